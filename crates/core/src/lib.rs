@@ -1,0 +1,18 @@
+//! Pure-Rust kernels of texsense.
+//!
+//! Nothing in this crate knows about Python: the same kernels can later serve firmware
+//! (through a C ABI) or the browser (through WASM). The PyO3 binding lives in
+//! `crates/python` and only converts arrays and errors.
+//!
+//! Modules are named after the concept they implement:
+//! - [`topology`]: the 4-neighbour graph of a sensor layout, in compressed sparse rows;
+//! - [`repair`]: replacing failed elements by the mean of their available neighbours
+//!   (thesis eq. 6.14), streaming and batch.
+
+pub mod error;
+pub mod repair;
+pub mod topology;
+
+pub use error::CoreError;
+pub use repair::NeighbourMeanRepair;
+pub use topology::Neighbours;

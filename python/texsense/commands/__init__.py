@@ -1,0 +1,6 @@
+"""Sub-commands of the ``texsense`` CLI; each module defines ``register(subparsers)`` and
+sets ``run`` as the parser's default function."""
+
+from texsense.commands import convert, info, plot
+
+COMMANDS = (info, convert, plot)

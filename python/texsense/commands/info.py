@@ -1,0 +1,112 @@
+"""``texsense info FILE [--json]``: what a recording holds, at a glance."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from texsense import stats
+from texsense.io import load, sniff_format
+from texsense.recording import Recording
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``info`` command."""
+    p = sub.add_parser(
+        "info",
+        help="summarise a recording (shape, timing, unit, labels, load and peak)",
+        description="Summarise any readable recording: file or folder (PMD tree).",
+    )
+    p.add_argument("file", type=Path, help="recording file or folder")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.set_defaults(run=run)
+
+
+def _summary(values: np.ndarray) -> dict[str, float] | None:
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return None
+    return {
+        "mean": float(finite.mean()),
+        "max": float(finite.max()),
+        "min": float(finite.min()),
+    }
+
+
+def describe(rec: Recording, path: Path, fmt: str) -> dict[str, Any]:
+    """A JSON-able summary of ``rec``."""
+    lay = rec.layout
+    labels: dict[str, Any] = {}
+    for name, values in rec.labels.items():
+        distinct = np.unique(values)
+        labels[name] = {"distinct": int(distinct.size)}
+        if distinct.size <= 20:
+            labels[name]["values"] = distinct.tolist()
+    period = rec.frame_period_s
+    info: dict[str, Any] = {
+        "path": str(path),
+        "format": fmt,
+        "frames": rec.n_frames,
+        "elements": rec.n_elements,
+        "layout": lay.kind,
+        "rows": None if lay.shape is None else lay.shape[0],
+        "cols": None if lay.shape is None else lay.shape[1],
+        "pitch_cm": None if lay.pitch_cm is None else list(lay.pitch_cm),
+        "frame_period_s": None if not np.isfinite(period) else round(period, 9),
+        "duration_s": rec.duration_s,
+        "quantity": rec.quantity,
+        "unit": rec.unit,
+        "source_unit": rec.meta.get("source_unit"),
+        "invalid_readings": int((~rec.valid).sum()),
+        "regions": sorted(lay.regions),
+        "labels": labels,
+        "peak": _summary(stats.peak_pressure(rec)),
+        "load_N": _summary(stats.total_load(rec)) if rec.quantity == "pressure" else None,
+    }
+    if "subject" in rec.labels:
+        info["subjects"] = labels["subject"]["distinct"]
+    if "posture" in rec.labels:
+        info["postures"] = labels["posture"]["distinct"]
+    return info
+
+
+def _text(info: dict[str, Any]) -> str:
+    grid = (
+        f"{info['rows']} x {info['cols']} grid" if info["layout"] == "grid" else "discrete points"
+    )
+    period = info["frame_period_s"]
+    lines = [
+        f"{info['path']}  ({info['format']})",
+        f"  frames      {info['frames']}"
+        + (f"  ({period:g} s per frame, {info['duration_s']:.6g} s)" if period else ""),
+        f"  elements    {info['elements']} on a {grid}",
+        f"  values      {info['quantity']} in {info['unit']}"
+        + (f" (file: {info['source_unit']})" if info["source_unit"] else ""),
+    ]
+    if info["invalid_readings"]:
+        lines.append(f"  invalid     {info['invalid_readings']} readings flagged")
+    if info["regions"]:
+        lines.append(f"  regions     {', '.join(info['regions'])}")
+    for name, lab in info["labels"].items():
+        shown = f": {', '.join(map(str, lab['values']))}" if "values" in lab else ""
+        lines.append(f"  label       {name} ({lab['distinct']} distinct){shown}")
+    if info["load_N"]:
+        ld = info["load_N"]
+        lines.append(f"  load        mean {ld['mean']:.4g} N, max {ld['max']:.4g} N")
+    if info["peak"]:
+        pk = info["peak"]
+        lines.append(f"  peak        mean {pk['mean']:.4g}, max {pk['max']:.4g} {info['unit']}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``texsense info``."""
+    fmt = sniff_format(args.file)
+    rec = load(args.file, format=fmt)
+    info = describe(rec, args.file, fmt)
+    print(json.dumps(info, indent=2) if args.json else _text(info))
+    return 0

@@ -1,0 +1,50 @@
+"""Exceptions raised by texsense.
+
+Errors at the edges (files, lines, parameters) carry one clear message that names *where*
+(file, line, field) and *what was expected*. The compiled core's error variants map one to
+one onto the classes re-exported here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from texsense._core import NeighbourIndexError, ParameterError, ShapeError
+
+__all__ = [
+    "FormatError",
+    "NeighbourIndexError",
+    "NotFittedError",
+    "ParameterError",
+    "ShapeError",
+    "UnitError",
+]
+
+
+class UnitError(ValueError):
+    """A unit string is unknown or does not fit the quantity."""
+
+
+class NotFittedError(RuntimeError):
+    """A model was used before ``fit`` was called."""
+
+
+class FormatError(ValueError):
+    """A file does not follow its format.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (or folder) being read.
+    message : str
+        What was found and what was expected.
+    line : int, optional
+        1-based line number where the problem is, if it is line oriented.
+    """
+
+    def __init__(self, path: str | Path, message: str, line: int | None = None) -> None:
+        self.path = Path(path)
+        self.line = line
+        self.detail = message
+        where = f"{self.path}" if line is None else f"{self.path}, line {line}"
+        super().__init__(f"{where}: {message}")

@@ -1,0 +1,368 @@
+"""HDF5 recordings: the texsense on-disk format (schema version 1).
+
+The schema is documented in ``docs/data-model.md`` so that h5py alone can read a file::
+
+    /                      attrs: format="texsense.recording", version=1, quantity, unit,
+                                  meta (JSON text), software="texsense <version>"
+    /frames                float32 (T, N), chunked, gzip, growable along T
+    /times                 float64 (T,), s
+    /valid                 bool (T, N)
+    /element_times         float64 (T, N), s                         (only if present)
+    /labels/<name>         (T,) numbers or UTF-8 strings
+    /layout                attrs: kind ("grid" | "points"), rows, cols, pitch_cm (grid only)
+    /layout/xy_cm          float64 (N, 2)
+    /layout/size_cm        float64 (N, 2)
+    /layout/area_cm2       float64 (N,)
+    /layout/cells          int64 (N,)                                 (grid only)
+    /layout/neighbours_indptr, /layout/neighbours_indices   int64
+    /layout/names          UTF-8 strings (N,)                         (only if present)
+    /layout/regions/<name> int64 element indices
+
+:class:`RecordingWriter` appends frames while recording and flushes them to disk, so that a
+process that is killed leaves a readable file holding everything flushed before.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+
+from texsense import units
+from texsense.exceptions import FormatError, ParameterError
+from texsense.layout import Layout
+from texsense.recording import Recording
+
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "RecordingWriter", "read_hdf5", "write_hdf5"]
+
+FORMAT_NAME = "texsense.recording"
+FORMAT_VERSION = 1
+_STR = h5py.string_dtype("utf-8")
+
+
+def _software() -> str:
+    from texsense import __version__
+
+    return f"texsense {__version__}"
+
+
+def _chunk_rows(n_elements: int) -> int:
+    # about 256 KiB of float32 per chunk
+    return int(max(1, min(4096, 65536 // max(1, n_elements))))
+
+
+def _write_layout(group: h5py.Group, layout: Layout) -> None:
+    group.attrs["kind"] = layout.kind
+    if layout.shape is not None and layout.cells is not None:
+        group.attrs["rows"], group.attrs["cols"] = layout.shape
+        group.create_dataset("cells", data=layout.cells)
+    if layout.pitch_cm is not None:
+        group.attrs["pitch_cm"] = np.asarray(layout.pitch_cm, dtype=np.float64)
+    group.create_dataset("xy_cm", data=layout.xy_cm)
+    group.create_dataset("size_cm", data=layout.size_cm)
+    group.create_dataset("area_cm2", data=layout.area_cm2)
+    indptr, indices = layout.neighbours
+    group.create_dataset("neighbours_indptr", data=indptr)
+    group.create_dataset("neighbours_indices", data=indices)
+    if layout.names is not None:
+        group.create_dataset("names", data=np.array(layout.names, dtype=object), dtype=_STR)
+    regions = group.create_group("regions")
+    for name, members in layout.regions.items():
+        regions.create_dataset(name, data=members)
+
+
+def _read_layout(group: h5py.Group) -> Layout:
+    shape = None
+    cells = None
+    if group.attrs.get("kind") == "grid":
+        shape = (int(group.attrs["rows"]), int(group.attrs["cols"]))
+        cells = group["cells"][()]
+    pitch = None
+    if "pitch_cm" in group.attrs:
+        pitch = tuple(float(v) for v in group.attrs["pitch_cm"])
+    names = None
+    if "names" in group:
+        names = list(group["names"].asstr()[()])
+    regions = {k: v[()] for k, v in group["regions"].items()} if "regions" in group else {}
+    return Layout(
+        group["xy_cm"][()],
+        group["size_cm"][()],
+        area_cm2=group["area_cm2"][()],
+        shape=shape,
+        cells=cells,
+        pitch_cm=pitch,  # type: ignore[arg-type]
+        neighbours=(group["neighbours_indptr"][()], group["neighbours_indices"][()]),
+        names=names,
+        regions=regions,
+    )
+
+
+def _label_dtype(values: np.ndarray) -> Any:
+    return _STR if values.dtype.kind == "U" else values.dtype
+
+
+class RecordingWriter:
+    """Append frames to an HDF5 recording while it is being made.
+
+    Every :meth:`append` writes the frames into growable datasets; the file is flushed to disk
+    at most ``flush_interval_s`` after the last flush (0: after every append), so a killed
+    process loses at most that interval.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to create (overwritten if it exists).
+    layout : Layout
+        Element layout.
+    quantity, unit : str
+        What the frames hold.
+    meta : mapping, optional
+        JSON-able provenance.
+    element_times : bool
+        Whether per-element time stamps will be appended.
+    flush_interval_s : float
+        Longest time between flushes.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from texsense import Layout, load
+    >>> path = os.path.join(tempfile.mkdtemp(), "live.h5")
+    >>> with RecordingWriter(path, Layout.grid(2, 2), "pressure", "N/cm2") as w:
+    ...     w.append(np.ones((3, 4)), times=[0.0, 0.1, 0.2])
+    >>> load(path).n_frames
+    3
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        layout: Layout,
+        quantity: str,
+        unit: str,
+        *,
+        meta: dict[str, Any] | None = None,
+        element_times: bool = False,
+        flush_interval_s: float = 0.0,
+    ) -> None:
+        # Validate quantity/unit/meta by building an empty recording.
+        probe = Recording(
+            np.zeros((0, layout.n_elements)), [], layout, quantity, unit, meta=meta or {}
+        )
+        self.path = Path(path)
+        self.n_elements = layout.n_elements
+        self.flush_interval_s = float(flush_interval_s)
+        self._last_flush = time.monotonic()
+        self._file = h5py.File(self.path, "w")
+        f = self._file
+        f.attrs["format"] = FORMAT_NAME
+        f.attrs["version"] = FORMAT_VERSION
+        f.attrs["quantity"] = probe.quantity
+        f.attrs["unit"] = probe.unit
+        f.attrs["meta"] = json.dumps(probe.meta)
+        f.attrs["software"] = _software()
+        n = layout.n_elements
+        rows = _chunk_rows(n)
+        comp = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+        f.create_dataset(
+            "frames", (0, n), np.float32, maxshape=(None, n), chunks=(rows, max(n, 1)), **comp
+        )
+        f.create_dataset("times", (0,), np.float64, maxshape=(None,), chunks=(max(rows, 256),))
+        f.create_dataset(
+            "valid", (0, n), bool, maxshape=(None, n), chunks=(rows, max(n, 1)), **comp
+        )
+        if element_times:
+            f.create_dataset(
+                "element_times",
+                (0, n),
+                np.float64,
+                maxshape=(None, n),
+                chunks=(rows, max(n, 1)),
+                **comp,
+            )
+        f.create_group("labels")
+        _write_layout(f.create_group("layout"), layout)
+        f.flush()
+        self.n_frames = 0
+
+    def append(
+        self,
+        frames: npt.ArrayLike,
+        times: npt.ArrayLike,
+        *,
+        valid: npt.ArrayLike | None = None,
+        element_times: npt.ArrayLike | None = None,
+        labels: dict[str, npt.ArrayLike] | None = None,
+    ) -> None:
+        """Append one frame (N,) or a block of frames (k, N) with their time stamps."""
+        f = self._file
+        fr = np.asarray(frames, dtype=np.float32)
+        if fr.ndim == 1:
+            fr = fr[None, :]
+        k = fr.shape[0]
+        if fr.shape != (k, self.n_elements):
+            raise ParameterError(
+                f"append: expected frames of {self.n_elements} elements, got shape {fr.shape}"
+            )
+        t = np.atleast_1d(np.asarray(times, dtype=np.float64))
+        if t.shape != (k,):
+            raise ParameterError(f"append: expected {k} time stamps, got {t.shape}")
+        v = np.ones_like(fr, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+        v = v.reshape(k, self.n_elements)
+        has_et = "element_times" in f
+        if has_et != (element_times is not None):
+            raise ParameterError(
+                "append: element_times must be given exactly when the writer was opened "
+                "with element_times=True"
+            )
+        labels = labels or {}
+        label_group = f["labels"]
+        if self.n_frames > 0 and set(labels) != set(label_group):
+            raise ParameterError(
+                f"append: labels {sorted(labels)} differ from the first append's "
+                f"{sorted(label_group)}"
+            )
+        start, stop = self.n_frames, self.n_frames + k
+        for name, values in labels.items():
+            arr = np.atleast_1d(np.asarray(values))
+            if arr.shape != (k,):
+                raise ParameterError(f"append: label {name!r} needs {k} values")
+            if name not in label_group:
+                label_group.create_dataset(
+                    name, (0,), _label_dtype(arr), maxshape=(None,), chunks=(256,)
+                )
+            ds = label_group[name]
+            ds.resize((stop,))
+            ds[start:stop] = arr.astype(object) if arr.dtype.kind == "U" else arr
+        for name, data in (("frames", fr), ("valid", v), ("times", t)):
+            ds = f[name]
+            ds.resize(stop, axis=0)
+            ds[start:stop] = data
+        if has_et:
+            ds = f["element_times"]
+            ds.resize(stop, axis=0)
+            ds[start:stop] = np.asarray(element_times, dtype=np.float64).reshape(k, -1)
+        self.n_frames = stop
+        now = time.monotonic()
+        if now - self._last_flush >= self.flush_interval_s:
+            f.flush()
+            self._last_flush = now
+
+    def flush(self) -> None:
+        """Write everything appended so far to disk."""
+        self._file.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Flush and close the file."""
+        if self._file.id.valid:
+            self._file.flush()
+            self._file.close()
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def write_hdf5(rec: Recording, path: str | Path) -> Path:
+    """Write ``rec`` to ``path`` (HDF5, schema version 1) and return the path."""
+    path = Path(path)
+    with RecordingWriter(
+        path,
+        rec.layout,
+        rec.quantity,
+        rec.unit,
+        meta=rec.meta,
+        element_times=rec.element_times is not None,
+    ) as w:
+        if rec.n_frames:
+            w.append(
+                rec.frames,
+                rec.times,
+                valid=rec.valid,
+                element_times=rec.element_times,
+                labels=rec.labels,
+            )
+        else:
+            for name, values in rec.labels.items():
+                w._file["labels"].create_dataset(
+                    name, (0,), _label_dtype(values), maxshape=(None,), chunks=(256,)
+                )
+    return path
+
+
+def _open(path: Path) -> h5py.File:
+    try:
+        return h5py.File(path, "r")
+    except OSError as e:
+        if "already open for write" in str(e):
+            # A writer was killed while the file was in SWMR mode: the data are consistent,
+            # only the "open for writing" flag is left. Reading in SWMR mode is safe.
+            return h5py.File(path, "r", libver="latest", swmr=True)
+        raise FormatError(path, f"not a readable HDF5 file ({e})") from None
+
+
+def read_hdf5(path: str | Path) -> Recording:
+    """Read a texsense HDF5 recording.
+
+    Raises
+    ------
+    FormatError
+        If the file is not HDF5, not a texsense recording, of an unknown schema version, or
+        lacks a required dataset.
+    """
+    path = Path(path)
+    with _open(path) as f:
+        fmt = f.attrs.get("format")
+        if fmt != FORMAT_NAME:
+            raise FormatError(
+                path, f"HDF5 file is not a texsense recording (format attribute is {fmt!r})"
+            )
+        version = int(f.attrs.get("version", -1))
+        if version != FORMAT_VERSION:
+            raise FormatError(
+                path,
+                f"unknown texsense recording version {version}; this texsense reads "
+                f"version {FORMAT_VERSION}",
+            )
+        try:
+            # A writer killed between two dataset resizes can leave them one block apart:
+            # only the frames present in every dataset are complete.
+            lengths = [f[k].shape[0] for k in ("frames", "times", "valid")]
+            lengths += [ds.shape[0] for ds in f["labels"].values()]
+            if "element_times" in f:
+                lengths.append(f["element_times"].shape[0])
+            n = min(lengths)
+            frames = f["frames"][:n]
+            times = f["times"][:n]
+            valid = f["valid"][:n]
+            element_times = f["element_times"][:n] if "element_times" in f else None
+            labels = {}
+            for name, ds in f["labels"].items():
+                labels[name] = (
+                    np.array(ds.asstr()[:n], dtype=str) if ds.dtype.kind == "O" else ds[:n]
+                )
+            layout = _read_layout(f["layout"])
+            quantity = str(f.attrs["quantity"])
+            unit = units.canonical(str(f.attrs["unit"]))
+            meta = json.loads(f.attrs.get("meta", "{}"))
+        except KeyError as e:
+            raise FormatError(path, f"missing dataset or attribute: {e}") from None
+    return Recording(
+        frames,
+        times,
+        layout,
+        quantity,
+        unit,
+        valid=valid,
+        element_times=element_times,
+        labels=labels,
+        meta=meta,
+    )

@@ -1,0 +1,40 @@
+# Sourced by scripts/run.sh and scripts/test.sh: create or update the virtual environment at
+# .venv from the locked requirements and (re)build the Rust extension into it.
+# Needs only Python >= 3.11 and the Rust toolchain (cargo) on the machine.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+say() { printf '\033[1m[texsense]\033[0m %s\n' "$*" >&2; }
+
+PYTHON_BIN="${PYTHON:-}"
+if [ -z "$PYTHON_BIN" ]; then
+  for candidate in python3.13 python3.12 python3.11 python3; do
+    if command -v "$candidate" >/dev/null 2>&1; then PYTHON_BIN="$candidate"; break; fi
+  done
+fi
+if [ -z "$PYTHON_BIN" ] || ! "$PYTHON_BIN" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+  say "Python >= 3.11 is needed (set PYTHON=/path/to/python3.11)"; exit 2
+fi
+if ! command -v cargo >/dev/null 2>&1; then
+  say "the Rust toolchain (cargo) is needed: https://rustup.rs"; exit 2
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  say "creating .venv with $PYTHON_BIN"
+  "$PYTHON_BIN" -m venv .venv
+fi
+LOCK=requirements/lock.txt
+STAMP=.venv/.texsense-lock.sha256
+want="$(sha256sum "$LOCK" | cut -d' ' -f1)"
+if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$want" ]; then
+  say "installing locked Python packages ($LOCK)"
+  .venv/bin/python -m pip install --quiet --upgrade pip
+  .venv/bin/python -m pip install --quiet -r "$LOCK"
+  echo "$want" > "$STAMP"
+fi
+say "building the Rust core (texsense._core)"
+VIRTUAL_ENV="$ROOT/.venv" PATH="$ROOT/.venv/bin:$PATH" \
+  .venv/bin/maturin develop --release --quiet >/dev/null
+export PATH="$ROOT/.venv/bin:$PATH"
+export PYO3_PYTHON="$ROOT/.venv/bin/python"

@@ -1,0 +1,118 @@
+import numpy as np
+import pytest
+
+from texsense import Layout, Recording, stats
+from texsense.exceptions import ParameterError
+
+
+def grid_rec(maps, pitch=1.0, unit="N/cm2", valid=None, quantity="pressure"):
+    maps = np.asarray(maps, dtype=float)
+    t, rows, cols = maps.shape
+    lay = Layout.grid(rows, cols, pitch_cm=pitch)
+    v = None if valid is None else np.asarray(valid).reshape(t, -1)
+    return Recording(maps.reshape(t, -1), np.arange(t) * 0.1, lay, quantity, unit, valid=v)
+
+
+def test_load_area_peak_on_a_known_map():
+    m = np.zeros((1, 4, 5))
+    m[0, 1, 1] = 2.0
+    m[0, 2, 3] = 1.0
+    rec = grid_rec(m, pitch=2.0)  # 4 cm² per element
+    assert stats.total_load(rec)[0] == pytest.approx(12.0)
+    assert stats.contact_area(rec)[0] == pytest.approx(8.0)
+    assert stats.contact_area(rec, threshold=1.5)[0] == pytest.approx(4.0)
+    assert stats.peak_pressure(rec)[0] == 2.0
+
+
+def test_centre_of_force_of_known_maps():
+    m = np.zeros((2, 3, 3))
+    m[0, 0, 0] = 1.0
+    m[0, 2, 2] = 1.0  # symmetric: centre at the middle cell
+    m[1, 0, 2] = 3.0
+    m[1, 2, 2] = 1.0  # x at column 2, y weighted 3:1 towards row 0
+    rec = grid_rec(m, pitch=1.0)
+    cof = stats.centre_of_force(rec)
+    np.testing.assert_allclose(cof[0], [1.5, 1.5])
+    np.testing.assert_allclose(cof[1], [2.5, (3 * 0.5 + 1 * 2.5) / 4])
+    empty = stats.centre_of_force(grid_rec(np.zeros((1, 2, 2))))
+    assert np.isnan(empty).all()
+
+
+def test_units_are_converted_to_ncm2():
+    m = np.full((1, 2, 2), 10.0)  # kPa = 1 N/cm²
+    assert stats.total_load(grid_rec(m, unit="kPa"))[0] == pytest.approx(4.0)
+    assert stats.peak_pressure(grid_rec(m, unit="kPa"))[0] == pytest.approx(1.0)
+
+
+def test_invalid_readings_are_left_out():
+    m = np.array([[[1.0, 100.0], [1.0, 1.0]]])
+    valid = np.array([[[True, False], [True, True]]])
+    rec = grid_rec(m, valid=valid)
+    assert stats.peak_pressure(rec)[0] == 1.0
+    assert stats.total_load(rec)[0] == 3.0
+    all_bad = grid_rec(m, valid=np.zeros_like(valid))
+    assert np.isnan(stats.total_load(all_bad)[0]) and np.isnan(stats.peak_pressure(all_bad)[0])
+
+
+def test_peak_pressure_index_is_the_best_3x3_mean():
+    m = np.zeros((1, 6, 6))
+    m[0, 0, 0] = 20.0  # isolated spike: its best 3x3 mean is 20/9
+    m[0, 3:6, 3:6] = 4.0  # a 3x3 block of 4: mean 4
+    rec = grid_rec(m)
+    assert stats.peak_pressure_index(rec)[0] == pytest.approx(4.0)
+    assert stats.peak_pressure_index(rec, window=1)[0] == pytest.approx(20.0)
+    # windows larger than the grid shrink to the grid
+    assert stats.peak_pressure_index(grid_rec(np.ones((1, 2, 2))), window=5)[0] == 1.0
+    with pytest.raises(ParameterError):
+        stats.peak_pressure_index(rec, window=0)
+
+
+def test_peak_pressure_index_matches_brute_force_with_empty_cells():
+    rng = np.random.default_rng(1)
+    active = rng.random((7, 9)) > 0.2
+    lay = Layout.grid(7, 9, active=active)
+    frames = rng.random((4, lay.n_elements))
+    rec = Recording(frames, np.arange(4.0), lay)
+    maps = lay.to_grid(frames)
+    expected = [
+        max(
+            np.nanmean(maps[t, r : r + 3, c : c + 3])
+            for r in range(5)
+            for c in range(7)
+            if np.isfinite(maps[t, r : r + 3, c : c + 3]).any()
+        )
+        for t in range(4)
+    ]
+    np.testing.assert_allclose(stats.peak_pressure_index(rec), expected)
+
+
+def test_peak_pressure_index_on_points_uses_nearest_elements():
+    xy = np.array([[0, 0], [1, 0], [2, 0], [10, 0]], float)
+    lay = Layout.points(xy, size_cm=1.0)
+    rec = Recording([[3.0, 1.0, 2.0, 9.0]], [0.0], lay)
+    # window 1 -> 1 element: the peak itself
+    assert stats.peak_pressure_index(rec, window=1)[0] == 9.0
+    # window 2 -> 4 nearest of the peak (element 3): all four
+    assert stats.peak_pressure_index(rec, window=2)[0] == pytest.approx(15 / 4)
+
+
+def test_coefficient_of_variation():
+    rec = grid_rec(np.array([[[2.0, 4.0], [0.0, 0.0]]]))
+    assert stats.coefficient_of_variation(rec)[0] == pytest.approx(1.0 / 3.0)
+    assert np.isnan(stats.coefficient_of_variation(grid_rec(np.ones((1, 1, 1))))[0])
+
+
+def test_region_stats_and_raw_data():
+    lay = Layout.grid(2, 2).with_regions({"top": [0, 1], "bottom": [2, 3]})
+    rec = Recording([[1.0, 3.0, 0.0, 0.0]], [0.0], lay)
+    rs = stats.region_stats(rec)
+    assert rs["top"]["load_N"][0] == 4.0 and rs["top"]["mean"][0] == 2.0
+    assert rs["top"]["peak"][0] == 3.0 and rs["bottom"]["contact_area_cm2"][0] == 0.0
+    raw = Recording([[1.0, 3.0, 0.0, 0.0]], [0.0], lay, "raw", "count")
+    with pytest.raises(ParameterError, match="calibrate"):
+        stats.total_load(raw)
+    assert "load_N" not in stats.region_stats(raw)["top"]
+    fs = stats.frame_stats(raw)
+    assert fs.load_N is None and fs.peak[0] == 3.0
+    with pytest.raises(ParameterError, match="no regions"):
+        stats.region_stats(Recording([[1.0]], [0.0], Layout.grid(1, 1)))
