@@ -7,13 +7,14 @@ cd "$ROOT"
 
 say() { printf '\033[1m[texsense]\033[0m %s\n' "$*" >&2; }
 
+python_ok() { "$1" -c 'import sys; sys.exit(sys.version_info < (3, 11))' >/dev/null 2>&1; }
 PYTHON_BIN="${PYTHON:-}"
 if [ -z "$PYTHON_BIN" ]; then
-  for candidate in python3.13 python3.12 python3.11 python3; do
-    if command -v "$candidate" >/dev/null 2>&1; then PYTHON_BIN="$candidate"; break; fi
+  for candidate in python3.11 python3 python3.12 python3.13; do
+    if python_ok "$candidate"; then PYTHON_BIN="$candidate"; break; fi
   done
 fi
-if [ -z "$PYTHON_BIN" ] || ! "$PYTHON_BIN" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+if [ -z "$PYTHON_BIN" ] || ! python_ok "$PYTHON_BIN"; then
   say "Python >= 3.11 is needed (set PYTHON=/path/to/python3.11)"; exit 2
 fi
 if ! command -v cargo >/dev/null 2>&1; then
