@@ -36,11 +36,11 @@ def numpy_repair(frames: np.ndarray, valid: np.ndarray, layout: Layout) -> np.nd
     return out
 
 
-def best_of(fn, repeat: int = 3) -> float:
+def best_of(fn, *args, repeat: int = 3) -> float:
     times = []
     for _ in range(repeat):
         start = time.perf_counter()
-        fn()
+        fn(*args)
         times.append(time.perf_counter() - start)
     return min(times)
 
@@ -57,8 +57,8 @@ def main() -> None:
         expected = numpy_repair(frames, valid, lay)
         got = NeighbourMeanRepair(lay).run(rec).frames
         np.testing.assert_allclose(got, expected, rtol=1e-6)  # same algorithm, same answer
-        t_np = best_of(lambda: numpy_repair(frames, valid, lay))
-        t_rs = best_of(lambda: NeighbourMeanRepair(lay).run(rec))
+        t_np = best_of(numpy_repair, frames, valid, lay)
+        t_rs = best_of(lambda r, lay=lay: NeighbourMeanRepair(lay).run(r), rec)
         n = frames.size / 1e6
         print(
             f"| {lay.n_elements} | {n_frames} | 25 % | {n / t_np:.1f} | {n / t_rs:.1f} "

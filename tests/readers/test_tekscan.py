@@ -35,7 +35,9 @@ def test_iscan_raw(iscan, tmp_path):
     assert header["SENSOR_TYPE"] == "6900" and header["SENSEL_AREA"] == "0.016129 cm2"
     assert header["TIME"] == "12/2/2019 6:21:52.34PM"
     # every frame line ends with 'Raw Sum=,,<sum>': our cells add up to it in all 309 frames
-    sums = [int(s.rsplit(",", 1)[1]) for s in iscan.read_text().splitlines() if s.startswith("Frame")]
+    sums = [
+        int(s.rsplit(",", 1)[1]) for s in iscan.read_text().splitlines() if s.startswith("Frame")
+    ]
     np.testing.assert_array_equal(rec.frames.sum(axis=1), sums)
     check_recording(rec, tmp_path)
 
