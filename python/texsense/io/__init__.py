@@ -131,8 +131,8 @@ def load(path: str | Path, *, format: str | None = None, **options: Any) -> Reco
     Examples
     --------
     >>> import texsense
-    >>> rec = texsense.load("../shared/data/vendor-formats/iscan_test.csv")  # doctest: +SKIP
-    >>> rec.layout.shape, rec.n_frames  # doctest: +SKIP
+    >>> rec = texsense.load("../shared/data/vendor-formats/iscan_test.csv")
+    >>> rec.layout.shape, rec.n_frames
     ((28, 28), 309)
     """
     fmt = format or sniff_format(path)

@@ -135,8 +135,8 @@ def read_pmd(path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM) -> Recordi
 
     Examples
     --------
-    >>> rec = read_pmd("../shared/data/pmd/experiment-i/S1")  # doctest: +SKIP
-    >>> rec.layout.shape, sorted(set(rec.labels["posture"]))[:3]  # doctest: +SKIP
+    >>> rec = read_pmd("../shared/data/pmd/experiment-i/S1")
+    >>> rec.layout.shape, sorted(set(rec.labels["posture"].tolist()))[:3]
     ((64, 32), [1, 2, 3])
     """
     path = Path(path)
