@@ -122,16 +122,24 @@ def overview_figure(rec: Recording, frame: int | None = None, title: str = "") -
     ax_map.set_title(f"frame {frame} at t = {rec.times[frame]:.3f} s")
     ax_load = fig.add_subplot(grid[0, 1])
     t = rec.times
+    # Frames labelled unreliable (PMD: first and last 3 of each file) are left out of the
+    # time series: they are often saturated and would flatten the rest.
+    reliable = rec.labels.get("reliable")
+    hide = ~reliable if reliable is not None and reliable.dtype == bool else np.zeros(len(t), bool)
     if rec.quantity == "pressure":
-        ax_load.plot(t, stats.total_load(rec), lw=1)
+        total = stats.total_load(rec)
         ax_load.set_ylabel("total load [N]")
     else:
-        ax_load.plot(t, np.nansum(rec.masked_frames(), axis=1), lw=1)
+        total = np.nansum(rec.masked_frames(), axis=1)
         ax_load.set_ylabel(f"sum of {rec.quantity} [{rec.unit}]")
+    ax_load.plot(t, np.where(hide, np.nan, total), lw=1)
+    if hide.any():
+        ax_load.set_title(f"{int(hide.sum())} unreliable frames not shown", fontsize=8)
     ax_load.axvline(t[frame], color="red", lw=0.8, ls="--")
     ax_load.grid(alpha=0.3)
     ax_cof = fig.add_subplot(grid[1, 1], sharex=ax_load)
     cof = stats.centre_of_force(rec)
+    cof[hide] = np.nan
     ax_cof.plot(t, cof[:, 0], lw=1, label="x")
     ax_cof.plot(t, cof[:, 1], lw=1, label="y")
     ax_cof.set_ylabel("centre of force [cm]")
