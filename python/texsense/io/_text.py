@@ -9,7 +9,7 @@ import numpy as np
 
 from texsense.exceptions import FormatError
 
-__all__ = ["format_float", "parse_float", "parse_floats", "read_lines"]
+__all__ = ["format_float", "is_number", "parse_float", "parse_floats", "read_lines"]
 
 
 def read_lines(path: Path) -> list[str]:
@@ -44,11 +44,12 @@ def parse_floats(path: Path, line_no: int, tokens: list[str], count: int, what: 
     try:
         return np.array([float(t) for t in tokens], dtype=np.float64)
     except ValueError:
-        bad = next(t for t in tokens if not _is_number(t))
+        bad = next(t for t in tokens if not is_number(t))
         raise FormatError(path, f"expected a number in {what}, found {bad!r}", line_no) from None
 
 
-def _is_number(token: str) -> bool:
+def is_number(token: str) -> bool:
+    """True if ``token`` parses as a float."""
     try:
         float(token)
     except ValueError:

@@ -23,7 +23,7 @@ import numpy as np
 
 from texsense import units
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.io._text import format_float, read_lines
+from texsense.io._text import format_float, is_number, read_lines
 from texsense.layout import Layout
 from texsense.recording import QUANTITIES, Recording
 
@@ -108,7 +108,7 @@ def read_wide_csv(
         try:
             data[k] = [float(t) for t in tokens]
         except ValueError:
-            bad = next(t for t in tokens if not _number(t))
+            bad = next(t for t in tokens if not is_number(t))
             raise FormatError(
                 path, f"expected a number, found {bad.strip()!r}", i + 2 + k
             ) from None
@@ -141,14 +141,6 @@ def read_wide_csv(
         except json.JSONDecodeError as e:
             raise FormatError(path, f"bad meta line: {e}", where["meta"]) from None
     return Recording(data[:, 1:].astype(np.float32), data[:, 0], layout, q, u, meta=meta)
-
-
-def _number(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def write_wide_csv(rec: Recording, path: str | Path) -> Path:
