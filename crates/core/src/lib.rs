@@ -7,12 +7,15 @@
 //! Modules are named after the concept they implement:
 //! - [`topology`]: the 4-neighbour graph of a sensor layout, in compressed sparse rows;
 //! - [`repair`]: replacing failed elements by the mean of their available neighbours
-//!   (thesis eq. 6.14), streaming and batch.
+//!   (thesis eq. 6.14), streaming and batch;
+//! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep).
 
 pub mod error;
 pub mod repair;
+pub mod spacer;
 pub mod topology;
 
 pub use error::CoreError;
 pub use repair::NeighbourMeanRepair;
+pub use spacer::{SpacerBank, SpacerParams};
 pub use topology::Neighbours;

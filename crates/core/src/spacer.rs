@@ -1,0 +1,600 @@
+//! Mechanics of a compressible spacer: the ground truth of the virtual sensor.
+//!
+//! This model is deliberately *not* a Preisach model and not a logarithmic step-response
+//! superposition (the two models the compensation uses): a compensation tested against it
+//! cannot grade itself. It is a physical law of another family, chosen to reproduce what the
+//! thesis measured (chapters 2, 4 and 5):
+//!
+//! - **Backbone** (elastic, plateau, densification of a foam or a knitted pile):
+//!   `σ_e(e) = A (e / (e_d - e))^m + E_lin e`, with `e` the compression as a fraction of the
+//!   thickness and `e_d` the densification limit.
+//! - **Friction between piles / cell walls** (rate-independent hysteresis): K spring-slider
+//!   elements with deflection `z_i` limited to `±r_i`, whose stress is proportional to the
+//!   backbone stress (Coulomb friction grows with the contact force):
+//!   `σ_f = σ_e(e) Σ w_i z_i / r_i`. Because the friction is modulated by the current
+//!   compression, minor loops between the same extrema are *not* congruent.
+//! - **Creep of stuck contacts** (drift under constant compression): a slider that is at rest
+//!   or being unloaded creeps back with a thermally activated rate
+//!   `d|z|/dt = -(a r / t_c) exp((|z| - r) / (a r))`, integrated exactly over any step
+//!   (`exp(-y)` grows linearly with time). A held element therefore relaxes like
+//!   `r (1 - a ln(1 + t / t_c))`, while an element being loaded towards its friction limit,
+//!   or dragged along at it, does not creep: ramps are nearly rate independent (thesis §4.1)
+//!   and holds relax logarithmically (§5.1).
+//! - **Air flow and fast viscoelasticity** (0.1-10 s): quasi-linear viscoelastic branches
+//!   `q_j` driven by the backbone stress, integrated exactly for a stress that is linear within
+//!   the step.
+//! - **Cyclic softening** (a Mullins-like effect of foams and piles): stress reductions `R_j`
+//!   that follow `ρ_j σ_e` along the *path* of the compression, `dR_j = κ_j (ρ_j σ_e - R_j)
+//!   |de|`, with κ_j spread over decades, and recover in time (hours) when the load drops.
+//!   Driven by path length, not time, they do not make ramps rate dependent, leave held
+//!   compressions alone, and shift loops towards higher compression over many cycles (thesis
+//!   fig. 5.4/5.5).
+//! - **Structural creep and slow recovery** (10² - 10⁴ s): Kelvin elements adding a creep
+//!   strain `c` that grows under load and recovers (slower) when unloaded; the backbone and
+//!   the friction see `(e - c) / (1 - c / e_d)`. This leaves the permanent set of a foam that recovers over
+//!   hours.
+//!
+//! Every update is an exact solution or an exponential integrator over the step, so the model
+//! cannot blow up at any step size. Pressure-controlled drive solves for the compression by
+//! bisection (the stress is monotone in the compression for a given state).
+
+use crate::error::{check_len, CoreError};
+
+/// Parameters of one spacer material (shared by all elements of a bank).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpacerParams {
+    /// Backbone amplitude `A` (N/cm²).
+    pub backbone_a: f64,
+    /// Backbone exponent `m`.
+    pub backbone_m: f64,
+    /// Densification limit `e_d` (fraction of thickness, in (0, 1)).
+    pub densification: f64,
+    /// Linear backbone stiffness `E_lin` (N/cm² per unit compression).
+    pub linear: f64,
+    /// Friction elements: weight `w_i` (share of the backbone stress) and slip deflection
+    /// `r_i` (fraction of thickness).
+    pub friction: Vec<(f64, f64)>,
+    /// Creep amplitude `a` of stuck contacts (dimensionless).
+    pub creep_a: f64,
+    /// Creep time scale `t_c` (s).
+    pub creep_tc: f64,
+    /// Fast viscoelastic branches: weight (share of the backbone stress step) and time
+    /// constant (s).
+    pub viscous: Vec<(f64, f64)>,
+    /// Kelvin creep elements: maximal creep strain (fraction of thickness) and time constant
+    /// (s) under load.
+    pub kelvin: Vec<(f64, f64)>,
+    /// How much slower creep strain recovers than it grows (>= 1).
+    pub recovery_factor: f64,
+    /// Reference stress of the creep drive (N/cm²): the creep target is
+    /// `c_max h / (1 + h)` with `h = σ_e / p_ref`.
+    pub creep_p_ref: f64,
+    /// Cyclic softening elements: share `ρ_j` of the backbone stress and path rate `κ_j`
+    /// (per unit compression travelled).
+    pub softening: Vec<(f64, f64)>,
+    /// Time constant (s) with which softening recovers when the load drops.
+    pub softening_recovery_s: f64,
+}
+
+impl SpacerParams {
+    /// Check every parameter's domain.
+    pub fn validate(&self) -> Result<(), CoreError> {
+        let bad = |what: &'static str, why: String| Err(CoreError::Parameter { what, why });
+        if !(self.backbone_a > 0.0) {
+            return bad(
+                "backbone_a",
+                format!("must be > 0, got {}", self.backbone_a),
+            );
+        }
+        if !(self.backbone_m > 0.0) {
+            return bad(
+                "backbone_m",
+                format!("must be > 0, got {}", self.backbone_m),
+            );
+        }
+        if !(self.densification > 0.0 && self.densification < 1.0) {
+            return bad(
+                "densification",
+                format!("must be in (0, 1), got {}", self.densification),
+            );
+        }
+        if !(self.linear >= 0.0) {
+            return bad("linear", format!("must be >= 0, got {}", self.linear));
+        }
+        let share: f64 = self.friction.iter().map(|f| f.0).sum();
+        if !(share < 1.0)
+            || self
+                .friction
+                .iter()
+                .any(|&(w, r)| !(w >= 0.0) || !(r > 0.0))
+        {
+            return bad(
+                "friction",
+                "weights must be >= 0 and sum below 1, slip deflections > 0".into(),
+            );
+        }
+        if !(self.creep_a >= 0.0 && self.creep_a < 0.5) || !(self.creep_tc > 0.0) {
+            return bad("creep", "need 0 <= creep_a < 0.5 and creep_tc > 0".into());
+        }
+        if self.viscous.iter().any(|&(w, t)| !(w >= 0.0) || !(t > 0.0)) {
+            return bad(
+                "viscous",
+                "weights must be >= 0 and time constants > 0".into(),
+            );
+        }
+        if self.kelvin.iter().any(|&(c, t)| !(c >= 0.0) || !(t > 0.0)) {
+            return bad(
+                "kelvin",
+                "strains must be >= 0 and time constants > 0".into(),
+            );
+        }
+        if !(self.recovery_factor >= 1.0) || !(self.creep_p_ref > 0.0) {
+            return bad(
+                "kelvin",
+                "recovery_factor must be >= 1 and creep_p_ref > 0".into(),
+            );
+        }
+        let rho: f64 = self.softening.iter().map(|f| f.0).sum();
+        if !(rho < 1.0)
+            || self
+                .softening
+                .iter()
+                .any(|&(r, k)| !(r >= 0.0) || !(k > 0.0))
+        {
+            return bad(
+                "softening",
+                "shares must be >= 0 and sum below 1, path rates > 0".into(),
+            );
+        }
+        if !(self.softening_recovery_s > 0.0) {
+            return bad("softening_recovery_s", "must be > 0".into());
+        }
+        Ok(())
+    }
+
+    /// The backbone stress `σ_e(e)` in N/cm² (0 for e <= 0).
+    #[inline]
+    pub fn backbone(&self, e: f64) -> f64 {
+        if e <= 0.0 {
+            return 0.0;
+        }
+        let e = e.min(self.densification * (1.0 - 1e-9));
+        self.backbone_a * (e / (self.densification - e)).powf(self.backbone_m) + self.linear * e
+    }
+}
+
+/// The state of N spacer elements of one material, stepped together.
+#[derive(Debug, Clone)]
+pub struct SpacerBank {
+    p: SpacerParams,
+    n: usize,
+    scale: Vec<f64>,
+    e: Vec<f64>,
+    z: Vec<f64>,
+    q: Vec<f64>,
+    c: Vec<f64>,
+    soft: Vec<f64>,
+    backbone_prev: Vec<f64>,
+}
+
+/// What one trial step produces for one element, without committing it.
+struct Trial {
+    stress: f64,
+    creep: f64,
+}
+
+impl SpacerBank {
+    /// `n` unloaded elements; `scale` multiplies every stress of an element (specimen
+    /// variation), one entry per element.
+    pub fn new(params: SpacerParams, scale: Vec<f64>) -> Result<Self, CoreError> {
+        params.validate()?;
+        if scale.iter().any(|&s| !(s > 0.0)) {
+            return Err(CoreError::Parameter {
+                what: "scale",
+                why: "stress scales must be > 0".into(),
+            });
+        }
+        let n = scale.len();
+        Ok(Self {
+            z: vec![0.0; n * params.friction.len()],
+            q: vec![0.0; n * params.viscous.len()],
+            c: vec![0.0; n * params.kelvin.len()],
+            soft: vec![0.0; n * params.softening.len()],
+            e: vec![0.0; n],
+            backbone_prev: vec![0.0; n],
+            p: params,
+            n,
+            scale,
+        })
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// True when the bank has no elements.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &SpacerParams {
+        &self.p
+    }
+
+    /// Current platen compression of every element (fraction of thickness).
+    pub fn compression(&self) -> &[f64] {
+        &self.e
+    }
+
+    /// Current creep strain (permanent set) of every element: the compression at which the
+    /// spacer's own surface sits when nothing presses on it.
+    pub fn creep_strain(&self) -> Vec<f64> {
+        let k = self.p.kelvin.len();
+        (0..self.n)
+            .map(|i| self.c[i * k..(i + 1) * k].iter().sum())
+            .collect()
+    }
+
+    /// Compute the end-of-step stress of element `i` for platen compression `e_new`
+    /// after `dt` seconds; when `commit`, store the new state.
+    fn trial(&mut self, i: usize, dt: f64, e_new: f64, commit: bool) -> Trial {
+        let p = &self.p;
+        let (nk, nf, nv) = (p.kelvin.len(), p.friction.len(), p.viscous.len());
+        // 1. structural creep strain, driven by the backbone stress of the previous step
+        let h = self.backbone_prev[i] / p.creep_p_ref;
+        let drive = h / (1.0 + h);
+        let mut creep_old = 0.0;
+        let mut creep_new = 0.0;
+        for (j, &(c_max, tau)) in p.kelvin.iter().enumerate() {
+            let c = self.c[i * nk + j];
+            let target = c_max * drive;
+            let tau = if target >= c {
+                tau
+            } else {
+                tau * p.recovery_factor
+            };
+            let c1 = target + (c - target) * (-dt / tau).exp();
+            creep_old += c;
+            creep_new += c1;
+            if commit {
+                self.c[i * nk + j] = c1;
+            }
+        }
+        // the set takes thickness away: [c, e_d] of the platen maps onto [0, e_d] of the
+        // material, so a compressed foam still densifies where it did
+        let ed = p.densification;
+        let eff = |e: f64, c: f64| ((e - c) / (1.0 - c / ed)).max(0.0);
+        let eff_old = eff(self.e[i], creep_old);
+        let eff_new = eff(e_new, creep_new);
+        let backbone = p.backbone(eff_new);
+        // 2. friction elements: dragged ones slip at their limit, stuck ones creep
+        let delta = eff_new - eff_old;
+        let mut share = 0.0;
+        for (k, &(w, r)) in p.friction.iter().enumerate() {
+            let mut z = self.z[i * nf + k] + delta;
+            if z > r {
+                z = r;
+            } else if z < -r {
+                z = -r;
+            } else if p.creep_a > 0.0 && z != 0.0 && delta * z <= 0.0 {
+                // creep only while the contact is not being loaded towards its limit:
+                // at rest (delta = 0) or being unloaded
+                let ar = p.creep_a * r;
+                let y = (z.abs() - r) / ar; // <= 0
+                let grown = (-y).exp() + dt / p.creep_tc;
+                let mag = (r - ar * grown.ln()).max(0.0);
+                z = mag.copysign(z);
+            }
+            share += w * z / r;
+            if commit {
+                self.z[i * nf + k] = z;
+            }
+        }
+        // 3. fast viscoelastic branches, exact for a stress linear within the step
+        let step = backbone - self.backbone_prev[i];
+        let mut viscous = 0.0;
+        for (j, &(w, tau)) in p.viscous.iter().enumerate() {
+            let decay = (-dt / tau).exp();
+            let gain = if dt > 0.0 {
+                tau / dt * (1.0 - decay)
+            } else {
+                1.0
+            };
+            let q = self.q[i * nv + j] * decay + w * step * gain;
+            viscous += q;
+            if commit {
+                self.q[i * nv + j] = q;
+            }
+        }
+        // 4. cyclic softening: follows ρ σ_e along the path, recovers in time when unloading
+        let ns = p.softening.len();
+        let path = delta.abs();
+        let mut softening = 0.0;
+        for (j, &(rho, kappa)) in p.softening.iter().enumerate() {
+            let r0 = self.soft[i * ns + j];
+            let target = rho * backbone;
+            let mut r = target + (r0 - target) * (-kappa * path).exp();
+            if target < r {
+                r = target + (r - target) * (-dt / p.softening_recovery_s).exp();
+            }
+            softening += r;
+            if commit {
+                self.soft[i * ns + j] = r;
+            }
+        }
+        if commit {
+            self.e[i] = e_new;
+            self.backbone_prev[i] = backbone;
+        }
+        let stress = self.scale[i] * (backbone * (1.0 + share) + viscous - softening);
+        Trial {
+            stress: stress.max(0.0),
+            creep: creep_new,
+        }
+    }
+
+    fn check_dt(dt: f64) -> Result<(), CoreError> {
+        if dt >= 0.0 && dt.is_finite() {
+            Ok(())
+        } else {
+            Err(CoreError::Parameter {
+                what: "dt",
+                why: format!("time steps must be finite and >= 0, got {dt}"),
+            })
+        }
+    }
+
+    /// Displacement control: move every element's platen to `compression` (fraction of
+    /// thickness, in [0, e_d)) over `dt` seconds. Writes the pressure (N/cm²) and the
+    /// spacer's own compression (the platen's, or the creep set when the platen lifted off).
+    pub fn step_displacement(
+        &mut self,
+        dt: f64,
+        compression: &[f64],
+        pressure: &mut [f64],
+        spacer_compression: &mut [f64],
+    ) -> Result<(), CoreError> {
+        Self::check_dt(dt)?;
+        check_len("compression", compression.len(), self.n)?;
+        check_len("pressure", pressure.len(), self.n)?;
+        check_len("spacer_compression", spacer_compression.len(), self.n)?;
+        let limit = self.p.densification;
+        for i in 0..self.n {
+            let e = compression[i];
+            if !(e >= 0.0 && e < limit) {
+                return Err(CoreError::Parameter {
+                    what: "compression",
+                    why: format!(
+                        "element {i}: compression {e} is outside [0, {limit}) of the thickness"
+                    ),
+                });
+            }
+            let t = self.trial(i, dt, e, true);
+            pressure[i] = t.stress;
+            spacer_compression[i] = e.max(t.creep);
+        }
+        Ok(())
+    }
+
+    /// Pressure control: find, for every element, the compression at which the pressure is
+    /// `pressure[i]` (N/cm², >= 0) after `dt` seconds, and commit it. Writes the compression
+    /// (platen = spacer surface, fraction of thickness).
+    pub fn step_pressure(
+        &mut self,
+        dt: f64,
+        pressure: &[f64],
+        compression: &mut [f64],
+    ) -> Result<(), CoreError> {
+        Self::check_dt(dt)?;
+        check_len("pressure", pressure.len(), self.n)?;
+        check_len("compression", compression.len(), self.n)?;
+        let hi_limit = self.p.densification * (1.0 - 1e-6);
+        for i in 0..self.n {
+            let target = pressure[i];
+            if !(target >= 0.0 && target.is_finite()) {
+                return Err(CoreError::Parameter {
+                    what: "pressure",
+                    why: format!("element {i}: pressure must be finite and >= 0, got {target}"),
+                });
+            }
+            // the largest compression whose stress does not exceed the target
+            let (mut lo, mut hi) = (0.0, hi_limit);
+            if self.trial(i, dt, hi, false).stress <= target {
+                return Err(CoreError::Parameter {
+                    what: "pressure",
+                    why: format!(
+                        "element {i}: {target} N/cm² is beyond what the spacer can carry before \
+                         densification"
+                    ),
+                });
+            }
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if self.trial(i, dt, mid, false).stress <= target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+                if hi - lo < 1e-13 {
+                    break;
+                }
+            }
+            let t = self.trial(i, dt, lo, true);
+            compression[i] = lo.max(t.creep);
+        }
+        Ok(())
+    }
+
+    /// Test-machine ramp of a single-element bank: move the platen at `rate` (fraction of
+    /// thickness per second, sign gives the direction) in steps of `dt` until the pressure
+    /// reaches `target` (rising: >= target; falling: <= target or the platen at 0), at most
+    /// `max_steps` steps. Appends every step's (compression, pressure, spacer compression).
+    #[allow(clippy::too_many_arguments)]
+    pub fn ramp_until(
+        &mut self,
+        dt: f64,
+        rate: f64,
+        target: f64,
+        max_steps: usize,
+        compression: &mut Vec<f64>,
+        pressure: &mut Vec<f64>,
+        spacer_compression: &mut Vec<f64>,
+    ) -> Result<bool, CoreError> {
+        if self.n != 1 {
+            return Err(CoreError::Parameter {
+                what: "ramp_until",
+                why: format!("needs a bank of one element, this one has {}", self.n),
+            });
+        }
+        Self::check_dt(dt)?;
+        if !(dt > 0.0) || rate == 0.0 || !rate.is_finite() || !(target >= 0.0) {
+            return Err(CoreError::Parameter {
+                what: "ramp_until",
+                why: "need dt > 0, a finite non-zero rate and a target >= 0".into(),
+            });
+        }
+        let limit = self.p.densification * (1.0 - 1e-6);
+        for _ in 0..max_steps {
+            let e = (self.e[0] + rate * dt).clamp(0.0, limit);
+            if rate > 0.0 && e >= limit {
+                return Err(CoreError::Parameter {
+                    what: "ramp_until",
+                    why: format!("{target} N/cm² is not reached before densification"),
+                });
+            }
+            let t = self.trial(0, dt, e, true);
+            compression.push(e);
+            pressure.push(t.stress);
+            spacer_compression.push(e.max(t.creep));
+            let done = if rate > 0.0 {
+                t.stress >= target
+            } else {
+                t.stress <= target || e <= 0.0
+            };
+            if done {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn textile() -> SpacerParams {
+        SpacerParams {
+            backbone_a: 1.0,
+            backbone_m: 1.3,
+            densification: 0.85,
+            linear: 0.3,
+            friction: vec![(0.15, 0.01), (0.15, 0.03), (0.15, 0.06)],
+            creep_a: 0.08,
+            creep_tc: 1.0,
+            viscous: vec![(0.02, 0.3), (0.02, 3.0)],
+            kelvin: vec![(0.01, 300.0), (0.01, 3000.0)],
+            recovery_factor: 3.0,
+            creep_p_ref: 2.0,
+            softening: vec![(0.08, 2.0), (0.05, 0.2)],
+            softening_recovery_s: 3600.0,
+        }
+    }
+
+    fn loop_stress(bank: &mut SpacerBank, path: &[f64], dt: f64) -> Vec<f64> {
+        let mut p = [0.0];
+        let mut s = [0.0];
+        path.iter()
+            .map(|&e| {
+                bank.step_displacement(dt, &[e], &mut p, &mut s).unwrap();
+                p[0]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn loading_above_unloading_at_equal_compression() {
+        let mut bank = SpacerBank::new(textile(), vec![1.0]).unwrap();
+        let up: Vec<f64> = (0..=100).map(|k| 0.006 * k as f64).collect();
+        let rising = loop_stress(&mut bank, &up, 0.05);
+        let down: Vec<f64> = up.iter().rev().cloned().collect();
+        let falling = loop_stress(&mut bank, &down, 0.05);
+        for k in 10..90 {
+            assert!(rising[k] > falling[100 - k], "k = {k}");
+        }
+    }
+
+    #[test]
+    fn held_compression_relaxes_and_never_goes_negative() {
+        let mut bank = SpacerBank::new(textile(), vec![1.0]).unwrap();
+        let ramp: Vec<f64> = (0..=50).map(|k| 0.01 * k as f64).collect();
+        let top = *loop_stress(&mut bank, &ramp, 0.05).last().unwrap();
+        let held = loop_stress(&mut bank, &[0.5; 100], 36.0);
+        assert!(held[99] < top * 0.95);
+        assert!(held.windows(2).all(|w| w[1] <= w[0] + 1e-12));
+        assert!(held.iter().all(|&p| p > 0.0));
+    }
+
+    #[test]
+    fn huge_steps_stay_finite() {
+        let mut bank = SpacerBank::new(textile(), vec![1.0, 2.0]).unwrap();
+        let mut p = [0.0; 2];
+        let mut s = [0.0; 2];
+        for (dt, e) in [(1e6, 0.8), (1e-9, 0.0), (1e7, 0.84), (0.0, 0.3)] {
+            bank.step_displacement(dt, &[e, e], &mut p, &mut s).unwrap();
+            assert!(p.iter().all(|v| v.is_finite() && *v >= 0.0));
+        }
+    }
+
+    #[test]
+    fn pressure_control_inverts_displacement_control() {
+        let mut a = SpacerBank::new(textile(), vec![1.0]).unwrap();
+        let mut b = SpacerBank::new(textile(), vec![1.0]).unwrap();
+        let mut e = [0.0];
+        let mut p = [0.0];
+        let mut s = [0.0];
+        for k in 1..=40 {
+            let target = 0.25 * k as f64;
+            a.step_pressure(0.1, &[target], &mut e).unwrap();
+            b.step_displacement(0.1, &e, &mut p, &mut s).unwrap();
+            assert!(
+                (p[0] - target).abs() < 1e-6 * target.max(1.0),
+                "{} vs {target}",
+                p[0]
+            );
+        }
+    }
+
+    #[test]
+    fn ramp_until_stops_at_the_target() {
+        let mut bank = SpacerBank::new(textile(), vec![1.0]).unwrap();
+        let (mut e, mut p, mut s) = (Vec::new(), Vec::new(), Vec::new());
+        let done = bank
+            .ramp_until(0.01, 0.01, 5.0, 1_000_000, &mut e, &mut p, &mut s)
+            .unwrap();
+        assert!(done);
+        assert!(*p.last().unwrap() >= 5.0 && p[p.len() - 2] < 5.0);
+        let done = bank
+            .ramp_until(0.01, -0.01, 0.0, 1_000_000, &mut e, &mut p, &mut s)
+            .unwrap();
+        assert!(done && *p.last().unwrap() <= 1e-12);
+    }
+
+    #[test]
+    fn bad_input_is_rejected() {
+        let mut bad = textile();
+        bad.densification = 1.2;
+        assert!(SpacerBank::new(bad, vec![1.0]).is_err());
+        assert!(SpacerBank::new(textile(), vec![0.0]).is_err());
+        let mut bank = SpacerBank::new(textile(), vec![1.0]).unwrap();
+        let (mut p, mut s) = ([0.0], [0.0]);
+        assert!(bank.step_displacement(0.1, &[0.9], &mut p, &mut s).is_err());
+        assert!(bank
+            .step_displacement(-1.0, &[0.1], &mut p, &mut s)
+            .is_err());
+        assert!(bank.step_pressure(0.1, &[1e30], &mut p).is_err());
+        assert!(bank.step_pressure(0.1, &[-1.0], &mut p).is_err());
+    }
+}
