@@ -77,77 +77,72 @@ pub struct SpacerParams {
 }
 
 impl SpacerParams {
-    /// Check every parameter's domain.
+    /// Check every parameter's domain (NaN fails every check).
     pub fn validate(&self) -> Result<(), CoreError> {
         let bad = |what: &'static str, why: String| Err(CoreError::Parameter { what, why });
-        if !(self.backbone_a > 0.0) {
+        let pos = |x: f64| x > 0.0;
+        let nonneg = |x: f64| x >= 0.0;
+        if !pos(self.backbone_a) {
             return bad(
                 "backbone_a",
                 format!("must be > 0, got {}", self.backbone_a),
             );
         }
-        if !(self.backbone_m > 0.0) {
+        if !pos(self.backbone_m) {
             return bad(
                 "backbone_m",
                 format!("must be > 0, got {}", self.backbone_m),
             );
         }
-        if !(self.densification > 0.0 && self.densification < 1.0) {
+        if !(pos(self.densification) && self.densification < 1.0) {
             return bad(
                 "densification",
                 format!("must be in (0, 1), got {}", self.densification),
             );
         }
-        if !(self.linear >= 0.0) {
+        if !nonneg(self.linear) {
             return bad("linear", format!("must be >= 0, got {}", self.linear));
         }
         let share: f64 = self.friction.iter().map(|f| f.0).sum();
-        if !(share < 1.0)
-            || self
-                .friction
-                .iter()
-                .any(|&(w, r)| !(w >= 0.0) || !(r > 0.0))
-        {
+        if share >= 1.0 || self.friction.iter().any(|&(w, r)| !nonneg(w) || !pos(r)) {
             return bad(
                 "friction",
                 "weights must be >= 0 and sum below 1, slip deflections > 0".into(),
             );
         }
-        if !(self.creep_a >= 0.0 && self.creep_a < 0.5) || !(self.creep_tc > 0.0) {
+        if !(nonneg(self.creep_a) && self.creep_a < 0.5 && pos(self.creep_tc)) {
             return bad("creep", "need 0 <= creep_a < 0.5 and creep_tc > 0".into());
         }
-        if self.viscous.iter().any(|&(w, t)| !(w >= 0.0) || !(t > 0.0)) {
+        if self.viscous.iter().any(|&(w, t)| !nonneg(w) || !pos(t)) {
             return bad(
                 "viscous",
                 "weights must be >= 0 and time constants > 0".into(),
             );
         }
-        if self.kelvin.iter().any(|&(c, t)| !(c >= 0.0) || !(t > 0.0)) {
+        if self.kelvin.iter().any(|&(c, t)| !nonneg(c) || !pos(t)) {
             return bad(
                 "kelvin",
                 "strains must be >= 0 and time constants > 0".into(),
             );
         }
-        if !(self.recovery_factor >= 1.0) || !(self.creep_p_ref > 0.0) {
+        if !(self.recovery_factor >= 1.0 && pos(self.creep_p_ref)) {
             return bad(
                 "kelvin",
                 "recovery_factor must be >= 1 and creep_p_ref > 0".into(),
             );
         }
         let rho: f64 = self.softening.iter().map(|f| f.0).sum();
-        if !(rho < 1.0)
-            || self
-                .softening
-                .iter()
-                .any(|&(r, k)| !(r >= 0.0) || !(k > 0.0))
-        {
+        if rho >= 1.0 || self.softening.iter().any(|&(r, k)| !nonneg(r) || !pos(k)) {
             return bad(
                 "softening",
                 "shares must be >= 0 and sum below 1, path rates > 0".into(),
             );
         }
-        if !(self.softening_recovery_s > 0.0) {
+        if !pos(self.softening_recovery_s) {
             return bad("softening_recovery_s", "must be > 0".into());
+        }
+        if [share, rho].iter().any(|v| v.is_nan()) {
+            return bad("friction", "NaN in the parameters".into());
         }
         Ok(())
     }
@@ -188,7 +183,7 @@ impl SpacerBank {
     /// variation), one entry per element.
     pub fn new(params: SpacerParams, scale: Vec<f64>) -> Result<Self, CoreError> {
         params.validate()?;
-        if scale.iter().any(|&s| !(s > 0.0)) {
+        if scale.iter().any(|&s| s.is_nan() || s <= 0.0) {
             return Err(CoreError::Parameter {
                 what: "scale",
                 why: "stress scales must be > 0".into(),
@@ -449,7 +444,7 @@ impl SpacerBank {
             });
         }
         Self::check_dt(dt)?;
-        if !(dt > 0.0) || rate == 0.0 || !rate.is_finite() || !(target >= 0.0) {
+        if dt <= 0.0 || rate == 0.0 || !rate.is_finite() || target.is_nan() || target < 0.0 {
             return Err(CoreError::Parameter {
                 what: "ramp_until",
                 why: "need dt > 0, a finite non-zero rate and a target >= 0".into(),

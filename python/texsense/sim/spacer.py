@@ -21,7 +21,7 @@ Examples
 >>> spacer = Spacer.preset("textile-6mm", seed=0)
 >>> t = np.linspace(0, 60, 601)
 >>> result = spacer.drive_pressure(t, np.minimum(t / 10, 2.3))
->>> round(float(result.compression_mm[-1]), 1)   # about half of the 6 mm
+>>> round(float(result.compression_mm[-1, 0]), 1)   # about half of the 6 mm
 3.0
 """
 
