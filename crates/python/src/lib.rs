@@ -162,6 +162,13 @@ struct PySpacerBank {
 }
 
 type Pair<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+type RampVecs = (Vec<f64>, Vec<f64>, Vec<f64>, bool);
+type Ramp<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    bool,
+);
 
 #[pymethods]
 impl PySpacerBank {
@@ -239,9 +246,9 @@ impl PySpacerBank {
         let mut s = vec![0.0; t * n];
         let inner = &mut self.inner;
         py.detach(|| {
-            for k in 0..t {
+            for (k, &dt) in dts.iter().enumerate() {
                 let r = k * n..(k + 1) * n;
-                inner.step_displacement(dts[k], &e[r.clone()], &mut p[r.clone()], &mut s[r])?;
+                inner.step_displacement(dt, &e[r.clone()], &mut p[r.clone()], &mut s[r])?;
             }
             Ok::<(), CoreError>(())
         })
@@ -252,7 +259,6 @@ impl PySpacerBank {
     /// Test-machine ramp of a one-element bank at `rate` (fraction of thickness per s) until
     /// the pressure reaches `target`; returns (compression, pressure, spacer compression,
     /// reached) with one entry per step of `dt` seconds.
-    #[allow(clippy::type_complexity)]
     fn ramp_until<'py>(
         &mut self,
         py: Python<'py>,
@@ -260,12 +266,7 @@ impl PySpacerBank {
         rate: f64,
         target: f64,
         max_steps: usize,
-    ) -> PyResult<(
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        bool,
-    )> {
+    ) -> PyResult<Ramp<'py>> {
         let (e, p, s, done) = py
             .detach(|| self.ramp_until_inner(dt, rate, target, max_steps))
             .map_err(to_py)?;
@@ -291,9 +292,9 @@ impl PySpacerBank {
         let mut e = vec![0.0; t * n];
         let inner = &mut self.inner;
         py.detach(|| {
-            for k in 0..t {
+            for (k, &dt) in dts.iter().enumerate() {
                 let r = k * n..(k + 1) * n;
-                inner.step_pressure(dts[k], &p[r.clone()], &mut e[r])?;
+                inner.step_pressure(dt, &p[r.clone()], &mut e[r])?;
             }
             Ok::<(), CoreError>(())
         })
@@ -310,7 +311,7 @@ impl PySpacerBank {
         rate: f64,
         target: f64,
         max_steps: usize,
-    ) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, bool), CoreError> {
+    ) -> Result<RampVecs, CoreError> {
         let (mut e, mut p, mut s) = (Vec::new(), Vec::new(), Vec::new());
         let done = self
             .inner
