@@ -1,0 +1,101 @@
+"""``texsense simulate PROTOCOL``: run a test-machine protocol on the virtual sensor."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from texsense.exceptions import ParameterError
+from texsense.io.columns_csv import write_columns_csv
+from texsense.sim.protocols import PROTOCOLS, run_protocol
+from texsense.sim.spacer import PRESETS
+
+#: CLI option -> protocol keyword, for the protocols that take it.
+_OPTIONS = {
+    "speed": "speed_mm_min",
+    "max": "max_ncm2",
+    "cycles": "cycles",
+    "hold": "hold_s",
+    "levels": "levels",
+    "falling": "falling",
+    "p3": "p3_ncm2",
+    "duration": "duration_s",
+}
+_ACCEPTS = {
+    "ramp": {"max", "speed", "cycles"},
+    "calibration": {"max", "speed"},
+    "validation": {"cycles", "speed"},
+    "steps": {"levels", "hold", "speed", "falling"},
+    "cyclic": {"p3", "duration", "speed"},
+    "random": {"duration", "max"},
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``simulate`` command."""
+    p = sub.add_parser(
+        "simulate",
+        help="run a test-machine protocol on the virtual textile sensor",
+        description="Simulate a spacer specimen on a test machine and read it out through an "
+        "electrode and an AD7745-class converter. The HDF5 output holds the measured "
+        "capacitance with the true pressure and compression as labels; the CSV holds "
+        "time_s,compression_mm,pressure_ncm2,capacitance_pF.",
+    )
+    p.add_argument("protocol", choices=sorted(PROTOCOLS), help="protocol to run")
+    p.add_argument("--spacer", default="textile-6mm", choices=sorted(PRESETS), help="spacer preset")
+    p.add_argument("--seed", type=int, default=0, help="specimen and noise seed (default 0)")
+    p.add_argument("-o", "--output", type=Path, help="HDF5 file to write")
+    p.add_argument("--csv", type=Path, help="CSV file to write")
+    p.add_argument("--sample-hz", type=float, default=10.0, help="output rate (default 10 Hz)")
+    p.add_argument("--speed", type=float, help="platen speed, mm/min")
+    p.add_argument("--max", type=float, help="maximal pressure, N/cm²")
+    p.add_argument("--cycles", type=int, help="number of cycles")
+    p.add_argument("--hold", type=float, help="hold time per step, s")
+    p.add_argument(
+        "--levels",
+        type=lambda s: tuple(float(v) for v in s.split(",")),
+        help="step levels, N/cm² (comma separated)",
+    )
+    p.add_argument("--falling", action="store_true", help="falling steps (from 10 N/cm²)")
+    p.add_argument("--p3", type=float, help="upper pressure of cyclic compression, N/cm²")
+    p.add_argument("--duration", type=float, help="duration, s")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``texsense simulate``."""
+    if args.output is None and args.csv is None:
+        raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
+    options: dict[str, Any] = {}
+    for flag, keyword in _OPTIONS.items():
+        value = getattr(args, flag)
+        if value in (None, False):
+            continue
+        if flag not in _ACCEPTS[args.protocol]:
+            raise ParameterError(f"--{flag} does not apply to the {args.protocol} protocol")
+        options[keyword] = value
+    rec = run_protocol(
+        args.protocol, args.spacer, seed=args.seed, sample_hz=args.sample_hz, **options
+    )
+    if args.output:
+        rec.save(args.output)
+        print(f"wrote {args.output}")
+    if args.csv:
+        write_columns_csv(
+            args.csv,
+            {
+                "time_s": rec.times,
+                "compression_mm": rec.labels["compression_mm"],
+                "pressure_ncm2": rec.labels["pressure_ncm2"],
+                "capacitance_pF": rec.frames[:, 0],
+            },
+        )
+        print(f"wrote {args.csv}")
+    p = rec.labels["pressure_ncm2"]
+    print(
+        f"{args.protocol} on {args.spacer} (seed {args.seed}): {rec.n_frames} samples over "
+        f"{rec.duration_s:.6g} s, pressure 0-{p.max():.3g} N/cm², capacitance "
+        f"{rec.frames.min():.3f}-{rec.frames.max():.3f} pF"
+    )
+    return 0
