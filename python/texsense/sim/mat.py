@@ -73,7 +73,7 @@ class VirtualMat:
     electrode : Electrode, optional
         Electrode geometry (default 2 x 2 cm).
     cdc : CDC, optional
-        Converter; default AD7745 at 83.8 Hz with 4.8 ms settling, CAPDAC centred on the
+        Converter; default AD7745 at 83.8 Hz with 4.7 ms settling, CAPDAC centred on the
         spacer's capacitance range.
     failures : FailureModel, optional
         Failure model (default: none).

@@ -6,7 +6,7 @@ factory accuracy of about 4 fF and noise that falls with the conversion time (do
 rms at 9.1 Hz; the values in :data:`NOISE_AF_RMS` are approximations of the datasheet's
 resolution table). A multiplexer connects one element at a time, so a frame of N elements takes
 N x (conversion time + settling) and every element has its own time stamp: 96 elements at
-83.8 Hz with 4.8 ms settling take 1.6 s, as in the thesis (§6.2.1).
+83.8 Hz with 4.7 ms settling take 1.6 s, as in the thesis (§6.2.1).
 
 A capacitance to the shield of 100-150 pF (§3.3) is tolerated by the two-port measurement;
 the datasheet's 0.5 fF (Cp1) and 5 fF (Cp2) per 200 pF are added as offsets, < 0.1 % of the
@@ -66,7 +66,7 @@ class CDC:
     """
 
     rate_hz: float = 83.8
-    settle_ms: float = 4.8
+    settle_ms: float = 4.7
     capdac_pF: float = 4.9
     accuracy_fF: float = 4.0
     cp1_pF: float = 125.0
