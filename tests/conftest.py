@@ -49,3 +49,23 @@ def check_recording(rec: Recording, tmp_path: Path) -> None:
     assert stats.peak_pressure(rec).shape == (rec.n_frames,)
     assert stats.centre_of_force(rec).shape == (rec.n_frames, 2)
     assert stats.peak_pressure_index(rec).shape == (rec.n_frames,)
+
+
+_TARGETS: list[tuple[str, str]] = []
+
+
+@pytest.fixture
+def target_report():
+    """Record a measured target number; all of them are printed at the end of the run."""
+
+    def report(target: str, text: str) -> None:
+        _TARGETS.append((target, text))
+
+    return report
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG001
+    if _TARGETS:
+        terminalreporter.section("virtual sensor targets (measured)")
+        for target, text in sorted(_TARGETS):
+            terminalreporter.write_line(f"{target}: {text}")

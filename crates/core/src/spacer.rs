@@ -16,10 +16,17 @@
 //! - **Creep of stuck contacts** (drift under constant compression): a slider that is at rest
 //!   or being unloaded creeps back with a thermally activated rate
 //!   `d|z|/dt = -(a r / t_c) exp((|z| - r) / (a r))`, integrated exactly over any step
-//!   (`exp(-y)` grows linearly with time). A held element therefore relaxes like
-//!   `r (1 - a ln(1 + t / t_c))`, while an element being loaded towards its friction limit,
-//!   or dragged along at it, does not creep: ramps are nearly rate independent (thesis §4.1)
-//!   and holds relax logarithmically (§5.1).
+//!   (`exp(-y)` grows linearly with time). Contacts creep only at rest: the creep clock runs
+//!   at `1 / (1 + (|de/dt| / rest_rate)²)` of real time, so an element held still relaxes like
+//!   `r (1 - a ln(1 + t / t_c))` while any ramp (0.1 mm/min is 280 x rest_rate) leaves it
+//!   alone: ramps are nearly rate independent (thesis §4.1) and holds relax logarithmically
+//!   (§5.1).
+//! - **Clutched relaxation of the structure** (drift after any step, up or down): one branch
+//!   stores the increases `w Δσ` of the elastic and friction stress, another the decreases;
+//!   each is idle while it grows and relaxes like a stuck contact at rest
+//!   (`|s| → S (1 - a ln(1 + t / t_c))` from the value `S` it had when it last grew). Being idle during monotone motion it keeps ramps rate independent, while the
+//!   change after a step is proportional to the step, rising or falling (thesis eq. 5.1,
+//!   fig. 5.2/5.3).
 //! - **Air flow and fast viscoelasticity** (0.1-10 s): quasi-linear viscoelastic branches
 //!   `q_j` driven by the backbone stress, integrated exactly for a stress that is linear within
 //!   the step.
@@ -58,6 +65,12 @@ pub struct SpacerParams {
     pub creep_a: f64,
     /// Creep time scale `t_c` (s).
     pub creep_tc: f64,
+    /// Compression rate (fraction of thickness per s) below which contacts count as at rest:
+    /// creep runs at the rate `1 / (1 + (|de/dt| / rest_rate)²)` of its full speed.
+    pub rest_rate: f64,
+    /// Clutched relaxation branch: stored share `w` of the backbone stress changes and its
+    /// creep amplitude `a` (same time scale `t_c`).
+    pub clutch: (f64, f64),
     /// Fast viscoelastic branches: weight (share of the backbone stress step) and time
     /// constant (s).
     pub viscous: Vec<(f64, f64)>,
@@ -112,6 +125,12 @@ impl SpacerParams {
         }
         if !(nonneg(self.creep_a) && self.creep_a < 0.5 && pos(self.creep_tc)) {
             return bad("creep", "need 0 <= creep_a < 0.5 and creep_tc > 0".into());
+        }
+        if !pos(self.rest_rate) {
+            return bad("rest_rate", format!("must be > 0, got {}", self.rest_rate));
+        }
+        if !(nonneg(self.clutch.0) && nonneg(self.clutch.1) && self.clutch.1 < 0.5) {
+            return bad("clutch", "need weight >= 0 and 0 <= amplitude < 0.5".into());
         }
         if self.viscous.iter().any(|&(w, t)| !nonneg(w) || !pos(t)) {
             return bad(
@@ -169,6 +188,9 @@ pub struct SpacerBank {
     q: Vec<f64>,
     c: Vec<f64>,
     soft: Vec<f64>,
+    clutch: Vec<f64>,
+    clutch_ref: Vec<f64>,
+    ef_prev: Vec<f64>,
     backbone_prev: Vec<f64>,
 }
 
@@ -195,6 +217,9 @@ impl SpacerBank {
             q: vec![0.0; n * params.viscous.len()],
             c: vec![0.0; n * params.kelvin.len()],
             soft: vec![0.0; n * params.softening.len()],
+            clutch: vec![0.0; 2 * n],
+            clutch_ref: vec![0.0; 2 * n],
+            ef_prev: vec![0.0; n],
             e: vec![0.0; n],
             backbone_prev: vec![0.0; n],
             p: params,
@@ -266,6 +291,13 @@ impl SpacerBank {
         let backbone = p.backbone(eff_new);
         // 2. friction elements: dragged ones slip at their limit, stuck ones creep
         let delta = eff_new - eff_old;
+        // contacts creep at rest; any motion (well below 0.1 mm/min) stops them
+        let creep_dt = if dt > 0.0 {
+            let r = delta.abs() / dt / p.rest_rate;
+            dt / (1.0 + r * r)
+        } else {
+            0.0
+        };
         let mut share = 0.0;
         for (k, &(w, r)) in p.friction.iter().enumerate() {
             let mut z = self.z[i * nf + k] + delta;
@@ -274,11 +306,10 @@ impl SpacerBank {
             } else if z < -r {
                 z = -r;
             } else if p.creep_a > 0.0 && z != 0.0 && delta * z <= 0.0 {
-                // creep only while the contact is not being loaded towards its limit:
-                // at rest (delta = 0) or being unloaded
+                // creep only while the contact is not being loaded towards its limit
                 let ar = p.creep_a * r;
                 let y = (z.abs() - r) / ar; // <= 0
-                let grown = (-y).exp() + dt / p.creep_tc;
+                let grown = (-y).exp() + creep_dt / p.creep_tc;
                 let mag = (r - ar * grown.ln()).max(0.0);
                 z = mag.copysign(z);
             }
@@ -303,7 +334,40 @@ impl SpacerBank {
                 self.q[i * nv + j] = q;
             }
         }
-        // 4. cyclic softening: follows ρ σ_e along the path, recovers in time when unloading
+        // 4. clutched relaxation: a loading branch stores stress increments, an unloading
+        //    branch stores decrements; each is idle while it grows and creeps at rest
+        let (cw, ca) = p.clutch;
+        let elastic_friction = backbone * (1.0 + share);
+        let change = cw * (elastic_friction - self.ef_prev[i]);
+        let mut clutch = 0.0;
+        for side in 0..2 {
+            let k = 2 * i + side;
+            let mut v = self.clutch[k];
+            let mut v_ref = self.clutch_ref[k];
+            let grows = if side == 0 {
+                change > 0.0
+            } else {
+                change < 0.0
+            };
+            if grows {
+                v += change;
+                v_ref = v.abs();
+            } else if ca > 0.0 && v_ref > 0.0 && v != 0.0 {
+                let ar = ca * v_ref;
+                let y = (v.abs() - v_ref) / ar;
+                let grown = (-y).exp() + creep_dt / p.creep_tc;
+                v = (v_ref - ar * grown.ln()).max(0.0).copysign(v);
+            }
+            clutch += v;
+            if commit {
+                self.clutch[k] = v;
+                self.clutch_ref[k] = v_ref;
+            }
+        }
+        if commit {
+            self.ef_prev[i] = elastic_friction;
+        }
+        // 5. cyclic softening: follows ρ σ_e along the path, recovers in time when unloading
         let ns = p.softening.len();
         let path = delta.abs();
         let mut softening = 0.0;
@@ -323,7 +387,7 @@ impl SpacerBank {
             self.e[i] = e_new;
             self.backbone_prev[i] = backbone;
         }
-        let stress = self.scale[i] * (backbone * (1.0 + share) + viscous - softening);
+        let stress = self.scale[i] * (elastic_friction + viscous + clutch - softening);
         Trial {
             stress: stress.max(0.0),
             creep: creep_new,
@@ -489,6 +553,8 @@ mod tests {
             friction: vec![(0.15, 0.01), (0.15, 0.03), (0.15, 0.06)],
             creep_a: 0.08,
             creep_tc: 1.0,
+            rest_rate: 1e-5,
+            clutch: (0.3, 0.1),
             viscous: vec![(0.02, 0.3), (0.02, 3.0)],
             kelvin: vec![(0.01, 300.0), (0.01, 3000.0)],
             recovery_factor: 3.0,

@@ -159,17 +159,20 @@ def steps(
     speed_mm_min: float = 50.0,
     falling: bool = False,
     start_ncm2: float = 10.0,
+    prehold_s: float = 3600.0,
     gap_s: float = 60.0,
 ) -> list[DriveResult]:
     """Step-and-hold at constant compression (§5.1.2): one fresh specimen per level; rising
-    steps from 0 to each level, or (``falling``) from ``start_ncm2`` down to each level."""
+    steps from 0 to each level, or (``falling``) steps down to each level from ``start_ncm2``
+    after holding that compression for ``prehold_s`` (as the thesis held the compression for
+    an hour before its second steps)."""
     out = []
     offset = 0.0
     for level in levels:
         spacer.reset()
         m = _machine(spacer)
         if falling:
-            m.ramp_to_pressure(start_ncm2, speed_mm_min)
+            m.ramp_to_pressure(start_ncm2, speed_mm_min).hold_compression(prehold_s)
         m.ramp_to_pressure(level, speed_mm_min).hold_compression(hold_s, sample_s=None)
         tr = m.trace()
         tr.times_s = tr.times_s + offset

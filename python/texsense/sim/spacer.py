@@ -52,11 +52,13 @@ class SpacerMaterial:
     densification: float = 0.86
     backbone_m: float = 1.25
     linear_share: float = 0.15
-    friction: tuple[tuple[float, float], ...] = ((0.07, 0.004), (0.11, 0.012), (0.12, 0.024))
-    creep_a: float = 0.1
+    friction: tuple[tuple[float, float], ...] = ((0.08, 0.004), (0.12, 0.012), (0.12, 0.024))
+    creep_a: float = 0.0
     creep_tc: float = 1.0
+    rest_rate: float = 1e-6
+    clutch: tuple[float, float] = (0.3, 0.108)
     viscous: tuple[tuple[float, float], ...] = ((0.01, 0.1), (0.01, 1.0), (0.005, 10.0))
-    kelvin: tuple[tuple[float, float], ...] = ((0.001, 600.0), (0.002, 6000.0))
+    kelvin: tuple[tuple[float, float], ...] = ()
     recovery_factor: float = 3.0
     softening: tuple[tuple[float, float], ...] = ((0.07, 0.3), (0.07, 0.03), (0.07, 0.003))
     softening_recovery_s: float = 3.0 * 3600.0
@@ -73,7 +75,7 @@ class SpacerMaterial:
         fully dragged) passes through p50 at 50 % compression."""
         e = 0.5
         shape = (e / (self.densification - e)) ** self.backbone_m
-        total = self.p50_ncm2 / (1.0 + self.friction_share)
+        total = self.p50_ncm2 / ((1.0 + self.friction_share) * (1.0 + self.clutch[0]))
         linear = self.linear_share * total / e
         amplitude = (1.0 - self.linear_share) * total / shape
         return amplitude, linear
@@ -183,6 +185,10 @@ class Spacer:
                 material,
                 friction=tuple((w * f, r) for w, r in material.friction),
                 creep_a=material.creep_a * float(np.exp(rng.normal(0.0, material.variation))),
+                clutch=(
+                    material.clutch[0],
+                    material.clutch[1] * float(np.exp(rng.normal(0.0, material.variation))),
+                ),
             )
         self._effective = mat
         self.scale = scale
@@ -211,6 +217,9 @@ class Spacer:
             table(m.friction),
             m.creep_a,
             m.creep_tc,
+            m.rest_rate,
+            m.clutch[0],
+            m.clutch[1],
             table(m.viscous),
             table(m.kelvin),
             m.recovery_factor,
