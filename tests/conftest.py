@@ -64,7 +64,7 @@ def target_report():
     return report
 
 
-def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG001
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
     if _TARGETS:
         terminalreporter.section("virtual sensor targets (measured)")
         for target, text in sorted(_TARGETS):

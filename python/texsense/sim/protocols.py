@@ -264,7 +264,7 @@ def run_protocol(
 
     Examples
     --------
-    >>> rec = run_protocol("ramp", "textile-6mm", speed_mm_min=50)
+    >>> rec = run_protocol("ramp", "textile-6mm", speed_mm_min=50, sample_hz=None)
     >>> rec.quantity, rec.unit, round(float(rec.labels["pressure_ncm2"].max()))
     ('capacitance', 'pF', 10)
     """
