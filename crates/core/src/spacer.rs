@@ -191,6 +191,7 @@ pub struct SpacerBank {
     clutch: Vec<f64>,
     clutch_ref: Vec<f64>,
     ef_prev: Vec<f64>,
+    stress_prev: Vec<f64>,
     backbone_prev: Vec<f64>,
 }
 
@@ -220,6 +221,7 @@ impl SpacerBank {
             clutch: vec![0.0; 2 * n],
             clutch_ref: vec![0.0; 2 * n],
             ef_prev: vec![0.0; n],
+            stress_prev: vec![0.0; n],
             e: vec![0.0; n],
             backbone_prev: vec![0.0; n],
             p: params,
@@ -262,8 +264,9 @@ impl SpacerBank {
     fn trial(&mut self, i: usize, dt: f64, e_new: f64, commit: bool) -> Trial {
         let p = &self.p;
         let (nk, nf, nv) = (p.kelvin.len(), p.friction.len(), p.viscous.len());
-        // 1. structural creep strain, driven by the backbone stress of the previous step
-        let h = self.backbone_prev[i] / p.creep_p_ref;
+        // 1. structural creep strain, driven by the pressure of the previous step (an
+        //    unloaded specimen recovers)
+        let h = self.stress_prev[i] / p.creep_p_ref;
         let drive = h / (1.0 + h);
         let mut creep_old = 0.0;
         let mut creep_new = 0.0;
@@ -387,9 +390,12 @@ impl SpacerBank {
             self.e[i] = e_new;
             self.backbone_prev[i] = backbone;
         }
-        let stress = self.scale[i] * (elastic_friction + viscous + clutch - softening);
+        let stress = (self.scale[i] * (elastic_friction + viscous + clutch - softening)).max(0.0);
+        if commit {
+            self.stress_prev[i] = stress;
+        }
         Trial {
-            stress: stress.max(0.0),
+            stress,
             creep: creep_new,
         }
     }
@@ -437,18 +443,22 @@ impl SpacerBank {
         Ok(())
     }
 
-    /// Pressure control: find, for every element, the compression at which the pressure is
-    /// `pressure[i]` (N/cm², >= 0) after `dt` seconds, and commit it. Writes the compression
-    /// (platen = spacer surface, fraction of thickness).
+    /// Pressure control: find, for every element, the largest compression at which the
+    /// pressure does not exceed `pressure[i]` (N/cm², >= 0) after `dt` seconds, and commit it.
+    /// Writes the compression (platen = spacer surface, fraction of thickness) and the
+    /// pressure reached (equal to the target up to the solver tolerance, except where creep
+    /// at a turning point makes the stress jump across it).
     pub fn step_pressure(
         &mut self,
         dt: f64,
         pressure: &[f64],
         compression: &mut [f64],
+        reached: &mut [f64],
     ) -> Result<(), CoreError> {
         Self::check_dt(dt)?;
         check_len("pressure", pressure.len(), self.n)?;
         check_len("compression", compression.len(), self.n)?;
+        check_len("reached", reached.len(), self.n)?;
         let hi_limit = self.p.densification * (1.0 - 1e-6);
         for i in 0..self.n {
             let target = pressure[i];
@@ -482,6 +492,7 @@ impl SpacerBank {
             }
             let t = self.trial(i, dt, lo, true);
             compression[i] = lo.max(t.creep);
+            reached[i] = t.stress;
         }
         Ok(())
     }
@@ -618,7 +629,7 @@ mod tests {
         let mut s = [0.0];
         for k in 1..=40 {
             let target = 0.25 * k as f64;
-            a.step_pressure(0.1, &[target], &mut e).unwrap();
+            a.step_pressure(0.1, &[target], &mut e, &mut s).unwrap();
             b.step_displacement(0.1, &e, &mut p, &mut s).unwrap();
             assert!(
                 (p[0] - target).abs() < 1e-6 * target.max(1.0),
@@ -655,7 +666,8 @@ mod tests {
         assert!(bank
             .step_displacement(-1.0, &[0.1], &mut p, &mut s)
             .is_err());
-        assert!(bank.step_pressure(0.1, &[1e30], &mut p).is_err());
-        assert!(bank.step_pressure(0.1, &[-1.0], &mut p).is_err());
+        let mut q = [0.0];
+        assert!(bank.step_pressure(0.1, &[1e30], &mut p, &mut q).is_err());
+        assert!(bank.step_pressure(0.1, &[-1.0], &mut p, &mut q).is_err());
     }
 }

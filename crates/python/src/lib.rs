@@ -284,27 +284,28 @@ impl PySpacerBank {
     }
 
     /// Pressure control over a batch: `dt` (T,), `pressure` (T, N) in N/cm². Returns the
-    /// compression (T, N) as fractions of thickness.
+    /// compression (T, N) as fractions of thickness and the pressure reached (T, N).
     fn run_pressure<'py>(
         &mut self,
         py: Python<'py>,
         dt: PyReadonlyArray1<'py, f64>,
         pressure: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    ) -> PyResult<Pair<'py>> {
         let (t, n) = self.batch_shape(&dt, &pressure)?;
         let dts = dt.as_slice()?;
         let p = pressure.as_slice()?;
         let mut e = vec![0.0; t * n];
+        let mut reached = vec![0.0; t * n];
         let inner = &mut self.inner;
         py.detach(|| {
             for (k, &dt) in dts.iter().enumerate() {
                 let r = k * n..(k + 1) * n;
-                inner.step_pressure(dt, &p[r.clone()], &mut e[r])?;
+                inner.step_pressure(dt, &p[r.clone()], &mut e[r.clone()], &mut reached[r])?;
             }
             Ok::<(), CoreError>(())
         })
         .map_err(to_py)?;
-        to_2d(py, e, t, n)
+        Ok((to_2d(py, e, t, n)?, to_2d(py, reached, t, n)?))
     }
 }
 

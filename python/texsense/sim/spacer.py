@@ -293,16 +293,18 @@ class Spacer:
 
     def drive_pressure(self, times: npt.ArrayLike, pressure_ncm2: npt.ArrayLike) -> DriveResult:
         """Pressure control: find the compression that carries ``pressure_ncm2`` (T,) or (T, N)
-        at every sample (the state continues from the previous drive)."""
+        at every sample (the state continues from the previous drive). The result holds the
+        pressure reached, which equals the target except at turning points where the contacts
+        creep during the instant of rest (within about 0.3 % of the target)."""
         t, dt = self._steps(times)
         p = self._columns(pressure_ncm2, t.size, "pressure_ncm2")
         if np.any(p < 0):
             raise ParameterError("pressure_ncm2 must be >= 0 (a spacer cannot be pulled)")
         try:
-            e = self._bank.run_pressure(dt, p)
+            e, reached = self._bank.run_pressure(dt, p)
         except ValueError as err:
             raise ParameterError(str(err)) from None
-        return DriveResult(t, e * self.thickness_mm, p.copy(), {"control": "pressure"})
+        return DriveResult(t, e * self.thickness_mm, reached, {"control": "pressure"})
 
     def backbone_ncm2(self, compression_mm: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """The elastic backbone stress (no friction, no creep) at the given compressions."""
