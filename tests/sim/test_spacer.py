@@ -91,7 +91,7 @@ def test_bad_parameters_give_clear_errors():
     with pytest.raises(ParameterError, match="p50"):
         Spacer(SpacerMaterial("x", 3.0, 0.0))
     sp = Spacer.preset("textile-3mm")
-    with pytest.raises(ParameterError, match="compression 2.7 mm at sample 1 is outside"):
+    with pytest.raises(ParameterError, match=r"compression 2\.7 mm at sample 1 is outside"):
         sp.drive_displacement([0, 1], [0.0, 2.7])
     with pytest.raises(ParameterError, match="cannot be pulled"):
         sp.drive_pressure([0, 1], [0.0, -1.0])
