@@ -98,7 +98,7 @@ def draw_map(ax: Axes, rec: Recording, frame: int, *, vmax: float | None = None)
         ax.set_ylim(y1, y0)
         img = coll
     cof = stats.centre_of_force(rec.select([frame]))[0]
-    if np.all(np.isfinite(cof)):
+    if rec.quantity == "pressure" and np.all(np.isfinite(cof)):
         ax.plot(*cof, marker="+", color="red", markersize=14, mew=2, label="centre of force")
         ax.legend(loc="lower right", fontsize=8)
     ax.set_aspect("equal")
