@@ -165,3 +165,13 @@ def test_simulate_and_design_cli(tmp_path, capsys):
     assert '"routing_layers": 3' in capsys.readouterr().out
     assert main(["simulate", "ramp", "--hold", "3", "--csv", str(tmp_path / "x.csv")]) == 1
     assert main(["simulate", "ramp"]) == 1
+
+
+@pytest.mark.parametrize("n", [1, 16, 30, 240])
+def test_prototypes(n):
+    mat = VirtualMat.prototype(n)
+    assert mat.layout.n_elements == n
+    scan = mat.scan([0.0], np.full((1, n), 2.3))
+    assert np.all((scan.capacitance.frames > 1.5) & (scan.capacitance.frames < 5))
+    with pytest.raises(ParameterError, match="1, 16, 30 or 240"):
+        VirtualMat.prototype(17)

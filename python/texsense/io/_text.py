@@ -9,7 +9,14 @@ import numpy as np
 
 from texsense.exceptions import FormatError
 
-__all__ = ["format_float", "is_number", "parse_float", "parse_floats", "read_lines"]
+__all__ = [
+    "format_float",
+    "is_number",
+    "parse_csv_rows",
+    "parse_float",
+    "parse_floats",
+    "read_lines",
+]
 
 
 def read_lines(path: Path) -> list[str]:
@@ -63,3 +70,26 @@ def format_float(value: float, dtype: type = np.float32) -> str:
         return "nan"
     text = np.format_float_positional(dtype(value), unique=True, trim="-")
     return text
+
+
+def parse_csv_rows(
+    path: Path, rows: list[str], first_line: int, n_columns: int, what: str
+) -> np.ndarray:
+    """Parse comma-separated rows of exactly ``n_columns`` numbers into an array.
+
+    ``first_line`` is the 1-based line number of ``rows[0]`` in the file; ``what`` describes
+    the expected values for the message ("3 comma-separated values").
+    """
+    data = np.empty((len(rows), n_columns), dtype=np.float64)
+    for k, line in enumerate(rows):
+        tokens = line.split(",")
+        if len(tokens) != n_columns:
+            raise FormatError(path, f"expected {what}, found {len(tokens)}", first_line + k)
+        try:
+            data[k] = [float(t) for t in tokens]
+        except ValueError:
+            bad = next(t for t in tokens if not is_number(t))
+            raise FormatError(
+                path, f"expected a number, found {bad.strip()!r}", first_line + k
+            ) from None
+    return data

@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.exceptions import FormatError, ParameterError
-from texsense.io._text import is_number, read_lines
+from texsense.io._text import is_number, parse_csv_rows, read_lines
 
 __all__ = ["read_columns_csv", "write_columns_csv"]
 
@@ -65,21 +65,6 @@ def read_columns_csv(path: str | Path) -> dict[str, npt.NDArray[np.float64]]:
         raise FormatError(
             path, "the first line holds numbers: a header of names is expected", start + 1
         )
-    rows = lines[start + 1 :]
-    data = np.empty((len(rows), len(names)))
-    for k, line in enumerate(rows):
-        tokens = line.split(",")
-        if len(tokens) != len(names):
-            raise FormatError(
-                path,
-                f"expected {len(names)} values ({', '.join(names)}), found {len(tokens)}",
-                start + 2 + k,
-            )
-        try:
-            data[k] = [float(t) for t in tokens]
-        except ValueError:
-            bad = next(t for t in tokens if not is_number(t))
-            raise FormatError(
-                path, f"expected a number, found {bad.strip()!r}", start + 2 + k
-            ) from None
+    what = f"{len(names)} values ({', '.join(names)})"
+    data = parse_csv_rows(path, lines[start + 1 :], start + 2, len(names), what)
     return {n: data[:, i].copy() for i, n in enumerate(names)}

@@ -23,7 +23,7 @@ import numpy as np
 
 from texsense import units
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.io._text import format_float, is_number, read_lines
+from texsense.io._text import format_float, parse_csv_rows, read_lines
 from texsense.layout import Layout
 from texsense.recording import QUANTITIES, Recording
 
@@ -98,20 +98,7 @@ def read_wide_csv(
     body = lines[i + 1 :]
     while body and not body[-1].strip():
         body.pop()
-    data = np.empty((len(body), n + 1), dtype=np.float64)
-    for k, line in enumerate(body):
-        tokens = line.split(",")
-        if len(tokens) != n + 1:
-            raise FormatError(
-                path, f"expected {n + 1} comma-separated values, found {len(tokens)}", i + 2 + k
-            )
-        try:
-            data[k] = [float(t) for t in tokens]
-        except ValueError:
-            bad = next(t for t in tokens if not is_number(t))
-            raise FormatError(
-                path, f"expected a number, found {bad.strip()!r}", i + 2 + k
-            ) from None
+    data = parse_csv_rows(path, body, i + 2, n + 1, f"{n + 1} comma-separated values")
     if "layout" in info:
         try:
             layout = Layout.from_dict(json.loads(info["layout"]))

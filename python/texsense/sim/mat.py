@@ -144,6 +144,19 @@ class VirtualMat:
         )
         return cls(layout, spacer, **kwargs)  # type: ignore[arg-type]
 
+    @classmethod
+    def prototype(
+        cls, n_elements: int, spacer: str = "textile-6mm", **kwargs: object
+    ) -> VirtualMat:
+        """One of the thesis's single-electrode prototypes (§2.3.2.2): 1, 16 (4 x 4), 30
+        (5 x 6) or 240 (15 x 16) electrodes of 2 x 2 cm on a 2.07 cm pitch (0.7 mm apart)."""
+        shapes = {1: (1, 1), 16: (4, 4), 30: (5, 6), 240: (SEAT_ROWS, SEAT_COLS)}
+        if n_elements not in shapes:
+            raise ParameterError(f"prototypes have 1, 16, 30 or 240 elements, not {n_elements}")
+        rows, cols = shapes[n_elements]
+        layout = Layout.grid(rows, cols, pitch_cm=SEAT_PITCH_CM, element_size_cm=2.0)
+        return cls(layout, spacer, **kwargs)  # type: ignore[arg-type]
+
     def element_offsets_s(self) -> npt.NDArray[np.float64]:
         """When each element is read within a frame (s after the frame start)."""
         return (np.arange(self.layout.n_elements) // self.converters) * self.cdc.element_time_s
