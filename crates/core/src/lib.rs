@@ -8,14 +8,17 @@
 //! - [`topology`]: the 4-neighbour graph of a sensor layout, in compressed sparse rows;
 //! - [`repair`]: replacing failed elements by the mean of their available neighbours
 //!   (thesis eq. 6.14), streaming and batch;
+//! - [`preisach`]: the numerical Preisach model (thesis eq. 4.15-4.22), many elements at once;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep).
 
 pub mod error;
+pub mod preisach;
 pub mod repair;
 pub mod spacer;
 pub mod topology;
 
 pub use error::CoreError;
+pub use preisach::{Everett, PreisachBank};
 pub use repair::NeighbourMeanRepair;
 pub use spacer::{SpacerBank, SpacerParams};
 pub use topology::Neighbours;

@@ -11,7 +11,9 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use texsense_core::repair::RepairOutcome;
-use texsense_core::{CoreError, NeighbourMeanRepair, Neighbours, SpacerBank, SpacerParams};
+use texsense_core::{
+    CoreError, Everett, NeighbourMeanRepair, Neighbours, PreisachBank, SpacerBank, SpacerParams,
+};
 
 create_exception!(
     _core,
@@ -348,12 +350,142 @@ fn to_2d(py: Python<'_>, v: Vec<f64>, t: usize, n: usize) -> PyResult<Bound<'_, 
     Ok(a.into_pyarray(py))
 }
 
+/// Preisach stacks of N elements over one Everett table (thesis eq. 4.15-4.22).
+#[pyclass(name = "PreisachBank", module = "texsense._core")]
+struct PyPreisachBank {
+    inner: PreisachBank,
+}
+
+#[pymethods]
+impl PyPreisachBank {
+    #[new]
+    fn new(
+        u_min: f64,
+        u_max: f64,
+        table: PyReadonlyArray2<'_, f64>,
+        n_elements: usize,
+        capacity: usize,
+    ) -> PyResult<Self> {
+        let shape = table.shape();
+        if shape[0] != shape[1] {
+            return Err(to_py(CoreError::Shape {
+                what: "everett table",
+                expected: "a square (K, K) table".into(),
+                got: format!("{shape:?}"),
+            }));
+        }
+        let everett =
+            Everett::new(shape[0], u_min, u_max, table.as_slice()?.to_vec()).map_err(to_py)?;
+        let inner = PreisachBank::new(everett, n_elements, capacity).map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// Number of elements.
+    #[getter]
+    fn n_elements(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// Back to lower saturation.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Everett function F(alpha, beta) at points (same-shape 1-D arrays).
+    fn everett<'py>(
+        &self,
+        py: Python<'py>,
+        alpha: PyReadonlyArray1<'py, f64>,
+        beta: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (a, b) = (alpha.as_slice()?, beta.as_slice()?);
+        if a.len() != b.len() {
+            return Err(to_py(CoreError::Shape {
+                what: "beta",
+                expected: format!("length {}", a.len()),
+                got: format!("length {}", b.len()),
+            }));
+        }
+        let e = self.inner.everett();
+        let out: Vec<f64> = a.iter().zip(b).map(|(&x, &y)| e.value(x, y)).collect();
+        Ok(out.into_pyarray(py))
+    }
+
+    /// Batch: inputs (T, N), valid (T, N) -> outputs (T, N), NaN where skipped.
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        inputs: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let shape = inputs.shape().to_vec();
+        if valid.shape() != shape.as_slice() || shape[1] != self.inner.len() {
+            return Err(to_py(CoreError::Shape {
+                what: "inputs",
+                expected: format!(
+                    "(T, {}) with a valid mask of the same shape",
+                    self.inner.len()
+                ),
+                got: format!("{shape:?} and {:?}", valid.shape()),
+            }));
+        }
+        let (u, v) = (inputs.as_slice()?, valid.as_slice()?);
+        let mut out = vec![0.0; u.len()];
+        let inner = &mut self.inner;
+        py.detach(|| inner.run(u, v, &mut out)).map_err(to_py)?;
+        to_2d(py, out, shape[0], shape[1])
+    }
+
+    /// Set elements to an input with a given output (§6.4.4); returns the outputs set.
+    fn set_state<'py>(
+        &mut self,
+        py: Python<'py>,
+        inputs: PyReadonlyArray1<'py, f64>,
+        outputs: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (u, h) = (inputs.as_slice()?, outputs.as_slice()?);
+        if u.len() != self.inner.len() || h.len() != self.inner.len() {
+            return Err(to_py(CoreError::Shape {
+                what: "set_state",
+                expected: format!("{} inputs and outputs", self.inner.len()),
+                got: format!("{} and {}", u.len(), h.len()),
+            }));
+        }
+        let got: Vec<f64> = (0..u.len())
+            .map(|i| self.inner.set_state(i, u[i], h[i]))
+            .collect();
+        Ok(got.into_pyarray(py))
+    }
+
+    /// Samples clamped into the input range, per element.
+    fn clamped<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
+        self.inner.clamped().to_vec().into_pyarray(py)
+    }
+
+    /// Minor loops forgotten at full stacks, per element.
+    fn forgotten<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
+        self.inner.forgotten().to_vec().into_pyarray(py)
+    }
+
+    /// Stack depth per element.
+    fn depth<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
+        let d: Vec<u64> = self.inner.depth().iter().map(|&v| v as u64).collect();
+        d.into_pyarray(py)
+    }
+
+    /// Last output per element.
+    fn outputs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.last_outputs().to_vec().into_pyarray(py)
+    }
+}
+
 /// The compiled core of texsense.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<PyNeighbourMeanRepair>()?;
     m.add_class::<PySpacerBank>()?;
+    m.add_class::<PyPreisachBank>()?;
     m.add("ShapeError", m.py().get_type::<ShapeError>())?;
     m.add(
         "NeighbourIndexError",

@@ -1,0 +1,526 @@
+//! The numerical Preisach model of thesis §4.4.1 (eq. 4.15-4.22), for many elements at once.
+//!
+//! The model is given by its Everett function `F(α, β)` on a uniform `K x K` grid over the
+//! identified input range `[u_min, u_max]` (row = α, column = β, defined for β <= α, eq. 4.12:
+//! `F(α, β) = (h_α - h_αβ) / 2`). Each element keeps a stack of alternating input extrema,
+//! starting with the lower saturation `m_0 = u_min`, together with the output at each extremum.
+//! With `x` the output at the last extremum (eq. 4.18-4.22):
+//!
+//! - rising input after the minimum `m`: `h = x + 2 F(u, m)`  (eq. 4.16),
+//! - falling input after the maximum `M`: `h = x - 2 F(M, u)` (eq. 4.17).
+//!
+//! When the input passes the extremum before the last one, both are wiped out (the wiping-out
+//! property) and `x` becomes the output stored with the extremum now on top (eq. 4.20/4.21).
+//! A step therefore costs O(1) amortised. Between grid points `F` is interpolated bilinearly;
+//! in the cells on the diagonal, whose upper half lies outside the Preisach triangle, it is
+//! interpolated linearly on the lower triangle, so that `F(u, u) = 0` holds exactly. With an
+//! Everett table that is non-decreasing in α and non-increasing in β the output is monotone
+//! between extrema.
+//!
+//! Inputs outside `[u_min, u_max]` are clamped (and counted). An element whose input is NaN
+//! or flagged invalid keeps its state untouched and outputs NaN.
+//!
+//! **Stack capacity.** Each element stores at most `capacity` extrema. When a new turning
+//! point would overflow the stack, the most recent completed minor loop (the two extrema just
+//! below the top) is forgotten first — the smallest loop in the memory, whose loss changes the
+//! output least. With wiping-out, the stack only grows for ever-shrinking nested oscillations.
+
+use crate::error::{check_len, CoreError};
+
+/// An Everett function on a uniform grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Everett {
+    k: usize,
+    u_min: f64,
+    u_max: f64,
+    step: f64,
+    table: Vec<f64>,
+}
+
+impl Everett {
+    /// Build from a row-major `k x k` table (row α, column β; entries above the diagonal are
+    /// ignored and the diagonal must be 0) over `[u_min, u_max]`.
+    pub fn new(k: usize, u_min: f64, u_max: f64, table: Vec<f64>) -> Result<Self, CoreError> {
+        if k < 2 {
+            return Err(CoreError::Parameter {
+                what: "everett",
+                why: format!("the grid needs at least 2 points, got {k}"),
+            });
+        }
+        check_len("everett table", table.len(), k * k)?;
+        if !(u_min.is_finite() && u_max.is_finite() && u_max > u_min) {
+            return Err(CoreError::Parameter {
+                what: "input range",
+                why: format!("need finite u_min < u_max, got {u_min} .. {u_max}"),
+            });
+        }
+        let mut table = table;
+        for i in 0..k {
+            for j in 0..k {
+                let v = table[i * k + j];
+                if j > i || i == j {
+                    table[i * k + j] = 0.0;
+                } else if !v.is_finite() {
+                    return Err(CoreError::Parameter {
+                        what: "everett table",
+                        why: format!("entry ({i}, {j}) is not finite"),
+                    });
+                }
+            }
+        }
+        Ok(Self {
+            k,
+            u_min,
+            u_max,
+            step: (u_max - u_min) / (k - 1) as f64,
+            table,
+        })
+    }
+
+    /// Grid size K.
+    pub fn size(&self) -> usize {
+        self.k
+    }
+
+    /// Lower end of the input range (the saturation input `m_0`).
+    pub fn u_min(&self) -> f64 {
+        self.u_min
+    }
+
+    /// Upper end of the input range.
+    pub fn u_max(&self) -> f64 {
+        self.u_max
+    }
+
+    #[inline]
+    fn at(&self, i: usize, j: usize) -> f64 {
+        self.table[i * self.k + j]
+    }
+
+    /// `F(α, β)` for `u_min <= β <= α <= u_max` (interpolated).
+    #[inline]
+    pub fn value(&self, alpha: f64, beta: f64) -> f64 {
+        let last = (self.k - 1) as f64;
+        let a = ((alpha - self.u_min) / self.step).clamp(0.0, last);
+        let b = ((beta - self.u_min) / self.step).clamp(0.0, last);
+        if b >= a {
+            return 0.0;
+        }
+        let i0 = (a.floor() as usize).min(self.k - 2);
+        let j0 = (b.floor() as usize).min(self.k - 2);
+        let wa = a - i0 as f64;
+        let wb = b - j0 as f64;
+        if i0 == j0 {
+            // diagonal cell: linear on the lower triangle, F = 0 on the diagonal
+            return (wa - wb) * self.at(i0 + 1, j0);
+        }
+        let f00 = self.at(i0, j0);
+        let f10 = self.at(i0 + 1, j0);
+        let f01 = self.at(i0, j0 + 1);
+        let f11 = self.at(i0 + 1, j0 + 1);
+        (1.0 - wa) * ((1.0 - wb) * f00 + wb * f01) + wa * ((1.0 - wb) * f10 + wb * f11)
+    }
+}
+
+/// Stacks of N elements.
+#[derive(Debug, Clone)]
+pub struct PreisachBank {
+    everett: Everett,
+    n: usize,
+    capacity: usize,
+    values: Vec<f64>,
+    outputs: Vec<f64>,
+    len: Vec<usize>,
+    last_u: Vec<f64>,
+    last_h: Vec<f64>,
+    clamped: Vec<u64>,
+    forgotten: Vec<u64>,
+}
+
+impl PreisachBank {
+    /// N elements at lower saturation (input `u_min`, output 0), each with a stack of at most
+    /// `capacity` extrema (>= 4).
+    pub fn new(everett: Everett, n: usize, capacity: usize) -> Result<Self, CoreError> {
+        if capacity < 4 {
+            return Err(CoreError::Parameter {
+                what: "capacity",
+                why: format!("must be >= 4, got {capacity}"),
+            });
+        }
+        let mut bank = Self {
+            n,
+            capacity,
+            values: vec![0.0; n * capacity],
+            outputs: vec![0.0; n * capacity],
+            len: vec![1; n],
+            last_u: vec![everett.u_min; n],
+            last_h: vec![0.0; n],
+            clamped: vec![0; n],
+            forgotten: vec![0; n],
+            everett,
+        };
+        bank.reset();
+        Ok(bank)
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// True without elements.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// The Everett function.
+    pub fn everett(&self) -> &Everett {
+        &self.everett
+    }
+
+    /// Back to lower saturation; counters cleared.
+    pub fn reset(&mut self) {
+        for i in 0..self.n {
+            self.values[i * self.capacity] = self.everett.u_min;
+            self.outputs[i * self.capacity] = 0.0;
+            self.len[i] = 1;
+            self.last_u[i] = self.everett.u_min;
+            self.last_h[i] = 0.0;
+            self.clamped[i] = 0;
+            self.forgotten[i] = 0;
+        }
+    }
+
+    /// Samples clamped into the input range, per element.
+    pub fn clamped(&self) -> &[u64] {
+        &self.clamped
+    }
+
+    /// Minor loops forgotten because a stack was full, per element.
+    pub fn forgotten(&self) -> &[u64] {
+        &self.forgotten
+    }
+
+    /// Current depth of every element's stack.
+    pub fn depth(&self) -> &[usize] {
+        &self.len
+    }
+
+    /// Last output of every element.
+    pub fn last_outputs(&self) -> &[f64] {
+        &self.last_h
+    }
+
+    /// Set element `i` to input `u` with the output `target` (§6.4.4: a model started from a
+    /// known pressure). Reached by rising from saturation to `u` and, if `target` lies above
+    /// that branch, by rising further to the maximum `M` whose falling curve passes through
+    /// `(u, target)`. Targets outside the outermost branches are clamped to them; returns the
+    /// output actually set.
+    pub fn set_state(&mut self, i: usize, u: f64, target: f64) -> f64 {
+        let e = &self.everett;
+        let u = u.clamp(e.u_min, e.u_max);
+        let base = self.capacity * i;
+        let rising = 2.0 * e.value(u, e.u_min);
+        self.values[base] = e.u_min;
+        self.outputs[base] = 0.0;
+        if target.is_nan() || target <= rising || u >= e.u_max {
+            self.len[i] = 1;
+            self.last_u[i] = u;
+            self.last_h[i] = rising;
+            return rising;
+        }
+        // output at u after rising to M and falling back: 2 F(M, m0) - 2 F(M, u)
+        let after = |m: f64| 2.0 * e.value(m, e.u_min) - 2.0 * e.value(m, u);
+        let (mut lo, mut hi) = (u, e.u_max);
+        if after(hi) <= target {
+            lo = hi;
+        } else {
+            for _ in 0..80 {
+                let mid = 0.5 * (lo + hi);
+                if after(mid) <= target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+        }
+        let m = lo;
+        self.values[base + 1] = m;
+        self.outputs[base + 1] = 2.0 * e.value(m, e.u_min);
+        self.len[i] = 2;
+        self.last_u[i] = u;
+        let h = after(m);
+        self.last_h[i] = h;
+        h
+    }
+
+    #[inline]
+    fn step_one(&mut self, i: usize, u_in: f64) -> f64 {
+        let e = &self.everett;
+        let u = if u_in < e.u_min || u_in > e.u_max {
+            self.clamped[i] += 1;
+            u_in.clamp(e.u_min, e.u_max)
+        } else {
+            u_in
+        };
+        let prev = self.last_u[i];
+        if u == prev {
+            return self.last_h[i];
+        }
+        let base = self.capacity * i;
+        let mut len = self.len[i];
+        // the top is a minimum when len is odd (stack = m0, M1, m1, ...)
+        let top_is_min = len % 2 == 1;
+        let rising = u > prev;
+        if rising != top_is_min {
+            // the input turned at `prev`: push it as a new extremum
+            if len == self.capacity {
+                // forget the most recent completed minor loop (the two entries below the top)
+                let t = base + len - 1;
+                self.values[t - 2] = self.values[t];
+                self.outputs[t - 2] = self.outputs[t];
+                len -= 2;
+                self.forgotten[i] += 1;
+            }
+            self.values[base + len] = prev;
+            self.outputs[base + len] = self.last_h[i];
+            len += 1;
+        }
+        // wiping-out: the new input passes the extremum before the top
+        if rising {
+            while len >= 3 && u >= self.values[base + len - 2] {
+                len -= 2;
+            }
+        } else {
+            while len >= 3 && u <= self.values[base + len - 2] {
+                len -= 2;
+            }
+            if len == 2 && u <= self.values[base] {
+                len = 1; // back at lower saturation
+            }
+        }
+        let top = self.values[base + len - 1];
+        let x = self.outputs[base + len - 1];
+        let h = if len % 2 == 1 {
+            x + 2.0 * e.value(u, top)
+        } else {
+            x - 2.0 * e.value(top, u)
+        };
+        self.len[i] = len;
+        self.last_u[i] = u;
+        self.last_h[i] = h;
+        h
+    }
+
+    /// One frame: inputs (N,), validity (N,) -> outputs (N,) (NaN where skipped).
+    pub fn step(
+        &mut self,
+        inputs: &[f64],
+        valid: &[bool],
+        out: &mut [f64],
+    ) -> Result<(), CoreError> {
+        check_len("inputs", inputs.len(), self.n)?;
+        check_len("valid", valid.len(), self.n)?;
+        check_len("out", out.len(), self.n)?;
+        for i in 0..self.n {
+            out[i] = if valid[i] && inputs[i].is_finite() {
+                self.step_one(i, inputs[i])
+            } else {
+                f64::NAN
+            };
+        }
+        Ok(())
+    }
+
+    /// A batch of frames (T x N, row-major), identical to T calls of `step`.
+    pub fn run(
+        &mut self,
+        inputs: &[f64],
+        valid: &[bool],
+        out: &mut [f64],
+    ) -> Result<(), CoreError> {
+        if self.n == 0 {
+            return Ok(());
+        }
+        if inputs.len() % self.n != 0 {
+            return Err(CoreError::Shape {
+                what: "inputs",
+                expected: format!("a multiple of {} elements", self.n),
+                got: format!("length {}", inputs.len()),
+            });
+        }
+        check_len("valid", valid.len(), inputs.len())?;
+        check_len("out", out.len(), inputs.len())?;
+        let n = self.n;
+        for ((f, v), o) in inputs
+            .chunks_exact(n)
+            .zip(valid.chunks_exact(n))
+            .zip(out.chunks_exact_mut(n))
+        {
+            for i in 0..n {
+                o[i] = if v[i] && f[i].is_finite() {
+                    self.step_one(i, f[i])
+                } else {
+                    f64::NAN
+                };
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// The Everett function of a uniform (non-negative) Preisach density: F = (α - β)² / 2.
+    fn uniform(k: usize) -> Everett {
+        let mut t = vec![0.0; k * k];
+        let h = 1.0 / (k - 1) as f64;
+        for i in 0..k {
+            for j in 0..i {
+                let d = (i - j) as f64 * h;
+                t[i * k + j] = 0.5 * d * d;
+            }
+        }
+        Everett::new(k, 0.0, 1.0, t).unwrap()
+    }
+
+    fn run1(bank: &mut PreisachBank, path: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; path.len()];
+        bank.run(path, &vec![true; path.len()], &mut out).unwrap();
+        out
+    }
+
+    #[test]
+    fn major_loop_of_a_uniform_density() {
+        let mut bank = PreisachBank::new(uniform(101), 1, 64).unwrap();
+        let out = run1(&mut bank, &[0.5, 1.0, 0.5, 0.0]);
+        // rising from saturation: 2 F(u, 0) = u²
+        assert!((out[0] - 0.25).abs() < 1e-12);
+        assert!((out[1] - 1.0).abs() < 1e-12);
+        // falling from 1: 1 - 2 F(1, u) = 1 - (1 - u)²
+        assert!((out[2] - 0.75).abs() < 1e-12);
+        assert!(out[3].abs() < 1e-12);
+        assert_eq!(bank.depth()[0], 1);
+    }
+
+    #[test]
+    fn clamping_nan_and_invalid() {
+        let mut bank = PreisachBank::new(uniform(11), 2, 8).unwrap();
+        let mut out = [0.0; 2];
+        bank.step(&[2.0, 0.5], &[true, true], &mut out).unwrap();
+        assert_eq!(bank.clamped(), &[1, 0]);
+        assert!((out[0] - 1.0).abs() < 1e-12);
+        bank.step(&[f64::NAN, 0.2], &[true, false], &mut out)
+            .unwrap();
+        assert!(out[0].is_nan() && out[1].is_nan());
+        // state untouched: continuing gives the same as if the NaN frame had not happened
+        bank.step(&[0.5, 0.5], &[true, true], &mut out).unwrap();
+        assert!((out[1] - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn set_state_hits_the_target_between_the_branches() {
+        let mut bank = PreisachBank::new(uniform(201), 1, 16).unwrap();
+        // at u = 0.5 the rising branch gives 0.25 and the falling major branch 0.75
+        for target in [0.3, 0.5, 0.74] {
+            let got = bank.set_state(0, 0.5, target);
+            assert!((got - target).abs() < 1e-9, "{got} vs {target}");
+        }
+        assert!((bank.set_state(0, 0.5, 0.1) - 0.25).abs() < 1e-12); // below: clamped
+        assert!((bank.set_state(0, 0.5, 0.9) - 0.75).abs() < 1e-9); // above: clamped
+    }
+
+    #[test]
+    fn capacity_policy_forgets_the_innermost_loop() {
+        let mut bank = PreisachBank::new(uniform(101), 1, 4).unwrap();
+        // ever-shrinking oscillation: 1, 0, 0.9, 0.1, 0.8, 0.2, ...
+        let path: Vec<f64> = (0..12)
+            .map(|k| {
+                let a = 0.05 * (k / 2) as f64;
+                if k % 2 == 0 {
+                    1.0 - a
+                } else {
+                    a
+                }
+            })
+            .collect();
+        let out = run1(&mut bank, &path);
+        assert!(bank.forgotten()[0] > 0);
+        assert!(bank.depth()[0] <= 4);
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+
+    fn arb_path() -> impl Strategy<Value = Vec<f64>> {
+        proptest::collection::vec(0.0f64..1.0, 1..60)
+    }
+
+    proptest! {
+        #[test]
+        fn streaming_equals_batch(path in arb_path()) {
+            let mut a = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            let batch = run1(&mut a, &path);
+            let mut b = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            let mut o = [0.0];
+            for (k, &u) in path.iter().enumerate() {
+                b.step(&[u], &[true], &mut o).unwrap();
+                prop_assert_eq!(o[0].to_bits(), batch[k].to_bits());
+            }
+        }
+
+        #[test]
+        fn return_point_memory(path in arb_path(), lo in 0.0f64..0.5, span in 0.05f64..0.5) {
+            // after any history, go to an extremum M, make a minor excursion inside
+            // [m, M] and come back to M: the output at M is the same as before
+            let mut bank = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            let mut hist = path.clone();
+            let m = lo;
+            let big = (lo + span).min(1.0);
+            hist.push(0.0); // the extremum before `big`
+            hist.push(big);
+            let before = run1(&mut bank, &hist);
+            let at_m = *before.last().unwrap();
+            let after = run1(&mut bank, &[m, (m + big) / 2.0, m + 0.01 * span, big]);
+            prop_assert!((after[3] - at_m).abs() < 1e-9);
+        }
+
+        #[test]
+        fn wiping_out(path in arb_path()) {
+            // any history inside [0, 1] is erased by going to 1 and back to a value:
+            // the output equals that of a fresh model doing the same
+            let mut bank = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            run1(&mut bank, &path);
+            let a = run1(&mut bank, &[1.0, 0.3]);
+            let mut fresh = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            let b = run1(&mut fresh, &[1.0, 0.3]);
+            prop_assert!((a[1] - b[1]).abs() < 1e-12);
+            prop_assert!(bank.depth()[0] == fresh.depth()[0]);
+        }
+
+        #[test]
+        fn congruent_minor_loops(
+            p1 in arb_path(), p2 in arb_path(), lo in 0.2f64..0.5, span in 0.05f64..0.3,
+        ) {
+            // minor loops between the same extrema, after different histories that stay
+            // above lo + span, differ only by a constant
+            let hi = lo + span;
+            let lift = |p: &Vec<f64>| -> Vec<f64> { p.iter().map(|v| hi + v * (1.0 - hi)).collect() };
+            let loop_path: Vec<f64> = (0..=20).map(|k| lo + span * (k as f64 / 20.0))
+                .chain((0..=20).map(|k| hi - span * (k as f64 / 20.0))).collect();
+            let mut a = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            let mut b = PreisachBank::new(uniform(51), 1, 256).unwrap();
+            let mut ha = lift(&p1); ha.push(lo);
+            let mut hb = lift(&p2); hb.push(lo);
+            run1(&mut a, &ha);
+            run1(&mut b, &hb);
+            let la = run1(&mut a, &loop_path);
+            let lb = run1(&mut b, &loop_path);
+            let shift = la[0] - lb[0];
+            for (x, y) in la.iter().zip(lb.iter()) {
+                prop_assert!((x - y - shift).abs() < 1e-9);
+            }
+        }
+    }
+}
