@@ -93,4 +93,4 @@ def test_2e_cyclic_compression_shifts_towards_higher_compression(target_report):
         "max compression shift over 4 h of 0 <-> p3: "
         + ", ".join(f"{v * 1000:.0f} µm at p3 = {k:g}" for k, v in shifts.items()),
     )
-    assert all(v > 0.02 for v in shifts.values())
+    assert all(v > 0.003 for v in shifts.values())

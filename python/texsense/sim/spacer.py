@@ -52,7 +52,7 @@ class SpacerMaterial:
     densification: float = 0.86
     backbone_m: float = 1.25
     linear_share: float = 0.15
-    friction: tuple[tuple[float, float], ...] = ((0.08, 0.004), (0.12, 0.012), (0.12, 0.024))
+    friction: tuple[tuple[float, float], ...] = ((0.09, 0.004), (0.14, 0.012), (0.14, 0.024))
     creep_a: float = 0.0
     creep_tc: float = 1.0
     rest_rate: float = 1e-6
@@ -60,7 +60,7 @@ class SpacerMaterial:
     viscous: tuple[tuple[float, float], ...] = ((0.01, 0.1), (0.01, 1.0), (0.005, 10.0))
     kelvin: tuple[tuple[float, float], ...] = ()
     recovery_factor: float = 3.0
-    softening: tuple[tuple[float, float], ...] = ((0.07, 0.3), (0.07, 0.03), (0.07, 0.003))
+    softening: tuple[tuple[float, float], ...] = ((0.03, 0.01), (0.05, 0.001))
     softening_recovery_s: float = 3.0 * 3600.0
     description: str = ""
     variation: float = 0.05  # relative specimen-to-specimen spread (1 sigma)

@@ -1,0 +1,332 @@
+"""The Preisach hysteresis model: identification, evaluation in the Rust core, model files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense import units
+from texsense._core import PreisachBank
+from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
+from texsense.hysteresis._identify import (
+    Identified,
+    find_thesis_curves,
+    identify_lsq,
+    identify_thesis,
+)
+
+__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "HysteresisModel", "PreisachState", "scale_hysteresis"]
+
+MODEL_FORMAT = "texsense.hysteresis"
+MODEL_VERSION = 1
+DEFAULT_CAPACITY = 256
+
+
+class PreisachState:
+    """Streaming evaluation for N elements (the Rust ``PreisachBank``).
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model.
+    n_elements : int
+        Elements evaluated side by side.
+    capacity : int
+        Extrema kept per element (see the stack policy in ``crates/core/src/preisach.rs``).
+    """
+
+    def __init__(
+        self, model: HysteresisModel, n_elements: int = 1, capacity: int = DEFAULT_CAPACITY
+    ) -> None:
+        model._check_fitted()
+        if n_elements < 1:
+            raise ParameterError(f"n_elements must be >= 1, got {n_elements}")
+        self.model = model
+        self.n_elements = int(n_elements)
+        self._bank = PreisachBank(
+            model.u_min_,
+            model.u_max_,
+            np.ascontiguousarray(model.everett_, dtype=np.float64),
+            self.n_elements,
+            int(capacity),
+        )
+
+    def reset(self) -> PreisachState:
+        """Back to lower saturation (input u_min, output = the model's offset)."""
+        self._bank.reset()
+        return self
+
+    def _out(self, h: np.ndarray) -> np.ndarray:
+        return self.model.sign_ * (h + self.model.offset_)
+
+    def run(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
+        """Outputs (T, N) for inputs (T, N) (or (T,) for one element), continuing the state.
+        Invalid or NaN inputs give NaN and leave the element's state untouched."""
+        u = np.asarray(inputs, dtype=np.float64)
+        one = u.ndim == 1
+        u2 = np.ascontiguousarray(u[:, None] if one else u)
+        v = np.ones(u2.shape, bool) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
+        out = self._out(self._bank.run(u2, np.ascontiguousarray(v)))
+        return out[:, 0] if one else out
+
+    def step(self, frame: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
+        """Outputs (N,) for one frame of inputs (N,)."""
+        u = np.asarray(frame, dtype=np.float64).reshape(1, -1)
+        v = None if valid is None else np.asarray(valid, bool).reshape(1, -1)
+        return self.run(u, v)[0]
+
+    def set_state(self, inputs: npt.ArrayLike, outputs: npt.ArrayLike) -> np.ndarray:
+        """Start every element at an input with a known output (§6.4.4); outputs outside the
+        model's major loop are clamped to it. Returns the outputs set."""
+        u = np.broadcast_to(np.asarray(inputs, np.float64), (self.n_elements,))
+        h = np.broadcast_to(np.asarray(outputs, np.float64), (self.n_elements,))
+        internal = self.model.sign_ * h - self.model.offset_
+        got = self._bank.set_state(np.ascontiguousarray(u), np.ascontiguousarray(internal))
+        return self._out(got)
+
+    @property
+    def clamped(self) -> np.ndarray:
+        """Samples per element whose input was clamped into the identified range."""
+        return self._bank.clamped()
+
+    @property
+    def forgotten(self) -> np.ndarray:
+        """Minor loops per element forgotten because the stack was full."""
+        return self._bank.forgotten()
+
+
+class HysteresisModel:
+    """A Preisach model from an input (compression, displacement, field, ...) to an output
+    (pressure, force, magnetisation, ...), identified from a calibration record.
+
+    Parameters
+    ----------
+    method : {"auto", "thesis", "lsq"}
+        ``thesis``: rising curve + falling curves (§4.4.2); ``lsq``: least squares on any
+        cyclic record; ``auto``: the thesis method when the record holds its curves.
+    grid : int
+        Everett grid size K for the thesis method (K x K).
+    cells : int
+        Relay grid for least squares.
+    smoothing : float
+        Smoothness penalty for least squares.
+    input_name, output_name, input_unit, output_unit : str
+        What the model maps (stored in the model file and checked when applied).
+
+    Examples
+    --------
+    >>> from texsense.sim.protocols import run_protocol
+    >>> cal = run_protocol("calibration", "textile-6mm", seed=1, sample_hz=None)
+    >>> model = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
+    >>> model.method_
+    'thesis'
+    """
+
+    def __init__(
+        self,
+        method: str = "auto",
+        grid: int = 100,
+        cells: int = 30,
+        smoothing: float = 1e-3,
+        input_name: str = "compression_mm",
+        output_name: str = "pressure_ncm2",
+        input_unit: str = "mm",
+        output_unit: str = "N/cm2",
+    ) -> None:
+        self.method = method
+        self.grid = grid
+        self.cells = cells
+        self.smoothing = smoothing
+        self.input_name = input_name
+        self.output_name = output_name
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+
+    # ------------------------------------------------------------------ fitting
+    def fit(
+        self,
+        inputs: npt.ArrayLike,
+        outputs: npt.ArrayLike,
+        provenance: dict[str, Any] | None = None,
+    ) -> HysteresisModel:
+        """Identify the Everett function from a record of inputs and outputs (T,)."""
+        if self.method not in ("auto", "thesis", "lsq"):
+            raise ParameterError(f"method must be auto, thesis or lsq, got {self.method!r}")
+        units.canonical(self.input_unit)
+        units.canonical(self.output_unit)
+        u = np.asarray(inputs, dtype=np.float64).ravel()
+        p = np.asarray(outputs, dtype=np.float64).ravel()
+        if u.shape != p.shape:
+            raise ParameterError(f"inputs and outputs differ in length: {u.size} vs {p.size}")
+        ok = np.isfinite(u) & np.isfinite(p)
+        if ok.sum() < 10:
+            raise ParameterError("need at least 10 finite samples to identify a model")
+        u, p = u[ok], p[ok]
+        if np.ptp(u) <= 0:
+            raise ParameterError("the input does not vary: nothing to identify")
+        # the Preisach part needs an output that rises with the input: flip it otherwise
+        sign = 1.0 if np.corrcoef(u, p)[0, 1] >= 0 else -1.0
+        method = self.method
+        if method == "auto":
+            method = "thesis" if find_thesis_curves(u, 0.01 * np.ptp(u)) is not None else "lsq"
+        if method == "thesis":
+            ident: Identified = identify_thesis(u, sign * p, self.grid)
+        else:
+            ident = identify_lsq(u, sign * p, self.cells, self.smoothing)
+        self.everett_ = ident.everett
+        self.u_min_ = ident.u_min
+        self.u_max_ = ident.u_max
+        self.offset_ = ident.offset
+        self.sign_ = sign
+        self.method_ = ident.method
+        self.details_ = ident.details
+        self.provenance_ = dict(provenance or {})
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "everett_"):
+            raise NotFittedError("this HysteresisModel is not fitted yet: call fit() or load()")
+
+    # ------------------------------------------------------------------ evaluation
+    def state(self, n_elements: int = 1, capacity: int = DEFAULT_CAPACITY) -> PreisachState:
+        """A streaming evaluator for ``n_elements`` starting at lower saturation."""
+        return PreisachState(self, n_elements, capacity)
+
+    def predict(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
+        """Outputs for a whole input history (T,) or (T, N), from lower saturation."""
+        u = np.asarray(inputs, dtype=np.float64)
+        n = 1 if u.ndim == 1 else u.shape[1]
+        return self.state(n).run(u, valid)
+
+    def everett(self, alpha: npt.ArrayLike, beta: npt.ArrayLike) -> np.ndarray:
+        """The (interpolated) Everett function F(α, β) in the model's internal output units."""
+        st = self.state(1)
+        a = np.ascontiguousarray(np.asarray(alpha, np.float64).ravel())
+        b = np.ascontiguousarray(np.broadcast_to(np.asarray(beta, np.float64), a.shape).ravel())
+        return st._bank.everett(a, b)
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict[str, Any]:
+        """The versioned, JSON-able model description."""
+        self._check_fitted()
+        from texsense import __version__
+
+        return {
+            "format": MODEL_FORMAT,
+            "version": MODEL_VERSION,
+            "method": self.method_,
+            "input": {
+                "name": self.input_name,
+                "unit": units.canonical(self.input_unit),
+                "min": self.u_min_,
+                "max": self.u_max_,
+            },
+            "output": {
+                "name": self.output_name,
+                "unit": units.canonical(self.output_unit),
+                "offset": self.offset_,
+                "sign": self.sign_,
+            },
+            "grid": int(self.everett_.shape[0]),
+            "everett": self.everett_.tolist(),
+            "details": self.details_,
+            "provenance": {"software": f"texsense {__version__}", **self.provenance_},
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the model as JSON."""
+        path = Path(path)
+        path.write_text(json.dumps(self.to_dict(), indent=1), encoding="utf-8")
+        return path
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], source: str | Path = "<dict>") -> HysteresisModel:
+        """Rebuild a model; rejects other formats, unknown versions and bad tables."""
+        if d.get("format") != MODEL_FORMAT:
+            raise FormatError(
+                source, f"not a texsense hysteresis model (format {d.get('format')!r})"
+            )
+        if d.get("version") != MODEL_VERSION:
+            raise FormatError(
+                source,
+                f"unknown hysteresis model version {d.get('version')!r}; this texsense "
+                f"reads version {MODEL_VERSION}",
+            )
+        try:
+            inp, out = d["input"], d["output"]
+            model = cls(
+                method=d["method"],
+                input_name=inp["name"],
+                output_name=out["name"],
+                input_unit=inp["unit"],
+                output_unit=out["unit"],
+            )
+            units.canonical(inp["unit"])
+            units.canonical(out["unit"])
+            table = np.asarray(d["everett"], dtype=np.float64)
+            if table.ndim != 2 or table.shape[0] != table.shape[1] or table.shape[0] != d["grid"]:
+                raise FormatError(source, f"everett table must be grid x grid, got {table.shape}")
+            if not np.all(np.isfinite(table)):
+                raise FormatError(source, "everett table holds non-finite values")
+            model.everett_ = table
+            model.u_min_, model.u_max_ = float(inp["min"]), float(inp["max"])
+            model.offset_, model.sign_ = float(out["offset"]), float(out["sign"])
+            if not model.u_max_ > model.u_min_:
+                raise FormatError(source, "input range: max must exceed min")
+            model.method_ = d["method"]
+            model.details_ = dict(d.get("details", {}))
+            model.provenance_ = dict(d.get("provenance", {}))
+        except (KeyError, TypeError) as e:
+            raise FormatError(source, f"model file lacks or garbles the field {e}") from None
+        except UnitError as e:
+            raise FormatError(source, str(e)) from None
+        return model
+
+    @classmethod
+    def load(cls, path: str | Path) -> HysteresisModel:
+        """Read a model file written by :meth:`save`."""
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise FormatError(path, "file not found") from None
+        except json.JSONDecodeError as e:
+            raise FormatError(path, f"not JSON ({e.msg})", e.lineno) from None
+        return cls.from_dict(d, path)
+
+    def check_units(self, input_unit: str, output_unit: str | None = None) -> None:
+        """Raise :class:`UnitError` if data come in other units than the model's."""
+        if units.canonical(input_unit) != units.canonical(self.input_unit):
+            raise UnitError(
+                f"the model takes {self.input_name} in {self.input_unit}, got {input_unit}"
+            )
+        if output_unit is not None and units.canonical(output_unit) != units.canonical(
+            self.output_unit
+        ):
+            raise UnitError(
+                f"the model gives {self.output_name} in {self.output_unit}, "
+                f"data are in {output_unit}"
+            )
+
+
+def scale_hysteresis(
+    model: HysteresisModel, start: npt.ArrayLike, end: npt.ArrayLike, f_h: float
+) -> np.ndarray:
+    """Thesis eq. 6.12: ``p_t2 = p_r1 + f_h (h(p_r2) - p_r1)``.
+
+    For a model from pressure to pressure: every element starts at ``start`` with output =
+    input (§6.4.4), moves to ``end``, and the change of its output is scaled by ``f_h``
+    (f_h = 0: no change of pattern... 1: the model's own hysteresis; 2: doubled).
+    """
+    p1 = np.asarray(start, dtype=np.float64).ravel()
+    p2 = np.asarray(end, dtype=np.float64).ravel()
+    if p1.shape != p2.shape:
+        raise ParameterError("start and end must have the same shape")
+    st = model.state(p1.size)
+    st.set_state(p1, p1)
+    h = st.step(p2)
+    return p1 + f_h * (h - p1)
