@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 import numpy.typing as npt
@@ -48,7 +49,7 @@ def split_branches(u: npt.ArrayLike, tolerance: float) -> list[Branch]:
     x = np.asarray(u, dtype=np.float64)
     cuts = [0, *reversal_indices(x, tolerance), x.size - 1]
     out = []
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+    for a, b in pairwise(cuts):
         if b > a:
             out.append(Branch(a, b, bool(x[b] > x[a])))
     return out
