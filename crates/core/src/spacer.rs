@@ -18,7 +18,7 @@
 //!   `d|z|/dt = -(a r / t_c) exp((|z| - r) / (a r))`, integrated exactly over any step
 //!   (`exp(-y)` grows linearly with time). Contacts creep only at rest: the creep clock runs
 //!   at `1 / (1 + (|de/dt| / rest_rate)²)` of real time, so an element held still relaxes like
-//!   `r (1 - a ln(1 + t / t_c))` while any ramp (0.1 mm/min is 280 x rest_rate) leaves it
+//!   `r (1 - a ln(1 + t / t_c))` while any ramp (0.1 mm/min is 2800 x rest_rate) leaves it
 //!   alone: ramps are nearly rate independent (thesis §4.1) and holds relax logarithmically
 //!   (§5.1).
 //! - **Clutched relaxation of the structure** (drift after any step, up or down): one branch

@@ -29,6 +29,7 @@ _ACCEPTS = {
     "steps": {"levels", "hold", "speed", "falling"},
     "cyclic": {"p3", "duration", "speed"},
     "random": {"duration", "max"},
+    "sawtooth": {"max", "speed"},
 }
 
 

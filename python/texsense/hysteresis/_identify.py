@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import lsq_linear
-from scipy.sparse import csr_matrix, diags, vstack
+from scipy.sparse import csr_matrix, vstack
 
 from texsense.exceptions import ParameterError
 from texsense.hysteresis._segments import Branch, split_branches
@@ -152,19 +152,72 @@ def _monotone_xy(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x[keep], y[keep]
 
 
-def relay_states(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> np.ndarray:
-    """States (T, n_relays) of the relays (α_i = nodes[i] > β_j = nodes[j]), all down at the
-    start: up once the input reached α_i, down once it fell to β_j, whichever was last."""
-    t = np.arange(u.size)
-    last_up = np.array([np.maximum.accumulate(np.where(u >= a, t, -1)) for a in nodes])
-    last_down = np.array([np.maximum.accumulate(np.where(u <= b, t, -1)) for b in nodes])
-    ii, jj = np.tril_indices(nodes.size, -1)
-    return (last_up[ii] > last_down[jj]).T
+def everett_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> csr_matrix:
+    """The model's output for an input history is linear in the Everett table: return the
+    sparse matrix A (T x K²) with ``output = A @ F.ravel()`` (output at u_min = 0).
 
+    The extremum stack depends on the input alone (eq. 4.15/4.16 with wiping-out); each
+    ``F(α, β)`` term is spread over the grid nodes with the interpolation weights of the Rust
+    core (bilinear; linear on the lower triangle of a diagonal cell).
+    """
+    k = nodes.size
+    u_min, step = nodes[0], nodes[1] - nodes[0]
+    last = k - 1
+    rows: list[int] = []
+    cols: list[int] = []
+    vals: list[float] = []
 
-def _reversible_basis(u: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    width = np.diff(nodes)
-    return np.clip((u[:, None] - nodes[None, :-1]) / width[None, :], 0.0, 1.0)
+    def add(t: int, alpha: float, beta: float, c: float) -> None:
+        a = min(max((alpha - u_min) / step, 0.0), last)
+        b = min(max((beta - u_min) / step, 0.0), last)
+        if b >= a:
+            return
+        i0 = min(int(a), k - 2)
+        j0 = min(int(b), k - 2)
+        wa, wb = a - i0, b - j0
+        if i0 == j0:
+            terms = [((i0 + 1) * k + j0, (wa - wb))]
+        else:
+            terms = [
+                (i0 * k + j0, (1 - wa) * (1 - wb)),
+                (i0 * k + j0 + 1, (1 - wa) * wb),
+                ((i0 + 1) * k + j0, wa * (1 - wb)),
+                ((i0 + 1) * k + j0 + 1, wa * wb),
+            ]
+        for col, w in terms:
+            if w:
+                rows.append(t)
+                cols.append(col)
+                vals.append(c * w)
+
+    stack = [u_min]  # alternating extrema, m0 first
+    prev = u_min
+    for t, x in enumerate(u):
+        x = min(max(float(x), nodes[0]), nodes[-1])
+        top_is_min = len(stack) % 2 == 1
+        if x != prev:
+            rising = x > prev
+            if rising != top_is_min:
+                stack.append(prev)
+            if rising:
+                while len(stack) >= 3 and x >= stack[-2]:
+                    del stack[-2:]
+            else:
+                while len(stack) >= 3 and x <= stack[-2]:
+                    del stack[-2:]
+                if len(stack) == 2 and x <= stack[0]:
+                    del stack[1:]
+            prev = x
+        # output = 2 Σ_k [F(M_k, m_{k-1}) - F(M_k, m_k)] + the branch now being traced
+        for q in range(1, len(stack), 2):
+            add(t, stack[q], stack[q - 1], 2.0)
+            if q + 1 < len(stack):
+                add(t, stack[q], stack[q + 1], -2.0)
+        if len(stack) % 2 == 1:  # rising after the minimum on top
+            add(t, x, stack[-1], 2.0)
+        else:  # falling after the maximum on top
+            add(t, stack[-1], x, -2.0)
+    return csr_matrix((vals, (rows, cols)), shape=(u.size, k * k))
 
 
 def _downsample(u: np.ndarray, p: np.ndarray, max_samples: int) -> tuple[np.ndarray, np.ndarray]:
@@ -177,21 +230,24 @@ def _downsample(u: np.ndarray, p: np.ndarray, max_samples: int) -> tuple[np.ndar
     return u[keep], p[keep]
 
 
-def loop_orientation(u: npt.NDArray[np.float64], p: npt.NDArray[np.float64]) -> int:
-    """+1 for counter-clockwise loops in (u, p) (output lags input, ∮ p du < 0), -1 for
-    clockwise (loading branch above unloading, as spacers)."""
-    area = float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(u)))
-    return 1 if area < 0 else -1
-
-
 def identify_lsq(
     u: npt.ArrayLike,
     p: npt.ArrayLike,
     cells: int = 30,
     smoothing: float = 1e-3,
-    max_samples: int = 6000,
+    max_samples: int = 8000,
+    prior: Identified | None = None,
+    prior_weight: float = 0.05,
 ) -> Identified:
-    """Least-squares identification from any record (see the module docstring)."""
+    """Least-squares identification of the Everett table from any record.
+
+    The output of the numerical model is linear in the table (:func:`everett_design`), so
+    the table values at ``cells + 1`` nodes per axis and the output offset are found by
+    regularised linear least squares (second differences along α and β penalised with
+    weight ``smoothing``), then made monotone. Parts of the Preisach triangle that the record
+    never visits are only filled by the smoothness penalty: the record should hold reversals
+    at many levels (a random or cyclic record), not just the thesis's falling curves.
+    """
     u = np.asarray(u, dtype=np.float64)
     p = np.asarray(p, dtype=np.float64)
     ok = np.isfinite(u) & np.isfinite(p)
@@ -200,67 +256,56 @@ def identify_lsq(
         raise ParameterError("least squares needs at least 10 samples over a non-zero input range")
     if cells < 3:
         raise ParameterError(f"cells must be >= 3, got {cells}")
-    orientation = loop_orientation(u, p)
     us, ps = _downsample(u, p, max_samples)
     u_min, u_max = float(u.min()), float(u.max())
     nodes = np.linspace(u_min, u_max, cells + 1)
-    relays = relay_states(us, nodes).astype(np.float64)
-    rev = _reversible_basis(us, nodes)
-    n_rel, n_rev = relays.shape[1], rev.shape[1]
-    a = np.hstack([relays, rev, np.ones((us.size, 1))])
-    # smoothness: differences of neighbouring relay weights (along α and β) and increments
-    ii, jj = np.tril_indices(nodes.size, -1)
-    index = {(i, j): k for k, (i, j) in enumerate(zip(ii, jj, strict=True))}
+    k = nodes.size
+    a_full = everett_design(us, nodes)
+    ii, jj = np.tril_indices(k, -1)
+    free = ii * k + jj
+    a = a_full[:, free]
+    n = free.size
+    # second-difference smoothness along α (rows) and β (columns) of the lower triangle
+    index = {(i, j): c for c, (i, j) in enumerate(zip(ii, jj, strict=True))}
     rows, cols, vals = [], [], []
     r = 0
-    for (i, j), k in index.items():
-        for nb in ((i + 1, j), (i, j + 1)):
-            if nb in index:
-                rows += [r, r]
-                cols += [k, index[nb]]
-                vals += [1.0, -1.0]
+    for (i, j), c in index.items():
+        for di, dj in ((1, 0), (0, 1)):
+            a1, a2 = (i - di, j - dj), (i + di, j + dj)
+            if a1 in index and a2 in index:  # curvature
+                rows += [r, r, r]
+                cols += [index[a1], c, index[a2]]
+                vals += [1.0, -2.0, 1.0]
                 r += 1
-    for k in range(n_rev - 1):
-        rows += [r, r]
-        cols += [n_rel + k, n_rel + k + 1]
-        vals += [1.0, -1.0]
-        r += 1
-    scale = np.sqrt(us.size) * smoothing * cells
-    penalty = csr_matrix((np.array(vals) * scale, (rows, cols)), shape=(r, a.shape[1]))
-    ridge = diags(np.full(a.shape[1], 1e-6 * np.sqrt(us.size)))
-    a_aug = vstack([csr_matrix(a), penalty, ridge]).tocsr()
-    b_aug = np.concatenate([ps, np.zeros(r + a.shape[1])])
-    inf = np.inf
-    lower = np.concatenate(
-        [np.zeros(n_rel) if orientation > 0 else np.full(n_rel, -inf), np.full(n_rev + 1, -inf)]
-    )
-    upper = np.concatenate(
-        [np.full(n_rel, inf) if orientation > 0 else np.zeros(n_rel), np.full(n_rev + 1, inf)]
-    )
-    sol = lsq_linear(
-        a_aug,
-        b_aug,
-        bounds=(lower, upper),
-        method="bvls" if a.shape[1] < 400 else "trf",
-        lsmr_tol="auto",
-        max_iter=2000,
-    )
-    w = sol.x[:n_rel]
-    incr = sol.x[n_rel : n_rel + n_rev]
+
+    scale = smoothing * np.sqrt(us.size) * float(np.ptp(ps) or 1.0) / max(float(np.ptp(ps)), 1e-12)
+    penalty = csr_matrix((np.array(vals) * scale * k, (rows, cols)), shape=(r, n + 1))
+    design = hstack_offset(a)
+    blocks, rhs = [design, penalty], [ps, np.zeros(r)]
+    if prior is not None:
+        # pull towards a prior table (e.g. the thesis method's) where the data say little
+        old = np.linspace(prior.u_min, prior.u_max, prior.everett.shape[0])
+        from scipy.interpolate import RegularGridInterpolator
+
+        interp = RegularGridInterpolator(
+            (old, old), prior.everett, bounds_error=False, fill_value=None
+        )
+        target = interp(np.column_stack([nodes[ii], nodes[jj]]))
+        weight = prior_weight * np.sqrt(us.size)
+        blocks.append(
+            csr_matrix((np.full(n, weight), (np.arange(n), np.arange(n))), shape=(n, n + 1))
+        )
+        rhs.append(weight * target)
+    a_aug = vstack(blocks).tocsr()
+    b_aug = np.concatenate(rhs)
+    sol = lsq_linear(a_aug, b_aug, method="trf", lsmr_tol="auto", max_iter=200)
+    table = np.zeros(k * k)
+    table[free] = sol.x[:n]
+    table = table.reshape(k, k)
     offset = float(sol.x[-1])
-    # Everett on the nodes: ½ Σ_{j <= j' < i' <= i} w  +  ½ (R(α) - R(β))
-    k = nodes.size
-    wm = np.zeros((k, k))
-    wm[ii, jj] = w
-    # cumulative: rows (α) upward, columns (β) from the diagonal downward
-    cum = np.cumsum(np.cumsum(wm[:, ::-1], axis=1)[:, ::-1], axis=0)
-    table = 0.5 * cum  # relays with α_i' <= α_i and β_j' >= β_j
-    rev_nodes = np.concatenate([[0.0], np.cumsum(incr)])
-    table += 0.5 * (rev_nodes[:, None] - rev_nodes[None, :])
-    table = np.tril(table, -1)
-    fit = a @ sol.x
+    fit = design @ sol.x
     return Identified(
-        table,
+        make_monotone(table),
         u_min,
         u_max,
         offset,
@@ -268,8 +313,15 @@ def identify_lsq(
         {
             "cells": cells,
             "smoothing": smoothing,
-            "orientation": "counter-clockwise" if orientation > 0 else "clockwise",
             "fit_rmse": float(np.sqrt(np.mean((fit - ps) ** 2))),
             "samples_used": int(us.size),
+            "prior": None if prior is None else prior.method,
         },
     )
+
+
+def hstack_offset(a: csr_matrix) -> csr_matrix:
+    """Append a column of ones (the output offset) to a sparse design matrix."""
+    from scipy.sparse import hstack
+
+    return hstack([a, csr_matrix(np.ones((a.shape[0], 1)))]).tocsr()

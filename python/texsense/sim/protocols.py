@@ -15,6 +15,7 @@ protocol       what                                                            t
 ``steps``      steps to 2.5/5/7.5/10 N/cm² (fresh specimen each), held 1 h      §5.1.2
 ``cyclic``     0 <-> p3 for 4 h                                                 §5.1.2.2, §5.3
 ``random``     band-limited random pressure (pressure controlled)               —
+``sawtooth``   ramps to random levels at constant speed (nested minor loops)    —
 ============== =============================================================== ===========
 """
 
@@ -224,6 +225,33 @@ def random_pressure(
     ]
 
 
+def sawtooth(
+    spacer: Spacer,
+    *,
+    reversals: int = 60,
+    max_ncm2: float = 10.0,
+    speed_mm_min: float = 50.0,
+    seed: int | None = 0,
+) -> list[DriveResult]:
+    """Random-amplitude sawtooth: alternating ramps to random pressures, each reversal at a
+    level drawn uniformly between 0 and ``max_ncm2`` (the kind of cyclic record least-squares
+    identification needs: reversals at many levels, nested minor loops)."""
+    if reversals < 2:
+        raise ParameterError("reversals must be >= 2")
+    rng = np.random.default_rng(seed)
+    m = _machine(spacer)
+    m.ramp_to_pressure(max_ncm2, speed_mm_min).ramp_to_pressure(0.0, speed_mm_min)
+    level = 0.0
+    for k in range(reversals):
+        if k % 2 == 0:
+            level = float(rng.uniform(level, max_ncm2))
+        else:
+            level = float(rng.uniform(0.0, level))
+        m.ramp_to_pressure(level, speed_mm_min)
+    m.ramp_to_pressure(0.0, speed_mm_min)
+    return [m.trace()]
+
+
 PROTOCOLS: dict[str, Callable[..., list[DriveResult]]] = {
     "ramp": ramp,
     "calibration": calibration,
@@ -231,6 +259,7 @@ PROTOCOLS: dict[str, Callable[..., list[DriveResult]]] = {
     "steps": steps,
     "cyclic": cyclic,
     "random": random_pressure,
+    "sawtooth": sawtooth,
 }
 
 

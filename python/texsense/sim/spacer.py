@@ -55,7 +55,7 @@ class SpacerMaterial:
     friction: tuple[tuple[float, float], ...] = ((0.09, 0.004), (0.14, 0.012), (0.14, 0.024))
     creep_a: float = 0.0
     creep_tc: float = 1.0
-    rest_rate: float = 1e-6
+    rest_rate: float = 1e-7
     clutch: tuple[float, float] = (0.3, 0.108)
     viscous: tuple[tuple[float, float], ...] = ((0.01, 0.1), (0.01, 1.0), (0.005, 10.0))
     kelvin: tuple[tuple[float, float], ...] = ()
