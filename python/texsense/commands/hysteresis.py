@@ -1,0 +1,197 @@
+"""``texsense hysteresis fit|apply|plot``: identify and apply a Preisach model."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from texsense.exceptions import FormatError, ParameterError
+from texsense.hysteresis import HysteresisModel
+from texsense.io.columns_csv import read_columns_csv, write_columns_csv
+
+#: Pressure bands of the error summary (thesis §4.5), in the output's unit.
+DEFAULT_BANDS = ((0.5, 3.5), (3.5, 10.0))
+_UNIT_BY_SUFFIX = {
+    "_mm": "mm",
+    "_ncm2": "N/cm2",
+    "_kpa": "kPa",
+    "_n": "N",
+    "_pf": "pF",
+    "_s": "s",
+    "_mmhg": "mmHg",
+}
+
+
+def _unit_of(name: str) -> str:
+    """Unit from a column name's suffix (compression_mm -> mm); '1' if there is none."""
+    low = name.lower()
+    for suffix, unit in _UNIT_BY_SUFFIX.items():
+        if low.endswith(suffix):
+            return unit
+    return "1"
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``hysteresis`` command group."""
+    p = sub.add_parser(
+        "hysteresis",
+        help="identify and apply Preisach hysteresis models",
+        description="Preisach hysteresis compensation (thesis chapter 4).",
+    )
+    hs = p.add_subparsers(dest="hysteresis_command", metavar="ACTION")
+    hs.required = True
+    f = hs.add_parser(
+        "fit",
+        help="identify a model from a calibration CSV",
+        description="Identify the Everett function from a column CSV.",
+    )
+    f.add_argument("calibration", type=Path, help="CSV with the input and output columns")
+    f.add_argument("-o", "--output-model", type=Path, required=True, help="model JSON to write")
+    f.add_argument("--input", default="compression_mm", help="input column (compression_mm)")
+    f.add_argument("--output", default="pressure_ncm2", help="output column (pressure_ncm2)")
+    f.add_argument("--method", default="auto", choices=("auto", "thesis", "lsq"))
+    f.add_argument("--grid", type=int, default=100, help="Everett grid, thesis method (100)")
+    f.add_argument("--cells", type=int, default=40, help="grid cells, least squares (40)")
+    f.add_argument("--json", action="store_true", help="print a JSON summary")
+    f.set_defaults(run=run_fit)
+    a = hs.add_parser(
+        "apply",
+        help="apply a model to a CSV",
+        description="Run a model over a CSV; OUT holds every input column plus "
+        "<output>_model. With the output column present, prints the error.",
+    )
+    a.add_argument("model", type=Path, help="model JSON")
+    a.add_argument("data", type=Path, help="CSV with the input column")
+    a.add_argument("-o", "--out", type=Path, required=True, help="CSV to write")
+    a.add_argument("--input", help="input column (default: the model's)")
+    a.add_argument("--output", help="output column to compare with (default: the model's)")
+    a.add_argument("--json", action="store_true", help="print the error summary as JSON")
+    a.set_defaults(run=run_apply)
+    pl = hs.add_parser("plot", help="Everett surface and modelled loops as PNG")
+    pl.add_argument("model", type=Path)
+    pl.add_argument("-o", "--out", type=Path, required=True, help="PNG to write")
+    pl.set_defaults(run=run_plot)
+
+
+def _column(cols: dict[str, np.ndarray], name: str, path: Path) -> np.ndarray:
+    if name not in cols:
+        raise FormatError(path, f"no column {name!r}; columns are {', '.join(cols)}")
+    return cols[name]
+
+
+def error_summary(
+    measured: np.ndarray,
+    modelled: np.ndarray,
+    bands: tuple[tuple[float, float], ...] = DEFAULT_BANDS,
+) -> dict[str, Any]:
+    """RMSE and mean/max relative error per output band."""
+    ok = np.isfinite(measured) & np.isfinite(modelled)
+    y, m = measured[ok], modelled[ok]
+    out: dict[str, Any] = {
+        "samples": int(ok.sum()),
+        "rmse": float(np.sqrt(np.mean((m - y) ** 2))) if y.size else None,
+    }
+    for lo, hi in bands:
+        sel = (y >= lo) & (y < hi)
+        rel = np.abs(m[sel] - y[sel]) / y[sel]
+        out[f"{lo:g}-{hi:g}"] = {
+            "samples": int(sel.sum()),
+            "mean_relative_error": float(rel.mean()) if sel.any() else None,
+            "max_relative_error": float(rel.max()) if sel.any() else None,
+        }
+    return out
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    """Run ``texsense hysteresis fit``."""
+    cols = read_columns_csv(args.calibration)
+    u = _column(cols, args.input, args.calibration)
+    y = _column(cols, args.output, args.calibration)
+    model = HysteresisModel(
+        method=args.method,
+        grid=args.grid,
+        cells=args.cells,
+        input_name=args.input,
+        output_name=args.output,
+        input_unit=_unit_of(args.input),
+        output_unit=_unit_of(args.output),
+    )
+    model.fit(u, y, provenance={"calibration": str(args.calibration)})
+    model.save(args.output_model)
+    fitted = model.predict(u)
+    summary = {
+        "model": str(args.output_model),
+        "method": model.method_,
+        "input_range": [model.u_min_, model.u_max_],
+        "grid": model.everett_.shape[0],
+        "fit": error_summary(y, fitted),
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(
+            f"wrote {args.output_model}: {model.method_} method, "
+            f"{model.everett_.shape[0]} x {model.everett_.shape[0]} Everett grid, "
+            f"{args.input} {model.u_min_:.4g}..{model.u_max_:.4g}; "
+            f"fit RMSE {summary['fit']['rmse']:.4g}"
+        )
+    return 0
+
+
+def run_apply(args: argparse.Namespace) -> int:
+    """Run ``texsense hysteresis apply``."""
+    model = HysteresisModel.load(args.model)
+    cols = read_columns_csv(args.data)
+    in_name = args.input or model.input_name
+    out_name = args.output or model.output_name
+    u = _column(cols, in_name, args.data)
+    if args.input and _unit_of(in_name) != "1":
+        model.check_units(_unit_of(in_name))
+    st = model.state(1)
+    modelled = st.run(u)
+    clamped = int(st.clamped[0])
+    cols[f"{out_name}_model"] = modelled
+    write_columns_csv(args.out, cols)
+    summary: dict[str, Any] = {
+        "out": str(args.out),
+        "samples": int(u.size),
+        "clamped_inputs": clamped,
+    }
+    if out_name in cols and out_name != f"{out_name}_model":
+        summary["error"] = error_summary(cols[out_name], modelled)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(
+        f"wrote {args.out} ({u.size} samples, {clamped} inputs clamped into "
+        f"{model.u_min_:.4g}..{model.u_max_:.4g})"
+    )
+    if "error" in summary:
+        e = summary["error"]
+        print(f"  RMSE {e['rmse']:.4g} {model.output_unit}")
+        for band in (k for k in e if "-" in k):
+            b = e[band]
+            if b["samples"]:
+                print(
+                    f"  {band} {model.output_unit}: mean relative error "
+                    f"{b['mean_relative_error']:.2%}, max {b['max_relative_error']:.2%} "
+                    f"({b['samples']} samples)"
+                )
+    return 0
+
+
+def run_plot(args: argparse.Namespace) -> int:
+    """Run ``texsense hysteresis plot``."""
+    from texsense.hysteresis.plots import model_figure
+
+    model = HysteresisModel.load(args.model)
+    model_figure(model, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+__all__ = ["ParameterError", "error_summary", "register"]
