@@ -212,39 +212,50 @@ impl PreisachBank {
     }
 
     /// Set element `i` to input `u` with the output `target` (§6.4.4: a model started from a
-    /// known pressure). Reached by rising from saturation to `u` and, if `target` lies above
-    /// that branch, by rising further to the maximum `M` whose falling curve passes through
-    /// `(u, target)`. Targets outside the outermost branches are clamped to them; returns the
-    /// output actually set.
+    /// known pressure). Reached by rising from saturation to a maximum `M >= u` and falling
+    /// back to `u`: `M = u` gives the rising branch, `M = u_max` the major falling branch, and
+    /// `M` is found by bisection for targets between the two (either orientation of the
+    /// loop). Targets outside are clamped to the nearer branch; returns the output set.
     pub fn set_state(&mut self, i: usize, u: f64, target: f64) -> f64 {
         let e = &self.everett;
         let u = u.clamp(e.u_min, e.u_max);
         let base = self.capacity * i;
-        let rising = 2.0 * e.value(u, e.u_min);
         self.values[base] = e.u_min;
         self.outputs[base] = 0.0;
-        if target.is_nan() || target <= rising || u >= e.u_max {
-            self.len[i] = 1;
-            self.last_u[i] = u;
-            self.last_h[i] = rising;
-            return rising;
-        }
         // output at u after rising to M and falling back: 2 F(M, m0) - 2 F(M, u)
         let after = |m: f64| 2.0 * e.value(m, e.u_min) - 2.0 * e.value(m, u);
-        let (mut lo, mut hi) = (u, e.u_max);
-        if after(hi) <= target {
-            lo = hi;
+        let rising = after(u);
+        let major = after(e.u_max);
+        let (lo_val, hi_val) = (rising.min(major), rising.max(major));
+        let want = if target.is_nan() {
+            rising
         } else {
-            for _ in 0..80 {
+            target.clamp(lo_val, hi_val)
+        };
+        let m = if (want - rising).abs() <= f64::EPSILON * rising.abs().max(1.0) {
+            u
+        } else if (want - major).abs() <= f64::EPSILON * major.abs().max(1.0) {
+            e.u_max
+        } else {
+            // after(M) runs monotonically from `rising` (M = u) to `major` (M = u_max)
+            let up = major > rising;
+            let (mut lo, mut hi) = (u, e.u_max);
+            for _ in 0..100 {
                 let mid = 0.5 * (lo + hi);
-                if after(mid) <= target {
+                if (after(mid) < want) == up {
                     lo = mid;
                 } else {
                     hi = mid;
                 }
             }
+            0.5 * (lo + hi)
+        };
+        if m <= u {
+            self.len[i] = 1;
+            self.last_u[i] = u;
+            self.last_h[i] = rising;
+            return rising;
         }
-        let m = lo;
         self.values[base + 1] = m;
         self.outputs[base + 1] = 2.0 * e.value(m, e.u_min);
         self.len[i] = 2;
