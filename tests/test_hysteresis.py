@@ -6,7 +6,7 @@ import pytest
 from texsense._core import PreisachBank
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
 from texsense.hysteresis import HysteresisModel, scale_hysteresis
-from texsense.hysteresis._identify import everett_design, identify_thesis, make_monotone
+from texsense.hysteresis._identify import everett_design, make_monotone
 from texsense.sim.protocols import run_protocol
 
 K = 51

@@ -70,15 +70,16 @@ def make_monotone(table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 def find_thesis_curves(
     u: npt.NDArray[np.float64], tolerance: float, reach: float = 0.9
 ) -> tuple[Branch, list[Branch]] | None:
-    """The designed curves in a record: a rising curve over (nearly) the whole range and at
-    least two falling curves that go (nearly) down to the bottom. None if absent."""
+    """The designed curves in a record: a rising curve over the whole range (within 3 % at
+    both ends) and at least two falling curves that go down to within ``1 - reach`` of the
+    bottom (a spacer stops carrying load a little above zero compression). None if absent."""
     lo, hi = float(u.min()), float(u.max())
     span = hi - lo
     branches = split_branches(u, tolerance)
     rising = [
         b
         for b in branches
-        if b.rising and u[b.start] - lo < (1 - reach) * span and hi - u[b.stop] < (1 - reach) * span
+        if b.rising and u[b.start] - lo < 0.03 * span and hi - u[b.stop] < 0.03 * span
     ]
     falling = [b for b in branches if not b.rising and u[b.stop] - lo < (1 - reach) * span]
     if not rising or len(falling) < 2:
