@@ -68,7 +68,7 @@ def make_monotone(table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 
 
 def find_thesis_curves(
-    u: npt.NDArray[np.float64], tolerance: float, reach: float = 0.9
+    u: npt.NDArray[np.float64], tolerance: float, reach: float = 0.8
 ) -> tuple[Branch, list[Branch]] | None:
     """The designed curves in a record: a rising curve over the whole range (within 3 % at
     both ends) and at least two falling curves that go down to within ``1 - reach`` of the

@@ -1,0 +1,50 @@
+"""Loading the real hysteresis records in ../shared/data for the benchmarks (read in place)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("TEXSENSE_SHARED_DATA", ROOT.parent / "shared" / "data"))
+
+
+def elastomer_sawtooth() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random sawtooth on the conductive elastomer rig: time (s), displacement (mm, negative =
+    stretch) and force (N) (columns t_P, displacement, force).
+
+    Six samples read a displacement of exactly 0 in the middle of a stretch (the position
+    jumps by 3-11 mm for one sample and back); they are dropouts of the position reading and
+    are left out.
+    """
+    data = np.loadtxt(DATA / "elastomer-stretch" / "2_7-5_4Epin_rand_sawtooth.csv", delimiter=",")
+    d = data[:, 3]
+    before = np.abs(d - np.roll(d, 1))
+    after = np.abs(d - np.roll(d, -1))
+    dropout = (d == 0.0) & (before > 2.0) & (after > 2.0)
+    data = data[~dropout]
+    return data[:, 4], data[:, 3], data[:, 5]
+
+
+def _vhb(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rows = []
+    for line in path.read_bytes().decode("latin-1").splitlines():
+        fields = [v.strip().strip('"') for v in line.split(",")]
+        try:
+            rows.append([float(v) for v in fields[:3]])
+        except ValueError:
+            continue  # the two header lines (names in Chinese, then units) and blank lines
+    a = np.asarray(rows)
+    return a[:, 0], a[:, 1], a[:, 2]
+
+
+def vhb_cycle(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One VHB 4910 load-unload cycle: time (s), displacement (mm), force (N)."""
+    return _vhb(DATA / "vhb4910" / "loading-unloading" / f"{name}.csv")
+
+
+def vhb_relaxation(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A VHB 4910 relaxation record: time (s), displacement (mm), force (N)."""
+    return _vhb(DATA / "vhb4910" / "relaxation" / f"{name}.csv")

@@ -1,0 +1,125 @@
+"""Speed of the Preisach evaluation (Rust core) against a plain-Python Everett sum, and of
+the identification.
+
+Run:  .venv/bin/python benchmarks/hysteresis_speed.py
+
+Ratios are measured in the same run on the same inputs; absolute rates vary with the load of
+this shared 2-core machine.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from texsense.hysteresis import HysteresisModel
+from texsense.sim.protocols import run_protocol
+
+
+def python_everett_sum(model: HysteresisModel, u: np.ndarray) -> np.ndarray:
+    """The textbook implementation (eq. 4.15/4.16): keep the dominant extrema with the
+    wiping-out rule and sum the Everett terms anew at every sample, in plain Python with the
+    same interpolation as the core."""
+    k = model.everett_.shape[0]
+    f = model.everett_.tolist()
+    lo, step = model.u_min_, (model.u_max_ - model.u_min_) / (k - 1)
+
+    def ev(a: float, b: float) -> float:
+        x = min(max((a - lo) / step, 0.0), k - 1.0)
+        y = min(max((b - lo) / step, 0.0), k - 1.0)
+        if y >= x:
+            return 0.0
+        i, j = min(int(x), k - 2), min(int(y), k - 2)
+        wa, wb = x - i, y - j
+        if i == j:
+            return (wa - wb) * f[i + 1][j]
+        return (1 - wa) * ((1 - wb) * f[i][j] + wb * f[i][j + 1]) + wa * (
+            (1 - wb) * f[i + 1][j] + wb * f[i + 1][j + 1]
+        )
+
+    out = []
+    stack = [lo]
+    prev = lo
+    for x in u.tolist():
+        x = min(max(x, lo), model.u_max_)
+        if x != prev:
+            rising = x > prev
+            if rising != (len(stack) % 2 == 1):
+                stack.append(prev)
+            if rising:
+                while len(stack) >= 3 and x >= stack[-2]:
+                    del stack[-2:]
+            else:
+                while len(stack) >= 3 and x <= stack[-2]:
+                    del stack[-2:]
+                if len(stack) == 2 and x <= stack[0]:
+                    del stack[1:]
+            prev = x
+        h = 0.0
+        for q in range(1, len(stack), 2):
+            h += 2 * ev(stack[q], stack[q - 1])
+            if q + 1 < len(stack):
+                h -= 2 * ev(stack[q], stack[q + 1])
+        h += 2 * ev(x, stack[-1]) if len(stack) % 2 == 1 else -2 * ev(stack[-1], x)
+        out.append(model.sign_ * (h + model.offset_))
+    return np.asarray(out)
+
+
+def timed(fn, repeat=3):
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, result
+
+
+def main() -> None:
+    cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
+    uc, pc = cal.labels["compression_mm"], cal.labels["pressure_ncm2"]
+    t_thesis, model = timed(lambda: HysteresisModel(method="thesis", grid=100).fit(uc, pc))
+    t_lsq, _ = timed(lambda: HysteresisModel(method="lsq", cells=40).fit(uc, pc), 1)
+    rng = np.random.default_rng(0)
+    lo, hi = model.u_min_, model.u_max_
+    # 1 element x 10^6 samples, every sample a reversal
+    noisy = lo + (hi - lo) * (
+        0.5 + 0.45 * rng.random(1_000_000) * np.where(np.arange(1_000_000) % 2 == 0, 1.0, -1.0)
+    )
+    t_one, out_one = timed(lambda: model.predict(noisy))
+    # 1024 elements x 10^4 frames, random walks
+    walk = np.clip(
+        np.cumsum(rng.normal(0, 0.02, (10_000, 1024)), axis=0) % (2 * (hi - lo)), 0, None
+    )
+    walk = lo + np.where(walk > hi - lo, 2 * (hi - lo) - walk, walk)
+    t_many, _ = timed(lambda: model.predict(walk))
+    # plain Python on a slice of the noisy input, checked against the core
+    n_py = 20_000
+    t_py, out_py = timed(lambda: python_everett_sum(model, noisy[:n_py]), 1)
+    np.testing.assert_allclose(out_py, out_one[:n_py], rtol=1e-9, atol=1e-9)
+    rust_rate = 1e6 / t_one
+    py_rate = n_py / t_py
+    print("| what | time | rate |")
+    print("|---|---:|---:|")
+    print(
+        f"| Rust, 1 element x 10⁶ samples, every sample a reversal | {t_one:.3f} s | "
+        f"{rust_rate / 1e6:.1f} M samples/s |"
+    )
+    print(
+        f"| Rust, 1024 elements x 10⁴ frames (random walks) | {t_many:.3f} s | "
+        f"{walk.size / t_many / 1e6:.1f} M element-samples/s |"
+    )
+    print(
+        f"| plain-Python Everett sum, 1 element x {n_py:,} samples | {t_py:.2f} s | "
+        f"{py_rate / 1e3:.1f} k samples/s |"
+    )
+    print(f"| **Rust / Python** | | **{rust_rate / py_rate:,.0f} x** |")
+    print(
+        f"| identification, thesis method, 100 x 100 ({uc.size} samples) | "
+        f"{t_thesis * 1000:.0f} ms | |"
+    )
+    print(f"| identification, least squares, 41 x 41 | {t_lsq * 1000:.0f} ms | |")
+
+
+if __name__ == "__main__":
+    main()
