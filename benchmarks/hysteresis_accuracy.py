@@ -11,13 +11,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _realdata import elastomer_sawtooth, vhb_cycle  # noqa: E402
-
-from texsense.hysteresis import HysteresisModel  # noqa: E402
-from texsense.hysteresis._identify import identify_lsq, identify_thesis  # noqa: E402
-from texsense.hysteresis.plots import validation_figure  # noqa: E402
-from texsense.sim import protocols  # noqa: E402
-from texsense.sim.spacer import Spacer  # noqa: E402
+from _realdata import elastomer_sawtooth, vhb_cycle
+from texsense.hysteresis import HysteresisModel
+from texsense.hysteresis._identify import identify_lsq, identify_thesis
+from texsense.hysteresis.plots import validation_figure
+from texsense.sim import protocols
+from texsense.sim.spacer import Spacer
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 BANDS = ((0.5, 3.5), (3.5, 10.0))
