@@ -14,13 +14,14 @@ import time
 import numpy as np
 
 from texsense.hysteresis import HysteresisModel
+from texsense.hysteresis._identify import update_extrema
 from texsense.sim.protocols import run_protocol
 
 
 def python_everett_sum(model: HysteresisModel, u: np.ndarray) -> np.ndarray:
     """The textbook implementation (eq. 4.15/4.16): keep the dominant extrema with the
-    wiping-out rule and sum the Everett terms anew at every sample, in plain Python with the
-    same interpolation as the core."""
+    wiping-out rule (the shared stack update) and sum the Everett terms anew at every sample,
+    in plain Python with the same interpolation as the core."""
     k = model.everett_.shape[0]
     f = model.everett_.tolist()
     lo, step = model.u_min_, (model.u_max_ - model.u_min_) / (k - 1)
@@ -43,19 +44,8 @@ def python_everett_sum(model: HysteresisModel, u: np.ndarray) -> np.ndarray:
     prev = lo
     for x in u.tolist():
         x = min(max(x, lo), model.u_max_)
-        if x != prev:
-            rising = x > prev
-            if rising != (len(stack) % 2 == 1):
-                stack.append(prev)
-            if rising:
-                while len(stack) >= 3 and x >= stack[-2]:
-                    del stack[-2:]
-            else:
-                while len(stack) >= 3 and x <= stack[-2]:
-                    del stack[-2:]
-                if len(stack) == 2 and x <= stack[0]:
-                    del stack[1:]
-            prev = x
+        update_extrema(stack, prev, x)
+        prev = x
         h = 0.0
         for q in range(1, len(stack), 2):
             h += 2 * ev(stack[q], stack[q - 1])

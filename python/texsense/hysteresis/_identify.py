@@ -153,6 +153,25 @@ def _monotone_xy(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x[keep], y[keep]
 
 
+def update_extrema(stack: list[float], prev: float, x: float) -> None:
+    """Advance an extremum stack ``[m_0, M_1, m_1, ...]`` from input ``prev`` to ``x``: push
+    ``prev`` when the input turns there, then wipe out the extrema ``x`` passes (the same rule
+    as the Rust core)."""
+    if x == prev:
+        return
+    rising = x > prev
+    if rising != (len(stack) % 2 == 1):
+        stack.append(prev)
+    if rising:
+        while len(stack) >= 3 and x >= stack[-2]:
+            del stack[-2:]
+    else:
+        while len(stack) >= 3 and x <= stack[-2]:
+            del stack[-2:]
+        if len(stack) == 2 and x <= stack[0]:
+            del stack[1:]
+
+
 def everett_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> csr_matrix:
     """The model's output for an input history is linear in the Everett table: return the
     sparse matrix A (T x K²) with ``output = A @ F.ravel()`` (output at u_min = 0).
@@ -195,20 +214,8 @@ def everett_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -
     prev = u_min
     for t, x in enumerate(u):
         x = min(max(float(x), nodes[0]), nodes[-1])
-        top_is_min = len(stack) % 2 == 1
-        if x != prev:
-            rising = x > prev
-            if rising != top_is_min:
-                stack.append(prev)
-            if rising:
-                while len(stack) >= 3 and x >= stack[-2]:
-                    del stack[-2:]
-            else:
-                while len(stack) >= 3 and x <= stack[-2]:
-                    del stack[-2:]
-                if len(stack) == 2 and x <= stack[0]:
-                    del stack[1:]
-            prev = x
+        update_extrema(stack, prev, x)
+        prev = x
         # output = 2 Σ_k [F(M_k, m_{k-1}) - F(M_k, m_k)] + the branch now being traced
         for q in range(1, len(stack), 2):
             add(t, stack[q], stack[q - 1], 2.0)
