@@ -8,15 +8,18 @@
 //! - [`topology`]: the 4-neighbour graph of a sensor layout, in compressed sparse rows;
 //! - [`repair`]: replacing failed elements by the mean of their available neighbours
 //!   (thesis eq. 6.14), streaming and batch;
+//! - [`drift`]: drift as a superposition of step responses, recursive (thesis eq. 5.4/5.8);
 //! - [`preisach`]: the numerical Preisach model (thesis eq. 4.15-4.22), many elements at once;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep).
 
+pub mod drift;
 pub mod error;
 pub mod preisach;
 pub mod repair;
 pub mod spacer;
 pub mod topology;
 
+pub use drift::{DriftBank, Kernel};
 pub use error::CoreError;
 pub use preisach::{Everett, PreisachBank};
 pub use repair::NeighbourMeanRepair;

@@ -12,7 +12,8 @@ use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use texsense_core::repair::RepairOutcome;
 use texsense_core::{
-    CoreError, Everett, NeighbourMeanRepair, Neighbours, PreisachBank, SpacerBank, SpacerParams,
+    CoreError, DriftBank, Everett, Kernel, NeighbourMeanRepair, Neighbours, PreisachBank,
+    SpacerBank, SpacerParams,
 };
 
 create_exception!(
@@ -479,6 +480,57 @@ impl PyPreisachBank {
     }
 }
 
+/// Recursive drift superposition for N elements (thesis eq. 5.4/5.8).
+#[pyclass(name = "DriftBank", module = "texsense._core")]
+struct PyDriftBank {
+    inner: DriftBank,
+}
+
+#[pymethods]
+impl PyDriftBank {
+    #[new]
+    fn new(
+        weights: PyReadonlyArray1<'_, f64>,
+        taus: PyReadonlyArray1<'_, f64>,
+        gamma: f64,
+        n_elements: usize,
+    ) -> PyResult<Self> {
+        let kernel =
+            Kernel::new(weights.as_slice()?.to_vec(), taus.as_slice()?.to_vec()).map_err(to_py)?;
+        let inner = DriftBank::new(kernel, gamma, n_elements).map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// Forget the history.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Batch: time steps dt (T,), hysteresis outputs h (T, N), valid (T, N) -> (T, N).
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        dt: PyReadonlyArray1<'py, f64>,
+        h: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let shape = h.shape().to_vec();
+        if valid.shape() != shape.as_slice() || shape[1] != self.inner.len() || dt.len() != shape[0]
+        {
+            return Err(to_py(CoreError::Shape {
+                what: "drift run",
+                expected: format!("dt (T,), h and valid (T, {})", self.inner.len()),
+                got: format!("dt ({},), h {shape:?}, valid {:?}", dt.len(), valid.shape()),
+            }));
+        }
+        let (d, x, v) = (dt.as_slice()?, h.as_slice()?, valid.as_slice()?);
+        let mut out = vec![0.0; x.len()];
+        let inner = &mut self.inner;
+        py.detach(|| inner.run(d, x, v, &mut out)).map_err(to_py)?;
+        to_2d(py, out, shape[0], shape[1])
+    }
+}
+
 /// The compiled core of texsense.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -486,6 +538,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyNeighbourMeanRepair>()?;
     m.add_class::<PySpacerBank>()?;
     m.add_class::<PyPreisachBank>()?;
+    m.add_class::<PyDriftBank>()?;
     m.add("ShapeError", m.py().get_type::<ShapeError>())?;
     m.add(
         "NeighbourIndexError",

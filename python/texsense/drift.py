@@ -1,0 +1,180 @@
+"""Drift compensation (thesis chapter 5): logarithmic step responses and their superposition.
+
+After a step of size ``s`` at ``t0`` the pressure at constant compression changes as
+``p(t) = p(t0) + s γ ln(t - t0 + 1)`` (eq. 5.2); γ follows from one point (eq. 5.3) or from
+a least-squares fit over one or many steps. The drift of any history is the superposition of
+the step responses of the Preisach output (eq. 5.8). texsense evaluates it recursively
+(``texsense._core.DriftBank``): the kernel ``ln(1 + t)`` is approximated once by a
+non-negative sum of exponentials (:func:`log_kernel`), so each element keeps K states and each
+sample costs O(K) whatever the length of the history. The same machinery runs any fitted
+non-negative Prony kernel (:func:`prony_kernel`) where the logarithm does not hold.
+
+Status: γ identification, the kernels and the recursive evaluation are here; the combined
+Preisach -> drift stage, its model file and CLI are the next steps (see the drift issue).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import nnls
+
+from texsense._core import DriftBank
+from texsense.exceptions import ParameterError
+
+__all__ = [
+    "DriftKernel",
+    "StepFit",
+    "fit_gamma",
+    "gamma_from_point",
+    "log_kernel",
+    "prony_kernel",
+]
+
+
+@dataclass(frozen=True)
+class DriftKernel:
+    """``k(t) = Σ c_j (1 - exp(-t / τ_j))`` with its largest deviation from the target."""
+
+    weights: npt.NDArray[np.float64]
+    taus: npt.NDArray[np.float64]
+    max_error: float
+    span_s: tuple[float, float]
+
+    def __call__(self, t: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        t = np.asarray(t, dtype=np.float64)[..., None]
+        return np.sum(self.weights * (1.0 - np.exp(-t / self.taus)), axis=-1)
+
+    def bank(self, gamma: float, n_elements: int = 1) -> DriftBank:
+        """A recursive evaluator for ``n_elements``."""
+        return DriftBank(
+            np.ascontiguousarray(self.weights),
+            np.ascontiguousarray(self.taus),
+            float(gamma),
+            int(n_elements),
+        )
+
+
+def _fit_exponentials(t: np.ndarray, target: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    basis = 1.0 - np.exp(-t[:, None] / taus[None, :])
+    weights, _ = nnls(basis, target, maxiter=50 * taus.size)
+    return weights
+
+
+def log_kernel(t_min_s: float = 0.1, t_max_s: float = 1e6, per_decade: int = 2) -> DriftKernel:
+    """Approximate ``ln(1 + t)`` on ``[0, t_max_s]`` by a non-negative sum of exponentials
+    with time constants log-spaced from ``t_min_s`` to ``t_max_s``.
+
+    ``max_error`` is the largest absolute deviation on a dense logarithmic grid over the span,
+    in the units of ``ln(1 + t)``; the drift error it causes is at most
+    ``|γ| max_error Σ|Δh|`` over the steps of the history.
+    """
+    if not (0 < t_min_s < t_max_s) or per_decade < 1:
+        raise ParameterError("need 0 < t_min_s < t_max_s and per_decade >= 1")
+    n = int(np.ceil(np.log10(t_max_s / t_min_s) * per_decade)) + 1
+    taus = np.geomspace(t_min_s, t_max_s, n)
+    t = np.concatenate([[0.0], np.geomspace(t_min_s / 100, t_max_s, 4000)])
+    target = np.log1p(t)
+    weights = _fit_exponentials(t, target, taus)
+    keep = weights > 0
+    err = float(np.max(np.abs((1.0 - np.exp(-t[:, None] / taus[keep])) @ weights[keep] - target)))
+    return DriftKernel(weights[keep], taus[keep], err, (0.0, t_max_s))
+
+
+def prony_kernel(
+    t_s: npt.ArrayLike,
+    response: npt.ArrayLike,
+    t_min_s: float = 0.1,
+    t_max_s: float | None = None,
+    per_decade: int = 3,
+) -> DriftKernel:
+    """Fit a non-negative Prony series to a measured step response normalised to ``γ k(t)``
+    with ``k`` growing: ``response(t) ≈ -Σ c_j (1 - exp(-t/τ_j))`` for relaxation (negative
+    response) or ``+Σ ...`` for creep; returns the kernel of the magnitude."""
+    t = np.asarray(t_s, dtype=np.float64)
+    y = np.asarray(response, dtype=np.float64)
+    if t.shape != y.shape or t.size < 5:
+        raise ParameterError("need matching t and response with at least 5 samples")
+    t_max_s = float(t.max()) * 3 if t_max_s is None else t_max_s
+    n = int(np.ceil(np.log10(t_max_s / t_min_s) * per_decade)) + 1
+    taus = np.geomspace(t_min_s, t_max_s, n)
+    sign = -1.0 if y[-1] < 0 else 1.0
+    weights = _fit_exponentials(t - t[0], sign * y, taus)
+    keep = weights > 0
+    model = (1.0 - np.exp(-(t - t[0])[:, None] / taus[keep])) @ weights[keep]
+    return DriftKernel(
+        weights[keep],
+        taus[keep],
+        float(np.max(np.abs(model - sign * y))),
+        (0.0, float(t.max() - t[0])),
+    )
+
+
+def gamma_from_point(t0_s: float, p0: float, tc_s: float, pc: float, step: float) -> float:
+    """Eq. 5.3: ``γ = (p(tc) - p(t0)) / (s ln(tc - t0 + 1))``."""
+    if not tc_s > t0_s or step == 0:
+        raise ParameterError("need tc > t0 and a non-zero step size")
+    return (pc - p0) / (step * np.log(tc_s - t0_s + 1.0))
+
+
+@dataclass(frozen=True)
+class StepFit:
+    """γ fitted to step responses (changes normalised to their step sizes)."""
+
+    gamma_common: float
+    gamma_single: list[float]
+    max_error_common: float
+    max_error_single: float
+    proportionality_spread: float
+    proportional: bool
+
+
+def fit_gamma(
+    steps: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, float]],
+    tolerance: float = 0.04,
+) -> StepFit:
+    """Least-squares γ of ``Δp / s = γ ln(t + 1)`` per step and common to all.
+
+    Parameters
+    ----------
+    steps : sequence of (t_s, pressure, step_size)
+        Time since the end of each step (s), the pressure held at constant compression (the
+        first sample is p(t0)), and the step size s (negative for falling steps).
+    tolerance : float
+        Largest spread between the normalised responses at the end of the shortest record for
+        them to count as proportional to the step size (thesis: 4 %). The thesis found Tekscan
+        mats break this assumption; such data are flagged with ``proportional = False``.
+
+    Errors are the largest deviations from the fitted curves as shares of the step size.
+    """
+    if not steps:
+        raise ParameterError("no steps given")
+    norm, times = [], []
+    for t, p, s in steps:
+        t = np.asarray(t, dtype=np.float64)
+        p = np.asarray(p, dtype=np.float64)
+        if s == 0 or t.shape != p.shape or t.size < 2:
+            raise ParameterError("every step needs a non-zero size and matching t, p (>= 2)")
+        times.append(t - t[0])
+        norm.append((p - p[0]) / s)
+    x_all = np.concatenate([np.log1p(t) for t in times])
+    y_all = np.concatenate(norm)
+    common = float(x_all @ y_all / (x_all @ x_all))
+    singles = [
+        float(np.log1p(t) @ y / (np.log1p(t) @ np.log1p(t)))
+        for t, y in zip(times, norm, strict=True)
+    ]
+    err_single = max(
+        float(np.max(np.abs(y - g * np.log1p(t))))
+        for t, y, g in zip(times, norm, singles, strict=True)
+    )
+    err_common = max(
+        float(np.max(np.abs(y - common * np.log1p(t)))) for t, y in zip(times, norm, strict=True)
+    )
+    horizon = min(float(t[-1]) for t in times)
+    ends = [float(np.interp(horizon, t, y)) for t, y in zip(times, norm, strict=True)]
+    spread = max(ends) - min(ends)
+    return StepFit(common, singles, err_common, err_single, spread, spread <= tolerance)
