@@ -97,12 +97,17 @@ def test_prony_kernel_fits_vhb_relaxation_where_the_log_does_not(shared_data):
         except ValueError:
             continue
     a = np.asarray(rows)
-    t, force = a[:, 0], a[:, 2]
-    peak = int(np.argmax(force))
-    tt, ff = t[peak:] - t[peak], force[peak:]
+    t, disp, force = a[:, 0], a[:, 1], a[:, 2]
+    # the hold starts once the actuator has settled at the final stretch (it overshoots)
+    settled = int(
+        np.argmax((np.arange(t.size) > np.argmax(force)) & (np.abs(disp - disp[-1]) < 0.05))
+    )
+    # and the actuator's ringing has died out a second later
+    start = int(np.searchsorted(t, t[settled] + 1.0))
+    tt, ff = t[start:] - t[start], force[start:]
     rel = (ff - ff[0]) / ff[0]
     g = float(np.log1p(tt) @ rel / (np.log1p(tt) @ np.log1p(tt)))
     log_err = np.max(np.abs(rel - g * np.log1p(tt)))
     k = prony_kernel(tt, rel)
-    assert log_err > 0.05  # the logarithm misses VHB's relaxation (9 % of the peak force)
+    assert log_err > 0.04  # the logarithm misses VHB's relaxation by ~5 % of the force
     assert k.max_error < log_err / 4  # a non-negative Prony series follows it
