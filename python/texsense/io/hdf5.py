@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+from texsense._progress import logger
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
@@ -127,6 +128,12 @@ class RecordingWriter:
         Whether per-element time stamps will be appended.
     flush_interval_s : float
         Longest time between flushes.
+    compress : bool
+        gzip the frames. Off by default for live recording: a process killed while HDF5
+        rewrites a compressed chunk can leave the whole chunk unreadable, while an
+        uncompressed chunk is rewritten in place with the same bytes for the rows already
+        there. ``write_hdf5`` (one write, then close) compresses; ``texsense convert`` compacts
+        a live recording afterwards.
 
     Examples
     --------
@@ -149,6 +156,7 @@ class RecordingWriter:
         meta: dict[str, Any] | None = None,
         element_times: bool = False,
         flush_interval_s: float = 0.0,
+        compress: bool = False,
     ) -> None:
         # Validate quantity/unit/meta by building an empty recording.
         probe = Recording(
@@ -166,9 +174,10 @@ class RecordingWriter:
         f.attrs["unit"] = probe.unit
         f.attrs["meta"] = json.dumps(probe.meta)
         f.attrs["software"] = _software()
+        f.attrs["open"] = 1  # cleared by close(): a file still open was interrupted
         n = layout.n_elements
         rows = _chunk_rows(n)
-        comp = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+        comp = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
         f.create_dataset(
             "frames", (0, n), np.float32, maxshape=(None, n), chunks=(rows, max(n, 1)), **comp
         )
@@ -261,6 +270,7 @@ class RecordingWriter:
     def close(self) -> None:
         """Flush and close the file."""
         if self._file.id.valid:
+            self._file.attrs["open"] = 0
             self._file.flush()
             self._file.close()
 
@@ -281,6 +291,7 @@ def write_hdf5(rec: Recording, path: str | Path) -> Path:
         rec.unit,
         meta=rec.meta,
         element_times=rec.element_times is not None,
+        compress=True,
     ) as w:
         if rec.n_frames:
             w.append(
@@ -309,6 +320,27 @@ def _open(path: Path) -> h5py.File:
         raise FormatError(path, f"not a readable HDF5 file ({e})") from None
 
 
+def _read_prefix(ds: h5py.Dataset, n: int) -> tuple[np.ndarray, int]:
+    """Read the first ``n`` rows of ``ds``; if a chunk is unreadable (a write was killed
+    halfway), return the rows before it and how many there are."""
+    try:
+        return ds[:n], n
+    except OSError:
+        pass
+    rows = ds.chunks[0] if ds.chunks else 1
+    parts = []
+    got = 0
+    while got < n:
+        stop = min(n, got + rows)
+        try:
+            parts.append(ds[got:stop])
+        except OSError:
+            break
+        got = stop
+    empty = ds[:0]
+    return (np.concatenate(parts) if parts else empty), got
+
+
 def read_hdf5(path: str | Path) -> Recording:
     """Read a texsense HDF5 recording.
 
@@ -333,21 +365,34 @@ def read_hdf5(path: str | Path) -> Recording:
                 f"version {FORMAT_VERSION}",
             )
         try:
-            # A writer killed between two dataset resizes can leave them one block apart:
-            # only the frames present in every dataset are complete.
-            lengths = [f[k].shape[0] for k in ("frames", "times", "valid")]
-            lengths += [ds.shape[0] for ds in f["labels"].values()]
-            if "element_times" in f:
-                lengths.append(f["element_times"].shape[0])
-            n = min(lengths)
-            frames = f["frames"][:n]
-            times = f["times"][:n]
-            valid = f["valid"][:n]
-            element_times = f["element_times"][:n] if "element_times" in f else None
+            # A writer killed between two dataset resizes can leave them one block apart,
+            # and one killed while writing a compressed chunk leaves that chunk unreadable:
+            # only the frames readable in every dataset are complete.
+            sets = {k: f[k] for k in ("frames", "times", "valid", "element_times") if k in f}
+            sets.update({f"labels/{k}": v for k, v in f["labels"].items()})
+            n = min(ds.shape[0] for ds in sets.values())
+            data = {}
+            for key, ds in sets.items():
+                arr, readable = _read_prefix(ds, n)
+                data[key] = arr
+                n = min(n, readable)
+            if int(f.attrs.get("open", 0)):
+                # interrupted while recording: rows whose time stamp was not written yet
+                # read as 0 and end the complete part
+                t_all = data["times"][:n]
+                bad = np.nonzero(~(np.diff(t_all) > 0))[0]
+                if bad.size:
+                    n = int(bad[0]) + 1
+            lost = min(ds.shape[0] for ds in sets.values()) - n
+            frames, times, valid = (data[k][:n] for k in ("frames", "times", "valid"))
+            element_times = data["element_times"][:n] if "element_times" in data else None
             labels = {}
             for name, ds in f["labels"].items():
+                values = data[f"labels/{name}"][:n]
                 labels[name] = (
-                    np.array(ds.asstr()[:n], dtype=str) if ds.dtype.kind == "O" else ds[:n]
+                    np.array([v.decode() if isinstance(v, bytes) else v for v in values], dtype=str)
+                    if ds.dtype.kind == "O"
+                    else values
                 )
             layout = _read_layout(f["layout"])
             quantity = str(f.attrs["quantity"])
@@ -355,6 +400,13 @@ def read_hdf5(path: str | Path) -> Recording:
             meta = json.loads(f.attrs.get("meta", "{}"))
         except KeyError as e:
             raise FormatError(path, f"missing dataset or attribute: {e}") from None
+    if lost:
+        logger.warning(
+            "%s: %d frame(s) at the end were unreadable (interrupted write) and are left out",
+            path,
+            lost,
+        )
+        meta = {**meta, "recovered": {"frames_read": int(n), "frames_unreadable": int(lost)}}
     return Recording(
         frames,
         times,
