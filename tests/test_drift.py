@@ -111,3 +111,38 @@ def test_prony_kernel_fits_vhb_relaxation_where_the_log_does_not(shared_data):
     k = prony_kernel(tt, rel)
     assert log_err > 0.04  # the logarithm misses VHB's relaxation by ~5 % of the force
     assert k.max_error < log_err / 4  # a non-negative Prony series follows it
+
+
+def test_split_steps_and_cli_and_model_file(tmp_path, capsys):
+    import json
+
+    from texsense.cli import main
+    from texsense.drift import DriftModel, split_steps
+    from texsense.hysteresis import HysteresisModel
+    from texsense.io.columns_csv import read_columns_csv
+    from texsense.sim.protocols import run_protocol
+
+    rec = run_protocol("steps", "textile-6mm", seed=1, levels=(2.5, 5.0), hold_s=600)
+    steps = split_steps(rec.times, rec.labels["pressure_ncm2"], rec.labels["compression_mm"])
+    assert [round(s, 1) for _, _, s in steps] == [2.5, 5.0]
+    csv = tmp_path / "steps.csv"
+    assert main(["simulate", "steps", "--levels", "2.5,5", "--hold", "600", "--csv", str(csv)]) == 0
+    capsys.readouterr()
+    assert main(["drift", "fit", str(csv), "--json"]) == 0
+    fit = json.loads(capsys.readouterr().out)
+    assert -0.03 < fit["gamma_common"] < -0.02 and fit["proportional"]
+    cal = tmp_path / "cal.csv"
+    assert main(["simulate", "calibration", "--csv", str(cal)]) == 0
+    model = tmp_path / "m.json"
+    assert main(["hysteresis", "fit", str(cal), "--drift", str(csv), "-o", str(model)]) == 0
+    loaded = HysteresisModel.load(model)
+    assert isinstance(loaded.drift_, DriftModel)
+    cols = read_columns_csv(csv)
+    with_drift = loaded.predict(cols["compression_mm"], times_s=cols["time_s"])
+    without = loaded.predict(cols["compression_mm"])
+    # during the holds the drift stage lowers the pressure like the specimen relaxes
+    hold_end = np.nonzero(np.diff(cols["time_s"]) > 5)[0][0]
+    assert with_drift[hold_end] < without[hold_end]
+    err_with = abs(with_drift[hold_end] - cols["pressure_ncm2"][hold_end])
+    err_without = abs(without[hold_end] - cols["pressure_ncm2"][hold_end])
+    assert err_with < 0.3 * err_without

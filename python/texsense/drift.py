@@ -9,14 +9,16 @@ non-negative sum of exponentials (:func:`log_kernel`), so each element keeps K s
 sample costs O(K) whatever the length of the history. The same machinery runs any fitted
 non-negative Prony kernel (:func:`prony_kernel`) where the logarithm does not hold.
 
-Status: γ identification, the kernels and the recursive evaluation are here; the combined
-Preisach -> drift stage, its model file and CLI are the next steps (see the drift issue).
+:class:`DriftModel` is the drift stage: fitted from step responses (:func:`split_steps` cuts
+a step-and-hold record), stored in the hysteresis model file, applied after the Preisach
+model by ``HysteresisModel.predict(inputs, times_s=...)``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 import numpy.typing as npt
@@ -27,11 +29,13 @@ from texsense.exceptions import ParameterError
 
 __all__ = [
     "DriftKernel",
+    "DriftModel",
     "StepFit",
     "fit_gamma",
     "gamma_from_point",
     "log_kernel",
     "prony_kernel",
+    "split_steps",
 ]
 
 
@@ -178,3 +182,123 @@ def fit_gamma(
     ends = [float(np.interp(horizon, t, y)) for t, y in zip(times, norm, strict=True)]
     spread = max(ends) - min(ends)
     return StepFit(common, singles, err_common, err_single, spread, spread <= tolerance)
+
+
+def split_steps(
+    times_s: npt.ArrayLike,
+    pressure: npt.ArrayLike,
+    compression: npt.ArrayLike,
+    gap_s: float = 5.0,
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Cut a step-and-hold record into steps for :func:`fit_gamma`.
+
+    Records are split where the time stamps jump by more than ``gap_s`` (separate specimens,
+    as ``texsense simulate steps`` writes them). In each part the hold is the final stretch
+    at constant compression; the step is the ramp just before it, and its size is the
+    pressure at the start of the hold minus the pressure where that ramp began.
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    p = np.asarray(pressure, dtype=np.float64)
+    c = np.asarray(compression, dtype=np.float64)
+    if not (t.shape == p.shape == c.shape) or t.size < 3:
+        raise ParameterError("times, pressure and compression must be equal-length arrays (>= 3)")
+    cuts = np.concatenate([[0], np.nonzero(np.diff(t) > gap_s)[0] + 1, [t.size]])
+    steps = []
+    for a, b in pairwise(cuts.tolist()):
+        seg_c = c[a:b]
+        moving = np.nonzero(np.abs(np.diff(seg_c)) > 1e-9)[0]
+        if moving.size == 0:
+            continue
+        hold = a + int(moving[-1]) + 1
+        if b - hold < 3:
+            continue
+        direction = np.sign(c[hold] - c[hold - 1])
+        k = hold - 1
+        while k > a and np.sign(c[k] - c[k - 1]) in (direction, 0):
+            k -= 1
+        size = p[hold] - p[k]
+        if size == 0:
+            continue
+        steps.append((t[hold:b], p[hold:b], float(size)))
+    if not steps:
+        raise ParameterError("no step followed by a hold at constant compression was found")
+    return steps
+
+
+@dataclass(frozen=True)
+class DriftModel:
+    """γ and a kernel: the drift stage that follows the Preisach model (eq. 5.8)."""
+
+    gamma: float
+    kernel: DriftKernel
+    kind: str = "log"
+
+    def state(self, n_elements: int = 1) -> DriftBank:
+        """A recursive evaluator for ``n_elements``."""
+        return self.kernel.bank(self.gamma, n_elements)
+
+    def apply(self, h: npt.ArrayLike, times_s: npt.ArrayLike) -> np.ndarray:
+        """Add the drift to a history of hysteresis outputs (T,) or (T, N) at ``times_s``."""
+        x = np.asarray(h, dtype=np.float64)
+        one = x.ndim == 1
+        x2 = np.ascontiguousarray(x[:, None] if one else x)
+        t = np.asarray(times_s, dtype=np.float64)
+        if t.shape != (x2.shape[0],):
+            raise ParameterError(f"times must have {x2.shape[0]} entries, got {t.shape}")
+        dt = np.ascontiguousarray(np.diff(t, prepend=t[0]))
+        if np.any(dt < 0):
+            raise ParameterError("times must not decrease")
+        out = self.state(x2.shape[1]).run(dt, x2, np.ascontiguousarray(np.isfinite(x2)))
+        return out[:, 0] if one else out
+
+    @classmethod
+    def fit(
+        cls, steps: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, float]], kind: str = "log"
+    ) -> tuple[DriftModel, StepFit]:
+        """Fit from step responses: γ with the logarithmic kernel (``kind="log"``), or a
+        non-negative Prony kernel of the common normalised response (``"prony"``)."""
+        fit = fit_gamma(steps)
+        if kind == "log":
+            return cls(fit.gamma_common, log_kernel(), "log"), fit
+        if kind == "prony":
+            times = np.concatenate(
+                [np.asarray(t, float) - float(np.asarray(t)[0]) for t, _, _ in steps]
+            )
+            norm = np.concatenate(
+                [(np.asarray(p, float) - float(np.asarray(p)[0])) / s for _, p, s in steps]
+            )
+            order = np.argsort(times)
+            k = prony_kernel(times[order], norm[order])
+            return cls(-1.0 if norm[order][-1] < 0 else 1.0, k, "prony"), fit
+        raise ParameterError(f"kind must be 'log' or 'prony', got {kind!r}")
+
+    def to_dict(self) -> dict:
+        """JSON-able description (stored in the hysteresis model file)."""
+        return {
+            "kind": self.kind,
+            "gamma": self.gamma,
+            "kernel": {
+                "weights": self.kernel.weights.tolist(),
+                "taus_s": self.kernel.taus.tolist(),
+                "max_error": self.kernel.max_error,
+                "span_s": list(self.kernel.span_s),
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> DriftModel:
+        """Inverse of :meth:`to_dict`."""
+        k = d["kernel"]
+        kernel = DriftKernel(
+            np.asarray(k["weights"], float),
+            np.asarray(k["taus_s"], float),
+            float(k["max_error"]),
+            tuple(k["span_s"]),
+        )  # type: ignore[arg-type]
+        if (
+            kernel.weights.shape != kernel.taus.shape
+            or np.any(kernel.weights < 0)
+            or np.any(kernel.taus <= 0)
+        ):
+            raise ParameterError("drift kernel: weights must be >= 0 and time constants > 0")
+        return cls(float(d["gamma"]), kernel, str(d.get("kind", "log")))

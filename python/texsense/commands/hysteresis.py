@@ -56,6 +56,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     f.add_argument("--method", default="auto", choices=("auto", "thesis", "lsq"))
     f.add_argument("--grid", type=int, default=100, help="Everett grid, thesis method (100)")
     f.add_argument("--cells", type=int, default=40, help="grid cells, least squares (40)")
+    f.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
+    f.add_argument("--drift-kind", choices=("log", "prony"), default="log")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
     f.set_defaults(run=run_fit)
     a = hs.add_parser(
@@ -121,6 +123,13 @@ def run_fit(args: argparse.Namespace) -> int:
         output_unit=_unit_of(args.output),
     )
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
+    if args.drift:
+        from texsense.commands.drift import load_steps
+        from texsense.drift import DriftModel
+
+        drift, _ = DriftModel.fit(load_steps(args.drift), kind=args.drift_kind)
+        model.with_drift(drift)
+        model.provenance_["drift_steps"] = str(args.drift)
     model.save(args.output_model)
     fitted = model.predict(u)
     summary = {
@@ -154,6 +163,8 @@ def run_apply(args: argparse.Namespace) -> int:
     st = model.state(1)
     modelled = st.run(u)
     clamped = int(st.clamped[0])
+    if getattr(model, "drift_", None) is not None:
+        modelled = model.drift_.apply(modelled, _column(cols, "time_s", args.data))
     cols[f"{out_name}_model"] = modelled
     write_columns_csv(args.out, cols)
     summary: dict[str, Any] = {
@@ -166,8 +177,9 @@ def run_apply(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
+    stages = "hysteresis + drift" if getattr(model, "drift_", None) else "hysteresis"
     print(
-        f"wrote {args.out} ({u.size} samples, {clamped} inputs clamped into "
+        f"wrote {args.out} ({stages}; {u.size} samples, {clamped} inputs clamped into "
         f"{model.u_min_:.4g}..{model.u_max_:.4g})"
     )
     if "error" in summary:

@@ -196,11 +196,26 @@ class HysteresisModel:
         """A streaming evaluator for ``n_elements`` starting at lower saturation."""
         return PreisachState(self, n_elements, capacity)
 
-    def predict(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
-        """Outputs for a whole input history (T,) or (T, N), from lower saturation."""
+    def predict(
+        self,
+        inputs: npt.ArrayLike,
+        valid: npt.ArrayLike | None = None,
+        times_s: npt.ArrayLike | None = None,
+    ) -> np.ndarray:
+        """Outputs for a whole input history (T,) or (T, N), from lower saturation. With a
+        drift stage (``self.drift_``) and ``times_s`` the drift of eq. 5.8 is added."""
         u = np.asarray(inputs, dtype=np.float64)
         n = 1 if u.ndim == 1 else u.shape[1]
-        return self.state(n).run(u, valid)
+        h = self.state(n).run(u, valid)
+        if getattr(self, "drift_", None) is not None and times_s is not None:
+            return self.drift_.apply(h, times_s)
+        return h
+
+    def with_drift(self, drift: Any) -> HysteresisModel:
+        """Attach a :class:`texsense.drift.DriftModel` (returns self)."""
+        self._check_fitted()
+        self.drift_ = drift
+        return self
 
     def everett(self, alpha: npt.ArrayLike, beta: npt.ArrayLike) -> np.ndarray:
         """The (interpolated) Everett function F(α, β) in the model's internal output units."""
@@ -234,6 +249,7 @@ class HysteresisModel:
             "grid": int(self.everett_.shape[0]),
             "everett": self.everett_.tolist(),
             "details": self.details_,
+            "drift": None if getattr(self, "drift_", None) is None else self.drift_.to_dict(),
             "provenance": {"software": f"texsense {__version__}", **self.provenance_},
         }
 
@@ -279,9 +295,15 @@ class HysteresisModel:
                 raise FormatError(source, "input range: max must exceed min")
             model.method_ = d["method"]
             model.details_ = dict(d.get("details", {}))
+            if d.get("drift") is not None:
+                from texsense.drift import DriftModel
+
+                model.drift_ = DriftModel.from_dict(d["drift"])
             model.provenance_ = dict(d.get("provenance", {}))
         except (KeyError, TypeError) as e:
             raise FormatError(source, f"model file lacks or garbles the field {e}") from None
+        except ParameterError as e:
+            raise FormatError(source, str(e)) from None
         except UnitError as e:
             raise FormatError(source, str(e)) from None
         return model
