@@ -146,3 +146,23 @@ def test_split_steps_and_cli_and_model_file(tmp_path, capsys):
     err_with = abs(with_drift[hold_end] - cols["pressure_ncm2"][hold_end])
     err_without = abs(without[hold_end] - cols["pressure_ncm2"][hold_end])
     assert err_with < 0.3 * err_without
+
+
+def test_exact_windowed_model_against_the_recursive_form():
+    from texsense.drift import DriftModel, drift_exact
+
+    rng = np.random.default_rng(5)
+    t = np.cumsum(np.full(3000, 1.0))  # 1 s samples
+    levels = np.repeat(rng.uniform(0, 5, 30), 100)  # a step every 100 s
+    exact, kept = drift_exact(t, levels, -0.025, window_s=1.0, min_step=0.0)
+    assert kept == 30
+    recursive = DriftModel(-0.025, log_kernel()).apply(levels, t)
+    # the window delays every step by one sample; otherwise the two agree within the bound
+    steps = np.abs(np.diff(np.concatenate([[0.0], levels[::100]])))
+    bound = 0.025 * (log_kernel().max_error + np.log(2.0)) * steps.sum()
+    assert np.max(np.abs(exact - recursive)) <= bound
+    # omitting small steps and deleting old ones keeps fewer steps
+    _, fewer = drift_exact(t, levels, -0.025, window_s=10.0, min_step=0.2, delta=0.05)
+    assert fewer < 30
+    with pytest.raises(ParameterError):
+        drift_exact(t, levels[:-1], -0.025)

@@ -31,6 +31,7 @@ __all__ = [
     "DriftKernel",
     "DriftModel",
     "StepFit",
+    "drift_exact",
     "fit_gamma",
     "gamma_from_point",
     "log_kernel",
@@ -302,3 +303,61 @@ class DriftModel:
         ):
             raise ParameterError("drift kernel: weights must be >= 0 and time constants > 0")
         return cls(float(d["gamma"]), kernel, str(d.get("kind", "log")))
+
+
+def drift_exact(
+    times_s: npt.ArrayLike,
+    h: npt.ArrayLike,
+    gamma: float,
+    window_s: float = 10.0,
+    min_step: float = 0.01,
+    delta: float = 0.0,
+) -> tuple[np.ndarray, int]:
+    """The thesis's exact drift model with its practical rules (§5.2-5.3, eq. 5.4-5.7).
+
+    Every ``window_s`` the Preisach output is averaged over the window; when the average
+    differs from the last stored level by at least ``min_step`` (relative), the difference is
+    stored as a step at that time (smaller ones are omitted). With ``delta > 0`` a step whose
+    present rate of drift is below ``delta`` times the largest one is deleted (eq. 5.5-5.7).
+    The output is ``h(t) + γ Σ_i Δ_i ln(t - t_i + 1)`` (eq. 5.8). Cost and memory grow with
+    the number of stored steps — the reference the recursive form is checked against.
+
+    Returns the drift-corrected output (T,) and the number of steps kept at the end.
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    x = np.asarray(h, dtype=np.float64)
+    if t.shape != x.shape or t.ndim != 1:
+        raise ParameterError("times and h must be equal-length 1-D arrays")
+    if not window_s > 0 or min_step < 0 or not 0 <= delta < 1:
+        raise ParameterError("need window_s > 0, min_step >= 0 and 0 <= delta < 1")
+    out = np.empty_like(x)
+    step_t: list[float] = []
+    step_d: list[float] = []
+    level = 0.0
+    w_start, w_sum, w_n = (t[0] if t.size else 0.0), 0.0, 0
+    for k in range(t.size):
+        if t[k] - w_start >= window_s and w_n:
+            avg = w_sum / w_n
+            change = abs(avg - level)
+            if change > 0 and change >= min_step * max(abs(level), 1e-12):
+                step_t.append(float(t[k]))
+                step_d.append(avg - level)
+                level = avg
+                if delta > 0 and len(step_t) > 1:
+                    rate = np.abs(np.asarray(step_d)) / (t[k] - np.asarray(step_t) + 1.0)
+                    keep = rate >= delta * rate.max()
+                    kept_d = np.asarray(step_d)[keep]
+                    # deleted steps stop drifting; the level they reached stays in h
+                    step_t = list(np.asarray(step_t)[keep])
+                    step_d = list(kept_d)
+            w_start, w_sum, w_n = t[k], 0.0, 0
+        w_sum += x[k]
+        w_n += 1
+        if step_t:
+            st = np.asarray(step_t)
+            done = st <= t[k]
+            drift = gamma * np.sum(np.asarray(step_d)[done] * np.log1p(t[k] - st[done]))
+        else:
+            drift = 0.0
+        out[k] = x[k] + drift
+    return out, len(step_t)
