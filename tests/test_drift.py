@@ -166,3 +166,19 @@ def test_exact_windowed_model_against_the_recursive_form():
     assert fewer < 30
     with pytest.raises(ParameterError):
         drift_exact(t, levels[:-1], -0.025)
+
+
+def test_combined_stage_equals_the_stages_in_turn():
+    from texsense.drift import DriftModel
+    from texsense.hysteresis import HysteresisModel
+    from texsense.sim.protocols import run_protocol
+
+    cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
+    m = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
+    m.with_drift(DriftModel(-0.025, log_kernel()))
+    rng = np.random.default_rng(2)
+    u = rng.uniform(0, m.u_max_, (500, 4))
+    t = np.cumsum(rng.exponential(0.5, 500))
+    combined = m.predict(u, times_s=t)
+    separate = m.drift_.apply(m.state(4).run(u), t)
+    np.testing.assert_allclose(combined, separate, rtol=1e-12, atol=1e-12)

@@ -73,6 +73,7 @@ pub struct DriftBank {
     z: Vec<f64>,
     last_h: Vec<f64>,
     started: Vec<bool>,
+    weight_sum: f64,
 }
 
 impl DriftBank {
@@ -86,6 +87,7 @@ impl DriftBank {
         }
         let k = kernel.len();
         Ok(Self {
+            weight_sum: kernel.weights.iter().sum(),
             kernel,
             gamma,
             n,
@@ -133,12 +135,19 @@ impl DriftBank {
         check_len("valid", valid.len(), self.n)?;
         check_len("out", out.len(), self.n)?;
         let k = self.kernel.len();
+        // one decay factor per time constant for the whole frame
+        let decay: Vec<f64> = self
+            .kernel
+            .taus
+            .iter()
+            .map(|tau| (-dt / tau).exp())
+            .collect();
         for i in 0..self.n {
             if !(valid[i] && h[i].is_finite()) {
                 out[i] = f64::NAN;
                 // time still passes for the element's states
-                for j in 0..k {
-                    self.z[i * k + j] *= (-dt / self.kernel.taus[j]).exp();
+                for (zj, d) in self.z[i * k..(i + 1) * k].iter_mut().zip(&decay) {
+                    *zj *= d;
                 }
                 continue;
             }
@@ -151,11 +160,13 @@ impl DriftBank {
             self.last_h[i] = h[i];
             self.total[i] += change;
             let mut drift = 0.0;
-            for j in 0..k {
-                let zj = &mut self.z[i * k + j];
-                *zj = *zj * (-dt / self.kernel.taus[j]).exp() + change;
-                drift += self.kernel.weights[j] * (self.total[i] - *zj);
+            // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
+            let zs = &mut self.z[i * k..(i + 1) * k];
+            for ((zj, d), w) in zs.iter_mut().zip(&decay).zip(&self.kernel.weights) {
+                *zj = *zj * d + change;
+                drift -= w * *zj;
             }
+            drift += self.total[i] * self.weight_sum;
             out[i] = h[i] + self.gamma * drift;
         }
         Ok(())

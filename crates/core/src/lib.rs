@@ -12,6 +12,7 @@
 //! - [`preisach`]: the numerical Preisach model (thesis eq. 4.15-4.22), many elements at once;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep).
 
+pub mod compensation;
 pub mod drift;
 pub mod error;
 pub mod preisach;
@@ -19,6 +20,7 @@ pub mod repair;
 pub mod spacer;
 pub mod topology;
 
+pub use compensation::Compensation;
 pub use drift::{DriftBank, Kernel};
 pub use error::CoreError;
 pub use preisach::{Everett, PreisachBank};

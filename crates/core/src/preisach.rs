@@ -33,7 +33,7 @@ pub struct Everett {
     k: usize,
     u_min: f64,
     u_max: f64,
-    step: f64,
+    inv_step: f64,
     table: Vec<f64>,
 }
 
@@ -72,7 +72,7 @@ impl Everett {
             k,
             u_min,
             u_max,
-            step: (u_max - u_min) / (k - 1) as f64,
+            inv_step: (k - 1) as f64 / (u_max - u_min),
             table,
         })
     }
@@ -101,13 +101,13 @@ impl Everett {
     #[inline]
     pub fn value(&self, alpha: f64, beta: f64) -> f64 {
         let last = (self.k - 1) as f64;
-        let a = ((alpha - self.u_min) / self.step).clamp(0.0, last);
-        let b = ((beta - self.u_min) / self.step).clamp(0.0, last);
+        let a = ((alpha - self.u_min) * self.inv_step).clamp(0.0, last);
+        let b = ((beta - self.u_min) * self.inv_step).clamp(0.0, last);
         if b >= a {
             return 0.0;
         }
-        let i0 = (a.floor() as usize).min(self.k - 2);
-        let j0 = (b.floor() as usize).min(self.k - 2);
+        let i0 = (a as usize).min(self.k - 2); // a >= 0: truncation is floor
+        let j0 = (b as usize).min(self.k - 2);
         let wa = a - i0 as f64;
         let wb = b - j0 as f64;
         if i0 == j0 {

@@ -12,8 +12,8 @@ use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use texsense_core::repair::RepairOutcome;
 use texsense_core::{
-    CoreError, DriftBank, Everett, Kernel, NeighbourMeanRepair, Neighbours, PreisachBank,
-    SpacerBank, SpacerParams,
+    Compensation, CoreError, DriftBank, Everett, Kernel, NeighbourMeanRepair, Neighbours,
+    PreisachBank, SpacerBank, SpacerParams,
 };
 
 create_exception!(
@@ -531,6 +531,84 @@ impl PyDriftBank {
     }
 }
 
+/// Preisach then drift, in one pass per frame (the combined compensation stage).
+#[pyclass(name = "Compensation", module = "texsense._core")]
+struct PyCompensation {
+    inner: Compensation,
+}
+
+#[pymethods]
+impl PyCompensation {
+    #[new]
+    #[pyo3(signature = (u_min, u_max, table, n_elements, capacity, offset, sign, gamma, weights=None, taus=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        u_min: f64,
+        u_max: f64,
+        table: PyReadonlyArray2<'_, f64>,
+        n_elements: usize,
+        capacity: usize,
+        offset: f64,
+        sign: f64,
+        gamma: f64,
+        weights: Option<PyReadonlyArray1<'_, f64>>,
+        taus: Option<PyReadonlyArray1<'_, f64>>,
+    ) -> PyResult<Self> {
+        let shape = table.shape();
+        let everett =
+            Everett::new(shape[0], u_min, u_max, table.as_slice()?.to_vec()).map_err(to_py)?;
+        let preisach = PreisachBank::new(everett, n_elements, capacity).map_err(to_py)?;
+        let drift = match (weights, taus) {
+            (Some(w), Some(t)) => {
+                let kernel =
+                    Kernel::new(w.as_slice()?.to_vec(), t.as_slice()?.to_vec()).map_err(to_py)?;
+                Some(DriftBank::new(kernel, gamma, n_elements).map_err(to_py)?)
+            }
+            _ => None,
+        };
+        let inner = Compensation::new(preisach, drift, offset, sign).map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// Both stages back to their initial state.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Samples clamped into the identified range, per element.
+    fn clamped<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
+        self.inner.preisach().clamped().to_vec().into_pyarray(py)
+    }
+
+    /// Batch: dt (T,), inputs (T, N), valid (T, N) -> compensated outputs (T, N).
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        dt: PyReadonlyArray1<'py, f64>,
+        inputs: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let shape = inputs.shape().to_vec();
+        if valid.shape() != shape.as_slice() || shape[1] != self.inner.len() || dt.len() != shape[0]
+        {
+            return Err(to_py(CoreError::Shape {
+                what: "compensation run",
+                expected: format!("dt (T,), inputs and valid (T, {})", self.inner.len()),
+                got: format!(
+                    "dt ({},), inputs {shape:?}, valid {:?}",
+                    dt.len(),
+                    valid.shape()
+                ),
+            }));
+        }
+        let (d, u, v) = (dt.as_slice()?, inputs.as_slice()?, valid.as_slice()?);
+        let mut out = vec![0.0; u.len()];
+        let inner = &mut self.inner;
+        py.detach(|| inner.run(d, u, v, &mut out)).map_err(to_py)?;
+        to_2d(py, out, shape[0], shape[1])
+    }
+}
+
 /// The compiled core of texsense.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -539,6 +617,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySpacerBank>()?;
     m.add_class::<PyPreisachBank>()?;
     m.add_class::<PyDriftBank>()?;
+    m.add_class::<PyCompensation>()?;
     m.add("ShapeError", m.py().get_type::<ShapeError>())?;
     m.add(
         "NeighbourIndexError",

@@ -61,7 +61,12 @@ class PreisachState:
         return self
 
     def _out(self, h: np.ndarray) -> np.ndarray:
-        return self.model.sign_ * (h + self.model.offset_)
+        # in place: batches of millions of samples should not be copied twice
+        if self.model.offset_:
+            h += self.model.offset_
+        if self.model.sign_ != 1.0:
+            np.negative(h, out=h)
+        return h
 
     def run(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
         """Outputs (T, N) for inputs (T, N) (or (T,) for one element), continuing the state.
@@ -206,10 +211,35 @@ class HysteresisModel:
         drift stage (``self.drift_``) and ``times_s`` the drift of eq. 5.8 is added."""
         u = np.asarray(inputs, dtype=np.float64)
         n = 1 if u.ndim == 1 else u.shape[1]
-        h = self.state(n).run(u, valid)
-        if getattr(self, "drift_", None) is not None and times_s is not None:
-            return self.drift_.apply(h, times_s)
-        return h
+        drift = getattr(self, "drift_", None)
+        if drift is None or times_s is None:
+            return self.state(n).run(u, valid)
+        # both stages in one pass of the Rust core
+        from texsense._core import Compensation
+
+        one = u.ndim == 1
+        u2 = np.ascontiguousarray(u[:, None] if one else u)
+        t = np.asarray(times_s, dtype=np.float64)
+        if t.shape != (u2.shape[0],):
+            raise ParameterError(f"times_s must have {u2.shape[0]} entries, got {t.shape}")
+        dt = np.diff(t, prepend=t[0])
+        if np.any(dt < 0):
+            raise ParameterError("times_s must not decrease")
+        v = np.isfinite(u2) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
+        stage = Compensation(
+            self.u_min_,
+            self.u_max_,
+            np.ascontiguousarray(self.everett_, dtype=np.float64),
+            n,
+            DEFAULT_CAPACITY,
+            self.offset_,
+            self.sign_,
+            drift.gamma,
+            np.ascontiguousarray(drift.kernel.weights),
+            np.ascontiguousarray(drift.kernel.taus),
+        )
+        out = stage.run(np.ascontiguousarray(dt), u2, np.ascontiguousarray(v))
+        return out[:, 0] if one else out
 
     def with_drift(self, drift: Any) -> HysteresisModel:
         """Attach a :class:`texsense.drift.DriftModel` (returns self)."""
