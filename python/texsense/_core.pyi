@@ -56,9 +56,7 @@ class SpacerBank:
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
     def ramp_until(
         self, dt: float, rate: float, target: float, max_steps: int
-    ) -> tuple[
-        npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], bool
-    ]: ...
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], bool]: ...
 
 class PreisachBank:
     """Preisach stacks of N elements (crates/core/src/preisach.rs)."""
