@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError
 from texsense.hysteresis import HysteresisModel
 from texsense.io.columns_csv import read_columns_csv, write_columns_csv
 
@@ -206,4 +206,4 @@ def run_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["ParameterError", "error_summary", "register"]
+__all__ = ["error_summary", "register"]

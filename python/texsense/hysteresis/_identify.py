@@ -20,13 +20,12 @@ at low pressure from 13 % to 17 % (max, virtual textile spacer). Finally the tab
 monotone (non-decreasing in α, non-increasing in β) so the output is monotone between
 extrema.
 
-**Least squares.** For any record: the output is modelled as an offset, a reversible part
-``R(u)`` (piecewise linear, free increments) and a Preisach part from relays on a grid
-(``α_i > β_j``), whose weights all have one sign — the orientation of the loops measured from
-the data (counter-clockwise: positive, as a classical Preisach density; clockwise, as the
-spacers' loading branch above their unloading branch: negative). Relay states are computed for
-every sample, and the weights are found by bounded least squares with a smoothness penalty.
-The Everett table is ``F = F_relays + (R(α) - R(β)) / 2``.
+**Least squares.** For any record: the extremum stack depends on the input alone, so the
+model's output is linear in the Everett table values (:func:`everett_design`). The table on a
+coarser grid and an output offset are found by linear least squares with a curvature penalty
+(and optionally a prior table), then made monotone. Unlike a non-negative Preisach density,
+this covers loops of either orientation (a spacer's loading branch lies above its unloading
+branch, which a non-negative density cannot produce).
 """
 
 from __future__ import annotations
@@ -36,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import lsq_linear
-from scipy.sparse import csr_matrix, vstack
+from scipy.sparse import csr_matrix, hstack, vstack
 
 from texsense.exceptions import ParameterError
 from texsense.hysteresis._segments import Branch, split_branches
@@ -286,9 +285,9 @@ def identify_lsq(
                 vals += [1.0, -2.0, 1.0]
                 r += 1
 
-    scale = smoothing * np.sqrt(us.size) * float(np.ptp(ps) or 1.0) / max(float(np.ptp(ps)), 1e-12)
+    scale = smoothing * np.sqrt(us.size)
     penalty = csr_matrix((np.array(vals) * scale * k, (rows, cols)), shape=(r, n + 1))
-    design = hstack_offset(a)
+    design = hstack([a, csr_matrix(np.ones((a.shape[0], 1)))]).tocsr()  # + output offset
     blocks, rhs = [design, penalty], [ps, np.zeros(r)]
     if prior is not None:
         # pull towards a prior table (e.g. the thesis method's) where the data say little
@@ -326,10 +325,3 @@ def identify_lsq(
             "prior": None if prior is None else prior.method,
         },
     )
-
-
-def hstack_offset(a: csr_matrix) -> csr_matrix:
-    """Append a column of ones (the output offset) to a sparse design matrix."""
-    from scipy.sparse import hstack
-
-    return hstack([a, csr_matrix(np.ones((a.shape[0], 1)))]).tocsr()

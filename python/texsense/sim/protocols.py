@@ -106,15 +106,11 @@ def _read_out(
     )
 
 
-def _machine(spacer: Spacer) -> TestMachine:
-    return TestMachine(spacer)
-
-
 def ramp(
     spacer: Spacer, *, max_ncm2: float = 10.0, speed_mm_min: float = 10.0, cycles: int = 1
 ) -> list[DriveResult]:
     """0 -> max -> 0 at constant platen speed, ``cycles`` times (§4.1, fig. 4.1/4.3)."""
-    m = _machine(spacer)
+    m = TestMachine(spacer)
     for _ in range(cycles):
         m.ramp_to_pressure(max_ncm2, speed_mm_min).ramp_to_pressure(0.0, speed_mm_min)
     return [m.trace()]
@@ -129,7 +125,7 @@ def calibration(
 ) -> list[DriveResult]:
     """The thesis's identification record (§4.4.2): the rising curve to ``max_ncm2`` and
     falling curves to 0 from 100, 70 and 30 % of the maximum."""
-    m = _machine(spacer)
+    m = TestMachine(spacer)
     for share in falling_from:
         if not 0 < share <= 1:
             raise ParameterError(f"falling_from shares must lie in (0, 1], got {share}")
@@ -145,7 +141,7 @@ def validation(
     path: Sequence[float] = (10.0, 1.3, 10.0, 0.0, 1.3, 0.0),
 ) -> list[DriveResult]:
     """The validation cycle of §4.5: 0 -> 10 -> 1.3 -> 10 -> 0 -> 1.3 -> 0 N/cm², repeated."""
-    m = _machine(spacer)
+    m = TestMachine(spacer)
     for _ in range(cycles):
         for target in path:
             m.ramp_to_pressure(target, speed_mm_min)
@@ -171,7 +167,7 @@ def steps(
     offset = 0.0
     for level in levels:
         spacer.reset()
-        m = _machine(spacer)
+        m = TestMachine(spacer)
         if falling:
             m.ramp_to_pressure(start_ncm2, speed_mm_min).hold_compression(prehold_s)
         m.ramp_to_pressure(level, speed_mm_min).hold_compression(hold_s, sample_s=None)
@@ -191,7 +187,7 @@ def cyclic(
     speed_mm_min: float = 10.0,
 ) -> list[DriveResult]:
     """Cyclic compression 0 <-> p3 at constant speed for ``duration_s`` (§5.1.2.2, §5.3)."""
-    m = _machine(spacer)
+    m = TestMachine(spacer)
     while m.time_s < duration_s:
         m.ramp_to_pressure(p3_ncm2, speed_mm_min).ramp_to_pressure(0.0, speed_mm_min)
     return [m.trace()]
@@ -239,7 +235,7 @@ def sawtooth(
     if reversals < 2:
         raise ParameterError("reversals must be >= 2")
     rng = np.random.default_rng(seed)
-    m = _machine(spacer)
+    m = TestMachine(spacer)
     m.ramp_to_pressure(max_ncm2, speed_mm_min).ramp_to_pressure(0.0, speed_mm_min)
     level = 0.0
     for k in range(reversals):
