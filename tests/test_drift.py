@@ -182,3 +182,13 @@ def test_combined_stage_equals_the_stages_in_turn():
     combined = m.predict(u, times_s=t)
     separate = m.drift_.apply(m.state(4).run(u), t)
     np.testing.assert_allclose(combined, separate, rtol=1e-12, atol=1e-12)
+
+
+def test_time_stamps_are_checked():
+    from texsense.drift import DriftModel
+
+    m = DriftModel(-0.025, log_kernel())
+    with pytest.raises(ParameterError, match="must not decrease"):
+        m.apply([1.0, 2.0, 3.0], [0.0, 2.0, 1.0])
+    with pytest.raises(ParameterError, match="3 entries"):
+        m.apply([1.0, 2.0, 3.0], [0.0, 1.0])

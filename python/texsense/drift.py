@@ -37,6 +37,7 @@ __all__ = [
     "log_kernel",
     "prony_kernel",
     "split_steps",
+    "time_steps",
 ]
 
 
@@ -226,6 +227,17 @@ def split_steps(
     return steps
 
 
+def time_steps(times_s: npt.ArrayLike, n_frames: int) -> np.ndarray:
+    """Time steps (s) between ``n_frames`` non-decreasing time stamps, the first one 0."""
+    t = np.asarray(times_s, dtype=np.float64)
+    if t.shape != (n_frames,):
+        raise ParameterError(f"times_s must have {n_frames} entries, got {t.shape}")
+    dt = np.diff(t, prepend=t[0]) if t.size else t
+    if not np.all(dt >= 0):
+        raise ParameterError("times_s must be finite and must not decrease")
+    return np.ascontiguousarray(dt)
+
+
 @dataclass(frozen=True)
 class DriftModel:
     """γ and a kernel: the drift stage that follows the Preisach model (eq. 5.8)."""
@@ -243,12 +255,7 @@ class DriftModel:
         x = np.asarray(h, dtype=np.float64)
         one = x.ndim == 1
         x2 = np.ascontiguousarray(x[:, None] if one else x)
-        t = np.asarray(times_s, dtype=np.float64)
-        if t.shape != (x2.shape[0],):
-            raise ParameterError(f"times must have {x2.shape[0]} entries, got {t.shape}")
-        dt = np.ascontiguousarray(np.diff(t, prepend=t[0]))
-        if np.any(dt < 0):
-            raise ParameterError("times must not decrease")
+        dt = time_steps(times_s, x2.shape[0])
         out = self.state(x2.shape[1]).run(dt, x2, np.ascontiguousarray(np.isfinite(x2)))
         return out[:, 0] if one else out
 

@@ -216,15 +216,11 @@ class HysteresisModel:
             return self.state(n).run(u, valid)
         # both stages in one pass of the Rust core
         from texsense._core import Compensation
+        from texsense.drift import time_steps
 
         one = u.ndim == 1
         u2 = np.ascontiguousarray(u[:, None] if one else u)
-        t = np.asarray(times_s, dtype=np.float64)
-        if t.shape != (u2.shape[0],):
-            raise ParameterError(f"times_s must have {u2.shape[0]} entries, got {t.shape}")
-        dt = np.diff(t, prepend=t[0])
-        if np.any(dt < 0):
-            raise ParameterError("times_s must not decrease")
+        dt = time_steps(times_s, u2.shape[0])
         v = np.isfinite(u2) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
         stage = Compensation(
             self.u_min_,
@@ -238,7 +234,7 @@ class HysteresisModel:
             np.ascontiguousarray(drift.kernel.weights),
             np.ascontiguousarray(drift.kernel.taus),
         )
-        out = stage.run(np.ascontiguousarray(dt), u2, np.ascontiguousarray(v))
+        out = stage.run(dt, u2, np.ascontiguousarray(v))
         return out[:, 0] if one else out
 
     def with_drift(self, drift: Any) -> HysteresisModel:
