@@ -8,10 +8,13 @@ meaningful even on a shared, noisy machine; absolute numbers are not.
 
 from __future__ import annotations
 
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best_of
 from texsense import Layout, Recording
 from texsense.repair import NeighbourMeanRepair
 
@@ -36,15 +39,6 @@ def numpy_repair(frames: np.ndarray, valid: np.ndarray, layout: Layout) -> np.nd
     return out
 
 
-def best_of(fn, *args, repeat: int = 3) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn(*args)
-        times.append(time.perf_counter() - start)
-    return min(times)
-
-
 def main() -> None:
     rng = np.random.default_rng(0)
     print("| elements | frames | failed | numpy [Melem/s] | rust [Melem/s] | rust / numpy |")
@@ -57,8 +51,8 @@ def main() -> None:
         expected = numpy_repair(frames, valid, lay)
         got = NeighbourMeanRepair(lay).run(rec).frames
         np.testing.assert_allclose(got, expected, rtol=1e-6)  # same algorithm, same answer
-        t_np = best_of(numpy_repair, frames, valid, lay)
-        t_rs = best_of(lambda r, lay=lay: NeighbourMeanRepair(lay).run(r), rec)
+        t_np, _ = best_of(numpy_repair, frames, valid, lay)
+        t_rs, _ = best_of(lambda r, lay=lay: NeighbourMeanRepair(lay).run(r), rec)
         n = frames.size / 1e6
         print(
             f"| {lay.n_elements} | {n_frames} | 25 % | {n / t_np:.1f} | {n / t_rs:.1f} "

@@ -6,10 +6,14 @@ Run:  .venv/bin/python benchmarks/drift_speed.py
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best_of
 from texsense.drift import DriftModel, drift_exact, log_kernel
 from texsense.hysteresis import HysteresisModel
 from texsense.sim.protocols import run_protocol
@@ -27,17 +31,9 @@ def main() -> None:
         0.45 + 0.4 * np.sin(2 * np.pi * t[:, None] / 60.0 + rng.uniform(0, 6.3, n)[None, :])
     )
 
-    def best(fn, repeat=3):
-        times = []
-        for _ in range(repeat):
-            start = time.perf_counter()
-            result = fn()
-            times.append(time.perf_counter() - start)
-        return min(times), result
-
-    t_h, h = best(lambda: model.state(n).run(u))
-    t_d, separate = best(lambda: model.drift_.apply(h, t))
-    t_c, combined = best(lambda: model.predict(u, times_s=t))
+    t_h, h = best_of(lambda: model.state(n).run(u))
+    t_d, separate = best_of(lambda: model.drift_.apply(h, t))
+    t_c, combined = best_of(lambda: model.predict(u, times_s=t))
     np.testing.assert_allclose(combined, separate, rtol=1e-12, atol=1e-12)
     print("| what | time (best of 3) |")
     print("|---|---:|")

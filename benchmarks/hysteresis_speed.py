@@ -9,10 +9,13 @@ this shared 2-core machine.
 
 from __future__ import annotations
 
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best_of
 from texsense.hysteresis import HysteresisModel
 from texsense.hysteresis._identify import update_extrema
 from texsense.sim.protocols import run_protocol
@@ -56,36 +59,27 @@ def python_everett_sum(model: HysteresisModel, u: np.ndarray) -> np.ndarray:
     return np.asarray(out)
 
 
-def timed(fn, repeat=3):
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        result = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, result
-
-
 def main() -> None:
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     uc, pc = cal.labels["compression_mm"], cal.labels["pressure_ncm2"]
-    t_thesis, model = timed(lambda: HysteresisModel(method="thesis", grid=100).fit(uc, pc))
-    t_lsq, _ = timed(lambda: HysteresisModel(method="lsq", cells=40).fit(uc, pc), 1)
+    t_thesis, model = best_of(lambda: HysteresisModel(method="thesis", grid=100).fit(uc, pc))
+    t_lsq, _ = best_of(lambda: HysteresisModel(method="lsq", cells=40).fit(uc, pc), repeat=1)
     rng = np.random.default_rng(0)
     lo, hi = model.u_min_, model.u_max_
     # 1 element x 10^6 samples, every sample a reversal
     noisy = lo + (hi - lo) * (
         0.5 + 0.45 * rng.random(1_000_000) * np.where(np.arange(1_000_000) % 2 == 0, 1.0, -1.0)
     )
-    t_one, out_one = timed(lambda: model.predict(noisy))
+    t_one, out_one = best_of(lambda: model.predict(noisy))
     # 1024 elements x 10^4 frames, random walks
     walk = np.clip(
         np.cumsum(rng.normal(0, 0.02, (10_000, 1024)), axis=0) % (2 * (hi - lo)), 0, None
     )
     walk = lo + np.where(walk > hi - lo, 2 * (hi - lo) - walk, walk)
-    t_many, _ = timed(lambda: model.predict(walk))
+    t_many, _ = best_of(lambda: model.predict(walk))
     # plain Python on a slice of the noisy input, checked against the core
     n_py = 20_000
-    t_py, out_py = timed(lambda: python_everett_sum(model, noisy[:n_py]), 1)
+    t_py, out_py = best_of(lambda: python_everett_sum(model, noisy[:n_py]), repeat=1)
     np.testing.assert_allclose(out_py, out_one[:n_py], rtol=1e-9, atol=1e-9)
     rust_rate = 1e6 / t_one
     py_rate = n_py / t_py

@@ -6,7 +6,7 @@ Run:  .venv/bin/python benchmarks/virtual_sensor.py          (writes docs/img/si
 
 from __future__ import annotations
 
-import time
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -28,16 +28,10 @@ from texsense.sim.targets import (
     step_metrics,
 )
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best_of
+
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
-
-
-def best_of(fn, repeat=3):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def table() -> None:
@@ -127,9 +121,9 @@ def speed() -> None:
     sp = Spacer.preset("textile-6mm")
     t = np.arange(0, 4 * 3600, 0.1)
     p = 2.5 + 2.5 * np.sin(2 * np.pi * t / 60.0)  # 4 h of one-minute cycles at 10 Hz
-    t_press = best_of(lambda: sp.reset().drive_pressure(t, p), 1)
+    t_press, _ = best_of(lambda: sp.reset().drive_pressure(t, p), repeat=1)
     comp = sp.reset().drive_pressure(t, p).compression_mm[:, 0]
-    t_disp = best_of(lambda: sp.reset().drive_displacement(t, comp), 3)
+    t_disp, _ = best_of(lambda: sp.reset().drive_displacement(t, comp))
     mat = VirtualMat(Layout.grid(15, 16, pitch_cm=2.07), "textile-3mm", seed=0)
     frame = np.random.default_rng(0).random((1, 240)) * 3
     clock = [0.0]
@@ -138,7 +132,7 @@ def speed() -> None:
         clock[0] += 10.0
         mat.scan([clock[0]], frame)
 
-    t_frame = best_of(one_frame, 20)
+    t_frame, _ = best_of(one_frame, repeat=20)
     print("| what | time |")
     print("|---|---|")
     print(f"| 4 h at 10 Hz, one element, pressure controlled (144,000 samples) | {t_press:.2f} s |")
