@@ -192,3 +192,41 @@ def test_time_stamps_are_checked():
         m.apply([1.0, 2.0, 3.0], [0.0, 2.0, 1.0])
     with pytest.raises(ParameterError, match="3 entries"):
         m.apply([1.0, 2.0, 3.0], [0.0, 1.0])
+
+
+def test_gamma_from_any_history_is_recovered_exactly():
+    from texsense.drift import DriftModel
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.05, 2.0, 3000))
+    h = 2.0 + 1.5 * np.sin(t / 7.0) + rng.normal(0, 0.2, t.size)  # any history, cycles
+    truth = DriftModel(-0.0123, log_kernel())
+    p = truth.apply(h, t)
+    fitted, rms = DriftModel.fit_history(h, p, t)
+    assert fitted.gamma == pytest.approx(-0.0123, rel=1e-9)
+    assert rms < 1e-9
+    with pytest.raises(ParameterError, match="no drift to fit"):
+        DriftModel.fit_history(h, p, t, band=(50.0, 60.0))
+    with pytest.raises(ParameterError, match="equal length"):
+        DriftModel.fit_history(h, p[:-1], t)
+
+
+def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
+    import json
+
+    from texsense.cli import main
+    from texsense.hysteresis import HysteresisModel
+
+    cal, cyc = tmp_path / "cal.csv", tmp_path / "cyc.csv"
+    assert main(["simulate", "calibration", "--csv", str(cal)]) == 0
+    assert main(["simulate", "validation", "--cycles", "60", "--csv", str(cyc)]) == 0
+    model, out = tmp_path / "m.json", tmp_path / "md.json"
+    assert main(["hysteresis", "fit", str(cal), "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["drift", "fit", str(cyc), "--history", str(model), "-o", str(out), "--json"]) == 0
+    fit = json.loads(capsys.readouterr().out)
+    # cycling relaxes the virtual spacer far less than held steps do (docs/drift.md)
+    assert -0.02 < fit["gamma"] < 0
+    assert HysteresisModel.load(out).drift_.gamma == pytest.approx(fit["gamma"])
+    assert main(["drift", "fit", str(cyc), "-o", str(out)]) == 1
+    assert "needs --history" in capsys.readouterr().err

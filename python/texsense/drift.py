@@ -280,6 +280,43 @@ class DriftModel:
             return cls(-1.0 if norm[order][-1] < 0 else 1.0, k, "prony"), fit
         raise ParameterError(f"kind must be 'log' or 'prony', got {kind!r}")
 
+    @classmethod
+    def fit_history(
+        cls,
+        h: npt.ArrayLike,
+        pressure: npt.ArrayLike,
+        times_s: npt.ArrayLike,
+        band: tuple[float, float] = (0.5, 3.5),
+        kernel: DriftKernel | None = None,
+    ) -> tuple[DriftModel, float]:
+        """γ by least squares over any load history, not only held steps.
+
+        Eq. 5.8 is linear in γ: ``p(t) = h(t) + γ D(t)`` with ``D`` the superposition of the
+        kernel over the steps of the Preisach output ``h``. ``D`` is computed once with γ = 1
+        and γ solves the one-parameter least-squares problem over the samples whose true
+        ``pressure`` lies in ``band`` (N/cm², the thesis's §4.5 range). Use it to identify γ on
+        the kind of load the application sees (e.g. an hour of cycles) when γ from steps does
+        not transfer (docs/drift.md). Returns the model and the RMS residual in N/cm².
+        """
+        x = np.asarray(h, dtype=np.float64)
+        p = np.asarray(pressure, dtype=np.float64)
+        if x.ndim != 1 or p.shape != x.shape:
+            raise ParameterError(
+                f"h and pressure must be 1-D and of equal length, got {x.shape} and {p.shape}"
+            )
+        k = log_kernel() if kernel is None else kernel
+        unit = cls(1.0, k, "log" if kernel is None else "prony").apply(x, times_s) - x
+        sel = np.isfinite(unit) & np.isfinite(p) & (p >= band[0]) & (p < band[1])
+        denom = float(unit[sel] @ unit[sel])
+        if sel.sum() < 2 or denom <= 0:
+            raise ParameterError(
+                f"the history has no drift to fit in {band[0]}-{band[1]} N/cm² "
+                f"({int(sel.sum())} samples in the band)"
+            )
+        gamma = float(unit[sel] @ (p - x)[sel] / denom)
+        rms = float(np.sqrt(np.mean((x + gamma * unit - p)[sel] ** 2)))
+        return cls(gamma, k, "log" if kernel is None else "prony"), rms
+
     def to_dict(self) -> dict:
         """JSON-able description (stored in the hysteresis model file)."""
         return {
