@@ -47,6 +47,9 @@
 
 use crate::error::{check_len, CoreError};
 
+/// Largest share of the elastic and friction stress the clutched relaxation can cancel.
+const CLUTCH_FLOOR: f64 = 0.8;
+
 /// Parameters of one spacer material (shared by all elements of a bank).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpacerParams {
@@ -390,6 +393,10 @@ impl SpacerBank {
             self.e[i] = e_new;
             self.backbone_prev[i] = backbone;
         }
+        // the stored relaxation acts through the structure: it can take at most
+        // CLUTCH_FLOOR of the elastic and friction stress away, so an unloaded spacer is not
+        // held compressed by its own relaxation (the stress stays > 0 for any compression)
+        let clutch = clutch.max(-CLUTCH_FLOOR * elastic_friction);
         let stress = (self.scale[i] * (elastic_friction + viscous + clutch - softening)).max(0.0);
         if commit {
             self.stress_prev[i] = stress;

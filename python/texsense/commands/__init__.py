@@ -1,6 +1,6 @@
 """Sub-commands of the ``texsense`` CLI; each module defines ``register(subparsers)`` and
 sets ``run`` as the parser's default function."""
 
-from texsense.commands import convert, design, drift, hysteresis, info, plot, simulate
+from texsense.commands import convert, design, drift, hysteresis, info, pipeline, plot, simulate
 
-COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift)
+COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift, pipeline)

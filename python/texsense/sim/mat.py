@@ -83,6 +83,11 @@ class VirtualMat:
         Converters working in parallel (frame time divides accordingly).
     water_fraction : float
         Water content of a wet spacer (eq. 3.22), dried with ``drying_s``.
+    element_spread : float
+        Relative spread (1 sigma) of the electrode area between elements (embroidery,
+        lamination): each element's plate capacitance is scaled by its own factor.
+    stray_spread_pF : float
+        Spread (1 sigma) of the stray capacitance between elements (line lengths), pF.
     seed : int
         Seed of specimen variation, converter offsets, noise and failures.
     """
@@ -99,6 +104,8 @@ class VirtualMat:
         converters: int = 1,
         water_fraction: float = 0.0,
         drying_s: float = 3 * 3600.0,
+        element_spread: float = 0.04,
+        stray_spread_pF: float = 0.1,
         seed: int = 0,
     ) -> None:
         if spacer not in PRESETS:
@@ -130,6 +137,14 @@ class VirtualMat:
         self._rng = np.random.default_rng(seed)
         self.spacer = Spacer.preset(spacer, n_specimens=layout.n_elements, seed=seed)
         self.offsets_pF = self.cdc.channel_offsets(layout.n_elements, self._rng)
+        if not (0 <= element_spread < 0.3 and stray_spread_pF >= 0):
+            raise ParameterError("element_spread must lie in [0, 0.3), stray_spread_pF be >= 0")
+        n = layout.n_elements
+        self.element_gain = np.clip(1.0 + element_spread * self._rng.standard_normal(n), 0.5, 1.5)
+        stray = self.electrode.stray_pF
+        self.element_stray_pF = np.clip(
+            stray + stray_spread_pF * self._rng.standard_normal(n), 0.0, None
+        )
         self._clock = 0.0
 
     @classmethod
@@ -206,6 +221,8 @@ class VirtualMat:
             water = self.water_fraction * np.exp(-element_times / self.drying_s)
             stray = self.electrode.stray_pF
             cap = (cap - stray) * wet_factor(comp / thickness, water, self.electrode.eps_r0) + stray
+        stray = self.electrode.stray_pF
+        cap = (cap - stray) * self.element_gain + self.element_stray_pF
         if self.architecture == "stripes":
             cap = self._crosstalk(cap, comp / thickness)
         failed = self.failures.simulate(element_times[:, 0], p_at, self._rng)

@@ -1,0 +1,169 @@
+"""The capacitance-to-pressure pipeline end to end on the virtual 96-element seat (thesis
+failure rates), stage by stage, and its speed for 96, 1024 and 4096 elements.
+
+Run:  .venv/bin/python benchmarks/pipeline_virtual.py
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best_of
+from texsense import Layout, Recording
+from texsense.calibration import MatCalibration
+from texsense.drift import DriftModel, split_steps
+from texsense.pipeline import Pipeline
+from texsense.repair import Repair
+from texsense.sim import protocols
+from texsense.sim.failures import FailureModel
+from texsense.sim.mat import VirtualMat
+
+
+def calibrate(seed: int = 5) -> MatCalibration:
+    """Zeroing + equilibration (1 N/cm²) of the seat, spacer model from a test-machine record
+    of another specimen, drift γ from its steps."""
+    mat = VirtualMat.seat(seed=seed)
+    n = mat.layout.n_elements
+    ft = mat.cdc.frame_time_s(n)
+    base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance
+    uni = mat.scan((11 + np.arange(10)) * ft, np.full((10, n), 1.0)).capacitance
+    m = protocols.run_protocol("calibration", "textile-3mm", seed=11, sample_hz=None)
+    material = {
+        "compression_mm": m.labels["compression_mm"],
+        "capacitance_pF": m.frames[:, 0].astype(float),
+        "pressure_ncm2": m.labels["pressure_ncm2"],
+    }
+    cal = MatCalibration.fit(material, base, uni, 1.0, 3.0)
+    st = protocols.run_protocol("steps", "textile-3mm", seed=11, sample_hz=10)
+    drift, _ = DriftModel.fit(
+        split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
+    )
+    cal.model.with_drift(drift)
+    return cal
+
+
+def sitting_session(mat: VirtualMat, minutes: float, seed: int = 0) -> np.ndarray:
+    """True pressure maps: sitting bouts of 2-6 min (two ischial peaks and the thighs,
+    shifting a little), 30-90 s standing between."""
+    rng = np.random.default_rng(seed)
+    xy = mat.layout.xy_cm
+    ft = mat.cdc.frame_time_s(mat.layout.n_elements)
+    times = np.arange(0.0, minutes * 60, ft)
+    p = np.zeros((times.size, xy.shape[0]))
+    cx, cy = xy[:, 0].mean(), xy[:, 1].mean()
+    t = 0.0
+    while t < times[-1]:
+        sit = rng.uniform(120, 360)
+        weight = rng.uniform(0.8, 1.2)
+        centre = np.array([cx, cy]) + rng.normal(0, 1.5, 2)
+        sel = (times >= t) & (times < t + sit)
+        for k in np.flatnonzero(sel):
+            c = centre + rng.normal(0, 0.3, 2)
+            d = lambda o, s, c=c: np.exp(-np.sum((xy - c - o) ** 2, axis=1) / (2 * s * s))  # noqa: E731
+            p[k] = weight * (2.6 * d((-5.5, 3), 3.5) + 2.6 * d((5.5, 3), 3.5) + 0.9 * d((0, -7), 7))
+        t += sit + rng.uniform(30, 90)
+    return times, p
+
+
+def accuracy(minutes: float = 30.0) -> None:
+    cal = calibrate()
+    mat = VirtualMat.seat(seed=5, failures=FailureModel())
+    times, truth_in = sitting_session(mat, minutes)
+    scan = mat.scan(times, truth_in)
+    truth = scan.pressure.frames.astype(np.float64)
+    lay = mat.layout
+    loaded = truth >= 0.5
+    healthy = loaded & ~scan.failed
+    print(
+        f"virtual seat, 96 elements, {minutes:.0f} min of sitting bouts, frame {times[1]:.2f} s; "
+        f"{scan.failed.all(axis=0).sum()} elements dead, {scan.failed.any(axis=0).sum()} failed at "
+        f"least once, {scan.failed.mean():.1%} of readings failed\n"
+    )
+    print(
+        "| stages | mean rel. error, loaded elements (≥ 0.5 N/cm²) | healthy ones only | "
+        "failed ones |"
+    )
+    print("|---|---:|---:|---:|")
+    configs = [
+        ("capacitance -> pressure (first-loading curve)",
+         dict(hysteresis=False, drift=False, repair=None)),
+        ("+ hysteresis (Preisach)", dict(drift=False, repair=None)),
+        ("+ drift (eq. 5.8, γ from steps)", dict(repair=None)),
+        ("+ repair, eq. 6.14 neighbour mean", dict(repair="neighbour-mean")),
+        ("+ repair, harmonic", dict(repair="harmonic")),
+        ("+ repair, harmonic-temporal", dict(repair="harmonic-temporal")),
+    ]  # fmt: skip
+    codes = None
+    for label, cfg in configs:
+        pipe = Pipeline(cal, lay, **cfg)
+        out = pipe.run(scan.capacitance).frames.astype(np.float64)
+        out = np.nan_to_num(out)  # an unrepaired failed element shows nothing
+        rel = np.abs(out - truth) / np.maximum(truth, 1e-9)
+        bad = loaded & scan.failed
+        print(
+            f"| {label} | {rel[loaded].mean():.1%} | {rel[healthy].mean():.1%} | "
+            f"{rel[bad].mean():.1%} |"
+        )
+        codes = pipe.codes_
+    det = codes > 0
+    print(
+        f"\ndetection: {np.mean(det[scan.failed]):.1%} of failed readings found, "
+        f"{np.mean(det[~scan.failed]):.2%} of healthy readings flagged\n"
+    )
+
+
+def speed() -> None:
+    cal = calibrate()
+    rng = np.random.default_rng(1)
+    print(
+        "| elements | frames | pipeline batch: element-samples/s | per-frame latency (step) | "
+        "repair alone, Rust eq. 6.14: element-samples/s | harmonic repair, ms/frame: "
+        "same / new failure pattern |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|")
+    for rows, cols in ((8, 12), (32, 32), (64, 64)):
+        n = rows * cols
+        lay = Layout.grid(rows, cols, pitch_cm=1.0)
+        c = MatCalibration.from_parts(
+            cal.curve_compression_mm,
+            cal.curve_capacitance_pF,
+            rng.normal(0, 0.05, n),
+            rng.normal(1, 0.03, n),
+            cal.model,
+            3.0,
+        )
+        frames = 200 if n > 1000 else 1000
+        t = np.arange(frames) * 0.1
+        e = 1.2 + 0.8 * np.sin(t[:, None] / 3 + np.arange(n)[None, :] / 50)
+        cap = c.offset_pF + c.gain * np.interp(e, c.curve_compression_mm, c.curve_capacitance_pF)
+        valid = rng.random((frames, n)) > 0.02
+        cap = np.where(valid, cap, 0.0)
+        rec = Recording(cap, t, lay, "capacitance", "pF")
+        pipe = Pipeline(c, lay, repair="neighbour-mean")
+        batch = best_of(lambda: pipe.reset().run(rec))[0]  # noqa: B023
+        pipe.reset()
+        step = best_of(lambda: pipe.step(cap[5], 0.5), repeat=20)[0]  # noqa: B023
+        rep = Repair(lay, "neighbour-mean")
+        pres = Recording(np.where(valid, e, np.nan), t, lay, "pressure", "N/cm2", valid=valid)
+        rep_t = best_of(lambda: rep.reset().run(pres))[0]  # noqa: B023
+        harm = Repair(lay, "harmonic")
+        hk = best_of(lambda: harm.step(np.where(valid[7], e[7], 0), valid[7]), repeat=5)[0]  # noqa: B023
+
+        def fresh(harm: Repair = harm) -> None:
+            harm._cache.clear()  # a new failure pattern: factorise again
+            harm.step(np.where(valid[7], e[7], 0), valid[7])  # noqa: B023
+
+        hf = best_of(fresh, repeat=3)[0]
+        print(
+            f"| {n} | {frames} | {frames * n / batch / 1e6:.2f} M | {step * 1e3:.2f} ms | "
+            f"{frames * n / rep_t / 1e6:.0f} M | {hk * 1e3:.2f} / {hf * 1e3:.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    accuracy()
+    speed()

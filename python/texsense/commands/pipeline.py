@@ -1,0 +1,213 @@
+"""``texsense calibrate mat``, ``process``, ``repair`` and ``health``: raw capacitance to
+pressure maps (docs/pipeline.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from texsense.exceptions import FormatError
+from texsense.io import load, save
+from texsense.repair import METHODS
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``calibrate``, ``process``, ``repair`` and ``health`` commands."""
+    c = sub.add_parser(
+        "calibrate",
+        help="calibrate a whole mat (zeroing, equilibration, spacer model)",
+        description="Calibrate a mat from a test-machine record of its spacer and two mat "
+        "recordings: unloaded and under a uniform known load.",
+    )
+    cs = c.add_subparsers(dest="calibrate_command", metavar="WHAT")
+    cs.required = True
+    m = cs.add_parser("mat", help="write a mat calibration file")
+    m.add_argument(
+        "--material",
+        type=Path,
+        required=True,
+        help="CSV with compression_mm, capacitance_pF, pressure_ncm2 (e.g. 'texsense simulate "
+        "calibration --csv')",
+    )
+    m.add_argument("--baseline", type=Path, required=True, help="unloaded mat (capacitance)")
+    m.add_argument("--uniform", type=Path, required=True, help="mat under a uniform load")
+    m.add_argument("--pressure", type=float, required=True, help="the uniform load, N/cm²")
+    m.add_argument("--thickness-mm", type=float, required=True, help="spacer thickness")
+    m.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
+    m.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    m.set_defaults(run=run_calibrate)
+
+    p = sub.add_parser(
+        "process",
+        help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair)",
+        description="Run the whole pipeline over a capacitance recording.",
+    )
+    p.add_argument("raw", type=Path, help="capacitance recording (HDF5 or any readable format)")
+    p.add_argument("--calibration", type=Path, required=True, help="mat calibration file")
+    p.add_argument("-o", "--output", type=Path, required=True, help="pressure recording")
+    p.add_argument("--repair", choices=(*METHODS, "none"), default="harmonic")
+    p.add_argument("--no-hysteresis", action="store_true", help="first-loading curve only")
+    p.add_argument("--no-drift", action="store_true", help="skip the drift stage")
+    p.set_defaults(run=run_process)
+
+    r = sub.add_parser(
+        "repair",
+        help="fill elements marked invalid",
+        description="Repair every reading whose valid flag is False; repaired values stay "
+        "marked invalid in the output.",
+    )
+    r.add_argument("input", type=Path)
+    r.add_argument("-o", "--output", type=Path, required=True)
+    r.add_argument("--method", choices=METHODS, default="neighbour-mean")
+    r.set_defaults(run=run_repair)
+
+    h = sub.add_parser(
+        "health",
+        help="failure report per element of a capacitance recording",
+        description="Detect shorts/breaks, out-of-range, stuck readings and jumps; report "
+        "per element: failure episodes, share of time failed, first/last seen.",
+    )
+    h.add_argument("raw", type=Path)
+    h.add_argument("--calibration", type=Path, help="adds the expected range per element")
+    h.add_argument("--all", action="store_true", help="list healthy elements too")
+    h.add_argument("--json", action="store_true")
+    h.set_defaults(run=run_health)
+
+
+def _capacitance(path: Path):  # type: ignore[no-untyped-def]
+    rec = load(path)
+    if rec.quantity != "capacitance":
+        raise FormatError(path, f"holds {rec.quantity}, the command needs capacitance")
+    return rec
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """Run ``texsense calibrate mat``."""
+    from texsense.calibration import MatCalibration
+    from texsense.io.columns_csv import read_columns_csv
+
+    material = read_columns_csv(args.material)
+    for name in ("compression_mm", "capacitance_pF", "pressure_ncm2"):
+        if name not in material:
+            raise FormatError(
+                args.material, f"no column {name!r}; columns are {', '.join(material)}"
+            )
+    cal = MatCalibration.fit(
+        material,
+        _capacitance(args.baseline),
+        _capacitance(args.uniform),
+        args.pressure,
+        args.thickness_mm,
+    )
+    if args.drift:
+        from texsense.commands.drift import load_steps
+        from texsense.drift import DriftModel
+
+        drift, _ = DriftModel.fit(load_steps(args.drift))
+        cal.model.with_drift(drift)
+    cal.provenance.update(
+        {
+            "material": str(args.material),
+            "baseline": str(args.baseline),
+            "uniform": str(args.uniform),
+        }
+    )
+    cal.save(args.output)
+    print(
+        f"wrote {args.output}: {cal.n_elements} elements, id {cal.id}, gain "
+        f"{cal.gain.min():.3f}..{cal.gain.max():.3f}, offset {cal.offset_pF.min():+.3f}.."
+        f"{cal.offset_pF.max():+.3f} pF" + (", with drift stage" if args.drift else "")
+    )
+    return 0
+
+
+def run_process(args: argparse.Namespace) -> int:
+    """Run ``texsense process``."""
+    from texsense.calibration import MatCalibration
+    from texsense.pipeline import Pipeline
+
+    cal = MatCalibration.load(args.calibration)
+    raw = _capacitance(args.raw)
+    pipe = Pipeline(
+        cal,
+        raw.layout,
+        hysteresis=not args.no_hysteresis,
+        drift=not args.no_drift,
+        repair=None if args.repair == "none" else args.repair,
+    )
+    out = pipe.run(raw)
+    save(out, args.output)
+    failed = pipe.codes_ > 0
+    print(
+        f"wrote {args.output}: {out.n_frames} frames x {out.n_elements} elements, stages "
+        f"{', '.join(out.meta['stages'])}; {failed.mean():.1%} of readings failed, "
+        f"{int(failed.any(axis=0).sum())} elements failed at least once"
+    )
+    return 0
+
+
+def run_repair(args: argparse.Namespace) -> int:
+    """Run ``texsense repair``."""
+    from texsense.repair import Repair
+
+    rec = load(args.input)
+    out = Repair(rec.layout, args.method).run(rec)
+    save(out, args.output)
+    print(f"wrote {args.output}: {int((~rec.valid).sum())} readings repaired with {args.method}")
+    return 0
+
+
+def run_health(args: argparse.Namespace) -> int:
+    """Run ``texsense health``."""
+    from texsense.health import FailureDetector, health_report
+
+    raw = _capacitance(args.raw)
+    kwargs = {}
+    if args.calibration:
+        from texsense.calibration import MatCalibration
+
+        lo, hi = MatCalibration.load(args.calibration).expected_range_pF()
+        kwargs = {"baseline_pF": lo, "max_pF": hi}
+    codes = FailureDetector(raw.layout, **kwargs).run(raw)
+    report = health_report(codes, raw.times, raw.layout)
+    if args.json:
+        print(
+            json.dumps(
+                [
+                    {
+                        "element": e.element,
+                        "name": e.name,
+                        "status": e.status,
+                        "episodes": e.episodes,
+                        "failed_share": e.failed_share,
+                        "first_failed_s": e.first_failed_s,
+                        "last_failed_s": e.last_failed_s,
+                        "kinds": e.kinds,
+                    }
+                    for e in report
+                ],
+                indent=1,
+            )
+        )
+        return 0
+    status = np.array([e.status for e in report])
+    print(
+        f"{raw.n_elements} elements over {raw.duration_s:.0f} s: {np.sum(status == 'ok')} ok, "
+        f"{np.sum(status == 'intermittent')} intermittent, {np.sum(status == 'dead')} dead"
+    )
+    print(f"{'element':>8} {'status':>12} {'episodes':>8} {'failed':>7} {'first s':>9} "
+          f"{'last s':>9}  kinds")  # fmt: skip
+    for e in report:
+        if e.status == "ok" and not args.all:
+            continue
+        first = "-" if e.first_failed_s is None else f"{e.first_failed_s:.1f}"
+        last = "-" if e.last_failed_s is None else f"{e.last_failed_s:.1f}"
+        kinds = ", ".join(f"{k} {v}" for k, v in e.kinds.items())
+        print(
+            f"{e.name:>8} {e.status:>12} {e.episodes:>8} {e.failed_share:>7.1%} {first:>9} "
+            f"{last:>9}  {kinds}"
+        )
+    return 0
