@@ -98,6 +98,8 @@ def accuracy(minutes: float = 30.0) -> None:
         ("+ repair, harmonic-temporal", dict(repair="harmonic-temporal")),
     ]  # fmt: skip
     codes = None
+    bands = ((0.5, 1.0), (1.0, 2.0), (2.0, 4.0))
+    by_band = {}
     for label, cfg in configs:
         pipe = Pipeline(cal, lay, **cfg)
         out = pipe.run(scan.capacitance).frames.astype(np.float64)
@@ -109,6 +111,13 @@ def accuracy(minutes: float = 30.0) -> None:
             f"{rel[bad].mean():.1%} |"
         )
         codes = pipe.codes_
+        signed = (out - truth) / np.maximum(truth, 1e-9)
+        by_band[label] = [signed[healthy & (truth >= lo) & (truth < hi)].mean() for lo, hi in bands]
+    print("\nsigned mean relative error of the healthy elements by true pressure:\n")
+    print("| stages | " + " | ".join(f"{lo:g}-{hi:g} N/cm²" for lo, hi in bands) + " |")
+    print("|---|" + "---:|" * len(bands))
+    for label, _ in configs[:3]:
+        print(f"| {label} | " + " | ".join(f"{v:+.0%}" for v in by_band[label]) + " |")
     det = codes > 0
     print(
         f"\ndetection: {np.mean(det[scan.failed]):.1%} of failed readings found, "

@@ -304,8 +304,8 @@ class DriftModel:
             raise ParameterError(
                 f"h and pressure must be 1-D and of equal length, got {x.shape} and {p.shape}"
             )
-        k = log_kernel() if kernel is None else kernel
-        unit = cls(1.0, k, "log" if kernel is None else "prony").apply(x, times_s) - x
+        k, kind = (log_kernel(), "log") if kernel is None else (kernel, "prony")
+        unit = cls(1.0, k, kind).apply(x, times_s) - x
         sel = np.isfinite(unit) & np.isfinite(p) & (p >= band[0]) & (p < band[1])
         denom = float(unit[sel] @ unit[sel])
         if sel.sum() < 2 or denom <= 0:
@@ -315,7 +315,7 @@ class DriftModel:
             )
         gamma = float(unit[sel] @ (p - x)[sel] / denom)
         rms = float(np.sqrt(np.mean((x + gamma * unit - p)[sel] ** 2)))
-        return cls(gamma, k, "log" if kernel is None else "prony"), rms
+        return cls(gamma, k, kind), rms
 
     def to_dict(self) -> dict:
         """JSON-able description (stored in the hysteresis model file)."""

@@ -28,7 +28,7 @@ from texsense.exceptions import ParameterError
 from texsense.health import FailureDetector
 from texsense.layout import Layout
 from texsense.recording import Recording
-from texsense.repair import METHODS, Repair
+from texsense.repair import Repair
 
 __all__ = ["Pipeline"]
 
@@ -45,7 +45,8 @@ class Pipeline:
     detect, hysteresis, drift : bool
         Switch stages off to see what each contributes.
     repair : str or None
-        A method of :data:`texsense.repair.METHODS`, or None to leave failed elements NaN.
+        A method of :data:`texsense.repair.METHODS`, or None to leave failed elements NaN
+        (an unknown name raises :class:`ParameterError`).
     detector : FailureDetector, optional
         Default: one with the calibration's expected capacitance range.
     """
@@ -66,11 +67,9 @@ class Pipeline:
                 f"the calibration is for {calibration.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
             )
-        if repair is not None and repair not in METHODS:
-            raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
-        if (hysteresis or drift) and calibration.model is None:
-            raise ParameterError("the calibration has no spacer model; hysteresis=False needed")
         model = calibration.model
+        if model is None:
+            raise ParameterError("the calibration has no spacer model (compression -> pressure)")
         if drift and hysteresis and getattr(model, "drift_", None) is None:
             drift = False  # nothing to apply: recorded in the provenance
         self.calibration = calibration
@@ -80,9 +79,8 @@ class Pipeline:
         lo, hi = calibration.expected_range_pF()
         self.detector = detector or FailureDetector(layout, baseline_pF=lo, max_pF=hi)
         self._repair = Repair(layout, repair) if repair is not None else None
-        if model is not None:
-            e = np.linspace(model.u_min_, model.u_max_, 400)
-            self._loading = (e, np.maximum.accumulate(model.predict(e)))
+        e = np.linspace(model.u_min_, model.u_max_, 400)
+        self._loading = (e, np.maximum.accumulate(model.predict(e)))
         self._stage: Any = None
         self._last_t: float | None = None
         self.codes_: np.ndarray | None = None
@@ -94,22 +92,8 @@ class Pipeline:
         if self._repair is not None:
             self._repair.reset()
         if self.stages["hysteresis"]:
-            from texsense._core import Compensation
-            from texsense.hysteresis._model import DEFAULT_CAPACITY
-
-            m = self.calibration.model
-            d = m.drift_ if self.stages["drift"] else None
-            self._stage = Compensation(
-                m.u_min_,
-                m.u_max_,
-                np.ascontiguousarray(m.everett_, dtype=np.float64),
-                self.layout.n_elements,
-                DEFAULT_CAPACITY,
-                m.offset_,
-                m.sign_,
-                d.gamma if d is not None else 0.0,
-                np.ascontiguousarray(d.kernel.weights) if d is not None else None,
-                np.ascontiguousarray(d.kernel.taus) if d is not None else None,
+            self._stage = self.calibration.model.compensation(
+                self.layout.n_elements, drift=self.stages["drift"]
             )
         self._last_t = None
         return self
@@ -148,8 +132,7 @@ class Pipeline:
         else:
             e, p = self._loading
             pressure = np.where(ok, np.interp(comp, e, p), np.nan)
-        self._last_t = float(times[-1])
-        pressure = np.where(ok, pressure, np.nan)
+        self._last_t = float(times[-1])  # failed readings are NaN from either branch
         if self._repair is not None:
             for k in range(n_t):
                 pressure[k], _ = self._repair.step(pressure[k], ok[k])

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from texsense.drift import DriftModel, split_steps
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import ParameterError
 from texsense.io.columns_csv import read_columns_csv
 
 
@@ -58,11 +58,7 @@ def load_steps(path: Path) -> list:
 
 
 def _columns(path: Path) -> dict:
-    cols = read_columns_csv(path)
-    for name in ("time_s", "compression_mm", "pressure_ncm2"):
-        if name not in cols:
-            raise FormatError(path, f"no column {name!r}; columns are {', '.join(cols)}")
-    return cols
+    return read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
 
 
 def run_fit_history(args: argparse.Namespace) -> int:

@@ -89,12 +89,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from texsense.calibration import MatCalibration
     from texsense.io.columns_csv import read_columns_csv
 
-    material = read_columns_csv(args.material)
-    for name in ("compression_mm", "capacitance_pF", "pressure_ncm2"):
-        if name not in material:
-            raise FormatError(
-                args.material, f"no column {name!r}; columns are {', '.join(material)}"
-            )
+    material = read_columns_csv(
+        args.material, required=("compression_mm", "capacitance_pF", "pressure_ncm2")
+    )
     cal = MatCalibration.fit(
         material,
         _capacitance(args.baseline),

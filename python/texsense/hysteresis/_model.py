@@ -215,27 +215,36 @@ class HysteresisModel:
         if drift is None or times_s is None:
             return self.state(n).run(u, valid)
         # both stages in one pass of the Rust core
-        from texsense._core import Compensation
         from texsense.drift import time_steps
 
         one = u.ndim == 1
         u2 = np.ascontiguousarray(u[:, None] if one else u)
         dt = time_steps(times_s, u2.shape[0])
         v = np.isfinite(u2) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
-        stage = Compensation(
+        out = self.compensation(n).run(dt, u2, np.ascontiguousarray(v))
+        return out[:, 0] if one else out
+
+    def compensation(self, n_elements: int = 1, drift: bool = True) -> Any:
+        """The Preisach stage followed by the drift stage (``self.drift_``, when present and
+        ``drift``) for ``n_elements``, in one pass of the Rust core
+        (:class:`texsense._core.Compensation`, streaming: call ``run(dt, inputs, valid)``
+        frame after frame). Without a drift stage it is the Preisach model alone."""
+        self._check_fitted()
+        from texsense._core import Compensation
+
+        d = getattr(self, "drift_", None) if drift else None
+        return Compensation(
             self.u_min_,
             self.u_max_,
             np.ascontiguousarray(self.everett_, dtype=np.float64),
-            n,
+            n_elements,
             DEFAULT_CAPACITY,
             self.offset_,
             self.sign_,
-            drift.gamma,
-            np.ascontiguousarray(drift.kernel.weights),
-            np.ascontiguousarray(drift.kernel.taus),
+            d.gamma if d is not None else 0.0,
+            np.ascontiguousarray(d.kernel.weights) if d is not None else None,
+            np.ascontiguousarray(d.kernel.taus) if d is not None else None,
         )
-        out = stage.run(dt, u2, np.ascontiguousarray(v))
-        return out[:, 0] if one else out
 
     def with_drift(self, drift: Any) -> HysteresisModel:
         """Attach a :class:`texsense.drift.DriftModel` (returns self)."""

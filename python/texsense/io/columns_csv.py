@@ -14,7 +14,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -47,8 +47,11 @@ def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) ->
     return path
 
 
-def read_columns_csv(path: str | Path) -> dict[str, npt.NDArray[np.float64]]:
-    """Read a column table; raise :class:`FormatError` naming the line on any bad row."""
+def read_columns_csv(
+    path: str | Path, required: Sequence[str] = ()
+) -> dict[str, npt.NDArray[np.float64]]:
+    """Read a column table; raise :class:`FormatError` naming the line on any bad row, or
+    naming the first of the ``required`` columns that is missing."""
     path = Path(path)
     lines = [ln for ln in read_lines(path)]
     while lines and not lines[-1].strip():
@@ -66,5 +69,8 @@ def read_columns_csv(path: str | Path) -> dict[str, npt.NDArray[np.float64]]:
             path, "the first line holds numbers: a header of names is expected", start + 1
         )
     what = f"{len(names)} values ({', '.join(names)})"
+    for name in required:
+        if name not in names:
+            raise FormatError(path, f"no column {name!r}; columns are {', '.join(names)}")
     data = parse_csv_rows(path, lines[start + 1 :], start + 2, len(names), what)
     return {n: data[:, i].copy() for i, n in enumerate(names)}
