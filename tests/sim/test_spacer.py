@@ -106,3 +106,17 @@ def test_bad_parameters_give_clear_errors():
 def test_every_preset_is_documented():
     for m in PRESETS.values():
         assert m.description
+
+
+def test_repeated_loading_bouts_creep_a_bounded_amount():
+    """Sitting bouts (3 min at 0.3 N/cm², 1 min unloaded): the compression early in each bout
+    grows like the creep of a held step (thesis §5.1.2.2: cycles act like a step to their mean
+    pressure) and levels off; it must not ratchet bout after bout."""
+    t = np.arange(0, 8 * 240, 1.6)
+    on = (t % 240) < 180
+    c = Spacer.preset("textile-3mm").drive_pressure(t, np.where(on, 0.3, 0.0)).compression_mm[:, 0]
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(on.astype(int)) == 1) + 1])
+    early = c[starts + 6]  # about 10 s into each bout
+    assert early[-1] < 1.3 * early[0]
+    assert early[-1] - early[-4] < 0.5 * (early[3] - early[0])  # levels off
+    assert np.all(c[~on][-5:] < 0.05)  # unloaded, it springs back

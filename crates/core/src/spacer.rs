@@ -24,9 +24,13 @@
 //! - **Clutched relaxation of the structure** (drift after any step, up or down): one branch
 //!   stores the increases `w Δσ` of the elastic and friction stress, another the decreases;
 //!   each is idle while it grows and relaxes like a stuck contact at rest
-//!   (`|s| → S (1 - a ln(1 + t / t_c))` from the value `S` it had when it last grew). Being idle during monotone motion it keeps ramps rate independent, while the
-//!   change after a step is proportional to the step, rising or falling (thesis eq. 5.1,
-//!   fig. 5.2/5.3).
+//!   (`|s| → S (1 - a ln(1 + t_eff / t_c))`, `S` all it has stored, `t_eff` the age that
+//!   explains what has relaxed). Being idle during monotone motion it keeps ramps rate
+//!   independent, while the change after a step is proportional to the step, rising or
+//!   falling (thesis eq. 5.1, fig. 5.2/5.3). At every reversal the two branches' common
+//!   content cancels (the net stored stress is unchanged) and an increment joins a branch
+//!   without making its relaxed content young again: repeated loading and unloading (sitting bouts) creeps the spacer
+//!   like a step to the mean load (thesis §5.1.2.2), not bout after bout without bound.
 //! - **Air flow and fast viscoelasticity** (0.1-10 s): quasi-linear viscoelastic branches
 //!   `q_j` driven by the backbone stress, integrated exactly for a stress that is linear within
 //!   the step.
@@ -193,6 +197,7 @@ pub struct SpacerBank {
     soft: Vec<f64>,
     clutch: Vec<f64>,
     clutch_ref: Vec<f64>,
+    last_change_sign: Vec<f64>,
     ef_prev: Vec<f64>,
     stress_prev: Vec<f64>,
     backbone_prev: Vec<f64>,
@@ -223,6 +228,7 @@ impl SpacerBank {
             soft: vec![0.0; n * params.softening.len()],
             clutch: vec![0.0; 2 * n],
             clutch_ref: vec![0.0; 2 * n],
+            last_change_sign: vec![0.0; n],
             ef_prev: vec![0.0; n],
             stress_prev: vec![0.0; n],
             e: vec![0.0; n],
@@ -345,19 +351,36 @@ impl SpacerBank {
         let (cw, ca) = p.clutch;
         let elastic_friction = backbone * (1.0 + share);
         let change = cw * (elastic_friction - self.ef_prev[i]);
+        // at a reversal the two stores' common content cancels (the net stored stress, and
+        // so the stress now, is unchanged): repeated loading and unloading cannot pile up
+        // opposing stores whose different ages would creep the spacer without bound
+        let mut stores = [
+            (self.clutch[2 * i], self.clutch_ref[2 * i]),
+            (self.clutch[2 * i + 1], self.clutch_ref[2 * i + 1]),
+        ];
+        if change != 0.0 && change.signum() != self.last_change_sign[i] {
+            let common = stores[0].0.abs().min(stores[1].0.abs());
+            if common > 0.0 {
+                for (v, v_ref) in stores.iter_mut() {
+                    let kept = (v.abs() - common) / v.abs();
+                    *v *= kept;
+                    *v_ref *= kept;
+                }
+            }
+        }
         let mut clutch = 0.0;
-        for side in 0..2 {
+        for (side, &(mut v, mut v_ref)) in stores.iter().enumerate() {
             let k = 2 * i + side;
-            let mut v = self.clutch[k];
-            let mut v_ref = self.clutch_ref[k];
             let grows = if side == 0 {
                 change > 0.0
             } else {
                 change < 0.0
             };
             if grows {
+                // what has relaxed stays relaxed: the increment joins the store without
+                // making the old content young again
                 v += change;
-                v_ref = v.abs();
+                v_ref += change.abs();
             } else if ca > 0.0 && v_ref > 0.0 && v != 0.0 {
                 let ar = ca * v_ref;
                 let y = (v.abs() - v_ref) / ar;
@@ -372,6 +395,9 @@ impl SpacerBank {
         }
         if commit {
             self.ef_prev[i] = elastic_friction;
+            if change != 0.0 {
+                self.last_change_sign[i] = change.signum();
+            }
         }
         // 5. cyclic softening: follows ρ σ_e along the path, recovers in time when unloading
         let ns = p.softening.len();
