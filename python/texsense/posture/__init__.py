@@ -1,0 +1,29 @@
+"""Posture classification from pressure maps (thesis chapter 6): features, classifiers,
+leave-one-subject-out evaluation, forward selection, class distances, trained models and
+the error-modelling study.
+"""
+
+from texsense.posture.evaluate import (
+    CLASSIFIERS,
+    LosoReport,
+    class_distances,
+    loso,
+    make_classifier,
+    sequential_forward_selection,
+)
+from texsense.posture.features import FeatureSet, align_maps, area_means, centre_of_force
+from texsense.posture.model import PostureModel
+
+__all__ = [
+    "CLASSIFIERS",
+    "FeatureSet",
+    "LosoReport",
+    "PostureModel",
+    "align_maps",
+    "area_means",
+    "centre_of_force",
+    "class_distances",
+    "loso",
+    "make_classifier",
+    "sequential_forward_selection",
+]

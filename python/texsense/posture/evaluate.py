@@ -1,0 +1,284 @@
+"""Classifiers, leave-one-subject-out evaluation, sequential forward selection and the
+Mahalanobis distances between posture classes (thesis §6.3-6.4).
+
+- :data:`CLASSIFIERS`: the thesis's Gaussian naive Bayes (§6.3.1, eq. 6.1-6.8) and stronger
+  scikit-learn classifiers for comparison; :func:`make_classifier` builds one by name.
+- :func:`loso`: leave-one-subject-out accuracy (§6.5.2: train on all subjects but one, test on
+  that one, average over subjects), per subject and as a confusion matrix. The held-out
+  subject is never seen in training (tested).
+- :func:`sequential_forward_selection`: §6.3.2 / fig. 6.5, cost = LOSO accuracy.
+- :func:`class_distances`: d_md (eq. 6.9) and d_ms (eq. 6.10-6.11).
+
+Examples
+--------
+>>> import numpy as np
+>>> rng = np.random.default_rng(0)
+>>> y = np.repeat([0, 1], 40); groups = np.tile(np.repeat(["s1", "s2", "s3", "s4"], 10), 2)
+>>> X = np.c_[y + 0.3 * rng.standard_normal(80), rng.standard_normal(80)]
+>>> report = loso(X, y, groups, "naive-bayes")
+>>> report.accuracy > 0.9, sorted(report.per_subject)
+(True, ['s1', 's2', 's3', 's4'])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from sklearn.base import BaseEstimator, clone
+
+from texsense._progress import progress
+from texsense.exceptions import ParameterError
+
+__all__ = [
+    "CLASSIFIERS",
+    "LosoReport",
+    "class_distances",
+    "loso",
+    "make_classifier",
+    "sequential_forward_selection",
+]
+
+
+def _naive_bayes() -> BaseEstimator:
+    from sklearn.naive_bayes import GaussianNB
+
+    return GaussianNB()
+
+
+def _lda() -> BaseEstimator:
+    from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+    return LinearDiscriminantAnalysis(solver="lsqr", shrinkage="auto")
+
+
+def _logistic() -> BaseEstimator:
+    from sklearn.linear_model import LogisticRegression
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    return make_pipeline(StandardScaler(), LogisticRegression(C=1.0, max_iter=3000))
+
+
+def _linear_svm() -> BaseEstimator:
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+    from sklearn.svm import SVC
+
+    return make_pipeline(StandardScaler(), SVC(kernel="linear", C=0.01))
+
+
+def _rbf_svm() -> BaseEstimator:
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+    from sklearn.svm import SVC
+
+    return make_pipeline(StandardScaler(), SVC(kernel="rbf", C=10.0, gamma="scale"))
+
+
+def _boosting() -> BaseEstimator:
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
+    return HistGradientBoostingClassifier(max_iter=150, learning_rate=0.1, random_state=0)
+
+
+#: Classifier factories by name. ``naive-bayes`` is the thesis's (§6.3.1).
+CLASSIFIERS: dict[str, Callable[[], BaseEstimator]] = {
+    "naive-bayes": _naive_bayes,
+    "lda": _lda,
+    "logistic": _logistic,
+    "linear-svm": _linear_svm,
+    "svm": _rbf_svm,
+    "boosting": _boosting,
+}
+
+
+def make_classifier(name: str) -> BaseEstimator:
+    """A fresh, unfitted classifier by name (see :data:`CLASSIFIERS`)."""
+    if name not in CLASSIFIERS:
+        raise ParameterError(f"unknown classifier {name!r}; known: {', '.join(CLASSIFIERS)}")
+    return CLASSIFIERS[name]()
+
+
+@dataclass
+class LosoReport:
+    """Result of :func:`loso`."""
+
+    accuracy: float  # mean over subjects of the per-subject accuracy (§6.5.2)
+    per_subject: dict[str, float]
+    labels: list[Any]
+    confusion: np.ndarray  # (true label, predicted label) counts over all subjects
+    predictions: np.ndarray = field(repr=False)
+
+    @property
+    def minimum(self) -> tuple[str, float]:
+        """The worst subject and its accuracy."""
+        s = min(self.per_subject, key=self.per_subject.__getitem__)
+        return s, self.per_subject[s]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no per-sample predictions)."""
+        return {
+            "accuracy": self.accuracy,
+            "per_subject": self.per_subject,
+            "minimum": {"subject": self.minimum[0], "accuracy": self.minimum[1]},
+            "labels": [str(v) for v in self.labels],
+            "confusion": self.confusion.tolist(),
+        }
+
+
+def _check_xy(
+    X: npt.ArrayLike, y: npt.ArrayLike, groups: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    Xa = np.asarray(X, dtype=np.float64)
+    ya = np.asarray(y)
+    ga = np.asarray(groups).astype(str)
+    if Xa.ndim != 2 or ya.shape != (Xa.shape[0],) or ga.shape != (Xa.shape[0],):
+        raise ParameterError(
+            f"X must be (n, features) and y, groups (n,): got {Xa.shape}, {ya.shape}, {ga.shape}"
+        )
+    if not np.all(np.isfinite(Xa)):
+        raise ParameterError("features contain NaN or infinite values")
+    if np.unique(ga).size < 2:
+        raise ParameterError("leave-one-subject-out needs at least two subjects (groups)")
+    return Xa, ya, ga
+
+
+def loso(
+    X: npt.ArrayLike,
+    y: npt.ArrayLike,
+    groups: npt.ArrayLike,
+    classifier: str | BaseEstimator = "naive-bayes",
+    *,
+    show_progress: bool = False,
+) -> LosoReport:
+    """Leave-one-subject-out accuracy: for every subject, train on the others and test on it.
+
+    Parameters
+    ----------
+    X : array_like (n, F)
+        Features of every sample.
+    y : array_like (n,)
+        Class labels.
+    groups : array_like (n,)
+        Subject of every sample.
+    classifier : str or estimator
+        A name from :data:`CLASSIFIERS` or an unfitted scikit-learn estimator (cloned per
+        fold).
+    """
+    Xa, ya, ga = _check_xy(X, y, groups)
+    template = make_classifier(classifier) if isinstance(classifier, str) else classifier
+    labels = list(np.unique(ya))
+    pred = np.empty_like(ya)
+    per_subject: dict[str, float] = {}
+    subjects = list(np.unique(ga))
+    it = progress(subjects, total=len(subjects), desc="leave one subject out", unit="subject")
+    for s in it if show_progress else subjects:
+        test = ga == s
+        model = clone(template).fit(Xa[~test], ya[~test])
+        pred[test] = model.predict(Xa[test])
+        per_subject[str(s)] = float(np.mean(pred[test] == ya[test]))
+    index = {v: i for i, v in enumerate(labels)}
+    confusion = np.zeros((len(labels), len(labels)), dtype=np.int64)
+    np.add.at(confusion, ([index[v] for v in ya], [index[v] for v in pred]), 1)
+    return LosoReport(
+        accuracy=float(np.mean(list(per_subject.values()))),
+        per_subject=per_subject,
+        labels=labels,
+        confusion=confusion,
+        predictions=pred,
+    )
+
+
+def sequential_forward_selection(
+    X: npt.ArrayLike,
+    y: npt.ArrayLike,
+    groups: npt.ArrayLike,
+    k: int,
+    classifier: str | BaseEstimator = "naive-bayes",
+    *,
+    candidates: npt.ArrayLike | None = None,
+    show_progress: bool = True,
+) -> tuple[list[int], list[float]]:
+    """Sequential forward selection (thesis §6.3.2, fig. 6.5): start from the empty set and
+    add, one at a time, the feature whose addition gives the highest leave-one-subject-out
+    accuracy, until ``k`` features are chosen.
+
+    Returns the chosen column indices in the order they were added and the LOSO accuracy
+    after each addition (the thesis picks the k where the accuracy peaks).
+    """
+    Xa, ya, ga = _check_xy(X, y, groups)
+    pool = list(range(Xa.shape[1])) if candidates is None else [int(c) for c in candidates]
+    if not 1 <= k <= len(pool):
+        raise ParameterError(f"k must lie in 1..{len(pool)}, got {k}")
+    chosen: list[int] = []
+    scores: list[float] = []
+    steps = range(k)
+    for _ in progress(steps, total=k, desc="forward selection", unit="feature") if show_progress else steps:
+        best, best_score = -1, -1.0
+        for c in pool:
+            if c in chosen:
+                continue
+            score = loso(Xa[:, [*chosen, c]], ya, ga, classifier).accuracy
+            if score > best_score:
+                best, best_score = c, score
+        chosen.append(best)
+        scores.append(best_score)
+    return chosen, scores
+
+
+def _pooled_precision(X: np.ndarray, y: np.ndarray, ridge: float) -> np.ndarray:
+    """Inverse of the pooled within-class covariance (with a ridge of ``ridge`` x its mean
+    variance, so that it exists with more features than samples)."""
+    centred = np.vstack([X[y == c] - X[y == c].mean(axis=0) for c in np.unique(y)])
+    dof = max(centred.shape[0] - np.unique(y).size, 1)
+    cov = centred.T @ centred / dof
+    scale = float(np.mean(np.diag(cov))) or 1.0
+    return np.linalg.inv(cov + ridge * scale * np.eye(cov.shape[0]))
+
+
+def class_distances(
+    X: npt.ArrayLike,
+    y: npt.ArrayLike,
+    *,
+    reference: tuple[np.ndarray, np.ndarray] | None = None,
+    ridge: float = 0.05,
+) -> tuple[float, float]:
+    """Mahalanobis distances between and within classes (thesis §6.4.2).
+
+    ``d_md`` (eq. 6.9) is the mean over all ordered pairs of different classes of the
+    Mahalanobis distance between the class means; ``d_ms`` (eq. 6.11) the mean over classes of
+    ``d_c`` (eq. 6.10), the mean distance between all pairs of different samples of a class.
+    The metric is the pooled within-class covariance of ``reference`` (features, labels) —
+    e.g. the training patterns, so that distances of test sets with growing errors are
+    measured with one fixed metric — or of (X, y) itself.
+
+    Returns
+    -------
+    (d_md, d_ms)
+    """
+    Xa = np.asarray(X, dtype=np.float64)
+    ya = np.asarray(y)
+    classes = np.unique(ya)
+    if classes.size < 2:
+        raise ParameterError("class distances need at least two classes")
+    rx, ry = reference if reference is not None else (Xa, ya)
+    precision = _pooled_precision(np.asarray(rx, dtype=np.float64), np.asarray(ry), ridge)
+
+    def dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = a[:, None, :] - b[None, :, :]
+        return np.sqrt(np.maximum(np.einsum("ijk,kl,ijl->ij", d, precision, d), 0.0))
+
+    means = np.vstack([Xa[ya == c].mean(axis=0) for c in classes])
+    dm = dist(means, means)
+    n = classes.size
+    d_md = float(dm.sum() / (n * (n - 1)))  # eq. 6.9, the diagonal is 0
+    d_c = []
+    for c in classes:
+        s = Xa[ya == c]
+        ns = s.shape[0]
+        d_c.append(float(dist(s, s).sum() / (ns * (ns - 1))) if ns > 1 else 0.0)  # eq. 6.10
+    return d_md, float(np.mean(d_c))  # eq. 6.11

@@ -1,0 +1,229 @@
+"""Features of pressure maps for posture classification (thesis §6.3.2).
+
+The thesis tested every element value, the centre of force, the pressure on 4 and on 16
+equal aggregated areas of the seat and (§6.5.2.2) the single-element back sensor, with the
+element values normalised to the mean pressure of the mat (§6.4.2), and picked the k best by
+sequential forward selection (:func:`texsense.posture.evaluate.sequential_forward_selection`).
+
+Beyond the thesis, for large grids where people lie or sit at different places (PhysioNet
+PMD), a map can first be **aligned** (shifted so that its centre of force sits in the middle,
+sub-element by linear interpolation), **log-compressed** (``log(1 + p / mean)``: a few
+high-pressure bony spots otherwise dominate) and **pooled** (mean of k x k blocks).
+
+A :class:`FeatureSet` is a small, JSON-serialisable definition; a trained
+:class:`~texsense.posture.model.PostureModel` stores it next to the layout so the live
+monitor computes the same features.
+
+Examples
+--------
+>>> import numpy as np
+>>> from texsense import Layout
+>>> from texsense.posture.features import FeatureSet
+>>> lay = Layout.grid(4, 4, pitch_cm=2.0)
+>>> maps = np.zeros((1, 16)); maps[0, 5] = 2.0           # one loaded element
+>>> fs = FeatureSet(("centre", "areas4"))
+>>> fs.names(lay)
+['cof_x', 'cof_y', 'a1', 'a2', 'a3', 'a4']
+>>> fs.transform(maps, lay).round(2).tolist()
+[[3.0, 3.0, 4.0, 0.0, 0.0, 0.0]]
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from texsense.exceptions import ParameterError
+from texsense.layout import Layout
+
+__all__ = ["KINDS", "FeatureSet", "align_maps", "area_means", "centre_of_force"]
+
+#: The feature groups a :class:`FeatureSet` can hold.
+KINDS = ("elements", "centre", "areas4", "areas16", "back")
+
+
+def centre_of_force(frames: npt.ArrayLike, layout: Layout) -> np.ndarray:
+    """Centre of force (T, 2) in cm, weights pressure x element area; the centre of the
+    sensing area for an unloaded frame (so features stay finite)."""
+    v = np.clip(np.nan_to_num(np.asarray(frames, dtype=np.float64)), 0.0, None)
+    w = v * layout.area_cm2
+    total = w.sum(axis=1)
+    centre = layout.xy_cm.mean(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        xy = (w @ layout.xy_cm) / total[:, None]
+    xy[total <= 0] = centre
+    return xy
+
+
+def area_means(frames: npt.ArrayLike, layout: Layout, n_areas: int) -> np.ndarray:
+    """Mean pressure (T, n_areas) of the elements in each of ``n_areas`` equal rectangles of
+    the sensing area (:meth:`Layout.equal_areas`, thesis §6.3.2); 0 for an empty rectangle."""
+    v = np.nan_to_num(np.asarray(frames, dtype=np.float64))
+    areas = layout.equal_areas(n_areas)
+    out = np.zeros((v.shape[0], n_areas))
+    for j, idx in enumerate(areas.values()):
+        if idx.size:
+            out[:, j] = v[:, idx].mean(axis=1)
+    return out
+
+
+def align_maps(maps: npt.ArrayLike) -> np.ndarray:
+    """Shift each map (T, rows, cols) so its centre of force lies in the middle of the grid
+    (linear interpolation, zeros shifted in)."""
+    m = np.nan_to_num(np.asarray(maps, dtype=np.float64))
+    rows, cols = m.shape[1:]
+    r, c = np.mgrid[:rows, :cols]
+    out = np.empty_like(m)
+    for k, a in enumerate(m):
+        w = a.sum()
+        if w <= 0:
+            out[k] = a
+            continue
+        shift = ((rows - 1) / 2 - (a * r).sum() / w, (cols - 1) / 2 - (a * c).sum() / w)
+        out[k] = ndimage.shift(a, shift, order=1, mode="constant", cval=0.0)
+    return out
+
+
+@dataclass(frozen=True)
+class FeatureSet:
+    """Which features to compute from a pressure map and how.
+
+    Parameters
+    ----------
+    kinds : tuple of str
+        Any of :data:`KINDS`: ``elements`` (every element value), ``centre`` (centre of force
+        x, y in cm), ``areas4`` / ``areas16`` (mean pressure of equal areas), ``back`` (the
+        back sensor, passed to :meth:`transform`).
+    normalise : bool
+        Divide element values and area means by the frame's mean pressure (§6.4.2), so the
+        body weight drops out.
+    align : bool
+        Shift every map to centre its centre of force before taking element values (grid
+        layouts only).
+    log : bool
+        Element values as ``log(1 + value)`` (after normalising).
+    pool : int
+        Element values as means of ``pool x pool`` blocks (grid layouts only; 1 = off).
+    """
+
+    kinds: tuple[str, ...] = ("elements", "centre", "areas4", "areas16")
+    normalise: bool = True
+    align: bool = False
+    log: bool = False
+    pool: int = 1
+
+    def __post_init__(self) -> None:
+        kinds = tuple(self.kinds)
+        object.__setattr__(self, "kinds", kinds)
+        unknown = [k for k in kinds if k not in KINDS]
+        if unknown or not kinds:
+            raise ParameterError(
+                f"feature kinds must be some of {', '.join(KINDS)}; got {list(kinds)}"
+            )
+        if int(self.pool) != self.pool or self.pool < 1:
+            raise ParameterError(f"pool must be an integer >= 1, got {self.pool}")
+
+    # ------------------------------------------------------------------ helpers
+    def _check_grid(self, layout: Layout) -> tuple[int, int]:
+        shape = layout.shape
+        if shape is None:
+            raise ParameterError("align and pool need a grid layout")
+        if shape[0] % self.pool or shape[1] % self.pool:
+            raise ParameterError(f"pool {self.pool} does not divide the {shape} grid")
+        return shape
+
+    def _element_values(self, v: np.ndarray, layout: Layout) -> np.ndarray:
+        if not (self.align or self.pool > 1):
+            out = v
+        else:
+            rows, cols = self._check_grid(layout)
+            maps = layout.to_grid(v, fill=0.0)
+            if self.align:
+                maps = align_maps(maps)
+            if self.pool > 1:
+                k = self.pool
+                maps = maps.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
+                out = maps.reshape(maps.shape[0], -1)
+            else:
+                out = layout.from_grid(maps)
+        return np.log1p(np.clip(out, 0.0, None)) if self.log else out
+
+    def names(self, layout: Layout) -> list[str]:
+        """Feature names, in the column order of :meth:`transform`."""
+        names: list[str] = []
+        for kind in self.kinds:
+            if kind == "elements":
+                if self.pool > 1:
+                    rows, cols = self._check_grid(layout)
+                    k = self.pool
+                    names += [f"b{r}_{c}" for r in range(rows // k) for c in range(cols // k)]
+                else:
+                    names += [f"e{i + 1}" for i in range(layout.n_elements)]
+            elif kind == "centre":
+                names += ["cof_x", "cof_y"]
+            elif kind in ("areas4", "areas16"):
+                n = 4 if kind == "areas4" else 16
+                prefix = "a" if n == 4 else "A"
+                names += [f"{prefix}{i + 1}" for i in range(n)]
+            else:
+                names.append("back")
+        return names
+
+    def transform(
+        self, frames: npt.ArrayLike, layout: Layout, back: npt.ArrayLike | None = None
+    ) -> np.ndarray:
+        """Features (T, F) of pressure frames (T, N) on ``layout``.
+
+        Parameters
+        ----------
+        frames : array_like (T, N)
+            Pressure (or raw counts); NaN (a missing reading) counts as 0.
+        back : array_like (T,), optional
+            The back sensor's pressure; required when ``"back"`` is among the kinds.
+        """
+        v = np.nan_to_num(np.asarray(frames, dtype=np.float64))
+        if v.ndim != 2 or v.shape[1] != layout.n_elements:
+            raise ParameterError(
+                f"frames must have shape (T, {layout.n_elements}) for this layout, got {v.shape}"
+            )
+        scaled = v
+        if self.normalise:
+            mean = v.mean(axis=1, keepdims=True)
+            scaled = np.divide(v, mean, out=np.zeros_like(v), where=mean > 0)
+        parts = []
+        for kind in self.kinds:
+            if kind == "elements":
+                parts.append(self._element_values(scaled, layout))
+            elif kind == "centre":
+                parts.append(centre_of_force(v, layout))
+            elif kind == "areas4":
+                parts.append(area_means(scaled, layout, 4))
+            elif kind == "areas16":
+                parts.append(area_means(scaled, layout, 16))
+            else:
+                if back is None:
+                    raise ParameterError("this feature set uses the back sensor: pass back=")
+                b = np.asarray(back, dtype=np.float64).reshape(-1, 1)
+                if b.shape[0] != v.shape[0]:
+                    raise ParameterError(f"back: expected {v.shape[0]} values, got {b.shape[0]}")
+                parts.append(np.nan_to_num(b))
+        return np.hstack(parts)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready definition."""
+        d = asdict(self)
+        d["kinds"] = list(self.kinds)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FeatureSet:
+        """Inverse of :meth:`to_dict` (clear errors for unknown or missing keys)."""
+        allowed = {"kinds", "normalise", "align", "log", "pool"}
+        extra = set(d) - allowed
+        if extra:
+            raise ParameterError(f"unknown feature-set keys: {', '.join(sorted(extra))}")
+        return cls(**{**d, "kinds": tuple(d.get("kinds", ()))})

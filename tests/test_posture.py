@@ -1,0 +1,180 @@
+import numpy as np
+import pytest
+from sklearn.base import BaseEstimator, ClassifierMixin
+
+from texsense import Layout
+from texsense.exceptions import FormatError, ParameterError
+from texsense.posture import (
+    FeatureSet,
+    PostureModel,
+    align_maps,
+    area_means,
+    centre_of_force,
+    class_distances,
+    loso,
+    sequential_forward_selection,
+)
+
+
+def test_centre_of_force_of_known_maps():
+    lay = Layout.grid(3, 4, pitch_cm=2.0)  # x = 1, 3, 5, 7 cm; y = 1, 3, 5 cm
+    f = np.zeros((3, 12))
+    f[0, lay.element_at(0, 0)] = 5.0  # a single loaded element: its centre
+    f[1, lay.element_at(1, 1)] = 1.0
+    f[1, lay.element_at(1, 3)] = 3.0  # weights 1:3 between x = 3 and x = 7 -> x = 6
+    xy = centre_of_force(f, lay)
+    np.testing.assert_allclose(xy[0], lay.xy_cm[lay.element_at(0, 0)])
+    np.testing.assert_allclose(xy[1], [6.0, lay.xy_cm[lay.element_at(1, 1)][1]])
+    np.testing.assert_allclose(xy[2], lay.xy_cm.mean(axis=0))  # unloaded: the centre
+
+
+def test_area_means_split_the_seat_into_equal_rectangles():
+    lay = Layout.grid(4, 4, pitch_cm=1.0)
+    maps = np.arange(16, dtype=float).reshape(1, 4, 4)
+    a4 = area_means(lay.from_grid(maps), lay, 4)
+    # top left 2 x 2 block of 0 1 / 4 5 -> 2.5, etc.
+    np.testing.assert_allclose(a4[0], [2.5, 4.5, 10.5, 12.5])
+    a16 = area_means(lay.from_grid(maps), lay, 16)
+    np.testing.assert_allclose(a16[0], np.arange(16))
+
+
+def test_feature_set_normalises_to_the_mean_pressure_and_names_columns():
+    lay = Layout.grid(2, 2, pitch_cm=1.0)
+    f = np.array([[1.0, 1.0, 2.0, 4.0]])
+    fs = FeatureSet(("elements", "areas4", "back"))
+    X = fs.transform(f, lay, back=[0.5])
+    assert fs.names(lay) == ["e1", "e2", "e3", "e4", "a1", "a2", "a3", "a4", "back"]
+    np.testing.assert_allclose(X[0], [0.5, 0.5, 1.0, 2.0, 0.5, 0.5, 1.0, 2.0, 0.5])
+    # the same posture with twice the weight gives the same normalised features
+    np.testing.assert_allclose(fs.transform(2 * f, lay, back=[0.5]), X)
+
+
+def test_alignment_and_pooling():
+    maps = np.zeros((1, 8, 8))
+    maps[0, 1, 1] = 1.0  # far from the middle
+    aligned = align_maps(maps)
+    r, c = np.mgrid[:8, :8]
+    assert (aligned[0] * r).sum() / aligned[0].sum() == pytest.approx(3.5)
+    assert (aligned[0] * c).sum() / aligned[0].sum() == pytest.approx(3.5)
+    lay = Layout.grid(8, 8, pitch_cm=1.0)
+    fs = FeatureSet(("elements",), normalise=False, pool=4)
+    X = fs.transform(lay.from_grid(np.ones((1, 8, 8))), lay)
+    assert X.shape == (1, 4) and fs.names(lay) == ["b0_0", "b0_1", "b1_0", "b1_1"]
+
+
+def test_feature_set_errors():
+    lay = Layout.grid(3, 3, pitch_cm=1.0)
+    with pytest.raises(ParameterError, match="feature kinds"):
+        FeatureSet(("elements", "colour"))
+    with pytest.raises(ParameterError, match="does not divide"):
+        FeatureSet(("elements",), pool=2).transform(np.ones((1, 9)), lay)
+    with pytest.raises(ParameterError, match="back sensor"):
+        FeatureSet(("back",)).transform(np.ones((1, 9)), lay)
+    with pytest.raises(ParameterError, match=r"shape \(T, 9\)"):
+        FeatureSet().transform(np.ones((1, 4)), lay)
+    pts = Layout.points([[0, 0], [1, 0]])
+    with pytest.raises(ParameterError, match="grid layout"):
+        FeatureSet(("elements",), align=True).transform(np.ones((1, 2)), pts)
+
+
+class _SubjectSpy(ClassifierMixin, BaseEstimator):
+    """Column 0 is the subject id: remembers which subjects it trained on and fails if asked
+    to predict one of them."""
+
+    def fit(self, X, y):
+        self.seen_ = set(X[:, 0].tolist())
+        self.majority_ = np.unique(y)[0]
+        return self
+
+    def predict(self, X):
+        assert not self.seen_ & set(X[:, 0].tolist()), "a test subject was in the training set"
+        return np.full(X.shape[0], self.majority_)
+
+
+def test_loso_never_trains_on_the_held_out_subject():
+    groups = np.repeat(np.arange(5), 6)
+    X = np.c_[groups, np.zeros(30)]
+    y = np.tile([0, 1], 15)
+    report = loso(X, y, groups.astype(str), _SubjectSpy())
+    assert sorted(report.per_subject) == ["0", "1", "2", "3", "4"]
+    assert report.confusion.sum() == 30
+    assert report.accuracy == pytest.approx(0.5)
+
+
+def test_loso_reports_per_subject_and_the_worst_one():
+    rng = np.random.default_rng(0)
+    groups = np.repeat(["a", "b", "c"], 40)
+    y = np.tile(np.repeat([0, 1], 20), 3)
+    X = (y + 0.2 * rng.standard_normal(120))[:, None]
+    X[groups == "c"] = rng.standard_normal((40, 1))  # subject c is noise
+    report = loso(X, y, groups, "lda")
+    assert report.per_subject["a"] > 0.9 and report.per_subject["b"] > 0.9
+    assert report.minimum[0] == "c"
+    with pytest.raises(ParameterError, match="two subjects"):
+        loso(X, y, np.zeros(120), "lda")
+    with pytest.raises(ParameterError, match="unknown classifier"):
+        loso(X, y, groups, "oracle")
+
+
+def test_forward_selection_finds_the_informative_features():
+    rng = np.random.default_rng(3)
+    n = 240
+    y = rng.integers(0, 4, n)
+    groups = np.repeat(np.arange(6), n // 6).astype(str)
+    X = rng.standard_normal((n, 8))
+    X[:, 5] += 3.0 * (y % 2)  # separates 0/2 from 1/3
+    X[:, 2] += 3.0 * (y // 2)  # separates 0/1 from 2/3
+    chosen, scores = sequential_forward_selection(X, y, groups, 3, show_progress=False)
+    assert set(chosen[:2]) == {2, 5}
+    assert scores[1] > 0.85 and scores[0] < 0.6  # one feature tells two classes apart
+    with pytest.raises(ParameterError, match="k must lie"):
+        sequential_forward_selection(X, y, groups, 9, show_progress=False)
+
+
+def test_class_distances_match_a_hand_computation():
+    # two classes, two samples each, in 2-d; pooled within-class covariance by hand
+    X = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 4.0], [2.0, 6.0]])
+    y = np.array([0, 0, 1, 1])
+    dev = np.array([[-1.0, 0.0], [1.0, 0.0], [-1.0, -1.0], [1.0, 1.0]])
+    cov = dev.T @ dev / (4 - 2)
+    ridge = 0.05 * np.mean(np.diag(cov))
+    prec = np.linalg.inv(cov + ridge * np.eye(2))
+
+    def maha(a, b):
+        d = np.asarray(a) - np.asarray(b)
+        return np.sqrt(d @ prec @ d)
+
+    d_md, d_ms = class_distances(X, y)
+    assert d_md == pytest.approx(maha([1, 0], [1, 5]))  # eq. 6.9: both ordered pairs equal
+    d_c0 = maha(X[0], X[1])  # eq. 6.10: (d01 + d10) / (2 * 1)
+    d_c1 = maha(X[2], X[3])
+    assert d_ms == pytest.approx((d_c0 + d_c1) / 2)  # eq. 6.11
+
+
+def test_posture_model_round_trip_and_bad_files(tmp_path):
+    rng = np.random.default_rng(1)
+    lay = Layout.grid(4, 4, pitch_cm=2.0)
+    y = np.repeat(["left", "right"], 30)
+    frames = rng.random((60, 16))
+    frames[y == "left", 0] += 3
+    frames[y == "right", 15] += 3
+    model = PostureModel(FeatureSet(("elements", "centre")), lay, "lda").fit(frames, y)
+    path = model.save(tmp_path / "m.joblib")
+    back = PostureModel.load(path)
+    np.testing.assert_array_equal(back.predict(frames), model.predict(frames))
+    assert back.features == model.features and back.layout.shape == (4, 4)
+    assert (back.predict(frames) == y).mean() > 0.95
+    bad = tmp_path / "bad.joblib"
+    bad.write_text("not a model")
+    with pytest.raises(FormatError, match="not a texsense posture model"):
+        PostureModel.load(bad)
+    import joblib
+
+    joblib.dump({"format": "texsense.posture-model", "version": 99}, bad)
+    with pytest.raises(FormatError, match="version 99"):
+        PostureModel.load(bad)
+    joblib.dump({"format": "something else"}, bad)
+    with pytest.raises(FormatError, match="expected format"):
+        PostureModel.load(bad)
+    with pytest.raises(ParameterError, match="not trained"):
+        PostureModel(FeatureSet(), lay).predict(frames)
