@@ -16,35 +16,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense import Layout, Recording
 from texsense.calibration import MatCalibration
-from texsense.drift import DriftModel, split_steps
+from texsense.drift import DriftModel
 from texsense.pipeline import Pipeline
 from texsense.repair import Repair
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
+from texsense.sim.seated import seat_calibration
 
 
 def calibrate(seed: int = 5) -> MatCalibration:
     """Zeroing + equilibration (1 N/cm²) of the seat, spacer model from a test-machine record
     of another specimen, drift γ from its steps."""
-    mat = VirtualMat.seat(seed=seed)
-    n = mat.layout.n_elements
-    ft = mat.cdc.frame_time_s(n)
-    base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance
-    uni = mat.scan((11 + np.arange(10)) * ft, np.full((10, n), 1.0)).capacitance
-    m = protocols.run_protocol("calibration", "textile-3mm", seed=11, sample_hz=None)
-    material = {
-        "compression_mm": m.labels["compression_mm"],
-        "capacitance_pF": m.frames[:, 0].astype(float),
-        "pressure_ncm2": m.labels["pressure_ncm2"],
-    }
-    cal = MatCalibration.fit(material, base, uni, 1.0, 3.0)
-    st = protocols.run_protocol("steps", "textile-3mm", seed=11, sample_hz=10)
-    drift, _ = DriftModel.fit(
-        split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
-    )
-    cal.model.with_drift(drift)
-    return cal
+    return seat_calibration(mat_seed=seed)  # type: ignore[return-value]
 
 
 def cycling_drift(cal: MatCalibration, seed: int = 11) -> MatCalibration:

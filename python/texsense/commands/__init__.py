@@ -1,6 +1,16 @@
 """Sub-commands of the ``texsense`` CLI; each module defines ``register(subparsers)`` and
 sets ``run`` as the parser's default function."""
 
-from texsense.commands import convert, design, drift, hysteresis, info, pipeline, plot, simulate
+from texsense.commands import (
+    convert,
+    design,
+    drift,
+    hysteresis,
+    info,
+    pipeline,
+    plot,
+    posture,
+    simulate,
+)
 
-COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift, pipeline)
+COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture)

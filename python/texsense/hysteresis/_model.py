@@ -373,11 +373,15 @@ class HysteresisModel:
 def scale_hysteresis(
     model: HysteresisModel, start: npt.ArrayLike, end: npt.ArrayLike, f_h: float
 ) -> np.ndarray:
-    """Thesis eq. 6.12: ``p_t2 = p_r1 + f_h (h(p_r2) - p_r1)``.
+    """Thesis eq. 6.12 as its text defines it: ``p_t2 = p_r2 + f_h (h(p_r2) - p_r2)``.
 
-    For a model from pressure to pressure: every element starts at ``start`` with output =
-    input (§6.4.4), moves to ``end``, and the change of its output is scaled by ``f_h``
-    (f_h = 0: no change of pattern... 1: the model's own hysteresis; 2: doubled).
+    For a model from pressure to pressure: every element starts at ``start`` (p_r1) with
+    output = input (§6.4.4) and moves to ``end`` (p_r2); the model's output ``h(p_r2)``
+    departs from ``p_r2`` by its hysteresis, and ``f_h`` scales that departure (f_h = 0: the
+    test pattern is the reference pattern r2, as §6.4.4 says for d_h = 0; 1: the model's own
+    hysteresis; 2: doubled). The equation as printed, ``p_r1 + f_h (h(p_r2) - p_r1)``, would
+    give the *start* pattern for f_h = 0 and cannot be meant: with it no posture would be
+    recognised at small f_h, where fig. 6.10 shows 100 %.
     """
     p1 = np.asarray(start, dtype=np.float64).ravel()
     p2 = np.asarray(end, dtype=np.float64).ravel()
@@ -386,4 +390,4 @@ def scale_hysteresis(
     st = model.state(p1.size)
     st.set_state(p1, p1)
     h = st.step(p2)
-    return p1 + f_h * (h - p1)
+    return p2 + f_h * (h - p2)

@@ -168,6 +168,8 @@ def loso(
     classifier : str or estimator
         A name from :data:`CLASSIFIERS` or an unfitted scikit-learn estimator (cloned per
         fold).
+    show_progress : bool
+        A progress bar over the subjects.
     """
     Xa, ya, ga = _check_xy(X, y, groups)
     template = make_classifier(classifier) if isinstance(classifier, str) else classifier
@@ -217,7 +219,11 @@ def sequential_forward_selection(
     chosen: list[int] = []
     scores: list[float] = []
     steps = range(k)
-    for _ in progress(steps, total=k, desc="forward selection", unit="feature") if show_progress else steps:
+    for _ in (
+        progress(steps, total=k, desc="forward selection", unit="feature")
+        if show_progress
+        else steps
+    ):
         best, best_score = -1, -1.0
         for c in pool:
             if c in chosen:

@@ -71,9 +71,10 @@ def area_means(frames: npt.ArrayLike, layout: Layout, n_areas: int) -> np.ndarra
     return out
 
 
-def align_maps(maps: npt.ArrayLike) -> np.ndarray:
+def align_maps(maps: npt.ArrayLike, rotate: bool = False) -> np.ndarray:
     """Shift each map (T, rows, cols) so its centre of force lies in the middle of the grid
-    (linear interpolation, zeros shifted in)."""
+    (linear interpolation, zeros shifted in); with ``rotate`` also turn it so the principal
+    axis of its pressure (the body axis) runs along the rows."""
     m = np.nan_to_num(np.asarray(maps, dtype=np.float64))
     rows, cols = m.shape[1:]
     r, c = np.mgrid[:rows, :cols]
@@ -83,8 +84,14 @@ def align_maps(maps: npt.ArrayLike) -> np.ndarray:
         if w <= 0:
             out[k] = a
             continue
-        shift = ((rows - 1) / 2 - (a * r).sum() / w, (cols - 1) / 2 - (a * c).sum() / w)
-        out[k] = ndimage.shift(a, shift, order=1, mode="constant", cval=0.0)
+        cr, cc = (a * r).sum() / w, (a * c).sum() / w
+        shifted = ndimage.shift(a, ((rows - 1) / 2 - cr, (cols - 1) / 2 - cc), order=1)
+        if rotate:
+            cov = np.cov(np.vstack([(r - cr).ravel(), (c - cc).ravel()]), aweights=a.ravel())
+            axis = np.linalg.eigh(cov)[1][:, 1]  # the longer principal axis (row, col)
+            angle = (np.degrees(np.arctan2(axis[1], axis[0])) + 90.0) % 180.0 - 90.0
+            shifted = ndimage.rotate(shifted, -angle, reshape=False, order=1)
+        out[k] = shifted
     return out
 
 
@@ -104,6 +111,8 @@ class FeatureSet:
     align : bool
         Shift every map to centre its centre of force before taking element values (grid
         layouts only).
+    rotate : bool
+        With ``align``, also turn every map so its principal axis runs along the rows.
     log : bool
         Element values as ``log(1 + value)`` (after normalising).
     pool : int
@@ -113,6 +122,7 @@ class FeatureSet:
     kinds: tuple[str, ...] = ("elements", "centre", "areas4", "areas16")
     normalise: bool = True
     align: bool = False
+    rotate: bool = False
     log: bool = False
     pool: int = 1
 
@@ -124,6 +134,8 @@ class FeatureSet:
             raise ParameterError(
                 f"feature kinds must be some of {', '.join(KINDS)}; got {list(kinds)}"
             )
+        if self.rotate and not self.align:
+            raise ParameterError("rotate needs align=True")
         if int(self.pool) != self.pool or self.pool < 1:
             raise ParameterError(f"pool must be an integer >= 1, got {self.pool}")
 
@@ -143,7 +155,7 @@ class FeatureSet:
             rows, cols = self._check_grid(layout)
             maps = layout.to_grid(v, fill=0.0)
             if self.align:
-                maps = align_maps(maps)
+                maps = align_maps(maps, rotate=self.rotate)
             if self.pool > 1:
                 k = self.pool
                 maps = maps.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
@@ -182,6 +194,8 @@ class FeatureSet:
         ----------
         frames : array_like (T, N)
             Pressure (or raw counts); NaN (a missing reading) counts as 0.
+        layout : Layout
+            Layout of the frames.
         back : array_like (T,), optional
             The back sensor's pressure; required when ``"back"`` is among the kinds.
         """
@@ -222,7 +236,7 @@ class FeatureSet:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FeatureSet:
         """Inverse of :meth:`to_dict` (clear errors for unknown or missing keys)."""
-        allowed = {"kinds", "normalise", "align", "log", "pool"}
+        allowed = {"kinds", "normalise", "align", "rotate", "log", "pool"}
         extra = set(d) - allowed
         if extra:
             raise ParameterError(f"unknown feature-set keys: {', '.join(sorted(extra))}")

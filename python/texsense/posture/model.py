@@ -14,7 +14,8 @@ Examples
 >>> lay = Layout.grid(2, 2, pitch_cm=1.0)
 >>> frames = np.array([[1, 0, 0, 0], [0, 0, 0, 1]] * 10, dtype=float)
 >>> labels = np.array(["front-left", "back-right"] * 10)
->>> m = PostureModel(FeatureSet(("centre",), normalise=False), lay, "naive-bayes").fit(frames, labels)
+>>> fs = FeatureSet(("centre",), normalise=False)
+>>> m = PostureModel(fs, lay, "naive-bayes").fit(frames, labels)
 >>> m.predict(np.array([[0.9, 0.1, 0, 0]])).tolist()
 ['front-left']
 """
@@ -64,7 +65,9 @@ class PostureModel:
     ) -> None:
         self.features = features
         self.layout = layout
-        self.classifier_name = classifier if isinstance(classifier, str) else type(classifier).__name__
+        self.classifier_name = (
+            classifier if isinstance(classifier, str) else type(classifier).__name__
+        )
         self.estimator = make_classifier(classifier) if isinstance(classifier, str) else classifier
         self.columns = None if columns is None else [int(c) for c in columns]
         self.classes_: np.ndarray | None = None

@@ -1,0 +1,241 @@
+"""``texsense posture evaluate|train`` and ``texsense study``: posture classification and the
+error-modelling study (docs/posture.md)."""
+
+from __future__ import annotations
+
+import argparse
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from texsense.exceptions import ParameterError
+from texsense.io import load
+from texsense.posture.evaluate import CLASSIFIERS
+from texsense.posture.features import KINDS, FeatureSet
+from texsense.recording import Recording
+
+
+def _selection_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recording", type=Path, help="recording with per-frame labels (any format)")
+    p.add_argument("--label", default="posture", help="the label to classify (default posture)")
+    p.add_argument("--where", action="append", default=[], metavar="LABEL",
+                   help="keep only frames where a boolean label is true (repeatable)")  # fmt: skip
+    p.add_argument("--drop", action="append", default=[], metavar="VALUE",
+                   help="leave out frames whose label has this value (repeatable)")  # fmt: skip
+    p.add_argument("--every", type=int, default=1, help="use every N-th frame (default 1)")
+
+
+def _feature_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--classifier", choices=tuple(CLASSIFIERS), default="naive-bayes")
+    p.add_argument("--features", default="elements,centre,areas4,areas16",
+                   help=f"comma-separated feature kinds of {', '.join(KINDS)}")  # fmt: skip
+    p.add_argument("--back-label", default="back", help="label holding the back sensor")
+    p.add_argument("--align", action="store_true", help="centre each map's centre of force")
+    p.add_argument("--rotate", action="store_true", help="with --align: turn to the body axis")
+    p.add_argument("--log", action="store_true", help="log(1 + value) of element values")
+    p.add_argument("--pool", type=int, default=1, help="mean of N x N element blocks")
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``posture`` and ``study`` commands."""
+    p = sub.add_parser(
+        "posture",
+        help="posture classification: leave-one-subject-out evaluation, training",
+        description="Classify frames of a labelled recording (thesis chapter 6).",
+    )
+    ps = p.add_subparsers(dest="posture_command", metavar="WHAT")
+    ps.required = True
+    e = ps.add_parser("evaluate", help="leave-one-subject-out accuracy, per subject, confusion")
+    _selection_args(e)
+    e.add_argument("--group", default="subject", help="the label naming the subject")
+    _feature_args(e)
+    e.add_argument("--json", action="store_true", help="print the report as JSON")
+    e.set_defaults(run=run_evaluate)
+    t = ps.add_parser("train", help="train a classifier on all frames and save it")
+    _selection_args(t)
+    _feature_args(t)
+    t.add_argument("-o", "--output", type=Path, required=True, help="model file (joblib)")
+    t.set_defaults(run=run_train)
+
+    s = sub.add_parser(
+        "study",
+        help="error-modelling study (noise, hysteresis, drift, failures) with an HTML report",
+        description="Thesis §6.4: one reference pattern per posture (the mean of its frames), "
+        "test patterns with modelled errors, recognition rate and class distances.",
+    )
+    _selection_args(s)
+    s.add_argument("--align", action="store_true", help="centre maps before averaging")
+    s.add_argument("--pool", type=int, default=1, help="average N x N blocks of elements")
+    s.add_argument("--range", type=float, default=5.0,
+                   help="scale non-pressure data so the largest reference value is this many "
+                   "N/cm² (default 5)")  # fmt: skip
+    s.add_argument("-o", "--output", type=Path, required=True, help="report folder")
+    s.set_defaults(run=run_study)
+
+
+def _frames(args: argparse.Namespace) -> tuple[Recording, np.ndarray, np.ndarray]:
+    """The recording, the selected frame indices and their labels."""
+    rec = load(args.recording)
+    labels = rec.labels
+    if args.label not in labels:
+        raise ParameterError(
+            f"{args.recording}: no label {args.label!r}; labels: {', '.join(labels) or 'none'}"
+        )
+    keep = np.ones(rec.n_frames, dtype=bool)
+    for name in args.where:
+        if name not in labels:
+            raise ParameterError(f"{args.recording}: no label {name!r} for --where")
+        keep &= np.asarray(labels[name]).astype(bool)
+    y = np.asarray(labels[args.label])
+    for value in args.drop:
+        keep &= y.astype(str) != value
+    if args.every < 1:
+        raise ParameterError(f"--every must be >= 1, got {args.every}")
+    idx = np.flatnonzero(keep)[:: args.every]
+    if idx.size == 0:
+        raise ParameterError("no frames left after --where/--drop")
+    return rec, idx, y[idx]
+
+
+def _feature_set(args: argparse.Namespace) -> FeatureSet:
+    kinds = tuple(k.strip() for k in args.features.split(",") if k.strip())
+    return FeatureSet(kinds, align=args.align, rotate=args.rotate, log=args.log, pool=args.pool)
+
+
+def _back(args: argparse.Namespace, rec: Recording, fs: FeatureSet, idx: np.ndarray) -> Any:
+    if "back" not in fs.kinds:
+        return None
+    if args.back_label not in rec.labels:
+        raise ParameterError(f"the back feature needs a label {args.back_label!r} in the file")
+    return np.asarray(rec.labels[args.back_label], dtype=np.float64)[idx]
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """Run ``texsense posture evaluate``."""
+    from texsense.posture.evaluate import loso
+
+    rec, idx, y = _frames(args)
+    if args.group not in rec.labels:
+        raise ParameterError(f"{args.recording}: no label {args.group!r} naming the subjects")
+    groups = np.asarray(rec.labels[args.group])[idx]
+    fs = _feature_set(args)
+    X = fs.transform(rec.frames[idx], rec.layout, _back(args, rec, fs, idx))
+    report = loso(X, y, groups, args.classifier, show_progress=not args.json)
+    if args.json:
+        print(json.dumps({"classifier": args.classifier, "frames": int(idx.size),
+                          "features": fs.to_dict(), **report.to_dict()}, indent=1))  # fmt: skip
+        return 0
+    print(
+        f"{args.classifier}, {idx.size} frames, {len(report.per_subject)} subjects, "
+        f"{len(report.labels)} classes of {args.label!r}: leave-one-subject-out accuracy "
+        f"{report.accuracy:.1%} (worst {report.minimum[0]}: {report.minimum[1]:.1%})"
+    )
+    for s, a in sorted(report.per_subject.items()):
+        print(f"  {s:>10}  {a:6.1%}")
+    print("confusion (rows true, columns predicted):")
+    width = max(len(str(v)) for v in report.labels) + 1
+    print(" " * width + "".join(f"{v!s:>{width}}" for v in report.labels))
+    for v, row in zip(report.labels, report.confusion, strict=True):
+        print(f"{v!s:>{width}}" + "".join(f"{c:>{width}}" for c in row))
+    return 0
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """Run ``texsense posture train``."""
+    from texsense.posture.model import PostureModel
+
+    rec, idx, y = _frames(args)
+    fs = _feature_set(args)
+    model = PostureModel(fs, rec.layout, args.classifier)
+    model.fit(rec.frames[idx], y, _back(args, rec, fs, idx))
+    model.save(args.output)
+    print(f"trained {args.classifier} on {idx.size} frames, {len(model.classes_)} classes "  # type: ignore[arg-type]
+          f"-> {args.output}")  # fmt: skip
+    return 0
+
+
+def run_study(args: argparse.Namespace) -> int:
+    """Run ``texsense study``: reference patterns, all sweeps, report.html + numbers.json."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from texsense import Layout
+    from texsense.posture.features import align_maps
+    from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
+
+    rec, idx, y = _frames(args)
+    frames = np.nan_to_num(rec.frames[idx].astype(np.float64))
+    layout = rec.layout
+    if args.align or args.pool > 1:
+        if layout.shape is None:
+            raise ParameterError("--align and --pool need a grid layout")
+        maps = layout.to_grid(frames, fill=0.0)
+        if args.align:
+            maps = align_maps(maps, rotate=True)
+        rows, cols = layout.shape
+        k = args.pool
+        if rows % k or cols % k:
+            raise ParameterError(f"--pool {k} does not divide the {rows} x {cols} grid")
+        maps = maps.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
+        pitch = layout.pitch_cm or (1.0, 1.0)
+        layout = Layout.grid(rows // k, cols // k, pitch_cm=(pitch[0] * k, pitch[1] * k))
+        frames = maps.reshape(maps.shape[0], -1)
+    classes = np.unique(y)
+    refs = np.vstack([frames[y == c].mean(axis=0) for c in classes])
+    scaled = rec.quantity != "pressure"
+    if scaled:
+        refs *= args.range / refs.max()
+    study = ErrorStudy(refs, layout, classes, hysteresis_model=sensor_hysteresis_model())
+    results = study.run()
+    out = args.output
+    out.mkdir(parents=True, exist_ok=True)
+    fig = plot_study(results, f"{args.recording.name}: {classes.size} classes, modelled errors")
+    fig.savefig(out / "study.png", dpi=100)
+    plt.close(fig)
+    numbers = {
+        "source": str(args.recording),
+        "classes": [str(c) for c in classes],
+        "elements": layout.n_elements,
+        "frames_averaged": int(idx.size),
+        "scaled_to_ncm2": args.range if scaled else None,
+        "results": ErrorStudy.to_dict(results),
+    }
+    (out / "numbers.json").write_text(json.dumps(numbers, indent=1), encoding="utf-8")
+    (out / "report.html").write_text(_report_html(numbers), encoding="utf-8")
+    print(f"wrote {out / 'report.html'}, {out / 'study.png'}, {out / 'numbers.json'}")
+    return 0
+
+
+def _report_html(numbers: dict[str, Any]) -> str:
+    """A self-contained page: the figure and one table per error source."""
+    esc = html.escape
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>texsense study</title>",
+        "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
+        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;"
+        "padding:2px 8px;text-align:right}</style></head><body>",
+        f"<h1>Error-modelling study: {esc(numbers['source'])}</h1>",
+        f"<p>{len(numbers['classes'])} reference patterns ({numbers['elements']} elements, "
+        f"means of {numbers['frames_averaged']} frames); 32 training and 15 test patterns per "
+        "class and level; naive Bayes (thesis §6.4-6.5.1).</p>",
+        "<img src='study.png' alt='recognition rate and class distances' style='width:100%'>",
+    ]
+    for source, pts in numbers["results"].items():
+        head = "".join(f"<th>{p['level']:g}</th>" for p in pts)
+        rows = [
+            ("recognition rate", [f"{100 * p['rate']:.0f} %" for p in pts]),
+            ("d_md (between)", [f"{p['d_md']:.2f}" for p in pts]),
+            ("d_ms (within)", [f"{p['d_ms']:.2f}" for p in pts]),
+        ]
+        body = "".join(
+            f"<tr><th>{name}</th>" + "".join(f"<td>{v}</td>" for v in vals) + "</tr>"
+            for name, vals in rows
+        )
+        parts.append(f"<h2>{esc(source)}</h2><table><tr><th>level</th>{head}</tr>{body}</table>")
+    parts.append("<p>Every number is in numbers.json.</p></body></html>")
+    return "\n".join(parts)

@@ -1,0 +1,78 @@
+import json
+
+import numpy as np
+import pytest
+
+from texsense import Layout, Recording
+from texsense.cli import main
+from texsense.io import save
+from texsense.posture import PostureModel
+
+
+@pytest.fixture()
+def labelled(tmp_path):
+    """Four subjects, three 'postures' (a load on the left, the middle or the right of a
+    4 x 6 grid), every subject placed a little differently, plus unloaded frames."""
+    rng = np.random.default_rng(0)
+    lay = Layout.grid(4, 6, pitch_cm=2.0)
+    frames, posture, subject, hold = [], [], [], []
+    for s in range(4):
+        for p, col in ((1, 1), (2, 3), (3, 5)):
+            for _ in range(12):
+                m = np.zeros((4, 6))
+                m[1:3, max(col - 1, 0) : col + 1] = rng.uniform(1, 3)
+                m[:, (col + s % 2) % 6] += 0.3
+                frames.append(lay.from_grid(m + rng.uniform(0, 0.1, (4, 6))))
+                posture.append(p)
+                subject.append(f"S{s}")
+                hold.append(True)
+        frames.append(np.zeros(24))
+        posture.append(0)
+        subject.append(f"S{s}")
+        hold.append(False)
+    rec = Recording(
+        np.array(frames), np.arange(len(frames), dtype=float), lay,
+        labels={"posture": np.array(posture), "subject": np.array(subject), "hold": np.array(hold)},
+    )  # fmt: skip
+    path = tmp_path / "postures.h5"
+    save(rec, path)
+    return path
+
+
+def test_posture_evaluate_prints_loso_and_json(labelled, capsys):
+    assert (
+        main(["posture", "evaluate", str(labelled), "--where", "hold", "--classifier", "lda"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "leave-one-subject-out accuracy" in out and "S3" in out and "confusion" in out
+    assert main(["posture", "evaluate", str(labelled), "--drop", "0", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert sorted(report["per_subject"]) == ["S0", "S1", "S2", "S3"]
+    assert report["labels"] == ["1", "2", "3"] and report["accuracy"] > 0.9
+
+
+def test_posture_train_writes_a_model_that_loads(labelled, tmp_path, capsys):
+    out = tmp_path / "m.joblib"
+    assert main(["posture", "train", str(labelled), "--where", "hold", "-o", str(out)]) == 0
+    model = PostureModel.load(out)
+    assert model.layout.shape == (4, 6) and sorted(model.classes_.tolist()) == [1, 2, 3]
+
+
+def test_posture_commands_name_missing_labels(labelled, capsys):
+    assert main(["posture", "evaluate", str(labelled), "--label", "mood"]) != 0
+    assert "no label 'mood'" in capsys.readouterr().err
+    assert main(["posture", "evaluate", str(labelled), "--where", "sleeping"]) != 0
+    assert "sleeping" in capsys.readouterr().err
+
+
+def test_study_writes_report_figure_and_numbers(labelled, tmp_path):
+    out = tmp_path / "report"
+    assert main(["study", str(labelled), "--where", "hold", "-o", str(out)]) == 0
+    numbers = json.loads((out / "numbers.json").read_text())
+    assert set(numbers["results"]) == {"noise", "hysteresis", "drift", "failures"}
+    noise = numbers["results"]["noise"]
+    assert noise[0]["rate"] >= noise[-1]["rate"]  # more noise never helps much
+    assert numbers["results"]["failures"][-1]["rate"] <= 0.5  # all elements failed: chance
+    page = (out / "report.html").read_text()
+    assert "study.png" in page and "<table>" in page
+    assert (out / "study.png").stat().st_size > 10_000
