@@ -23,7 +23,12 @@ from texsense import Layout
 from texsense.io.pmd import POSTURE_CLASS, read_pmd
 from texsense.posture import FeatureSet, loso
 from texsense.posture.features import align_maps
-from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
+from texsense.posture.study import (
+    ErrorStudy,
+    plot_study,
+    sensor_hysteresis_model,
+    study_tables,
+)
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 EVERY = 5  # every 5th reliable frame (1 Hz frames of a held posture are nearly identical)
@@ -122,12 +127,7 @@ def study(layout: Layout, frames, posture) -> dict:
     s = ErrorStudy(refs, small, labels, hysteresis_model=sensor_hysteresis_model(), seed=0)
     results = s.run()
     print("\nerror-modelling study on PMD (17 reference patterns, 512 elements, naive Bayes):\n")
-    for source, pts in results.items():
-        print(f"| {source} | " + " | ".join(f"{p.level:g}" for p in pts) + " |")
-        print("|---|" + "---:|" * len(pts))
-        print("| recognition rate | " + " | ".join(f"{p.rate:.0%}" for p in pts) + " |")
-        print("| d_md | " + " | ".join(f"{p.d_md:.1f}" for p in pts) + " |")
-        print("| d_ms | " + " | ".join(f"{p.d_ms:.1f}" for p in pts) + " |\n")
+    print(study_tables(results))
     fig = plot_study(
         results, "PhysioNet PMD, 17 postures: modelled errors (cf. thesis fig. 6.9-6.12)"
     )

@@ -22,7 +22,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from texsense import Layout
 from texsense.pipeline import Pipeline
 from texsense.posture import FeatureSet, loso, make_classifier, sequential_forward_selection
-from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
+from texsense.posture.study import (
+    ErrorStudy,
+    plot_study,
+    sensor_hysteresis_model,
+    study_tables,
+)
 from texsense.sim.seated import Subject, seat_calibration, simulate_session
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
@@ -172,12 +177,7 @@ def study(runs: list) -> None:
         "error-modelling study on the virtual seat (16 reference patterns, 256 elements, "
         "naive Bayes):\n"
     )
-    for source, pts in results.items():
-        print(f"| {source} | " + " | ".join(f"{p.level:g}" for p in pts) + " |")
-        print("|---|" + "---:|" * len(pts))
-        print("| recognition rate | " + " | ".join(f"{p.rate:.0%}" for p in pts) + " |")
-        print("| d_md | " + " | ".join(f"{p.d_md:.1f}" for p in pts) + " |")
-        print("| d_ms | " + " | ".join(f"{p.d_ms:.1f}" for p in pts) + " |\n")
+    print(study_tables(results))
     fig = plot_study(
         results, "virtual seat, 16 postures: modelled errors (cf. thesis fig. 6.9-6.12)"
     )

@@ -76,3 +76,24 @@ def test_reference_mat_has_a_fixed_gain_error_of_about_ten_percent():
     gain = reading.mean(axis=0)
     assert np.std(gain) == pytest.approx(0.10, abs=0.015)
     np.testing.assert_allclose(gain, ref.gain, atol=0.02)
+
+
+def test_sessions_are_reproducible_across_processes():
+    """The same subject and seed give the same session in any Python process (no use of the
+    per-process randomised str hash)."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "from texsense.sim.seated import Subject, simulate_session;"
+        "s = simulate_session(Subject.random(1), posture_s=4, home_s=2, rest_s=0, rounds=1);"
+        "print(float(s.truth.frames.sum()), float(s.capacitance.frames.sum()))"
+    )
+    outs = set()
+    for hashseed in ("1", "2"):
+        env = {**os.environ, "PYTHONHASHSEED": hashseed}
+        run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+        assert run.returncode == 0, run.stderr
+        outs.add(run.stdout)
+    assert len(outs) == 1

@@ -244,3 +244,15 @@ def sensor_hysteresis_model(spacer: str = "textile-3mm", seed: int = 0) -> Any:
     keep = np.concatenate([[True], np.diff(rise_e) > 0])
     reading = np.interp(e, rise_e[keep], rise_p[keep])  # the uncompensated sensor
     return HysteresisModel(input_name="pressure_ncm2", input_unit="N/cm2").fit(p, reading)
+
+
+def study_tables(results: dict[str, list[StudyPoint]]) -> str:
+    """Markdown tables of a study: one per error source, levels as columns."""
+    out = []
+    for source, pts in results.items():
+        out.append(f"| {source} | " + " | ".join(f"{p.level:g}" for p in pts) + " |")
+        out.append("|---|" + "---:|" * len(pts))
+        out.append("| recognition rate | " + " | ".join(f"{p.rate:.0%}" for p in pts) + " |")
+        out.append("| d_md | " + " | ".join(f"{p.d_md:.1f}" for p in pts) + " |")
+        out.append("| d_ms | " + " | ".join(f"{p.d_ms:.1f}" for p in pts) + " |\n")
+    return "\n".join(out)

@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -248,7 +249,7 @@ def simulate_session(
     from texsense.sim.failures import FailureModel
     from texsense.sim.mat import VirtualMat
 
-    rng = np.random.default_rng([seed, hash(subject.name) % 2**31])
+    rng = np.random.default_rng([seed, zlib.crc32(subject.name.encode())])
     vmat = mat if mat is not None else VirtualMat.seat(seed=mat_seed, failures=FailureModel())
     layout = vmat.layout  # type: ignore[attr-defined]
     ft = vmat.cdc.frame_time_s(layout.n_elements)  # type: ignore[attr-defined]
@@ -264,7 +265,7 @@ def simulate_session(
         rnd = np.zeros(times.size, dtype=np.int16)
         hold = np.zeros(times.size, dtype=bool)
         back = np.zeros(times.size)
-        seg_rng = np.random.default_rng([seed, 7, hash(subject.name) % 2**31])
+        seg_rng = np.random.default_rng([seed, 7, zlib.crc32(subject.name.encode())])
         for start, end, pst, r in segs:
             sel = (times >= start) & (times < end)
             posture[sel], rnd[sel] = pst, r
