@@ -22,7 +22,7 @@ from _realdata import DATA
 from texsense import Layout
 from texsense.io.pmd import POSTURE_CLASS, read_pmd
 from texsense.posture import FeatureSet, loso
-from texsense.posture.features import align_maps
+from texsense.posture.features import reduce_maps
 from texsense.posture.study import (
     ErrorStudy,
     plot_study,
@@ -117,12 +117,9 @@ def study(layout: Layout, frames, posture) -> dict:
     subjects, pooled 2 x 2 (as the thesis averaged its Tekscan mat 2 x 2), counts scaled so
     the largest reference value is 5 N/cm² (the thesis's seat range; PMD gives no
     calibration)."""
-    rows, cols = layout.shape
-    maps = align_maps(layout.to_grid(frames, fill=0.0), rotate=True)
-    pooled = maps.reshape(-1, rows // 2, 2, cols // 2, 2).mean(axis=(2, 4))
-    small = Layout.grid(rows // 2, cols // 2, pitch_cm=2 * layout.pitch_cm[0])
+    pooled, small = reduce_maps(frames, layout, align=True, rotate=True, pool=2)
     labels = np.unique(posture)
-    refs = np.vstack([pooled[posture == p].reshape(-1, small.n_elements).mean(0) for p in labels])
+    refs = np.vstack([pooled[posture == p].mean(axis=0) for p in labels])
     refs *= 5.0 / refs.max()
     s = ErrorStudy(refs, small, labels, hysteresis_model=sensor_hysteresis_model(), seed=0)
     results = s.run()

@@ -19,9 +19,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from texsense import Layout
 from texsense.pipeline import Pipeline
-from texsense.posture import FeatureSet, loso, make_classifier, sequential_forward_selection
+from texsense.posture import (
+    FeatureSet,
+    loso,
+    make_classifier,
+    reduce_maps,
+    sequential_forward_selection,
+)
 from texsense.posture.study import (
     ErrorStudy,
     plot_study,
@@ -59,6 +64,20 @@ def sessions() -> list:
 
 def stack(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts, axis=0)
+
+
+def reference_data(runs: list) -> tuple:
+    """The reference mat's hold frames of all subjects, averaged 2 x 2 to 256 elements (as the
+    thesis averaged its Tekscan, §6.4.1): frames, layout, posture, subject, back sensor."""
+    maps, y, g, back = [], [], [], []
+    for s in runs:
+        hold = s.reference.labels["hold"]
+        m, small = reduce_maps(s.reference.frames[hold], s.reference.layout, pool=2)
+        maps.append(m)
+        y.append(s.reference.labels["posture"][hold])
+        g.append(s.reference.labels["subject"][hold])
+        back.append(s.reference_back[hold])
+    return stack(maps), small, stack(y), stack(g), stack(back)
 
 
 def textile_data(runs: list, cal) -> dict:
@@ -113,17 +132,8 @@ def table_6_1(runs: list, cal) -> None:
         t0, t1 = THESIS_TABLE[label]
         print(f"| {label} | {t0:.0%} | {a0:.1%} | {t1:.0%} | {a1:.1%} | {lda:.1%} |")
     # the reference mat, averaged 2 x 2 to 256 elements as the thesis did with its Tekscan
-    ref_frames, ry, rg, rback = [], [], [], []
-    for s in runs:
-        hold = s.reference.labels["hold"]
-        m = s.reference.layout.to_grid(s.reference.frames[hold].astype(np.float64))
-        ref_frames.append(m.reshape(-1, 16, 2, 16, 2).mean(axis=(2, 4)).reshape(-1, 256))
-        ry.append(s.reference.labels["posture"][hold])
-        rg.append(s.reference.labels["subject"][hold])
-        rback.append(s.reference_back[hold])
-    small = Layout.grid(16, 16, pitch_cm=2 * runs[0].reference.layout.pitch_cm[0])
-    RX = THESIS.transform(stack(ref_frames), small, stack(rback))
-    ry, rg = stack(ry), stack(rg)
+    ref_frames, small, ry, rg, rback = reference_data(runs)
+    RX = THESIS.transform(ref_frames, small, rback)
     rnames = THESIS.names(small)
     every = slice(None, None, 4)  # selection on every 4th frame keeps it to a minute
     rchosen, rscores = sequential_forward_selection(
@@ -142,11 +152,8 @@ def table_6_1(runs: list, cal) -> None:
     X = THESIS.transform(frames, lay, back)[:, cols]
     r2, r3 = [], []
     for s in np.unique(g):
-        train = (g == s) & (rnd == 1)
-        model = make_classifier("naive-bayes").fit(
-            X[(g != s) & (rnd == 1)], y[(g != s) & (rnd == 1)]
-        )
-        del train
+        train = (g != s) & (rnd == 1)
+        model = make_classifier("naive-bayes").fit(X[train], y[train])
         for target, acc in ((2, r2), (3, r3)):
             test = (g == s) & (rnd == target)
             acc.append(float(np.mean(model.predict(X[test]) == y[test])))
@@ -161,16 +168,9 @@ def table_6_1(runs: list, cal) -> None:
 
 def study(runs: list) -> None:
     """§6.4-6.5.1 on the reference mat's patterns (256 elements, mean over all subjects)."""
-    maps, y = [], []
-    for s in runs:
-        hold = s.reference.labels["hold"]
-        m = s.reference.layout.to_grid(s.reference.frames[hold].astype(np.float64))
-        maps.append(m.reshape(-1, 16, 2, 16, 2).mean(axis=(2, 4)).reshape(-1, 256))
-        y.append(s.reference.labels["posture"][hold])
-    maps_a, y_a = stack(maps), stack(y)
+    maps, small, y, _, _ = reference_data(runs)
     labels = np.arange(1, 17)
-    refs = np.vstack([maps_a[y_a == p].mean(axis=0) for p in labels])
-    small = Layout.grid(16, 16, pitch_cm=2 * runs[0].reference.layout.pitch_cm[0])
+    refs = np.vstack([maps[y == p].mean(axis=0) for p in labels])
     st = ErrorStudy(refs, small, labels, hysteresis_model=sensor_hysteresis_model(), seed=0)
     results = st.run(show_progress=False)
     print(

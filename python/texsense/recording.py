@@ -200,6 +200,10 @@ class Recording:
             **args,
         )
 
+    def with_labels(self, labels: Mapping[str, npt.ArrayLike]) -> Recording:
+        """A copy with ``labels`` in place of the per-frame labels (same frames and rest)."""
+        return self._with(labels=labels)
+
     def to_unit(self, unit: str) -> Recording:
         """A copy with the values converted to ``unit`` (same quantity)."""
         f = units.factor(self.unit, unit)

@@ -35,11 +35,13 @@ import numpy.typing as npt
 
 from texsense import units
 from texsense.exceptions import ParameterError
+from texsense.layout import Layout
 from texsense.recording import Recording
 
 __all__ = [
     "FrameStats",
     "centre_of_force",
+    "centre_of_force_values",
     "coefficient_of_variation",
     "contact_area",
     "frame_stats",
@@ -101,12 +103,16 @@ def peak_pressure(rec: Recording) -> _Array:
 
 def centre_of_force(rec: Recording) -> _Array:
     """Centre of force (T, 2): x and y in cm, weights pressure x area; NaN when unloaded."""
-    v = _values(rec)
-    w = np.nan_to_num(v, nan=0.0) * rec.layout.area_cm2
-    w = np.clip(w, 0.0, None)
+    return centre_of_force_values(_values(rec), rec.layout)
+
+
+def centre_of_force_values(values: npt.ArrayLike, layout: Layout) -> _Array:
+    """:func:`centre_of_force` of plain frames (T, N) on ``layout`` (NaN readings count 0)."""
+    v = np.asarray(values, dtype=np.float64)
+    w = np.clip(np.nan_to_num(v, nan=0.0) * layout.area_cm2, 0.0, None)
     total = w.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        xy = (w @ rec.layout.xy_cm) / total[:, None]
+        xy = (w @ layout.xy_cm) / total[:, None]
     xy[total <= 0] = np.nan
     return xy
 

@@ -164,27 +164,14 @@ def run_study(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from texsense import Layout
-    from texsense.posture.features import align_maps
+    from texsense.posture.features import reduce_maps
     from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 
     rec, idx, y = _frames(args)
     frames = np.nan_to_num(rec.frames[idx].astype(np.float64))
     layout = rec.layout
     if args.align or args.pool > 1:
-        if layout.shape is None:
-            raise ParameterError("--align and --pool need a grid layout")
-        maps = layout.to_grid(frames, fill=0.0)
-        if args.align:
-            maps = align_maps(maps, rotate=True)
-        rows, cols = layout.shape
-        k = args.pool
-        if rows % k or cols % k:
-            raise ParameterError(f"--pool {k} does not divide the {rows} x {cols} grid")
-        maps = maps.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
-        pitch = layout.pitch_cm or (1.0, 1.0)
-        layout = Layout.grid(rows // k, cols // k, pitch_cm=(pitch[0] * k, pitch[1] * k))
-        frames = maps.reshape(maps.shape[0], -1)
+        frames, layout = reduce_maps(frames, layout, align=args.align, rotate=True, pool=args.pool)
     classes = np.unique(y)
     refs = np.vstack([frames[y == c].mean(axis=0) for c in classes])
     scaled = rec.quantity != "pressure"

@@ -11,7 +11,14 @@ from texsense.posture.evaluate import (
     make_classifier,
     sequential_forward_selection,
 )
-from texsense.posture.features import FeatureSet, align_maps, area_means, centre_of_force
+from texsense.posture.features import (
+    FeatureSet,
+    align_maps,
+    area_means,
+    centre_of_force,
+    pool_maps,
+    reduce_maps,
+)
 from texsense.posture.model import PostureModel
 
 __all__ = [
@@ -25,5 +32,7 @@ __all__ = [
     "class_distances",
     "loso",
     "make_classifier",
+    "pool_maps",
+    "reduce_maps",
     "sequential_forward_selection",
 ]

@@ -39,23 +39,28 @@ from scipy import ndimage
 
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
+from texsense.stats import centre_of_force_values
 
-__all__ = ["KINDS", "FeatureSet", "align_maps", "area_means", "centre_of_force"]
+__all__ = [
+    "KINDS",
+    "FeatureSet",
+    "align_maps",
+    "area_means",
+    "centre_of_force",
+    "pool_maps",
+    "reduce_maps",
+]
 
 #: The feature groups a :class:`FeatureSet` can hold.
 KINDS = ("elements", "centre", "areas4", "areas16", "back")
 
 
 def centre_of_force(frames: npt.ArrayLike, layout: Layout) -> np.ndarray:
-    """Centre of force (T, 2) in cm, weights pressure x element area; the centre of the
-    sensing area for an unloaded frame (so features stay finite)."""
-    v = np.clip(np.nan_to_num(np.asarray(frames, dtype=np.float64)), 0.0, None)
-    w = v * layout.area_cm2
-    total = w.sum(axis=1)
-    centre = layout.xy_cm.mean(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        xy = (w @ layout.xy_cm) / total[:, None]
-    xy[total <= 0] = centre
+    """Centre of force (T, 2) in cm (:func:`texsense.stats.centre_of_force_values`), but the
+    centre of the sensing area for an unloaded frame, so features stay finite."""
+    xy = centre_of_force_values(frames, layout)
+    unloaded = np.isnan(xy[:, 0])
+    xy[unloaded] = layout.xy_cm.mean(axis=0)
     return xy
 
 
@@ -93,6 +98,40 @@ def align_maps(maps: npt.ArrayLike, rotate: bool = False) -> np.ndarray:
             shifted = ndimage.rotate(shifted, -angle, reshape=False, order=1)
         out[k] = shifted
     return out
+
+
+def pool_maps(maps: npt.ArrayLike, k: int) -> np.ndarray:
+    """Means of k x k blocks of maps (T, rows, cols); k must divide both sides."""
+    m = np.asarray(maps, dtype=np.float64)
+    rows, cols = m.shape[1:]
+    if rows % k or cols % k:
+        raise ParameterError(f"pool {k} does not divide the {(rows, cols)} grid")
+    return m.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
+
+
+def reduce_maps(
+    frames: npt.ArrayLike,
+    layout: Layout,
+    *,
+    align: bool = False,
+    rotate: bool = False,
+    pool: int = 1,
+) -> tuple[np.ndarray, Layout]:
+    """Frames (T, N) of a grid layout aligned (:func:`align_maps`) and pooled
+    (:func:`pool_maps`), with the layout of the pooled grid — e.g. the thesis's 2 x 2
+    averaging of its 1024-element reference mat to 256 elements (§6.4.1)."""
+    shape = layout.shape
+    if shape is None:
+        raise ParameterError("align and pool need a grid layout")
+    maps = layout.to_grid(np.nan_to_num(np.asarray(frames, dtype=np.float64)), fill=0.0)
+    if align:
+        maps = align_maps(maps, rotate=rotate)
+    if pool == 1:
+        return layout.from_grid(maps), layout  # the layout's own elements (empty cells out)
+    maps = pool_maps(maps, pool)
+    pitch = layout.pitch_cm or (1.0, 1.0)
+    small = Layout.grid(*maps.shape[1:], pitch_cm=(pitch[0] * pool, pitch[1] * pool))
+    return maps.reshape(maps.shape[0], -1), small
 
 
 @dataclass(frozen=True)
@@ -149,19 +188,9 @@ class FeatureSet:
         return shape
 
     def _element_values(self, v: np.ndarray, layout: Layout) -> np.ndarray:
-        if not (self.align or self.pool > 1):
-            out = v
-        else:
-            rows, cols = self._check_grid(layout)
-            maps = layout.to_grid(v, fill=0.0)
-            if self.align:
-                maps = align_maps(maps, rotate=self.rotate)
-            if self.pool > 1:
-                k = self.pool
-                maps = maps.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
-                out = maps.reshape(maps.shape[0], -1)
-            else:
-                out = layout.from_grid(maps)
+        out = v
+        if self.align or self.pool > 1:
+            out, _ = reduce_maps(v, layout, align=self.align, rotate=self.rotate, pool=self.pool)
         return np.log1p(np.clip(out, 0.0, None)) if self.log else out
 
     def names(self, layout: Layout) -> list[str]:

@@ -122,19 +122,17 @@ class ErrorStudy:
         self.gamma = gamma
         self.n_test = n_test
         self._rng = np.random.default_rng(seed)
-        n_c = self.references.shape[0]
         train = np.repeat(self.references, n_train, axis=0)
         train = np.clip(train + self._rng.normal(0.0, train_noise, train.shape), 0.0, None)
         self.train_y = np.repeat(self.labels, n_train)
         self.train_X = self.features.transform(train, layout)
         self.model = make_classifier(classifier).fit(self.train_X, self.train_y)
-        self._n_classes = n_c
 
     # ------------------------------------------------------------------ test patterns
     def _transitions(self) -> tuple[np.ndarray, np.ndarray]:
         """(start, end) pattern pairs: n_test per posture, starting from the other postures
         in turn (§6.4.4, fig. 6.8)."""
-        n_c = self._n_classes
+        n_c = self.references.shape[0]
         starts, ends = [], []
         for c in range(n_c):
             others = [o for o in range(n_c) if o != c]

@@ -43,7 +43,6 @@ __all__ = [
     "Subject",
     "back_pressure",
     "posture_pressure",
-    "replace_labels",
     "seat_calibration",
     "simulate_session",
 ]
@@ -98,7 +97,7 @@ class Subject:
     """A sitting person.
 
     weight_kg scales the pressure (75 kg -> ischial peaks of 2.6 N/cm²), size the spacing of
-    the blobs, offset_cm the placement on the seat, style (16, 10) the relative deviation of
+    the blobs, offset_cm the placement on the seat, style (16, 9) the relative deviation of
     every posture parameter from the template.
     """
 
@@ -132,11 +131,11 @@ def posture_pressure(
     posture: int,
     subject: Subject,
     jitter_cm: tuple[float, float] = (0.0, 0.0),
-    seat_cm: tuple[float, float, float] | None = None,
+    seat_cm: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """True pressure (N/cm²) of ``subject`` in ``posture`` at the elements of ``layout``.
 
-    ``seat_cm`` = (x centre, y of the backrest, unused) of the seat; by default the centre
+    ``seat_cm`` = (x of the seat's centre, y of the backrest); by default the centre
     and the back edge of the layout's extent (so any layout over the same seat — the textile
     sensor or the reference mat — sees the same body)."""
     if posture not in _P:
@@ -150,7 +149,7 @@ def posture_pressure(
         x0, x1, _, y1 = layout.extent_cm
         cx, back = (x0 + x1) / 2, y1
     else:
-        cx, back = seat_cm[0], seat_cm[1]
+        cx, back = seat_cm
     k = subject.size
     scale = subject.weight_kg / 75.0
     it_y = back - 9.0 * k + dy
@@ -257,7 +256,7 @@ def simulate_session(
     total = segs[-1][1]
     ref = ReferenceMat(seed=mat_seed)
     x0, x1, _, y1 = layout.extent_cm
-    seat = ((x0 + x1) / 2, y1, 0.0)
+    seat = ((x0 + x1) / 2, y1)
 
     def run(times: np.ndarray, lay: Layout) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
         p = np.zeros((times.size, lay.n_elements))
@@ -295,28 +294,13 @@ def simulate_session(
     return SeatSession(
         subject=subject,
         truth=Recording(truth, t_tex, layout, "pressure", "N/cm2", labels=lab, meta=meta),
-        capacitance=replace_labels(scan.capacitance, lab),
+        capacitance=scan.capacitance.with_labels(lab),
         back=back,
         failed=scan.failed,
         reference=Recording(
             ref.read(ref_truth), t_ref, ref.layout, "pressure", "N/cm2", labels=ref_lab, meta=meta
         ),
         reference_back=ref_back,
-    )
-
-
-def replace_labels(rec: Recording, labels: dict[str, np.ndarray]) -> Recording:
-    """The recording with ``labels`` (same frames, times, layout, valid, meta)."""
-    return Recording(
-        rec.frames,
-        rec.times,
-        rec.layout,
-        rec.quantity,
-        rec.unit,
-        valid=rec.valid,
-        element_times=rec.element_times,
-        labels=labels,
-        meta=dict(rec.meta),
     )
 
 
