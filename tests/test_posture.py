@@ -12,6 +12,8 @@ from texsense.posture import (
     centre_of_force,
     class_distances,
     loso,
+    mirror_frames,
+    mirror_samples,
     sequential_forward_selection,
 )
 
@@ -99,6 +101,62 @@ def test_loso_never_trains_on_the_held_out_subject():
     assert sorted(report.per_subject) == ["0", "1", "2", "3", "4"]
     assert report.confusion.sum() == 30
     assert report.accuracy == pytest.approx(0.5)
+
+
+def test_loso_extra_samples_of_the_held_out_subject_stay_out():
+    groups = np.repeat(np.arange(5), 6)
+    X = np.c_[groups, np.zeros(30)]
+    y = np.tile([0, 1], 15)
+    # every subject's extra samples carry its own id: the spy would see it in training
+    extra = (np.c_[groups, np.ones(30)], y, groups.astype(str))
+    report = loso(X, y, groups.astype(str), _SubjectSpy(), extra=extra)
+    assert report.confusion.sum() == 30  # extra samples are never tested
+    with pytest.raises(ParameterError, match="features"):
+        loso(X, y, groups.astype(str), "lda", extra=(np.zeros((3, 5)), y[:3], groups[:3]))
+
+
+def test_mirror_frames_reverses_the_columns_and_checks_symmetry():
+    lay = Layout.grid(2, 3)
+    f = np.arange(12.0).reshape(2, 6)
+    m = mirror_frames(f, lay)
+    np.testing.assert_array_equal(m[0], [2, 1, 0, 5, 4, 3])
+    np.testing.assert_array_equal(mirror_frames(m, lay), f)
+    # a checkerboard of even width is not symmetric: a mirrored reading would land on a hole
+    board = Layout.grid(2, 4, active=(np.add.outer(np.arange(2), np.arange(4)) % 2 == 0))
+    with pytest.raises(ParameterError, match="symmetric"):
+        mirror_frames(np.zeros((1, board.n_elements)), board)
+    odd = Layout.grid(2, 3, active=(np.add.outer(np.arange(2), np.arange(3)) % 2 == 0))
+    g = np.arange(float(odd.n_elements))[None]
+    np.testing.assert_array_equal(mirror_frames(mirror_frames(g, odd), odd), g)
+
+
+def test_mirror_samples_swap_labels_and_skip_those_without_a_partner():
+    lay = Layout.grid(1, 2)
+    f = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [5.0, 0.0]])
+    y = np.array([2, 3, 1, 7])  # 7 has no mirror image
+    m, y_m, src = mirror_samples(f, y, lay, {"2": "3", "3": "2", 1: 1})
+    np.testing.assert_array_equal(src, [0, 1, 2])
+    np.testing.assert_array_equal(y_m, [3, 2, 1])
+    assert y_m.dtype == y.dtype
+    np.testing.assert_array_equal(m, [[0, 1], [1, 0], [1, 1]])
+
+
+def test_a_model_trained_on_one_side_recognises_the_other_through_mirroring():
+    rng = np.random.default_rng(1)
+    lay = Layout.grid(4, 6)
+    left = np.zeros((40, 4, 6))
+    left[:, 1:3, 0:2] = rng.uniform(1, 2, (40, 1, 1))
+    middle = np.zeros((40, 4, 6))
+    middle[:, 1:3, 2:4] = rng.uniform(1, 2, (40, 1, 1))
+    frames = lay.from_grid(np.concatenate([left, middle]))
+    y = np.repeat(["left", "middle"], 40)
+    right_side = lay.from_grid(left[:, :, ::-1])
+    plain = PostureModel(FeatureSet(("elements",)), lay, "logistic").fit(frames, y)
+    assert not np.any(plain.predict(right_side) == "right")  # never saw "right"
+    table = {"left": "right", "right": "left", "middle": "middle"}
+    mirrored = PostureModel(FeatureSet(("elements",)), lay, "logistic", mirror=table).fit(frames, y)
+    assert np.all(mirrored.predict(right_side) == "right")
+    assert np.all(mirrored.predict(frames) == y)
 
 
 def test_loso_reports_per_subject_and_the_worst_one():

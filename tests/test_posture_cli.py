@@ -76,3 +76,19 @@ def test_study_writes_report_figure_and_numbers(labelled, tmp_path):
     page = (out / "report.html").read_text()
     assert "study.png" in page and "<table>" in page
     assert (out / "study.png").stat().st_size > 10_000
+
+
+def test_mirror_option_trains_on_mirrored_frames_and_checks_its_map(labelled, tmp_path, capsys):
+    args = ["posture", "evaluate", str(labelled), "--where", "hold", "--classifier", "lda"]
+    assert main([*args, "--mirror", "1:3,2", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["mirror"] == {"1": "3", "3": "1", "2": "2"}
+    assert report["confusion"] and sum(map(sum, report["confusion"])) == 144  # tested: originals
+    assert main([*args, "--mirror"]) != 0  # this file declares no map
+    assert "declares no mirror map for label 'posture'" in capsys.readouterr().err
+    assert main([*args, "--mirror", "1:3,1:2"]) != 0
+    assert "two mirror images" in capsys.readouterr().err
+    out = tmp_path / "m.joblib"
+    assert main(["posture", "train", str(labelled), "--where", "hold", "--mirror", "1:3,2",
+                 "-o", str(out)]) == 0  # fmt: skip
+    assert PostureModel.load(out).mirror == {"1": "3", "3": "1", "2": "2"}

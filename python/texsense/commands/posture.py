@@ -14,7 +14,7 @@ import numpy as np
 from texsense.exceptions import ParameterError
 from texsense.io import load
 from texsense.posture.evaluate import CLASSIFIERS
-from texsense.posture.features import KINDS, FeatureSet
+from texsense.posture.features import KINDS, FeatureSet, mirror_samples
 from texsense.recording import Recording
 
 
@@ -37,6 +37,10 @@ def _feature_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rotate", action="store_true", help="with --align: turn to the body axis")
     p.add_argument("--log", action="store_true", help="log(1 + value) of element values")
     p.add_argument("--pool", type=int, default=1, help="mean of N x N element blocks")
+    p.add_argument("--mirror", nargs="?", const="auto", metavar="MAP",
+                   help="also train on left-right mirrored frames; MAP names each label's mirror "
+                   "image ('2:3,4:6,1' = 2 and 3 swap, 4 and 6 swap, 1 is its own), default: "
+                   "the map the recording declares (PMD does)")  # fmt: skip
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -105,6 +109,31 @@ def _feature_set(args: argparse.Namespace) -> FeatureSet:
     return FeatureSet(kinds, align=args.align, rotate=args.rotate, log=args.log, pool=args.pool)
 
 
+def _mirror_map(args: argparse.Namespace, rec: Recording) -> dict[str, str] | None:
+    """The label -> mirror-image map of ``--mirror`` (None without the option)."""
+    if args.mirror is None:
+        return None
+    if args.mirror == "auto":
+        declared = rec.meta.get("mirror", {})
+        if args.label not in declared:
+            raise ParameterError(
+                f"{args.recording} declares no mirror map for label {args.label!r}; "
+                "pass one: --mirror '2:3,4:6,1'"
+            )
+        return {str(k): str(v) for k, v in declared[args.label].items()}
+    table: dict[str, str] = {}
+    for item in args.mirror.split(","):
+        a, sep, b = (part.strip() for part in item.partition(":"))
+        if not a or (sep and not b):
+            raise ParameterError(f"--mirror: cannot read {item!r} (expected A:B or A)")
+        b = b if sep else a
+        for k, v in ((a, b), (b, a)):
+            if table.get(k, v) != v:
+                raise ParameterError(f"--mirror: {k!r} has two mirror images")
+            table[k] = v
+    return table
+
+
 def _back(args: argparse.Namespace, rec: Recording, fs: FeatureSet, idx: np.ndarray) -> Any:
     if "back" not in fs.kinds:
         return None
@@ -122,10 +151,19 @@ def run_evaluate(args: argparse.Namespace) -> int:
         raise ParameterError(f"{args.recording}: no label {args.group!r} naming the subjects")
     groups = np.asarray(rec.labels[args.group])[idx]
     fs = _feature_set(args)
-    X = fs.transform(rec.frames[idx], rec.layout, _back(args, rec, fs, idx))
-    report = loso(X, y, groups, args.classifier, show_progress=not args.json)
+    back = _back(args, rec, fs, idx)
+    X = fs.transform(rec.frames[idx], rec.layout, back)
+    extra = None
+    mirror = _mirror_map(args, rec)
+    if mirror is not None:
+        flipped, y_m, src = mirror_samples(rec.frames[idx], y.astype(str), rec.layout, mirror)
+        b = None if back is None else back[src]
+        y_m = y_m.astype(y.dtype) if src.size else y[:0]
+        extra = (fs.transform(flipped, rec.layout, b), y_m, groups[src])
+    report = loso(X, y, groups, args.classifier, extra=extra, show_progress=not args.json)
     if args.json:
         print(json.dumps({"classifier": args.classifier, "frames": int(idx.size),
+                          "mirror": mirror,
                           "features": fs.to_dict(), **report.to_dict()}, indent=1))  # fmt: skip
         return 0
     print(
@@ -149,7 +187,7 @@ def run_train(args: argparse.Namespace) -> int:
 
     rec, idx, y = _frames(args)
     fs = _feature_set(args)
-    model = PostureModel(fs, rec.layout, args.classifier)
+    model = PostureModel(fs, rec.layout, args.classifier, mirror=_mirror_map(args, rec))
     model.fit(rec.frames[idx], y, _back(args, rec, fs, idx))
     model.save(args.output)
     print(f"trained {args.classifier} on {idx.size} frames, {len(model.classes_)} classes "  # type: ignore[arg-type]

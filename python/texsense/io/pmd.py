@@ -22,7 +22,7 @@ from texsense.io._text import read_lines
 from texsense.layout import Layout
 from texsense.recording import Recording
 
-__all__ = ["POSTURES", "POSTURE_CLASS", "is_pmd_path", "read_pmd"]
+__all__ = ["MIRROR_CLASS", "MIRROR_POSTURE", "POSTURES", "POSTURE_CLASS", "is_pmd_path", "read_pmd"]
 
 ROWS, COLS = 64, 32
 #: Frames at each end of a file that the publishers flag as unreliable.
@@ -57,6 +57,18 @@ POSTURE_CLASS: dict[int, str] = {
     **dict.fromkeys((2, 4, 5, 13), "right"),
     **dict.fromkeys((3, 6, 7, 14), "left"),
 }
+
+#: The mirror image (left and right swapped) of every posture file, for training on mirrored
+#: maps (:func:`texsense.posture.features.mirror_samples`). 11 and 12 are the two sides'
+#: knee-up variants. Checked on the data (benchmarks/posture_pmd.py prints it): a classifier
+#: trained on the original maps of the other subjects labels the mirrored maps of 15 of the 17
+#: files mostly as the file named here; the mirrored 60° wedges (5, 7) go about equally to the
+#: other side's 30° and 60° wedges, the mirrored 45° incline (16) to the neighbouring inclines.
+MIRROR_POSTURE: dict[int, int] = {
+    **{p: p for p in (1, 8, 9, 10, 15, 16, 17)},
+    **{2: 3, 3: 2, 4: 6, 6: 4, 5: 7, 7: 5, 11: 12, 12: 11, 13: 14, 14: 13},
+}
+MIRROR_CLASS: dict[str, str] = {"supine": "supine", "right": "left", "left": "right"}
 
 _SUBJECT = re.compile(r"^S(\d+)$")
 _POSTURE_FILE = re.compile(r"^(\d+)\.txt$")
@@ -188,6 +200,10 @@ def read_pmd(path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM) -> Recordi
         "frame_period_nominal_s": FRAME_PERIOD_S,
         "pitch_cm_assumed": pitch_cm,
         "postures": {str(k): v for k, v in POSTURES.items()},
+        "mirror": {
+            "posture": {str(k): v for k, v in MIRROR_POSTURE.items()},
+            "posture_class": MIRROR_CLASS,
+        },
         "files": [str(f) for _, f in jobs],
     }
     if info_file is not None:

@@ -16,6 +16,8 @@ from texsense.posture.features import (
     align_maps,
     area_means,
     centre_of_force,
+    mirror_frames,
+    mirror_samples,
     pool_maps,
     reduce_maps,
 )
@@ -32,6 +34,8 @@ __all__ = [
     "class_distances",
     "loso",
     "make_classifier",
+    "mirror_frames",
+    "mirror_samples",
     "pool_maps",
     "reduce_maps",
     "sequential_forward_selection",

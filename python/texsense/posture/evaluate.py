@@ -131,7 +131,7 @@ class LosoReport:
 
 
 def _check_xy(
-    X: npt.ArrayLike, y: npt.ArrayLike, groups: npt.ArrayLike
+    X: npt.ArrayLike, y: npt.ArrayLike, groups: npt.ArrayLike, min_groups: int = 2
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Xa = np.asarray(X, dtype=np.float64)
     ya = np.asarray(y)
@@ -142,7 +142,7 @@ def _check_xy(
         )
     if not np.all(np.isfinite(Xa)):
         raise ParameterError("features contain NaN or infinite values")
-    if np.unique(ga).size < 2:
+    if np.unique(ga).size < min_groups:
         raise ParameterError("leave-one-subject-out needs at least two subjects (groups)")
     return Xa, ya, ga
 
@@ -153,6 +153,7 @@ def loso(
     groups: npt.ArrayLike,
     classifier: str | BaseEstimator = "naive-bayes",
     *,
+    extra: tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike] | None = None,
     show_progress: bool = False,
 ) -> LosoReport:
     """Leave-one-subject-out accuracy: for every subject, train on the others and test on it.
@@ -168,10 +169,23 @@ def loso(
     classifier : str or estimator
         A name from :data:`CLASSIFIERS` or an unfitted scikit-learn estimator (cloned per
         fold).
+    extra : (X, y, groups), optional
+        Additional training samples, e.g. mirrored copies
+        (:func:`texsense.posture.features.mirror_samples`), each belonging to a subject: they
+        join the training set of every fold whose held-out subject is another one, and are
+        never tested.
     show_progress : bool
         A progress bar over the subjects.
     """
     Xa, ya, ga = _check_xy(X, y, groups)
+    if extra is None:
+        Xe, ye, ge = Xa[:0], ya[:0], ga[:0]
+    else:
+        Xe, ye, ge = _check_xy(*extra, min_groups=0)
+        if Xe.shape[1] != Xa.shape[1]:
+            raise ParameterError(
+                f"extra samples have {Xe.shape[1]} features, the samples {Xa.shape[1]}"
+            )
     template = make_classifier(classifier) if isinstance(classifier, str) else classifier
     labels = list(np.unique(ya))
     pred = np.empty_like(ya)
@@ -180,7 +194,11 @@ def loso(
     it = progress(subjects, total=len(subjects), desc="leave one subject out", unit="subject")
     for s in it if show_progress else subjects:
         test = ga == s
-        model = clone(template).fit(Xa[~test], ya[~test])
+        train_extra = ge != s
+        model = clone(template).fit(
+            np.vstack([Xa[~test], Xe[train_extra]]),
+            np.concatenate([ya[~test], ye[train_extra]]),
+        )
         pred[test] = model.predict(Xa[test])
         per_subject[str(s)] = float(np.mean(pred[test] == ya[test]))
     index = {v: i for i, v in enumerate(labels)}

@@ -47,6 +47,8 @@ __all__ = [
     "align_maps",
     "area_means",
     "centre_of_force",
+    "mirror_frames",
+    "mirror_samples",
     "pool_maps",
     "reduce_maps",
 ]
@@ -98,6 +100,54 @@ def align_maps(maps: npt.ArrayLike, rotate: bool = False) -> np.ndarray:
             shifted = ndimage.rotate(shifted, -angle, reshape=False, order=1)
         out[k] = shifted
     return out
+
+
+def mirror_frames(frames: npt.ArrayLike, layout: Layout) -> np.ndarray:
+    """Frames (T, N) of a grid layout mirrored left to right (the columns reversed).
+
+    A body lying on its right side mirrored is a body lying on its left side: with the labels
+    swapped accordingly (:func:`mirror_samples`) this doubles the training data of a classifier
+    and teaches it that a bed or seat has no preferred side. Raises ``ParameterError`` when the
+    layout is not a grid or its elements are not placed symmetrically (every mirrored element
+    must land on an element).
+    """
+    shape = layout.shape
+    if shape is None:
+        raise ParameterError("mirroring needs a grid layout")
+    v = np.asarray(frames, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != layout.n_elements:
+        raise ParameterError(
+            f"frames must have shape (T, {layout.n_elements}) for this layout, got {v.shape}"
+        )
+    occupied = ~np.isnan(layout.to_grid(np.zeros(layout.n_elements)))
+    if not np.array_equal(occupied, occupied[:, ::-1]):
+        raise ParameterError(
+            "the layout's elements are not placed symmetrically left to right; mirroring "
+            "would move readings onto empty cells"
+        )
+    return layout.from_grid(layout.to_grid(v, fill=0.0)[:, :, ::-1])
+
+
+def mirror_samples(
+    frames: npt.ArrayLike,
+    labels: npt.ArrayLike,
+    layout: Layout,
+    mapping: dict[Any, Any],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mirrored copies of the frames whose label has a mirror image in ``mapping``.
+
+    ``mapping`` names, for every label that may be mirrored, the label of its mirror image
+    (``{"left": "right", "right": "left", "supine": "supine"}``); frames with other labels
+    (an asymmetric posture without a partner) are not copied. Keys are compared as strings,
+    so a mapping read back from JSON works for integer labels. Returns the mirrored frames,
+    their labels and the indices of the frames they were made from.
+    """
+    y = np.asarray(labels)
+    table = {str(k): v for k, v in mapping.items()}
+    index = np.flatnonzero([str(v) in table for v in y])
+    mirrored = mirror_frames(np.asarray(frames)[index], layout)
+    new = np.array([table[str(v)] for v in y[index]], dtype=object)
+    return mirrored, new.astype(y.dtype) if index.size else y[:0], index
 
 
 def pool_maps(maps: npt.ArrayLike, k: int) -> np.ndarray:

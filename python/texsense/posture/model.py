@@ -33,7 +33,7 @@ from texsense import __version__
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
 from texsense.posture.evaluate import make_classifier
-from texsense.posture.features import FeatureSet
+from texsense.posture.features import FeatureSet, mirror_samples
 
 __all__ = ["FORMAT", "VERSION", "PostureModel"]
 
@@ -54,6 +54,9 @@ class PostureModel:
         A name from :data:`texsense.posture.evaluate.CLASSIFIERS` or an unfitted estimator.
     columns : list of int, optional
         Use only these feature columns (e.g. from forward selection).
+    mirror : dict, optional
+        Train also on left-right mirrored frames, labelled by this map from a label to the
+        label of its mirror image (:func:`texsense.posture.features.mirror_samples`).
     """
 
     def __init__(
@@ -62,6 +65,7 @@ class PostureModel:
         layout: Layout,
         classifier: str | BaseEstimator = "naive-bayes",
         columns: list[int] | None = None,
+        mirror: dict[Any, Any] | None = None,
     ) -> None:
         self.features = features
         self.layout = layout
@@ -70,6 +74,7 @@ class PostureModel:
         )
         self.estimator = make_classifier(classifier) if isinstance(classifier, str) else classifier
         self.columns = None if columns is None else [int(c) for c in columns]
+        self.mirror = None if mirror is None else {str(k): v for k, v in mirror.items()}
         self.classes_: np.ndarray | None = None
 
     def features_of(self, frames: npt.ArrayLike, back: npt.ArrayLike | None = None) -> np.ndarray:
@@ -80,11 +85,17 @@ class PostureModel:
     def fit(
         self, frames: npt.ArrayLike, labels: npt.ArrayLike, back: npt.ArrayLike | None = None
     ) -> PostureModel:
-        """Train on frames (T, N) with one label per frame."""
+        """Train on frames (T, N) with one label per frame (and their mirror images when the
+        model has a ``mirror`` map)."""
         y = np.asarray(labels)
         X = self.features_of(frames, back)
         if y.shape != (X.shape[0],):
             raise ParameterError(f"expected {X.shape[0]} labels, got shape {y.shape}")
+        if self.mirror is not None:
+            flipped, y_m, source = mirror_samples(frames, y, self.layout, self.mirror)
+            b = None if back is None else np.asarray(back)[source]
+            X = np.vstack([X, self.features_of(flipped, b)])
+            y = np.concatenate([y, y_m])
         self.estimator.fit(X, y)
         self.classes_ = np.unique(y)
         return self
@@ -94,6 +105,21 @@ class PostureModel:
         if self.classes_ is None:
             raise ParameterError("the posture model is not trained: call fit() first")
         return self.estimator.predict(self.features_of(frames, back))
+
+    def predict_with_confidence(
+        self, frames: npt.ArrayLike, back: npt.ArrayLike | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The posture of every frame and the classifier's probability for it (NaN for a
+        classifier without probabilities)."""
+        label = self.predict(frames, back)
+        proba = getattr(self.estimator, "predict_proba", None)
+        if proba is None:
+            return label, np.full(label.shape, np.nan)
+        try:
+            p = proba(self.features_of(frames, back))
+        except AttributeError:  # e.g. an SVC trained without probability=True
+            return label, np.full(label.shape, np.nan)
+        return label, p.max(axis=1)
 
     def save(self, path: str | Path) -> Path:
         """Write the model (joblib, versioned envelope)."""
@@ -110,6 +136,7 @@ class PostureModel:
             "layout": self.layout.to_dict(),
             "classifier": self.classifier_name,
             "columns": self.columns,
+            "mirror": self.mirror,
             "classes": self.classes_,
             "estimator": self.estimator,
         }
@@ -144,6 +171,7 @@ class PostureModel:
             Layout.from_dict(d["layout"]),
             d["estimator"],
             d.get("columns"),
+            d.get("mirror"),
         )
         model.classifier_name = d["classifier"]
         model.classes_ = np.asarray(d["classes"])

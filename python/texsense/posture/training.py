@@ -1,0 +1,38 @@
+"""Ready-made posture models: the one the live monitor uses on the virtual seat."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from texsense.posture.features import FeatureSet
+from texsense.posture.model import PostureModel
+
+__all__ = ["train_virtual_seat_model"]
+
+
+def train_virtual_seat_model(
+    subjects: int = 9,
+    seed: int = 7,
+    classifier: str = "lda",
+    features: FeatureSet | None = None,
+) -> PostureModel:
+    """A posture model for the virtual seat (labels: the names of the 16 postures of §6.2.2),
+    trained on the compensated pressure of ``subjects`` simulated people (two rounds each, no
+    long rest) — none of them the person the monitor's virtual source simulates. Linear
+    discriminant analysis (shrinkage) on the normalised element values, centre of force and 4 +
+    16 areas."""
+    from texsense.pipeline import Pipeline
+    from texsense.sim.seated import POSTURES, Subject, seat_calibration, simulate_session
+
+    cal = seat_calibration()
+    frames, labels = [], []
+    for i in range(subjects):
+        s = simulate_session(Subject.random(i, seed=seed), rounds=2, rest_s=0.0, seed=seed + i)
+        lay = s.truth.layout
+        out = Pipeline(cal, lay).run(s.capacitance).frames.astype(np.float64)
+        hold = s.truth.labels["hold"]
+        frames.append(np.nan_to_num(out[hold]))
+        labels.append([POSTURES[int(p)] for p in s.truth.labels["posture"][hold]])
+    fs = features or FeatureSet(("elements", "centre", "areas4", "areas16"))
+    model = PostureModel(fs, lay, classifier)
+    return model.fit(np.vstack(frames), np.concatenate(labels))
