@@ -7,10 +7,11 @@ from texsense.commands import (
     drift,
     hysteresis,
     info,
+    monitor,
     pipeline,
     plot,
     posture,
     simulate,
 )
 
-COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture)
+COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor)

@@ -1,0 +1,185 @@
+"""``texsense monitor``: the live dashboard (docs/monitor.md)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import Any
+
+from texsense.exceptions import ParameterError
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``monitor`` command."""
+    p = sub.add_parser(
+        "monitor",
+        help="live pressure map, posture and pressure-injury alerts in the browser",
+        description="Read a sensor live, compensate it, record it and show it in a web "
+        "dashboard. Without --source: a simulated person on the virtual 96-element seat.",
+    )
+    p.add_argument(
+        "--source",
+        default="virtual",
+        help="virtual | replay:FILE | serial:PORT | iio:DEVICE_DIR | mqtt:HOST[:PORT]",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="virtual seat / replay: times faster than real time (0: as fast as possible)",
+    )
+    p.add_argument(
+        "--grid",
+        default=None,
+        metavar="ROWSxCOLS",
+        help="serial/iio/mqtt: the sensor's grid (e.g. 15x16)",
+    )
+    p.add_argument("--calibration", type=Path, help="mat calibration (texsense pipeline calibrate)")
+    p.add_argument("--model", type=Path, help="posture model (texsense posture train)")
+    p.add_argument(
+        "--no-posture",
+        action="store_true",
+        help="no posture classification (the virtual seat trains one otherwise)",
+    )
+    p.add_argument("--threshold", type=float, default=32.0, help="exposure threshold (default 32)")
+    p.add_argument("--threshold-unit", default="mmHg", help="its unit (default mmHg)")
+    p.add_argument(
+        "--reposition-min",
+        type=float,
+        default=20.0,
+        help="reposition alert after this many minutes of exposure (5-120, default 20)",
+    )
+    p.add_argument(
+        "--offload-min",
+        type=float,
+        default=1.0,
+        help="minutes below the threshold that reset the exposure (default 1)",
+    )
+    p.add_argument("--record", action="store_true", help="record from the start")
+    p.add_argument("--record-dir", type=Path, default=Path("recordings"))
+    p.add_argument(
+        "--db",
+        type=Path,
+        default=Path("texsense-monitor.sqlite"),
+        help="SQLite file of sessions and events",
+    )
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8765)
+    p.add_argument(
+        "--token",
+        default=None,
+        help="required on every request; mandatory when binding beyond loopback",
+    )
+    p.set_defaults(run=run_monitor)
+
+
+def _grid(args: argparse.Namespace) -> Any:
+    from texsense.layout import Layout
+
+    if not args.grid:
+        raise ParameterError(f"--source {args.source.split(':')[0]} needs --grid ROWSxCOLS")
+    try:
+        rows, cols = (int(v) for v in args.grid.lower().split("x"))
+    except ValueError:
+        raise ParameterError(f"--grid: expected ROWSxCOLS, got {args.grid!r}") from None
+    return Layout.grid(rows, cols)
+
+
+def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
+    """The source named by ``--source`` and its default calibration (or None)."""
+    from texsense.monitor import sources
+
+    kind, _, rest = args.source.partition(":")
+    if kind == "virtual":
+        from texsense.sim.seated import seat_calibration
+
+        return sources.VirtualSeatSource(speed=args.speed), seat_calibration()
+    if kind == "replay":
+        return sources.ReplaySource(Path(rest), speed=args.speed, loop=True), None
+    if kind == "serial":
+        return sources.SerialSource(rest, _grid(args)), None
+    if kind == "iio":
+        return sources.IIOSource(rest, _grid(args)), None
+    if kind == "mqtt":
+        host, _, port = rest.partition(":")
+        return sources.MQTTSource(host, _grid(args), port=int(port or 1883)), None
+    raise ParameterError(f"unknown source {args.source!r} (virtual, replay:, serial:, iio:, mqtt:)")
+
+
+def build_monitor(args: argparse.Namespace) -> Any:
+    """Source, pipeline, tracker, model, store -> a Monitor."""
+    from texsense.calibration import MatCalibration
+    from texsense.monitor import EventStore, ExposureTracker, Monitor
+    from texsense.pipeline import Pipeline
+    from texsense.posture import PostureModel
+
+    source, calibration = make_source(args)
+    if args.calibration is not None:
+        calibration = MatCalibration.load(args.calibration)
+    pipeline = None
+    if source.quantity == "capacitance":
+        if calibration is None:
+            raise ParameterError("a capacitance source needs --calibration")
+        pipeline = Pipeline(calibration, source.layout)
+    tracker = ExposureTracker(
+        source.layout,
+        threshold=args.threshold,
+        unit=args.threshold_unit,
+        reposition_min=args.reposition_min,
+        offload_min=args.offload_min,
+    )
+    model = PostureModel.load(args.model) if args.model else None
+    if model is None and args.source == "virtual" and not args.no_posture:
+        model = virtual_seat_model()
+    monitor = Monitor(
+        source,
+        pipeline=pipeline,
+        tracker=tracker,
+        posture_model=model,
+        store=EventStore(args.db),
+        record_dir=args.record_dir,
+    )
+    if args.record:
+        monitor.start_recording()
+    return monitor
+
+
+def virtual_seat_model() -> Any:
+    """A posture model for the virtual seat, trained on simulated sessions of other people
+    (compensated pressure, §6.5.2), cached under ~/.cache/texsense."""
+    import os
+
+    from texsense.posture import PostureModel
+
+    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
+    path = cache / "virtual-seat-posture-v2.joblib"
+    if path.is_file():
+        try:
+            return PostureModel.load(path)
+        except Exception as e:  # a stale or broken cache is rebuilt, and said so
+            logging.getLogger("texsense.monitor").warning("rebuilding %s: %s", path, e)
+    from texsense.posture.training import train_virtual_seat_model
+
+    cache.mkdir(parents=True, exist_ok=True)
+    model = train_virtual_seat_model()
+    model.save(path)
+    return model
+
+
+def run_monitor(args: argparse.Namespace) -> int:
+    """Run ``texsense monitor``."""
+    from texsense.monitor.server import is_loopback, serve
+
+    if not is_loopback(args.host) and not args.token:
+        raise ParameterError(
+            f"binding {args.host} exposes the monitor beyond this machine: pass --token"
+        )
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    monitor = build_monitor(args)
+    url = f"http://{'127.0.0.1' if args.host in ('0.0.0.0', '::') else args.host}:{args.port}/"
+    if args.token:
+        url += f"?token={args.token}"
+    print(f"texsense monitor: {monitor.source.name} -> {url}", flush=True)
+    serve(monitor, host=args.host, port=args.port, token=args.token)
+    return 0

@@ -1,0 +1,97 @@
+import numpy as np
+import pytest
+
+from texsense import Layout
+from texsense.exceptions import ParameterError
+from texsense.monitor import EventStore, ExposureTracker
+
+
+def run(tracker, schedule, dt=10.0):
+    """schedule: list of (seconds, pressure vector); returns all events."""
+    events = []
+    t = 0.0 if tracker._last_t is None else tracker._last_t + dt
+    for seconds, p in schedule:
+        for _ in range(int(seconds / dt)):
+            events += tracker.step(t, np.asarray(p, float))
+            t += dt
+    return events
+
+
+def test_threshold_in_any_unit_and_exposure_accumulates_only_above_it():
+    lay = Layout.grid(1, 3)
+    tr = ExposureTracker(lay, threshold=4.266, unit="kPa", reposition_min=5)  # = 32 mmHg
+    assert tr.threshold_ncm2 == pytest.approx(0.4266)
+    run(tr, [(120, [0.5, 0.40, 0.0])])  # 0.5 above, 0.40 just below
+    np.testing.assert_allclose(tr.exposure_s, [110.0, 0.0, 0.0])  # first step has dt = 0
+
+
+def test_short_relief_does_not_reset_but_offloading_does():
+    lay = Layout.grid(1, 1)
+    tr = ExposureTracker(lay, reposition_min=20, offload_min=1)
+    run(tr, [(600, [1.0]), (30, [0.0]), (300, [1.0])])
+    # 30 s of relief kept the 590 s before (the first frame has no interval) and 300 s added
+    assert tr.exposure_s[0] == pytest.approx(890.0)
+    run(tr, [(70, [0.0])])
+    assert tr.exposure_s[0] == 0.0  # 1 min offloaded: reset
+
+
+def test_reposition_alert_opens_once_acknowledge_and_clear():
+    lay = Layout.grid(2, 2)
+    tr = ExposureTracker(lay, reposition_min=5, offload_min=1)
+    seated = [1.0, 1.0, 0.0, 0.0]
+    events = run(tr, [(290, seated)])
+    assert [e.kind for e in events] == ["seated"]
+    events = run(tr, [(600, seated)])
+    kinds = [e.kind for e in events]
+    assert kinds.count("reposition") == 1  # not again while open
+    alert = tr.open_alert
+    assert alert.elements == [0, 1] and alert.active
+    ack = tr.acknowledge(alert.id, 900.0)
+    assert ack.kind == "acknowledged" and not alert.active and tr.open_alert is alert
+    events = run(tr, [(80, [0.0] * 4)])
+    assert [e.kind for e in events] == ["left", "cleared"]
+    assert tr.open_alert is None and alert.cleared_t is not None
+    with pytest.raises(ParameterError, match="no alert"):
+        tr.acknowledge(99, 1.0)
+
+
+def test_regions_track_mean_pressure():
+    lay = Layout.grid(2, 2)
+    regions = {"left": [0, 2], "right": [1, 3]}
+    tr = ExposureTracker(lay, regions=regions, reposition_min=5)
+    events = run(tr, [(400, [1.0, 0.2, 1.0, 0.9])])  # right mean 0.55 N/cm² > 32 mmHg
+    assert events[-1].kind == "reposition" and events[-1].detail["where"] == ["left", "right"]
+    np.testing.assert_allclose(tr.exposure_map(), [390.0] * 4)  # 40 steps, the first dt = 0
+
+
+def test_bad_parameters_are_named():
+    lay = Layout.grid(1, 2)
+    with pytest.raises(ParameterError, match="5-120 min"):
+        ExposureTracker(lay, reposition_min=3)
+    with pytest.raises(ParameterError, match="not a pressure unit"):
+        ExposureTracker(lay, unit="pF")
+    with pytest.raises(ParameterError, match="threshold"):
+        ExposureTracker(lay, threshold=-1)
+    tr = ExposureTracker(lay)
+    with pytest.raises(ParameterError, match="expected 2"):
+        tr.step(0.0, np.zeros(3))
+    tr.step(5.0, np.zeros(2))
+    with pytest.raises(ParameterError, match="backwards"):
+        tr.step(4.0, np.zeros(2))
+
+
+def test_event_store_keeps_sessions_and_events(tmp_path):
+    from texsense.monitor import Event
+
+    path = tmp_path / "m.sqlite"
+    store = EventStore(path)
+    sid = store.start_session("test")
+    store.add_event(sid, Event("reposition", 10.0, 1, {"where": ["3"]}))
+    store.set_recording(sid, ["a.h5"])
+    store.end_session(sid)
+    store.close()
+    again = EventStore(path)  # a new process sees it all
+    (s,) = again.sessions()
+    assert s["source"] == "test" and s["recordings"] == ["a.h5"] and s["ended"] is not None
+    assert again.events(kind="reposition")[0]["detail"] == {"where": ["3"]}
+    assert again.events(kind="cleared") == []

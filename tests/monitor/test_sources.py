@@ -1,0 +1,191 @@
+import asyncio
+import json
+import random
+
+import numpy as np
+import pytest
+
+from texsense import Layout, Recording
+from texsense.exceptions import FormatError
+from texsense.monitor import IIOSource, MQTTSource, ReplaySource, SerialSource, VirtualSeatSource
+from texsense.monitor.protocol import (
+    ProtocolError,
+    format_serial_line,
+    parse_mqtt_payload,
+    parse_serial_line,
+)
+
+
+def first(source, n):
+    async def go():
+        out = []
+        async for f in source.frames():
+            out.append(f)
+            if len(out) == n:
+                return out
+        return out
+
+    return asyncio.run(go())
+
+
+def test_serial_line_round_trip_and_errors():
+    vals = [1.5, np.nan, 3.25]
+    f = parse_serial_line(format_serial_line(7, 2_000_000, 1000, vals), 3)
+    assert f.seq == 7
+    np.testing.assert_allclose(f.element_times, [2.0, 2.001, 2.002])
+    np.testing.assert_array_equal(np.isnan(f.values), [False, True, False])
+    assert parse_serial_line("# comment", 3) is None and parse_serial_line("  ", 3) is None
+    for line, msg in [
+        ("F,1,2,3,1,2", "expected 3 values, got 2"),
+        ("F,1,2,3,1,x,2", "value 2 is not a number"),
+        ("F,1,2,3,1,inf,2", "not finite"),
+        ("G,1,2,3,1,2,3", "unknown record type"),
+        ("F,1,2,3,1,2,3*00", "checksum mismatch"),
+        ("F,-1,2,3,1,2,3", ">= 0"),
+        (b"F,1,2,3,\xff,2,3", "not ASCII"),
+    ]:
+        with pytest.raises(ProtocolError, match=msg):
+            parse_serial_line(line, 3)
+
+
+def test_mqtt_payload_and_errors():
+    f = parse_mqtt_payload(json.dumps({"seq": 1, "t": 2.0, "dt": 0.5, "values": [1, None]}), 2)
+    np.testing.assert_allclose(f.element_times, [2.0, 2.5])
+    assert np.isnan(f.values[1]) and f.unit == "pF"
+    for payload, msg in [
+        (b"{", "not JSON"),
+        (b"[]", "JSON object"),
+        (json.dumps({"t": 1, "values": [1, 2]}), "lacks 'seq'"),
+        (json.dumps({"seq": 1, "t": 1, "values": [1]}), "list of 2"),
+        (json.dumps({"seq": 1, "t": 1, "values": [1, "a"]}), "value 2"),
+        (json.dumps({"seq": 1, "t": 1, "values": [1, 2], "unit": "furlong"}), "unknown unit"),
+        (json.dumps({"seq": 1, "t": 1, "values": [1, 2], "unit": "mm"}), "neither"),
+        (json.dumps({"seq": True, "t": 1, "values": [1, 2]}), "'seq'"),
+    ]:
+        with pytest.raises(ProtocolError, match=msg):
+            parse_mqtt_payload(payload, 2)
+
+
+def random_line(rng):
+    kind = rng.random()
+    if kind < 0.2:
+        return bytes(rng.getrandbits(8) for _ in range(rng.randrange(0, 80)))
+    good = format_serial_line(rng.randrange(100), rng.randrange(10**6), 500, [1.0, 2.0, 3.0])
+    chars = list(good)
+    for _ in range(rng.randrange(1, 4)):  # mutate a few characters
+        i = rng.randrange(len(chars))
+        chars[i] = rng.choice(",*F-.e0123456789abc \t")
+    return "".join(chars).encode()
+
+
+class FakeSerial:
+    """A pySerial-like device fed from a list of lines."""
+
+    def __init__(self, lines):
+        self.lines = list(lines)
+
+    def readline(self):
+        if not self.lines:
+            raise EOFError
+        return self.lines.pop(0) + b"\n"
+
+    def close(self):
+        pass
+
+
+def test_fuzzed_serial_lines_are_counted_and_skipped_and_good_frames_pass():
+    rng = random.Random(0)
+    lines = []
+    for k in range(3000):
+        lines.append(random_line(rng))
+        if k % 100 == 0:
+            lines.append(format_serial_line(k, k * 1000, 10, [1.0, 2.0, 3.0]).encode())
+    src = SerialSource("fake", Layout.grid(1, 3), opener=lambda *a, **k: FakeSerial(lines))
+    frames = []
+    with pytest.raises(EOFError):  # the fake device ends; the source never stopped before
+
+        async def go():
+            async for f in src.frames():
+                frames.append(f)
+
+        asyncio.run(go())
+    assert src.lines == len(lines)
+    good = [f for f in frames if f.element_times[1] - f.element_times[0] == pytest.approx(1e-5)]
+    assert len(good) == 30  # every well-formed frame came through
+    assert src.errors >= 2800 and src.errors + len(frames) <= src.lines  # some mutants stay valid
+    assert src.last_error.startswith("line ")
+
+
+def test_serial_source_over_a_pyserial_loop_url():
+    src = SerialSource("loop://", Layout.grid(1, 2))
+    src._dev.write((format_serial_line(1, 0, 100, [5.0, 6.0]) + "\ngarbage\n").encode())
+    (f,) = first(src, 1)
+    assert f.values.tolist() == [5.0, 6.0]
+    src.close()
+
+
+def test_fuzzed_mqtt_payloads_are_counted_and_skipped():
+    rng = random.Random(1)
+    src = MQTTSource("localhost", Layout.grid(1, 2))
+    ok = 0
+    for k in range(2000):
+        good = json.dumps({"seq": k, "t": k * 0.1, "values": [1.0, 2.0], "unit": "pF"})
+        if k % 10 == 0:
+            ok += src.handle(good.encode()) is not None
+            continue
+        chars = list(good)
+        for _ in range(rng.randrange(1, 4)):
+            chars[rng.randrange(len(chars))] = rng.choice('{}[],:"0123456789.eanul ')
+        src.handle("".join(chars).encode())
+    assert ok == 200 and src.messages == 2000 and src.errors >= 1500
+    kpa = src.handle(json.dumps({"seq": 1, "t": 0, "values": [1, 2], "unit": "kPa"}).encode())
+    assert kpa is None  # a pressure payload on a capacitance source is refused
+
+
+def test_iio_source_reads_a_sysfs_tree_through_a_multiplexer(tmp_path):
+    dev = tmp_path / "iio:device0"
+    dev.mkdir()
+    (dev / "in_capacitance0_raw").write_text("1000\n")
+    (dev / "in_capacitance0_scale").write_text("0.000488\n")  # pF per count
+    (dev / "in_capacitance0_offset").write_text("24\n")
+    (dev / "sampling_frequency").write_text("91\n")
+    (dev / "in_capacitance0_calibbias").write_text("0\n")
+    selected = []
+
+    def mux(i):
+        selected.append(i)
+        (dev / "in_capacitance0_raw").write_text(f"{1000 * (i + 1)}\n")
+
+    src = IIOSource(dev, Layout.grid(1, 3), multiplexer=mux, sampling_frequency=45.5, capdac=12)
+    (f,) = first(src, 1)
+    assert selected == [0, 1, 2]
+    np.testing.assert_allclose(f.values, [(1000 * k + 24) * 0.000488 for k in (1, 2, 3)])
+    assert (dev / "sampling_frequency").read_text() == "45.5"
+    assert (dev / "in_capacitance0_calibbias").read_text() == "12"
+    assert np.all(np.diff(f.element_times) >= 0)
+    (dev / "in_capacitance0_raw").write_text("garbage")
+    src.mux = None
+    src.channels = [0, 0, 0]
+    _times, values = src.read_frame()
+    assert np.all(np.isnan(values)) and src.errors == 3
+    with pytest.raises(FormatError, match="in_capacitance5_raw"):
+        IIOSource(dev, Layout.grid(1, 1), channels=[5])
+
+
+def test_replay_source_yields_the_recording_and_loops():
+    rec = Recording(
+        np.arange(6.0).reshape(3, 2), [0.0, 0.5, 1.0], Layout.grid(1, 2), "pressure", "N/cm2"
+    )
+    frames = first(ReplaySource(rec, speed=0, loop=True), 5)
+    assert [f.values[0] for f in frames] == [0.0, 2.0, 4.0, 0.0, 2.0]
+    assert [f.t for f in frames] == [0.0, 0.5, 1.0, 1.5, 2.0]
+
+
+def test_virtual_seat_source_gives_capacitance_with_failures():
+    src = VirtualSeatSource(speed=0, hold_s=10, postures_per_sitting=2, away_s=5)
+    frames = first(src, 30)
+    assert src.layout.n_elements == 96 and src.quantity == "capacitance"
+    v = np.array([f.values for f in frames])
+    assert np.all(np.isfinite(v)) and (v == 0).any()  # dead elements read 0 pF
+    t = np.array([f.t for f in frames])
+    assert np.all(np.diff(t) > 0)
