@@ -95,9 +95,9 @@ _P = {
 
 #: Failures of the thesis's seat (§6.5.2.5): 12 of 96 elements dead; of the others 80 % can
 #: fail, 40 onsets per hour at 1 N/cm² (rate ~ pressure^1.5), 10 s each. Calibrated on the
-#: sessions of 9 virtual subjects (benchmarks/posture_seat.py prints the check): 56.7 elements
-#: fail at least once per round (max 65) and 69.8 over three rounds (max 74); the thesis
-#: reports 58 (65) and 67 (77). 15.6 % of the seated readings are failed.
+#: sessions of 9 virtual subjects; benchmarks/posture_seat.py prints the check: 60.1 elements
+#: fail at least once per round (max 66) and 73.6 over three rounds (max 79); the thesis
+#: reports 58 (65) and 67 (77). 16 % of the readings in a posture are failed.
 SEAT_FAILURES = FailureModel(susceptible_fraction=0.8, onset_per_hour=40.0, mean_duration_s=10.0)
 
 
