@@ -156,9 +156,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     extra = None
     mirror = _mirror_map(args, rec)
     if mirror is not None:
-        flipped, y_m, src = mirror_samples(rec.frames[idx], y.astype(str), rec.layout, mirror)
+        flipped, y_m, src = mirror_samples(rec.frames[idx], y, rec.layout, mirror)
         b = None if back is None else back[src]
-        y_m = y_m.astype(y.dtype) if src.size else y[:0]
         extra = (fs.transform(flipped, rec.layout, b), y_m, groups[src])
     report = loso(X, y, groups, args.classifier, extra=extra, show_progress=not args.json)
     if args.json:

@@ -136,8 +136,6 @@ class VirtualSeatSource(Source):
         n = self.layout.n_elements
         start = time.monotonic()
         t, seq = 0.0, 0
-        x0, x1, _, y1 = self.layout.extent_cm
-        seat = ((x0 + x1) / 2, y1)
         while True:
             for duration, posture in self._plan():
                 take = self._rng.normal(0.0, 0.5, 2)
@@ -146,7 +144,7 @@ class VirtualSeatSource(Source):
                     self.posture = posture
                     if posture:
                         jitter = tuple(take + self._rng.normal(0.0, 0.15, 2))
-                        p = posture_pressure(self.layout, posture, self.subject, jitter, seat)
+                        p = posture_pressure(self.layout, posture, self.subject, jitter)
                     else:
                         p = np.zeros(n)
                     scan = self.mat.scan(np.array([t]), p[None, :])

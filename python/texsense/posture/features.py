@@ -147,7 +147,7 @@ def mirror_samples(
     index = np.flatnonzero([str(v) in table for v in y])
     mirrored = mirror_frames(np.asarray(frames)[index], layout)
     new = np.array([table[str(v)] for v in y[index]], dtype=object)
-    return mirrored, new.astype(y.dtype) if index.size else y[:0], index
+    return mirrored, new.astype(y.dtype), index
 
 
 def pool_maps(maps: npt.ArrayLike, k: int) -> np.ndarray:
