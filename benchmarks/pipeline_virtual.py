@@ -28,7 +28,7 @@ from texsense.sim.seated import seat_calibration
 def calibrate(seed: int = 5) -> MatCalibration:
     """Zeroing + equilibration (1 N/cm²) of the seat, spacer model from a test-machine record
     of another specimen, drift γ from its steps."""
-    return seat_calibration(mat_seed=seed)  # type: ignore[return-value]
+    return seat_calibration(mat_seed=seed)
 
 
 def cycling_drift(cal: MatCalibration, seed: int = 11) -> MatCalibration:

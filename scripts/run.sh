@@ -1,16 +1,9 @@
 #!/usr/bin/env bash
-# The main job: set up .venv, then a short end-to-end run on real data (until the live
-# monitor exists): summarise the PhysioNet PMD tree and one subject, convert the subject to
-# HDF5 and plot its peak frame. Output goes to out/.
+# The main job: set up .venv, then start the live monitor (docs/monitor.md) on the virtual
+# seat — a simulated person on the 96-element textile seat, 10x real time — and print the
+# URL of its dashboard. Ctrl-C stops it. Extra arguments go to `texsense monitor`
+# (e.g. --port 9000, --source replay:FILE, --speed 1).
 source "$(dirname "${BASH_SOURCE[0]}")/_bootstrap.sh"
-DATA="${TEXSENSE_SHARED_DATA:-$ROOT/../shared/data}"
 mkdir -p out
-say "texsense info $DATA/pmd/experiment-i"
-texsense info "$DATA/pmd/experiment-i"
-say "texsense convert (PMD subject S1 -> out/pmd-S1.h5)"
-texsense convert "$DATA/pmd/experiment-i/S1" out/pmd-S1.h5
-say "texsense plot out/pmd-S1.h5 -o out/pmd-S1.png"
-texsense plot out/pmd-S1.h5 -o out/pmd-S1.png
-say "texsense plot (Tekscan F-Scan walk) -o out/fscan.png"
-texsense plot "$DATA/vendor-formats/fscan_testL.asf" -o out/fscan.png --unit kPa
-say "done: see out/pmd-S1.png and out/fscan.png"
+say "texsense monitor --speed 10 (open the URL below; Ctrl-C stops)"
+exec texsense monitor --speed 10 --db out/monitor.sqlite --record-dir out/recordings "$@"

@@ -2,9 +2,18 @@
 # Every test and check: lint and format (Python and Rust), clippy, Rust unit tests, pytest.
 source "$(dirname "${BASH_SOURCE[0]}")/_bootstrap.sh"
 export TEXSENSE_NO_PROGRESS=1
-say "ruff check";            ruff check python tests benchmarks
-say "ruff format --check";   ruff format --check python tests benchmarks
+say "ruff check";            ruff check python tests benchmarks examples
+say "ruff format --check";   ruff format --check python tests benchmarks examples
 say "cargo fmt --check";     cargo fmt --all --check
 say "cargo clippy";          cargo clippy --quiet --all-targets -- -D warnings
 say "cargo test";            cargo test --quiet -p texsense-core
+# the browser test drives Debian's chromium (docs/monitor.md); install it if we may
+if [ ! -x "${TEXSENSE_CHROMIUM:-/usr/bin/chromium}" ] && ! command -v chromium >/dev/null 2>&1; then
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    say "installing Debian's chromium for the browser test"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+  else
+    say "chromium is missing and apt-get is not available as root: the browser test will fail"
+  fi
+fi
 say "pytest";                python -m pytest -q "$@"

@@ -69,3 +69,74 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         terminalreporter.section("virtual sensor targets (measured)")
         for target, text in sorted(_TARGETS):
             terminalreporter.write_line(f"{target}: {text}")
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on right now."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class MonitorProcess:
+    """``texsense monitor ARGS`` as a real child process on a free port, its output in
+    ``tmp_path/monitor.log``; ``status()`` reads /api/status."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        import subprocess
+        import sys
+
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}/"
+        self.log_path = tmp_path / "monitor.log"
+        cmd = [sys.executable, "-m", "texsense.cli", "monitor", *args]
+        cmd += ["--db", str(tmp_path / "m.sqlite"), "--port", str(self.port)]
+        with self.log_path.open("wb") as log:
+            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+
+    def status(self) -> dict:
+        import json
+        import urllib.request
+
+        with urllib.request.urlopen(self.url + "api/status", timeout=2) as r:
+            return json.load(r)
+
+    def wait_for_frames(self, frames: int = 1, timeout: float = 60.0) -> None:
+        """Until the monitor has processed ``frames`` frames (fails with its log otherwise)."""
+        import time
+
+        deadline = time.monotonic() + timeout
+        while True:
+            if self.proc.poll() is not None:
+                pytest.fail(f"the monitor exited ({self.proc.returncode}):\n{self.log()}")
+            try:
+                if self.status()["frames"] >= frames:
+                    return
+            except OSError:
+                pass
+            if time.monotonic() > deadline:
+                pytest.fail(f"the monitor did not reach {frames} frames:\n{self.log()}")
+            time.sleep(0.1)
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def stop(self) -> None:
+        self.proc.kill()
+        self.proc.wait(timeout=20)
+
+
+@pytest.fixture
+def monitor_process(tmp_path: Path):
+    """Start ``texsense monitor`` with the given arguments; killed at the end of the test."""
+    started: list[MonitorProcess] = []
+
+    def start(*args: str) -> MonitorProcess:
+        started.append(MonitorProcess(tmp_path, *args))
+        return started[-1]
+
+    yield start
+    for m in started:
+        m.stop()

@@ -153,7 +153,7 @@ def virtual_seat_model() -> Any:
     from texsense.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
-    path = cache / "virtual-seat-posture-v2.joblib"
+    path = cache / "virtual-seat-posture-v3.joblib"
     if path.is_file():
         try:
             return PostureModel.load(path)
@@ -162,9 +162,29 @@ def virtual_seat_model() -> Any:
     from texsense.posture.training import train_virtual_seat_model
 
     cache.mkdir(parents=True, exist_ok=True)
+    print(
+        "texsense monitor: training the virtual seat's posture model on simulated people "
+        f"(once, about 15 s; cached in {path})",
+        flush=True,
+    )
     model = train_virtual_seat_model()
     model.save(path)
     return model
+
+
+def _check_port_free(host: str, port: int) -> None:
+    """Fail before the (slow) set-up when the port is taken."""
+    import socket
+
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            raise ParameterError(
+                f"cannot listen on {host}:{port} ({e.strerror}): is a monitor already "
+                "running? Choose another --port"
+            ) from None
 
 
 def run_monitor(args: argparse.Namespace) -> int:
@@ -175,6 +195,7 @@ def run_monitor(args: argparse.Namespace) -> int:
         raise ParameterError(
             f"binding {args.host} exposes the monitor beyond this machine: pass --token"
         )
+    _check_port_free(args.host, args.port)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     monitor = build_monitor(args)
     url = f"http://{'127.0.0.1' if args.host in ('0.0.0.0', '::') else args.host}:{args.port}/"

@@ -200,6 +200,7 @@ class Monitor:
 
     def process(self, frame: Frame) -> dict[str, Any]:
         """One frame through everything; returns the snapshot."""
+        received_at = time.time()
         raw = frame.values
         if self.pipeline is not None and self.source.quantity == "capacitance":
             valid = np.isfinite(raw)
@@ -229,8 +230,10 @@ class Monitor:
         alert = self.tracker.open_alert
         self.frames += 1
 
-        def r(v: np.ndarray, nd: int = 3) -> list[Any]:
-            return [None if not np.isfinite(x) else round(float(x), nd) for x in v]
+        def r(v: np.ndarray, nd: int = 3) -> list[Any]:  # rounded, NaN -> None (JSON null)
+            out = np.round(np.asarray(v, dtype=np.float64), nd).astype(object)
+            out[~np.isfinite(np.asarray(v, dtype=np.float64))] = None
+            return out.tolist()  # type: ignore[no-any-return]
 
         snap = {
             "seq": frame.seq,
@@ -256,6 +259,8 @@ class Monitor:
             "alert": alert.to_dict() if alert is not None else None,
             "recording": self.recorder is not None,
             "source": self.source.info(),
+            "received_at": received_at,  # wall clock (Unix s) when the frame arrived
+            "processed_ms": round(1e3 * (time.time() - received_at), 3),
         }
         self._latest = snap
         self._latest_text = json.dumps(snap, separators=(",", ":"))

@@ -156,8 +156,11 @@ class VirtualSeatSource(Source):
                     t += self.frame_s
 
     def info(self) -> dict[str, Any]:
-        """Status, with the simulated truth (posture now)."""
-        return {**super().info(), "speed": self.speed, "true_posture": self.posture}
+        """Status, with the simulated truth (the posture's name now, None when away)."""
+        from texsense.sim.seated import POSTURES
+
+        truth = POSTURES[self.posture] if self.posture else None
+        return {**super().info(), "speed": self.speed, "true_posture": truth}
 
 
 class ReplaySource(Source):

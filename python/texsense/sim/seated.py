@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -36,6 +37,10 @@ from texsense.layout import Layout
 from texsense.recording import Recording
 from texsense.sim.failures import FailureModel
 
+if TYPE_CHECKING:
+    from texsense.calibration import MatCalibration
+    from texsense.sim.mat import VirtualMat
+
 __all__ = [
     "LEANING_BACK",
     "POSTURES",
@@ -43,6 +48,7 @@ __all__ = [
     "SeatSession",
     "Subject",
     "back_pressure",
+    "calibrate_virtual_mat",
     "posture_pressure",
     "seat_calibration",
     "simulate_session",
@@ -312,17 +318,25 @@ def simulate_session(
     )
 
 
-def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> object:
+def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> MatCalibration:
     """Calibrate the virtual seat as a user would (docs/pipeline.md): zeroing + 1 N/cm²
     equilibration of a mat with the same ``mat_seed`` (the same elements), the spacer model
     from a test-machine record of another specimen (``material_seed``) with γ from its held
     steps."""
+    from texsense.sim.mat import VirtualMat
+
+    return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
+
+
+def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> MatCalibration:
+    """Calibrate a virtual mat (textile-3mm spacer) as a user would: zeroing and 1 N/cm²
+    equilibration scanned on ``mat`` (pass a fresh mat with the same seed as the one to be
+    used: the scans load it), the spacer model from a test-machine record of another
+    specimen (``material_seed``) with γ from its held steps."""
     from texsense.calibration import MatCalibration
     from texsense.drift import DriftModel, split_steps
     from texsense.sim import protocols
-    from texsense.sim.mat import VirtualMat
 
-    mat = VirtualMat.seat(seed=mat_seed)
     n = mat.layout.n_elements
     ft = mat.cdc.frame_time_s(n)
     base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance

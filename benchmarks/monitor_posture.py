@@ -1,0 +1,88 @@
+"""How often the live monitor names the virtual person's posture right.
+
+`texsense monitor`'s default source is a simulated person on the 96-element seat (through the
+virtual sensor: hysteresis, drift, failures) taking the 16 postures in random order; its
+posture model is trained on *other* simulated people (texsense.posture.training). This runs
+the same source and model through `Monitor.process` as fast as possible and compares the
+label on every seated frame with the simulated truth.
+
+Run:  .venv/bin/python benchmarks/monitor_posture.py [--classifier linear-svm] [--seeds 0,1,2,3,4]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import time
+from collections import Counter
+
+import numpy as np
+
+from texsense.monitor import Monitor, VirtualSeatSource
+from texsense.pipeline import Pipeline
+from texsense.posture.training import train_virtual_seat_model
+from texsense.sim.seated import seat_calibration
+
+
+async def collect(monitor: Monitor, frames: int) -> list[tuple[str | None, str | None, int]]:
+    """(truth, predicted, frames since the posture changed) per frame."""
+    out: list[tuple[str | None, str | None, int]] = []
+    since, last = 0, None
+    async for frame in monitor.source.frames():
+        snap = monitor.process(frame)
+        truth = snap["source"]["true_posture"]
+        since = since + 1 if truth == last else 0
+        last = truth
+        pred = snap["posture"]["label"] if snap["posture"] else None
+        out.append((truth, pred, since))
+        if len(out) >= frames:
+            return out
+    return out
+
+
+def live_person(model, seed: int, sittings: float) -> list[tuple[str | None, str | None, int]]:
+    src = VirtualSeatSource(speed=0, seed=seed)
+    n = int(sittings * (20 * 90 + 120) / src.frame_s)
+    mon = Monitor(src, pipeline=Pipeline(seat_calibration(), src.layout), posture_model=model)
+    return asyncio.run(collect(mon, n))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sittings", type=float, default=1, help="20 postures + 2 min away each")
+    ap.add_argument("--subjects", type=int, default=9, help="simulated people to train on")
+    ap.add_argument("--classifier", default="linear-svm")
+    ap.add_argument("--seeds", default="0,1,2,3,4", help="live people (seed 0: the monitor's)")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    model = train_virtual_seat_model(subjects=args.subjects, classifier=args.classifier)
+    train_s = time.perf_counter() - t0
+    print(
+        f"model: {args.classifier}, {args.subjects} training people ({train_s:.0f} s); "
+        f"{args.sittings:g} sitting(s) of 20 postures per live person"
+    )
+    print(
+        "\n| live person (seed) | frames | seated | right, all seated | "
+        "right, ≥ 10 s after a change |"
+    )
+    print("|---:|---:|---:|---:|---:|")
+    wrong: Counter[tuple[str, str]] = Counter()
+    totals = []
+    for seed in (int(v) for v in args.seeds.split(",")):
+        rows = live_person(model, seed, args.sittings)
+        seated = [(t, p, s) for t, p, s in rows if t is not None]
+        settled = [(t, p) for t, p, s in seated if s >= round(10 / 1.6)]
+        a_all = 100 * float(np.mean([t == p for t, p, _ in seated]))
+        a_set = 100 * float(np.mean([t == p for t, p in settled]))
+        totals.append((a_all, a_set))
+        wrong.update((t, p) for t, p in settled if t != p)
+        print(f"| {seed} | {len(rows)} | {len(seated)} | {a_all:.1f} % | {a_set:.1f} % |")
+    m = np.mean(totals, axis=0)
+    print(f"| mean | | | {m[0]:.1f} % | {m[1]:.1f} % |")
+    print("\nmost frequent confusions (settled frames, all people): truth -> label (frames)")
+    for (t, p), k in wrong.most_common(6):
+        print(f"  {t} -> {p} ({k})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,88 @@
+"""The dashboard in a real headless Chromium (Debian ``chromium``, driven by Playwright):
+`texsense monitor` on the virtual seat, the frame counter grows, raw/compensated toggles,
+an alert comes up and is acknowledged, and a screenshot is saved.
+
+Set TEXSENSE_SCREENSHOT=docs/img/monitor_dashboard.png to refresh the one in docs/monitor.md.
+"""
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = os.environ.get("TEXSENSE_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-dev-shm-usage",
+    "--disable-background-networking",
+    "--no-first-run",
+]
+
+
+def chromium() -> str:
+    """The Chromium binary, or a failure that says how to get it (never a silent skip)."""
+    if not (Path(CHROMIUM).is_file() and os.access(CHROMIUM, os.X_OK)):
+        found = shutil.which("chromium")
+        if found is None:
+            pytest.fail(
+                f"no Chromium at {CHROMIUM}: install Debian's `chromium` (scripts/test.sh does "
+                "when it may use apt-get) or point TEXSENSE_CHROMIUM at one"
+            )
+        return found
+    return CHROMIUM
+
+
+@pytest.fixture()
+def monitor_url(tmp_path, monitor_process):
+    rec_dir = str(tmp_path / "rec")
+    m = monitor_process("--speed", "60", "--reposition-min", "5", "--record-dir", rec_dir)
+    m.wait_for_frames(1, timeout=180)  # the first run trains the virtual seat's model
+    return m.url
+
+
+@pytest.mark.slow
+def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
+    from playwright.sync_api import expect, sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1000, "height": 830})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(monitor_url)
+            frames = page.locator("#frames")
+            expect(frames).not_to_have_text("0", timeout=20_000)
+            first = int(frames.inner_text())
+            page.wait_for_timeout(1500)
+            assert int(frames.inner_text()) > first, "the frame counter does not grow"
+
+            title = page.locator("#map-title")
+            expect(title).to_have_text("pressure (compensated)")
+            page.click("#show-raw")
+            expect(title).to_have_text("raw readings")
+            expect(page.locator("#show-raw")).to_have_class("on")
+            expect(page.locator("#scale-text")).to_contain_text("pF")
+            page.click("#show-pressure")
+            expect(title).to_have_text("pressure (compensated)")
+            page.select_option("#unit", "mmHg")
+            expect(page.locator("#scale-text")).to_contain_text("mmHg")
+
+            expect(page.locator("#posture")).to_contain_text("%", timeout=20_000)
+            alert = page.locator("#alert")
+            expect(alert).to_be_visible(timeout=60_000)  # 5 min of exposure at 60x: ~5 s
+            expect(page.locator("#alert-text")).to_contain_text("Reposition")
+            page.wait_for_timeout(300)
+            shot = tmp_path / "monitor.png"
+            page.screenshot(path=str(shot))
+            assert shot.stat().st_size > 20_000
+            if os.environ.get("TEXSENSE_SCREENSHOT"):
+                shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT"])
+
+            page.click("#ack")
+            expect(alert).to_have_class("alert acked", timeout=5_000)
+            assert errors == [], errors
+        finally:
+            browser.close()
