@@ -101,3 +101,24 @@ def test_binding_beyond_loopback_needs_a_token(monitor):
     assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.5")
     with pytest.raises(ParameterError, match="token"):
         serve(monitor, host="0.0.0.0")
+
+
+def test_cli_names_a_port_in_use_before_starting(capsys):
+    import socket
+
+    from texsense.cli import main
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        assert main(["monitor", "--no-posture", "--port", str(port)]) == 1
+    err = capsys.readouterr().err
+    assert f"cannot listen on 127.0.0.1:{port}" in err and "--port" in err
+
+
+def test_cli_refuses_a_public_address_without_a_token(capsys):
+    from texsense.cli import main
+
+    assert main(["monitor", "--host", "0.0.0.0", "--no-posture"]) == 1
+    assert "--token" in capsys.readouterr().err

@@ -146,22 +146,23 @@ def test_iio_source_reads_a_sysfs_tree_through_a_multiplexer(tmp_path):
     dev = tmp_path / "iio:device0"
     dev.mkdir()
     (dev / "in_capacitance0_raw").write_text("1000\n")
-    (dev / "in_capacitance0_scale").write_text("0.000488\n")  # pF per count
-    (dev / "in_capacitance0_offset").write_text("24\n")
+    (dev / "in_capacitance0_scale").write_text("0.000000488\n")  # ad7746: 8.192 pF / 2^24
+    (dev / "in_capacitance0_offset").write_text("0\n")
     (dev / "sampling_frequency").write_text("91\n")
-    (dev / "in_capacitance0_calibbias").write_text("0\n")
     selected = []
 
     def mux(i):
         selected.append(i)
-        (dev / "in_capacitance0_raw").write_text(f"{1000 * (i + 1)}\n")
+        (dev / "in_capacitance0_raw").write_text(f"{1_000_000 * (i + 1)}\n")
 
-    src = IIOSource(dev, Layout.grid(1, 3), multiplexer=mux, sampling_frequency=45.5, capdac=12)
+    src = IIOSource(dev, Layout.grid(1, 3), multiplexer=mux, sampling_frequency=45.5, capdac_pF=5.0)
+    offset = round(5.0 / 0.000000488)
+    assert (dev / "in_capacitance0_offset").read_text() == str(offset)  # the CAPDAC
     (f,) = first(src, 1)
     assert selected == [0, 1, 2]
-    np.testing.assert_allclose(f.values, [(1000 * k + 24) * 0.000488 for k in (1, 2, 3)])
+    expected = [(1_000_000 * k + offset) * 0.000000488 for k in (1, 2, 3)]
+    np.testing.assert_allclose(f.values, expected)  # 5.49, 5.98, 6.46 pF
     assert (dev / "sampling_frequency").read_text() == "45.5"
-    assert (dev / "in_capacitance0_calibbias").read_text() == "12"
     assert np.all(np.diff(f.element_times) >= 0)
     (dev / "in_capacitance0_raw").write_text("garbage")
     src.mux = None

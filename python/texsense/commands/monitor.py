@@ -35,6 +35,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="ROWSxCOLS",
         help="serial/iio/mqtt: the sensor's grid (e.g. 15x16)",
     )
+    p.add_argument(
+        "--sampling-frequency",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="iio: the converter's conversion rate (the driver picks its nearest)",
+    )
+    p.add_argument(
+        "--capdac-pf",
+        type=float,
+        default=None,
+        metavar="PF",
+        help="iio: CAPDAC offset subtracted before conversion (pF)",
+    )
     p.add_argument("--calibration", type=Path, help="mat calibration (texsense pipeline calibrate)")
     p.add_argument("--model", type=Path, help="posture model (texsense posture train)")
     p.add_argument(
@@ -100,7 +114,13 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
     if kind == "serial":
         return sources.SerialSource(rest, _grid(args)), None
     if kind == "iio":
-        return sources.IIOSource(rest, _grid(args)), None
+        iio = sources.IIOSource(
+            rest,
+            _grid(args),
+            sampling_frequency=args.sampling_frequency,
+            capdac_pF=args.capdac_pf,
+        )
+        return iio, None
     if kind == "mqtt":
         host, _, port = rest.partition(":")
         return sources.MQTTSource(host, _grid(args), port=int(port or 1883)), None

@@ -267,11 +267,14 @@ class IIOSource(Source):
     """A Linux IIO capacitance-to-digital converter (AD7745/AD7746 driver) read through sysfs,
     with a multiplexer in front of it selecting one element at a time.
 
-    Capacitance of channel ``c`` = (``in_capacitance<c>_raw`` + ``offset``) x ``scale``
-    (the IIO convention; scale in pF per count). ``multiplexer`` is called with the element
-    index before each reading (e.g. a function setting GPIO lines); without one the source
-    reads the converter's channels as the elements. ``capdac_pF`` writes the CAPDAC
-    (``in_capacitance<c>_calibbias``, the AD7746 driver's offset) once at start.
+    Capacitance of channel ``c`` = (``in_capacitance<c>_raw`` + ``in_capacitance<c>_offset``)
+    x ``in_capacitance<c>_scale`` (the IIO convention; the ad7746 driver's scale, 8.192 pF /
+    2^24 = 0.000000488, gives pF). ``multiplexer`` is called with the element index before each
+    reading (e.g. a function setting GPIO lines); without one the source reads the converter's
+    channels as the elements. ``capdac_pF`` sets the CAPDAC once at start: the ad7746 driver
+    exposes it as the channel's ``offset`` (in counts; it keeps the nearest of its 127 steps
+    of about 21/127 pF, read back before use). ``sampling_frequency`` (Hz) is written to the
+    device's ``sampling_frequency`` (the driver picks its nearest filter rate).
     """
 
     name = "iio"
@@ -284,7 +287,7 @@ class IIOSource(Source):
         channels: list[int] | None = None,
         multiplexer: Callable[[int], None] | None = None,
         sampling_frequency: float | None = None,
-        capdac: int | None = None,
+        capdac_pF: float | None = None,
         settle_s: float = 0.0,
     ) -> None:
         super().__init__()
@@ -306,13 +309,16 @@ class IIOSource(Source):
                 raise FormatError(self.dir, f"no in_capacitance{c}_raw (not a CDC, or channel?)")
         if sampling_frequency is not None:
             self._write("sampling_frequency", f"{sampling_frequency:g}")
-        if capdac is not None:
-            for c in set(self.channels):
-                self._write(f"in_capacitance{c}_calibbias", str(int(capdac)))
         self._scale = {
             c: self._number(f"in_capacitance{c}_scale", "in_capacitance_scale", 1.0)
             for c in set(self.channels)
         }
+        if capdac_pF is not None:
+            if capdac_pF < 0:
+                raise ParameterError(f"capdac_pF must be >= 0, got {capdac_pF}")
+            for c in set(self.channels):
+                counts = round(capdac_pF / self._scale[c])
+                self._write(f"in_capacitance{c}_offset", str(counts))
         self._offset = {
             c: self._number(f"in_capacitance{c}_offset", "in_capacitance_offset", 0.0)
             for c in set(self.channels)
