@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording
-from texsense.exceptions import FormatError
+from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor import IIOSource, MQTTSource, ReplaySource, SerialSource, VirtualSeatSource
 from texsense.monitor.protocol import (
     ProtocolError,
@@ -190,3 +190,15 @@ def test_virtual_seat_source_gives_capacitance_with_failures():
     assert np.all(np.isfinite(v)) and (v == 0).any()  # dead elements read 0 pF
     t = np.array([f.t for f in frames])
     assert np.all(np.diff(t) > 0)
+
+
+def test_replay_source_refuses_what_it_cannot_monitor():
+    lay = Layout.grid(1, 2)
+    raw = Recording(np.ones((2, 2)), [0.0, 1.0], lay, "raw", "count")
+    with pytest.raises(ParameterError, match=r"needs capacitance .* or pressure"):
+        ReplaySource(raw)
+    empty = Recording(np.ones((0, 2)), np.zeros(0), lay, "pressure", "N/cm2")
+    with pytest.raises(ParameterError, match="no frames"):
+        ReplaySource(empty)
+    with pytest.raises(ParameterError, match="speed"):
+        ReplaySource(Recording(np.ones((1, 2)), [0.0], lay, "pressure", "N/cm2"), speed=-1)

@@ -181,7 +181,10 @@ class ReplaySource(Source):
         if recording.n_frames == 0:
             raise ParameterError("the recording has no frames to replay")
         if recording.quantity not in ("capacitance", "pressure"):
-            raise ParameterError(f"cannot monitor {recording.quantity!r} data")
+            raise ParameterError(
+                f"cannot monitor {recording.quantity!r} data ({recording.unit}): the monitor "
+                "needs capacitance (with a calibration) or pressure"
+            )
         if speed < 0:
             raise ParameterError(f"speed must be >= 0, got {speed}")
         self.rec = recording
