@@ -202,3 +202,36 @@ def test_replay_source_refuses_what_it_cannot_monitor():
         ReplaySource(empty)
     with pytest.raises(ParameterError, match="speed"):
         ReplaySource(Recording(np.ones((1, 2)), [0.0], lay, "pressure", "N/cm2"), speed=-1)
+
+
+def test_cli_iio_source_with_a_multiplexer_from_a_file(tmp_path):
+    from texsense.cli import build_parser
+    from texsense.commands.monitor import make_source
+
+    dev = tmp_path / "iio:device0"
+    dev.mkdir()
+    (dev / "in_capacitance0_raw").write_text("0\n")
+    (dev / "in_capacitance_scale").write_text("0.000000488\n")
+    (dev / "in_capacitance0_offset").write_text("0\n")
+    mux = tmp_path / "mymux.py"
+    mux.write_text(
+        "from pathlib import Path\n"
+        f"RAW = Path({str(dev / 'in_capacitance0_raw')!r})\n"
+        "def select(i):\n"
+        "    RAW.write_text(str(1_000_000 * (i + 1)))\n"
+    )
+    args = build_parser().parse_args(
+        ["monitor", f"--source=iio:{dev}", "--grid", "1x2", "--multiplexer", f"{mux}:select"]
+    )
+    src, _ = make_source(args)
+    _times, values = src.read_frame()
+    np.testing.assert_allclose(values, [0.488, 0.976])
+    for bad, what in [
+        (f"{mux}:nothing", "no function 'nothing'"),
+        (f"{tmp_path / 'none.py'}:f", "no such file"),
+        ("texsense_no_such_module:f", "cannot import"),
+        ("select", "expected MODULE:FUNCTION"),
+    ]:
+        args.multiplexer = bad
+        with pytest.raises(ParameterError, match=what):
+            make_source(args)

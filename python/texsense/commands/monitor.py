@@ -43,6 +43,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="iio: the converter's conversion rate (the driver picks its nearest)",
     )
     p.add_argument(
+        "--multiplexer",
+        default=None,
+        metavar="MODULE:FUNCTION",
+        help="iio: a function called with each element's index before it is read (a module "
+        "name or a .py file, e.g. mymux.py:select)",
+    )
+    p.add_argument(
         "--capdac-pf",
         type=float,
         default=None,
@@ -100,6 +107,31 @@ def _grid(args: argparse.Namespace) -> Any:
     return Layout.grid(rows, cols)
 
 
+def load_function(spec: str) -> Any:
+    """``module:function`` or ``path/to/file.py:function`` -> the function."""
+    import importlib
+    import importlib.util
+
+    where, _, name = spec.rpartition(":")
+    if not where or not name:
+        raise ParameterError(f"--multiplexer: expected MODULE:FUNCTION, got {spec!r}")
+    try:
+        if where.endswith(".py"):
+            loader = importlib.util.spec_from_file_location(Path(where).stem, where)
+            if loader is None or loader.loader is None or not Path(where).is_file():
+                raise ParameterError(f"--multiplexer: no such file {where!r}")
+            module = importlib.util.module_from_spec(loader)
+            loader.loader.exec_module(module)
+        else:
+            module = importlib.import_module(where)
+    except ImportError as e:
+        raise ParameterError(f"--multiplexer: cannot import {where!r}: {e}") from None
+    fn = getattr(module, name, None)
+    if not callable(fn):
+        raise ParameterError(f"--multiplexer: {where!r} has no function {name!r}")
+    return fn
+
+
 def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
     """The source named by ``--source`` and its default calibration (or None)."""
     from texsense.monitor import sources
@@ -119,6 +151,7 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
             _grid(args),
             sampling_frequency=args.sampling_frequency,
             capdac_pF=args.capdac_pf,
+            multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
         )
         return iio, None
     if kind == "mqtt":
