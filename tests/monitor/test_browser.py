@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from texsense import load
+
 CHROMIUM = os.environ.get("TEXSENSE_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--no-sandbox",
@@ -49,7 +51,7 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1000, "height": 830})
+            page = browser.new_page(viewport={"width": 1180, "height": 830})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(monitor_url)
@@ -74,6 +76,7 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
             alert = page.locator("#alert")
             expect(alert).to_be_visible(timeout=60_000)  # 5 min of exposure at 60x: ~5 s
             expect(page.locator("#alert-text")).to_contain_text("Reposition")
+            expect(page.locator("#events")).to_contain_text("reposition alert", timeout=5_000)
             page.wait_for_timeout(300)
             shot = tmp_path / "monitor.png"
             page.screenshot(path=str(shot))
@@ -83,6 +86,17 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
 
             page.click("#ack")
             expect(alert).to_have_class("alert acked", timeout=5_000)
+            expect(page.locator("#events")).to_contain_text("alert acknowledged", timeout=5_000)
+
+            record = page.locator("#record")
+            record.click()
+            expect(record).to_have_text("■ stop recording", timeout=5_000)
+            page.wait_for_timeout(500)
+            record.click()
+            expect(record).to_have_text("● record", timeout=5_000)
+            files = page.request.get(monitor_url + "api/sessions").json()[0]["recordings"]
+            assert len(files) == 2 and all(Path(f).is_file() for f in files)
+            assert load(files[1]).n_frames > 0
             assert errors == [], errors
         finally:
             browser.close()

@@ -10,8 +10,8 @@ let layout = null, status = null, last = null, mode = "pressure", unit = "N/cm2"
 // perceptual colour map (viridis-like, 6 stops)
 const STOPS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37], [255, 255, 255]];
 function colour(f) {
-  if (!(f >= 0)) return "#e5e7eb";
-  f = Math.min(f, 1) * (STOPS.length - 2);
+  if (!Number.isFinite(f)) return "#e5e7eb";
+  f = Math.min(Math.max(f, 0), 1) * (STOPS.length - 2);  // compensation noise can dip below 0
   const i = Math.min(Math.floor(f), STOPS.length - 3), t = f - i;
   const c = STOPS[i].map((v, k) => Math.round(v + t * (STOPS[i + 1][k] - v)));
   return `rgb(${c[0]},${c[1]},${c[2]})`;
@@ -140,7 +140,31 @@ function updateThreshold() {
   const t = status.threshold;
   $("threshold").textContent = `${fmt(t.ncm2 * FACTOR[unit], unit === "mmHg" ? 0 : 2)} ${LABEL[unit]} (alert after ${fmt(status.reposition_min, 0)} min)`;
 }
+const EVENT_TEXT = {
+  seated: "load on the mat", left: "mat unloaded", reposition: "reposition alert",
+  acknowledged: "alert acknowledged", cleared: "alert cleared (skin offloaded)",
+};
+function clock(s) {
+  const m = Math.floor(s / 60), h = Math.floor(m / 60);
+  return h ? `${h}:${String(m % 60).padStart(2, "0")}:${String(Math.floor(s % 60)).padStart(2, "0")}`
+    : `${m}:${String(Math.floor(s % 60)).padStart(2, "0")}`;
+}
+async function refreshEvents() {
+  if (!status) return;
+  try {
+    const events = await api(`/api/events?session=${status.session}&limit=12`);
+    const list = $("events");
+    list.replaceChildren(...events.map((e) => {
+      const li = document.createElement("li");
+      const when = document.createElement("span"); when.className = "when"; when.textContent = clock(e.t);
+      const what = document.createElement("span"); what.className = e.kind; what.textContent = EVENT_TEXT[e.kind] || e.kind;
+      li.append(when, what);
+      return li;
+    }));
+  } catch (err) { /* the next refresh tries again; the connection line shows outages */ }
+}
+setInterval(refreshEvents, 2000);
 drawScale($("scale"), colour);
 drawScale($("exposure-scale"), heat);
-api("/api/status").then((s) => { status = s; layout = s.layout; updateThreshold(); connect(); })
+api("/api/status").then((s) => { status = s; layout = s.layout; updateThreshold(); connect(); refreshEvents(); })
   .catch((e) => { $("source").textContent = String(e); });
