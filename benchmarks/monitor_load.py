@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import DATA
-from texsense import Layout, Recording, load
+from texsense import Layout, load
 from texsense.io import write_hdf5
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
@@ -58,11 +58,8 @@ def make_recording(folder: Path, frames: int = 600, seed: int = 3) -> tuple[Path
         return VirtualMat(layout, converters=128, failures=failures, seed=seed)
 
     times = np.arange(pressure.shape[0]) / FPS
-    cap = mat(FailureModel()).scan(times, pressure).capacitance
-    rec_path = write_hdf5(
-        Recording(cap.frames, times, layout, "capacitance", "pF", valid=cap.valid),
-        folder / "mat1024-capacitance.h5",
-    )
+    cap = mat(FailureModel()).scan(times, pressure).capacitance  # with per-element times
+    rec_path = write_hdf5(cap, folder / "mat1024-capacitance.h5")
     cal_path = folder / "mat1024-calibration.json"
     calibrate_virtual_mat(mat()).save(cal_path)  # the same elements, before any failed
     return Path(rec_path), cal_path

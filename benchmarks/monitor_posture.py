@@ -40,11 +40,12 @@ async def collect(monitor: Monitor, frames: int) -> list[tuple[str | None, str |
     return out
 
 
-def live_person(model, seed: int, sittings: float) -> list[tuple[str | None, str | None, int]]:
+def live_person(model, seed: int, sittings: float) -> tuple[list, int]:
+    """(truth, label, frames since a change) per frame, and the frames in 10 s."""
     src = VirtualSeatSource(speed=0, seed=seed)
     n = int(sittings * (20 * 90 + 120) / src.frame_s)
     mon = Monitor(src, pipeline=Pipeline(seat_calibration(), src.layout), posture_model=model)
-    return asyncio.run(collect(mon, n))
+    return asyncio.run(collect(mon, n)), round(10 / src.frame_s)
 
 
 def main() -> None:
@@ -69,9 +70,9 @@ def main() -> None:
     wrong: Counter[tuple[str, str]] = Counter()
     totals = []
     for seed in (int(v) for v in args.seeds.split(",")):
-        rows = live_person(model, seed, args.sittings)
+        rows, settle = live_person(model, seed, args.sittings)
         seated = [(t, p, s) for t, p, s in rows if t is not None]
-        settled = [(t, p) for t, p, s in seated if s >= round(10 / 1.6)]
+        settled = [(t, p) for t, p, s in seated if s >= settle]
         a_all = 100 * float(np.mean([t == p for t, p, _ in seated]))
         a_set = 100 * float(np.mean([t == p for t, p in settled]))
         totals.append((a_all, a_set))

@@ -69,7 +69,7 @@ class Clock:
 
 
 class Sender:
-    """Reads the mat element by element and writes protocol lines to ``out``."""
+    """Reads the mat element by element; :meth:`frame` returns one protocol line."""
 
     def __init__(self, i2c, select_pins, enable_pins, clock, n_elements=N_ELEMENTS, sleep_us=None):
         self.i2c, self.select, self.enable = i2c, select_pins, enable_pins

@@ -117,11 +117,11 @@ def load_function(spec: str) -> Any:
         raise ParameterError(f"--multiplexer: expected MODULE:FUNCTION, got {spec!r}")
     try:
         if where.endswith(".py"):
-            loader = importlib.util.spec_from_file_location(Path(where).stem, where)
-            if loader is None or loader.loader is None or not Path(where).is_file():
+            spec_ = importlib.util.spec_from_file_location(Path(where).stem, where)
+            if not Path(where).is_file() or spec_ is None or spec_.loader is None:
                 raise ParameterError(f"--multiplexer: no such file {where!r}")
-            module = importlib.util.module_from_spec(loader)
-            loader.loader.exec_module(module)
+            module = importlib.util.module_from_spec(spec_)
+            spec_.loader.exec_module(module)
         else:
             module = importlib.import_module(where)
     except ImportError as e:

@@ -231,8 +231,9 @@ class Monitor:
         self.frames += 1
 
         def r(v: np.ndarray, nd: int = 3) -> list[Any]:  # rounded, NaN -> None (JSON null)
-            out = np.round(np.asarray(v, dtype=np.float64), nd).astype(object)
-            out[~np.isfinite(np.asarray(v, dtype=np.float64))] = None
+            a = np.asarray(v, dtype=np.float64)
+            out = np.round(a, nd).astype(object)
+            out[~np.isfinite(a)] = None
             return out.tolist()  # type: ignore[no-any-return]
 
         snap = {
