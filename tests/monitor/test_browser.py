@@ -1,6 +1,7 @@
 """The dashboard in a real headless Chromium (Debian ``chromium``, driven by Playwright):
 `texsense monitor` on the virtual seat, the frame counter grows, raw/compensated toggles,
-an alert comes up and is acknowledged, and a screenshot is saved.
+an alert band that is not rendered without an alert, comes up with its text and button, and
+shows the acknowledged text without the button after acknowledge; a screenshot is saved.
 
 Set TEXSENSE_SCREENSHOT=docs/img/monitor_dashboard.png to refresh the one in docs/monitor.md.
 """
@@ -58,6 +59,13 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
             frames = page.locator("#frames")
             expect(frames).not_to_have_text("0", timeout=20_000)
             first = int(frames.inner_text())
+            # no alert yet (5 min of exposure at 60x takes longer than the page load): the
+            # band must not be rendered at all, not merely be empty (issue 18)
+            status = page.request.get(monitor_url + "api/status").json()
+            assert status["alert"] is None, f"alert before the no-alert check: {status['alert']}"
+            alert = page.locator("#alert")
+            expect(alert).to_be_hidden()
+            assert alert.bounding_box() is None
             page.wait_for_timeout(1500)
             assert int(frames.inner_text()) > first, "the frame counter does not grow"
 
@@ -73,9 +81,9 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
             expect(page.locator("#scale-text")).to_contain_text("mmHg")
 
             expect(page.locator("#posture")).to_contain_text("%", timeout=20_000)
-            alert = page.locator("#alert")
             expect(alert).to_be_visible(timeout=60_000)  # 5 min of exposure at 60x: ~5 s
             expect(page.locator("#alert-text")).to_contain_text("Reposition")
+            expect(page.locator("#ack")).to_be_visible()
             expect(page.locator("#events")).to_contain_text("reposition alert", timeout=5_000)
             page.wait_for_timeout(300)
             shot = tmp_path / "monitor.png"
@@ -86,6 +94,9 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
 
             page.click("#ack")
             expect(alert).to_have_class("alert acked", timeout=5_000)
+            expect(alert).to_be_visible()
+            expect(page.locator("#alert-text")).to_contain_text("acknowledged")
+            expect(page.locator("#ack")).to_be_hidden()
             expect(page.locator("#events")).to_contain_text("alert acknowledged", timeout=5_000)
 
             record = page.locator("#record")
