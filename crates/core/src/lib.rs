@@ -23,7 +23,7 @@ pub mod topology;
 pub use compensation::Compensation;
 pub use drift::{DriftBank, Kernel};
 pub use error::CoreError;
-pub use preisach::{Everett, PreisachBank};
+pub use preisach::{everett_terms, Everett, EverettTerms, PreisachBank};
 pub use repair::NeighbourMeanRepair;
 pub use spacer::{SpacerBank, SpacerParams};
 pub use topology::Neighbours;

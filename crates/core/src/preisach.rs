@@ -380,6 +380,97 @@ impl PreisachBank {
     }
 }
 
+/// The Everett terms behind the model's output along one input history, for identification.
+///
+/// The output of the numerical model is linear in the Everett function: with the extremum
+/// stack `m_0, M_1, m_1, ...` (which depends on the input alone, eq. 4.18-4.22),
+/// `h(t) = h(u_min) + 2 Σ_k [F(M_k, m_{k-1}) - F(M_k, m_k)] ± 2 F(branch now traced)`
+/// (eq. 4.15/4.16). Sample `t` owns the terms `indptr[t] .. indptr[t + 1]`, each a point
+/// `(alpha, beta)` with `alpha > beta` and a coefficient of ±2; a table on any grid turns
+/// them into a design matrix by its interpolation weights. The stack is the evaluator's
+/// (same turning and wiping-out rules, no capacity limit); inputs are clamped into
+/// `[u_min, u_max]` and must not be NaN.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EverettTerms {
+    /// Row pointer: sample `t` owns terms `indptr[t] .. indptr[t + 1]`.
+    pub indptr: Vec<usize>,
+    /// α of each term.
+    pub alpha: Vec<f64>,
+    /// β of each term.
+    pub beta: Vec<f64>,
+    /// Coefficient of each term (±2).
+    pub coef: Vec<f64>,
+}
+
+impl EverettTerms {
+    fn push(&mut self, alpha: f64, beta: f64, coef: f64) {
+        if alpha > beta {
+            self.alpha.push(alpha);
+            self.beta.push(beta);
+            self.coef.push(coef);
+        }
+    }
+}
+
+/// The Everett terms of every sample of `inputs` (see [`EverettTerms`]).
+pub fn everett_terms(inputs: &[f64], u_min: f64, u_max: f64) -> Result<EverettTerms, CoreError> {
+    if !(u_min.is_finite() && u_max.is_finite() && u_max > u_min) {
+        return Err(CoreError::Parameter {
+            what: "input range",
+            why: format!("need finite u_min < u_max, got {u_min} .. {u_max}"),
+        });
+    }
+    if let Some(t) = inputs.iter().position(|u| u.is_nan()) {
+        return Err(CoreError::Parameter {
+            what: "inputs",
+            why: format!("sample {t} is NaN"),
+        });
+    }
+    let mut out = EverettTerms {
+        indptr: Vec::with_capacity(inputs.len() + 1),
+        ..Default::default()
+    };
+    out.indptr.push(0);
+    let mut stack = vec![u_min];
+    let mut prev = u_min;
+    for &u_in in inputs {
+        let u = u_in.clamp(u_min, u_max);
+        if u != prev {
+            let rising = u > prev;
+            if rising != (stack.len() % 2 == 1) {
+                stack.push(prev);
+            }
+            if rising {
+                while stack.len() >= 3 && u >= stack[stack.len() - 2] {
+                    stack.truncate(stack.len() - 2);
+                }
+            } else {
+                while stack.len() >= 3 && u <= stack[stack.len() - 2] {
+                    stack.truncate(stack.len() - 2);
+                }
+                if stack.len() == 2 && u <= stack[0] {
+                    stack.truncate(1);
+                }
+            }
+            prev = u;
+        }
+        let len = stack.len();
+        for q in (1..len).step_by(2) {
+            out.push(stack[q], stack[q - 1], 2.0);
+            if q + 1 < len {
+                out.push(stack[q], stack[q + 1], -2.0);
+            }
+        }
+        if len % 2 == 1 {
+            out.push(u, stack[len - 1], 2.0);
+        } else {
+            out.push(stack[len - 1], u, -2.0);
+        }
+        out.indptr.push(out.alpha.len());
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -533,5 +624,29 @@ mod tests {
                 prop_assert!((x - y - shift).abs() < 1e-9);
             }
         }
+    }
+
+    proptest! {
+        #[test]
+        fn everett_terms_reproduce_the_bank(path in arb_path()) {
+            let e = uniform(41);
+            let mut bank = PreisachBank::new(e.clone(), 1, 256).unwrap();
+            let out = run1(&mut bank, &path);
+            let terms = everett_terms(&path, 0.0, 1.0).unwrap();
+            prop_assert_eq!(terms.indptr.len(), path.len() + 1);
+            for (t, h) in out.iter().enumerate() {
+                let r = terms.indptr[t]..terms.indptr[t + 1];
+                let sum: f64 = r
+                    .map(|q| terms.coef[q] * e.value(terms.alpha[q], terms.beta[q]))
+                    .sum();
+                prop_assert!((sum - h).abs() < 1e-9, "sample {}: {} vs {}", t, sum, h);
+            }
+        }
+    }
+
+    #[test]
+    fn everett_terms_reject_nan_and_bad_ranges() {
+        assert!(everett_terms(&[0.1, f64::NAN], 0.0, 1.0).is_err());
+        assert!(everett_terms(&[0.1], 1.0, 1.0).is_err());
     }
 }

@@ -12,8 +12,8 @@ use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use texsense_core::repair::RepairOutcome;
 use texsense_core::{
-    Compensation, CoreError, DriftBank, Everett, Kernel, NeighbourMeanRepair, Neighbours,
-    PreisachBank, SpacerBank, SpacerParams,
+    everett_terms, Compensation, CoreError, DriftBank, Everett, Kernel, NeighbourMeanRepair,
+    Neighbours, PreisachBank, SpacerBank, SpacerParams,
 };
 
 create_exception!(
@@ -609,6 +609,33 @@ impl PyCompensation {
     }
 }
 
+/// The Everett terms of an input history (identification): (indptr, alpha, beta, coef).
+#[pyfunction(name = "everett_terms")]
+#[allow(clippy::type_complexity)]
+fn py_everett_terms<'py>(
+    py: Python<'py>,
+    inputs: PyReadonlyArray1<'py, f64>,
+    u_min: f64,
+    u_max: f64,
+) -> PyResult<(
+    Bound<'py, PyArray1<u64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+)> {
+    let u = inputs.as_slice()?;
+    let terms = py
+        .detach(|| everett_terms(u, u_min, u_max))
+        .map_err(to_py)?;
+    let indptr: Vec<u64> = terms.indptr.iter().map(|&v| v as u64).collect();
+    Ok((
+        indptr.into_pyarray(py),
+        terms.alpha.into_pyarray(py),
+        terms.beta.into_pyarray(py),
+        terms.coef.into_pyarray(py),
+    ))
+}
+
 /// The compiled core of texsense.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -618,6 +645,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyPreisachBank>()?;
     m.add_class::<PyDriftBank>()?;
     m.add_class::<PyCompensation>()?;
+    m.add_function(wrap_pyfunction!(py_everett_terms, m)?)?;
     m.add("ShapeError", m.py().get_type::<ShapeError>())?;
     m.add(
         "NeighbourIndexError",

@@ -53,9 +53,23 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     f.add_argument("-o", "--output-model", type=Path, required=True, help="model JSON to write")
     f.add_argument("--input", default="compression_mm", help="input column (compression_mm)")
     f.add_argument("--output", default="pressure_ncm2", help="output column (pressure_ncm2)")
-    f.add_argument("--method", default="auto", choices=("auto", "thesis", "lsq"))
-    f.add_argument("--grid", type=int, default=100, help="Everett grid, thesis method (100)")
-    f.add_argument("--cells", type=int, default=40, help="grid cells, least squares (40)")
+    f.add_argument(
+        "--method",
+        default="auto",
+        choices=("auto", "lsq", "thesis"),
+        help="auto (default): least squares, with the thesis table as a weak prior when the "
+        "record holds the thesis's curves; lsq; thesis (§4.4.2)",
+    )
+    f.add_argument("--grid", type=int, default=100, help="evaluated Everett table K x K (100)")
+    f.add_argument(
+        "--cells", type=int, help="coarse α cells of least squares (default: cross-validated)"
+    )
+    f.add_argument(
+        "--smoothing",
+        type=float,
+        help="curvature penalty of least squares (default: cross-validated)",
+    )
+    f.add_argument("--folds", type=int, default=4, help="folds of held-out reversal curves (4)")
     f.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     f.add_argument("--drift-kind", choices=("log", "prony"), default="log")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -117,6 +131,8 @@ def run_fit(args: argparse.Namespace) -> int:
         method=args.method,
         grid=args.grid,
         cells=args.cells,
+        smoothing=args.smoothing,
+        folds=args.folds,
         input_name=args.input,
         output_name=args.output,
         input_unit=_unit_of(args.input),
@@ -138,6 +154,10 @@ def run_fit(args: argparse.Namespace) -> int:
         "input_range": [model.u_min_, model.u_max_],
         "grid": model.everett_.shape[0],
         "fit": error_summary(y, fitted),
+        "validation_rmse": model.validation_rmse_,
+        "chosen": {
+            k: model.details_.get(k) for k in ("alpha_cells", "d_cells", "spacing", "smoothing")
+        },
     }
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -148,6 +168,15 @@ def run_fit(args: argparse.Namespace) -> int:
             f"{args.input} {model.u_min_:.4g}..{model.u_max_:.4g}; "
             f"fit RMSE {summary['fit']['rmse']:.4g}"
         )
+        if model.validation_rmse_ is not None:
+            d = model.details_
+            print(
+                f"  chosen by {d['validation_folds']}-fold cross-validation on held-out reversal "
+                f"curves: {d['alpha_cells']} x {d['d_cells']} cells, smoothing "
+                f"{d['smoothing']:g}; validation RMSE {model.validation_rmse_:.4g}"
+            )
+        elif model.method_ != "thesis":
+            print("  too few reversal curves to hold any out: settings not cross-validated")
     return 0
 
 

@@ -34,10 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import lsq_linear
-from scipy.sparse import csr_matrix, hstack, vstack
+from scipy.sparse import csr_matrix
 
 from texsense.exceptions import ParameterError
+from texsense.hysteresis._lsq import fit_everett_lsq, lower_design
 from texsense.hysteresis._segments import Branch, split_branches
 
 __all__ = ["Identified", "find_thesis_curves", "identify_lsq", "identify_thesis", "make_monotone"]
@@ -70,8 +70,11 @@ def find_thesis_curves(
     u: npt.NDArray[np.float64], tolerance: float, reach: float = 0.8
 ) -> tuple[Branch, list[Branch]] | None:
     """The designed curves in a record: a rising curve over the whole range (within 3 % at
-    both ends) and at least two falling curves that go down to within ``1 - reach`` of the
-    bottom (a spacer stops carrying load a little above zero compression). None if absent."""
+    both ends) and falling curves from at least two different maxima (5 % of the range
+    apart; the first curve from each) that go down to within ``1 - reach`` of the bottom (a
+    spacer stops carrying load a little above zero compression). None if absent —
+    ascending first-order reversal curves, which all fall from the top, are not the
+    thesis's protocol."""
     lo, hi = float(u.min()), float(u.max())
     span = hi - lo
     branches = split_branches(u, tolerance)
@@ -81,9 +84,15 @@ def find_thesis_curves(
         if b.rising and u[b.start] - lo < 0.03 * span and hi - u[b.stop] < 0.03 * span
     ]
     falling = [b for b in branches if not b.rising and u[b.stop] - lo < (1 - reach) * span]
-    if not rising or len(falling) < 2:
+    # the thesis's curves fall from *different* maxima (100, 70, 30 %); first-order reversal
+    # curves that all fall from the top to different minima are the mirror protocol
+    distinct: list[Branch] = []
+    for b in falling:
+        if all(abs(u[b.start] - u[c.start]) > 0.05 * span for c in distinct):
+            distinct.append(b)
+    if not rising or len(distinct) < 2:
         return None
-    return rising[0], falling
+    return rising[0], distinct
 
 
 def identify_thesis(
@@ -175,153 +184,78 @@ def everett_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -
     """The model's output for an input history is linear in the Everett table: return the
     sparse matrix A (T x K²) with ``output = A @ F.ravel()`` (output at u_min = 0).
 
-    The extremum stack depends on the input alone (eq. 4.15/4.16 with wiping-out); each
-    ``F(α, β)`` term is spread over the grid nodes with the interpolation weights of the Rust
-    core (bilinear; linear on the lower triangle of a diagonal cell).
+    The extremum stack depends on the input alone (eq. 4.15/4.16 with wiping-out; the terms
+    come from the Rust core, :func:`texsense._core.everett_terms`); each ``F(α, β)`` term is
+    spread over the grid nodes with the interpolation weights of the core (bilinear; linear on
+    the lower triangle of a diagonal cell).
     """
     k = nodes.size
-    u_min, step = nodes[0], nodes[1] - nodes[0]
-    last = k - 1
-    rows: list[int] = []
-    cols: list[int] = []
-    vals: list[float] = []
-
-    def add(t: int, alpha: float, beta: float, c: float) -> None:
-        a = min(max((alpha - u_min) / step, 0.0), last)
-        b = min(max((beta - u_min) / step, 0.0), last)
-        if b >= a:
-            return
-        i0 = min(int(a), k - 2)
-        j0 = min(int(b), k - 2)
-        wa, wb = a - i0, b - j0
-        if i0 == j0:
-            terms = [((i0 + 1) * k + j0, (wa - wb))]
-        else:
-            terms = [
-                (i0 * k + j0, (1 - wa) * (1 - wb)),
-                (i0 * k + j0 + 1, (1 - wa) * wb),
-                ((i0 + 1) * k + j0, wa * (1 - wb)),
-                ((i0 + 1) * k + j0 + 1, wa * wb),
-            ]
-        for col, w in terms:
-            if w:
-                rows.append(t)
-                cols.append(col)
-                vals.append(c * w)
-
-    stack = [u_min]  # alternating extrema, m0 first
-    prev = u_min
-    for t, x in enumerate(u):
-        x = min(max(float(x), nodes[0]), nodes[-1])
-        update_extrema(stack, prev, x)
-        prev = x
-        # output = 2 Σ_k [F(M_k, m_{k-1}) - F(M_k, m_k)] + the branch now being traced
-        for q in range(1, len(stack), 2):
-            add(t, stack[q], stack[q - 1], 2.0)
-            if q + 1 < len(stack):
-                add(t, stack[q], stack[q + 1], -2.0)
-        if len(stack) % 2 == 1:  # rising after the minimum on top
-            add(t, x, stack[-1], 2.0)
-        else:  # falling after the maximum on top
-            add(t, stack[-1], x, -2.0)
-    return csr_matrix((vals, (rows, cols)), shape=(u.size, k * k))
-
-
-def _downsample(u: np.ndarray, p: np.ndarray, max_samples: int) -> tuple[np.ndarray, np.ndarray]:
-    if u.size <= max_samples:
-        return u, p
-    # keep every turning point, thin the rest evenly
-    d = np.sign(np.diff(u))
-    turns = np.nonzero(d[1:] * d[:-1] < 0)[0] + 1
-    keep = np.unique(np.concatenate([np.linspace(0, u.size - 1, max_samples).astype(int), turns]))
-    return u[keep], p[keep]
+    lower = lower_design(np.asarray(u, dtype=np.float64), nodes).tocoo()
+    i = np.floor((1 + np.sqrt(8 * lower.col + 1)) / 2).astype(np.int64)
+    i -= (i * (i - 1) // 2 > lower.col).astype(np.int64)  # guard the float sqrt
+    j = lower.col - i * (i - 1) // 2
+    return csr_matrix((lower.data, (lower.row, i * k + j)), shape=(lower.shape[0], k * k))
 
 
 def identify_lsq(
     u: npt.ArrayLike,
     p: npt.ArrayLike,
-    cells: int = 30,
-    smoothing: float = 1e-3,
-    max_samples: int = 8000,
+    grid: int = 100,
+    cells: int | None = None,
+    smoothing: float | None = None,
+    spacing: float | None = None,
+    folds: int = 4,
     prior: Identified | None = None,
-    prior_weight: float = 0.05,
+    prior_weight: float = 1e-3,
 ) -> Identified:
-    """Least-squares identification of the Everett table from any record.
-
-    The output of the numerical model is linear in the table (:func:`everett_design`), so
-    the table values at ``cells + 1`` nodes per axis and the output offset are found by
-    regularised linear least squares (second differences along α and β penalised with
-    weight ``smoothing``), then made monotone. Parts of the Preisach triangle that the record
-    never visits are only filled by the smoothness penalty: the record should hold reversals
-    at many levels (a random or cyclic record), not just the thesis's falling curves.
-    """
+    """Constrained least-squares identification of a monotone Everett table from any record
+    (:mod:`texsense.hysteresis._lsq`): the grid, node spacing and curvature penalty are chosen
+    by cross-validation on held-out reversal curves unless given; ``prior`` (e.g. the thesis
+    method's table) fills the parts of the Preisach triangle the record does not visit."""
     u = np.asarray(u, dtype=np.float64)
     p = np.asarray(p, dtype=np.float64)
     ok = np.isfinite(u) & np.isfinite(p)
     u, p = u[ok], p[ok]
     if u.size < 10 or np.ptp(u) <= 0:
         raise ParameterError("least squares needs at least 10 samples over a non-zero input range")
-    if cells < 3:
-        raise ParameterError(f"cells must be >= 3, got {cells}")
-    us, ps = _downsample(u, p, max_samples)
     u_min, u_max = float(u.min()), float(u.max())
-    nodes = np.linspace(u_min, u_max, cells + 1)
-    k = nodes.size
-    a_full = everett_design(us, nodes)
-    ii, jj = np.tril_indices(k, -1)
-    free = ii * k + jj
-    a = a_full[:, free]
-    n = free.size
-    # second-difference smoothness along α (rows) and β (columns) of the lower triangle
-    index = {(i, j): c for c, (i, j) in enumerate(zip(ii, jj, strict=True))}
-    rows, cols, vals = [], [], []
-    r = 0
-    for (i, j), c in index.items():
-        for di, dj in ((1, 0), (0, 1)):
-            a1, a2 = (i - di, j - dj), (i + di, j + dj)
-            if a1 in index and a2 in index:  # curvature
-                rows += [r, r, r]
-                cols += [index[a1], c, index[a2]]
-                vals += [1.0, -2.0, 1.0]
-                r += 1
-
-    scale = smoothing * np.sqrt(us.size)
-    penalty = csr_matrix((np.array(vals) * scale * k, (rows, cols)), shape=(r, n + 1))
-    design = hstack([a, csr_matrix(np.ones((a.shape[0], 1)))]).tocsr()  # + output offset
-    blocks, rhs = [design, penalty], [ps, np.zeros(r)]
+    target = None
     if prior is not None:
-        # pull towards a prior table (e.g. the thesis method's) where the data say little
-        old = np.linspace(prior.u_min, prior.u_max, prior.everett.shape[0])
         from scipy.interpolate import RegularGridInterpolator
 
+        old = np.linspace(prior.u_min, prior.u_max, prior.everett.shape[0])
+        nodes = np.linspace(u_min, u_max, grid)
         interp = RegularGridInterpolator(
             (old, old), prior.everett, bounds_error=False, fill_value=None
         )
-        target = interp(np.column_stack([nodes[ii], nodes[jj]]))
-        weight = prior_weight * np.sqrt(us.size)
-        blocks.append(
-            csr_matrix((np.full(n, weight), (np.arange(n), np.arange(n))), shape=(n, n + 1))
-        )
-        rhs.append(weight * target)
-    a_aug = vstack(blocks).tocsr()
-    b_aug = np.concatenate(rhs)
-    sol = lsq_linear(a_aug, b_aug, method="trf", lsmr_tol="auto", max_iter=200)
-    table = np.zeros(k * k)
-    table[free] = sol.x[:n]
-    table = table.reshape(k, k)
-    offset = float(sol.x[-1])
-    fit = design @ sol.x
+        aa, bb = np.meshgrid(nodes, nodes, indexing="ij")
+        target = np.tril(interp(np.column_stack([aa.ravel(), bb.ravel()])).reshape(grid, grid), -1)
+    res = fit_everett_lsq(
+        u,
+        p,
+        grid=grid,
+        cells=cells,
+        smoothing=smoothing,
+        spacing=spacing,
+        folds=folds,
+        prior=target,
+        prior_weight=prior_weight,
+    )
     return Identified(
-        make_monotone(table),
+        res.table,
         u_min,
         u_max,
-        offset,
-        "lsq",
+        res.offset,
+        "lsq" if prior is None else f"lsq+{prior.method}-prior",
         {
-            "cells": cells,
-            "smoothing": smoothing,
-            "fit_rmse": float(np.sqrt(np.mean((fit - ps) ** 2))),
-            "samples_used": int(us.size),
+            "grid": grid,
+            **res.chosen.as_dict(),
+            "validation_rmse": res.validation_rmse,
+            "validation_folds": res.folds,
+            "fit_rmse": res.fit_rmse,
+            "samples_used": int(u.size),
             "prior": None if prior is None else prior.method,
+            "prior_weight": None if prior is None else prior_weight,
+            "cv": [{**c.as_dict(), "rmse": r} for c, r in res.scores],
         },
     )

@@ -1,0 +1,441 @@
+"""Least-squares identification of a monotone Everett table from any record.
+
+The output of the numerical Preisach model is linear in the Everett function (eq. 4.15/4.16:
+the extremum stack depends on the input alone), so a table is identified by linear least
+squares. Three choices make it hold on records nobody here designed:
+
+- **Where the resolution goes.** The unknowns are values of ``F`` on a coarse grid in
+  ``(α, d)``, ``d = α - β`` the distance fallen since the maximum, with the d-nodes denser next
+  to the diagonal (``spacing`` > 1): a spacer's falling branch starts steeply over a fixed
+  compression distance (friction reversing), which a uniform ``(α, β)`` grid of a few dozen
+  cells cannot resolve. The coarse values are interpolated bilinearly onto the fine
+  ``grid x grid`` table that the Rust core evaluates; ``F(α, α) = 0`` holds by construction.
+- **Monotone by construction.** The fine table must be non-decreasing in α and
+  non-increasing in β (the output is then monotone between extrema, eq. 4.16/4.17). These
+  are linear inequalities on the unknowns, and the quadratic program is solved by an
+  interior-point method whose iterates stay strictly feasible (:mod:`._qp`): no clipping
+  after the fact. The orientation of the loops is free (clockwise for a spacer, whose
+  loading branch lies above unloading; counter-clockwise for magnetic material).
+- **Chosen by the record itself.** The grid, the node spacing and the curvature penalty are
+  chosen by cross-validation on held-out reversal curves of the same record: the record's
+  monotone branches (every turning point) are dealt to ``folds`` folds in turn; a candidate
+  is fitted with the whole input history (so every sample keeps its true extremum stack) but
+  only the other folds' samples in the loss, and scored by the RMSE on the held-out branches.
+  The chosen candidate is refitted on all samples. A prior table (the thesis method's, when
+  the record holds its curves) can fill the parts of the Preisach triangle that the record
+  never visits, with a small fixed weight.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import csr_matrix, hstack
+
+from texsense._core import everett_terms
+from texsense.exceptions import ParameterError
+from texsense.hysteresis._qp import solve_monotone_qp
+from texsense.hysteresis._segments import split_branches
+
+__all__ = ["Candidate", "LsqResult", "fit_everett_lsq", "lower_design"]
+
+# the cross-validated search (coordinate-wise, from the middle candidate)
+SIZES: tuple[tuple[int, int], ...] = ((10, 8), (16, 12), (24, 18))
+SMOOTHINGS: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One setting of the identification: coarse grid, node spacing, curvature penalty."""
+
+    alpha_cells: int
+    d_cells: int
+    spacing: float
+    smoothing: float
+
+    def as_dict(self) -> dict[str, float]:
+        """JSON-able form."""
+        return {
+            "alpha_cells": self.alpha_cells,
+            "d_cells": self.d_cells,
+            "spacing": self.spacing,
+            "smoothing": self.smoothing,
+        }
+
+
+@dataclass
+class LsqResult:
+    """The identified fine table (lower triangle filled), output offset and how it was chosen."""
+
+    table: npt.NDArray[np.float64]
+    offset: float
+    chosen: Candidate
+    validation_rmse: float | None
+    scores: list[tuple[Candidate, float]]
+    fit_rmse: float
+    folds: int
+
+
+def _lower_index(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row (α) and column (β) of the free entries ``i > j`` of a k x k table, in the order
+    of the column index ``i (i - 1) / 2 + j``."""
+    i = np.repeat(np.arange(1, k), np.arange(1, k))
+    j = np.concatenate([np.arange(n) for n in range(1, k)]) if k > 1 else np.zeros(0, int)
+    return i, j
+
+
+def lower_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> csr_matrix:
+    """Design matrix (T x K(K-1)/2) of the model's output over the free table entries
+    ``F[i, j]`` (i > j, column ``i (i - 1) / 2 + j``) with the core's interpolation (bilinear;
+    linear on the lower triangle of the diagonal cells); output at ``u_min`` = 0."""
+    k = nodes.size
+    indptr, alpha, beta, coef = everett_terms(
+        np.ascontiguousarray(u, dtype=np.float64), float(nodes[0]), float(nodes[-1])
+    )
+    row = np.repeat(np.arange(u.size), np.diff(indptr.astype(np.int64)))
+    step = nodes[1] - nodes[0]
+    a = np.clip((alpha - nodes[0]) / step, 0.0, k - 1)
+    b = np.clip((beta - nodes[0]) / step, 0.0, k - 1)
+    i0 = np.minimum(a.astype(np.int64), k - 2)
+    j0 = np.minimum(b.astype(np.int64), k - 2)
+    wa, wb = a - i0, b - j0
+    on_diag = i0 == j0
+    off = ~on_diag
+    parts = [(row[on_diag], i0[on_diag] + 1, j0[on_diag], coef[on_diag] * (wa - wb)[on_diag])]
+    for di, dj, w in (
+        (0, 0, (1 - wa) * (1 - wb)),
+        (0, 1, (1 - wa) * wb),
+        (1, 0, wa * (1 - wb)),
+        (1, 1, wa * wb),
+    ):
+        parts.append((row[off], i0[off] + di, j0[off] + dj, coef[off] * w[off]))
+    r, ii, jj, ww = (np.concatenate(x) for x in zip(*parts, strict=True))
+    keep = (ii > jj) & (ww != 0)
+    col = ii[keep] * (ii[keep] - 1) // 2 + jj[keep]
+    return csr_matrix((ww[keep], (r[keep], col)), shape=(u.size, k * (k - 1) // 2))
+
+
+def _monotone_constraints(k: int) -> csr_matrix:
+    """Rows ``c`` with ``c · F >= 0`` for a table non-increasing in β (``F[i, j] >= F[i, j+1]``,
+    ``F[i, i] = 0``) and non-decreasing in α (``F[i+1, j] >= F[i, j]``)."""
+    i, j = _lower_index(k)
+    col = np.arange(i.size)
+    n_beta = i.size
+    # β: F[i, j] - F[i, j + 1] (the second term absent on the diagonal's neighbour)
+    inner = j + 1 < i
+    rows = [np.arange(n_beta), np.arange(n_beta)[inner]]
+    cols = [col, (i * (i - 1) // 2 + j + 1)[inner]]
+    vals = [np.ones(n_beta), -np.ones(int(inner.sum()))]
+    # α: F[i + 1, j] - F[i, j] for i + 1 < k
+    up = i + 1 < k
+    r_alpha = n_beta + np.arange(int(up.sum()))
+    rows += [r_alpha, r_alpha]
+    cols += [((i + 1) * i // 2 + j)[up], col[up]]
+    vals += [np.ones(r_alpha.size), -np.ones(r_alpha.size)]
+    return csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(n_beta + r_alpha.size, i.size),
+    )
+
+
+def _shape_constraints(alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
+    """Rows ``c`` with ``c · θ >= 0`` on the coarse unknowns that make the interpolated
+    surface ``B(α, d)`` (``F(α, β) = B(α, α - β)``) monotone everywhere, hence every table
+    sampled from it:
+
+    - ``B`` non-decreasing in d at every α node (bilinear interpolation keeps it within
+      cells): ``F`` non-increasing in β;
+    - ``∂B/∂α + ∂B/∂d >= 0`` at the four corners of every cell (the sum is affine in the
+      cell, so its minimum is at a corner): ``F`` non-decreasing in α at fixed β.
+    """
+    na, nd = alpha_cells + 1, d_nodes.size - 1
+    h_a = 1.0 / alpha_cells
+
+    def idx(a: int, b: int) -> int:
+        return a * nd + b - 1  # b >= 1; node b = 0 is the fixed zero
+
+    rows: list[int] = []
+    cols: list[int] = []
+    vals: list[float] = []
+    r = 0
+
+    def add(terms: dict[tuple[int, int], float]) -> None:
+        nonlocal r
+        for (a, b), v in terms.items():
+            if b >= 1 and v != 0.0:
+                rows.append(r)
+                cols.append(idx(a, b))
+                vals.append(v)
+        r += 1
+
+    for a in range(na):
+        for b in range(1, nd + 1):
+            add({(a, b): 1.0, (a, b - 1): -1.0})
+    for a in range(na - 1):
+        for b in range(nd):
+            h_d = d_nodes[b + 1] - d_nodes[b]
+            for ca in (0, 1):  # corner (a + ca, b + cb)
+                for cb in (0, 1):
+                    t: dict[tuple[int, int], float] = {}
+                    # ∂B/∂α along the d-edge of the corner, ∂B/∂d along its α-edge
+                    for key, v in (
+                        ((a + 1, b + cb), 1.0 / h_a),
+                        ((a, b + cb), -1.0 / h_a),
+                        ((a + ca, b + 1), 1.0 / h_d),
+                        ((a + ca, b), -1.0 / h_d),
+                    ):
+                        t[key] = t.get(key, 0.0) + v
+                    add(t)
+    return csr_matrix((vals, (rows, cols)), shape=(r, na * nd))
+
+
+def _d_nodes(cells: int, spacing: float) -> np.ndarray:
+    """Fall distances as fractions of the input span, 0 .. 1, denser near 0 for spacing > 1."""
+    return np.linspace(0.0, 1.0, cells + 1) ** spacing
+
+
+def _shape_map(k: int, alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
+    """Fine free entries <- coarse unknowns on (α node, d node ≥ 1); bilinear in (α, d)."""
+    i, j = _lower_index(k)
+    x = np.linspace(0.0, 1.0, k)
+    a = np.clip(x[i] * alpha_cells, 0.0, alpha_cells * (1 - 1e-12))
+    a0 = a.astype(np.int64)
+    wa = a - a0
+    d = x[i] - x[j]
+    nd = d_nodes.size
+    b0 = np.clip(np.searchsorted(d_nodes, d, side="right") - 1, 0, nd - 2)
+    wb = (d - d_nodes[b0]) / (d_nodes[b0 + 1] - d_nodes[b0])
+    r = np.arange(i.size)
+    rows, cols, vals = [], [], []
+    for da, db, w in (
+        (0, 0, (1 - wa) * (1 - wb)),
+        (1, 0, wa * (1 - wb)),
+        (0, 1, (1 - wa) * wb),
+        (1, 1, wa * wb),
+    ):
+        bb = b0 + db
+        keep = (bb >= 1) & (w != 0)  # d node 0 is the diagonal, where F = 0
+        rows.append(r[keep])
+        cols.append((a0[keep] + da) * (nd - 1) + bb[keep] - 1)
+        vals.append(w[keep])
+    return csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(i.size, (alpha_cells + 1) * (nd - 1)),
+    )
+
+
+def _curvature(alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
+    """Second differences of the coarse unknowns along α and along d (divided differences on
+    the non-uniform d-nodes, scaled to a uniform step), one row each."""
+    na, nd = alpha_cells + 1, d_nodes.size - 1
+    h = (d_nodes[-1] - d_nodes[0]) / nd
+    rows, cols, vals = [], [], []
+    r = 0
+
+    def idx(a: int, b: int) -> int:
+        return a * nd + b - 1
+
+    for a in range(na):
+        for b in range(1, nd + 1):
+            if 0 < a < na - 1:
+                rows += [r, r, r]
+                cols += [idx(a - 1, b), idx(a, b), idx(a + 1, b)]
+                vals += [1.0, -2.0, 1.0]
+                r += 1
+            if b < nd:
+                h1 = d_nodes[b] - d_nodes[b - 1]
+                h2 = d_nodes[b + 1] - d_nodes[b]
+                c1, c2 = 2 * h * h / (h1 * (h1 + h2)), 2 * h * h / (h2 * (h1 + h2))
+                if b > 1:  # the d = 0 node is the fixed zero on the diagonal
+                    rows.append(r)
+                    cols.append(idx(a, b - 1))
+                    vals.append(c1)
+                rows += [r, r]
+                cols += [idx(a, b), idx(a, b + 1)]
+                vals += [-(c1 + c2), c2]
+                r += 1
+    return csr_matrix((vals, (rows, cols)), shape=(r, na * nd))
+
+
+def branch_folds(u: npt.NDArray[np.float64], folds: int, tolerance: float) -> np.ndarray:
+    """Fold of every sample: the record's monotone branches dealt to the folds in turn. A
+    record with few branches (the thesis's protocol has about seven) gets fewer folds, at
+    least two branches each; with fewer than four branches every sample is -1 (none can be
+    held out)."""
+    branches = split_branches(u, tolerance)
+    fold = np.full(u.size, -1, dtype=np.int64)
+    n_folds = min(folds, len(branches) // 2)
+    if n_folds < 2:
+        return fold
+    for n, b in enumerate(branches):
+        fold[b.start : b.stop + 1] = n % n_folds
+    return fold
+
+
+class _Problem:
+    """Everything of one record that the candidates share: the fine design, the constraints,
+    per-fold Gram matrices are computed per candidate map."""
+
+    def __init__(
+        self,
+        u: np.ndarray,
+        p: np.ndarray,
+        grid: int,
+        fold: np.ndarray,
+        prior: np.ndarray | None,
+        prior_weight: float,
+    ) -> None:
+        self.u, self.p, self.k = u, p, grid
+        self.nodes = np.linspace(float(u.min()), float(u.max()), grid)
+        self.fine = lower_design(u, self.nodes)
+        self.fold = fold
+        self.n_folds = int(fold.max()) + 1
+        self.prior = prior
+        self.prior_weight = prior_weight
+        self._cache: dict[tuple, tuple] = {}
+
+    def system(self, alpha_cells: int, d_cells: int, spacing: float) -> tuple:
+        key = (alpha_cells, d_cells, spacing)
+        if key not in self._cache:
+            d_nodes = _d_nodes(d_cells, spacing)
+            P = _shape_map(self.k, alpha_cells, d_nodes)
+            A = hstack([self.fine @ P, csr_matrix(np.ones((self.u.size, 1)))]).tocsr()
+            n = P.shape[1]
+            grams = []
+            for f in range(max(self.n_folds, 1)):
+                rows = np.nonzero(self.fold == f)[0] if self.n_folds else np.arange(self.u.size)
+                Af = A[rows]
+                grams.append(((Af.T @ Af).toarray(), Af.T @ self.p[rows], rows.size))
+            G_all = sum(g[0] for g in grams) if self.n_folds else grams[0][0]
+            b_all = sum(g[1] for g in grams) if self.n_folds else grams[0][1]
+            D = _curvature(alpha_cells, d_nodes)
+            DD = np.zeros((n + 1, n + 1))
+            DD[:n, :n] = (D.T @ D).toarray()
+            shape_c = _shape_constraints(alpha_cells, d_nodes)
+            C = hstack([shape_c, csr_matrix((shape_c.shape[0], 1))]).tocsr()
+            prior_terms = None
+            if self.prior is not None and self.prior_weight > 0:
+                i, j = _lower_index(self.k)
+                PP = np.zeros((n + 1, n + 1))
+                PP[:n, :n] = (P.T @ P).toarray()
+                pb = np.zeros(n + 1)
+                pb[:n] = P.T @ self.prior[i, j]
+                prior_terms = (PP, pb)
+            x0 = np.zeros(n + 1)
+            x0[:n] = (
+                1e-3 * max(float(np.ptp(self.p)), 1e-12) * np.tile(d_nodes[1:], alpha_cells + 1)
+            )
+            x0[n] = float(self.p.mean())
+            self._cache[key] = (A, P, grams, G_all, b_all, DD, C, prior_terms, x0)
+        return self._cache[key]
+
+    def solve(self, c: Candidate, exclude: int | None, tol: float = 1e-7) -> np.ndarray:
+        _, _, grams, G_all, b_all, DD, C, prior_terms, x0 = self.system(
+            c.alpha_cells, c.d_cells, c.spacing
+        )
+        if exclude is None:
+            G, b, count = G_all, b_all, self.u.size
+        else:
+            G = G_all - grams[exclude][0]
+            b = b_all - grams[exclude][1]
+            count = self.u.size - grams[exclude][2]
+        G = G / count
+        b = b / count
+        scale = np.trace(G)
+        H = G + c.smoothing * scale / max(np.trace(DD), 1e-300) * DD
+        if prior_terms is not None:
+            PP, pb = prior_terms
+            w = self.prior_weight * scale / max(np.trace(PP), 1e-300)
+            H = H + w * PP
+            b = b + w * pb
+        x, _ = solve_monotone_qp(H, b, C, x0, tol=tol)
+        return x
+
+    def cv_rmse(self, c: Candidate) -> float:
+        A = self.system(c.alpha_cells, c.d_cells, c.spacing)[0]
+
+        def one(f: int) -> float:
+            x = self.solve(c, f, tol=1e-6)
+            rows = np.nonzero(self.fold == f)[0]
+            return float(np.sum((A[rows] @ x - self.p[rows]) ** 2))
+
+        sse = sum(one(f) for f in range(self.n_folds))
+        return float(np.sqrt(sse / np.count_nonzero(self.fold >= 0)))
+
+
+def _search(problem: _Problem, start: Candidate, free: dict[str, bool]) -> list:
+    """Coordinate-wise search over the settings that are free (smoothing, then grid size,
+    then the smoothing's neighbours again); returns every (candidate, CV RMSE) tried, best
+    first. The d-node spacing stays as given (default 3: dense next to the diagonal)."""
+    scores: dict[Candidate, float] = {}
+
+    def score(c: Candidate) -> float:
+        if c not in scores:
+            scores[c] = problem.cv_rmse(c)
+        return scores[c]
+
+    best = start
+    score(best)
+    if free["smoothing"]:
+        best = min(
+            (Candidate(best.alpha_cells, best.d_cells, best.spacing, s) for s in SMOOTHINGS),
+            key=score,
+        )
+    if free["size"]:
+        best = min((Candidate(a, d, best.spacing, best.smoothing) for a, d in SIZES), key=score)
+        if free["smoothing"]:  # the neighbours of the smoothing chosen for the first size
+            k = SMOOTHINGS.index(best.smoothing)
+            near = SMOOTHINGS[max(k - 1, 0) : k + 2]
+            best = min(
+                (Candidate(best.alpha_cells, best.d_cells, best.spacing, s) for s in near),
+                key=score,
+            )
+    return sorted(scores.items(), key=lambda kv: kv[1])
+
+
+def fit_everett_lsq(
+    u: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    grid: int = 100,
+    cells: int | None = None,
+    smoothing: float | None = None,
+    spacing: float | None = None,
+    folds: int = 4,
+    tolerance: float | None = None,
+    prior: npt.NDArray[np.float64] | None = None,
+    prior_weight: float = 1e-3,
+) -> LsqResult:
+    """Identify a monotone ``grid x grid`` Everett table and an output offset from a record
+    (see the module docstring). ``cells`` (α cells; the d-cells are three quarters of it),
+    ``smoothing`` and ``spacing`` fix a setting instead of choosing it by cross-validation;
+    ``prior`` is a table on the same fine grid."""
+    if grid < 3:
+        raise ParameterError(f"grid must be >= 3, got {grid}")
+    if cells is not None and cells < 2:
+        raise ParameterError(f"cells must be >= 2, got {cells}")
+    if smoothing is not None and not smoothing >= 0:
+        raise ParameterError(f"smoothing must be >= 0, got {smoothing}")
+    if folds < 2:
+        raise ParameterError(f"folds must be >= 2, got {folds}")
+    tol = 0.01 * float(np.ptp(u)) if tolerance is None else tolerance
+    fold = branch_folds(u, folds, tol)
+    problem = _Problem(u, p, grid, fold, prior, prior_weight)
+    size = (16, 12) if cells is None else (cells, max(2, round(0.75 * cells)))
+    start = Candidate(size[0], size[1], 3.0 if spacing is None else spacing, smoothing or 1e-4)
+    free = {"smoothing": smoothing is None, "size": cells is None}
+    if problem.n_folds >= 2:
+        scores = _search(problem, start, free)
+        chosen, validation = scores[0]
+    else:  # too few reversal curves to hold any out
+        scores, chosen, validation = [], start, None
+    x = problem.solve(chosen, None)
+    A, P = problem.system(chosen.alpha_cells, chosen.d_cells, chosen.spacing)[:2]
+    i, j = _lower_index(grid)
+    table = np.zeros((grid, grid))
+    table[i, j] = P @ x[:-1]
+    fit_rmse = float(np.sqrt(np.mean((A @ x - p) ** 2)))
+    return LsqResult(
+        table, float(x[-1]), chosen, validation, scores, fit_rmse, max(problem.n_folds, 0)
+    )
