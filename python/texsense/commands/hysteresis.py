@@ -87,6 +87,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     a.add_argument("--output", help="output column to compare with (default: the model's)")
     a.add_argument("--json", action="store_true", help="print the error summary as JSON")
     a.set_defaults(run=run_apply)
+    v = hs.add_parser(
+        "validate",
+        help="where does a model fail on a record (bands, branches, worst places, plot)",
+        description="Run a model through a record with the measured output and report the "
+        "error overall, by output band, on rising and falling branches, and the worst places.",
+    )
+    v.add_argument("model", type=Path, help="model JSON")
+    v.add_argument("data", type=Path, help="CSV with the input and the measured output")
+    v.add_argument("--input", help="input column (default: the model's)")
+    v.add_argument("--output", help="measured output column (default: the model's)")
+    v.add_argument("--plot", type=Path, help="PNG: measured vs model and the error")
+    v.add_argument("--json", action="store_true", help="print the report as JSON")
+    v.set_defaults(run=run_validate)
+
     pl = hs.add_parser("plot", help="Everett surface and modelled loops as PNG")
     pl.add_argument("model", type=Path)
     pl.add_argument("-o", "--out", type=Path, required=True, help="PNG to write")
@@ -222,6 +236,69 @@ def run_apply(args: argparse.Namespace) -> int:
                     f"{b['mean_relative_error']:.2%}, max {b['max_relative_error']:.2%} "
                     f"({b['samples']} samples)"
                 )
+    return 0
+
+
+def run_validate(args: argparse.Namespace) -> int:
+    """Run ``texsense hysteresis validate``."""
+    from texsense.hysteresis.validation import validate
+
+    model = HysteresisModel.load(args.model)
+    cols = read_columns_csv(args.data)
+    in_name = args.input or model.input_name
+    out_name = args.output or model.output_name
+    u = _column(cols, in_name, args.data)
+    y = _column(cols, out_name, args.data)
+    if args.input and _unit_of(in_name) != "1":
+        model.check_units(_unit_of(in_name))
+    times = cols.get("time_s")
+    report = validate(model, u, y, times_s=times)
+    if args.plot:
+        from texsense.hysteresis.plots import validation_report_figure
+
+        validation_report_figure(
+            report,
+            u,
+            y,
+            args.plot,
+            in_name,
+            out_name,
+            title=f"{args.model.name} on {args.data.name}",
+        )
+    if args.json:
+        print(json.dumps(report.to_dict(), indent=2))
+        return 0
+    unit = report.unit
+    print(
+        f"{args.model} on {args.data}: {report.samples} samples, RMSE {report.rmse:.4g} {unit} "
+        f"(NRMSE {report.nrmse:.2%}), {report.clamped} inputs clamped"
+    )
+
+    def line(e: Any) -> str:
+        if not e.samples:
+            return f"  {e.name:>14}: no samples"
+        rel = (
+            ""
+            if e.mean_relative is None
+            else f", mean rel. {e.mean_relative:.2%}, max rel. {e.max_relative:.2%}"
+        )
+        return f"  {e.name:>14}: {e.samples:6d} samples, RMSE {e.rmse:.4g}{rel}"
+
+    print(f"by measured {out_name} ({unit}):")
+    for e in report.bands:
+        print(line(e))
+    print("by branch:")
+    for e in report.branches:
+        print(line(e))
+    print("worst places (one per branch):")
+    for n, p in enumerate(report.worst, 1):
+        when = f"t = {p.time_s:.1f} s, " if p.time_s is not None else ""
+        print(
+            f"  {n}. sample {p.index} ({when}{p.branch}): {in_name} {p.input:.4g}, "
+            f"measured {p.measured:.4g}, model {p.model:.4g} ({p.model - p.measured:+.3g})"
+        )
+    if args.plot:
+        print(f"wrote {args.plot}")
     return 0
 
 

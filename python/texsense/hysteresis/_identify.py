@@ -67,14 +67,17 @@ def make_monotone(table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 
 
 def find_thesis_curves(
-    u: npt.NDArray[np.float64], tolerance: float, reach: float = 0.8
+    u: npt.NDArray[np.float64],
+    tolerance: float,
+    reach: float = 0.8,
+    exclude: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[Branch, list[Branch]] | None:
     """The designed curves in a record: a rising curve over the whole range (within 3 % at
     both ends) and falling curves from at least two different maxima (5 % of the range
     apart; the first curve from each) that go down to within ``1 - reach`` of the bottom (a
     spacer stops carrying load a little above zero compression). None if absent —
     ascending first-order reversal curves, which all fall from the top, are not the
-    thesis's protocol."""
+    thesis's protocol. Falling curves that touch a sample in ``exclude`` are left out."""
     lo, hi = float(u.min()), float(u.max())
     span = hi - lo
     branches = split_branches(u, tolerance)
@@ -84,6 +87,8 @@ def find_thesis_curves(
         if b.rising and u[b.start] - lo < 0.03 * span and hi - u[b.stop] < 0.03 * span
     ]
     falling = [b for b in branches if not b.rising and u[b.stop] - lo < (1 - reach) * span]
+    if exclude is not None:  # held-out curves (cross-validation) are not used
+        falling = [b for b in falling if not exclude[b.start + 1 : b.stop].any()]
     # the thesis's curves fall from *different* maxima (100, 70, 30 %); first-order reversal
     # curves that all fall from the top to different minima are the mirror protocol
     distinct: list[Branch] = []
@@ -96,13 +101,18 @@ def find_thesis_curves(
 
 
 def identify_thesis(
-    u: npt.ArrayLike, p: npt.ArrayLike, grid: int = 100, tolerance: float | None = None
+    u: npt.ArrayLike,
+    p: npt.ArrayLike,
+    grid: int = 100,
+    tolerance: float | None = None,
+    exclude: npt.NDArray[np.bool_] | None = None,
 ) -> Identified:
-    """The thesis's identification from a rising curve and falling curves (§4.4.2)."""
+    """The thesis's identification from a rising curve and falling curves (§4.4.2); falling
+    curves touching ``exclude`` are not used (a held-out fold)."""
     u = np.asarray(u, dtype=np.float64)
     p = np.asarray(p, dtype=np.float64)
     tol = 0.01 * np.ptp(u) if tolerance is None else tolerance
-    found = find_thesis_curves(u, tol)
+    found = find_thesis_curves(u, tol, exclude=exclude)
     if found is None:
         raise ParameterError(
             "the record does not hold the thesis's calibration curves (a rising curve over "
@@ -205,13 +215,14 @@ def identify_lsq(
     smoothing: float | None = None,
     spacing: float | None = None,
     folds: int = 4,
-    prior: Identified | None = None,
-    prior_weight: float = 1e-3,
+    thesis_prior: bool = False,
+    prior_weight: float | None = None,
 ) -> Identified:
     """Constrained least-squares identification of a monotone Everett table from any record
-    (:mod:`texsense.hysteresis._lsq`): the grid, node spacing and curvature penalty are chosen
-    by cross-validation on held-out reversal curves unless given; ``prior`` (e.g. the thesis
-    method's table) fills the parts of the Preisach triangle the record does not visit."""
+    (:mod:`texsense.hysteresis._lsq`): the grid, curvature penalty and (with
+    ``thesis_prior``) the weight of the thesis method's table as a prior are chosen by
+    cross-validation on held-out reversal curves unless given. The prior of each fold is
+    identified without that fold's held-out falling curves."""
     u = np.asarray(u, dtype=np.float64)
     p = np.asarray(p, dtype=np.float64)
     ok = np.isfinite(u) & np.isfinite(p)
@@ -219,17 +230,13 @@ def identify_lsq(
     if u.size < 10 or np.ptp(u) <= 0:
         raise ParameterError("least squares needs at least 10 samples over a non-zero input range")
     u_min, u_max = float(u.min()), float(u.max())
-    target = None
-    if prior is not None:
-        from scipy.interpolate import RegularGridInterpolator
 
-        old = np.linspace(prior.u_min, prior.u_max, prior.everett.shape[0])
-        nodes = np.linspace(u_min, u_max, grid)
-        interp = RegularGridInterpolator(
-            (old, old), prior.everett, bounds_error=False, fill_value=None
-        )
-        aa, bb = np.meshgrid(nodes, nodes, indexing="ij")
-        target = np.tril(interp(np.column_stack([aa.ravel(), bb.ravel()])).reshape(grid, grid), -1)
+    def thesis_table(exclude: np.ndarray | None) -> np.ndarray | None:
+        try:
+            return identify_thesis(u, p, grid, exclude=exclude).everett
+        except ParameterError:  # the fold holds out too many of the curves
+            return None
+
     res = fit_everett_lsq(
         u,
         p,
@@ -238,15 +245,16 @@ def identify_lsq(
         smoothing=smoothing,
         spacing=spacing,
         folds=folds,
-        prior=target,
+        prior=thesis_table if thesis_prior else None,
         prior_weight=prior_weight,
     )
+    weight = res.chosen.prior_weight
     return Identified(
         res.table,
         u_min,
         u_max,
         res.offset,
-        "lsq" if prior is None else f"lsq+{prior.method}-prior",
+        "lsq+thesis-prior" if weight else "lsq",
         {
             "grid": grid,
             **res.chosen.as_dict(),
@@ -254,8 +262,7 @@ def identify_lsq(
             "validation_folds": res.folds,
             "fit_rmse": res.fit_rmse,
             "samples_used": int(u.size),
-            "prior": None if prior is None else prior.method,
-            "prior_weight": None if prior is None else prior_weight,
+            "prior": "thesis" if weight else None,
             "cv": [{**c.as_dict(), "rmse": r} for c, r in res.scores],
         },
     )

@@ -28,11 +28,13 @@ squares. Three choices make it hold on records nobody here designed:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import csr_matrix, hstack
+from threadpoolctl import threadpool_limits
 
 from texsense._core import everett_terms
 from texsense.exceptions import ParameterError
@@ -44,6 +46,7 @@ __all__ = ["Candidate", "LsqResult", "fit_everett_lsq", "lower_design"]
 # the cross-validated search (coordinate-wise, from the middle candidate)
 SIZES: tuple[tuple[int, int], ...] = ((10, 8), (16, 12), (24, 18))
 SMOOTHINGS: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
+PRIOR_WEIGHTS: tuple[float, ...] = (0.0, 1e-3, 1e-2)
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,7 @@ class Candidate:
     d_cells: int
     spacing: float
     smoothing: float
+    prior_weight: float = 0.0
 
     def as_dict(self) -> dict[str, float]:
         """JSON-able form."""
@@ -62,7 +66,14 @@ class Candidate:
             "d_cells": self.d_cells,
             "spacing": self.spacing,
             "smoothing": self.smoothing,
+            "prior_weight": self.prior_weight,
         }
+
+    def but(self, **changes: float) -> Candidate:
+        """A copy with some settings changed."""
+        from dataclasses import replace
+
+        return replace(self, **changes)
 
 
 @dataclass
@@ -260,23 +271,31 @@ def _curvature(alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
 
 
 def branch_folds(u: npt.NDArray[np.float64], folds: int, tolerance: float) -> np.ndarray:
-    """Fold of every sample: the record's monotone branches dealt to the folds in turn. A
-    record with few branches (the thesis's protocol has about seven) gets fewer folds, at
-    least two branches each; with fewer than four branches every sample is -1 (none can be
-    held out)."""
+    """Fold of every sample, -1 for samples that always stay in training.
+
+    Branches that span at least 97 % of the input range (the major loop: no model can
+    extrapolate it, and holding it out measures nothing about interpolation between reversal
+    curves) always train. The other branches, taken in consecutive pairs (a reversal curve
+    and the branch that follows it), are dealt to the folds in turn; fewer pairs than folds
+    give fewer folds, and fewer than two pairs none.
+    """
     branches = split_branches(u, tolerance)
     fold = np.full(u.size, -1, dtype=np.int64)
-    n_folds = min(folds, len(branches) // 2)
+    span = float(np.ptp(u))
+    minor = [b for b in branches if abs(u[b.stop] - u[b.start]) < 0.97 * span]
+    pairs = [minor[k : k + 2] for k in range(0, len(minor), 2)]
+    n_folds = min(folds, len(pairs))
     if n_folds < 2:
         return fold
-    for n, b in enumerate(branches):
-        fold[b.start : b.stop + 1] = n % n_folds
+    for n, pair in enumerate(pairs):
+        for b in pair:
+            fold[b.start : b.stop + 1] = n % n_folds
     return fold
 
 
 class _Problem:
-    """Everything of one record that the candidates share: the fine design, the constraints,
-    per-fold Gram matrices are computed per candidate map."""
+    """Everything of one record that the candidates share: the fine design, the folds, the
+    prior of each fold; the per-candidate systems are cached."""
 
     def __init__(
         self,
@@ -284,16 +303,20 @@ class _Problem:
         p: np.ndarray,
         grid: int,
         fold: np.ndarray,
-        prior: np.ndarray | None,
-        prior_weight: float,
+        prior: Callable[[np.ndarray | None], np.ndarray | None] | None,
     ) -> None:
         self.u, self.p, self.k = u, p, grid
         self.nodes = np.linspace(float(u.min()), float(u.max()), grid)
         self.fine = lower_design(u, self.nodes)
         self.fold = fold
         self.n_folds = int(fold.max()) + 1
-        self.prior = prior
-        self.prior_weight = prior_weight
+        i, j = _lower_index(grid)
+        # the prior of the whole record (key None) and of each fold without its held-out part
+        self.priors: dict[int | None, np.ndarray | None] = {}
+        if prior is not None:
+            for f in [None, *range(self.n_folds)]:
+                table = prior(None if f is None else fold == f)
+                self.priors[f] = None if table is None else table[i, j]
         self._cache: dict[tuple, tuple] = {}
 
     def system(self, alpha_cells: int, d_cells: int, spacing: float) -> tuple:
@@ -303,26 +326,22 @@ class _Problem:
             P = _shape_map(self.k, alpha_cells, d_nodes)
             A = hstack([self.fine @ P, csr_matrix(np.ones((self.u.size, 1)))]).tocsr()
             n = P.shape[1]
+            # one Gram matrix per fold; samples of fold -1 (the major loop) always train
             grams = []
-            for f in range(max(self.n_folds, 1)):
-                rows = np.nonzero(self.fold == f)[0] if self.n_folds else np.arange(self.u.size)
+            for f in range(self.n_folds):
+                rows = np.nonzero(self.fold == f)[0]
                 Af = A[rows]
                 grams.append(((Af.T @ Af).toarray(), Af.T @ self.p[rows], rows.size))
-            G_all = sum(g[0] for g in grams) if self.n_folds else grams[0][0]
-            b_all = sum(g[1] for g in grams) if self.n_folds else grams[0][1]
+            G_all = (A.T @ A).toarray()
+            b_all = A.T @ self.p
             D = _curvature(alpha_cells, d_nodes)
             DD = np.zeros((n + 1, n + 1))
             DD[:n, :n] = (D.T @ D).toarray()
             shape_c = _shape_constraints(alpha_cells, d_nodes)
             C = hstack([shape_c, csr_matrix((shape_c.shape[0], 1))]).tocsr()
-            prior_terms = None
-            if self.prior is not None and self.prior_weight > 0:
-                i, j = _lower_index(self.k)
-                PP = np.zeros((n + 1, n + 1))
-                PP[:n, :n] = (P.T @ P).toarray()
-                pb = np.zeros(n + 1)
-                pb[:n] = P.T @ self.prior[i, j]
-                prior_terms = (PP, pb)
+            PP = np.zeros((n + 1, n + 1))
+            PP[:n, :n] = (P.T @ P).toarray()
+            prior_terms = (PP, P)
             x0 = np.zeros(n + 1)
             x0[:n] = (
                 1e-3 * max(float(np.ptp(self.p)), 1e-12) * np.tile(d_nodes[1:], alpha_cells + 1)
@@ -332,7 +351,7 @@ class _Problem:
         return self._cache[key]
 
     def solve(self, c: Candidate, exclude: int | None, tol: float = 1e-7) -> np.ndarray:
-        _, _, grams, G_all, b_all, DD, C, prior_terms, x0 = self.system(
+        _, _, grams, G_all, b_all, DD, C, (PP, P), x0 = self.system(
             c.alpha_cells, c.d_cells, c.spacing
         )
         if exclude is None:
@@ -345,12 +364,14 @@ class _Problem:
         b = b / count
         scale = np.trace(G)
         H = G + c.smoothing * scale / max(np.trace(DD), 1e-300) * DD
-        if prior_terms is not None:
-            PP, pb = prior_terms
-            w = self.prior_weight * scale / max(np.trace(PP), 1e-300)
+        target = self.priors.get(exclude)
+        if c.prior_weight > 0 and target is not None:
+            w = c.prior_weight * scale / max(np.trace(PP), 1e-300)
             H = H + w * PP
-            b = b + w * pb
-        x, _ = solve_monotone_qp(H, b, C, x0, tol=tol)
+            b = b.copy()
+            b[:-1] += w * (P.T @ target)
+        with threadpool_limits(1, "blas"):  # small matrices: threads only spin-wait
+            x, _ = solve_monotone_qp(H, b, C, x0, tol=tol)
         return x
 
     def cv_rmse(self, c: Candidate) -> float:
@@ -366,8 +387,8 @@ class _Problem:
 
 
 def _search(problem: _Problem, start: Candidate, free: dict[str, bool]) -> list:
-    """Coordinate-wise search over the settings that are free (smoothing, then grid size,
-    then the smoothing's neighbours again); returns every (candidate, CV RMSE) tried, best
+    """Coordinate-wise search over the settings that are free (prior weight, smoothing, grid
+    size, then the smoothing's neighbours again); returns every (candidate, CV RMSE) tried, best
     first. The d-node spacing stays as given (default 3: dense next to the diagonal)."""
     scores: dict[Candidate, float] = {}
 
@@ -378,18 +399,20 @@ def _search(problem: _Problem, start: Candidate, free: dict[str, bool]) -> list:
 
     best = start
     score(best)
+    if free["prior"]:
+        best = min((best.but(prior_weight=w) for w in PRIOR_WEIGHTS), key=score)
     if free["smoothing"]:
         best = min(
-            (Candidate(best.alpha_cells, best.d_cells, best.spacing, s) for s in SMOOTHINGS),
+            (best.but(smoothing=s) for s in SMOOTHINGS),
             key=score,
         )
     if free["size"]:
-        best = min((Candidate(a, d, best.spacing, best.smoothing) for a, d in SIZES), key=score)
+        best = min((best.but(alpha_cells=a, d_cells=d) for a, d in SIZES), key=score)
         if free["smoothing"]:  # the neighbours of the smoothing chosen for the first size
             k = SMOOTHINGS.index(best.smoothing)
             near = SMOOTHINGS[max(k - 1, 0) : k + 2]
             best = min(
-                (Candidate(best.alpha_cells, best.d_cells, best.spacing, s) for s in near),
+                (best.but(smoothing=s) for s in near),
                 key=score,
             )
     return sorted(scores.items(), key=lambda kv: kv[1])
@@ -404,13 +427,14 @@ def fit_everett_lsq(
     spacing: float | None = None,
     folds: int = 4,
     tolerance: float | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
-    prior_weight: float = 1e-3,
+    prior: Callable[[np.ndarray | None], np.ndarray | None] | None = None,
+    prior_weight: float | None = None,
 ) -> LsqResult:
     """Identify a monotone ``grid x grid`` Everett table and an output offset from a record
     (see the module docstring). ``cells`` (α cells; the d-cells are three quarters of it),
-    ``smoothing`` and ``spacing`` fix a setting instead of choosing it by cross-validation;
-    ``prior`` is a table on the same fine grid."""
+    ``smoothing``, ``spacing`` and ``prior_weight`` fix a setting instead of choosing it by
+    cross-validation. ``prior(held_out)`` returns a prior table on the same fine grid built
+    without the samples marked held out (None: all samples), or None when it cannot."""
     if grid < 3:
         raise ParameterError(f"grid must be >= 3, got {grid}")
     if cells is not None and cells < 2:
@@ -421,10 +445,18 @@ def fit_everett_lsq(
         raise ParameterError(f"folds must be >= 2, got {folds}")
     tol = 0.01 * float(np.ptp(u)) if tolerance is None else tolerance
     fold = branch_folds(u, folds, tol)
-    problem = _Problem(u, p, grid, fold, prior, prior_weight)
+    problem = _Problem(u, p, grid, fold, prior)
+    has_prior = problem.priors.get(None) is not None
     size = (16, 12) if cells is None else (cells, max(2, round(0.75 * cells)))
-    start = Candidate(size[0], size[1], 3.0 if spacing is None else spacing, smoothing or 1e-4)
-    free = {"smoothing": smoothing is None, "size": cells is None}
+    weight = prior_weight if prior_weight is not None else (1e-3 if has_prior else 0.0)
+    start = Candidate(
+        size[0], size[1], 3.0 if spacing is None else spacing, smoothing or 1e-4, weight
+    )
+    free = {
+        "smoothing": smoothing is None,
+        "size": cells is None,
+        "prior": has_prior and prior_weight is None,
+    }
     if problem.n_folds >= 2:
         scores = _search(problem, start, free)
         chosen, validation = scores[0]

@@ -186,9 +186,9 @@ class HysteresisModel:
         if self.method == "thesis":
             ident: Identified = identify_thesis(u, sign * p, self.grid)
         else:
-            prior = None
-            if self.method == "auto" and find_thesis_curves(u, 0.01 * np.ptp(u)) is not None:
-                prior = identify_thesis(u, sign * p, self.grid)
+            thesis_prior = (
+                self.method == "auto" and find_thesis_curves(u, 0.01 * np.ptp(u)) is not None
+            )
             ident = identify_lsq(
                 u,
                 sign * p,
@@ -196,7 +196,7 @@ class HysteresisModel:
                 cells=self.cells,
                 smoothing=self.smoothing,
                 folds=self.folds,
-                prior=prior,
+                thesis_prior=thesis_prior,
             )
         self.everett_ = ident.everett
         self.u_min_ = ident.u_min

@@ -9,7 +9,7 @@ import numpy.typing as npt
 
 from texsense.hysteresis._model import HysteresisModel
 
-__all__ = ["model_figure", "validation_figure"]
+__all__ = ["model_figure", "validation_figure", "validation_report_figure"]
 
 
 def _plt():
@@ -84,3 +84,44 @@ def validation_figure(
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def validation_report_figure(
+    report: object,
+    inputs: npt.ArrayLike,
+    outputs: npt.ArrayLike,
+    path: str | Path,
+    input_label: str = "input",
+    output_label: str = "output",
+    title: str = "",
+) -> Path:
+    """Measured vs model over the input (loops) and the error along the record, with the
+    worst places of a :class:`texsense.hysteresis.validation.ValidationReport` marked."""
+    plt = _plt()
+    u = np.asarray(inputs, dtype=np.float64)
+    y = np.asarray(outputs, dtype=np.float64)
+    m = report.modelled  # type: ignore[attr-defined]
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.6), layout="constrained")
+    ax.plot(u, y, color="0.2", lw=1.0, label="measured")
+    ax.plot(u, m, color="tab:orange", lw=1.0, label="model")
+    for n, p in enumerate(report.worst):  # type: ignore[attr-defined]
+        ax.plot([p.input, p.input], [p.measured, p.model], color="tab:red", lw=2)
+        ax.annotate(str(n + 1), (p.input, p.model), color="tab:red", fontsize=9)
+    ax.set_xlabel(input_label)
+    ax.set_ylabel(output_label)
+    ax.legend(loc="upper left")
+    ax.set_title("measured and modelled (worst places in red)")
+    ax2.plot(np.arange(u.size), m - y, color="tab:blue", lw=0.8)
+    ax2.axhline(0, color="0.5", lw=0.6)
+    for n, p in enumerate(report.worst):  # type: ignore[attr-defined]
+        ax2.annotate(str(n + 1), (p.index, p.model - p.measured), color="tab:red", fontsize=9)
+    ax2.set_xlabel("sample")
+    ax2.set_ylabel(f"model - measured ({report.unit})")  # type: ignore[attr-defined]
+    ax2.set_title(
+        f"RMSE {report.rmse:.3g} {report.unit}, NRMSE {report.nrmse:.1%}"  # type: ignore[attr-defined]
+    )
+    if title:
+        fig.suptitle(title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

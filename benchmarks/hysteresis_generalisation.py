@@ -1,0 +1,173 @@
+"""Does the hysteresis identification hold on records it was not tuned on?
+
+Every method on every record, the single-valued polynomial (no hysteresis model) beside it:
+
+- virtual spacers (every preset): identified from the thesis's calibration record or from a
+  65 s random sawtooth of specimen 0; validated on 10 validation cycles (§4.5) of the same
+  specimen and of another specimen of the same preset (specimen-to-specimen variation);
+  mean and max relative error in 0.5-3.5 N/cm²;
+- the real conductive-elastomer random sawtooth (../shared/data): identified on the first
+  60 %, run through the whole record, scored on the last 40 %;
+- the real VHB 4910 cycles: identified on the cycles to stretch 1.5, 2.5 and 3.0, predicting
+  the cycle to 2.0.
+
+The polynomial is the best single-valued polynomial of degree 1-9 *chosen on the scored
+data* (an optimistic baseline). "default" is ``HysteresisModel()`` with no settings.
+
+Run:  .venv/bin/python benchmarks/hysteresis_generalisation.py     (writes docs/img/hyst_gen_*.png)
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _realdata import elastomer_sawtooth, vhb_cycle
+from texsense.exceptions import ParameterError
+from texsense.hysteresis import HysteresisModel
+from texsense.hysteresis.plots import validation_figure
+from texsense.sim import protocols
+from texsense.sim.spacer import PRESETS, Spacer
+
+IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
+METHODS = (("default", "auto"), ("lsq", "lsq"), ("thesis", "thesis"))
+
+
+def best_polynomial(u_fit, y_fit, u_test, y_test, score):
+    best = None
+    for deg in range(1, 10):
+        coef = np.polynomial.polynomial.polyfit(u_fit, y_fit, deg)
+        s = score(y_test, np.polynomial.polynomial.polyval(u_test, coef))
+        if best is None or s[0] < best[0]:
+            best = s
+    return best
+
+
+def band_score(p, pm, band=(0.5, 3.5)):
+    sel = (p >= band[0]) & (p < band[1])
+    rel = np.abs(pm[sel] - p[sel]) / p[sel]
+    return float(rel.mean()), float(rel.max())
+
+
+def nrmse_score(y, m):
+    return (
+        float(np.sqrt(np.mean((m - y) ** 2)) / np.ptp(y)),
+        float(np.max(np.abs(m - y)) / np.ptp(y)),
+    )
+
+
+def fit(method, u, y, **kw):
+    t0 = time.perf_counter()
+    try:
+        m = HysteresisModel(method=method, **kw).fit(u, y)
+    except ParameterError:
+        return None, 0.0
+    return m, time.perf_counter() - t0
+
+
+def virtual_rows(rows, timings):
+    for name in PRESETS:
+        sp0, sp1 = Spacer.preset(name, seed=0), Spacer.preset(name, seed=1)
+        cal = protocols.run_protocol("calibration", sp0, seed=0, sample_hz=None)
+        sp0.reset()
+        saw = protocols.run_protocol("sawtooth", sp0, seed=100, sample_hz=None)
+        sp0.reset()
+        val0 = protocols.run_protocol("validation", sp0, seed=0, sample_hz=None, cycles=10)
+        val1 = protocols.run_protocol("validation", sp1, seed=1, sample_hz=None, cycles=10)
+        for source, rec in (("thesis calibration", cal), ("random sawtooth", saw)):
+            u, y = rec.labels["compression_mm"], rec.labels["pressure_ncm2"]
+            models = {label: fit(method, u, y) for label, method in METHODS}
+            for (label, _), (m, dt) in zip(METHODS, models.values(), strict=True):
+                if m is not None:
+                    timings.append((f"{name}, {source}", label, u.size, dt))
+            for target, val in (("same specimen", val0), ("other specimen", val1)):
+                uv, pv = val.labels["compression_mm"], val.labels["pressure_ncm2"]
+                row = {
+                    "record": f"{name}: {source} -> {target}",
+                    "metric": "mean / max rel. error 0.5-3.5 N/cm²",
+                    "polynomial": best_polynomial(u, y, uv, pv, band_score),
+                }
+                for label, (m, _) in models.items():
+                    row[label] = None if m is None else band_score(pv, m.predict(uv))
+                rows.append(row)
+
+
+def real_rows(rows, timings):
+    t, d, f = elastomer_sawtooth()
+    cut = int(0.6 * t.size)
+    kw = {"input_name": "displacement_mm", "output_name": "force_n", "output_unit": "N"}
+    row = {
+        "record": "elastomer sawtooth (real): first 60 % -> last 40 %",
+        "metric": "NRMSE / max error (share of range)",
+        "polynomial": best_polynomial(d[:cut], f[:cut], d[cut:], f[cut:], nrmse_score),
+    }
+    for label, method in METHODS:
+        m, dt = fit(method, d[:cut], f[:cut], **kw)
+        if m is not None:
+            timings.append(("elastomer sawtooth", label, cut, dt))
+        row[label] = None if m is None else nrmse_score(f[cut:], m.predict(d)[cut:])
+        if label == "default" and m is not None:
+            validation_figure(
+                d[cut:],
+                f[cut:],
+                m.predict(d)[cut:],
+                IMG / "hyst_gen_elastomer.png",
+                input_label="displacement [mm]",
+                output_label="force [N]",
+                title="elastomer sawtooth: default identification on the first 60 %, "
+                "scored on the last 40 %",
+            )
+    rows.append(row)
+    parts = [vhb_cycle(n) for n in ("0d01_3d0", "0d01_2d5", "0d01_1d5")]
+    uu = np.concatenate([p[1] for p in parts])
+    yy = np.concatenate([p[2] for p in parts])
+    _, ut, yt = vhb_cycle("0d01_2d0")
+    row = {
+        "record": "VHB 4910 (real): cycles to 1.5/2.5/3.0 -> 2.0",
+        "metric": "NRMSE / max error (share of range)",
+        "polynomial": best_polynomial(uu, yy, ut, yt, nrmse_score),
+    }
+    for label, method in METHODS:
+        m, dt = fit(method, uu, yy, **kw)
+        if m is not None:
+            timings.append(("VHB 4910", label, uu.size, dt))
+        row[label] = None if m is None else nrmse_score(yt, m.predict(ut))
+    rows.append(row)
+
+
+def cell(v):
+    return "—" if v is None else f"{v[0]:.1%} / {v[1]:.0%}"
+
+
+def main() -> None:
+    IMG.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    timings: list[tuple] = []
+    virtual_rows(rows, timings)
+    real_rows(rows, timings)
+    labels = ["polynomial"] + [label for label, _ in METHODS]
+    print(
+        "| record | metric | " + " | ".join(labels) + " | default vs best | default vs polynomial |"
+    )
+    print("|---|---|" + "---:|" * (len(labels) + 2))
+    for r in rows:
+        best = min(r[k][0] for k in labels[1:] if r[k] is not None)
+        d = r["default"][0]
+        print(
+            f"| {r['record']} | {r['metric']} | "
+            + " | ".join(cell(r[k]) for k in labels)
+            + f" | {d / best - 1:+.0%} | {d / r['polynomial'][0] - 1:+.0%} |"
+        )
+    print()
+    print("| record | method | samples | identification time |")
+    print("|---|---|---:|---:|")
+    for rec, label, n, dt in timings:
+        print(f"| {rec} | {label} | {n} | {dt:.2f} s |")
+
+
+if __name__ == "__main__":
+    main()
