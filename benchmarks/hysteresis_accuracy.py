@@ -13,7 +13,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import elastomer_sawtooth, vhb_cycle
 from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis._identify import identify_lsq, identify_thesis
+from texsense.hysteresis._identify import identify_thesis
 from texsense.hysteresis.plots import validation_figure
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer
@@ -99,16 +99,14 @@ def virtual(name: str = "textile-6mm", seeds=(0, 1, 2, 3), figure: bool = True) 
                 ).predict(u),
             ),
             (
-                "Preisach, least squares",
-                "65 s random sawtooth",
-                from_ident(identify_lsq(us, ps, cells=50)).predict(u),
+                "Preisach, default (CV least squares + thesis prior)",
+                "calibration (3 falling curves)",
+                HysteresisModel().fit(uc, pc).predict(u),
             ),
             (
-                "Preisach, least squares + thesis prior",
-                "calibration + sawtooth",
-                from_ident(identify_lsq(us, ps, cells=50, prior=thesis, prior_weight=0.1)).predict(
-                    u
-                ),
+                "Preisach, default (CV least squares)",
+                "65 s random sawtooth",
+                HysteresisModel().fit(us, ps).predict(u),
             ),
         ]
         for label, source, pm in rows:
@@ -143,11 +141,11 @@ def real() -> None:
     cut = int(0.6 * t.size)
     fit_u, fit_y, test_u, test_y = d[:cut], f[:cut], d, f
     base = mean_of_branches(fit_u, fit_y)
-    m = HysteresisModel(
-        method="lsq", cells=40, input_name="displacement_mm", output_name="force_n", output_unit="N"
-    ).fit(fit_u, fit_y)
+    m = HysteresisModel(input_name="displacement_mm", output_name="force_n", output_unit="N").fit(
+        fit_u, fit_y
+    )
     full = m.predict(test_u)
-    for label, pred in (("mean of branches", base(test_u)), ("Preisach, least squares", full)):
+    for label, pred in (("mean of branches", base(test_u)), ("Preisach, default", full)):
         y, pm = test_y[cut:], pred[cut:]
         mean, p95 = rel_err(y, pm)
         print(
@@ -161,7 +159,7 @@ def real() -> None:
         IMG / "hyst_elastomer.png",
         input_label="displacement [mm]",
         output_label="force [N]",
-        title="elastomer random sawtooth: least squares on the first 60 %, "
+        title="elastomer random sawtooth: default identification on the first 60 %, "
         "predicted over the whole record",
     )
     # VHB 4910 at 0.01 /s: identify on stretches 1.5, 2.5, 3.0, predict 2.0
@@ -173,13 +171,13 @@ def real() -> None:
     thesis = HysteresisModel(
         method="thesis", input_name="displacement_mm", output_name="force_n", output_unit="N"
     ).fit(uu, yy)
-    lsq = HysteresisModel(
-        method="lsq", cells=40, input_name="displacement_mm", output_name="force_n", output_unit="N"
-    ).fit(uu, yy)
+    lsq = HysteresisModel(input_name="displacement_mm", output_name="force_n", output_unit="N").fit(
+        uu, yy
+    )
     for label, pm in (
         ("mean of branches", base(ut)),
         ("Preisach, thesis method", thesis.predict(ut)),
-        ("Preisach, least squares", lsq.predict(ut)),
+        (f"Preisach, default ({lsq.method_})", lsq.predict(ut)),
     ):
         mean, p95 = rel_err(yt, pm)
         print(

@@ -63,7 +63,10 @@ def main() -> None:
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     uc, pc = cal.labels["compression_mm"], cal.labels["pressure_ncm2"]
     t_thesis, model = best_of(lambda: HysteresisModel(method="thesis", grid=100).fit(uc, pc))
-    t_lsq, _ = best_of(lambda: HysteresisModel(method="lsq", cells=40).fit(uc, pc), repeat=1)
+    t_default, default = best_of(lambda: HysteresisModel().fit(uc, pc), repeat=1)
+    saw = run_protocol("sawtooth", "textile-6mm", seed=100, sample_hz=None)
+    us, ps = saw.labels["compression_mm"][:20_000], saw.labels["pressure_ncm2"][:20_000]
+    t_saw, _ = best_of(lambda: HysteresisModel().fit(us, ps), repeat=1)
     rng = np.random.default_rng(0)
     lo, hi = model.u_min_, model.u_max_
     # 1 element x 10^6 samples, every sample a reversal
@@ -77,6 +80,7 @@ def main() -> None:
     )
     walk = lo + np.where(walk > hi - lo, 2 * (hi - lo) - walk, walk)
     t_many, _ = best_of(lambda: model.predict(walk))
+    t_many_default, _ = best_of(lambda: default.predict(walk))
     # plain Python on a slice of the noisy input, checked against the core
     n_py = 20_000
     t_py, out_py = best_of(lambda: python_everett_sum(model, noisy[:n_py]), repeat=1)
@@ -94,6 +98,10 @@ def main() -> None:
         f"{walk.size / t_many / 1e6:.1f} M element-samples/s |"
     )
     print(
+        f"| Rust, same, the default model ({default.method_}) | {t_many_default:.3f} s | "
+        f"{walk.size / t_many_default / 1e6:.1f} M element-samples/s |"
+    )
+    print(
         f"| plain-Python Everett sum, 1 element x {n_py:,} samples | {t_py:.2f} s | "
         f"{py_rate / 1e3:.1f} k samples/s |"
     )
@@ -102,7 +110,14 @@ def main() -> None:
         f"| identification, thesis method, 100 x 100 ({uc.size} samples) | "
         f"{t_thesis * 1000:.0f} ms | |"
     )
-    print(f"| identification, least squares, 41 x 41 | {t_lsq * 1000:.0f} ms | |")
+    print(
+        f"| identification, default, cross-validated ({uc.size} samples, thesis record) | "
+        f"{t_default:.2f} s | |"
+    )
+    print(
+        f"| identification, default, cross-validated ({us.size} samples, random sawtooth) | "
+        f"{t_saw:.2f} s | |"
+    )
 
 
 if __name__ == "__main__":

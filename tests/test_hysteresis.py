@@ -304,3 +304,33 @@ def test_forcs_fit_on_even_curves_predict_the_odd_ones(table):
     y = simulate(test, tab)
     nrmse = np.sqrt(np.mean((m.predict(test) - y) ** 2)) / np.ptp(y)
     assert m.method_ == "lsq" and nrmse < 0.01
+
+
+def test_cli_validate_reports_bands_branches_and_worst_places(tmp_path, capsys):
+    from texsense.cli import main
+
+    cal, val = tmp_path / "cal.csv", tmp_path / "val.csv"
+    assert main(["simulate", "calibration", "--seed", "2", "--csv", str(cal)]) == 0
+    assert main(["simulate", "validation", "--cycles", "2", "--seed", "2", "--csv", str(val)]) == 0
+    model = tmp_path / "m.json"
+    assert main(["hysteresis", "fit", str(cal), "-o", str(model)]) == 0
+    capsys.readouterr()
+    plot = tmp_path / "v.png"
+    assert (
+        main(["hysteresis", "validate", str(model), str(val), "--plot", str(plot), "--json"]) == 0
+    )
+    report = json.loads(capsys.readouterr().out)
+    assert [b["name"] for b in report["bands"]] == ["0.5-3.5", "3.5-10"]
+    rising, falling = report["branches"]
+    assert rising["samples"] + falling["samples"] == report["samples"]
+    assert 0 < report["bands"][0]["mean_relative"] < 0.05
+    worst = report["worst"]
+    assert len(worst) == 5
+    errs = [abs(w["model"] - w["measured"]) for w in worst]
+    assert errs == sorted(errs, reverse=True) and errs[0] > 0
+    assert plot.read_bytes()[:4] == b"\x89PNG"
+    # the text report names the worst place; a missing column names the file and the column
+    assert main(["hysteresis", "validate", str(model), str(val)]) == 0
+    assert "worst places" in capsys.readouterr().out
+    assert main(["hysteresis", "validate", str(model), str(val), "--output", "nope"]) == 1
+    assert "nope" in capsys.readouterr().err
