@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 
@@ -168,14 +170,15 @@ def test_exact_windowed_model_against_the_recursive_form():
         drift_exact(t, levels[:-1], -0.025)
 
 
-def test_combined_stage_equals_the_stages_in_turn():
+@pytest.mark.parametrize("rest_rate", [0.0, 0.02])
+def test_combined_stage_equals_the_stages_in_turn(rest_rate):
     from texsense.drift import DriftModel
     from texsense.hysteresis import HysteresisModel
     from texsense.sim.protocols import run_protocol
 
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     m = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
-    m.with_drift(DriftModel(-0.025, log_kernel()))
+    m.with_drift(DriftModel(-0.025, log_kernel(), rest_rate=rest_rate))
     rng = np.random.default_rng(2)
     u = rng.uniform(0, m.u_max_, (500, 4))
     t = np.cumsum(rng.exponential(0.5, 500))
@@ -230,3 +233,55 @@ def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     assert HysteresisModel.load(out).drift_.gamma == pytest.approx(fit["gamma"])
     assert main(["drift", "fit", str(cyc), "-o", str(out)]) == 1
     assert "needs --history" in capsys.readouterr().err
+
+
+def test_rest_clock_is_time_on_holds_and_nearly_stops_on_cycles():
+    """The rest clock leaves a held step as eq. 5.8 has it (γ from steps is unchanged) and
+    adds almost no drift to fast cycles, where the time clock adds a lot; reading noise on a
+    hold does not stop it."""
+    from texsense.drift import DriftModel
+
+    k = log_kernel()
+    t = np.arange(0, 3600.0, 0.1)
+    hold = np.where(t < 2.0, t, 2.0)  # a 2 s ramp to 2 N/cm², then held
+    time_clock, rest_clock = DriftModel(-0.025, k), DriftModel(-0.025, k, rest_rate=0.02)
+    d_time = time_clock.apply(hold, t) - hold
+    d_rest = rest_clock.apply(hold, t) - hold
+    assert abs(d_rest[-1] - d_time[-1]) < 0.03 * abs(d_time[-1])
+    noisy = hold + np.random.default_rng(0).normal(0, 0.005, t.size)
+    d_noisy = rest_clock.apply(noisy, t) - noisy
+    assert abs(d_noisy[-1] - d_time[-1]) < 0.05 * abs(d_time[-1])
+    # triangle 1 <-> 5 N/cm², 2 N/cm² per s (as fast as the thesis's test-machine cycles):
+    # the clock runs ~100x slower, so the logarithm's drift after an hour is about halved
+    cycles = 1.0 + 4.0 * np.abs(((t / 2.0) % 2.0) - 1.0)
+    c_time = time_clock.apply(cycles, t) - cycles
+    c_rest = rest_clock.apply(cycles, t) - cycles
+    assert abs(c_rest[-100:]).max() < 0.6 * abs(c_time[-100:]).max()
+
+
+def test_rest_clock_round_trip_and_old_files(tmp_path):
+    from texsense.drift import DriftModel
+
+    m = DriftModel(-0.02, log_kernel(), rest_rate=0.03, rest_window=0.7)
+    back = DriftModel.from_dict(m.to_dict())
+    assert (back.rest_rate, back.rest_window, back.clock) == (0.03, 0.7, "rest")
+    old = m.to_dict()
+    del old["rest_rate"], old["rest_window_s"]
+    assert DriftModel.from_dict(old).clock == "time"  # files before the rest clock
+    bad = m.to_dict() | {"rest_rate": -1.0}
+    with pytest.raises(ParameterError, match="rest_rate"):
+        DriftModel.from_dict(bad)
+
+
+def test_cli_clock_choice_and_bad_rest_rate(tmp_path, capsys):
+    from texsense.cli import main
+
+    steps = tmp_path / "steps.csv"
+    assert main(["simulate", "steps", "--seed", "2", "--csv", str(steps)]) == 0
+    capsys.readouterr()
+    assert main(["drift", "fit", str(steps), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["clock"] == "rest"
+    assert main(["drift", "fit", str(steps), "--clock", "time", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["clock"] == "time"
+    assert main(["drift", "fit", str(steps), "--rest-rate", "0"]) == 1
+    assert "rest-rate" in capsys.readouterr().err

@@ -95,6 +95,8 @@ class DriftBank:
         taus: npt.NDArray[np.float64],
         gamma: float,
         n_elements: int,
+        rest_rate: float = 0.0,
+        rest_window: float = 0.5,
     ) -> None: ...
     def reset(self) -> None: ...
     def run(
@@ -119,6 +121,8 @@ class Compensation:
         gamma: float,
         weights: npt.NDArray[np.float64] | None = None,
         taus: npt.NDArray[np.float64] | None = None,
+        rest_rate: float = 0.0,
+        rest_window: float = 0.5,
     ) -> None: ...
     def reset(self) -> None: ...
     def clamped(self) -> npt.NDArray[np.uint64]: ...
@@ -128,3 +132,13 @@ class Compensation:
         inputs: npt.NDArray[np.float64],
         valid: npt.NDArray[np.bool_],
     ) -> npt.NDArray[np.float64]: ...
+
+def everett_terms(
+    inputs: npt.NDArray[np.float64], u_min: float, u_max: float
+) -> tuple[
+    npt.NDArray[np.uint64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
+    """The Everett terms (indptr, alpha, beta, coef) of every sample of an input history."""

@@ -54,13 +54,18 @@ class DriftKernel:
         t = np.asarray(t, dtype=np.float64)[..., None]
         return np.sum(self.weights * (1.0 - np.exp(-t / self.taus)), axis=-1)
 
-    def bank(self, gamma: float, n_elements: int = 1) -> DriftBank:
-        """A recursive evaluator for ``n_elements``."""
+    def bank(
+        self, gamma: float, n_elements: int = 1, rest_rate: float = 0.0, rest_window: float = 0.5
+    ) -> DriftBank:
+        """A recursive evaluator for ``n_elements`` (on the rest clock when ``rest_rate`` >
+        0, see :class:`DriftModel`)."""
         return DriftBank(
             np.ascontiguousarray(self.weights),
             np.ascontiguousarray(self.taus),
             float(gamma),
             int(n_elements),
+            float(rest_rate),
+            float(rest_window),
         )
 
 
@@ -240,15 +245,31 @@ def time_steps(times_s: npt.ArrayLike, n_frames: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class DriftModel:
-    """γ and a kernel: the drift stage that follows the Preisach model (eq. 5.8)."""
+    """γ and a kernel: the drift stage that follows the Preisach model (eq. 5.8).
+
+    ``rest_rate`` > 0 runs the kernel on a *rest clock* instead of time: each element's clock
+    advances by ``dt / (1 + |v| / rest_rate)``, ``v`` the velocity of its own hysteresis
+    output (N/cm² per s for pressure) averaged exponentially over ``rest_window`` seconds (so
+    reading noise does not stop the clock). At rest (a held step) it is time and eq. 5.8 is
+    unchanged; while the load changes fast (cycles) the clock nearly stops. Why this transfers
+    γ between held steps and cycles, and where it does not (load-controlled sitting):
+    docs/drift.md. ``rest_rate = 0`` is eq. 5.8 as printed (``kind="thesis"`` in the CLI).
+    """
 
     gamma: float
     kernel: DriftKernel
     kind: str = "log"
+    rest_rate: float = 0.0
+    rest_window: float = 0.5
+
+    @property
+    def clock(self) -> str:
+        """``"time"`` (eq. 5.8 as printed) or ``"rest"``."""
+        return "rest" if self.rest_rate > 0 else "time"
 
     def state(self, n_elements: int = 1) -> DriftBank:
         """A recursive evaluator for ``n_elements``."""
-        return self.kernel.bank(self.gamma, n_elements)
+        return self.kernel.bank(self.gamma, n_elements, self.rest_rate, self.rest_window)
 
     def apply(self, h: npt.ArrayLike, times_s: npt.ArrayLike) -> np.ndarray:
         """Add the drift to a history of hysteresis outputs (T,) or (T, N) at ``times_s``."""
@@ -261,13 +282,18 @@ class DriftModel:
 
     @classmethod
     def fit(
-        cls, steps: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, float]], kind: str = "log"
+        cls,
+        steps: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, float]],
+        kind: str = "log",
+        rest_rate: float = 0.0,
     ) -> tuple[DriftModel, StepFit]:
         """Fit from step responses: γ with the logarithmic kernel (``kind="log"``), or a
-        non-negative Prony kernel of the common normalised response (``"prony"``)."""
+        non-negative Prony kernel of the common normalised response (``"prony"``). With
+        ``rest_rate`` > 0 the model runs on the rest clock; γ is the same (a hold is at
+        rest)."""
         fit = fit_gamma(steps)
         if kind == "log":
-            return cls(fit.gamma_common, log_kernel(), "log"), fit
+            return cls(fit.gamma_common, log_kernel(), "log", rest_rate), fit
         if kind == "prony":
             times = np.concatenate(
                 [np.asarray(t, float) - float(np.asarray(t)[0]) for t, _, _ in steps]
@@ -277,7 +303,7 @@ class DriftModel:
             )
             order = np.argsort(times)
             k = prony_kernel(times[order], norm[order])
-            return cls(-1.0 if norm[order][-1] < 0 else 1.0, k, "prony"), fit
+            return cls(-1.0 if norm[order][-1] < 0 else 1.0, k, "prony", rest_rate), fit
         raise ParameterError(f"kind must be 'log' or 'prony', got {kind!r}")
 
     @classmethod
@@ -288,6 +314,7 @@ class DriftModel:
         times_s: npt.ArrayLike,
         band: tuple[float, float] = (0.5, 3.5),
         kernel: DriftKernel | None = None,
+        rest_rate: float = 0.0,
     ) -> tuple[DriftModel, float]:
         """γ by least squares over any load history, not only held steps.
 
@@ -305,7 +332,7 @@ class DriftModel:
                 f"h and pressure must be 1-D and of equal length, got {x.shape} and {p.shape}"
             )
         k, kind = (log_kernel(), "log") if kernel is None else (kernel, "prony")
-        unit = cls(1.0, k, kind).apply(x, times_s) - x
+        unit = cls(1.0, k, kind, rest_rate).apply(x, times_s) - x
         sel = np.isfinite(unit) & np.isfinite(p) & (p >= band[0]) & (p < band[1])
         denom = float(unit[sel] @ unit[sel])
         if sel.sum() < 2 or denom <= 0:
@@ -315,13 +342,15 @@ class DriftModel:
             )
         gamma = float(unit[sel] @ (p - x)[sel] / denom)
         rms = float(np.sqrt(np.mean((x + gamma * unit - p)[sel] ** 2)))
-        return cls(gamma, k, kind), rms
+        return cls(gamma, k, kind, rest_rate), rms
 
     def to_dict(self) -> dict:
         """JSON-able description (stored in the hysteresis model file)."""
         return {
             "kind": self.kind,
             "gamma": self.gamma,
+            "rest_rate": self.rest_rate,
+            "rest_window_s": self.rest_window,
             "kernel": {
                 "weights": self.kernel.weights.tolist(),
                 "taus_s": self.kernel.taus.tolist(),
@@ -346,7 +375,13 @@ class DriftModel:
             or np.any(kernel.taus <= 0)
         ):
             raise ParameterError("drift kernel: weights must be >= 0 and time constants > 0")
-        return cls(float(d["gamma"]), kernel, str(d.get("kind", "log")))
+        rest_rate = float(d.get("rest_rate", 0.0))  # files before the rest clock: time
+        if not (np.isfinite(rest_rate) and rest_rate >= 0):
+            raise ParameterError(f"drift: rest_rate must be finite and >= 0, got {rest_rate}")
+        window = float(d.get("rest_window_s", 0.5))
+        if not (np.isfinite(window) and window > 0):
+            raise ParameterError(f"drift: rest_window_s must be > 0, got {window}")
+        return cls(float(d["gamma"]), kernel, str(d.get("kind", "log")), rest_rate, window)
 
 
 def drift_exact(

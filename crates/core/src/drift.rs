@@ -74,6 +74,9 @@ pub struct DriftBank {
     last_h: Vec<f64>,
     started: Vec<bool>,
     weight_sum: f64,
+    rest_rate: f64,
+    rest_window: f64,
+    smooth: Vec<f64>,
 }
 
 impl DriftBank {
@@ -88,6 +91,9 @@ impl DriftBank {
         let k = kernel.len();
         Ok(Self {
             weight_sum: kernel.weights.iter().sum(),
+            rest_rate: 0.0,
+            rest_window: 0.5,
+            smooth: vec![0.0; n],
             kernel,
             gamma,
             n,
@@ -96,6 +102,32 @@ impl DriftBank {
             last_h: vec![0.0; n],
             started: vec![false; n],
         })
+    }
+
+    /// Run the kernel on a *rest clock* instead of time: an element's clock advances by
+    /// `dt / (1 + r / rest_rate)`, `r` the rate of change of its own input, so it runs at
+    /// full speed while the input holds still and nearly stops while it changes fast. The rate
+    /// is the exponential average of the signed velocity `Δh / dt` over `rest_window` (s):
+    /// equal to the rate of a steady ramp, through zero only where the input turns, and far
+    /// below `rest_rate` for reading noise (whose frame-to-frame differences telescope in the
+    /// average, to about `σ √2 / rest_window`).
+    /// `rest_rate = 0` (the default) is the thesis's time clock (eq. 5.8 as printed).
+    pub fn with_rest_rate(mut self, rest_rate: f64, rest_window: f64) -> Result<Self, CoreError> {
+        if !(rest_rate.is_finite() && rest_rate >= 0.0) {
+            return Err(CoreError::Parameter {
+                what: "rest_rate",
+                why: format!("must be finite and >= 0, got {rest_rate}"),
+            });
+        }
+        if !(rest_window.is_finite() && rest_window > 0.0) {
+            return Err(CoreError::Parameter {
+                what: "rest_window",
+                why: format!("must be finite and > 0 s, got {rest_window}"),
+            });
+        }
+        self.rest_rate = rest_rate;
+        self.rest_window = rest_window;
+        Ok(self)
     }
 
     /// Number of elements.
@@ -113,6 +145,7 @@ impl DriftBank {
         self.total.iter_mut().for_each(|v| *v = 0.0);
         self.z.iter_mut().for_each(|v| *v = 0.0);
         self.started.iter_mut().for_each(|v| *v = false);
+        self.smooth.iter_mut().for_each(|v| *v = 0.0);
     }
 
     /// One sample `dt` seconds after the previous one: the hysteresis outputs `h` (N,) in,
@@ -145,7 +178,7 @@ impl DriftBank {
         for i in 0..self.n {
             if !(valid[i] && h[i].is_finite()) {
                 out[i] = f64::NAN;
-                // time still passes for the element's states
+                // time still passes for the element's states (at rest: nothing is known)
                 for (zj, d) in self.z[i * k..(i + 1) * k].iter_mut().zip(&decay) {
                     *zj *= d;
                 }
@@ -162,9 +195,25 @@ impl DriftBank {
             let mut drift = 0.0;
             // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
             let zs = &mut self.z[i * k..(i + 1) * k];
-            for ((zj, d), w) in zs.iter_mut().zip(&decay).zip(&self.kernel.weights) {
-                *zj = *zj * d + change;
-                drift -= w * *zj;
+            if self.rest_rate > 0.0 && dt > 0.0 {
+                // this element's clock: slowed by its own (averaged) rate of change
+                let v = &mut self.smooth[i];
+                *v += (change / dt - *v) * (1.0 - (-dt / self.rest_window).exp());
+                let rate = v.abs();
+                let clock = dt / (1.0 + rate / self.rest_rate);
+                for ((zj, tau), w) in zs
+                    .iter_mut()
+                    .zip(&self.kernel.taus)
+                    .zip(&self.kernel.weights)
+                {
+                    *zj = *zj * (-clock / tau).exp() + change;
+                    drift -= w * *zj;
+                }
+            } else {
+                for ((zj, d), w) in zs.iter_mut().zip(&decay).zip(&self.kernel.weights) {
+                    *zj = *zj * d + change;
+                    drift -= w * *zj;
+                }
             }
             drift += self.total[i] * self.weight_sum;
             out[i] = h[i] + self.gamma * drift;
@@ -243,5 +292,93 @@ mod tests {
         assert!(Kernel::new(vec![-1.0], vec![1.0]).is_err());
         assert!(DriftBank::new(log_kernel(), f64::NAN, 1).is_err());
         assert!(a.step(-1.0, &[1.0, 1.0], &[true, true], &mut out).is_err());
+    }
+
+    #[test]
+    fn rest_clock_runs_at_rest_and_stops_while_moving() {
+        let run = |rest: f64, path: &[(f64, f64)]| {
+            let mut b = DriftBank::new(log_kernel(), -0.025, 1)
+                .unwrap()
+                .with_rest_rate(rest, 2.0)
+                .unwrap();
+            let mut out = [0.0];
+            for &(dt, h) in path {
+                b.step(dt, &[h], &[true], &mut out).unwrap();
+            }
+            out[0] - path.last().unwrap().1
+        };
+        // a step then a long hold: the clock is slowed for a few windows after the step,
+        // then runs with time, so after 1000 s the two clocks differ by a few seconds' worth
+        let hold: Vec<(f64, f64)> = [(0.0, 0.0), (1e-3, 2.0)]
+            .into_iter()
+            .chain((0..1000).map(|_| (1.0, 2.0)))
+            .collect();
+        let (time, rest) = (run(0.0, &hold), run(0.1, &hold));
+        assert!(
+            rest < 0.0 && (time - rest).abs() < 0.05 * time.abs(),
+            "{time} vs {rest}"
+        );
+        // a steady triangle wave at 10 units/s: the rest clock is the time clock run with every
+        // step slowed by the averaged velocity v, dt / (1 + |v| / rest_rate)
+        let wave: Vec<(f64, f64)> = (0..4000)
+            .map(|k| {
+                let x = (k % 200) as f64;
+                (0.1, if (k / 200) % 2 == 0 { x } else { 200.0 - x })
+            })
+            .collect();
+        let (mut v, mut prev) = (0.0, 0.0);
+        let slowed: Vec<(f64, f64)> = wave
+            .iter()
+            .map(|&(dt, h)| {
+                let d: f64 = if dt > 0.0 {
+                    v += ((h - prev) / dt - v) * (1.0 - (-dt / 2.0f64).exp());
+                    dt / (1.0 + v.abs() / 0.1)
+                } else {
+                    dt
+                };
+                prev = h;
+                (d, h)
+            })
+            .collect();
+        let (wr, ws) = (run(0.1, &wave), run(0.0, &slowed));
+        assert!((wr - ws).abs() < 1e-9, "rest {wr} vs slowed time {ws}");
+        // with a kernel of slow terms (10 s .. 10^6 s) the moving element hardly drifts
+        let slow = |rest: f64, path: &[(f64, f64)]| {
+            let taus: Vec<f64> = (2..13).map(|k| 10f64.powf(k as f64 / 2.0)).collect();
+            let mut b = DriftBank::new(Kernel::new(vec![0.4; 11], taus).unwrap(), -0.025, 1)
+                .unwrap()
+                .with_rest_rate(rest, 2.0)
+                .unwrap();
+            let mut out = [0.0];
+            for &(dt, h) in path {
+                b.step(dt, &[h], &[true], &mut out).unwrap();
+            }
+            out[0] - path.last().unwrap().1
+        };
+        let (st, sr) = (slow(0.0, &wave), slow(0.1, &wave));
+        assert!(sr.abs() < 0.3 * st.abs(), "rest {sr} vs time {st}");
+        // noise on a hold does not stop the clock
+        let noisy: Vec<(f64, f64)> = hold
+            .iter()
+            .enumerate()
+            .map(|(k, &(dt, h))| {
+                (
+                    dt,
+                    if k > 1 {
+                        h + 0.002 * ((k * 7919 % 13) as f64 - 6.0) / 6.0
+                    } else {
+                        h
+                    },
+                )
+            })
+            .collect();
+        let rn = run(0.1, &noisy);
+        assert!(
+            (rn - rest).abs() < 0.05 * rest.abs(),
+            "noisy {rn} vs clean {rest}"
+        );
+        let b = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
+        assert!(b.clone().with_rest_rate(-1.0, 2.0).is_err());
+        assert!(b.with_rest_rate(0.1, 0.0).is_err());
     }
 }

@@ -489,15 +489,20 @@ struct PyDriftBank {
 #[pymethods]
 impl PyDriftBank {
     #[new]
+    #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5))]
     fn new(
         weights: PyReadonlyArray1<'_, f64>,
         taus: PyReadonlyArray1<'_, f64>,
         gamma: f64,
         n_elements: usize,
+        rest_rate: f64,
+        rest_window: f64,
     ) -> PyResult<Self> {
         let kernel =
             Kernel::new(weights.as_slice()?.to_vec(), taus.as_slice()?.to_vec()).map_err(to_py)?;
-        let inner = DriftBank::new(kernel, gamma, n_elements).map_err(to_py)?;
+        let inner = DriftBank::new(kernel, gamma, n_elements)
+            .and_then(|b| b.with_rest_rate(rest_rate, rest_window))
+            .map_err(to_py)?;
         Ok(Self { inner })
     }
 
@@ -540,7 +545,7 @@ struct PyCompensation {
 #[pymethods]
 impl PyCompensation {
     #[new]
-    #[pyo3(signature = (u_min, u_max, table, n_elements, capacity, offset, sign, gamma, weights=None, taus=None))]
+    #[pyo3(signature = (u_min, u_max, table, n_elements, capacity, offset, sign, gamma, weights=None, taus=None, rest_rate=0.0, rest_window=0.5))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         u_min: f64,
@@ -553,6 +558,8 @@ impl PyCompensation {
         gamma: f64,
         weights: Option<PyReadonlyArray1<'_, f64>>,
         taus: Option<PyReadonlyArray1<'_, f64>>,
+        rest_rate: f64,
+        rest_window: f64,
     ) -> PyResult<Self> {
         let shape = table.shape();
         let everett =
@@ -562,7 +569,11 @@ impl PyCompensation {
             (Some(w), Some(t)) => {
                 let kernel =
                     Kernel::new(w.as_slice()?.to_vec(), t.as_slice()?.to_vec()).map_err(to_py)?;
-                Some(DriftBank::new(kernel, gamma, n_elements).map_err(to_py)?)
+                Some(
+                    DriftBank::new(kernel, gamma, n_elements)
+                        .and_then(|b| b.with_rest_rate(rest_rate, rest_window))
+                        .map_err(to_py)?,
+                )
             }
             _ => None,
         };

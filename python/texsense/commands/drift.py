@@ -47,8 +47,42 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         type=Path,
         help="with --history: write the hysteresis model with the fitted drift stage here",
     )
+    add_clock_arguments(f)
     f.add_argument("--json", action="store_true", help="print JSON")
     f.set_defaults(run=run_fit)
+
+
+#: Default rest rate of the rest clock (N/cm² per s; the velocity is averaged over 0.5 s).
+REST_RATE = 0.02
+
+
+def add_clock_arguments(parser: argparse.ArgumentParser, prefix: str = "") -> None:
+    """``--clock rest|time`` and ``--rest-rate`` (with ``prefix``, e.g. ``drift-``)."""
+    parser.add_argument(
+        f"--{prefix}clock",
+        choices=("rest", "time"),
+        default="rest",
+        help="rest (default): the kernel's clock runs while the element's reading holds "
+        "still, so γ from held steps also serves cycles; time: eq. 5.8 as printed "
+        "(docs/drift.md)",
+    )
+    parser.add_argument(
+        f"--{prefix}rest-rate",
+        type=float,
+        default=REST_RATE,
+        help=f"rest clock: reading velocity (N/cm² per s) that halves the clock ({REST_RATE})",
+    )
+
+
+def rest_rate_of(args: argparse.Namespace, prefix: str = "") -> float:
+    """The rest rate the arguments ask for (0 for the time clock)."""
+    key = prefix.replace("-", "_")
+    if getattr(args, f"{key}clock") == "time":
+        return 0.0
+    rate = float(getattr(args, f"{key}rest_rate"))
+    if not rate > 0:
+        raise ParameterError(f"--{prefix}rest-rate must be > 0 N/cm² per s, got {rate}")
+    return rate
 
 
 def load_steps(path: Path) -> list:
@@ -68,8 +102,15 @@ def run_fit_history(args: argparse.Namespace) -> int:
     model = HysteresisModel.load(args.history)
     cols = _columns(args.steps)
     h = model.predict(cols["compression_mm"])
-    drift, rms = DriftModel.fit_history(h, cols["pressure_ncm2"], cols["time_s"])
-    summary = {"gamma": drift.gamma, "rms_residual_ncm2": rms, "samples": int(h.size)}
+    drift, rms = DriftModel.fit_history(
+        h, cols["pressure_ncm2"], cols["time_s"], rest_rate=rest_rate_of(args)
+    )
+    summary = {
+        "gamma": drift.gamma,
+        "clock": drift.clock,
+        "rms_residual_ncm2": rms,
+        "samples": int(h.size),
+    }
     if args.output:
         model.with_drift(drift)
         model.provenance_["drift_history"] = str(args.steps)
@@ -78,7 +119,7 @@ def run_fit_history(args: argparse.Namespace) -> int:
         print(json.dumps(summary, indent=2))
         return 0
     print(
-        f"γ {drift.gamma:.5f} over {h.size} samples of {args.steps.name} "
+        f"γ {drift.gamma:.5f} ({drift.clock} clock) over {h.size} samples of {args.steps.name} "
         f"(RMS residual {rms:.4g} N/cm² in 0.5-3.5 N/cm²)"
     )
     if args.output:
@@ -93,7 +134,7 @@ def run_fit(args: argparse.Namespace) -> int:
     if args.output is not None:
         raise ParameterError("drift fit: -o/--output needs --history MODEL.json")
     steps = load_steps(args.steps)
-    model, fit = DriftModel.fit(steps, kind=args.kind)
+    model, fit = DriftModel.fit(steps, kind=args.kind, rest_rate=rest_rate_of(args))
     summary = {
         "steps": [round(s, 6) for _, _, s in steps],
         "gamma_common": fit.gamma_common,
@@ -103,6 +144,7 @@ def run_fit(args: argparse.Namespace) -> int:
         "proportionality_spread": fit.proportionality_spread,
         "proportional": fit.proportional,
         "kind": model.kind,
+        "clock": model.clock,
         "kernel_terms": int(model.kernel.weights.size),
         "kernel_max_error": model.kernel.max_error,
     }
@@ -120,4 +162,13 @@ def run_fit(args: argparse.Namespace) -> int:
     )
     verdict = "proportional" if fit.proportional else "NOT proportional (eq. 5.1 fails)"
     print(f"  spread between steps {fit.proportionality_spread:.2%}: {verdict}")
+    print(
+        f"  clock: {model.clock}"
+        + (
+            f" (rest rate {model.rest_rate:g} N/cm² per s): transfers to cycles; for a load "
+            "held by a person (sitting, lying) fit γ on such a record instead (--history)"
+            if model.clock == "rest"
+            else " (eq. 5.8 as printed)"
+        )
+    )
     return 0

@@ -72,6 +72,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     f.add_argument("--folds", type=int, default=4, help="folds of held-out reversal curves (4)")
     f.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     f.add_argument("--drift-kind", choices=("log", "prony"), default="log")
+    from texsense.commands.drift import add_clock_arguments
+
+    add_clock_arguments(f, "drift-")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
     f.set_defaults(run=run_fit)
     a = hs.add_parser(
@@ -154,10 +157,12 @@ def run_fit(args: argparse.Namespace) -> int:
     )
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
     if args.drift:
-        from texsense.commands.drift import load_steps
+        from texsense.commands.drift import load_steps, rest_rate_of
         from texsense.drift import DriftModel
 
-        drift, _ = DriftModel.fit(load_steps(args.drift), kind=args.drift_kind)
+        drift, _ = DriftModel.fit(
+            load_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
+        )
         model.with_drift(drift)
         model.provenance_["drift_steps"] = str(args.drift)
     model.save(args.output_model)

@@ -261,6 +261,8 @@ class HysteresisModel:
             d.gamma if d is not None else 0.0,
             np.ascontiguousarray(d.kernel.weights) if d is not None else None,
             np.ascontiguousarray(d.kernel.taus) if d is not None else None,
+            d.rest_rate if d is not None else 0.0,
+            d.rest_window if d is not None else 0.5,
         )
 
     def with_drift(self, drift: Any) -> HysteresisModel:

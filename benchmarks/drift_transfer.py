@@ -1,0 +1,200 @@
+"""Does a drift model identified on one kind of load work on another?
+
+Four specimens of the virtual 6 mm textile spacer, each calibrated (default Preisach
+identification from its calibration record) and recorded under three kinds of load:
+
+- holds: the thesis's step-and-hold record (steps to 2.5/5/7.5/10 N/cm², held 1 h at constant
+  compression, §5.1.2.1), 10 Hz;
+- cycles: 4 h of the §4.5 validation cycle at 50 mm/min, 10 Hz (§5.3, fig. 5.8);
+- sitting bouts: 4 x (2 N/cm² held by a load, i.e. pressure-controlled, 25 min; unloaded
+  10 min), 1 Hz.
+
+Drift candidates, each identified on one record of specimen 0 and applied to the records of
+all four specimens (mean relative error in 0.5-3.5 N/cm²):
+
+- time clock: eq. 5.8 as printed (`ln(1 + t)`); γ from holds (the thesis's workflow), from the
+  first hour of cycles, from the bouts, or jointly from holds + cycles;
+- onset kernel `ln(1 + t/τ0)`: γ and τ0 fitted on holds;
+- rest clock (`DriftModel(rest_rate=...)`): the kernel's clock advances by
+  `dt / (1 + |dh/dt| / r0)`; γ from holds or from cycles; r0 = 0.02 N/cm² per s, velocity averaged over 0.5 s.
+
+Then the 4 h cycling per hour and specimen for the thesis workflow vs the rest clock, both with
+γ from the specimen's own held steps only.
+
+Run:  .venv/bin/python benchmarks/drift_transfer.py      (writes docs/img/drift_transfer.png)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from texsense.drift import DriftModel, log_kernel, split_steps
+from texsense.hysteresis import HysteresisModel
+from texsense.sim import protocols
+from texsense.sim.machine import TestMachine
+from texsense.sim.spacer import Spacer
+
+IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
+REST_RATE = 0.02  # N/cm² per s (averaged over 0.5 s)
+HOURS = 4.0
+
+
+def band_error(x: np.ndarray, p: np.ndarray, sel: np.ndarray | None = None) -> float:
+    s = (p >= 0.5) & (p < 3.5)
+    if sel is not None:
+        s &= sel
+    return float(np.mean(np.abs(x[s] - p[s]) / p[s]))
+
+
+def specimen(seed: int) -> dict:
+    """Calibrate specimen ``seed`` and record holds, cycles and bouts; returns (h, p, t) of
+    each (h: the Preisach output) and γ of its held steps."""
+    sp = Spacer.preset("textile-6mm", seed=seed)
+    cal = protocols.run_protocol("calibration", sp, seed=seed, sample_hz=None)
+    model = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
+    st = protocols.run_protocol("steps", "textile-6mm", seed=seed, sample_hz=10)
+    steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
+    out = {
+        "steps": steps,
+        "holds": (model.predict(st.labels["compression_mm"]), st.labels["pressure_ncm2"], st.times),
+    }
+    sp.reset()
+    cycles = int(HOURS * 3600 / 14.0)
+    rec = protocols.run_protocol("validation", sp, seed=seed, sample_hz=10, cycles=cycles)
+    keep = rec.times < HOURS * 3600
+    out["cycles"] = (
+        model.predict(rec.labels["compression_mm"][keep]),
+        rec.labels["pressure_ncm2"][keep],
+        rec.times[keep],
+    )
+    sp.reset()
+    m = TestMachine(sp)
+    for _ in range(4):
+        m.ramp_to_pressure(2.0, 50).hold_pressure(1500, sample_s=1.0)
+        m.ramp_to_pressure(0.0, 50).hold_compression(600, sample_s=1.0)
+    tr = m.trace()
+    tb = np.arange(0.0, tr.times_s[-1], 1.0)
+    ub = np.interp(tb, tr.times_s, tr.meta["specimen_compression_mm"])
+    out["bouts"] = (model.predict(ub), np.interp(tb, tr.times_s, tr.pressure_ncm2), tb)
+    return out
+
+
+def fit_gamma(parts: list[tuple], rest_rate: float, clock_scale: float = 1.0) -> float:
+    """One γ by least squares over several records (eq. 5.8 is linear in γ)."""
+    num = den = 0.0
+    for h, p, t in parts:
+        unit = DriftModel(1.0, log_kernel(), "log", rest_rate).apply(h, t / clock_scale) - h
+        s = (p >= 0.5) & (p < 3.5)
+        num += float(unit[s] @ (p - h)[s])
+        den += float(unit[s] @ unit[s])
+    return num / den
+
+
+def main() -> None:
+    IMG.mkdir(parents=True, exist_ok=True)
+    specs = [specimen(seed) for seed in range(4)]
+    s0 = specs[0]
+    first_hour = tuple(x[s0["cycles"][2] < 3600] for x in s0["cycles"])
+    # onset kernel: γ and τ0 on specimen 0's holds
+    onset = []
+    for tau0 in (1.0, 10.0, 100.0, 1000.0):
+        g = fit_gamma([s0["holds"]], 0.0, tau0)
+        h, p, t = s0["holds"]
+        err = band_error(DriftModel(g, log_kernel()).apply(h, t / tau0), p)
+        onset.append((err, tau0, g))
+    _, tau0, g_onset = min(onset)
+    candidates = [
+        ("hysteresis only", None, 0.0, 1.0),
+        ("time clock, γ from holds (thesis)", fit_gamma([s0["holds"]], 0.0), 0.0, 1.0),
+        ("time clock, γ from 1 h of cycles", fit_gamma([first_hour], 0.0), 0.0, 1.0),
+        ("time clock, γ from bouts", fit_gamma([s0["bouts"]], 0.0), 0.0, 1.0),
+        (
+            "time clock, γ jointly from holds + 1 h of cycles",
+            fit_gamma([s0["holds"], first_hour], 0.0),
+            0.0,
+            1.0,
+        ),
+        (f"onset kernel ln(1 + t/{tau0:g} s), γ and τ0 from holds", g_onset, 0.0, tau0),
+        ("rest clock, γ from holds", fit_gamma([s0["holds"]], REST_RATE), REST_RATE, 1.0),
+        ("rest clock, γ from 1 h of cycles", fit_gamma([first_hour], REST_RATE), REST_RATE, 1.0),
+    ]
+    print(
+        f"identified on specimen 0, applied to specimens 0-3 (mean of 4; worst in brackets); "
+        f"rest rate r0 = {REST_RATE} N/cm² per s\n"
+    )
+    print("| drift model | γ | holds | 4 h of cycles | sitting bouts |")
+    print("|---|---:|---:|---:|---:|")
+    matrix = []
+    for label, g, rest, scale in candidates:
+        row = []
+        for load in ("holds", "cycles", "bouts"):
+            errs = []
+            for sp in specs:
+                h, p, t = sp[load]
+                x = h if g is None else DriftModel(g, log_kernel(), "log", rest).apply(h, t / scale)
+                errs.append(band_error(x, p))
+            row.append((float(np.mean(errs)), float(np.max(errs))))
+        matrix.append(row)
+        gtxt = "—" if g is None else f"{g:+.4f}"
+        print(f"| {label} | {gtxt} | " + " | ".join(f"{m:.1%} ({w:.1%})" for m, w in row) + " |")
+    print()
+    # 4 h per hour, γ from each specimen's own held steps only
+    print("| specimen | hour | hysteresis only | time clock (thesis workflow) | rest clock |")
+    print("|---|---|---:|---:|---:|")
+    curves = []
+    for seed, sp in enumerate(specs):
+        g = fit_gamma([sp["holds"]], 0.0)
+        one = DriftModel.fit(sp["steps"])[1]
+        h, p, t = sp["cycles"]
+        variants = (
+            h,
+            DriftModel(g, log_kernel()).apply(h, t),
+            DriftModel(g, log_kernel(), "log", REST_RATE).apply(h, t),
+        )
+        for k in range(int(HOURS)):
+            sel = (t >= 3600 * k) & (t < 3600 * (k + 1))
+            e = [band_error(x, p, sel) for x in variants]
+            print(f"| {seed} | {k}-{k + 1} h | {e[0]:.1%} | {e[1]:.1%} | {e[2]:.1%} |")
+        windows = np.arange(0, HOURS * 3600, 900.0)
+        curves.append(
+            [[band_error(x, p, (t >= w) & (t < w + 900)) for x in variants] for w in windows]
+        )
+        print(
+            f"|  | one-step fit error of the held steps | γ {g:+.4f} | {one.max_error_single:.2%} "
+            "| same γ |"
+        )
+    errs = 100 * np.asarray(curves)
+    mid = (np.arange(0, HOURS * 3600, 900.0) + 450) / 60
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.3), layout="constrained")
+    for j, (label, mark) in enumerate(
+        (("hysteresis only", "o-"), ("time clock (thesis)", "s-"), ("rest clock", "^-"))
+    ):
+        ax.plot(mid, errs[:, :, j].mean(axis=0), mark, label=label)
+        ax.fill_between(mid, errs[:, :, j].min(axis=0), errs[:, :, j].max(axis=0), alpha=0.15)
+    ax.axhline(5, color="k", lw=0.8, ls=":")
+    ax.set_xlabel("time of continuous validation cycles [min]")
+    ax.set_ylabel("mean relative error 0.5-3.5 N/cm² [%]")
+    ax.set_title("γ from held steps only, 4 specimens (band: min-max)", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    m = 100 * np.asarray([[c[0] for c in row] for row in matrix])
+    im = ax2.imshow(np.minimum(m, 25), cmap="RdYlGn_r", aspect="auto", vmin=0, vmax=25)
+    ax2.set_xticks(range(3), ["holds", "4 h of cycles", "sitting bouts"])
+    ax2.set_yticks(range(len(candidates)), [c[0] for c in candidates], fontsize=8)
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            ax2.text(j, i, f"{m[i, j]:.1f}", ha="center", va="center", fontsize=8)
+    ax2.set_title("applied to: mean rel. error [%] (colour capped at 25)", fontsize=10)
+    fig.colorbar(im, ax=ax2, shrink=0.8)
+    fig.savefig(IMG / "drift_transfer.png", dpi=100)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
