@@ -16,7 +16,8 @@ all four specimens (mean relative error in 0.5-3.5 N/cm²):
   first hour of cycles, from the bouts, or jointly from holds + cycles;
 - onset kernel `ln(1 + t/τ0)`: γ and τ0 fitted on holds;
 - rest clock (`DriftModel(rest_rate=...)`): the kernel's clock advances by
-  `dt / (1 + |dh/dt| / r0)`; γ from holds or from cycles; r0 = 0.02 N/cm² per s, velocity averaged over 0.5 s.
+  `dt / (1 + |v| / r0)`, v the reading velocity averaged over 0.5 s; γ from holds or from
+  cycles; r0 = 0.02 N/cm² per s.
 
 Then the 4 h cycling per hour and specimen for the thesis workflow vs the rest clock, both with
 γ from the specimen's own held steps only.
