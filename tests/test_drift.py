@@ -281,7 +281,37 @@ def test_cli_clock_choice_and_bad_rest_rate(tmp_path, capsys):
     capsys.readouterr()
     assert main(["drift", "fit", str(steps), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["clock"] == "rest"
-    assert main(["drift", "fit", str(steps), "--clock", "time", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["clock"] == "time"
+    for thesis in ("thesis", "time"):  # eq. 5.8 as printed
+        assert main(["drift", "fit", str(steps), "--clock", thesis, "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["clock"] == "time"
     assert main(["drift", "fit", str(steps), "--rest-rate", "0"]) == 1
     assert "rest-rate" in capsys.readouterr().err
+
+
+def test_joint_fit_recovers_both_clocks_and_the_cli_names_its_limits(tmp_path, capsys):
+    """Records made by a known two-clock model (a held step and fast cycles): fit_joint gets
+    both factors back; held steps alone cannot separate the clocks, and the CLI says so."""
+    from texsense.cli import main
+    from texsense.drift import DriftModel
+
+    k = log_kernel()
+    truth = DriftModel(-0.02, k, rest_rate=0.02, gamma_time=-0.008)
+    t = np.arange(0, 1800.0, 0.5)
+    hold = np.where(t < 2.0, t, 2.0)
+    cycles = 1.0 + 4.0 * np.abs(((t / 2.0) % 2.0) - 1.0)
+    records = [(h, truth.apply(h, t), t) for h in (hold, cycles)]
+    fitted, rms = DriftModel.fit_joint(records, rest_rate=0.02)
+    assert fitted.gamma == pytest.approx(-0.02, abs=1e-6)
+    assert fitted.gamma_time == pytest.approx(-0.008, abs=1e-6)
+    assert rms < 1e-6 and fitted.clock == "rest+time"
+    back = DriftModel.from_dict(fitted.to_dict())
+    np.testing.assert_allclose(back.apply(cycles, t), truth.apply(cycles, t), atol=1e-9)
+    with pytest.raises(ParameterError, match="rest_rate"):
+        DriftModel.fit_joint(records, rest_rate=0.0)
+    steps = tmp_path / "steps.csv"
+    assert main(["simulate", "steps", "--seed", "2", "--csv", str(steps)]) == 0
+    capsys.readouterr()
+    assert main(["drift", "fit", str(steps), "--clock", "rest+time"]) == 1
+    assert "cannot tell the two clocks apart" in capsys.readouterr().err
+    assert main(["drift", "fit", str(steps), str(steps)]) == 1
+    assert "--history" in capsys.readouterr().err

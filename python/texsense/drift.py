@@ -55,10 +55,15 @@ class DriftKernel:
         return np.sum(self.weights * (1.0 - np.exp(-t / self.taus)), axis=-1)
 
     def bank(
-        self, gamma: float, n_elements: int = 1, rest_rate: float = 0.0, rest_window: float = 0.5
+        self,
+        gamma: float,
+        n_elements: int = 1,
+        rest_rate: float = 0.0,
+        rest_window: float = 0.5,
+        gamma_time: float = 0.0,
     ) -> DriftBank:
         """A recursive evaluator for ``n_elements`` (on the rest clock when ``rest_rate`` >
-        0, see :class:`DriftModel`)."""
+        0, plus a time-clock part ``gamma_time``; see :class:`DriftModel`)."""
         return DriftBank(
             np.ascontiguousarray(self.weights),
             np.ascontiguousarray(self.taus),
@@ -66,6 +71,7 @@ class DriftKernel:
             int(n_elements),
             float(rest_rate),
             float(rest_window),
+            float(gamma_time),
         )
 
 
@@ -261,15 +267,21 @@ class DriftModel:
     kind: str = "log"
     rest_rate: float = 0.0
     rest_window: float = 0.5
+    gamma_time: float = 0.0
 
     @property
     def clock(self) -> str:
-        """``"time"`` (eq. 5.8 as printed) or ``"rest"``."""
-        return "rest" if self.rest_rate > 0 else "time"
+        """``"time"`` (eq. 5.8 as printed), ``"rest"``, or ``"rest+time"`` (both, the time
+        part with factor ``gamma_time``; :meth:`fit_joint`)."""
+        if self.rest_rate <= 0:
+            return "time"
+        return "rest+time" if self.gamma_time else "rest"
 
     def state(self, n_elements: int = 1) -> DriftBank:
         """A recursive evaluator for ``n_elements``."""
-        return self.kernel.bank(self.gamma, n_elements, self.rest_rate, self.rest_window)
+        return self.kernel.bank(
+            self.gamma, n_elements, self.rest_rate, self.rest_window, self.gamma_time
+        )
 
     def apply(self, h: npt.ArrayLike, times_s: npt.ArrayLike) -> np.ndarray:
         """Add the drift to a history of hysteresis outputs (T,) or (T, N) at ``times_s``."""
@@ -344,6 +356,47 @@ class DriftModel:
         rms = float(np.sqrt(np.mean((x + gamma * unit - p)[sel] ** 2)))
         return cls(gamma, k, kind, rest_rate), rms
 
+    @classmethod
+    def fit_joint(
+        cls,
+        records: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]],
+        rest_rate: float = 0.02,
+        band: tuple[float, float] = (0.5, 3.5),
+        kernel: DriftKernel | None = None,
+    ) -> tuple[DriftModel, float]:
+        """Both clocks from records that hold both kinds of load (e.g. held steps and an
+        hour of cycles): ``p = h + γ D_rest(h) + γ_time D_time(h)`` is linear in the two
+        factors, which solve one least-squares problem over the samples in ``band`` with every
+        record weighted equally. The data decide which clock the spacer's drift runs on: on
+        the virtual textile spacer γ_time comes out near 0, on the second law (creep on time)
+        the time part dominates (docs/drift.md). Returns the model and the RMS residual.
+        """
+        if not records:
+            raise ParameterError("fit_joint needs at least one record")
+        if not rest_rate > 0:
+            raise ParameterError(f"rest_rate must be > 0, got {rest_rate}")
+        k, kind = (log_kernel(), "log") if kernel is None else (kernel, "prony")
+        rows, rhs, plain = [], [], []
+        for n, (h, p, t) in enumerate(records):
+            x = np.asarray(h, dtype=np.float64)
+            y = np.asarray(p, dtype=np.float64)
+            if x.ndim != 1 or y.shape != x.shape:
+                raise ParameterError(f"record {n}: h and pressure must be equal-length 1-D")
+            d_rest = cls(1.0, k, kind, rest_rate).apply(x, t) - x
+            d_time = cls(1.0, k, kind).apply(x, t) - x
+            sel = np.isfinite(y) & np.isfinite(x) & (y >= band[0]) & (y < band[1])
+            if sel.sum() < 2:
+                raise ParameterError(f"record {n} has no samples in {band[0]}-{band[1]}")
+            w = 1.0 / np.sqrt(sel.sum())
+            design = np.column_stack([d_rest[sel], d_time[sel]])
+            rows.append(w * design)
+            rhs.append(w * (y - x)[sel])
+            plain.append((design, (y - x)[sel]))
+        (g_rest, g_time), *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
+        resid = np.concatenate([d @ [g_rest, g_time] - r for d, r in plain])
+        rms = float(np.sqrt(np.mean(resid**2)))
+        return cls(float(g_rest), k, kind, rest_rate, 0.5, float(g_time)), rms
+
     def to_dict(self) -> dict:
         """JSON-able description (stored in the hysteresis model file)."""
         return {
@@ -351,6 +404,7 @@ class DriftModel:
             "gamma": self.gamma,
             "rest_rate": self.rest_rate,
             "rest_window_s": self.rest_window,
+            "gamma_time": self.gamma_time,
             "kernel": {
                 "weights": self.kernel.weights.tolist(),
                 "taus_s": self.kernel.taus.tolist(),
@@ -381,7 +435,12 @@ class DriftModel:
         window = float(d.get("rest_window_s", 0.5))
         if not (np.isfinite(window) and window > 0):
             raise ParameterError(f"drift: rest_window_s must be > 0, got {window}")
-        return cls(float(d["gamma"]), kernel, str(d.get("kind", "log")), rest_rate, window)
+        gamma_time = float(d.get("gamma_time", 0.0))
+        if gamma_time and rest_rate <= 0:
+            raise ParameterError("drift: gamma_time needs the rest clock (rest_rate > 0)")
+        return cls(
+            float(d["gamma"]), kernel, str(d.get("kind", "log")), rest_rate, window, gamma_time
+        )
 
 
 def drift_exact(

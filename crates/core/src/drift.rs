@@ -77,6 +77,8 @@ pub struct DriftBank {
     rest_rate: f64,
     rest_window: f64,
     smooth: Vec<f64>,
+    gamma_time: f64,
+    z_time: Vec<f64>,
 }
 
 impl DriftBank {
@@ -94,6 +96,8 @@ impl DriftBank {
             rest_rate: 0.0,
             rest_window: 0.5,
             smooth: vec![0.0; n],
+            gamma_time: 0.0,
+            z_time: Vec::new(),
             kernel,
             gamma,
             n,
@@ -130,6 +134,26 @@ impl DriftBank {
         Ok(self)
     }
 
+    /// With the rest clock, add a second superposition on the *time* clock with factor
+    /// `gamma_time`: `d = γ Σ Δh k(τ_rest) + γ_time Σ Δh k(t)`. Both factors are identified
+    /// together from one record that holds both kinds of load (docs/drift.md), so the data
+    /// decide which clock a spacer's drift runs on.
+    pub fn with_time_component(mut self, gamma_time: f64) -> Result<Self, CoreError> {
+        if !gamma_time.is_finite() {
+            return Err(CoreError::Parameter {
+                what: "gamma_time",
+                why: format!("must be finite, got {gamma_time}"),
+            });
+        }
+        self.gamma_time = gamma_time;
+        self.z_time = if gamma_time != 0.0 {
+            vec![0.0; self.z.len()]
+        } else {
+            Vec::new()
+        };
+        Ok(self)
+    }
+
     /// Number of elements.
     pub fn len(&self) -> usize {
         self.n
@@ -146,6 +170,7 @@ impl DriftBank {
         self.z.iter_mut().for_each(|v| *v = 0.0);
         self.started.iter_mut().for_each(|v| *v = false);
         self.smooth.iter_mut().for_each(|v| *v = 0.0);
+        self.z_time.iter_mut().for_each(|v| *v = 0.0);
     }
 
     /// One sample `dt` seconds after the previous one: the hysteresis outputs `h` (N,) in,
@@ -182,6 +207,11 @@ impl DriftBank {
                 for (zj, d) in self.z[i * k..(i + 1) * k].iter_mut().zip(&decay) {
                     *zj *= d;
                 }
+                if !self.z_time.is_empty() {
+                    for (zj, d) in self.z_time[i * k..(i + 1) * k].iter_mut().zip(&decay) {
+                        *zj *= d;
+                    }
+                }
                 continue;
             }
             let change = if self.started[i] {
@@ -216,7 +246,17 @@ impl DriftBank {
                 }
             }
             drift += self.total[i] * self.weight_sum;
-            out[i] = h[i] + self.gamma * drift;
+            let mut out_i = h[i] + self.gamma * drift;
+            if self.rest_rate > 0.0 && !self.z_time.is_empty() {
+                let mut time_drift = self.total[i] * self.weight_sum;
+                let zt = &mut self.z_time[i * k..(i + 1) * k];
+                for ((zj, d), w) in zt.iter_mut().zip(&decay).zip(&self.kernel.weights) {
+                    *zj = *zj * d + change;
+                    time_drift -= w * *zj;
+                }
+                out_i += self.gamma_time * time_drift;
+            }
+            out[i] = out_i;
         }
         Ok(())
     }
@@ -380,5 +420,43 @@ mod tests {
         let b = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
         assert!(b.clone().with_rest_rate(-1.0, 2.0).is_err());
         assert!(b.with_rest_rate(0.1, 0.0).is_err());
+    }
+
+    #[test]
+    fn two_clocks_add_the_two_superpositions() {
+        let path: Vec<(f64, f64)> = (0..600)
+            .map(|k| {
+                (
+                    0.5,
+                    if (k / 40) % 3 == 0 {
+                        2.0
+                    } else {
+                        (k % 17) as f64 * 0.3
+                    },
+                )
+            })
+            .collect();
+        let run = |bank: DriftBank| {
+            let mut b = bank;
+            let mut out = [0.0];
+            path.iter()
+                .map(|&(dt, h)| {
+                    b.step(dt, &[h], &[true], &mut out).unwrap();
+                    out[0] - h
+                })
+                .collect::<Vec<f64>>()
+        };
+        let base = || DriftBank::new(log_kernel(), -0.02, 1).unwrap();
+        let rest = run(base().with_rest_rate(0.1, 0.5).unwrap());
+        let time = run(DriftBank::new(log_kernel(), -0.01, 1).unwrap());
+        let both = run(base()
+            .with_rest_rate(0.1, 0.5)
+            .unwrap()
+            .with_time_component(-0.01)
+            .unwrap());
+        for k in 0..path.len() {
+            assert!((both[k] - rest[k] - time[k]).abs() < 1e-12, "sample {k}");
+        }
+        assert!(base().with_time_component(f64::NAN).is_err());
     }
 }

@@ -10,8 +10,10 @@
 //!   (thesis eq. 6.14), streaming and batch;
 //! - [`drift`]: drift as a superposition of step responses, recursive (thesis eq. 5.4/5.8);
 //! - [`preisach`]: the numerical Preisach model (thesis eq. 4.15-4.22), many elements at once;
-//! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep).
+//! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep);
+//! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep).
 
+pub mod bouc_wen;
 pub mod compensation;
 pub mod drift;
 pub mod error;
@@ -20,10 +22,11 @@ pub mod repair;
 pub mod spacer;
 pub mod topology;
 
+pub use bouc_wen::{BoucWenBank, BoucWenParams};
 pub use compensation::Compensation;
 pub use drift::{DriftBank, Kernel};
 pub use error::CoreError;
 pub use preisach::{everett_terms, Everett, EverettTerms, PreisachBank};
 pub use repair::NeighbourMeanRepair;
-pub use spacer::{SpacerBank, SpacerParams};
+pub use spacer::{SpacerBank, SpacerLaw, SpacerParams};
 pub use topology::Neighbours;

@@ -204,9 +204,185 @@ pub struct SpacerBank {
 }
 
 /// What one trial step produces for one element, without committing it.
-struct Trial {
-    stress: f64,
-    creep: f64,
+#[derive(Debug, Clone, Copy)]
+pub struct Trial {
+    /// Stress at the end of the step (N/cm²).
+    pub stress: f64,
+    /// Compression at which the spacer's own surface sits (its permanent set).
+    pub creep: f64,
+}
+
+fn check_dt(dt: f64) -> Result<(), CoreError> {
+    if dt >= 0.0 && dt.is_finite() {
+        Ok(())
+    } else {
+        Err(CoreError::Parameter {
+            what: "dt",
+            why: format!("time steps must be finite and >= 0, got {dt}"),
+        })
+    }
+}
+
+/// A spacer law: N elements of one material whose state a trial step advances. The
+/// test-machine drivers (displacement control, pressure control, a ramp until a pressure) are
+/// shared by every law.
+pub trait SpacerLaw {
+    /// Number of elements.
+    fn len(&self) -> usize;
+    /// True without elements.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Densification limit (fraction of the thickness; compressions stay below it).
+    fn limit(&self) -> f64;
+    /// Current platen compression of element `i` (fraction of thickness).
+    fn current(&self, i: usize) -> f64;
+    /// End-of-step stress of element `i` for platen compression `e_new` after `dt` seconds;
+    /// when `commit`, store the new state.
+    fn trial(&mut self, i: usize, dt: f64, e_new: f64, commit: bool) -> Trial;
+    /// The elastic backbone stress (N/cm²) at compression `e` (no friction, no creep).
+    fn backbone(&self, e: f64) -> f64;
+    /// Current permanent set of every element (fraction of thickness).
+    fn creep_strain(&self) -> Vec<f64>;
+
+    /// Displacement control: move every element's platen to `compression` (fraction of
+    /// thickness, in [0, e_d)) over `dt` seconds. Writes the pressure (N/cm²) and the
+    /// spacer's own compression (the platen's, or the creep set when the platen lifted off).
+    fn step_displacement(
+        &mut self,
+        dt: f64,
+        compression: &[f64],
+        pressure: &mut [f64],
+        spacer_compression: &mut [f64],
+    ) -> Result<(), CoreError> {
+        check_dt(dt)?;
+        check_len("compression", compression.len(), self.len())?;
+        check_len("pressure", pressure.len(), self.len())?;
+        check_len("spacer_compression", spacer_compression.len(), self.len())?;
+        let limit = self.limit();
+        for i in 0..self.len() {
+            let e = compression[i];
+            if !(e >= 0.0 && e < limit) {
+                return Err(CoreError::Parameter {
+                    what: "compression",
+                    why: format!(
+                        "element {i}: compression {e} is outside [0, {limit}) of the thickness"
+                    ),
+                });
+            }
+            let t = self.trial(i, dt, e, true);
+            pressure[i] = t.stress;
+            spacer_compression[i] = e.max(t.creep);
+        }
+        Ok(())
+    }
+
+    /// Pressure control: find, for every element, the largest compression at which the
+    /// pressure does not exceed `pressure[i]` (N/cm², >= 0) after `dt` seconds, and commit it.
+    /// Writes the compression (platen = spacer surface, fraction of thickness) and the
+    /// pressure reached (equal to the target up to the solver tolerance, except where creep
+    /// at a turning point makes the stress jump across it).
+    fn step_pressure(
+        &mut self,
+        dt: f64,
+        pressure: &[f64],
+        compression: &mut [f64],
+        reached: &mut [f64],
+    ) -> Result<(), CoreError> {
+        check_dt(dt)?;
+        check_len("pressure", pressure.len(), self.len())?;
+        check_len("compression", compression.len(), self.len())?;
+        check_len("reached", reached.len(), self.len())?;
+        let hi_limit = self.limit() * (1.0 - 1e-6);
+        for i in 0..self.len() {
+            let target = pressure[i];
+            if !(target >= 0.0 && target.is_finite()) {
+                return Err(CoreError::Parameter {
+                    what: "pressure",
+                    why: format!("element {i}: pressure must be finite and >= 0, got {target}"),
+                });
+            }
+            // the largest compression whose stress does not exceed the target
+            let (mut lo, mut hi) = (0.0, hi_limit);
+            if self.trial(i, dt, hi, false).stress <= target {
+                return Err(CoreError::Parameter {
+                    what: "pressure",
+                    why: format!(
+                        "element {i}: {target} N/cm² is beyond what the spacer can carry before \
+                         densification"
+                    ),
+                });
+            }
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if self.trial(i, dt, mid, false).stress <= target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+                if hi - lo < 1e-13 {
+                    break;
+                }
+            }
+            let t = self.trial(i, dt, lo, true);
+            compression[i] = lo.max(t.creep);
+            reached[i] = t.stress;
+        }
+        Ok(())
+    }
+
+    /// Test-machine ramp of a single-element bank: move the platen at `rate` (fraction of
+    /// thickness per second, sign gives the direction) in steps of `dt` until the pressure
+    /// reaches `target` (rising: >= target; falling: <= target or the platen at 0), at most
+    /// `max_steps` steps. Appends every step's (compression, pressure, spacer compression).
+    #[allow(clippy::too_many_arguments)]
+    fn ramp_until(
+        &mut self,
+        dt: f64,
+        rate: f64,
+        target: f64,
+        max_steps: usize,
+        compression: &mut Vec<f64>,
+        pressure: &mut Vec<f64>,
+        spacer_compression: &mut Vec<f64>,
+    ) -> Result<bool, CoreError> {
+        if self.len() != 1 {
+            return Err(CoreError::Parameter {
+                what: "ramp_until",
+                why: format!("needs a bank of one element, this one has {}", self.len()),
+            });
+        }
+        check_dt(dt)?;
+        if dt <= 0.0 || rate == 0.0 || !rate.is_finite() || target.is_nan() || target < 0.0 {
+            return Err(CoreError::Parameter {
+                what: "ramp_until",
+                why: "need dt > 0, a finite non-zero rate and a target >= 0".into(),
+            });
+        }
+        let limit = self.limit() * (1.0 - 1e-6);
+        for _ in 0..max_steps {
+            let e = (self.current(0) + rate * dt).clamp(0.0, limit);
+            if rate > 0.0 && e >= limit {
+                return Err(CoreError::Parameter {
+                    what: "ramp_until",
+                    why: format!("{target} N/cm² is not reached before densification"),
+                });
+            }
+            let t = self.trial(0, dt, e, true);
+            compression.push(e);
+            pressure.push(t.stress);
+            spacer_compression.push(e.max(t.creep));
+            let done = if rate > 0.0 {
+                t.stress >= target
+            } else {
+                t.stress <= target || e <= 0.0
+            };
+            if done {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
 }
 
 impl SpacerBank {
@@ -239,16 +415,6 @@ impl SpacerBank {
         })
     }
 
-    /// Number of elements.
-    pub fn len(&self) -> usize {
-        self.n
-    }
-
-    /// True when the bank has no elements.
-    pub fn is_empty(&self) -> bool {
-        self.n == 0
-    }
-
     /// The parameters.
     pub fn params(&self) -> &SpacerParams {
         &self.p
@@ -258,10 +424,28 @@ impl SpacerBank {
     pub fn compression(&self) -> &[f64] {
         &self.e
     }
+}
+
+impl SpacerLaw for SpacerBank {
+    fn len(&self) -> usize {
+        self.n
+    }
+
+    fn limit(&self) -> f64 {
+        self.p.densification
+    }
+
+    fn current(&self, i: usize) -> f64 {
+        self.e[i]
+    }
+
+    fn backbone(&self, e: f64) -> f64 {
+        self.p.backbone(e)
+    }
 
     /// Current creep strain (permanent set) of every element: the compression at which the
     /// spacer's own surface sits when nothing presses on it.
-    pub fn creep_strain(&self) -> Vec<f64> {
+    fn creep_strain(&self) -> Vec<f64> {
         let k = self.p.kelvin.len();
         (0..self.n)
             .map(|i| self.c[i * k..(i + 1) * k].iter().sum())
@@ -431,156 +615,6 @@ impl SpacerBank {
             stress,
             creep: creep_new,
         }
-    }
-
-    fn check_dt(dt: f64) -> Result<(), CoreError> {
-        if dt >= 0.0 && dt.is_finite() {
-            Ok(())
-        } else {
-            Err(CoreError::Parameter {
-                what: "dt",
-                why: format!("time steps must be finite and >= 0, got {dt}"),
-            })
-        }
-    }
-
-    /// Displacement control: move every element's platen to `compression` (fraction of
-    /// thickness, in [0, e_d)) over `dt` seconds. Writes the pressure (N/cm²) and the
-    /// spacer's own compression (the platen's, or the creep set when the platen lifted off).
-    pub fn step_displacement(
-        &mut self,
-        dt: f64,
-        compression: &[f64],
-        pressure: &mut [f64],
-        spacer_compression: &mut [f64],
-    ) -> Result<(), CoreError> {
-        Self::check_dt(dt)?;
-        check_len("compression", compression.len(), self.n)?;
-        check_len("pressure", pressure.len(), self.n)?;
-        check_len("spacer_compression", spacer_compression.len(), self.n)?;
-        let limit = self.p.densification;
-        for i in 0..self.n {
-            let e = compression[i];
-            if !(e >= 0.0 && e < limit) {
-                return Err(CoreError::Parameter {
-                    what: "compression",
-                    why: format!(
-                        "element {i}: compression {e} is outside [0, {limit}) of the thickness"
-                    ),
-                });
-            }
-            let t = self.trial(i, dt, e, true);
-            pressure[i] = t.stress;
-            spacer_compression[i] = e.max(t.creep);
-        }
-        Ok(())
-    }
-
-    /// Pressure control: find, for every element, the largest compression at which the
-    /// pressure does not exceed `pressure[i]` (N/cm², >= 0) after `dt` seconds, and commit it.
-    /// Writes the compression (platen = spacer surface, fraction of thickness) and the
-    /// pressure reached (equal to the target up to the solver tolerance, except where creep
-    /// at a turning point makes the stress jump across it).
-    pub fn step_pressure(
-        &mut self,
-        dt: f64,
-        pressure: &[f64],
-        compression: &mut [f64],
-        reached: &mut [f64],
-    ) -> Result<(), CoreError> {
-        Self::check_dt(dt)?;
-        check_len("pressure", pressure.len(), self.n)?;
-        check_len("compression", compression.len(), self.n)?;
-        check_len("reached", reached.len(), self.n)?;
-        let hi_limit = self.p.densification * (1.0 - 1e-6);
-        for i in 0..self.n {
-            let target = pressure[i];
-            if !(target >= 0.0 && target.is_finite()) {
-                return Err(CoreError::Parameter {
-                    what: "pressure",
-                    why: format!("element {i}: pressure must be finite and >= 0, got {target}"),
-                });
-            }
-            // the largest compression whose stress does not exceed the target
-            let (mut lo, mut hi) = (0.0, hi_limit);
-            if self.trial(i, dt, hi, false).stress <= target {
-                return Err(CoreError::Parameter {
-                    what: "pressure",
-                    why: format!(
-                        "element {i}: {target} N/cm² is beyond what the spacer can carry before \
-                         densification"
-                    ),
-                });
-            }
-            for _ in 0..60 {
-                let mid = 0.5 * (lo + hi);
-                if self.trial(i, dt, mid, false).stress <= target {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-                if hi - lo < 1e-13 {
-                    break;
-                }
-            }
-            let t = self.trial(i, dt, lo, true);
-            compression[i] = lo.max(t.creep);
-            reached[i] = t.stress;
-        }
-        Ok(())
-    }
-
-    /// Test-machine ramp of a single-element bank: move the platen at `rate` (fraction of
-    /// thickness per second, sign gives the direction) in steps of `dt` until the pressure
-    /// reaches `target` (rising: >= target; falling: <= target or the platen at 0), at most
-    /// `max_steps` steps. Appends every step's (compression, pressure, spacer compression).
-    #[allow(clippy::too_many_arguments)]
-    pub fn ramp_until(
-        &mut self,
-        dt: f64,
-        rate: f64,
-        target: f64,
-        max_steps: usize,
-        compression: &mut Vec<f64>,
-        pressure: &mut Vec<f64>,
-        spacer_compression: &mut Vec<f64>,
-    ) -> Result<bool, CoreError> {
-        if self.n != 1 {
-            return Err(CoreError::Parameter {
-                what: "ramp_until",
-                why: format!("needs a bank of one element, this one has {}", self.n),
-            });
-        }
-        Self::check_dt(dt)?;
-        if dt <= 0.0 || rate == 0.0 || !rate.is_finite() || target.is_nan() || target < 0.0 {
-            return Err(CoreError::Parameter {
-                what: "ramp_until",
-                why: "need dt > 0, a finite non-zero rate and a target >= 0".into(),
-            });
-        }
-        let limit = self.p.densification * (1.0 - 1e-6);
-        for _ in 0..max_steps {
-            let e = (self.e[0] + rate * dt).clamp(0.0, limit);
-            if rate > 0.0 && e >= limit {
-                return Err(CoreError::Parameter {
-                    what: "ramp_until",
-                    why: format!("{target} N/cm² is not reached before densification"),
-                });
-            }
-            let t = self.trial(0, dt, e, true);
-            compression.push(e);
-            pressure.push(t.stress);
-            spacer_compression.push(e.max(t.creep));
-            let done = if rate > 0.0 {
-                t.stress >= target
-            } else {
-                t.stress <= target || e <= 0.0
-            };
-            if done {
-                return Ok(true);
-            }
-        }
-        Ok(false)
     }
 }
 

@@ -12,8 +12,8 @@ use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use texsense_core::repair::RepairOutcome;
 use texsense_core::{
-    everett_terms, Compensation, CoreError, DriftBank, Everett, Kernel, NeighbourMeanRepair,
-    Neighbours, PreisachBank, SpacerBank, SpacerParams,
+    everett_terms, BoucWenBank, BoucWenParams, Compensation, CoreError, DriftBank, Everett, Kernel,
+    NeighbourMeanRepair, Neighbours, PreisachBank, SpacerBank, SpacerLaw, SpacerParams,
 };
 
 create_exception!(
@@ -158,10 +158,11 @@ fn pairs(what: &'static str, rows: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<(f
 }
 
 /// N spacer elements of one material (the virtual sensor's mechanics), stepped together by
-/// displacement or by pressure. See `texsense.sim.spacer` for the meaning of the parameters.
+/// displacement or by pressure: the first law (`SpacerBank(...)`) or the Bouc–Wen / Norton
+/// law (`SpacerBank.bouc_wen(...)`). See `texsense.sim.spacer` for the parameters.
 #[pyclass(name = "SpacerBank", module = "texsense._core")]
 struct PySpacerBank {
-    inner: SpacerBank,
+    inner: Box<dyn SpacerLaw + Send + Sync>,
 }
 
 type Pair<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
@@ -214,7 +215,44 @@ impl PySpacerBank {
             softening_recovery_s,
         };
         let inner = SpacerBank::new(params, scale.as_slice()?.to_vec()).map_err(to_py)?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner: Box::new(inner),
+        })
+    }
+
+    /// The second spacer law: exponential backbone, Bouc–Wen friction, Norton creep
+    /// (crates/core/src/bouc_wen.rs).
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    fn bouc_wen(
+        stiffness: f64,
+        exponent: f64,
+        densification: f64,
+        friction: f64,
+        slip: f64,
+        bw_n: f64,
+        bw_beta: f64,
+        creep_share: f64,
+        creep_rate: f64,
+        creep_exponent: f64,
+        scale: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<Self> {
+        let params = BoucWenParams {
+            stiffness,
+            exponent,
+            densification,
+            friction,
+            slip,
+            bw_n,
+            bw_beta,
+            creep_share,
+            creep_rate,
+            creep_exponent,
+        };
+        let inner = BoucWenBank::new(params, scale.as_slice()?.to_vec()).map_err(to_py)?;
+        Ok(Self {
+            inner: Box::new(inner),
+        })
     }
 
     /// Number of elements.
@@ -229,8 +267,11 @@ impl PySpacerBank {
         py: Python<'py>,
         e: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let p = self.inner.params();
-        let out: Vec<f64> = e.as_slice()?.iter().map(|&x| p.backbone(x)).collect();
+        let out: Vec<f64> = e
+            .as_slice()?
+            .iter()
+            .map(|&x| self.inner.backbone(x))
+            .collect();
         Ok(out.into_pyarray(py))
     }
 
@@ -489,7 +530,7 @@ struct PyDriftBank {
 #[pymethods]
 impl PyDriftBank {
     #[new]
-    #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5))]
+    #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5, gamma_time=0.0))]
     fn new(
         weights: PyReadonlyArray1<'_, f64>,
         taus: PyReadonlyArray1<'_, f64>,
@@ -497,11 +538,13 @@ impl PyDriftBank {
         n_elements: usize,
         rest_rate: f64,
         rest_window: f64,
+        gamma_time: f64,
     ) -> PyResult<Self> {
         let kernel =
             Kernel::new(weights.as_slice()?.to_vec(), taus.as_slice()?.to_vec()).map_err(to_py)?;
         let inner = DriftBank::new(kernel, gamma, n_elements)
             .and_then(|b| b.with_rest_rate(rest_rate, rest_window))
+            .and_then(|b| b.with_time_component(gamma_time))
             .map_err(to_py)?;
         Ok(Self { inner })
     }
@@ -545,7 +588,7 @@ struct PyCompensation {
 #[pymethods]
 impl PyCompensation {
     #[new]
-    #[pyo3(signature = (u_min, u_max, table, n_elements, capacity, offset, sign, gamma, weights=None, taus=None, rest_rate=0.0, rest_window=0.5))]
+    #[pyo3(signature = (u_min, u_max, table, n_elements, capacity, offset, sign, gamma, weights=None, taus=None, rest_rate=0.0, rest_window=0.5, gamma_time=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         u_min: f64,
@@ -560,6 +603,7 @@ impl PyCompensation {
         taus: Option<PyReadonlyArray1<'_, f64>>,
         rest_rate: f64,
         rest_window: f64,
+        gamma_time: f64,
     ) -> PyResult<Self> {
         let shape = table.shape();
         let everett =
@@ -572,6 +616,7 @@ impl PyCompensation {
                 Some(
                     DriftBank::new(kernel, gamma, n_elements)
                         .and_then(|b| b.with_rest_rate(rest_rate, rest_window))
+                        .and_then(|b| b.with_time_component(gamma_time))
                         .map_err(to_py)?,
                 )
             }

@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 from texsense.drift import DriftModel, split_steps
 from texsense.exceptions import ParameterError
 from texsense.io.columns_csv import read_columns_csv
@@ -27,7 +29,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "pressure_ncm2) into steps and fit γ per step and common to all; flags "
         "data whose change is not proportional to the step size.",
     )
-    f.add_argument("steps", type=Path, help="CSV, e.g. from 'texsense simulate steps --csv'")
+    f.add_argument(
+        "steps",
+        type=Path,
+        nargs="+",
+        help="CSV, e.g. from 'texsense simulate steps --csv'; with --history one or more "
+        "records (--clock rest+time: e.g. held steps and an hour of cycles)",
+    )
     f.add_argument(
         "--kind",
         choices=("log", "prony"),
@@ -60,11 +68,12 @@ def add_clock_arguments(parser: argparse.ArgumentParser, prefix: str = "") -> No
     """``--clock rest|time`` and ``--rest-rate`` (with ``prefix``, e.g. ``drift-``)."""
     parser.add_argument(
         f"--{prefix}clock",
-        choices=("rest", "time"),
+        choices=("rest", "thesis", "time") if prefix else ("rest", "thesis", "time", "rest+time"),
         default="rest",
         help="rest (default): the kernel's clock runs while the element's reading holds "
-        "still, so γ from held steps also serves cycles; time: eq. 5.8 as printed "
-        "(docs/drift.md)",
+        "still, so γ from held steps also serves cycles; thesis (or time): eq. 5.8 as printed"
+        + ("" if prefix else "; rest+time (with --history): both, fitted together")
+        + " (docs/drift.md)",
     )
     parser.add_argument(
         f"--{prefix}rest-rate",
@@ -77,7 +86,7 @@ def add_clock_arguments(parser: argparse.ArgumentParser, prefix: str = "") -> No
 def rest_rate_of(args: argparse.Namespace, prefix: str = "") -> float:
     """The rest rate the arguments ask for (0 for the time clock)."""
     key = prefix.replace("-", "_")
-    if getattr(args, f"{key}clock") == "time":
+    if getattr(args, f"{key}clock") in ("thesis", "time"):
         return 0.0
     rate = float(getattr(args, f"{key}rest_rate"))
     if not rate > 0:
@@ -100,26 +109,40 @@ def run_fit_history(args: argparse.Namespace) -> int:
     from texsense.hysteresis import HysteresisModel
 
     model = HysteresisModel.load(args.history)
-    cols = _columns(args.steps)
-    h = model.predict(cols["compression_mm"])
-    drift, rms = DriftModel.fit_history(
-        h, cols["pressure_ncm2"], cols["time_s"], rest_rate=rest_rate_of(args)
-    )
+    records = []
+    for path in args.steps:
+        cols = _columns(path)
+        records.append(
+            (model.predict(cols["compression_mm"]), cols["pressure_ncm2"], cols["time_s"])
+        )
+    if args.clock == "rest+time":
+        drift, rms = DriftModel.fit_joint(records, rest_rate=rest_rate_of(args))
+    elif len(records) == 1:
+        h, p, t = records[0]
+        drift, rms = DriftModel.fit_history(h, p, t, rest_rate=rest_rate_of(args))
+    else:
+        raise ParameterError("several records need --clock rest+time (one record otherwise)")
+    h = np.concatenate([r[0] for r in records])
     summary = {
         "gamma": drift.gamma,
+        "gamma_time": drift.gamma_time,
         "clock": drift.clock,
         "rms_residual_ncm2": rms,
         "samples": int(h.size),
     }
     if args.output:
         model.with_drift(drift)
-        model.provenance_["drift_history"] = str(args.steps)
+        model.provenance_["drift_history"] = [str(p) for p in args.steps]
         summary["model"] = str(model.save(args.output))
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
     print(
-        f"γ {drift.gamma:.5f} ({drift.clock} clock) over {h.size} samples of {args.steps.name} "
+        f"γ {drift.gamma:.5f}"
+        + (f", γ_time {drift.gamma_time:.5f}" if drift.gamma_time else "")
+        + f" ({drift.clock} clock) over {h.size} samples of "
+        + ", ".join(p.name for p in args.steps)
+        + " "
         f"(RMS residual {rms:.4g} N/cm² in 0.5-3.5 N/cm²)"
     )
     if args.output:
@@ -133,7 +156,14 @@ def run_fit(args: argparse.Namespace) -> int:
         return run_fit_history(args)
     if args.output is not None:
         raise ParameterError("drift fit: -o/--output needs --history MODEL.json")
-    steps = load_steps(args.steps)
+    if len(args.steps) != 1:
+        raise ParameterError("drift fit: one step-and-hold CSV (several need --history)")
+    if args.clock == "rest+time":
+        raise ParameterError(
+            "drift fit: --clock rest+time needs --history MODEL.json and records with cycles "
+            "(held steps alone cannot tell the two clocks apart)"
+        )
+    steps = load_steps(args.steps[0])
     model, fit = DriftModel.fit(steps, kind=args.kind, rest_rate=rest_rate_of(args))
     summary = {
         "steps": [round(s, 6) for _, _, s in steps],

@@ -263,6 +263,7 @@ class HysteresisModel:
             np.ascontiguousarray(d.kernel.taus) if d is not None else None,
             d.rest_rate if d is not None else 0.0,
             d.rest_window if d is not None else 0.5,
+            d.gamma_time if d is not None else 0.0,
         )
 
     def with_drift(self, drift: Any) -> HysteresisModel:

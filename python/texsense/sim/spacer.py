@@ -36,7 +36,7 @@ import numpy.typing as npt
 from texsense._core import SpacerBank
 from texsense.exceptions import ParameterError
 
-__all__ = ["PRESETS", "DriveResult", "Spacer", "SpacerMaterial"]
+__all__ = ["PRESETS", "BoucWenMaterial", "DriveResult", "Spacer", "SpacerMaterial"]
 
 
 @dataclass(frozen=True)
@@ -93,8 +93,120 @@ class SpacerMaterial:
         if not 0 <= self.variation < 0.5:
             raise ParameterError(f"{self.name}: variation must lie in [0, 0.5)")
 
+    def varied(self, rng: np.random.Generator) -> SpacerMaterial:
+        """One batch of the material: friction and creep varied by ``variation`` (1 sigma)."""
+        f = float(np.exp(rng.normal(0.0, self.variation)))
+        return replace(
+            self,
+            friction=tuple((w * f, r) for w, r in self.friction),
+            creep_a=self.creep_a * float(np.exp(rng.normal(0.0, self.variation))),
+            clutch=(
+                self.clutch[0],
+                self.clutch[1] * float(np.exp(rng.normal(0.0, self.variation))),
+            ),
+        )
 
-PRESETS: dict[str, SpacerMaterial] = {
+    def bank(self, scale: npt.NDArray[np.float64]) -> SpacerBank:
+        """The core's state for elements whose stresses are multiplied by ``scale``."""
+        amplitude, linear = self.backbone_amplitude()
+
+        def table(rows: tuple[tuple[float, float], ...]) -> np.ndarray:
+            return np.asarray(rows, dtype=np.float64).reshape(-1, 2)
+
+        return SpacerBank(
+            amplitude,
+            self.backbone_m,
+            self.densification,
+            linear,
+            table(self.friction),
+            self.creep_a,
+            self.creep_tc,
+            self.rest_rate,
+            self.clutch[0],
+            self.clutch[1],
+            table(self.viscous),
+            table(self.kelvin),
+            self.recovery_factor,
+            self.p50_ncm2,
+            table(self.softening),
+            self.softening_recovery_s,
+            np.ascontiguousarray(scale, dtype=np.float64),
+        )
+
+
+@dataclass(frozen=True)
+class BoucWenMaterial:
+    """A spacer of the second law (``crates/core/src/bouc_wen.rs``): exponential backbone,
+    Bouc–Wen friction, Norton (power-law) creep that runs on time, moving or not. Another
+    family than the first law and than the compensation's models; used to check that results
+    do not depend on one simulator.
+
+    Stresses in N/cm², compressions in fractions of the thickness, times in s.
+    """
+
+    name: str
+    thickness_mm: float
+    p50_ncm2: float
+    densification: float = 0.85
+    exponent: float = 6.0
+    friction: float = 0.35
+    slip: float = 0.015
+    bw_n: float = 1.5
+    bw_beta: float = 0.6
+    creep_share: float = 0.3
+    creep_rate: float = 1e-3
+    creep_exponent: float = 2.0
+    description: str = ""
+    variation: float = 0.05
+
+    def stiffness(self) -> float:
+        """Backbone stiffness E so that the loading curve passes through p50 at 50 %."""
+        return self.p50_ncm2 / (
+            (1.0 + self.friction) * (1.0 + self.creep_share) * (np.exp(0.5 * self.exponent) - 1)
+        )
+
+    def validate(self) -> None:
+        """Raise :class:`ParameterError` on a bad value (before the core sees it)."""
+        if not self.thickness_mm > 0:
+            raise ParameterError(f"{self.name}: thickness must be > 0 mm, got {self.thickness_mm}")
+        if not self.p50_ncm2 > 0:
+            raise ParameterError(f"{self.name}: p50 must be > 0 N/cm², got {self.p50_ncm2}")
+        if not 0.5 < self.densification < 1.0:
+            raise ParameterError(
+                f"{self.name}: densification must lie in (0.5, 1), got {self.densification}"
+            )
+        if not 0 <= self.variation < 0.5:
+            raise ParameterError(f"{self.name}: variation must lie in [0, 0.5)")
+
+    def varied(self, rng: np.random.Generator) -> BoucWenMaterial:
+        """One batch of the material: friction and creep rate varied by ``variation``."""
+        return replace(
+            self,
+            friction=self.friction * float(np.exp(rng.normal(0.0, self.variation))),
+            creep_rate=self.creep_rate * float(np.exp(rng.normal(0.0, self.variation))),
+        )
+
+    def bank(self, scale: npt.NDArray[np.float64]) -> SpacerBank:
+        """The core's state for elements whose stresses are multiplied by ``scale``."""
+        try:
+            return SpacerBank.bouc_wen(
+                self.stiffness(),
+                self.exponent,
+                self.densification,
+                self.friction,
+                self.slip,
+                self.bw_n,
+                self.bw_beta,
+                self.creep_share,
+                self.creep_rate,
+                self.creep_exponent,
+                np.ascontiguousarray(scale, dtype=np.float64),
+            )
+        except ValueError as e:
+            raise ParameterError(f"{self.name}: {e}") from None
+
+
+PRESETS: dict[str, SpacerMaterial | BoucWenMaterial] = {
     m.name: m
     for m in (
         SpacerMaterial(
@@ -138,6 +250,13 @@ PRESETS: dict[str, SpacerMaterial] = {
             description="open-cell foam, 9 mm, 50 % at 1.7 N/cm²; after a compression it "
             "recovers only to 8.2-8.4 mm, and to > 8.9 mm after hours",
         ),
+        BoucWenMaterial(
+            "bouc-wen-6mm",
+            6.0,
+            2.3,
+            description="second law (Bouc–Wen friction, Norton creep on time), 6 mm, 50 % at "
+            "2.3 N/cm²: a spacer of another family for generalisation checks",
+        ),
     )
 }
 
@@ -166,7 +285,12 @@ class Spacer:
         ``material.variation``); None gives the nominal material for every specimen.
     """
 
-    def __init__(self, material: SpacerMaterial, n_specimens: int = 1, seed: int | None = None):
+    def __init__(
+        self,
+        material: SpacerMaterial | BoucWenMaterial,
+        n_specimens: int = 1,
+        seed: int | None = None,
+    ):
         material.validate()
         if n_specimens < 1:
             raise ParameterError(f"n_specimens must be >= 1, got {n_specimens}")
@@ -179,17 +303,7 @@ class Spacer:
         else:
             rng = np.random.default_rng(seed)
             scale = np.exp(rng.normal(0.0, material.variation, n_specimens))
-            # one friction and creep variation per call (a batch of a material)
-            f = float(np.exp(rng.normal(0.0, material.variation)))
-            mat = replace(
-                material,
-                friction=tuple((w * f, r) for w, r in material.friction),
-                creep_a=material.creep_a * float(np.exp(rng.normal(0.0, material.variation))),
-                clutch=(
-                    material.clutch[0],
-                    material.clutch[1] * float(np.exp(rng.normal(0.0, material.variation))),
-                ),
-            )
+            mat = material.varied(rng)  # one friction and creep variation per call (a batch)
         self._effective = mat
         self.scale = scale
         self._bank = self._new_bank()
@@ -203,31 +317,7 @@ class Spacer:
         return cls(PRESETS[name], n_specimens, seed)
 
     def _new_bank(self) -> SpacerBank:
-        m = self._effective
-        amplitude, linear = m.backbone_amplitude()
-
-        def table(rows: tuple[tuple[float, float], ...]) -> np.ndarray:
-            return np.asarray(rows, dtype=np.float64).reshape(-1, 2)
-
-        return SpacerBank(
-            amplitude,
-            m.backbone_m,
-            m.densification,
-            linear,
-            table(m.friction),
-            m.creep_a,
-            m.creep_tc,
-            m.rest_rate,
-            m.clutch[0],
-            m.clutch[1],
-            table(m.viscous),
-            table(m.kelvin),
-            m.recovery_factor,
-            m.p50_ncm2,
-            table(m.softening),
-            m.softening_recovery_s,
-            np.ascontiguousarray(self.scale, dtype=np.float64),
-        )
+        return self._effective.bank(self.scale)
 
     @property
     def thickness_mm(self) -> float:
