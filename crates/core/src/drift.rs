@@ -334,19 +334,22 @@ mod tests {
         assert!(a.step(-1.0, &[1.0, 1.0], &[true, true], &mut out).is_err());
     }
 
+    /// The drift (output - input) at the end of `path` ((dt, h) pairs) for one element.
+    fn final_drift(kernel: Kernel, rest: f64, path: &[(f64, f64)]) -> f64 {
+        let mut b = DriftBank::new(kernel, -0.025, 1)
+            .unwrap()
+            .with_rest_rate(rest, 2.0)
+            .unwrap();
+        let mut out = [0.0];
+        for &(dt, h) in path {
+            b.step(dt, &[h], &[true], &mut out).unwrap();
+        }
+        out[0] - path.last().unwrap().1
+    }
+
     #[test]
     fn rest_clock_runs_at_rest_and_stops_while_moving() {
-        let run = |rest: f64, path: &[(f64, f64)]| {
-            let mut b = DriftBank::new(log_kernel(), -0.025, 1)
-                .unwrap()
-                .with_rest_rate(rest, 2.0)
-                .unwrap();
-            let mut out = [0.0];
-            for &(dt, h) in path {
-                b.step(dt, &[h], &[true], &mut out).unwrap();
-            }
-            out[0] - path.last().unwrap().1
-        };
+        let run = |rest: f64, path: &[(f64, f64)]| final_drift(log_kernel(), rest, path);
         // a step then a long hold: the clock is slowed for a few windows after the step,
         // then runs with time, so after 1000 s the two clocks differ by a few seconds' worth
         let hold: Vec<(f64, f64)> = [(0.0, 0.0), (1e-3, 2.0)]
@@ -385,15 +388,7 @@ mod tests {
         // with a kernel of slow terms (10 s .. 10^6 s) the moving element hardly drifts
         let slow = |rest: f64, path: &[(f64, f64)]| {
             let taus: Vec<f64> = (2..13).map(|k| 10f64.powf(k as f64 / 2.0)).collect();
-            let mut b = DriftBank::new(Kernel::new(vec![0.4; 11], taus).unwrap(), -0.025, 1)
-                .unwrap()
-                .with_rest_rate(rest, 2.0)
-                .unwrap();
-            let mut out = [0.0];
-            for &(dt, h) in path {
-                b.step(dt, &[h], &[true], &mut out).unwrap();
-            }
-            out[0] - path.last().unwrap().1
+            final_drift(Kernel::new(vec![0.4; 11], taus).unwrap(), rest, path)
         };
         let (st, sr) = (slow(0.0, &wave), slow(0.1, &wave));
         assert!(sr.abs() < 0.3 * st.abs(), "rest {sr} vs time {st}");

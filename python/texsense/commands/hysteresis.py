@@ -199,8 +199,11 @@ def run_fit(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_apply(args: argparse.Namespace) -> int:
-    """Run ``texsense hysteresis apply``."""
+def _model_and_record(
+    args: argparse.Namespace,
+) -> tuple[HysteresisModel, dict[str, np.ndarray], str, str, np.ndarray]:
+    """The model, the record's columns, the input and output names (the model's unless given)
+    and the input column, with its unit checked against the model's."""
     model = HysteresisModel.load(args.model)
     cols = read_columns_csv(args.data)
     in_name = args.input or model.input_name
@@ -208,6 +211,12 @@ def run_apply(args: argparse.Namespace) -> int:
     u = _column(cols, in_name, args.data)
     if args.input and _unit_of(in_name) != "1":
         model.check_units(_unit_of(in_name))
+    return model, cols, in_name, out_name, u
+
+
+def run_apply(args: argparse.Namespace) -> int:
+    """Run ``texsense hysteresis apply``."""
+    model, cols, in_name, out_name, u = _model_and_record(args)
     st = model.state(1)
     modelled = st.run(u)
     clamped = int(st.clamped[0])
@@ -248,14 +257,8 @@ def run_validate(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis validate``."""
     from texsense.hysteresis.validation import validate
 
-    model = HysteresisModel.load(args.model)
-    cols = read_columns_csv(args.data)
-    in_name = args.input or model.input_name
-    out_name = args.output or model.output_name
-    u = _column(cols, in_name, args.data)
+    model, cols, in_name, out_name, u = _model_and_record(args)
     y = _column(cols, out_name, args.data)
-    if args.input and _unit_of(in_name) != "1":
-        model.check_units(_unit_of(in_name))
     times = cols.get("time_s")
     report = validate(model, u, y, times_s=times)
     if args.plot:

@@ -39,6 +39,18 @@ from texsense.exceptions import ParameterError
 __all__ = ["PRESETS", "BoucWenMaterial", "DriveResult", "Spacer", "SpacerMaterial"]
 
 
+def _check_material(m: SpacerMaterial | BoucWenMaterial) -> None:
+    """The checks every spacer material shares (its law's own are in the core)."""
+    if not m.thickness_mm > 0:
+        raise ParameterError(f"{m.name}: thickness must be > 0 mm, got {m.thickness_mm}")
+    if not m.p50_ncm2 > 0:
+        raise ParameterError(f"{m.name}: p50 must be > 0 N/cm², got {m.p50_ncm2}")
+    if not 0.5 < m.densification < 1.0:
+        raise ParameterError(f"{m.name}: densification must lie in (0.5, 1), got {m.densification}")
+    if not 0 <= m.variation < 0.5:
+        raise ParameterError(f"{m.name}: variation must lie in [0, 0.5)")
+
+
 @dataclass(frozen=True)
 class SpacerMaterial:
     """Parameters of a spacer material (see the module docstring and spacer.rs).
@@ -82,16 +94,7 @@ class SpacerMaterial:
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` on a bad value (before the core sees it)."""
-        if not self.thickness_mm > 0:
-            raise ParameterError(f"{self.name}: thickness must be > 0 mm, got {self.thickness_mm}")
-        if not self.p50_ncm2 > 0:
-            raise ParameterError(f"{self.name}: p50 must be > 0 N/cm², got {self.p50_ncm2}")
-        if not 0.5 < self.densification < 1.0:
-            raise ParameterError(
-                f"{self.name}: densification must lie in (0.5, 1), got {self.densification}"
-            )
-        if not 0 <= self.variation < 0.5:
-            raise ParameterError(f"{self.name}: variation must lie in [0, 0.5)")
+        _check_material(self)
 
     def varied(self, rng: np.random.Generator) -> SpacerMaterial:
         """One batch of the material: friction and creep varied by ``variation`` (1 sigma)."""
@@ -167,16 +170,7 @@ class BoucWenMaterial:
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` on a bad value (before the core sees it)."""
-        if not self.thickness_mm > 0:
-            raise ParameterError(f"{self.name}: thickness must be > 0 mm, got {self.thickness_mm}")
-        if not self.p50_ncm2 > 0:
-            raise ParameterError(f"{self.name}: p50 must be > 0 N/cm², got {self.p50_ncm2}")
-        if not 0.5 < self.densification < 1.0:
-            raise ParameterError(
-                f"{self.name}: densification must lie in (0.5, 1), got {self.densification}"
-            )
-        if not 0 <= self.variation < 0.5:
-            raise ParameterError(f"{self.name}: variation must lie in [0, 0.5)")
+        _check_material(self)
 
     def varied(self, rng: np.random.Generator) -> BoucWenMaterial:
         """One batch of the material: friction and creep rate varied by ``variation``."""
