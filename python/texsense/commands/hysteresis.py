@@ -216,7 +216,7 @@ def _model_and_record(
 
 def run_apply(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis apply``."""
-    model, cols, in_name, out_name, u = _model_and_record(args)
+    model, cols, _, out_name, u = _model_and_record(args)
     st = model.state(1)
     modelled = st.run(u)
     clamped = int(st.clamped[0])
