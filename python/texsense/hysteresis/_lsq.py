@@ -44,7 +44,7 @@ from texsense.hysteresis._segments import split_branches
 __all__ = ["Candidate", "LsqResult", "fit_everett_lsq", "lower_design"]
 
 # the cross-validated search (coordinate-wise, from the middle candidate)
-SIZES: tuple[tuple[int, int], ...] = ((10, 8), (16, 12), (24, 18))
+SIZES: tuple[tuple[int, int], ...] = ((10, 10), (16, 16), (24, 24))
 SMOOTHINGS: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
 PRIOR_WEIGHTS: tuple[float, ...] = (0.0, 1e-3, 1e-2)
 
@@ -431,7 +431,7 @@ def fit_everett_lsq(
     prior_weight: float | None = None,
 ) -> LsqResult:
     """Identify a monotone ``grid x grid`` Everett table and an output offset from a record
-    (see the module docstring). ``cells`` (α cells; the d-cells are three quarters of it),
+    (see the module docstring). ``cells`` (α cells and as many d-cells),
     ``smoothing``, ``spacing`` and ``prior_weight`` fix a setting instead of choosing it by
     cross-validation. ``prior(held_out)`` returns a prior table on the same fine grid built
     without the samples marked held out (None: all samples), or None when it cannot."""
@@ -447,7 +447,7 @@ def fit_everett_lsq(
     fold = branch_folds(u, folds, tol)
     problem = _Problem(u, p, grid, fold, prior)
     has_prior = problem.priors.get(None) is not None
-    size = (16, 12) if cells is None else (cells, max(2, round(0.75 * cells)))
+    size = (16, 16) if cells is None else (cells, cells)
     weight = prior_weight if prior_weight is not None else (1e-3 if has_prior else 0.0)
     start = Candidate(
         size[0], size[1], 3.0 if spacing is None else spacing, smoothing or 1e-4, weight

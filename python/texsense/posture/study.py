@@ -241,7 +241,10 @@ def sensor_hysteresis_model(spacer: str = "textile-3mm", seed: int = 0) -> Any:
     rise_e, rise_p = np.maximum.accumulate(e[: top + 1]), p[: top + 1]
     keep = np.concatenate([[True], np.diff(rise_e) > 0])
     reading = np.interp(e, rise_e[keep], rise_p[keep])  # the uncompensated sensor
-    return HysteresisModel(input_name="pressure_ncm2", input_unit="N/cm2").fit(p, reading)
+    # the thesis's own hysteresis model for its error study (eq. 6.12), from its protocol
+    return HysteresisModel(method="thesis", input_name="pressure_ncm2", input_unit="N/cm2").fit(
+        p, reading
+    )
 
 
 def study_tables(results: dict[str, list[StudyPoint]]) -> str:
