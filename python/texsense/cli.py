@@ -6,6 +6,7 @@ Exit codes: 0 ok, 1 failed (bad file, bad data), 2 bad usage.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -45,6 +46,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"texsense {args.command}: interrupted", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # the reader went away (`texsense ... | head`): not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

@@ -136,9 +136,12 @@ def validate(
     ]
     index = np.nonzero(ok)[0]
     places = []
-    for b in branches:
-        seg = slice(b.start, b.stop + 1)
-        k = b.start + int(np.argmax(np.abs(mo[seg] - yo[seg])))
+    for n, b in enumerate(branches):
+        first = b.start + (1 if n else 0)  # a turning sample belongs to the branch it ends
+        if first > b.stop:
+            continue
+        seg = slice(first, b.stop + 1)
+        k = first + int(np.argmax(np.abs(mo[seg] - yo[seg])))
         places.append(
             Place(
                 int(index[k]),
