@@ -134,6 +134,7 @@ def main(preset: str = "textile-6mm") -> None:
         return DriftModel(g, log_kernel(), "log", rest)
 
     joint, _ = DriftModel.fit_joint([s0["holds"], first_hour], rest_rate=REST_RATE)
+    joint3, _ = DriftModel.fit_joint([s0["holds"], first_hour, s0["bouts"]], rest_rate=REST_RATE)
     # a Prony kernel (non-negative exponentials, τ 0.1 s .. 10^5 s) fitted to the holds'
     # drift after the Preisach model, on the time clock
     h, p, t = s0["holds"]
@@ -188,6 +189,7 @@ def main(preset: str = "textile-6mm") -> None:
             "rest clock, γ from 1 h of cycles", model(fit_gamma([first_hour], REST_RATE), REST_RATE)
         ),
         candidate("two clocks, jointly from holds + 1 h of cycles", joint),
+        candidate("two clocks, jointly from holds + 1 h of cycles + bouts", joint3),
     ]
     print(
         f"identified on specimen 0, applied to specimens 0-3 (mean of 4; worst in brackets); "
