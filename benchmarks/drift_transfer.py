@@ -17,8 +17,9 @@ all four specimens (mean relative error in 0.5-3.5 N/cm²):
 - onset kernel `ln(1 + t/τ0)`: γ and τ0 fitted on holds;
 - a Prony kernel (non-negative exponentials) fitted on holds, time clock;
 - superposition on the compression instead of the Preisach output, factor from holds;
-- two clocks (`DriftModel.fit_joint`): `γ_rest D_rest + γ_time D_time`, both factors from one
-  record of holds plus an hour of cycles;
+- two clocks (`DriftModel.fit_joint`): `γ_rest D_rest + γ_time D_time`, both factors from
+  held steps plus an hour of cycles (also with the bouts added, and from held loads, i.e. the
+  bouts, plus cycles);
 - rest clock (`DriftModel(rest_rate=...)`): the kernel's clock advances by
   `dt / (1 + |v| / r0)`, v the reading velocity averaged over 0.5 s; γ from holds or from
   cycles; r0 = 0.02 N/cm² per s.
@@ -48,7 +49,6 @@ from scipy.optimize import nnls
 from texsense.drift import DriftKernel, DriftModel, log_kernel, split_steps
 from texsense.hysteresis import HysteresisModel
 from texsense.sim import protocols
-from texsense.sim.machine import TestMachine
 from texsense.sim.spacer import Spacer
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
@@ -92,14 +92,9 @@ def specimen(seed: int, preset: str = "textile-6mm") -> dict:
         rec.times[keep],
     )
     sp.reset()
-    m = TestMachine(sp)
-    for _ in range(4):
-        m.ramp_to_pressure(2.0, 50).hold_pressure(1500, sample_s=1.0)
-        m.ramp_to_pressure(0.0, 50).hold_compression(600, sample_s=1.0)
-    tr = m.trace()
-    tb = np.arange(0.0, tr.times_s[-1], 1.0)
-    ub = np.interp(tb, tr.times_s, tr.meta["specimen_compression_mm"])
-    out["bouts"] = (model.predict(ub), np.interp(tb, tr.times_s, tr.pressure_ncm2), tb)
+    bouts = protocols.run_protocol("loads", sp, seed=seed, sample_hz=1)
+    tb, ub = bouts.times, bouts.labels["compression_mm"]
+    out["bouts"] = (model.predict(ub), bouts.labels["pressure_ncm2"], tb)
     out["u"]["bouts"] = ub
     return out
 
@@ -135,6 +130,7 @@ def main(preset: str = "textile-6mm") -> None:
 
     joint, _ = DriftModel.fit_joint([s0["holds"], first_hour], rest_rate=REST_RATE)
     joint3, _ = DriftModel.fit_joint([s0["holds"], first_hour, s0["bouts"]], rest_rate=REST_RATE)
+    joint_load, _ = DriftModel.fit_joint([s0["bouts"], first_hour], rest_rate=REST_RATE)
     # a Prony kernel (non-negative exponentials, τ 0.1 s .. 10^5 s) fitted to the holds'
     # drift after the Preisach model, on the time clock
     h, p, t = s0["holds"]
@@ -190,6 +186,7 @@ def main(preset: str = "textile-6mm") -> None:
         ),
         candidate("two clocks, jointly from holds + 1 h of cycles", joint),
         candidate("two clocks, jointly from holds + 1 h of cycles + bouts", joint3),
+        candidate("two clocks, jointly from held loads (bouts) + 1 h of cycles", joint_load),
     ]
     print(
         f"identified on specimen 0, applied to specimens 0-3 (mean of 4; worst in brackets); "

@@ -315,3 +315,43 @@ def test_joint_fit_recovers_both_clocks_and_the_cli_names_its_limits(tmp_path, c
     assert "cannot tell the two clocks apart" in capsys.readouterr().err
     assert main(["drift", "fit", str(steps), str(steps)]) == 1
     assert "--history" in capsys.readouterr().err
+
+
+def test_cli_workflow_for_mats_in_use_held_loads_plus_cycles(tmp_path, capsys):
+    """docs/drift.md: a mat in use is load-controlled; two clocks from held loads plus cycles."""
+    from texsense.cli import main
+    from texsense.hysteresis import HysteresisModel
+
+    cal, loads, cycles = (tmp_path / f"{n}.csv" for n in ("cal", "loads", "cycles"))
+    run = [
+        ["simulate", "calibration", "--seed", "4", "--csv", str(cal)],
+        [
+            "simulate",
+            "loads",
+            "--seed",
+            "4",
+            "--levels",
+            "2,3",
+            "--hold",
+            "600",
+            "--csv",
+            str(loads),
+        ],
+        ["simulate", "validation", "--seed", "4", "--cycles", "40", "--csv", str(cycles)],
+        ["hysteresis", "fit", str(cal), "-o", str(tmp_path / "m.json")],
+    ]
+    for argv in run:
+        assert main(argv) == 0, argv
+    model = tmp_path / "md.json"
+    args = ["drift", "fit", str(loads), str(cycles), "--history", str(tmp_path / "m.json")]
+    assert main([*args, "--clock", "rest+time", "-o", str(model), "--json"]) == 0
+    out = capsys.readouterr().out
+    summary = json.loads(out[out.index("{") :])
+    assert summary["clock"] == "rest+time" and summary["gamma_time"] != 0
+    m = HysteresisModel.load(model)
+    assert m.drift_.clock == "rest+time"
+    assert (
+        main(["hysteresis", "apply", str(model), str(cycles), "-o", str(tmp_path / "o.csv")]) == 0
+    )
+    assert main(["simulate", "loads", "--levels", "0", "--csv", str(tmp_path / "x.csv")]) == 1
+    assert "load levels must be > 0" in capsys.readouterr().err

@@ -195,8 +195,9 @@ def run_fit(args: argparse.Namespace) -> int:
     print(
         f"  clock: {model.clock}"
         + (
-            f" (rest rate {model.rest_rate:g} N/cm² per s): transfers to cycles; for a load "
-            "held by a person (sitting, lying) fit γ on such a record instead (--history)"
+            f" (rest rate {model.rest_rate:g} N/cm² per s): transfers to cycles. For a mat "
+            "in use (sitting, lying: held loads) fit held loads plus cycles instead: drift fit "
+            "LOADS.csv CYCLES.csv --history MODEL.json --clock rest+time (docs/drift.md)"
             if model.clock == "rest"
             else " (eq. 5.8 as printed)"
         )

@@ -27,6 +27,7 @@ _ACCEPTS = {
     "calibration": {"max", "speed"},
     "validation": {"cycles", "speed"},
     "steps": {"levels", "hold", "speed", "falling"},
+    "loads": {"levels", "hold", "speed"},
     "cyclic": {"p3", "duration", "speed"},
     "random": {"duration", "max"},
     "sawtooth": {"max", "speed"},
@@ -52,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--speed", type=float, help="platen speed, mm/min")
     p.add_argument("--max", type=float, help="maximal pressure, N/cm²")
     p.add_argument("--cycles", type=int, help="number of cycles")
-    p.add_argument("--hold", type=float, help="hold time per step, s")
+    p.add_argument("--hold", type=float, help="hold time per step or load, s")
     p.add_argument(
         "--levels",
         type=lambda s: tuple(float(v) for v in s.split(",")),

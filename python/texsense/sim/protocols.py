@@ -38,6 +38,7 @@ __all__ = [
     "PROTOCOLS",
     "calibration",
     "cyclic",
+    "loads",
     "ramp",
     "random_pressure",
     "run_protocol",
@@ -179,6 +180,27 @@ def steps(
     return out
 
 
+def loads(
+    spacer: Spacer,
+    *,
+    levels: Sequence[float] = (2.0, 2.0, 2.0, 2.0),
+    hold_s: float = 1500.0,
+    rest_s: float = 600.0,
+    speed_mm_min: float = 50.0,
+) -> list[DriveResult]:
+    """Held loads, like sitting bouts: for each level, ramp to it, hold the *load* for
+    ``hold_s`` (pressure control: the spacer creeps), unload and rest ``rest_s`` at zero
+    compression. A mat in use is load-controlled; its drift is identified on this record plus
+    cycles (docs/drift.md), not on held compressions."""
+    m = TestMachine(spacer)
+    for level in levels:
+        if not level > 0:
+            raise ParameterError(f"load levels must be > 0 N/cm², got {level}")
+        m.ramp_to_pressure(level, speed_mm_min).hold_pressure(hold_s, sample_s=1.0)
+        m.ramp_to_pressure(0.0, speed_mm_min).hold_compression(rest_s, sample_s=1.0)
+    return [m.trace()]
+
+
 def cyclic(
     spacer: Spacer,
     *,
@@ -253,6 +275,7 @@ PROTOCOLS: dict[str, Callable[..., list[DriveResult]]] = {
     "calibration": calibration,
     "validation": validation,
     "steps": steps,
+    "loads": loads,
     "cyclic": cyclic,
     "random": random_pressure,
     "sawtooth": sawtooth,
