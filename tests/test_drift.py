@@ -355,3 +355,17 @@ def test_cli_workflow_for_mats_in_use_held_loads_plus_cycles(tmp_path, capsys):
     )
     assert main(["simulate", "loads", "--levels", "0", "--csv", str(tmp_path / "x.csv")]) == 1
     assert "load levels must be > 0" in capsys.readouterr().err
+
+
+def test_kind_thesis_is_eq_5_8_as_printed():
+    from texsense.drift import DriftModel
+
+    t = np.concatenate([[0.0], np.geomspace(0.1, 3600, 200)])
+    steps = [(t, 2.0 * (1 - 0.025 * np.log1p(t)), 2.0)]
+    thesis, _ = DriftModel.fit(steps, kind="thesis")
+    assert thesis.kind == "thesis" and thesis.clock == "time"
+    assert thesis.gamma == pytest.approx(-0.025, rel=1e-9)
+    with pytest.raises(ParameterError, match="as printed"):
+        DriftModel.fit(steps, kind="thesis", rest_rate=0.02)
+    with pytest.raises(ParameterError, match="'thesis', 'log' or 'prony'"):
+        DriftModel.fit(steps, kind="nope")

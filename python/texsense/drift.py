@@ -300,10 +300,15 @@ class DriftModel:
         rest_rate: float = 0.0,
     ) -> tuple[DriftModel, StepFit]:
         """Fit from step responses: γ with the logarithmic kernel (``kind="log"``), or a
-        non-negative Prony kernel of the common normalised response (``"prony"``). With
+        non-negative Prony kernel of the common normalised response (``"prony"``);
+        ``kind="thesis"`` is eq. 5.8 exactly as printed (``ln(1 + t)``, time clock). With
         ``rest_rate`` > 0 the model runs on the rest clock; γ is the same (a hold is at
         rest)."""
         fit = fit_gamma(steps)
+        if kind == "thesis":  # eq. 5.8 exactly as printed: ln(1 + t) on the time clock
+            if rest_rate:
+                raise ParameterError("kind='thesis' is eq. 5.8 as printed: no rest clock")
+            return cls(fit.gamma_common, log_kernel(), "thesis"), fit
         if kind == "log":
             return cls(fit.gamma_common, log_kernel(), "log", rest_rate), fit
         if kind == "prony":
@@ -316,7 +321,7 @@ class DriftModel:
             order = np.argsort(times)
             k = prony_kernel(times[order], norm[order])
             return cls(-1.0 if norm[order][-1] < 0 else 1.0, k, "prony", rest_rate), fit
-        raise ParameterError(f"kind must be 'log' or 'prony', got {kind!r}")
+        raise ParameterError(f"kind must be 'thesis', 'log' or 'prony', got {kind!r}")
 
     @classmethod
     def fit_history(
