@@ -269,3 +269,27 @@ def test_cli_calibrate_process_repair_health(mat_setup, tmp_path, capsys):
     assert dead == np.flatnonzero(scan.failed.all(axis=0)).tolist()
     assert main(["health", str(out)]) == 1
     assert "needs capacitance" in capsys.readouterr().err
+
+
+def test_detector_neighbour_median_equals_a_brute_force_median():
+    """The padded-table median (one small row sort per frame) against np.median over each
+    element's neighbours, on a full grid and on a grid with holes (degrees 0-4)."""
+    from texsense.health import FailureDetector
+    from texsense.layout import Layout
+
+    rng = np.random.default_rng(5)
+    active = rng.random((9, 11)) > 0.3
+    for lay in (Layout.grid(8, 7), Layout.grid(9, 11, active=active)):
+        det = FailureDetector(lay)
+        indptr, indices = lay.neighbours
+        for _ in range(10):
+            x = rng.random(lay.n_elements)
+            expected = np.array(
+                [
+                    np.median(x[indices[indptr[i] : indptr[i + 1]]])
+                    if indptr[i + 1] > indptr[i]
+                    else 0.0
+                    for i in range(lay.n_elements)
+                ]
+            )
+            np.testing.assert_allclose(det._neighbour_median(x), expected, rtol=0, atol=1e-15)
