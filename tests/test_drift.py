@@ -369,3 +369,26 @@ def test_kind_thesis_is_eq_5_8_as_printed():
         DriftModel.fit(steps, kind="thesis", rest_rate=0.02)
     with pytest.raises(ParameterError, match="'thesis', 'log' or 'prony'"):
         DriftModel.fit(steps, kind="nope")
+
+
+def test_batch_shapes_are_checked_in_one_place_for_every_stage():
+    from texsense._core import Compensation, DriftBank, PreisachBank
+    from texsense.exceptions import ShapeError
+
+    table = np.ascontiguousarray(np.tril(np.ones((5, 5)), -1))
+    ok_valid = np.ones((4, 3), bool)
+    stages = [
+        lambda v, m: PreisachBank(0.0, 1.0, table, 3, 32).run(v, m),
+        lambda v, m: DriftBank(np.ones(2), np.array([1.0, 10.0]), -0.02, 3).run(np.zeros(4), v, m),
+        lambda v, m: Compensation(0.0, 1.0, table, 3, 32, 0.0, 1.0, 0.0).run(np.zeros(4), v, m),
+    ]
+    for run in stages:
+        assert run(np.zeros((4, 3)), ok_valid).shape == (4, 3)
+        with pytest.raises(ShapeError, match="3 elements per frame"):
+            run(np.zeros((4, 2)), np.ones((4, 2), bool))
+        with pytest.raises(ShapeError, match="valid mask of the same shape"):
+            run(np.zeros((4, 3)), np.ones((4, 2), bool))
+    with pytest.raises(ShapeError, match=r"dt \(5,\)"):
+        DriftBank(np.ones(2), np.array([1.0, 10.0]), -0.02, 3).run(
+            np.zeros(5), np.zeros((4, 3)), ok_valid
+        )

@@ -114,20 +114,7 @@ impl PyNeighbourMeanRepair {
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u8>>)> {
         let shape = frames.shape().to_vec();
-        if valid.shape() != shape.as_slice() {
-            return Err(to_py(CoreError::Shape {
-                what: "valid",
-                expected: format!("shape {shape:?} like frames"),
-                got: format!("shape {:?}", valid.shape()),
-            }));
-        }
-        if shape[1] != self.inner.len() {
-            return Err(to_py(CoreError::Shape {
-                what: "frames",
-                expected: format!("{} elements per frame", self.inner.len()),
-                got: format!("{}", shape[1]),
-            }));
-        }
+        batch_shape("frames", self.inner.len(), &shape, valid.shape(), None)?;
         let f = frames.as_slice()?;
         let v = valid.as_slice()?;
         let mut out = vec![0.0f32; f.len()];
@@ -386,6 +373,48 @@ impl PySpacerBank {
     }
 }
 
+/// Check a batch of `values` (T, N) with a `valid` mask of the same shape (and, for stages
+/// that take time steps, `dt` of length T) against a bank of `n` elements; returns (T, N).
+fn batch_shape(
+    what: &'static str,
+    n: usize,
+    values: &[usize],
+    valid: &[usize],
+    dt: Option<usize>,
+) -> PyResult<(usize, usize)> {
+    let ok = values.len() == 2
+        && valid == values
+        && values[1] == n
+        && dt.map_or(true, |len| len == values[0]);
+    if !ok {
+        let dt_txt = |len: Option<usize>| len.map_or(String::new(), |l| format!("dt ({l},), "));
+        return Err(to_py(CoreError::Shape {
+            what,
+            expected: format!(
+                "{}values (T, {n}) with a valid mask of the same shape ({n} elements per frame)",
+                if dt.is_some() { "dt (T,), " } else { "" }
+            ),
+            got: format!("{}values {values:?}, valid {valid:?}", dt_txt(dt)),
+        }));
+    }
+    Ok((values[0], values[1]))
+}
+
+/// Run a kernel that fills a (T, N) f64 output, with the GIL released, and return the array.
+fn run_detached<'py, F>(
+    py: Python<'py>,
+    t: usize,
+    n: usize,
+    kernel: F,
+) -> PyResult<Bound<'py, PyArray2<f64>>>
+where
+    F: FnOnce(&mut [f64]) -> Result<(), CoreError> + Send,
+{
+    let mut out = vec![0.0; t * n];
+    py.detach(|| kernel(&mut out)).map_err(to_py)?;
+    to_2d(py, out, t, n)
+}
+
 fn to_2d(py: Python<'_>, v: Vec<f64>, t: usize, n: usize) -> PyResult<Bound<'_, PyArray2<f64>>> {
     let a = numpy::ndarray::Array2::from_shape_vec((t, n), v)
         .map_err(|e| ShapeError::new_err(e.to_string()))?;
@@ -460,22 +489,16 @@ impl PyPreisachBank {
         inputs: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let shape = inputs.shape().to_vec();
-        if valid.shape() != shape.as_slice() || shape[1] != self.inner.len() {
-            return Err(to_py(CoreError::Shape {
-                what: "inputs",
-                expected: format!(
-                    "(T, {}) with a valid mask of the same shape",
-                    self.inner.len()
-                ),
-                got: format!("{shape:?} and {:?}", valid.shape()),
-            }));
-        }
+        let (t, n) = batch_shape(
+            "inputs",
+            self.inner.len(),
+            inputs.shape(),
+            valid.shape(),
+            None,
+        )?;
         let (u, v) = (inputs.as_slice()?, valid.as_slice()?);
-        let mut out = vec![0.0; u.len()];
         let inner = &mut self.inner;
-        py.detach(|| inner.run(u, v, &mut out)).map_err(to_py)?;
-        to_2d(py, out, shape[0], shape[1])
+        run_detached(py, t, n, |out| inner.run(u, v, out))
     }
 
     /// Set elements to an input with a given output (§6.4.4); returns the outputs set.
@@ -562,20 +585,16 @@ impl PyDriftBank {
         h: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let shape = h.shape().to_vec();
-        if valid.shape() != shape.as_slice() || shape[1] != self.inner.len() || dt.len() != shape[0]
-        {
-            return Err(to_py(CoreError::Shape {
-                what: "drift run",
-                expected: format!("dt (T,), h and valid (T, {})", self.inner.len()),
-                got: format!("dt ({},), h {shape:?}, valid {:?}", dt.len(), valid.shape()),
-            }));
-        }
+        let (t, n) = batch_shape(
+            "drift run",
+            self.inner.len(),
+            h.shape(),
+            valid.shape(),
+            Some(dt.len()),
+        )?;
         let (d, x, v) = (dt.as_slice()?, h.as_slice()?, valid.as_slice()?);
-        let mut out = vec![0.0; x.len()];
         let inner = &mut self.inner;
-        py.detach(|| inner.run(d, x, v, &mut out)).map_err(to_py)?;
-        to_2d(py, out, shape[0], shape[1])
+        run_detached(py, t, n, |out| inner.run(d, x, v, out))
     }
 }
 
@@ -644,24 +663,16 @@ impl PyCompensation {
         inputs: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let shape = inputs.shape().to_vec();
-        if valid.shape() != shape.as_slice() || shape[1] != self.inner.len() || dt.len() != shape[0]
-        {
-            return Err(to_py(CoreError::Shape {
-                what: "compensation run",
-                expected: format!("dt (T,), inputs and valid (T, {})", self.inner.len()),
-                got: format!(
-                    "dt ({},), inputs {shape:?}, valid {:?}",
-                    dt.len(),
-                    valid.shape()
-                ),
-            }));
-        }
+        let (t, n) = batch_shape(
+            "compensation run",
+            self.inner.len(),
+            inputs.shape(),
+            valid.shape(),
+            Some(dt.len()),
+        )?;
         let (d, u, v) = (dt.as_slice()?, inputs.as_slice()?, valid.as_slice()?);
-        let mut out = vec![0.0; u.len()];
         let inner = &mut self.inner;
-        py.detach(|| inner.run(d, u, v, &mut out)).map_err(to_py)?;
-        to_2d(py, out, shape[0], shape[1])
+        run_detached(py, t, n, |out| inner.run(d, u, v, out))
     }
 }
 
