@@ -249,6 +249,11 @@ def time_steps(times_s: npt.ArrayLike, n_frames: int) -> np.ndarray:
     return np.ascontiguousarray(dt)
 
 
+def _kernel_or_log(kernel: DriftKernel | None) -> tuple[DriftKernel, str]:
+    """The given kernel (a fitted Prony series) or the logarithmic one."""
+    return (log_kernel(), "log") if kernel is None else (kernel, "prony")
+
+
 @dataclass(frozen=True)
 class DriftModel:
     """γ and a kernel: the drift stage that follows the Preisach model (eq. 5.8).
@@ -348,7 +353,7 @@ class DriftModel:
             raise ParameterError(
                 f"h and pressure must be 1-D and of equal length, got {x.shape} and {p.shape}"
             )
-        k, kind = (log_kernel(), "log") if kernel is None else (kernel, "prony")
+        k, kind = _kernel_or_log(kernel)
         unit = cls(1.0, k, kind, rest_rate).apply(x, times_s) - x
         sel = np.isfinite(unit) & np.isfinite(p) & (p >= band[0]) & (p < band[1])
         denom = float(unit[sel] @ unit[sel])
@@ -380,7 +385,7 @@ class DriftModel:
             raise ParameterError("fit_joint needs at least one record")
         if not rest_rate > 0:
             raise ParameterError(f"rest_rate must be > 0, got {rest_rate}")
-        k, kind = (log_kernel(), "log") if kernel is None else (kernel, "prony")
+        k, kind = _kernel_or_log(kernel)
         rows, rhs, plain = [], [], []
         for n, (h, p, t) in enumerate(records):
             x = np.asarray(h, dtype=np.float64)

@@ -37,7 +37,7 @@ import numpy.typing as npt
 from scipy.sparse import csr_matrix
 
 from texsense.exceptions import ParameterError
-from texsense.hysteresis._lsq import fit_everett_lsq, lower_design
+from texsense.hysteresis._lsq import design_entries, fit_everett_lsq
 from texsense.hysteresis._segments import Branch, split_branches
 
 __all__ = ["Identified", "find_thesis_curves", "identify_lsq", "identify_thesis", "make_monotone"]
@@ -200,11 +200,8 @@ def everett_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -
     the lower triangle of a diagonal cell).
     """
     k = nodes.size
-    lower = lower_design(np.asarray(u, dtype=np.float64), nodes).tocoo()
-    i = np.floor((1 + np.sqrt(8 * lower.col + 1)) / 2).astype(np.int64)
-    i -= (i * (i - 1) // 2 > lower.col).astype(np.int64)  # guard the float sqrt
-    j = lower.col - i * (i - 1) // 2
-    return csr_matrix((lower.data, (lower.row, i * k + j)), shape=(lower.shape[0], k * k))
+    r, i, j, w = design_entries(np.asarray(u, dtype=np.float64), nodes)
+    return csr_matrix((w, (r, i * k + j)), shape=(np.size(u), k * k))
 
 
 def identify_lsq(

@@ -29,7 +29,7 @@ squares. Three choices make it hold on records nobody here designed:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -41,7 +41,7 @@ from texsense.exceptions import ParameterError
 from texsense.hysteresis._qp import solve_monotone_qp
 from texsense.hysteresis._segments import split_branches
 
-__all__ = ["Candidate", "LsqResult", "fit_everett_lsq", "lower_design"]
+__all__ = ["Candidate", "LsqResult", "design_entries", "fit_everett_lsq", "lower_design"]
 
 # the cross-validated search (coordinate-wise, from the middle candidate)
 SIZES: tuple[tuple[int, int], ...] = ((10, 10), (16, 16), (24, 24))
@@ -71,8 +71,6 @@ class Candidate:
 
     def but(self, **changes: float) -> Candidate:
         """A copy with some settings changed."""
-        from dataclasses import replace
-
         return replace(self, **changes)
 
 
@@ -97,10 +95,13 @@ def _lower_index(k: int) -> tuple[np.ndarray, np.ndarray]:
     return i, j
 
 
-def lower_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> csr_matrix:
-    """Design matrix (T x K(K-1)/2) of the model's output over the free table entries
-    ``F[i, j]`` (i > j, column ``i (i - 1) / 2 + j``) with the core's interpolation (bilinear;
-    linear on the lower triangle of the diagonal cells); output at ``u_min`` = 0."""
+def design_entries(
+    u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The model's output along ``u`` as weighted table entries: (sample, i, j, weight) with
+    ``output[t] = Σ weight F[i, j]`` over the entries of sample t (i > j), from the Rust
+    core's Everett terms (eq. 4.15/4.16) and its interpolation (bilinear; linear on the lower
+    triangle of the diagonal cells); output at ``u_min`` = 0."""
     k = nodes.size
     indptr, alpha, beta, coef = everett_terms(
         np.ascontiguousarray(u, dtype=np.float64), float(nodes[0]), float(nodes[-1])
@@ -124,31 +125,15 @@ def lower_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> 
         parts.append((row[off], i0[off] + di, j0[off] + dj, coef[off] * w[off]))
     r, ii, jj, ww = (np.concatenate(x) for x in zip(*parts, strict=True))
     keep = (ii > jj) & (ww != 0)
-    col = ii[keep] * (ii[keep] - 1) // 2 + jj[keep]
-    return csr_matrix((ww[keep], (r[keep], col)), shape=(u.size, k * (k - 1) // 2))
+    return r[keep], ii[keep], jj[keep], ww[keep]
 
 
-def _monotone_constraints(k: int) -> csr_matrix:
-    """Rows ``c`` with ``c · F >= 0`` for a table non-increasing in β (``F[i, j] >= F[i, j+1]``,
-    ``F[i, i] = 0``) and non-decreasing in α (``F[i+1, j] >= F[i, j]``)."""
-    i, j = _lower_index(k)
-    col = np.arange(i.size)
-    n_beta = i.size
-    # β: F[i, j] - F[i, j + 1] (the second term absent on the diagonal's neighbour)
-    inner = j + 1 < i
-    rows = [np.arange(n_beta), np.arange(n_beta)[inner]]
-    cols = [col, (i * (i - 1) // 2 + j + 1)[inner]]
-    vals = [np.ones(n_beta), -np.ones(int(inner.sum()))]
-    # α: F[i + 1, j] - F[i, j] for i + 1 < k
-    up = i + 1 < k
-    r_alpha = n_beta + np.arange(int(up.sum()))
-    rows += [r_alpha, r_alpha]
-    cols += [((i + 1) * i // 2 + j)[up], col[up]]
-    vals += [np.ones(r_alpha.size), -np.ones(r_alpha.size)]
-    return csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-        shape=(n_beta + r_alpha.size, i.size),
-    )
+def lower_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> csr_matrix:
+    """Design matrix (T x K(K-1)/2) over the free table entries ``F[i, j]`` (i > j, column
+    ``i (i - 1) / 2 + j``); see :func:`design_entries`."""
+    k = nodes.size
+    r, i, j, w = design_entries(u, nodes)
+    return csr_matrix((w, (r, i * (i - 1) // 2 + j)), shape=(u.size, k * (k - 1) // 2))
 
 
 def _shape_constraints(alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
@@ -293,6 +278,23 @@ def branch_folds(u: npt.NDArray[np.float64], folds: int, tolerance: float) -> np
     return fold
 
 
+@dataclass
+class _System:
+    """What one grid setting of a record needs: the design over the coarse unknowns (plus the
+    offset column), the map onto the fine table, the per-fold and whole Gram matrices, the
+    curvature and prior penalties, the shape constraints and a strictly feasible start."""
+
+    design: csr_matrix
+    shape_map: csr_matrix
+    grams: list[tuple[np.ndarray, np.ndarray, int]]
+    gram: np.ndarray
+    rhs: np.ndarray
+    curvature: np.ndarray
+    prior_gram: np.ndarray
+    constraints: csr_matrix
+    start: np.ndarray
+
+
 class _Problem:
     """Everything of one record that the candidates share: the fine design, the folds, the
     prior of each fold; the per-candidate systems are cached."""
@@ -319,7 +321,7 @@ class _Problem:
                 self.priors[f] = None if table is None else table[i, j]
         self._cache: dict[tuple, tuple] = {}
 
-    def system(self, alpha_cells: int, d_cells: int, spacing: float) -> tuple:
+    def system(self, alpha_cells: int, d_cells: int, spacing: float) -> _System:
         key = (alpha_cells, d_cells, spacing)
         if key not in self._cache:
             d_nodes = _d_nodes(d_cells, spacing)
@@ -332,50 +334,58 @@ class _Problem:
                 rows = np.nonzero(self.fold == f)[0]
                 Af = A[rows]
                 grams.append(((Af.T @ Af).toarray(), Af.T @ self.p[rows], rows.size))
-            G_all = (A.T @ A).toarray()
-            b_all = A.T @ self.p
             D = _curvature(alpha_cells, d_nodes)
             DD = np.zeros((n + 1, n + 1))
             DD[:n, :n] = (D.T @ D).toarray()
-            shape_c = _shape_constraints(alpha_cells, d_nodes)
-            C = hstack([shape_c, csr_matrix((shape_c.shape[0], 1))]).tocsr()
             PP = np.zeros((n + 1, n + 1))
             PP[:n, :n] = (P.T @ P).toarray()
-            prior_terms = (PP, P)
+            shape_c = _shape_constraints(alpha_cells, d_nodes)
+            # strictly feasible: F = 1e-3 ptp(p) (α - β) / span. The system is nearly singular
+            # along directions the record does not determine (unknowns outside the Preisach
+            # triangle, the curvature penalty's affine null space), so the solution there
+            # depends on this start; it is kept fixed so that results are reproducible
             x0 = np.zeros(n + 1)
             x0[:n] = (
                 1e-3 * max(float(np.ptp(self.p)), 1e-12) * np.tile(d_nodes[1:], alpha_cells + 1)
             )
             x0[n] = float(self.p.mean())
-            self._cache[key] = (A, P, grams, G_all, b_all, DD, C, prior_terms, x0)
+            self._cache[key] = _System(
+                design=A,
+                shape_map=P,
+                grams=grams,
+                gram=(A.T @ A).toarray(),
+                rhs=A.T @ self.p,
+                curvature=DD,
+                prior_gram=PP,
+                constraints=hstack([shape_c, csr_matrix((shape_c.shape[0], 1))]).tocsr(),
+                start=x0,
+            )
         return self._cache[key]
 
     def solve(self, c: Candidate, exclude: int | None, tol: float = 1e-7) -> np.ndarray:
-        _, _, grams, G_all, b_all, DD, C, (PP, P), x0 = self.system(
-            c.alpha_cells, c.d_cells, c.spacing
-        )
+        sys_ = self.system(c.alpha_cells, c.d_cells, c.spacing)
         if exclude is None:
-            G, b, count = G_all, b_all, self.u.size
+            G, b, count = sys_.gram, sys_.rhs, self.u.size
         else:
-            G = G_all - grams[exclude][0]
-            b = b_all - grams[exclude][1]
-            count = self.u.size - grams[exclude][2]
+            G0, b0, n0 = sys_.grams[exclude]
+            G, b, count = sys_.gram - G0, sys_.rhs - b0, self.u.size - n0
         G = G / count
         b = b / count
         scale = np.trace(G)
+        DD, PP = sys_.curvature, sys_.prior_gram
         H = G + c.smoothing * scale / max(np.trace(DD), 1e-300) * DD
         target = self.priors.get(exclude)
         if c.prior_weight > 0 and target is not None:
             w = c.prior_weight * scale / max(np.trace(PP), 1e-300)
             H = H + w * PP
             b = b.copy()
-            b[:-1] += w * (P.T @ target)
+            b[:-1] += w * (sys_.shape_map.T @ target)
         with threadpool_limits(1, "blas"):  # small matrices: threads only spin-wait
-            x, _ = solve_monotone_qp(H, b, C, x0, tol=tol)
+            x, _ = solve_monotone_qp(H, b, sys_.constraints, sys_.start, tol=tol)
         return x
 
     def cv_rmse(self, c: Candidate) -> float:
-        A = self.system(c.alpha_cells, c.d_cells, c.spacing)[0]
+        A = self.system(c.alpha_cells, c.d_cells, c.spacing).design
 
         def one(f: int) -> float:
             x = self.solve(c, f, tol=1e-6)
@@ -463,7 +473,8 @@ def fit_everett_lsq(
     else:  # too few reversal curves to hold any out
         scores, chosen, validation = [], start, None
     x = problem.solve(chosen, None)
-    A, P = problem.system(chosen.alpha_cells, chosen.d_cells, chosen.spacing)[:2]
+    chosen_system = problem.system(chosen.alpha_cells, chosen.d_cells, chosen.spacing)
+    A, P = chosen_system.design, chosen_system.shape_map
     i, j = _lower_index(grid)
     table = np.zeros((grid, grid))
     table[i, j] = P @ x[:-1]

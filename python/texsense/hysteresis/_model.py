@@ -120,7 +120,8 @@ class HysteresisModel:
     grid : int
         Size K of the evaluated Everett table (K x K).
     cells : int, optional
-        Coarse α cells of least squares (None: chosen by cross-validation).
+        Coarse cells of least squares, in α and in the distance fallen α - β alike (None:
+        chosen by cross-validation).
     smoothing : float, optional
         Curvature penalty of least squares (None: chosen by cross-validation).
     folds : int
@@ -205,9 +206,15 @@ class HysteresisModel:
         self.sign_ = sign
         self.method_ = ident.method
         self.details_ = ident.details
-        self.validation_rmse_ = ident.details.get("validation_rmse")
         self.provenance_ = dict(provenance or {})
         return self
+
+    @property
+    def validation_rmse_(self) -> float | None:
+        """RMSE on held-out reversal curves of the setting least squares chose (None for the
+        thesis method, or when the record has too few reversal curves to hold any out)."""
+        self._check_fitted()
+        return self.details_.get("validation_rmse")
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "everett_"):
@@ -350,7 +357,6 @@ class HysteresisModel:
                 raise FormatError(source, "input range: max must exceed min")
             model.method_ = d["method"]
             model.details_ = dict(d.get("details", {}))
-            model.validation_rmse_ = model.details_.get("validation_rmse")
             if d.get("drift") is not None:
                 from texsense.drift import DriftModel
 
