@@ -14,7 +14,9 @@ breaks it. :class:`FailureDetector` flags, frame by frame (streaming) or over a 
   (unloaded to fully compressed) — faster than a body on a seat can move the spacer.
 
 Every flagged reading is a failure at that frame; an element can fail and recover any number
-of times (intermittent failures). :func:`health_report` counts episodes per element.
+of times (intermittent failures). :func:`health_report` counts episodes per element. The
+detector runs in the Rust core (``crates/core/src/detect.rs``), over blocks of elements in
+parallel for a batch.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import FailureDetector as _CoreDetector
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
@@ -70,43 +73,43 @@ class FailureDetector:
         if self.stuck_frames < 2 or not (self.jump_share > 0 and 0 < self.low_share < 1):
             raise ParameterError("stuck_frames >= 2, jump_share > 0 and 0 < low_share < 1 needed")
         if self._base is not None and self._max is not None:
-            self._jump = self.jump_share * np.maximum(self._max - self._base, 1e-6)
+            jump = self.jump_share * np.maximum(self._max - self._base, 1e-6)
         else:
-            self._jump = np.full(n, self.jump_pF)
+            jump = np.full(n, self.jump_pF)
         indptr, indices = self.layout.neighbours
-        counts = np.diff(indptr)
-        self._has_nb = counts > 0
-        # neighbours as a padded (N, max degree) table: a padded slot points at an extra
-        # +inf entry, so a row sort puts it last and the median reads positions
-        # (count - 1) // 2 and count // 2 — one small sort per frame instead of a lexsort
-        width = int(counts.max()) if counts.size else 0
-        self._nb_table = np.full((n, width), n, dtype=np.int64)
-        rows = np.repeat(np.arange(n), counts)
-        slots = np.arange(indices.size) - np.repeat(indptr[:-1], counts)
-        self._nb_table[rows, slots] = indices
-        self._nb_lo = np.maximum(counts - 1, 0) // 2
-        self._nb_hi = counts // 2
-        self.reset()
+        contiguous = np.ascontiguousarray
+        self._core = _CoreDetector(
+            contiguous(indptr, dtype=np.int64),
+            contiguous(indices, dtype=np.int64),
+            contiguous(jump, dtype=np.float64),
+            None if self._base is None else contiguous(self._base),
+            None if self._max is None else contiguous(self._max),
+            self.min_pF,
+            self.low_share,
+            self.high_share,
+            int(self.stuck_frames),
+            self.stuck_pF,
+            self.neighbour_change_pF,
+        )
 
     def reset(self) -> FailureDetector:
         """Forget the history (the start of a new recording)."""
-        n = self.layout.n_elements
-        self._last = np.full(n, np.nan)
-        self._still = np.zeros(n, dtype=np.int64)  # frames without change
-        self._moved = np.zeros(n)  # neighbours' median change accumulated since then
+        self._core.reset()
         return self
 
-    def _neighbour_median(self, x: np.ndarray) -> np.ndarray:
-        """Median over the 4-neighbours of every element (0 where it has none)."""
+    @property
+    def core(self) -> _CoreDetector:
+        """The compiled detector (the pipeline's chain runs a copy of it)."""
+        return self._core
+
+    def detect(self, frames_pF: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
+        """Failure codes (T, N) uint8 of frames (T, N), continuing from the present state."""
+        c = np.ascontiguousarray(frames_pF, dtype=np.float64)
         n = self.layout.n_elements
-        if self._nb_table.shape[1] == 0:
-            return np.zeros(n)
-        vals = np.append(x, np.inf)[self._nb_table]
-        vals.sort(axis=1)
-        rows = np.arange(n)
-        out = 0.5 * (vals[rows, self._nb_lo] + vals[rows, self._nb_hi])
-        out[~self._has_nb] = 0.0
-        return out
+        if c.ndim != 2 or c.shape[1] != n:
+            raise ParameterError(f"expected frames of {n} elements, got shape {c.shape}")
+        v = np.ones(c.shape, bool) if valid is None else np.ascontiguousarray(valid, dtype=bool)
+        return self._core.run(c, v)
 
     def step(self, frame_pF: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
         """Failure codes (N,) uint8 of one frame (see :data:`FAILURE_KINDS`)."""
@@ -114,42 +117,14 @@ class FailureDetector:
         n = self.layout.n_elements
         if c.shape != (n,):
             raise ParameterError(f"expected a frame of {n} elements, got shape {c.shape}")
-        ok_in = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
-        code = np.zeros(n, dtype=np.uint8)
-        # change since the last frame; the stuck counter and the neighbours' movement
-        delta = np.abs(c - self._last)
-        first = np.isnan(delta)
-        delta = np.where(first, 0.0, delta)
-        nb_move = self._neighbour_median(delta)
-        still = (delta <= self.stuck_pF) & ~first
-        self._still = np.where(still, self._still + 1, 0)
-        self._moved = np.where(still, self._moved + nb_move, 0.0)
-        stuck = (
-            (self._still >= self.stuck_frames)
-            & (self._moved > self.neighbour_change_pF)
-            & self._has_nb
-        )
-        code[stuck] = 3
-        jump = ~first & (delta > self._jump)
-        code[jump] = 4
-        low = ~np.isfinite(c) | (c <= self.min_pF)
-        if self._base is not None:
-            low |= c < self.low_share * self._base
-        high = ~ok_in
-        if self._max is not None:
-            high |= c > self.high_share * self._max
-        code[high] = 2
-        code[low] = 1
-        self._last = np.where(np.isfinite(c), c, self._last)
-        return code
+        return self.detect(c[None, :], None if valid is None else np.asarray(valid)[None, :])[0]
 
     def run(self, rec: Recording) -> np.ndarray:
         """Failure codes (T, N) of a capacitance recording (from the detector's present state)."""
         if rec.quantity != "capacitance":
             raise ParameterError(f"failure detection reads capacitance, not {rec.quantity}")
-        return np.stack(
-            [self.step(rec.frames[k], rec.valid[k]) for k in range(rec.n_frames)]
-        ) if rec.n_frames else np.zeros((0, rec.n_elements), np.uint8)  # fmt: skip
+        cap = rec.to_unit("pF").frames if rec.unit != "pF" else rec.frames
+        return self.detect(cap, rec.valid)
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,11 @@ repair, streaming frame by frame or in batch over a recording.
 - **repair** (:class:`~texsense.repair.Repair`): failed elements are filled (eq. 6.14 or a
   better method) and stay marked False in the output's ``valid`` mask.
 
-Batch and streaming give the same numbers (tested): :meth:`Pipeline.run` is the streaming
-path applied to all frames at once, stage by stage.
+Detection, conversion, hysteresis + drift and the local repair methods (``zero``,
+``last-value``, ``neighbour-mean``, ``idw8``) run as one compiled pass of the Rust core
+(``crates/core/src/chain.rs``) over the whole block of frames, in parallel over blocks of
+elements; the harmonic repairs solve a sparse system per frame in scipy afterwards. Batch and
+streaming give the same numbers (tested); ``step`` is the same code with one frame.
 """
 
 from __future__ import annotations
@@ -23,14 +26,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import Chain
 from texsense.calibration import MatCalibration
 from texsense.exceptions import ParameterError
 from texsense.health import FailureDetector
 from texsense.layout import Layout
 from texsense.recording import Recording
-from texsense.repair import Repair
+from texsense.repair import METHODS, Repair, idw_weights
 
 __all__ = ["Pipeline"]
+
+#: Repair methods that solve for all failed elements of a frame together (scipy, per frame).
+_GLOBAL_REPAIRS = ("harmonic", "harmonic-temporal")
 
 
 class Pipeline:
@@ -70,6 +77,8 @@ class Pipeline:
         model = calibration.model
         if model is None:
             raise ParameterError("the calibration has no spacer model (compression -> pressure)")
+        if repair is not None and repair not in METHODS:
+            raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
         if drift and hysteresis and getattr(model, "drift_", None) is None:
             drift = False  # nothing to apply: recorded in the provenance
         self.calibration = calibration
@@ -78,25 +87,63 @@ class Pipeline:
         self.repair_method = repair
         lo, hi = calibration.expected_range_pF()
         self.detector = detector or FailureDetector(layout, baseline_pF=lo, max_pF=hi)
-        self._repair = Repair(layout, repair) if repair is not None else None
-        e = np.linspace(model.u_min_, model.u_max_, 400)
-        self._loading = (e, np.maximum.accumulate(model.predict(e)))
-        self._stage: Any = None
+        # the harmonic methods solve a sparse system per frame (scipy); the others run in
+        # the compiled chain
+        self._repair = Repair(layout, repair) if repair in _GLOBAL_REPAIRS else None
+        self._chain = self._build_chain()
         self._last_t: float | None = None
         self.codes_: np.ndarray | None = None
-        self.reset()
+
+    def _build_chain(self) -> Chain:
+        cal, model = self.calibration, self.calibration.model
+        c = np.ascontiguousarray
+        if self.stages["hysteresis"]:
+            response = {
+                "compensation": model.compensation(
+                    self.layout.n_elements, drift=self.stages["drift"]
+                )
+            }
+        else:
+            e = np.linspace(model.u_min_, model.u_max_, 400)
+            p = np.maximum.accumulate(model.predict(e))
+            response = {"loading": (c(e), c(p, dtype=np.float64))}
+        method = self.repair_method
+        graph: dict[str, Any] = {}
+        if method == "neighbour-mean":
+            indptr, indices = self.layout.neighbours
+            graph = {"indptr": c(indptr, dtype=np.int64), "indices": c(indices, dtype=np.int64)}
+        elif method == "idw8":
+            w = idw_weights(self.layout)
+            graph = {
+                "indptr": c(w.indptr, dtype=np.int64),
+                "indices": c(w.indices, dtype=np.int64),
+                "weights": c(w.data, dtype=np.float64),
+            }
+            method = "weighted"
+        local = "none" if method is None or method in _GLOBAL_REPAIRS else method
+        return Chain(
+            c(cal.offset_pF, dtype=np.float64),
+            c(cal.gain, dtype=np.float64),
+            c(cal.curve_capacitance_pF, dtype=np.float64),
+            c(cal.curve_compression_mm, dtype=np.float64),
+            detector=self.detector.core if self.stages["detect"] else None,
+            repair=local,
+            **response,
+            **graph,
+        )
 
     def reset(self) -> Pipeline:
         """Start over: unloaded spacer states, no history."""
-        self.detector.reset()
+        self._chain.reset()
         if self._repair is not None:
             self._repair.reset()
-        if self.stages["hysteresis"]:
-            self._stage = self.calibration.model.compensation(
-                self.layout.n_elements, drift=self.stages["drift"]
-            )
         self._last_t = None
         return self
+
+    def state_bytes_per_element(self) -> int:
+        """Bytes of streaming state per element (all compiled stages, with the per-element
+        parameters they read)."""
+        return int(self._chain.state_bytes_per_element())
 
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
@@ -110,31 +157,40 @@ class Pipeline:
             + ([f"repair:{self.repair_method}"] if self.repair_method else []),
         }
 
+    def process(
+        self, frames_pF: npt.ArrayLike, times_s: npt.ArrayLike, valid: npt.ArrayLike | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Frames of capacitance (T, N) in pF at ``times_s`` (T,) -> pressure (T, N) float64
+        in N/cm², the mask of measured (not repaired) readings and the failure codes, both
+        (T, N); continues from the present state (so a long recording can go in chunks)."""
+        cap = np.ascontiguousarray(frames_pF, dtype=np.float64)
+        n = self.layout.n_elements
+        if cap.ndim != 2 or cap.shape[1] != n:
+            raise ParameterError(f"expected frames (T, {n}), got shape {cap.shape}")
+        t = np.asarray(times_s, dtype=np.float64)
+        if t.shape != (cap.shape[0],):
+            raise ParameterError(f"expected {cap.shape[0]} frame times, got shape {t.shape}")
+        v = (
+            np.ones(cap.shape, bool)
+            if valid is None
+            else np.ascontiguousarray(np.broadcast_to(np.asarray(valid, bool), cap.shape))
+        )
+        if cap.shape[0] == 0:
+            return np.empty(cap.shape), np.zeros(cap.shape, bool), np.zeros(cap.shape, np.uint8)
+        return self._process(cap, v, t)
+
     def _process(
         self, cap: np.ndarray, valid: np.ndarray, times: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Frames (T, N) -> pressure (T, N), measured mask (T, N), failure codes (T, N)."""
-        n_t = cap.shape[0]
-        if self.stages["detect"]:
-            codes = np.stack([self.detector.step(cap[k], valid[k]) for k in range(n_t)])
-        else:
-            codes = np.where(valid & np.isfinite(cap), 0, 2).astype(np.uint8)
+        t0 = times[0] if self._last_t is None else self._last_t
+        dt = np.diff(times, prepend=t0)
+        if np.any(dt < 0):
+            raise ParameterError("frame times must not decrease")
+        pressure, codes = self._chain.run(dt, cap, valid)
+        self._last_t = float(times[-1])
         ok = codes == 0
-        comp = self.calibration.to_compression(cap)
-        if self._stage is not None:
-            t0 = times[0] if self._last_t is None else self._last_t
-            dt = np.diff(times, prepend=t0)
-            if np.any(dt < 0):
-                raise ParameterError("frame times must not decrease")
-            pressure = self._stage.run(
-                np.ascontiguousarray(dt), np.ascontiguousarray(comp), np.ascontiguousarray(ok)
-            )
-        else:
-            e, p = self._loading
-            pressure = np.where(ok, np.interp(comp, e, p), np.nan)
-        self._last_t = float(times[-1])  # failed readings are NaN from either branch
         if self._repair is not None:
-            for k in range(n_t):
+            for k in range(cap.shape[0]):
                 pressure[k], _ = self._repair.step(pressure[k], ok[k])
         return pressure, ok, codes
 
@@ -143,13 +199,13 @@ class Pipeline:
     ) -> tuple[np.ndarray, np.ndarray]:
         """One frame of capacitance (N,) at ``time_s`` -> pressure (N,) and the mask of
         measured (not repaired) elements."""
-        c = np.asarray(frame_pF, dtype=np.float64)[None, :]
-        v = np.ones_like(c, bool) if valid is None else np.asarray(valid, bool)[None, :]
+        c = np.asarray(frame_pF, dtype=np.float64).reshape(1, -1)
+        v = np.ones(c.shape, bool) if valid is None else np.asarray(valid, bool).reshape(1, -1)
         if c.shape[1] != self.layout.n_elements:
             raise ParameterError(
                 f"expected a frame of {self.layout.n_elements} elements, got {c.shape[1]}"
             )
-        p, ok, codes = self._process(c, v, np.array([float(time_s)]))
+        p, ok, codes = self._process(c, v, np.array([time_s], dtype=np.float64))
         self.codes_ = codes[0]
         return p[0], ok[0]
 
@@ -164,9 +220,11 @@ class Pipeline:
                 f"the recording has {rec.n_elements} elements, the pipeline "
                 f"{self.layout.n_elements}"
             )
-        cap = rec.to_unit("pF").frames.astype(np.float64) if rec.unit != "pF" else rec.frames
+        cap = rec.to_unit("pF").frames if rec.unit != "pF" else rec.frames
         p, ok, codes = self._process(
-            np.asarray(cap, dtype=np.float64), rec.valid, np.asarray(rec.times, np.float64)
+            np.ascontiguousarray(cap, dtype=np.float64),
+            np.ascontiguousarray(rec.valid, dtype=bool),
+            np.asarray(rec.times, np.float64),
         )
         self.codes_ = codes
         meta = {**rec.meta, **self.provenance()}

@@ -40,6 +40,8 @@ np.float32(3.0)
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -142,7 +144,7 @@ class Repair:
         self._prev = np.full(n, np.nan)  # the previous output frame
         self._core = NeighbourMeanRepair(layout) if method == "neighbour-mean" else None
         if method == "idw8":
-            self._weights = _idw_matrix(layout)
+            self._weights = idw_weights(layout)
         if method in ("harmonic", "harmonic-temporal"):
             import scipy.sparse as sp
 
@@ -266,8 +268,9 @@ class Repair:
         )
 
 
-def _idw_matrix(layout: Layout, reach: float = 1.5) -> object:
-    """Sparse (N, N) weights 1/d² to the elements within ``reach`` pitches (no self)."""
+def idw_weights(layout: Layout, reach: float = 1.5) -> Any:
+    """Sparse (N, N) CSR weights 1/d² to the elements within ``reach`` pitches (no self;
+    the ``idw8`` repair), with sorted indices per row."""
     import scipy.sparse as sp
     from scipy.spatial import cKDTree
 
@@ -288,4 +291,6 @@ def _idw_matrix(layout: Layout, reach: float = 1.5) -> object:
     w = 1.0 / d2
     rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
     cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
-    return sp.csr_matrix((np.concatenate([w, w]), (rows, cols)), shape=(n, n))
+    m = sp.csr_matrix((np.concatenate([w, w]), (rows, cols)), shape=(n, n))
+    m.sort_indices()
+    return m

@@ -1,9 +1,12 @@
 //! The combined compensation stage: Preisach model, then drift (thesis eq. 5.8), frame by
 //! frame in one pass, so a batch needs no intermediate array.
 
-use crate::drift::DriftBank;
+use rayon::prelude::*;
+
+use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
-use crate::preisach::PreisachBank;
+use crate::par::{block_size, parallel, Columns};
+use crate::preisach::{PreisachBank, PreisachBlock};
 
 /// Preisach output `sign (h + offset)`, followed by an optional drift stage.
 #[derive(Debug, Clone)]
@@ -12,7 +15,45 @@ pub struct Compensation {
     drift: Option<DriftBank>,
     offset: f64,
     sign: f64,
-    frame: Vec<f64>,
+}
+
+/// One block of elements of a [`Compensation`], for a parallel batch.
+pub struct CompensationBlock<'a> {
+    preisach: PreisachBlock<'a>,
+    drift: Option<DriftBlock<'a>>,
+    offset: f64,
+    sign: f64,
+}
+
+impl CompensationBlock<'_> {
+    /// Number of elements in the block.
+    pub fn len(&self) -> usize {
+        self.preisach.len()
+    }
+
+    /// True without elements.
+    pub fn is_empty(&self) -> bool {
+        self.preisach.is_empty()
+    }
+
+    /// Start a frame `dt` seconds after the previous one.
+    #[inline]
+    pub fn frame(&mut self, dt: f64) {
+        if let Some(d) = &mut self.drift {
+            d.frame(dt);
+        }
+    }
+
+    /// Element `i` of the block reads the input `u` in the current frame; NaN when skipped.
+    #[inline]
+    pub fn step(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> f64 {
+        let h = self.preisach.step(i, u, valid);
+        let h = self.sign * (h + self.offset);
+        match &mut self.drift {
+            Some(d) => d.step(i, dt, h, valid),
+            None => h,
+        }
+    }
 }
 
 impl Compensation {
@@ -26,13 +67,11 @@ impl Compensation {
         if let Some(d) = &drift {
             check_len("drift elements", d.len(), preisach.len())?;
         }
-        let n = preisach.len();
         Ok(Self {
             preisach,
             drift,
             offset,
             sign,
-            frame: vec![0.0; n],
         })
     }
 
@@ -59,7 +98,34 @@ impl Compensation {
         &self.preisach
     }
 
-    /// A batch of T frames: time steps `dt` (T,), inputs and validity (T x N) -> outputs.
+    /// Bytes of state per element (both stages).
+    pub fn state_bytes_per_element(&self) -> usize {
+        let n = self.len().max(1);
+        self.preisach.state_bytes() / n
+            + self
+                .drift
+                .as_ref()
+                .map_or(0, DriftBank::state_bytes_per_element)
+    }
+
+    /// Both stages split into blocks of [`block_size`] elements.
+    pub fn blocks(&mut self) -> Vec<CompensationBlock<'_>> {
+        let (offset, sign) = (self.offset, self.sign);
+        let mut drift = self.drift.as_mut().map(|d| d.blocks().into_iter());
+        self.preisach
+            .blocks()
+            .into_iter()
+            .map(|preisach| CompensationBlock {
+                preisach,
+                drift: drift.as_mut().and_then(Iterator::next),
+                offset,
+                sign,
+            })
+            .collect()
+    }
+
+    /// A batch of T frames: time steps `dt` (T,), inputs and validity (T x N) -> outputs;
+    /// large batches run in parallel over blocks of elements.
     pub fn run(
         &mut self,
         dt: &[f64],
@@ -68,23 +134,30 @@ impl Compensation {
         out: &mut [f64],
     ) -> Result<(), CoreError> {
         let n = self.len();
+        check_time_steps(dt)?;
         check_len("inputs", inputs.len(), dt.len() * n)?;
         check_len("valid", valid.len(), dt.len() * n)?;
         check_len("out", out.len(), dt.len() * n)?;
-        for (t, &d) in dt.iter().enumerate() {
-            let r = t * n..(t + 1) * n;
-            self.preisach
-                .step(&inputs[r.clone()], &valid[r.clone()], &mut self.frame)?;
-            for h in self.frame.iter_mut() {
-                *h = self.sign * (*h + self.offset);
-            }
-            match &mut self.drift {
-                Some(drift) => {
-                    let ok: &[bool] = &valid[r.clone()];
-                    drift.step(d, &self.frame, ok, &mut out[r])?;
+        let cols = Columns::new(out);
+        let size = block_size(n);
+        let work = |(b, mut block): (usize, CompensationBlock<'_>)| {
+            let start = b * size;
+            let width = block.preisach.len();
+            for (r, &d) in dt.iter().enumerate() {
+                block.frame(d);
+                let row = r * n + start;
+                for li in 0..width {
+                    let v = block.step(li, d, inputs[row + li], valid[row + li]);
+                    // SAFETY: this block owns columns start .. start + width
+                    unsafe { cols.write(row + li, v) };
                 }
-                None => out[r].copy_from_slice(&self.frame),
             }
+        };
+        let blocks = self.blocks();
+        if parallel(dt.len(), n) {
+            blocks.into_par_iter().enumerate().for_each(work);
+        } else {
+            blocks.into_iter().enumerate().for_each(work);
         }
         Ok(())
     }

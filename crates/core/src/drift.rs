@@ -13,7 +13,10 @@
 //! same machinery runs any non-negative Prony series (a fitted kernel where the logarithm does
 //! not hold).
 
+use rayon::prelude::*;
+
 use crate::error::{check_len, CoreError};
+use crate::par::{block_size, parallel, Columns};
 
 /// A kernel `k(t) = Σ_j c_j (1 - exp(-t / τ_j))` (c_j >= 0, τ_j > 0).
 #[derive(Debug, Clone, PartialEq)]
@@ -63,22 +66,103 @@ impl Kernel {
     }
 }
 
-/// Drift states of N elements.
+/// The scalar drift state of one element.
+#[derive(Debug, Clone, Copy, Default)]
+struct DriftElement {
+    total: f64,
+    last_h: f64,
+    smooth: f64,
+    started: bool,
+}
+
+/// The clock and kernel settings shared by all elements of a bank.
 #[derive(Debug, Clone)]
-pub struct DriftBank {
+struct DriftSettings {
     kernel: Kernel,
     gamma: f64,
-    n: usize,
-    total: Vec<f64>,
-    z: Vec<f64>,
-    last_h: Vec<f64>,
-    started: Vec<bool>,
     weight_sum: f64,
     rest_rate: f64,
     rest_window: f64,
-    smooth: Vec<f64>,
     gamma_time: f64,
+}
+
+/// Drift states of N elements.
+#[derive(Debug, Clone)]
+pub struct DriftBank {
+    settings: DriftSettings,
+    elements: Vec<DriftElement>,
+    /// K states per element, element-major (`[N][K]`).
+    z: Vec<f64>,
+    /// The time clock's K states per element when two clocks run (else empty).
     z_time: Vec<f64>,
+}
+
+/// The elements of one block of a bank, for a parallel batch.
+pub struct DriftBlock<'a> {
+    settings: &'a DriftSettings,
+    elements: &'a mut [DriftElement],
+    z: &'a mut [f64],
+    z_time: &'a mut [f64],
+    decay: Vec<f64>,
+}
+
+impl DriftBlock<'_> {
+    /// Start a frame `dt` seconds after the previous one (once per frame, before `step`).
+    #[inline]
+    pub fn frame(&mut self, dt: f64) {
+        for (d, tau) in self.decay.iter_mut().zip(&self.settings.kernel.taus) {
+            *d = (-dt / tau).exp();
+        }
+    }
+
+    /// Element `i` of the block, in the frame started by [`DriftBlock::frame`] with `dt`:
+    /// hysteresis output `h` in, drift-corrected output out (eq. 5.8); NaN or invalid inputs
+    /// keep the state (time still passes for it) and give NaN.
+    #[inline]
+    pub fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
+        let s = self.settings;
+        let k = s.kernel.len();
+        let zs = &mut self.z[i * k..(i + 1) * k];
+        // the second clock only runs beside the rest clock
+        let two_clocks = !self.z_time.is_empty() && s.rest_rate > 0.0;
+        if !(valid && h.is_finite()) {
+            // time still passes for the element's states (at rest: nothing is known)
+            for (zj, d) in zs.iter_mut().zip(&self.decay) {
+                *zj *= d;
+            }
+            if two_clocks {
+                for (zj, d) in self.z_time[i * k..(i + 1) * k].iter_mut().zip(&self.decay) {
+                    *zj *= d;
+                }
+            }
+            return f64::NAN;
+        }
+        let el = &mut self.elements[i];
+        let change = if el.started { h - el.last_h } else { h };
+        el.started = true;
+        el.last_h = h;
+        el.total += change;
+        // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
+        let weighted = if s.rest_rate > 0.0 && dt > 0.0 {
+            // this element's clock: slowed by its own (averaged) rate of change
+            el.smooth += (change / dt - el.smooth) * (1.0 - (-dt / s.rest_window).exp());
+            let clock = dt / (1.0 + el.smooth.abs() / s.rest_rate);
+            for (zj, tau) in zs.iter_mut().zip(&s.kernel.taus) {
+                *zj = *zj * (-clock / tau).exp() + change;
+            }
+            dot(&s.kernel.weights, zs)
+        } else {
+            decay_and_add(zs, &self.decay, change);
+            dot(&s.kernel.weights, zs)
+        };
+        let mut out = h + s.gamma * (el.total * s.weight_sum - weighted);
+        if two_clocks {
+            let zt = &mut self.z_time[i * k..(i + 1) * k];
+            decay_and_add(zt, &self.decay, change);
+            out += s.gamma_time * (el.total * s.weight_sum - dot(&s.kernel.weights, zt));
+        }
+        out
+    }
 }
 
 impl DriftBank {
@@ -92,19 +176,17 @@ impl DriftBank {
         }
         let k = kernel.len();
         Ok(Self {
-            weight_sum: kernel.weights.iter().sum(),
-            rest_rate: 0.0,
-            rest_window: 0.5,
-            smooth: vec![0.0; n],
-            gamma_time: 0.0,
-            z_time: Vec::new(),
-            kernel,
-            gamma,
-            n,
-            total: vec![0.0; n],
+            settings: DriftSettings {
+                weight_sum: kernel.weights.iter().sum(),
+                kernel,
+                gamma,
+                rest_rate: 0.0,
+                rest_window: 0.5,
+                gamma_time: 0.0,
+            },
+            elements: vec![DriftElement::default(); n],
             z: vec![0.0; n * k],
-            last_h: vec![0.0; n],
-            started: vec![false; n],
+            z_time: Vec::new(),
         })
     }
 
@@ -129,8 +211,8 @@ impl DriftBank {
                 why: format!("must be finite and > 0 s, got {rest_window}"),
             });
         }
-        self.rest_rate = rest_rate;
-        self.rest_window = rest_window;
+        self.settings.rest_rate = rest_rate;
+        self.settings.rest_window = rest_window;
         Ok(self)
     }
 
@@ -145,7 +227,7 @@ impl DriftBank {
                 why: format!("must be finite, got {gamma_time}"),
             });
         }
-        self.gamma_time = gamma_time;
+        self.settings.gamma_time = gamma_time;
         self.z_time = if gamma_time != 0.0 {
             vec![0.0; self.z.len()]
         } else {
@@ -156,21 +238,45 @@ impl DriftBank {
 
     /// Number of elements.
     pub fn len(&self) -> usize {
-        self.n
+        self.elements.len()
     }
 
     /// True without elements.
     pub fn is_empty(&self) -> bool {
-        self.n == 0
+        self.elements.is_empty()
+    }
+
+    /// Bytes of state per element.
+    pub fn state_bytes_per_element(&self) -> usize {
+        let k = self.settings.kernel.len();
+        let clocks = if self.z_time.is_empty() { 1 } else { 2 };
+        std::mem::size_of::<DriftElement>() + clocks * k * std::mem::size_of::<f64>()
     }
 
     /// Forget the history (the next input is the starting level, with no drift).
     pub fn reset(&mut self) {
-        self.total.iter_mut().for_each(|v| *v = 0.0);
-        self.z.iter_mut().for_each(|v| *v = 0.0);
-        self.started.iter_mut().for_each(|v| *v = false);
-        self.smooth.iter_mut().for_each(|v| *v = 0.0);
-        self.z_time.iter_mut().for_each(|v| *v = 0.0);
+        self.elements.fill(DriftElement::default());
+        self.z.fill(0.0);
+        self.z_time.fill(0.0);
+    }
+
+    /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
+    pub fn blocks(&mut self) -> Vec<DriftBlock<'_>> {
+        let k = self.settings.kernel.len();
+        let settings = &self.settings;
+        let size = block_size(self.len());
+        let mut z_time = self.z_time.chunks_mut(size * k);
+        self.elements
+            .chunks_mut(size)
+            .zip(self.z.chunks_mut(size * k))
+            .map(|(elements, z)| DriftBlock {
+                settings,
+                elements,
+                z,
+                z_time: z_time.next().unwrap_or_default(),
+                decay: vec![1.0; k],
+            })
+            .collect()
     }
 
     /// One sample `dt` seconds after the previous one: the hysteresis outputs `h` (N,) in,
@@ -183,85 +289,12 @@ impl DriftBank {
         valid: &[bool],
         out: &mut [f64],
     ) -> Result<(), CoreError> {
-        if dt.is_nan() || dt < 0.0 {
-            return Err(CoreError::Parameter {
-                what: "dt",
-                why: format!("time steps must be >= 0, got {dt}"),
-            });
-        }
-        check_len("h", h.len(), self.n)?;
-        check_len("valid", valid.len(), self.n)?;
-        check_len("out", out.len(), self.n)?;
-        let k = self.kernel.len();
-        // one decay factor per time constant for the whole frame
-        let decay: Vec<f64> = self
-            .kernel
-            .taus
-            .iter()
-            .map(|tau| (-dt / tau).exp())
-            .collect();
-        for i in 0..self.n {
-            if !(valid[i] && h[i].is_finite()) {
-                out[i] = f64::NAN;
-                // time still passes for the element's states (at rest: nothing is known)
-                for (zj, d) in self.z[i * k..(i + 1) * k].iter_mut().zip(&decay) {
-                    *zj *= d;
-                }
-                if !self.z_time.is_empty() {
-                    for (zj, d) in self.z_time[i * k..(i + 1) * k].iter_mut().zip(&decay) {
-                        *zj *= d;
-                    }
-                }
-                continue;
-            }
-            let change = if self.started[i] {
-                h[i] - self.last_h[i]
-            } else {
-                h[i]
-            };
-            self.started[i] = true;
-            self.last_h[i] = h[i];
-            self.total[i] += change;
-            let mut drift = 0.0;
-            // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
-            let zs = &mut self.z[i * k..(i + 1) * k];
-            if self.rest_rate > 0.0 && dt > 0.0 {
-                // this element's clock: slowed by its own (averaged) rate of change
-                let v = &mut self.smooth[i];
-                *v += (change / dt - *v) * (1.0 - (-dt / self.rest_window).exp());
-                let rate = v.abs();
-                let clock = dt / (1.0 + rate / self.rest_rate);
-                for ((zj, tau), w) in zs
-                    .iter_mut()
-                    .zip(&self.kernel.taus)
-                    .zip(&self.kernel.weights)
-                {
-                    *zj = *zj * (-clock / tau).exp() + change;
-                    drift -= w * *zj;
-                }
-            } else {
-                for ((zj, d), w) in zs.iter_mut().zip(&decay).zip(&self.kernel.weights) {
-                    *zj = *zj * d + change;
-                    drift -= w * *zj;
-                }
-            }
-            drift += self.total[i] * self.weight_sum;
-            let mut out_i = h[i] + self.gamma * drift;
-            if self.rest_rate > 0.0 && !self.z_time.is_empty() {
-                let mut time_drift = self.total[i] * self.weight_sum;
-                let zt = &mut self.z_time[i * k..(i + 1) * k];
-                for ((zj, d), w) in zt.iter_mut().zip(&decay).zip(&self.kernel.weights) {
-                    *zj = *zj * d + change;
-                    time_drift -= w * *zj;
-                }
-                out_i += self.gamma_time * time_drift;
-            }
-            out[i] = out_i;
-        }
-        Ok(())
+        check_len("h", h.len(), self.len())?;
+        self.run(&[dt], h, valid, out)
     }
 
-    /// A batch (T x N row-major) with time steps `dt` (T,), identical to T calls of `step`.
+    /// A batch (T x N row-major) with time steps `dt` (T,), identical to T calls of `step`;
+    /// large batches run in parallel over blocks of elements.
     pub fn run(
         &mut self,
         dt: &[f64],
@@ -269,15 +302,67 @@ impl DriftBank {
         valid: &[bool],
         out: &mut [f64],
     ) -> Result<(), CoreError> {
-        let n = self.n;
+        let n = self.len();
+        check_time_steps(dt)?;
         check_len("h", h.len(), dt.len() * n)?;
         check_len("valid", valid.len(), dt.len() * n)?;
         check_len("out", out.len(), dt.len() * n)?;
-        for (t, &d) in dt.iter().enumerate() {
-            let r = t * n..(t + 1) * n;
-            self.step(d, &h[r.clone()], &valid[r.clone()], &mut out[r])?;
+        let cols = Columns::new(out);
+        let size = block_size(n);
+        let work = |(b, mut block): (usize, DriftBlock<'_>)| {
+            let start = b * size;
+            for (r, &d) in dt.iter().enumerate() {
+                block.frame(d);
+                let row = r * n + start;
+                for li in 0..block.elements.len() {
+                    let v = block.step(li, d, h[row + li], valid[row + li]);
+                    // SAFETY: this block owns columns start .. start + its length
+                    unsafe { cols.write(row + li, v) };
+                }
+            }
+        };
+        let blocks = self.blocks();
+        if parallel(dt.len(), n) {
+            blocks.into_par_iter().enumerate().for_each(work);
+        } else {
+            blocks.into_iter().enumerate().for_each(work);
         }
         Ok(())
+    }
+}
+
+/// `z_j <- z_j d_j + change` for every term.
+#[inline]
+fn decay_and_add(z: &mut [f64], decay: &[f64], change: f64) {
+    for (zj, d) in z.iter_mut().zip(decay) {
+        *zj = *zj * d + change;
+    }
+}
+
+/// `Σ w_j z_j` in four independent partial sums (the terms are added in a tree, not one
+/// long chain of dependent additions).
+#[inline]
+fn dot(w: &[f64], z: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (wc, zc) = (w.chunks_exact(4), z.chunks_exact(4));
+    let (wr, zr) = (wc.remainder(), zc.remainder());
+    for (a, b) in wc.zip(zc) {
+        for q in 0..4 {
+            acc[q] += a[q] * b[q];
+        }
+    }
+    let tail: f64 = wr.iter().zip(zr).map(|(a, b)| a * b).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// Time steps must be >= 0 (and not NaN).
+pub(crate) fn check_time_steps(dt: &[f64]) -> Result<(), CoreError> {
+    match dt.iter().find(|d| d.is_nan() || **d < 0.0) {
+        Some(d) => Err(CoreError::Parameter {
+            what: "dt",
+            why: format!("time steps must be >= 0, got {d}"),
+        }),
+        None => Ok(()),
     }
 }
 

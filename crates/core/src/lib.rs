@@ -14,9 +14,12 @@
 //! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep).
 
 pub mod bouc_wen;
+pub mod chain;
 pub mod compensation;
+pub mod detect;
 pub mod drift;
 pub mod error;
+pub mod par;
 pub mod preisach;
 pub mod repair;
 pub mod spacer;

@@ -25,7 +25,12 @@
 //! below the top) is forgotten first — the smallest loop in the memory, whose loss changes the
 //! output least. With wiping-out, the stack only grows for ever-shrinking nested oscillations.
 
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
 use crate::error::{check_len, CoreError};
+use crate::par::{block_size, parallel, Columns};
 
 /// An Everett function on a uniform grid.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,10 +46,10 @@ impl Everett {
     /// Build from a row-major `k x k` table (row α, column β; entries above the diagonal are
     /// ignored and the diagonal must be 0) over `[u_min, u_max]`.
     pub fn new(k: usize, u_min: f64, u_max: f64, table: Vec<f64>) -> Result<Self, CoreError> {
-        if k < 2 {
+        if !(2..=1 << 20).contains(&k) {
             return Err(CoreError::Parameter {
                 what: "everett",
-                why: format!("the grid needs at least 2 points, got {k}"),
+                why: format!("the grid needs 2 ..= 2^20 points, got {k}"),
             });
         }
         check_len("everett table", table.len(), k * k)?;
@@ -92,54 +97,252 @@ impl Everett {
         self.u_max
     }
 
-    #[inline]
-    fn at(&self, i: usize, j: usize) -> f64 {
-        self.table[i * self.k + j]
-    }
-
     /// `F(α, β)` for `u_min <= β <= α <= u_max` (interpolated).
+    ///
+    /// Branch-free: both the bilinear and the diagonal-cell formula are computed and the
+    /// right one selected, since on a real input which cell is hit is unpredictable (a
+    /// mispredicted branch costs more than the few extra multiplications).
     #[inline]
     pub fn value(&self, alpha: f64, beta: f64) -> f64 {
+        if alpha.is_nan() || beta.is_nan() {
+            return f64::NAN;
+        }
+        self.value_of_numbers(alpha, beta)
+    }
+
+    /// [`Everett::value`] for inputs that are numbers (not NaN; infinities are clamped).
+    #[inline(always)]
+    fn value_of_numbers(&self, alpha: f64, beta: f64) -> f64 {
         let last = (self.k - 1) as f64;
         let a = ((alpha - self.u_min) * self.inv_step).clamp(0.0, last);
         let b = ((beta - self.u_min) * self.inv_step).clamp(0.0, last);
-        if b >= a {
-            return 0.0;
-        }
-        let i0 = (a as usize).min(self.k - 2); // a >= 0: truncation is floor
-        let j0 = (b as usize).min(self.k - 2);
+        // SAFETY: a and b are in [0, k - 1] (clamped, not NaN), so the truncation is a floor
+        // that fits in u32 (k is at most the table's side)
+        let (ia, ib) = unsafe { (a.to_int_unchecked::<u32>(), b.to_int_unchecked::<u32>()) };
+        let top = (self.k - 2) as u32;
+        let (i0, j0) = (ia.min(top) as usize, ib.min(top) as usize);
         let wa = a - i0 as f64;
         let wb = b - j0 as f64;
-        if i0 == j0 {
-            // diagonal cell: linear on the lower triangle, F = 0 on the diagonal
-            return (wa - wb) * self.at(i0 + 1, j0);
+        let q = i0 * self.k + j0;
+        // SAFETY: i0, j0 <= k - 2, so q + 1 and q + k + 1 are below k * k = table.len()
+        let (f00, f01, f10, f11) = unsafe {
+            let t = self.table.as_ptr().add(q);
+            (*t, *t.add(1), *t.add(self.k), *t.add(self.k + 1))
+        };
+        let bilinear =
+            (1.0 - wa) * ((1.0 - wb) * f00 + wb * f01) + wa * ((1.0 - wb) * f10 + wb * f11);
+        // diagonal cell: linear on the lower triangle, F = 0 on the diagonal
+        let diagonal = (wa - wb) * f10;
+        let v = if i0 == j0 { diagonal } else { bilinear };
+        if b >= a {
+            0.0
+        } else {
+            v
         }
-        let f00 = self.at(i0, j0);
-        let f10 = self.at(i0 + 1, j0);
-        let f01 = self.at(i0, j0 + 1);
-        let f11 = self.at(i0 + 1, j0 + 1);
-        (1.0 - wa) * ((1.0 - wb) * f00 + wb * f01) + wa * ((1.0 - wb) * f10 + wb * f11)
     }
+}
+
+/// Extrema an element holds in place. A deeper stack (ever-shrinking nested oscillations;
+/// the deepest seen on real and simulated records is 13) moves to the heap, up to the bank's
+/// capacity, and back in place once it is shallow again.
+pub const INLINE_EXTREMA: usize = 12;
+
+/// The state of one element: its extremum stack (input and output at each extremum) and the
+/// last input and output.
+#[derive(Debug, Clone)]
+struct Element {
+    len: u32,
+    last_u: f64,
+    last_h: f64,
+    clamped: u64,
+    forgotten: u64,
+    inline: [[f64; 2]; INLINE_EXTREMA + 1],
+    spill: Option<Box<[[f64; 2]]>>,
+}
+
+impl Element {
+    fn new(u_min: f64) -> Self {
+        let mut inline = [[0.0; 2]; INLINE_EXTREMA + 1];
+        inline[0] = [u_min, 0.0];
+        Self {
+            len: 1,
+            last_u: u_min,
+            last_h: 0.0,
+            clamped: 0,
+            forgotten: 0,
+            inline,
+            spill: None,
+        }
+    }
+
+    #[inline]
+    fn stack(&self) -> &[[f64; 2]] {
+        match &self.spill {
+            Some(s) => s,
+            None => &self.inline,
+        }
+    }
+
+    #[inline]
+    fn stack_mut(&mut self) -> &mut [[f64; 2]] {
+        match &mut self.spill {
+            Some(s) => s,
+            None => &mut self.inline,
+        }
+    }
+
+    /// Give the stack room for `room` extrema on the heap (plus the spare slot).
+    #[cold]
+    fn grow_to(&mut self, room: usize) {
+        let len = self.len as usize;
+        let mut s = vec![[0.0; 2]; room + 1].into_boxed_slice();
+        s[..len].copy_from_slice(&self.stack()[..len]);
+        self.spill = Some(s);
+    }
+
+    /// Back in place (the stack is shallow again).
+    #[cold]
+    fn unspill(&mut self) {
+        if let Some(s) = self.spill.take() {
+            let len = self.len as usize;
+            self.inline[..len].copy_from_slice(&s[..len]);
+        }
+    }
+
+    /// One valid input (eq. 4.16-4.22). Written so that the outcomes that are unpredictable
+    /// on a real input (rising or falling, turning or not) select values instead of branching.
+    #[inline]
+    fn step(&mut self, e: &Everett, capacity: usize, u_in: f64) -> f64 {
+        let u = u_in.clamp(e.u_min, e.u_max);
+        self.clamped += u64::from(u != u_in);
+        let prev = self.last_u;
+        if u == prev {
+            return self.last_h;
+        }
+        let mut len = self.len as usize;
+        let rising = u > prev;
+        // the top is a minimum when len is odd (stack = m0, M1, m1, ...); a turn at `prev`
+        // pushes it as a new extremum
+        let turned = rising != (len % 2 == 1);
+        if len == self.room(capacity) {
+            // rare: test the unpredictable `turned` only here
+            if turned {
+                self.make_room(capacity, &mut len);
+            }
+        }
+        let Element {
+            inline,
+            spill,
+            last_h,
+            last_u,
+            len: stored_len,
+            ..
+        } = self;
+        let s: &mut [[f64; 2]] = match spill {
+            Some(b) => b,
+            None => inline,
+        };
+        s[len] = [prev, *last_h]; // written always, kept only on a turn
+        len += usize::from(turned);
+        // wiping-out: the new input passes the extremum before the top
+        let dir = if rising { 1.0 } else { -1.0 };
+        while len >= 3 && (u - s[len - 2][0]) * dir >= 0.0 {
+            len -= 2;
+        }
+        if len == 2 && u <= s[0][0] {
+            len = 1; // back at lower saturation (only a falling input gets here)
+        }
+        let [top, x] = s[len - 1];
+        // rising after a minimum: x + 2 F(u, m); falling after a maximum: x - 2 F(M, u)
+        let odd = len % 2 == 1;
+        let (alpha, beta) = if odd { (u, top) } else { (top, u) };
+        let sign = if odd { 2.0 } else { -2.0 };
+        let h = x + sign * e.value_of_numbers(alpha, beta);
+        *stored_len = len as u32;
+        *last_u = u;
+        *last_h = h;
+        if len <= INLINE_EXTREMA / 2 && spill.is_some() {
+            self.unspill();
+        }
+        h
+    }
+
+    /// Extrema the stack may hold; one more slot always exists (the unconditional write of
+    /// a possible turning point).
+    #[inline]
+    fn room(&self, capacity: usize) -> usize {
+        (self.stack().len() - 1).min(capacity)
+    }
+
+    /// The stack is full and the input turned: grow it on the heap (doubling) while below
+    /// `capacity`, else forget the most recent completed minor loop (the two entries below
+    /// the top).
+    #[cold]
+    fn make_room(&mut self, capacity: usize, len: &mut usize) {
+        let room = self.stack().len() - 1;
+        if room < capacity {
+            self.grow_to((2 * room).min(capacity));
+        } else {
+            let s = self.stack_mut();
+            s[*len - 3] = s[*len - 1];
+            *len -= 2;
+            self.forgotten += 1;
+        }
+    }
+}
+
+/// How a batch walks through the frames and elements (all give identical outputs; the
+/// benchmark shows what each step gains).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Schedule {
+    /// Frame after frame over all elements, on the calling thread.
+    FrameOrder,
+    /// Block of elements after block, each through all frames, on the calling thread.
+    Blocks,
+    /// Blocks in parallel on the thread pool (the default for large batches).
+    Parallel,
 }
 
 /// Stacks of N elements.
 #[derive(Debug, Clone)]
 pub struct PreisachBank {
-    everett: Everett,
-    n: usize,
+    everett: Arc<Everett>,
     capacity: usize,
-    values: Vec<f64>,
-    outputs: Vec<f64>,
-    len: Vec<usize>,
-    last_u: Vec<f64>,
-    last_h: Vec<f64>,
-    clamped: Vec<u64>,
-    forgotten: Vec<u64>,
+    elements: Vec<Element>,
+}
+
+/// The elements `start .. start + len` of a bank, for a parallel batch.
+pub struct PreisachBlock<'a> {
+    everett: &'a Everett,
+    capacity: usize,
+    elements: &'a mut [Element],
+}
+
+impl PreisachBlock<'_> {
+    /// Element `i` of the block reads `u` (skipped, NaN out, when invalid or not finite).
+    #[inline]
+    pub fn step(&mut self, i: usize, u: f64, valid: bool) -> f64 {
+        if valid && u.is_finite() {
+            self.elements[i].step(self.everett, self.capacity, u)
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// Number of elements in the block.
+    pub fn len(&self) -> usize {
+        self.elements.len()
+    }
+
+    /// True without elements.
+    pub fn is_empty(&self) -> bool {
+        self.elements.is_empty()
+    }
 }
 
 impl PreisachBank {
     /// N elements at lower saturation (input `u_min`, output 0), each with a stack of at most
-    /// `capacity` extrema (>= 4).
+    /// `capacity` extrema (>= 4); the first [`INLINE_EXTREMA`] are held in place.
     pub fn new(everett: Everett, n: usize, capacity: usize) -> Result<Self, CoreError> {
         if capacity < 4 {
             return Err(CoreError::Parameter {
@@ -147,30 +350,21 @@ impl PreisachBank {
                 why: format!("must be >= 4, got {capacity}"),
             });
         }
-        let mut bank = Self {
-            n,
+        Ok(Self {
+            elements: vec![Element::new(everett.u_min); n],
             capacity,
-            values: vec![0.0; n * capacity],
-            outputs: vec![0.0; n * capacity],
-            len: vec![1; n],
-            last_u: vec![everett.u_min; n],
-            last_h: vec![0.0; n],
-            clamped: vec![0; n],
-            forgotten: vec![0; n],
-            everett,
-        };
-        bank.reset();
-        Ok(bank)
+            everett: Arc::new(everett),
+        })
     }
 
     /// Number of elements.
     pub fn len(&self) -> usize {
-        self.n
+        self.elements.len()
     }
 
     /// True without elements.
     pub fn is_empty(&self) -> bool {
-        self.n == 0
+        self.elements.is_empty()
     }
 
     /// The Everett function.
@@ -180,35 +374,39 @@ impl PreisachBank {
 
     /// Back to lower saturation; counters cleared.
     pub fn reset(&mut self) {
-        for i in 0..self.n {
-            self.values[i * self.capacity] = self.everett.u_min;
-            self.outputs[i * self.capacity] = 0.0;
-            self.len[i] = 1;
-            self.last_u[i] = self.everett.u_min;
-            self.last_h[i] = 0.0;
-            self.clamped[i] = 0;
-            self.forgotten[i] = 0;
-        }
+        let fresh = Element::new(self.everett.u_min);
+        self.elements.iter_mut().for_each(|e| *e = fresh.clone());
     }
 
     /// Samples clamped into the input range, per element.
-    pub fn clamped(&self) -> &[u64] {
-        &self.clamped
+    pub fn clamped(&self) -> Vec<u64> {
+        self.elements.iter().map(|e| e.clamped).collect()
     }
 
     /// Minor loops forgotten because a stack was full, per element.
-    pub fn forgotten(&self) -> &[u64] {
-        &self.forgotten
+    pub fn forgotten(&self) -> Vec<u64> {
+        self.elements.iter().map(|e| e.forgotten).collect()
     }
 
     /// Current depth of every element's stack.
-    pub fn depth(&self) -> &[usize] {
-        &self.len
+    pub fn depth(&self) -> Vec<usize> {
+        self.elements.iter().map(|e| e.len as usize).collect()
     }
 
     /// Last output of every element.
-    pub fn last_outputs(&self) -> &[f64] {
-        &self.last_h
+    pub fn last_outputs(&self) -> Vec<f64> {
+        self.elements.iter().map(|e| e.last_h).collect()
+    }
+
+    /// Bytes of state: the elements themselves and the stacks moved to the heap.
+    pub fn state_bytes(&self) -> usize {
+        let heap: usize = self
+            .elements
+            .iter()
+            .filter_map(|e| e.spill.as_ref())
+            .map(|s| std::mem::size_of_val(&s[..]))
+            .sum();
+        self.elements.len() * std::mem::size_of::<Element>() + heap
     }
 
     /// Set element `i` to input `u` with the output `target` (§6.4.4: a model started from a
@@ -217,11 +415,8 @@ impl PreisachBank {
     /// `M` is found by bisection for targets between the two (either orientation of the
     /// loop). Targets outside are clamped to the nearer branch; returns the output set.
     pub fn set_state(&mut self, i: usize, u: f64, target: f64) -> f64 {
-        let e = &self.everett;
+        let e = &*self.everett;
         let u = u.clamp(e.u_min, e.u_max);
-        let base = self.capacity * i;
-        self.values[base] = e.u_min;
-        self.outputs[base] = 0.0;
         // output at u after rising to M and falling back: 2 F(M, m0) - 2 F(M, u)
         let after = |m: f64| 2.0 * e.value(m, e.u_min) - 2.0 * e.value(m, u);
         let rising = after(u);
@@ -250,77 +445,34 @@ impl PreisachBank {
             }
             0.5 * (lo + hi)
         };
-        if m <= u {
-            self.len[i] = 1;
-            self.last_u[i] = u;
-            self.last_h[i] = rising;
-            return rising;
-        }
-        self.values[base + 1] = m;
-        self.outputs[base + 1] = 2.0 * e.value(m, e.u_min);
-        self.len[i] = 2;
-        self.last_u[i] = u;
-        let h = after(m);
-        self.last_h[i] = h;
+        let mut el = Element::new(e.u_min);
+        el.clamped = self.elements[i].clamped;
+        el.forgotten = self.elements[i].forgotten;
+        el.last_u = u;
+        let h = if m <= u {
+            rising
+        } else {
+            el.inline[1] = [m, 2.0 * e.value(m, e.u_min)];
+            el.len = 2;
+            after(m)
+        };
+        el.last_h = h;
+        self.elements[i] = el;
         h
     }
 
-    #[inline]
-    fn step_one(&mut self, i: usize, u_in: f64) -> f64 {
-        let e = &self.everett;
-        let u = if u_in < e.u_min || u_in > e.u_max {
-            self.clamped[i] += 1;
-            u_in.clamp(e.u_min, e.u_max)
-        } else {
-            u_in
-        };
-        let prev = self.last_u[i];
-        if u == prev {
-            return self.last_h[i];
-        }
-        let base = self.capacity * i;
-        let mut len = self.len[i];
-        // the top is a minimum when len is odd (stack = m0, M1, m1, ...)
-        let top_is_min = len % 2 == 1;
-        let rising = u > prev;
-        if rising != top_is_min {
-            // the input turned at `prev`: push it as a new extremum
-            if len == self.capacity {
-                // forget the most recent completed minor loop (the two entries below the top)
-                let t = base + len - 1;
-                self.values[t - 2] = self.values[t];
-                self.outputs[t - 2] = self.outputs[t];
-                len -= 2;
-                self.forgotten[i] += 1;
-            }
-            self.values[base + len] = prev;
-            self.outputs[base + len] = self.last_h[i];
-            len += 1;
-        }
-        // wiping-out: the new input passes the extremum before the top
-        if rising {
-            while len >= 3 && u >= self.values[base + len - 2] {
-                len -= 2;
-            }
-        } else {
-            while len >= 3 && u <= self.values[base + len - 2] {
-                len -= 2;
-            }
-            if len == 2 && u <= self.values[base] {
-                len = 1; // back at lower saturation
-            }
-        }
-        let top = self.values[base + len - 1];
-        let x = self.outputs[base + len - 1];
-        let h = if len % 2 == 1 {
-            x + 2.0 * e.value(u, top)
-        } else {
-            x - 2.0 * e.value(top, u)
-        };
-        self.len[i] = len;
-        self.last_u[i] = u;
-        self.last_h[i] = h;
-        h
+    /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
+    pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
+        let (everett, capacity) = (&*self.everett, self.capacity);
+        let size = block_size(self.len());
+        self.elements
+            .chunks_mut(size)
+            .map(|elements| PreisachBlock {
+                everett,
+                capacity,
+                elements,
+            })
+            .collect()
     }
 
     /// One frame: inputs (N,), validity (N,) -> outputs (N,) (NaN where skipped).
@@ -330,54 +482,95 @@ impl PreisachBank {
         valid: &[bool],
         out: &mut [f64],
     ) -> Result<(), CoreError> {
-        check_len("inputs", inputs.len(), self.n)?;
-        check_len("valid", valid.len(), self.n)?;
-        check_len("out", out.len(), self.n)?;
-        for i in 0..self.n {
-            out[i] = if valid[i] && inputs[i].is_finite() {
-                self.step_one(i, inputs[i])
-            } else {
-                f64::NAN
-            };
-        }
-        Ok(())
+        let n = self.len();
+        check_len("inputs", inputs.len(), n)?;
+        check_len("out", out.len(), n)?;
+        self.run(inputs, valid, out)
     }
 
-    /// A batch of frames (T x N, row-major), identical to T calls of `step`.
+    /// A batch of frames (T x N, row-major), identical to T calls of `step`; large batches
+    /// run in parallel over blocks of elements.
     pub fn run(
         &mut self,
         inputs: &[f64],
         valid: &[bool],
         out: &mut [f64],
     ) -> Result<(), CoreError> {
-        if self.n == 0 {
+        self.run_scheduled(inputs, valid, out, Schedule::Parallel)
+    }
+
+    /// [`PreisachBank::run`] with a chosen schedule (identical outputs).
+    pub fn run_scheduled(
+        &mut self,
+        inputs: &[f64],
+        valid: &[bool],
+        out: &mut [f64],
+        schedule: Schedule,
+    ) -> Result<(), CoreError> {
+        let n = self.len();
+        if n == 0 {
             return Ok(());
         }
-        if inputs.len() % self.n != 0 {
-            return Err(CoreError::Shape {
-                what: "inputs",
-                expected: format!("a multiple of {} elements", self.n),
-                got: format!("length {}", inputs.len()),
-            });
-        }
+        let t = frames_of("inputs", inputs.len(), n)?;
         check_len("valid", valid.len(), inputs.len())?;
         check_len("out", out.len(), inputs.len())?;
-        let n = self.n;
-        for ((f, v), o) in inputs
-            .chunks_exact(n)
-            .zip(valid.chunks_exact(n))
-            .zip(out.chunks_exact_mut(n))
-        {
-            for i in 0..n {
-                o[i] = if v[i] && f[i].is_finite() {
-                    self.step_one(i, f[i])
-                } else {
-                    f64::NAN
-                };
+        let (everett, capacity) = (&*self.everett, self.capacity);
+        if schedule == Schedule::FrameOrder {
+            for ((f, v), o) in inputs
+                .chunks_exact(n)
+                .zip(valid.chunks_exact(n))
+                .zip(out.chunks_exact_mut(n))
+            {
+                for (i, el) in self.elements.iter_mut().enumerate() {
+                    o[i] = if v[i] && f[i].is_finite() {
+                        el.step(everett, capacity, f[i])
+                    } else {
+                        f64::NAN
+                    };
+                }
             }
+            return Ok(());
+        }
+        let cols = Columns::new(out);
+        let size = block_size(n);
+        let work = |(b, block): (usize, &mut [Element])| {
+            let start = b * size;
+            for r in 0..t {
+                let row = r * n + start;
+                for (li, el) in block.iter_mut().enumerate() {
+                    let idx = row + li;
+                    let h = if valid[idx] && inputs[idx].is_finite() {
+                        el.step(everett, capacity, inputs[idx])
+                    } else {
+                        f64::NAN
+                    };
+                    // SAFETY: this block owns columns start .. start + block.len()
+                    unsafe { cols.write(idx, h) };
+                }
+            }
+        };
+        if schedule == Schedule::Parallel && parallel(t, n) {
+            self.elements
+                .par_chunks_mut(size)
+                .enumerate()
+                .for_each(work);
+        } else {
+            self.elements.chunks_mut(size).enumerate().for_each(work);
         }
         Ok(())
     }
+}
+
+/// Frames in a row-major batch of `len` values of `n` elements each.
+pub(crate) fn frames_of(what: &'static str, len: usize, n: usize) -> Result<usize, CoreError> {
+    if n == 0 || len % n != 0 {
+        return Err(CoreError::Shape {
+            what,
+            expected: format!("a multiple of {n} elements"),
+            got: format!("length {len}"),
+        });
+    }
+    Ok(len / n)
 }
 
 /// The Everett terms behind the model's output along one input history, for identification.
@@ -640,6 +833,84 @@ mod tests {
                     .map(|q| terms.coef[q] * e.value(terms.alpha[q], terms.beta[q]))
                     .sum();
                 prop_assert!((sum - h).abs() < 1e-9, "sample {}: {} vs {}", t, sum, h);
+            }
+        }
+    }
+
+    /// A decaying oscillation nests `2 * turns` extrema: deeper than the in-place stack.
+    fn nested(turns: usize, wobble: f64) -> Vec<f64> {
+        let mut path = Vec::new();
+        for k in 0..turns {
+            let a = 0.45 * (1.0 - k as f64 / turns as f64);
+            path.push(0.5 + a + wobble * (k % 3) as f64);
+            path.push(0.5 - a + 0.5 * wobble * (k % 2) as f64);
+        }
+        // and unwind them again, wiping out level after level
+        path.extend([0.97, 0.02, 0.6, 0.4, 0.55]);
+        path
+    }
+
+    #[test]
+    fn deep_stacks_move_to_the_heap_and_back_without_changing_the_output() {
+        let e = uniform(41);
+        let path = nested(30, 1e-3);
+        let mut bank = PreisachBank::new(e.clone(), 1, 256).unwrap();
+        let before = bank.state_bytes();
+        let mut deepest = 0;
+        let mut out = Vec::new();
+        for &u in &path {
+            let mut o = [0.0];
+            bank.step(&[u], &[true], &mut o).unwrap();
+            out.push(o[0]);
+            deepest = deepest.max(bank.depth()[0]);
+            if bank.depth()[0] > INLINE_EXTREMA {
+                assert!(
+                    bank.state_bytes() > before,
+                    "a deep stack lives on the heap"
+                );
+            }
+        }
+        assert!(
+            deepest > INLINE_EXTREMA + 20,
+            "the path nests {deepest} extrema"
+        );
+        assert_eq!(bank.state_bytes(), before, "back in place once shallow");
+        assert_eq!(bank.forgotten()[0], 0);
+        let terms = everett_terms(&path, 0.0, 1.0).unwrap();
+        for (t, h) in out.iter().enumerate() {
+            let sum: f64 = (terms.indptr[t]..terms.indptr[t + 1])
+                .map(|q| terms.coef[q] * e.value(terms.alpha[q], terms.beta[q]))
+                .sum();
+            assert!((sum - h).abs() < 1e-9, "sample {t}: {sum} vs {h}");
+        }
+    }
+
+    #[test]
+    fn every_schedule_gives_the_same_outputs() {
+        let e = uniform(41);
+        let (n, t) = (3 * crate::par::MAX_BLOCK + 7, 120);
+        let mut inputs = Vec::with_capacity(n * t);
+        let mut valid = Vec::with_capacity(n * t);
+        for r in 0..t {
+            for i in 0..n {
+                let x = (r as f64 * 0.37 + i as f64 * 0.11).sin() * (1.0 + (i % 5) as f64 * 0.1);
+                inputs.push(0.5 + 0.45 * x * ((r * 7 + i) % 11) as f64 / 10.0);
+                valid.push((r * 13 + i * 7) % 17 != 0);
+            }
+        }
+        let mut reference = None;
+        for schedule in [Schedule::FrameOrder, Schedule::Blocks, Schedule::Parallel] {
+            let mut bank = PreisachBank::new(e.clone(), n, 16).unwrap();
+            let mut out = vec![0.0; n * t];
+            bank.run_scheduled(&inputs, &valid, &mut out, schedule)
+                .unwrap();
+            let bits: Vec<u64> = out.iter().map(|v| v.to_bits()).collect();
+            match &reference {
+                None => reference = Some((bits, bank.depth())),
+                Some((r, d)) => {
+                    assert!(r == &bits, "{schedule:?} differs");
+                    assert_eq!(d, &bank.depth());
+                }
             }
         }
     }

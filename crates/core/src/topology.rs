@@ -113,6 +113,19 @@ impl Neighbours {
     pub fn of(&self, i: usize) -> &[u32] {
         &self.indices[self.indptr[i]..self.indptr[i + 1]]
     }
+
+    /// Position of element `i`'s first neighbour in the flat list (for values stored
+    /// parallel to the indices, such as weights).
+    #[inline]
+    pub fn start(&self, i: usize) -> usize {
+        self.indptr[i]
+    }
+
+    /// Number of (directed) neighbour pairs.
+    #[inline]
+    pub fn nnz(&self) -> usize {
+        self.indices.len()
+    }
 }
 
 #[cfg(test)]

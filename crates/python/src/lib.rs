@@ -10,6 +10,9 @@ use numpy::{
 use pyo3::create_exception;
 use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
+use texsense_core::chain::{Chain, Converter, Curve, LocalRepair, Response};
+use texsense_core::detect::{Changes, DetectorParams, FailureDetector};
+use texsense_core::preisach::Schedule;
 use texsense_core::repair::RepairOutcome;
 use texsense_core::{
     everett_terms, BoucWenBank, BoucWenParams, Compensation, CoreError, DriftBank, Everett, Kernel,
@@ -415,7 +418,12 @@ where
     to_2d(py, out, t, n)
 }
 
-fn to_2d(py: Python<'_>, v: Vec<f64>, t: usize, n: usize) -> PyResult<Bound<'_, PyArray2<f64>>> {
+fn to_2d<T: numpy::Element>(
+    py: Python<'_>,
+    v: Vec<T>,
+    t: usize,
+    n: usize,
+) -> PyResult<Bound<'_, PyArray2<T>>> {
     let a = numpy::ndarray::Array2::from_shape_vec((t, n), v)
         .map_err(|e| ShapeError::new_err(e.to_string()))?;
     Ok(a.into_pyarray(py))
@@ -483,12 +491,27 @@ impl PyPreisachBank {
     }
 
     /// Batch: inputs (T, N), valid (T, N) -> outputs (T, N), NaN where skipped.
+    /// `schedule`: "parallel" (default), "blocks" or "frames" (one thread, frame after
+    /// frame): identical outputs, for the benchmark's step-by-step table.
+    #[pyo3(signature = (inputs, valid, schedule="parallel"))]
     fn run<'py>(
         &mut self,
         py: Python<'py>,
         inputs: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
+        schedule: &str,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let schedule = match schedule {
+            "parallel" => Schedule::Parallel,
+            "blocks" => Schedule::Blocks,
+            "frames" => Schedule::FrameOrder,
+            other => {
+                return Err(to_py(CoreError::Parameter {
+                    what: "schedule",
+                    why: format!("'parallel', 'blocks' or 'frames', got {other:?}"),
+                }))
+            }
+        };
         let (t, n) = batch_shape(
             "inputs",
             self.inner.len(),
@@ -498,7 +521,12 @@ impl PyPreisachBank {
         )?;
         let (u, v) = (inputs.as_slice()?, valid.as_slice()?);
         let inner = &mut self.inner;
-        run_detached(py, t, n, |out| inner.run(u, v, out))
+        run_detached(py, t, n, |out| inner.run_scheduled(u, v, out, schedule))
+    }
+
+    /// Bytes of state of the whole bank (elements and stacks moved to the heap).
+    fn state_bytes(&self) -> usize {
+        self.inner.state_bytes()
     }
 
     /// Set elements to an input with a given output (§6.4.4); returns the outputs set.
@@ -524,12 +552,12 @@ impl PyPreisachBank {
 
     /// Samples clamped into the input range, per element.
     fn clamped<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
-        self.inner.clamped().to_vec().into_pyarray(py)
+        self.inner.clamped().into_pyarray(py)
     }
 
     /// Minor loops forgotten at full stacks, per element.
     fn forgotten<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
-        self.inner.forgotten().to_vec().into_pyarray(py)
+        self.inner.forgotten().into_pyarray(py)
     }
 
     /// Stack depth per element.
@@ -540,7 +568,7 @@ impl PyPreisachBank {
 
     /// Last output per element.
     fn outputs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.inner.last_outputs().to_vec().into_pyarray(py)
+        self.inner.last_outputs().into_pyarray(py)
     }
 }
 
@@ -652,7 +680,7 @@ impl PyCompensation {
 
     /// Samples clamped into the identified range, per element.
     fn clamped<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
-        self.inner.preisach().clamped().to_vec().into_pyarray(py)
+        self.inner.preisach().clamped().into_pyarray(py)
     }
 
     /// Batch: dt (T,), inputs (T, N), valid (T, N) -> compensated outputs (T, N).
@@ -673,6 +701,216 @@ impl PyCompensation {
         let (d, u, v) = (dt.as_slice()?, inputs.as_slice()?, valid.as_slice()?);
         let inner = &mut self.inner;
         run_detached(py, t, n, |out| inner.run(d, u, v, out))
+    }
+}
+
+/// Failure detection on raw capacitance (thesis §6.5.2.5): codes 0 ok, 1 short/break,
+/// 2 out of range, 3 stuck, 4 jump.
+#[pyclass(name = "FailureDetector", module = "texsense._core")]
+#[derive(Clone)]
+struct PyFailureDetector {
+    inner: FailureDetector,
+    changes: Changes,
+}
+
+#[pymethods]
+impl PyFailureDetector {
+    #[new]
+    #[pyo3(signature = (indptr, indices, jump_pf, baseline_pf, max_pf, min_pf, low_share, high_share, stuck_frames, stuck_pf, neighbour_change_pf))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        indptr: PyReadonlyArray1<'_, i64>,
+        indices: PyReadonlyArray1<'_, i64>,
+        jump_pf: PyReadonlyArray1<'_, f64>,
+        baseline_pf: Option<PyReadonlyArray1<'_, f64>>,
+        max_pf: Option<PyReadonlyArray1<'_, f64>>,
+        min_pf: f64,
+        low_share: f64,
+        high_share: f64,
+        stuck_frames: u32,
+        stuck_pf: f64,
+        neighbour_change_pf: f64,
+    ) -> PyResult<Self> {
+        let params = DetectorParams {
+            min_pf,
+            low_share,
+            high_share,
+            stuck_frames,
+            stuck_pf,
+            neighbour_change_pf,
+        };
+        let vec = |a: Option<PyReadonlyArray1<'_, f64>>| -> PyResult<Option<Vec<f64>>> {
+            a.map(|a| Ok(a.as_slice()?.to_vec())).transpose()
+        };
+        let inner = FailureDetector::new(
+            params,
+            neighbours_from(indptr, indices)?,
+            jump_pf.as_slice()?.to_vec(),
+            vec(baseline_pf)?,
+            vec(max_pf)?,
+        )
+        .map_err(to_py)?;
+        Ok(Self {
+            inner,
+            changes: Changes::default(),
+        })
+    }
+
+    /// Forget the history.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Codes (T, N) uint8 of readings (T, N) with the converter's validity (T, N).
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        readings: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<Bound<'py, PyArray2<u8>>> {
+        let (t, n) = batch_shape(
+            "readings",
+            self.inner.len(),
+            readings.shape(),
+            valid.shape(),
+            None,
+        )?;
+        let (r, v) = (readings.as_slice()?, valid.as_slice()?);
+        let mut codes = vec![0u8; t * n];
+        let (inner, changes) = (&mut self.inner, &mut self.changes);
+        py.detach(|| inner.run(r, v, &mut codes, changes))
+            .map_err(to_py)?;
+        to_2d(py, codes, t, n)
+    }
+}
+
+/// The whole chain of a mat in one compiled pass: detect -> convert -> Preisach + drift (or
+/// the first-loading curve) -> local repair.
+#[pyclass(name = "Chain", module = "texsense._core")]
+struct PyChain {
+    inner: Chain,
+}
+
+#[pymethods]
+impl PyChain {
+    /// `repair`: "none", "zero", "last-value", "neighbour-mean" (needs indptr, indices) or
+    /// "weighted" (needs indptr, indices and weights parallel to indices).
+    #[new]
+    #[pyo3(signature = (offset_pf, gain, curve_capacitance_pf, curve_compression_mm, *, detector=None, compensation=None, loading=None, repair="none", indptr=None, indices=None, weights=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        offset_pf: PyReadonlyArray1<'_, f64>,
+        gain: PyReadonlyArray1<'_, f64>,
+        curve_capacitance_pf: PyReadonlyArray1<'_, f64>,
+        curve_compression_mm: PyReadonlyArray1<'_, f64>,
+        detector: Option<PyRef<'_, PyFailureDetector>>,
+        compensation: Option<PyRef<'_, PyCompensation>>,
+        loading: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>,
+        repair: &str,
+        indptr: Option<PyReadonlyArray1<'_, i64>>,
+        indices: Option<PyReadonlyArray1<'_, i64>>,
+        weights: Option<PyReadonlyArray1<'_, f64>>,
+    ) -> PyResult<Self> {
+        let curve = Curve::new(
+            curve_capacitance_pf.as_slice()?.to_vec(),
+            curve_compression_mm.as_slice()?.to_vec(),
+        )
+        .map_err(to_py)?;
+        let converter = Converter::new(
+            offset_pf.as_slice()?.to_vec(),
+            gain.as_slice()?.to_vec(),
+            curve,
+        )
+        .map_err(to_py)?;
+        let response = match (compensation, loading) {
+            (Some(c), None) => Response::Compensation(c.inner.clone()),
+            (None, Some((e, p))) => Response::Loading(
+                Curve::new(e.as_slice()?.to_vec(), p.as_slice()?.to_vec()).map_err(to_py)?,
+            ),
+            _ => {
+                return Err(to_py(CoreError::Parameter {
+                    what: "chain",
+                    why: "give exactly one of compensation and loading".into(),
+                }))
+            }
+        };
+        let graph = || -> PyResult<Neighbours> {
+            match (&indptr, &indices) {
+                (Some(p), Some(i)) => neighbours_from(p.clone(), i.clone()),
+                _ => Err(to_py(CoreError::Parameter {
+                    what: "repair",
+                    why: format!("{repair:?} needs the neighbour graph (indptr, indices)"),
+                })),
+            }
+        };
+        let repair = match repair {
+            "none" => LocalRepair::None,
+            "zero" => LocalRepair::Zero,
+            "last-value" => LocalRepair::LastValue,
+            "neighbour-mean" => LocalRepair::NeighbourMean(graph()?),
+            "weighted" => {
+                let w = weights.ok_or_else(|| {
+                    to_py(CoreError::Parameter {
+                        what: "repair",
+                        why: "\"weighted\" needs weights".into(),
+                    })
+                })?;
+                LocalRepair::Weighted(graph()?, w.as_slice()?.to_vec())
+            }
+            other => {
+                return Err(to_py(CoreError::Parameter {
+                    what: "repair",
+                    why: format!("unknown local repair {other:?}"),
+                }))
+            }
+        };
+        let inner = Chain::new(
+            detector.map(|d| d.inner.clone()),
+            converter,
+            response,
+            repair,
+        )
+        .map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// Number of elements.
+    #[getter]
+    fn n_elements(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// Every stage back to its initial state.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Bytes of state per element (all stages, per-element parameters included).
+    fn state_bytes_per_element(&self) -> usize {
+        self.inner.state_bytes_per_element()
+    }
+
+    /// Batch: dt (T,), readings (T, N) pF, valid (T, N) -> (pressure (T, N), codes (T, N)).
+    #[allow(clippy::type_complexity)]
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        dt: PyReadonlyArray1<'py, f64>,
+        readings: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u8>>)> {
+        let (t, n) = batch_shape(
+            "chain run",
+            self.inner.len(),
+            readings.shape(),
+            valid.shape(),
+            Some(dt.len()),
+        )?;
+        let (d, r, v) = (dt.as_slice()?, readings.as_slice()?, valid.as_slice()?);
+        let mut codes = vec![0u8; t * n];
+        let inner = &mut self.inner;
+        let out = run_detached(py, t, n, |out| inner.run(d, r, v, out, &mut codes))?;
+        Ok((out, to_2d(py, codes, t, n)?))
     }
 }
 
@@ -712,6 +950,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyPreisachBank>()?;
     m.add_class::<PyDriftBank>()?;
     m.add_class::<PyCompensation>()?;
+    m.add_class::<PyFailureDetector>()?;
+    m.add_class::<PyChain>()?;
     m.add_function(wrap_pyfunction!(py_everett_terms, m)?)?;
     m.add("ShapeError", m.py().get_type::<ShapeError>())?;
     m.add(

@@ -1,0 +1,402 @@
+//! Failure detection on raw capacitance (thesis §6.5.2.5), frame by frame for many elements.
+//!
+//! Per reading, in this order of precedence (the later wins):
+//! - `stuck` (3): no change larger than `stuck_pf` for `stuck_frames` frames while the median
+//!   change of the element's neighbours added up to more than `neighbour_change_pf`;
+//! - `jump` (4): a change larger than the element's jump limit between two readings;
+//! - `out of range` (2): flagged invalid by the converter, or beyond `high_share` times the
+//!   largest capacitance the calibration expects;
+//! - `short/break` (1): not a number, at or below `min_pf`, or below `low_share` of the
+//!   element's unloaded capacitance.
+//!
+//! 0 means healthy. A batch runs in two passes over blocks of elements: the change of every
+//! reading first (each element on its own), then the codes (which read the neighbours'
+//! changes of the same frame). Same results as frame after frame (tested).
+
+use rayon::prelude::*;
+
+use crate::error::{check_len, CoreError};
+use crate::par::{block_size, parallel, Columns};
+use crate::topology::Neighbours;
+
+/// Failure codes.
+pub mod code {
+    /// Healthy.
+    pub const OK: u8 = 0;
+    /// Short or break.
+    pub const SHORT_OR_BREAK: u8 = 1;
+    /// Out of range (saturated or far beyond the expected maximum).
+    pub const OUT_OF_RANGE: u8 = 2;
+    /// Stuck while the neighbours move.
+    pub const STUCK: u8 = 3;
+    /// A jump faster than a body moves the spacer.
+    pub const JUMP: u8 = 4;
+}
+
+/// Thresholds of the detector (see the module documentation).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetectorParams {
+    /// Readings at or below this are shorts or breaks (pF).
+    pub min_pf: f64,
+    /// Readings below this share of the unloaded value are shorts or breaks.
+    pub low_share: f64,
+    /// Readings beyond this multiple of the expected maximum are out of range.
+    pub high_share: f64,
+    /// Frames without change before an element counts as stuck.
+    pub stuck_frames: u32,
+    /// A change at or below this (pF) is no change.
+    pub stuck_pf: f64,
+    /// The neighbours' accumulated median change that makes a still element stuck (pF).
+    pub neighbour_change_pf: f64,
+}
+
+/// Per-element detector state.
+#[derive(Debug, Clone, Copy)]
+struct DetectorElement {
+    last: f64,
+    still: u32,
+    moved: f64,
+}
+
+impl Default for DetectorElement {
+    fn default() -> Self {
+        Self {
+            last: f64::NAN,
+            still: 0,
+            moved: 0.0,
+        }
+    }
+}
+
+/// Streaming failure detector of N elements.
+#[derive(Debug, Clone)]
+pub struct FailureDetector {
+    params: DetectorParams,
+    neighbours: Neighbours,
+    jump: Vec<f64>,
+    baseline: Option<Vec<f64>>,
+    max: Option<Vec<f64>>,
+    elements: Vec<DetectorElement>,
+}
+
+/// Scratch of one batch: the change of every reading, and whether it was an element's first.
+#[derive(Debug, Clone, Default)]
+pub struct Changes {
+    delta: Vec<f64>,
+    first: Vec<bool>,
+}
+
+impl FailureDetector {
+    /// A detector with per-element jump limits (pF) and optional unloaded and largest
+    /// expected capacitance per element.
+    pub fn new(
+        params: DetectorParams,
+        neighbours: Neighbours,
+        jump: Vec<f64>,
+        baseline: Option<Vec<f64>>,
+        max: Option<Vec<f64>>,
+    ) -> Result<Self, CoreError> {
+        let n = neighbours.len();
+        check_len("jump", jump.len(), n)?;
+        if let Some(b) = &baseline {
+            check_len("baseline", b.len(), n)?;
+        }
+        if let Some(m) = &max {
+            check_len("max", m.len(), n)?;
+        }
+        if params.stuck_frames < 2 || !(params.low_share > 0.0 && params.low_share < 1.0) {
+            return Err(CoreError::Parameter {
+                what: "detector",
+                why: "stuck_frames >= 2 and 0 < low_share < 1 needed".into(),
+            });
+        }
+        Ok(Self {
+            params,
+            neighbours,
+            jump,
+            baseline,
+            max,
+            elements: vec![DetectorElement::default(); n],
+        })
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.elements.len()
+    }
+
+    /// True without elements.
+    pub fn is_empty(&self) -> bool {
+        self.elements.is_empty()
+    }
+
+    /// Forget the history.
+    pub fn reset(&mut self) {
+        self.elements.fill(DetectorElement::default());
+    }
+
+    /// Bytes of state per element.
+    pub fn state_bytes_per_element(&self) -> usize {
+        std::mem::size_of::<DetectorElement>()
+    }
+
+    /// Codes (T x N) of a batch of readings (T x N) with the converter's validity.
+    pub fn run(
+        &mut self,
+        readings: &[f64],
+        valid: &[bool],
+        codes: &mut [u8],
+        scratch: &mut Changes,
+    ) -> Result<(), CoreError> {
+        let n = self.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let t = readings.len() / n;
+        check_len("readings", readings.len(), t * n)?;
+        check_len("valid", valid.len(), t * n)?;
+        check_len("codes", codes.len(), t * n)?;
+        scratch.delta.resize(t * n, 0.0);
+        scratch.first.resize(t * n, false);
+        let par = parallel(t, n);
+        let size = block_size(n);
+        // pass 1: the change of every reading since the element's last finite one
+        {
+            let delta = Columns::new(&mut scratch.delta);
+            let first = Columns::new(&mut scratch.first);
+            let work = |(b, block): (usize, &mut [DetectorElement])| {
+                let start = b * size;
+                for r in 0..t {
+                    let row = r * n + start;
+                    for (li, el) in block.iter_mut().enumerate() {
+                        let c = readings[row + li];
+                        let d = (c - el.last).abs();
+                        let is_first = d.is_nan();
+                        // SAFETY: this block owns columns start .. start + block.len()
+                        unsafe {
+                            delta.write(row + li, if is_first { 0.0 } else { d });
+                            first.write(row + li, is_first);
+                        }
+                        if c.is_finite() {
+                            el.last = c;
+                        }
+                    }
+                }
+            };
+            if par {
+                self.elements
+                    .par_chunks_mut(size)
+                    .enumerate()
+                    .for_each(work);
+            } else {
+                self.elements.chunks_mut(size).enumerate().for_each(work);
+            }
+        }
+        // pass 2: the codes, with the neighbours' median change of the same frame
+        let (delta, first) = (&scratch.delta[..], &scratch.first[..]);
+        let out = Columns::new(codes);
+        // the elements' states leave `self` for the pass, which reads the rest of it
+        let mut elements = std::mem::take(&mut self.elements);
+        let this = &*self;
+        let p = &this.params;
+        let work = |(b, block): (usize, &mut [DetectorElement])| {
+            let start = b * size;
+            let mut wide = Vec::new();
+            let mut few = [0.0; 8];
+            for r in 0..t {
+                let row = r * n;
+                for (li, el) in block.iter_mut().enumerate() {
+                    let i = start + li;
+                    let nbs = this.neighbours.of(i);
+                    let nb_move = if nbs.len() <= few.len() {
+                        for (f, &j) in few.iter_mut().zip(nbs) {
+                            *f = delta[row + j as usize];
+                        }
+                        median(&mut few[..nbs.len()])
+                    } else {
+                        wide.clear();
+                        wide.extend(nbs.iter().map(|&j| delta[row + j as usize]));
+                        median(&mut wide)
+                    };
+                    let d = delta[row + i];
+                    let is_first = first[row + i];
+                    let still = d <= p.stuck_pf && !is_first;
+                    if still {
+                        el.still += 1;
+                        el.moved += nb_move;
+                    } else {
+                        el.still = 0;
+                        el.moved = 0.0;
+                    }
+                    let c = readings[row + i];
+                    let mut k = code::OK;
+                    if el.still >= p.stuck_frames
+                        && el.moved > p.neighbour_change_pf
+                        && !nbs.is_empty()
+                    {
+                        k = code::STUCK;
+                    }
+                    if !is_first && d > this.jump[i] {
+                        k = code::JUMP;
+                    }
+                    let high = !valid[row + i]
+                        || this.max.as_ref().is_some_and(|m| c > p.high_share * m[i]);
+                    if high {
+                        k = code::OUT_OF_RANGE;
+                    }
+                    let low = !c.is_finite()
+                        || c <= p.min_pf
+                        || this
+                            .baseline
+                            .as_ref()
+                            .is_some_and(|b| c < p.low_share * b[i]);
+                    if low {
+                        k = code::SHORT_OR_BREAK;
+                    }
+                    // SAFETY: this block owns columns start .. start + block.len()
+                    unsafe { out.write(row + i, k) };
+                }
+            }
+        };
+        if par {
+            elements.par_chunks_mut(size).enumerate().for_each(work);
+        } else {
+            elements.chunks_mut(size).enumerate().for_each(work);
+        }
+        self.elements = elements;
+        Ok(())
+    }
+}
+
+/// Median of a few values (0 for none): the mean of the two middle ones of an even count.
+/// Up to four values (a grid's neighbours) by comparisons that select rather than branch.
+#[inline]
+fn median(v: &mut [f64]) -> f64 {
+    match *v {
+        [] => 0.0,
+        [a] => a,
+        [a, b] => 0.5 * (a + b),
+        [a, b, c] => a.min(b).max(a.max(b).min(c)),
+        [a, b, c, d] => {
+            // the middle two of four: the larger of the pairs' minima and the smaller of
+            // the pairs' maxima, for the pairs (a, b) and (c, d)
+            0.5 * (a.min(b).max(c.min(d)) + a.max(b).min(c.max(d)))
+        }
+        _ => {
+            // insertion sort: a handful of neighbours
+            for i in 1..v.len() {
+                let mut j = i;
+                while j > 0 && v[j - 1] > v[j] {
+                    v.swap(j - 1, j);
+                    j -= 1;
+                }
+            }
+            let len = v.len();
+            0.5 * (v[(len - 1) / 2] + v[len / 2])
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> DetectorParams {
+        DetectorParams {
+            min_pf: 0.05,
+            low_share: 0.5,
+            high_share: 1.2,
+            stuck_frames: 5,
+            stuck_pf: 1e-4,
+            neighbour_change_pf: 0.05,
+        }
+    }
+
+    #[test]
+    fn codes_each_kind_and_batch_equals_frames() {
+        let (rows, cols) = (3, 3);
+        let n = rows * cols;
+        let nb = Neighbours::grid4(rows, cols);
+        let base = vec![10.0; n];
+        let max = vec![20.0; n];
+        let mk = || {
+            FailureDetector::new(
+                params(),
+                nb.clone(),
+                vec![5.0; n],
+                Some(base.clone()),
+                Some(max.clone()),
+            )
+            .unwrap()
+        };
+        let t = 12;
+        let mut readings = Vec::new();
+        let mut valid = Vec::new();
+        for r in 0..t {
+            for i in 0..n {
+                let moving = 12.0 + 0.5 * ((r * 3 + i) % 4) as f64;
+                let v = match i {
+                    0 => 0.01,               // short
+                    1 => 30.0,               // out of range
+                    2 => 12.0,               // stuck while neighbours move
+                    3 if r == 6 => 19.0,     // a jump
+                    4 if r == 3 => f64::NAN, // not a number
+                    _ => moving,
+                };
+                readings.push(v);
+                valid.push(!(i == 5 && r == 2));
+            }
+        }
+        let mut det = mk();
+        let mut codes = vec![0u8; t * n];
+        det.run(&readings, &valid, &mut codes, &mut Changes::default())
+            .unwrap();
+        let at = |r: usize, i: usize| codes[r * n + i];
+        assert!((0..t).all(|r| at(r, 0) == code::SHORT_OR_BREAK));
+        assert!((0..t).all(|r| at(r, 1) == code::OUT_OF_RANGE));
+        assert_eq!(at(3, 2), code::OK);
+        assert!((5..t).all(|r| at(r, 2) == code::STUCK), "{:?}", &codes);
+        assert_eq!(at(6, 3), code::JUMP);
+        assert_eq!(at(3, 4), code::SHORT_OR_BREAK);
+        assert_eq!(at(2, 5), code::OUT_OF_RANGE);
+        assert_eq!(at(0, 8), code::OK);
+        // frame after frame gives the same
+        let mut det = mk();
+        let mut scratch = Changes::default();
+        for r in 0..t {
+            let mut c = vec![0u8; n];
+            let rr = r * n..(r + 1) * n;
+            det.run(
+                &readings[rr.clone()],
+                &valid[rr.clone()],
+                &mut c,
+                &mut scratch,
+            )
+            .unwrap();
+            assert_eq!(&c[..], &codes[rr]);
+        }
+    }
+
+    #[test]
+    fn median_of_even_and_odd_counts() {
+        assert_eq!(median(&mut []), 0.0);
+        assert_eq!(median(&mut [3.0]), 3.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0]), 3.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(median(&mut [f64::INFINITY, 1.0]), f64::INFINITY);
+        // every order of 3, 4 and 5 values against a sorted median
+        let vals = [0.3, -1.0, 2.5, 0.3, 7.0];
+        for len in 3..=5 {
+            let mut idx: Vec<usize> = (0..len).collect();
+            for _ in 0..120 {
+                let mut v: Vec<f64> = idx.iter().map(|&q| vals[q]).collect();
+                let mut s = v.clone();
+                s.sort_by(f64::total_cmp);
+                let want = 0.5 * (s[(len - 1) / 2] + s[len / 2]);
+                assert_eq!(median(&mut v).to_bits(), want.to_bits(), "{idx:?}");
+                idx.rotate_left(1);
+                idx.swap(0, len / 2);
+            }
+        }
+    }
+}

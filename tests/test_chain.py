@@ -1,0 +1,134 @@
+"""The compiled chain (crates/core/src/chain.rs) against the path it replaced
+(tests/reference_pipeline.py): same failure codes, same masks, values to 1e-9, on the virtual
+seat with the thesis's failure rates; streaming, chunked and batch runs agree."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reference_pipeline import ReferenceDetector, ReferencePipeline
+from texsense import Layout
+from texsense.health import FailureDetector
+from texsense.pipeline import Pipeline
+from texsense.sim.failures import FailureModel
+from texsense.sim.mat import VirtualMat
+from texsense.sim.seated import seat_calibration
+
+
+@pytest.fixture(scope="module")
+def seat():
+    """The 96-element virtual seat calibrated as a user would, and a 300-frame session on
+    it with intermittent and permanent failures (thesis rates), loads that come and go."""
+    cal = seat_calibration(mat_seed=5)
+    mat = VirtualMat.seat(seed=5, failures=FailureModel())
+    n = mat.layout.n_elements
+    times = np.arange(300) * mat.cdc.frame_time_s(n)
+    xy = mat.layout.xy_cm
+    on = (np.sin(times / 40.0) > -0.3)[:, None]
+    load = on * (0.4 + 2.2 * np.exp(-np.sum((xy - xy.mean(0)) ** 2, axis=1) / 60.0))[None, :]
+    load = load * (1 + 0.2 * np.sin(times / 7.0))[:, None]
+    scan = mat.scan(times, load)
+    assert scan.failed.any() and (~scan.failed).any()
+    # and 1 % of readings flagged by the converter (what detect=False has to go by)
+    flagged = np.random.default_rng(2).random(scan.failed.shape) < 0.01
+    rec = scan.capacitance
+    return cal, rec._with(valid=rec.valid & ~flagged)
+
+
+def test_compiled_detector_equals_the_numpy_detector():
+    rng = np.random.default_rng(3)
+    active = rng.random((9, 11)) > 0.3
+    for lay in (Layout.grid(8, 7), Layout.grid(9, 11, active=active)):
+        n = lay.n_elements
+        base = rng.uniform(8, 12, n)
+        top = base + rng.uniform(5, 10, n)
+        frames = base + rng.uniform(0, 6, (200, n))
+        frames[:, : n // 5] = frames[0, : n // 5]  # still elements (stuck while others move)
+        frames[rng.random(frames.shape) < 0.03] = 0.0  # shorts
+        frames[rng.random(frames.shape) < 0.01] = np.nan
+        frames[rng.random(frames.shape) < 0.01] *= 3.0  # out of range
+        valid = rng.random(frames.shape) > 0.02
+        for base_pf, max_pf in ((base, top), (None, None)):
+            ref = ReferenceDetector(lay, base_pf, max_pf, stuck_frames=5)
+            expected = np.stack([ref.step(frames[k], valid[k]) for k in range(200)])
+            assert set(np.unique(expected)) == {0, 1, 2, 3, 4} or max_pf is None
+            det = FailureDetector(lay, baseline_pF=base_pf, max_pF=max_pf, stuck_frames=5)
+            np.testing.assert_array_equal(det.detect(frames, valid), expected)
+            det.reset()
+            stream = np.stack([det.step(frames[k], valid[k]) for k in range(200)])
+            np.testing.assert_array_equal(stream, expected)
+
+
+STAGES = [
+    dict(repair=None),
+    dict(repair="zero"),
+    dict(repair="last-value"),
+    dict(repair="neighbour-mean"),
+    dict(repair="idw8"),
+    dict(repair="harmonic"),
+    dict(repair="neighbour-mean", drift=False),
+    dict(repair="neighbour-mean", hysteresis=False),
+    dict(repair="neighbour-mean", detect=False),
+]
+
+
+@pytest.mark.parametrize("stages", STAGES, ids=lambda s: ",".join(f"{k}={v}" for k, v in s.items()))
+def test_compiled_pipeline_equals_the_old_path(seat, stages):
+    cal, rec = seat
+    lay = rec.layout
+    cap = np.asarray(rec.frames, np.float64)
+    expected, ok, codes = ReferencePipeline(cal, lay, **stages).run(cap, rec.valid, rec.times)
+    pipe = Pipeline(cal, lay, **stages)
+    got, got_ok, got_codes = pipe.process(cap, rec.times, rec.valid)
+    np.testing.assert_array_equal(got_codes, codes)
+    np.testing.assert_array_equal(got_ok, ok)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9, equal_nan=True)
+    # the recording API gives the same (stored as float32)
+    out = pipe.reset().run(rec)
+    np.testing.assert_array_equal(out.valid, ok)
+    np.testing.assert_array_equal(out.frames, got.astype(np.float32))
+    assert (~ok).any() and np.isfinite(expected[ok]).all()
+
+
+@pytest.mark.parametrize("repair", ["neighbour-mean", "idw8", "last-value", "harmonic"])
+def test_streaming_chunked_and_batch_runs_agree(seat, repair):
+    cal, rec = seat
+    lay = rec.layout
+    batch, *_ = Pipeline(cal, lay, repair=repair).process(rec.frames, rec.times, rec.valid)
+    stream = Pipeline(cal, lay, repair=repair)
+    rows = [stream.step(rec.frames[k], rec.times[k], rec.valid[k])[0] for k in range(rec.n_frames)]
+    np.testing.assert_array_equal(np.array(rows), batch)
+    chunked = Pipeline(cal, lay, repair=repair)
+    parts = [
+        chunked.process(rec.frames[a : a + 37], rec.times[a : a + 37], rec.valid[a : a + 37])[0]
+        for a in range(0, rec.n_frames, 37)
+    ]
+    np.testing.assert_array_equal(np.concatenate(parts), batch)
+
+
+def test_a_large_mat_runs_in_parallel_blocks_with_the_same_result(seat):
+    """4096 elements x 40 frames crosses the parallel threshold of the core: the chain's
+    blocks run on the thread pool, and frame-by-frame steps give the same numbers."""
+    cal, _ = seat
+    from texsense.calibration import MatCalibration
+
+    rng = np.random.default_rng(0)
+    lay = Layout.grid(64, 64, pitch_cm=1.0)
+    n = lay.n_elements
+    big = MatCalibration.from_parts(
+        cal.curve_compression_mm, cal.curve_capacitance_pF, rng.normal(0, 0.05, n),
+        rng.normal(1, 0.03, n), cal.model, 3.0,
+    )  # fmt: skip
+    t = np.arange(40) * 0.1
+    e = 1.0 + 0.8 * np.sin(t[:, None] / 2 + np.arange(n)[None, :] / 40)
+    cap = big.offset_pF + big.gain * np.interp(
+        e, cal.curve_compression_mm, cal.curve_capacitance_pF
+    )
+    cap[rng.random(cap.shape) < 0.02] = 0.0
+    batch, ok, _ = Pipeline(big, lay, repair="neighbour-mean").process(cap, t)
+    stream = Pipeline(big, lay, repair="neighbour-mean")
+    rows = [stream.step(cap[k], t[k])[0] for k in range(t.size)]
+    np.testing.assert_array_equal(np.array(rows), batch)
+    assert (~ok).sum() > 1000 and np.isfinite(batch).all()
