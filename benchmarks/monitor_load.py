@@ -36,7 +36,7 @@ from texsense import Layout, load
 from texsense.io import write_hdf5
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.sim.seated import calibrate_virtual_mat
+from texsense.workflows import calibrate_virtual_mat
 
 ROWS, COLS, FPS = 32, 32, 10.0
 WARMUP_S = 3.0

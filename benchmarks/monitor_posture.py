@@ -21,7 +21,7 @@ import numpy as np
 from texsense.monitor import Monitor, VirtualSeatSource
 from texsense.pipeline import Pipeline
 from texsense.posture.training import train_virtual_seat_model
-from texsense.sim.seated import seat_calibration
+from texsense.workflows import seat_calibration
 
 
 async def collect(monitor: Monitor, frames: int) -> list[tuple[str | None, str | None, int]]:

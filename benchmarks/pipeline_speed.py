@@ -28,7 +28,7 @@ from _timing import best_of
 from texsense import Layout, Recording
 from texsense.calibration import MatCalibration
 from texsense.pipeline import Pipeline
-from texsense.sim.seated import seat_calibration
+from texsense.workflows import seat_calibration
 
 
 def copy_rate(shape: tuple[int, int]) -> float:

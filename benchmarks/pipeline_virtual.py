@@ -22,7 +22,7 @@ from texsense.repair import Repair
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.sim.seated import seat_calibration
+from texsense.workflows import seat_calibration
 
 
 def calibrate(seed: int = 5) -> MatCalibration:

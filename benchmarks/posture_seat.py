@@ -33,7 +33,8 @@ from texsense.posture.study import (
     sensor_hysteresis_model,
     study_tables,
 )
-from texsense.sim.seated import Subject, seat_calibration, simulate_session
+from texsense.sim.seated import Subject, simulate_session
+from texsense.workflows import seat_calibration
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 SUBJECTS = 9

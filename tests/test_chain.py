@@ -13,7 +13,7 @@ from texsense.health import FailureDetector
 from texsense.pipeline import Pipeline
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.sim.seated import seat_calibration
+from texsense.workflows import seat_calibration
 
 
 @pytest.fixture(scope="module")

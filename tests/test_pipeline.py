@@ -14,6 +14,7 @@ from texsense.repair import METHODS, Repair
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
+from texsense.workflows import calibrate_mat, material_record
 
 
 @pytest.fixture(scope="module")
@@ -25,12 +26,8 @@ def mat_setup():
     base = cal_mat.scan(np.arange(8) * ft, np.zeros((8, n))).capacitance
     uni = cal_mat.scan((8 + np.arange(8)) * ft, np.full((8, n), 1.0)).capacitance
     m = protocols.run_protocol("calibration", "textile-3mm", seed=9, sample_hz=None)
-    material = {
-        "compression_mm": m.labels["compression_mm"],
-        "capacitance_pF": m.frames[:, 0].astype(float),
-        "pressure_ncm2": m.labels["pressure_ncm2"],
-    }
-    cal = MatCalibration.fit(material, base, uni, 1.0, 3.0)
+    material = material_record(m)
+    cal = calibrate_mat(material, base, uni, 1.0, 3.0)
     session = VirtualMat.prototype(16, "textile-3mm", seed=4, failures=FailureModel())
     times = np.arange(120) * ft
     load = 1.5 + np.sin(times / 4.0)[:, None] * np.linspace(0.2, 1.0, n)[None, :]

@@ -92,6 +92,8 @@ class Pipeline:
         self._repair = Repair(layout, repair) if repair in _GLOBAL_REPAIRS else None
         self._chain = self._build_chain()
         self._last_t: float | None = None
+        self._dt1 = np.zeros(1)
+        self._all_valid = np.ones(layout.n_elements, bool)
         self.codes_: np.ndarray | None = None
 
     def _build_chain(self) -> Chain:
@@ -199,15 +201,29 @@ class Pipeline:
     ) -> tuple[np.ndarray, np.ndarray]:
         """One frame of capacitance (N,) at ``time_s`` -> pressure (N,) and the mask of
         measured (not repaired) elements."""
-        c = np.asarray(frame_pF, dtype=np.float64).reshape(1, -1)
-        v = np.ones(c.shape, bool) if valid is None else np.asarray(valid, bool).reshape(1, -1)
-        if c.shape[1] != self.layout.n_elements:
-            raise ParameterError(
-                f"expected a frame of {self.layout.n_elements} elements, got {c.shape[1]}"
-            )
-        p, ok, codes = self._process(c, v, np.array([time_s], dtype=np.float64))
+        n = self.layout.n_elements
+        c = np.ascontiguousarray(frame_pF, dtype=np.float64)
+        if c.shape != (n,):
+            raise ParameterError(f"expected a frame of {n} elements, got shape {c.shape}")
+        if valid is None:
+            v = self._all_valid
+        else:
+            v = np.ascontiguousarray(valid, dtype=bool)
+            if v.shape != (n,):
+                raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
+        t = float(time_s)
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        if not dt >= 0:
+            raise ParameterError("frame times must not decrease")
+        self._dt1[0] = dt
+        # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
+        p, codes = self._chain.run(self._dt1, c.reshape(1, n), v.reshape(1, n))
+        self._last_t = t
         self.codes_ = codes[0]
-        return p[0], ok[0]
+        ok = self.codes_ == 0
+        if self._repair is not None:
+            p[0], _ = self._repair.step(p[0], ok)
+        return p[0], ok
 
     def run(self, rec: Recording) -> Recording:
         """A capacitance recording -> a pressure recording (N/cm²) with the validity mask

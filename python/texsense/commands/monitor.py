@@ -138,7 +138,7 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
 
     kind, _, rest = args.source.partition(":")
     if kind == "virtual":
-        from texsense.sim.seated import seat_calibration
+        from texsense.workflows import seat_calibration
 
         return sources.VirtualSeatSource(speed=args.speed), seat_calibration()
     if kind == "replay":

@@ -86,31 +86,29 @@ def _capacitance(path: Path):  # type: ignore[no-untyped-def]
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate mat``."""
-    from texsense.calibration import MatCalibration
     from texsense.io.columns_csv import read_columns_csv
+    from texsense.workflows import calibrate_mat
 
     material = read_columns_csv(
         args.material, required=("compression_mm", "capacitance_pF", "pressure_ncm2")
     )
-    cal = MatCalibration.fit(
+    steps = None
+    if args.drift:
+        from texsense.commands.drift import load_steps
+
+        steps = load_steps(args.drift)
+    cal = calibrate_mat(
         material,
         _capacitance(args.baseline),
         _capacitance(args.uniform),
         args.pressure,
         args.thickness_mm,
-    )
-    if args.drift:
-        from texsense.commands.drift import load_steps
-        from texsense.drift import DriftModel
-
-        drift, _ = DriftModel.fit(load_steps(args.drift))
-        cal.model.with_drift(drift)
-    cal.provenance.update(
-        {
+        steps=steps,
+        provenance={
             "material": str(args.material),
             "baseline": str(args.baseline),
             "uniform": str(args.uniform),
-        }
+        },
     )
     cal.save(args.output)
     print(

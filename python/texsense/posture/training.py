@@ -29,7 +29,8 @@ def train_virtual_seat_model(
 
     from texsense.pipeline import Pipeline
     from texsense.posture.evaluate import make_classifier
-    from texsense.sim.seated import POSTURES, Subject, seat_calibration, simulate_session
+    from texsense.sim.seated import POSTURES, Subject, simulate_session
+    from texsense.workflows import seat_calibration
 
     cal = seat_calibration()
     frames, labels = [], []

@@ -38,8 +38,7 @@ from texsense.recording import Recording
 from texsense.sim.failures import FailureModel
 
 if TYPE_CHECKING:
-    from texsense.calibration import MatCalibration
-    from texsense.sim.mat import VirtualMat
+    pass
 
 __all__ = [
     "LEANING_BACK",
@@ -48,9 +47,7 @@ __all__ = [
     "SeatSession",
     "Subject",
     "back_pressure",
-    "calibrate_virtual_mat",
     "posture_pressure",
-    "seat_calibration",
     "simulate_session",
 ]
 
@@ -316,41 +313,3 @@ def simulate_session(
         ),
         reference_back=ref_back,
     )
-
-
-def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> MatCalibration:
-    """Calibrate the virtual seat as a user would (docs/pipeline.md): zeroing + 1 N/cm²
-    equilibration of a mat with the same ``mat_seed`` (the same elements), the spacer model
-    from a test-machine record of another specimen (``material_seed``) with γ from its held
-    steps."""
-    from texsense.sim.mat import VirtualMat
-
-    return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
-
-
-def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> MatCalibration:
-    """Calibrate a virtual mat (textile-3mm spacer) as a user would: zeroing and 1 N/cm²
-    equilibration scanned on ``mat`` (pass a fresh mat with the same seed as the one to be
-    used: the scans load it), the spacer model from a test-machine record of another
-    specimen (``material_seed``) with γ from its held steps."""
-    from texsense.calibration import MatCalibration
-    from texsense.drift import DriftModel, split_steps
-    from texsense.sim import protocols
-
-    n = mat.layout.n_elements
-    ft = mat.cdc.frame_time_s(n)
-    base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance
-    uni = mat.scan((11 + np.arange(10)) * ft, np.full((10, n), 1.0)).capacitance
-    m = protocols.run_protocol("calibration", "textile-3mm", seed=material_seed, sample_hz=None)
-    material = {
-        "compression_mm": m.labels["compression_mm"],
-        "capacitance_pF": m.frames[:, 0].astype(float),
-        "pressure_ncm2": m.labels["pressure_ncm2"],
-    }
-    cal = MatCalibration.fit(material, base, uni, 1.0, 3.0)
-    st = protocols.run_protocol("steps", "textile-3mm", seed=material_seed, sample_hz=10)
-    drift, _ = DriftModel.fit(
-        split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
-    )
-    cal.model.with_drift(drift)
-    return cal

@@ -1,0 +1,95 @@
+"""Workflows that build a mat calibration, in one place (docs/pipeline.md):
+
+- :func:`calibrate_mat`: a mat from its recordings, as ``texsense calibrate mat`` does —
+  the material curve and spacer model from a test-machine record, zeroing and equilibration
+  from two mat recordings, and optionally a drift stage from step-and-hold records;
+- :func:`calibrate_virtual_mat` and :func:`seat_calibration`: the virtual mats of the
+  simulator calibrated the same way, as a user would calibrate them.
+
+The simulator (:mod:`texsense.sim`) knows nothing of calibration or compensation: it is the
+ground truth that these workflows and the compensation are graded against.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from texsense.calibration import MatCalibration
+from texsense.recording import Recording
+
+if TYPE_CHECKING:
+    from texsense.drift import Step
+    from texsense.sim.mat import VirtualMat
+
+__all__ = ["calibrate_mat", "calibrate_virtual_mat", "material_record", "seat_calibration"]
+
+
+def calibrate_mat(
+    material: Mapping[str, np.ndarray],
+    baseline: Recording,
+    uniform: Recording,
+    uniform_pressure_ncm2: float,
+    thickness_mm: float,
+    *,
+    steps: Sequence[Step] | None = None,
+    provenance: Mapping[str, Any] | None = None,
+) -> MatCalibration:
+    """Calibrate a mat: :meth:`MatCalibration.fit` (eq. 2.1 per element, spacer model from
+    ``material``), then the drift stage of eq. 5.8 identified on held ``steps`` if given."""
+    cal = MatCalibration.fit(dict(material), baseline, uniform, uniform_pressure_ncm2, thickness_mm)
+    if steps is not None:
+        from texsense.drift import DriftModel
+
+        drift, _ = DriftModel.fit(list(steps))
+        cal.model.with_drift(drift)
+    cal.provenance.update(provenance or {})
+    return cal
+
+
+def material_record(rec: Recording) -> dict[str, np.ndarray]:
+    """The material record of one element from a simulated test-machine recording
+    (``texsense simulate``): compression, capacitance and pressure columns."""
+    return {
+        "compression_mm": np.asarray(rec.labels["compression_mm"], dtype=np.float64),
+        "capacitance_pF": rec.frames[:, 0].astype(np.float64),
+        "pressure_ncm2": np.asarray(rec.labels["pressure_ncm2"], dtype=np.float64),
+    }
+
+
+def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> MatCalibration:
+    """Calibrate a virtual mat (textile-3mm spacer) as a user would: zeroing and 1 N/cm²
+    equilibration scanned on ``mat`` (pass a fresh mat with the same seed as the one to be
+    used: the scans load it), the spacer model from a test-machine record of another
+    specimen (``material_seed``) with γ from its held steps."""
+    from texsense.drift import split_steps
+    from texsense.sim import protocols
+
+    n = mat.layout.n_elements
+    ft = mat.cdc.frame_time_s(n)
+    base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance
+    uni = mat.scan((11 + np.arange(10)) * ft, np.full((10, n), 1.0)).capacitance
+    m = protocols.run_protocol("calibration", "textile-3mm", seed=material_seed, sample_hz=None)
+    st = protocols.run_protocol("steps", "textile-3mm", seed=material_seed, sample_hz=10)
+    steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
+    return calibrate_mat(
+        material_record(m),
+        base,
+        uni,
+        1.0,
+        3.0,
+        steps=steps,
+        provenance={"virtual_mat": mat.layout.n_elements, "material_seed": material_seed},
+    )
+
+
+def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> MatCalibration:
+    """Calibrate the virtual seat as a user would (docs/pipeline.md): zeroing + 1 N/cm²
+    equilibration of a mat with the same ``mat_seed`` (the same elements), the spacer model
+    from a test-machine record of another specimen (``material_seed``) with γ from its held
+    steps."""
+    from texsense.sim.mat import VirtualMat
+
+    return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
