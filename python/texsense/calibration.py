@@ -43,7 +43,15 @@ import numpy.typing as npt
 from texsense.exceptions import FormatError, ParameterError
 from texsense.recording import Recording
 
-__all__ = ["CALIBRATION_FORMAT", "MatCalibration", "material_curve", "rising_compression"]
+__all__ = [
+    "CALIBRATION_FORMAT",
+    "LinearCalibration",
+    "MatCalibration",
+    "calibration_from_dict",
+    "load_calibration",
+    "material_curve",
+    "rising_compression",
+]
 
 CALIBRATION_FORMAT = "texsense.calibration"
 CALIBRATION_VERSION = 1
@@ -282,13 +290,10 @@ class MatCalibration:
     @classmethod
     def from_dict(cls, d: Any, source: str | Path = "<dict>") -> MatCalibration:
         """Inverse of :meth:`to_dict`; every problem raises :class:`FormatError` naming it."""
-        if not isinstance(d, dict) or d.get("format") != CALIBRATION_FORMAT:
-            raise FormatError(source, f"not a {CALIBRATION_FORMAT} file (no 'format' field)")
-        if d.get("version") != CALIBRATION_VERSION:
+        _check_envelope(d, source)
+        if d.get("kind", "mat") != "mat":
             raise FormatError(
-                source,
-                f"calibration version {d.get('version')!r}; this texsense reads version "
-                f"{CALIBRATION_VERSION}",
+                source, f"a {d.get('kind')!r} calibration: read it with load_calibration"
             )
         try:
             model = None
@@ -324,6 +329,8 @@ class MatCalibration:
         path = Path(path)
         try:
             d = json.loads(path.read_text(encoding="utf-8"))
+        except UnicodeDecodeError:
+            raise FormatError(path, "not JSON: a binary file, not a calibration") from None
         except json.JSONDecodeError as e:
             raise FormatError(path, f"not JSON: {e.msg}", line=e.lineno) from None
         return cls.from_dict(d, path)
@@ -341,3 +348,170 @@ def _mean_reading(rec: Recording, name: str) -> np.ndarray:
             f"{name} recording"
         )
     return m
+
+
+@dataclass
+class LinearCalibration:
+    """A mat with a static per-element calibration and no spacer model:
+    ``value = (reading - offset_i) / gain_i``.
+
+    For mats whose readings are already (nearly) linear in pressure — resistive mats such as
+    the Vista FSA of the PhysioNet PMD data, or any mat whose vendor calibration is trusted —
+    and for reprocessing archives where only failure detection and repair are wanted: with
+    offset 0 and gain 1 (:meth:`identity`) the values keep their units. Failure detection on
+    such readings uses the tests that do not need an unloaded level: not a number, beyond
+    ``full_scale`` (out of range), stuck while the neighbours move; a reading of 0 is a mat
+    without load, not a short.
+
+    The file is the calibration JSON (``"format": "texsense.calibration"``, version 1) with
+    ``"kind": "linear"``; :func:`load_calibration` reads either kind.
+    """
+
+    offset: np.ndarray
+    gain: np.ndarray
+    input_quantity: str
+    input_unit: str
+    output_quantity: str
+    output_unit: str
+    full_scale: float | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def identity(
+        cls,
+        n_elements: int,
+        quantity: str,
+        unit: str,
+        full_scale: float | None = None,
+        provenance: dict[str, Any] | None = None,
+    ) -> LinearCalibration:
+        """Values unchanged (offset 0, gain 1): detection and repair only."""
+        cal = cls(
+            np.zeros(n_elements), np.ones(n_elements), quantity, unit, quantity, unit,
+            full_scale, dict(provenance or {}),
+        )  # fmt: skip
+        cal.check()
+        return cal
+
+    def check(self) -> None:
+        """Raise :class:`ParameterError` when the numbers cannot describe a mat."""
+        from texsense import units
+        from texsense.recording import QUANTITIES
+
+        self.offset = np.asarray(self.offset, dtype=np.float64)
+        self.gain = np.asarray(self.gain, dtype=np.float64)
+        if self.offset.ndim != 1 or self.offset.shape != self.gain.shape or not self.gain.size:
+            raise ParameterError("offset and gain need one entry per element")
+        if not np.all(np.isfinite(self.offset)) or not np.all(self.gain > 0):
+            raise ParameterError("offsets must be finite and gains > 0 for every element")
+        for q, u in (
+            (self.input_quantity, self.input_unit),
+            (self.output_quantity, self.output_unit),
+        ):
+            if q not in QUANTITIES or units.quantity_of(units.canonical(u)) != QUANTITIES[q]:
+                raise ParameterError(f"unit {u!r} does not measure {q!r}")
+        if self.full_scale is not None and not np.isfinite(self.full_scale):
+            raise ParameterError(f"full_scale must be a number, got {self.full_scale}")
+
+    @property
+    def n_elements(self) -> int:
+        """Number of elements of the mat."""
+        return int(self.gain.size)
+
+    def _body(self) -> dict[str, Any]:
+        return {
+            "kind": "linear",
+            "input": {"quantity": self.input_quantity, "unit": self.input_unit},
+            "output": {"quantity": self.output_quantity, "unit": self.output_unit},
+            "full_scale": self.full_scale,
+            "elements": {"offset": self.offset.tolist(), "gain": self.gain.tolist()},
+        }
+
+    @property
+    def id(self) -> str:
+        """Content hash: changes whenever any number of the calibration does."""
+        body = json.dumps(self._body(), sort_keys=True).encode()
+        return hashlib.sha256(body).hexdigest()[:16]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The versioned, JSON-able description."""
+        from texsense import __version__
+
+        return {
+            "format": CALIBRATION_FORMAT,
+            "version": CALIBRATION_VERSION,
+            "id": self.id,
+            "software": f"texsense {__version__}",
+            "provenance": self.provenance,
+            **self._body(),
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the calibration file (JSON)."""
+        path = Path(path)
+        path.write_text(json.dumps(self.to_dict(), indent=1), encoding="utf-8")
+        return path
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str | Path = "<dict>") -> LinearCalibration:
+        """Inverse of :meth:`to_dict`; every problem raises :class:`FormatError` naming it."""
+        _check_envelope(d, source)
+        try:
+            cal = cls(
+                np.asarray(d["elements"]["offset"], dtype=np.float64),
+                np.asarray(d["elements"]["gain"], dtype=np.float64),
+                str(d["input"]["quantity"]),
+                str(d["input"]["unit"]),
+                str(d["output"]["quantity"]),
+                str(d["output"]["unit"]),
+                None if d.get("full_scale") is None else float(d["full_scale"]),
+                d.get("provenance", {}),
+            )
+            cal.check()
+        except KeyError as e:
+            raise FormatError(source, f"missing field {e}") from None
+        except (TypeError, ValueError, ParameterError) as e:
+            raise FormatError(source, f"bad value: {e}") from None
+        if "id" in d and d["id"] != cal.id:
+            raise FormatError(
+                source, f"id {d['id']} does not match the content ({cal.id}): edited or damaged"
+            )
+        return cal
+
+
+def _check_envelope(d: Any, source: str | Path) -> None:
+    if not isinstance(d, dict) or d.get("format") != CALIBRATION_FORMAT:
+        raise FormatError(source, f"not a {CALIBRATION_FORMAT} file (no 'format' field)")
+    if d.get("version") != CALIBRATION_VERSION:
+        raise FormatError(
+            source,
+            f"calibration version {d.get('version')!r}; this texsense reads version "
+            f"{CALIBRATION_VERSION}",
+        )
+
+
+def calibration_from_dict(
+    d: Any, source: str | Path = "<dict>"
+) -> MatCalibration | LinearCalibration:
+    """A calibration of either kind from its JSON description."""
+    _check_envelope(d, source)
+    kind = d.get("kind", "mat")
+    if kind == "linear":
+        return LinearCalibration.from_dict(d, source)
+    if kind != "mat":
+        raise FormatError(source, f"unknown calibration kind {kind!r} (known: mat, linear)")
+    return MatCalibration.from_dict(d, source)
+
+
+def load_calibration(path: str | Path) -> MatCalibration | LinearCalibration:
+    """Read a calibration file of either kind (``mat`` or ``linear``)."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise FormatError(path, f"cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not JSON: a binary file, not a calibration") from None
+    except json.JSONDecodeError as e:
+        raise FormatError(path, f"not JSON: {e.msg}", line=e.lineno) from None
+    return calibration_from_dict(d, path)

@@ -9,7 +9,9 @@ breaks it. :class:`FailureDetector` flags, frame by frame (streaming) or over a 
 - ``out of range``: the converter saturated (``valid`` False in the input), or a reading
   beyond ``high_share`` times the largest capacitance the calibration expects;
 - ``stuck``: no change larger than ``stuck_pF`` for ``stuck_frames`` frames while the
-  median 4-neighbour changed by more than ``neighbour_change_pF`` meanwhile;
+  median 4-neighbour changed by more than ``neighbour_change_pF`` meanwhile (readings at or
+  below ``stuck_floor_pF`` are never stuck: on a mat that reads 0 without load, an unloaded
+  element holds still legitimately);
 - ``jump``: a change between two frames larger than ``jump_share`` of the element's span
   (unloaded to fully compressed) — faster than a body on a seat can move the spacer.
 
@@ -60,6 +62,7 @@ class FailureDetector:
     stuck_frames: int = 20
     stuck_pF: float = 1e-4
     neighbour_change_pF: float = 0.05
+    stuck_floor_pF: float = -np.inf
     jump_share: float = 0.6
     jump_pF: float = 2.0
 
@@ -90,6 +93,7 @@ class FailureDetector:
             int(self.stuck_frames),
             self.stuck_pF,
             self.neighbour_change_pF,
+            float(self.stuck_floor_pF),
         )
 
     def reset(self) -> FailureDetector:

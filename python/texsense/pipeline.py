@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense._core import Chain
-from texsense.calibration import MatCalibration
+from texsense.calibration import LinearCalibration, MatCalibration
 from texsense.exceptions import ParameterError
 from texsense.health import FailureDetector
 from texsense.layout import Layout
@@ -60,7 +60,7 @@ class Pipeline:
 
     def __init__(
         self,
-        calibration: MatCalibration,
+        calibration: MatCalibration | LinearCalibration,
         layout: Layout,
         *,
         detect: bool = True,
@@ -74,19 +74,23 @@ class Pipeline:
                 f"the calibration is for {calibration.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
             )
-        model = calibration.model
-        if model is None:
+        linear = isinstance(calibration, LinearCalibration)
+        model = None if linear else calibration.model
+        if not linear and model is None:
             raise ParameterError("the calibration has no spacer model (compression -> pressure)")
         if repair is not None and repair not in METHODS:
             raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
+        if linear:
+            hysteresis = drift = False  # a linear calibration has no spacer model
         if drift and hysteresis and getattr(model, "drift_", None) is None:
             drift = False  # nothing to apply: recorded in the provenance
         self.calibration = calibration
         self.layout = layout
         self.stages = {"detect": detect, "hysteresis": hysteresis, "drift": drift}
         self.repair_method = repair
-        lo, hi = calibration.expected_range_pF()
-        self.detector = detector or FailureDetector(layout, baseline_pF=lo, max_pF=hi)
+        if detector is None:
+            detector = _default_detector(calibration, layout)
+        self.detector = detector
         # the harmonic methods solve a sparse system per frame (scipy); the others run in
         # the compiled chain
         self._repair = Repair(layout, repair) if repair in _GLOBAL_REPAIRS else None
@@ -96,19 +100,47 @@ class Pipeline:
         self._all_valid = np.ones(layout.n_elements, bool)
         self.codes_: np.ndarray | None = None
 
+    @property
+    def input_quantity(self) -> tuple[str, str]:
+        """(quantity, unit) of the readings the pipeline takes."""
+        cal = self.calibration
+        if isinstance(cal, LinearCalibration):
+            return cal.input_quantity, cal.input_unit
+        return "capacitance", "pF"
+
+    @property
+    def output_quantity(self) -> tuple[str, str]:
+        """(quantity, unit) of the values the pipeline gives."""
+        cal = self.calibration
+        if isinstance(cal, LinearCalibration):
+            return cal.output_quantity, cal.output_unit
+        return "pressure", "N/cm2"
+
     def _build_chain(self) -> Chain:
-        cal, model = self.calibration, self.calibration.model
+        cal = self.calibration
         c = np.ascontiguousarray
-        if self.stages["hysteresis"]:
-            response = {
-                "compensation": model.compensation(
-                    self.layout.n_elements, drift=self.stages["drift"]
-                )
-            }
+        detector = self.detector.core if self.stages["detect"] else None
+        if isinstance(cal, LinearCalibration):
+            conversion: dict[str, Any] = {}
+            response: dict[str, Any] = {}
+            offset, gain = cal.offset, cal.gain
         else:
-            e = np.linspace(model.u_min_, model.u_max_, 400)
-            p = np.maximum.accumulate(model.predict(e))
-            response = {"loading": (c(e), c(p, dtype=np.float64))}
+            model = cal.model
+            conversion = {
+                "curve_capacitance_pf": c(cal.curve_capacitance_pF, dtype=np.float64),
+                "curve_compression_mm": c(cal.curve_compression_mm, dtype=np.float64),
+            }
+            offset, gain = cal.offset_pF, cal.gain
+            if self.stages["hysteresis"]:
+                response = {
+                    "compensation": model.compensation(
+                        self.layout.n_elements, drift=self.stages["drift"]
+                    )
+                }
+            else:
+                e = np.linspace(model.u_min_, model.u_max_, 400)
+                p = np.maximum.accumulate(model.predict(e))
+                response = {"loading": (c(e), c(p, dtype=np.float64))}
         method = self.repair_method
         graph: dict[str, Any] = {}
         if method == "neighbour-mean":
@@ -124,11 +156,10 @@ class Pipeline:
             method = "weighted"
         local = "none" if method is None or method in _GLOBAL_REPAIRS else method
         return Chain(
-            c(cal.offset_pF, dtype=np.float64),
-            c(cal.gain, dtype=np.float64),
-            c(cal.curve_capacitance_pF, dtype=np.float64),
-            c(cal.curve_compression_mm, dtype=np.float64),
-            detector=self.detector.core if self.stages["detect"] else None,
+            c(offset, dtype=np.float64),
+            c(gain, dtype=np.float64),
+            **conversion,
+            detector=detector,
             repair=local,
             **response,
             **graph,
@@ -155,7 +186,7 @@ class Pipeline:
             "calibration_id": self.calibration.id,
             "software": f"texsense {__version__}",
             "stages": [k for k, v in self.stages.items() if v]
-            + ["convert"]
+            + ["convert" if isinstance(self.calibration, MatCalibration) else "convert:linear"]
             + ([f"repair:{self.repair_method}"] if self.repair_method else []),
         }
 
@@ -229,19 +260,46 @@ class Pipeline:
         """A capacitance recording -> a pressure recording (N/cm²) with the validity mask
         (False where a value was repaired or is missing), the failure codes in ``codes_``
         and the provenance in ``meta``."""
-        if rec.quantity != "capacitance":
-            raise ParameterError(f"the pipeline reads capacitance, not {rec.quantity}")
+        quantity, unit = self.input_quantity
+        if rec.quantity != quantity:
+            raise ParameterError(f"the pipeline reads {quantity}, not {rec.quantity}")
         if rec.n_elements != self.layout.n_elements:
             raise ParameterError(
                 f"the recording has {rec.n_elements} elements, the pipeline "
                 f"{self.layout.n_elements}"
             )
-        cap = rec.to_unit("pF").frames if rec.unit != "pF" else rec.frames
+        values = rec.to_unit(unit).frames if rec.unit != unit else rec.frames
         p, ok, codes = self._process(
-            np.ascontiguousarray(cap, dtype=np.float64),
+            np.ascontiguousarray(values, dtype=np.float64),
             np.ascontiguousarray(rec.valid, dtype=bool),
             np.asarray(rec.times, np.float64),
         )
         self.codes_ = codes
         meta = {**rec.meta, **self.provenance()}
-        return rec._with(frames=p, valid=ok, quantity="pressure", unit="N/cm2", meta=meta)
+        out_quantity, out_unit = self.output_quantity
+        return rec._with(frames=p, valid=ok, quantity=out_quantity, unit=out_unit, meta=meta)
+
+
+def _default_detector(
+    calibration: MatCalibration | LinearCalibration, layout: Layout
+) -> FailureDetector:
+    """The detector a calibration implies: with a mat calibration, the expected capacitance
+    range per element; with a linear one, only the tests that need no unloaded level (a 0
+    reading is an unloaded mat there, not a short), the jump test off, and readings within
+    1 % of full scale of the offset never stuck (low readings of an integer-count mat hold
+    still at rest)."""
+    if isinstance(calibration, LinearCalibration):
+        top, floor = None, float(np.max(calibration.offset))
+        if calibration.full_scale is not None:
+            top = np.full(layout.n_elements, float(calibration.full_scale))
+            floor += 0.01 * float(calibration.full_scale)
+        return FailureDetector(
+            layout,
+            max_pF=top,
+            high_share=1.0,
+            min_pF=-np.inf,
+            jump_pF=np.inf,
+            stuck_floor_pF=floor,
+        )
+    lo, hi = calibration.expected_range_pF()
+    return FailureDetector(layout, baseline_pF=lo, max_pF=hi)

@@ -35,8 +35,7 @@ def test_sim_imports_only_the_data_model_and_sensor():
     bad = {
         name: files
         for name, files in seen.items()
-        if name not in ALLOWED
-        and not name.startswith(("texsense.sim", "texsense.sensor"))
+        if name not in ALLOWED and not name.startswith(("texsense.sim", "texsense.sensor"))
     }
     assert not bad, f"texsense.sim imports {bad}"
     assert any(name.startswith("texsense.sim.") for name in seen)  # the walk saw imports

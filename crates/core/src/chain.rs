@@ -112,18 +112,19 @@ impl Curve {
 }
 
 /// Capacitance -> compression per element (eq. 2.1): `C_ref = (C - offset_i) / gain_i`,
-/// then the material curve from `C_ref` to the compression.
+/// then the material curve from `C_ref` to the compression (or, without a curve, the
+/// reading scaled per element: a linear calibration).
 #[derive(Debug, Clone)]
 pub struct Converter {
     offset: Vec<f64>,
     gain: Vec<f64>,
-    curve: Curve,
+    curve: Option<Curve>,
 }
 
 impl Converter {
     /// Per-element offsets and gains (> 0) and the curve from reference capacitance to
-    /// compression.
-    pub fn new(offset: Vec<f64>, gain: Vec<f64>, curve: Curve) -> Result<Self, CoreError> {
+    /// compression (None: the scaled reading itself).
+    pub fn new(offset: Vec<f64>, gain: Vec<f64>, curve: Option<Curve>) -> Result<Self, CoreError> {
         check_len("gain", gain.len(), offset.len())?;
         if gain.iter().any(|g| g.is_nan() || *g <= 0.0) || offset.iter().any(|o| !o.is_finite()) {
             return Err(CoreError::Parameter {
@@ -146,6 +147,8 @@ pub enum Response {
     Compensation(Compensation),
     /// The first-loading curve (what an uncompensated system does).
     Loading(Curve),
+    /// The converted value itself (a linear calibration: no spacer model).
+    Direct,
 }
 
 /// The local repair methods.
@@ -245,7 +248,7 @@ impl Chain {
     pub fn state_bytes_per_element(&self) -> usize {
         let response = match &self.response {
             Response::Compensation(c) => c.state_bytes_per_element(),
-            Response::Loading(_) => 0,
+            Response::Loading(_) | Response::Direct => 0,
         };
         std::mem::size_of::<ChainElement>()
             + 2 * std::mem::size_of::<f64>() // offset, gain
@@ -301,7 +304,13 @@ impl Chain {
         let n = self.len();
         let conv = &self.converter;
         let cols = Columns::new(out);
-        let compression = |i: usize, c: f64| conv.curve.at((c - conv.offset[i]) / conv.gain[i]);
+        let compression = |i: usize, c: f64| {
+            let scaled = (c - conv.offset[i]) / conv.gain[i];
+            match &conv.curve {
+                Some(curve) => curve.at(scaled),
+                None => scaled,
+            }
+        };
         let size = block_size(n);
         match &mut self.response {
             Response::Compensation(comp) => {
@@ -330,15 +339,19 @@ impl Chain {
                     blocks.into_iter().enumerate().for_each(work);
                 }
             }
-            Response::Loading(curve) => {
-                let curve = &*curve;
+            response @ (Response::Loading(_) | Response::Direct) => {
+                let curve = match &*response {
+                    Response::Loading(c) => Some(c),
+                    _ => None,
+                };
                 let work = |start: usize| {
                     let end = (start + size).min(n);
                     for r in 0..dt.len() {
                         for i in start..end {
                             let idx = r * n + i;
                             let v = if codes[idx] == code::OK {
-                                curve.at(compression(i, readings[idx]))
+                                let e = compression(i, readings[idx]);
+                                curve.map_or(e, |c| c.at(e))
                             } else {
                                 f64::NAN
                             };

@@ -2,7 +2,8 @@
 //!
 //! Per reading, in this order of precedence (the later wins):
 //! - `stuck` (3): no change larger than `stuck_pf` for `stuck_frames` frames while the median
-//!   change of the element's neighbours added up to more than `neighbour_change_pf`;
+//!   change of the element's neighbours added up to more than `neighbour_change_pf` (readings
+//!   at or below `stuck_floor_pf` are never stuck);
 //! - `jump` (4): a change larger than the element's jump limit between two readings;
 //! - `out of range` (2): flagged invalid by the converter, or beyond `high_share` times the
 //!   largest capacitance the calibration expects;
@@ -48,6 +49,9 @@ pub struct DetectorParams {
     pub stuck_pf: f64,
     /// The neighbours' accumulated median change that makes a still element stuck (pF).
     pub neighbour_change_pf: f64,
+    /// Readings at or below this never count as stuck (an unloaded element of a mat that
+    /// reads 0 without load holds still legitimately); minus infinity for capacitance.
+    pub stuck_floor_pf: f64,
 }
 
 /// Per-element detector state.
@@ -220,7 +224,8 @@ impl FailureDetector {
                     };
                     let d = delta[row + i];
                     let is_first = first[row + i];
-                    let still = d <= p.stuck_pf && !is_first;
+                    let c = readings[row + i];
+                    let still = d <= p.stuck_pf && !is_first && c > p.stuck_floor_pf;
                     if still {
                         el.still += 1;
                         el.moved += nb_move;
@@ -228,7 +233,6 @@ impl FailureDetector {
                         el.still = 0;
                         el.moved = 0.0;
                     }
-                    let c = readings[row + i];
                     let mut k = code::OK;
                     if el.still >= p.stuck_frames
                         && el.moved > p.neighbour_change_pf
@@ -309,6 +313,7 @@ mod tests {
             stuck_frames: 5,
             stuck_pf: 1e-4,
             neighbour_change_pf: 0.05,
+            stuck_floor_pf: f64::NEG_INFINITY,
         }
     }
 

@@ -716,7 +716,7 @@ struct PyFailureDetector {
 #[pymethods]
 impl PyFailureDetector {
     #[new]
-    #[pyo3(signature = (indptr, indices, jump_pf, baseline_pf, max_pf, min_pf, low_share, high_share, stuck_frames, stuck_pf, neighbour_change_pf))]
+    #[pyo3(signature = (indptr, indices, jump_pf, baseline_pf, max_pf, min_pf, low_share, high_share, stuck_frames, stuck_pf, neighbour_change_pf, stuck_floor_pf=f64::NEG_INFINITY))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         indptr: PyReadonlyArray1<'_, i64>,
@@ -730,6 +730,7 @@ impl PyFailureDetector {
         stuck_frames: u32,
         stuck_pf: f64,
         neighbour_change_pf: f64,
+        stuck_floor_pf: f64,
     ) -> PyResult<Self> {
         let params = DetectorParams {
             min_pf,
@@ -738,6 +739,7 @@ impl PyFailureDetector {
             stuck_frames,
             stuck_pf,
             neighbour_change_pf,
+            stuck_floor_pf,
         };
         let vec = |a: Option<PyReadonlyArray1<'_, f64>>| -> PyResult<Option<Vec<f64>>> {
             a.map(|a| Ok(a.as_slice()?.to_vec())).transpose()
@@ -796,13 +798,13 @@ impl PyChain {
     /// `repair`: "none", "zero", "last-value", "neighbour-mean" (needs indptr, indices) or
     /// "weighted" (needs indptr, indices and weights parallel to indices).
     #[new]
-    #[pyo3(signature = (offset_pf, gain, curve_capacitance_pf, curve_compression_mm, *, detector=None, compensation=None, loading=None, repair="none", indptr=None, indices=None, weights=None))]
+    #[pyo3(signature = (offset_pf, gain, curve_capacitance_pf=None, curve_compression_mm=None, *, detector=None, compensation=None, loading=None, repair="none", indptr=None, indices=None, weights=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         offset_pf: PyReadonlyArray1<'_, f64>,
         gain: PyReadonlyArray1<'_, f64>,
-        curve_capacitance_pf: PyReadonlyArray1<'_, f64>,
-        curve_compression_mm: PyReadonlyArray1<'_, f64>,
+        curve_capacitance_pf: Option<PyReadonlyArray1<'_, f64>>,
+        curve_compression_mm: Option<PyReadonlyArray1<'_, f64>>,
         detector: Option<PyRef<'_, PyFailureDetector>>,
         compensation: Option<PyRef<'_, PyCompensation>>,
         loading: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>,
@@ -811,11 +813,18 @@ impl PyChain {
         indices: Option<PyReadonlyArray1<'_, i64>>,
         weights: Option<PyReadonlyArray1<'_, f64>>,
     ) -> PyResult<Self> {
-        let curve = Curve::new(
-            curve_capacitance_pf.as_slice()?.to_vec(),
-            curve_compression_mm.as_slice()?.to_vec(),
-        )
-        .map_err(to_py)?;
+        let curve = match (curve_capacitance_pf, curve_compression_mm) {
+            (Some(c), Some(e)) => {
+                Some(Curve::new(c.as_slice()?.to_vec(), e.as_slice()?.to_vec()).map_err(to_py)?)
+            }
+            (None, None) => None,
+            _ => {
+                return Err(to_py(CoreError::Parameter {
+                    what: "chain",
+                    why: "give both curve arrays or neither".into(),
+                }))
+            }
+        };
         let converter = Converter::new(
             offset_pf.as_slice()?.to_vec(),
             gain.as_slice()?.to_vec(),
@@ -827,10 +836,11 @@ impl PyChain {
             (None, Some((e, p))) => Response::Loading(
                 Curve::new(e.as_slice()?.to_vec(), p.as_slice()?.to_vec()).map_err(to_py)?,
             ),
+            (None, None) => Response::Direct,
             _ => {
                 return Err(to_py(CoreError::Parameter {
                     what: "chain",
-                    why: "give exactly one of compensation and loading".into(),
+                    why: "give at most one of compensation and loading".into(),
                 }))
             }
         };

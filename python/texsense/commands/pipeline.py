@@ -1,15 +1,18 @@
-"""``texsense calibrate mat``, ``process``, ``repair`` and ``health``: raw capacitance to
-pressure maps (docs/pipeline.md)."""
+"""``texsense calibrate mat|linear``, ``process``, ``repair`` and ``health``: raw capacitance
+to pressure maps, one file or an archive (docs/pipeline.md)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from texsense.exceptions import FormatError
+from texsense.archive import ProcessOptions
+from texsense.exceptions import FormatError, ParameterError
 from texsense.io import load, save
 from texsense.repair import METHODS
 
@@ -40,17 +43,51 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     m.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
     m.set_defaults(run=run_calibrate)
 
+    lin = cs.add_parser(
+        "linear",
+        help="write a linear calibration (per-element offset and gain, no spacer model)",
+        description="A calibration value = (reading - offset) / gain for mats whose readings "
+        "are already linear in pressure (resistive mats, vendor-calibrated mats) or to "
+        "reprocess an archive with failure detection and repair only (the defaults: offset 0, "
+        "gain 1, values keep their unit).",
+    )
+    lin.add_argument("--like", type=Path, required=True, help="a recording of the mat")
+    lin.add_argument("--offset", type=float, default=0.0, help="reading at zero load")
+    lin.add_argument("--gain", type=float, default=1.0, help="reading units per output unit")
+    lin.add_argument(
+        "--to",
+        default=None,
+        metavar="QUANTITY:UNIT",
+        help="what the values become (e.g. pressure:N/cm2); default: the reading's own",
+    )
+    lin.add_argument("--full-scale", type=float, help="readings beyond it are out of range")
+    lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    lin.set_defaults(run=run_calibrate_linear)
+
     p = sub.add_parser(
         "process",
-        help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair)",
-        description="Run the whole pipeline over a capacitance recording.",
+        help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair); "
+        "one file, or a whole archive on Dask",
+        description="Run the whole pipeline over recordings. One file: processed block by "
+        "block (an HDF5 input and output keep the memory flat in the recording's length). "
+        "Several files, a folder or a glob pattern: one task per file on Dask (local worker "
+        "processes, or --scheduler ADDRESS), outputs mirrored into the -o folder; a second run "
+        "skips files whose output has the same calibration and input; a failed file is "
+        "reported at the end and the others go on.",
     )
-    p.add_argument("raw", type=Path, help="capacitance recording (HDF5 or any readable format)")
-    p.add_argument("--calibration", type=Path, required=True, help="mat calibration file")
-    p.add_argument("-o", "--output", type=Path, required=True, help="pressure recording")
+    p.add_argument(
+        "inputs", nargs="+", help="recording(s), folder(s) or glob pattern(s) (quote them)"
+    )
+    p.add_argument("--calibration", type=Path, required=True, help="calibration file")
+    p.add_argument(
+        "-o", "--output", type=Path, required=True, help="output file, or folder for an archive"
+    )
     p.add_argument("--repair", choices=(*METHODS, "none"), default="harmonic")
     p.add_argument("--no-hysteresis", action="store_true", help="first-loading curve only")
     p.add_argument("--no-drift", action="store_true", help="skip the drift stage")
+    p.add_argument("--chunk-frames", type=int, default=4096, help="frames per block (default 4096)")
+    p.add_argument("--scheduler", help="dask.distributed scheduler address (archives)")
+    p.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
     p.set_defaults(run=run_process)
 
     r = sub.add_parser(
@@ -119,25 +156,102 @@ def run_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_calibrate_linear(args: argparse.Namespace) -> int:
+    """Run ``texsense calibrate linear``."""
+    from texsense.calibration import LinearCalibration
+
+    rec = load(args.like)
+    quantity, unit = rec.quantity, rec.unit
+    if args.to is not None:
+        if ":" not in args.to:
+            raise ParameterError(f"--to wants QUANTITY:UNIT (e.g. pressure:N/cm2), got {args.to}")
+        quantity, unit = args.to.split(":", 1)
+    n = rec.n_elements
+    cal = LinearCalibration(
+        np.full(n, args.offset), np.full(n, args.gain), rec.quantity, rec.unit, quantity, unit,
+        args.full_scale, {"like": str(args.like)},
+    )  # fmt: skip
+    cal.check()
+    cal.save(args.output)
+    print(
+        f"wrote {args.output}: linear calibration of {n} elements, {rec.quantity} "
+        f"[{rec.unit}] -> {quantity} [{unit}], id {cal.id}"
+    )
+    return 0
+
+
+def _options(args: argparse.Namespace) -> ProcessOptions:
+    if args.chunk_frames < 1:
+        raise ParameterError(f"--chunk-frames must be >= 1, got {args.chunk_frames}")
+    return ProcessOptions(
+        repair=None if args.repair == "none" else args.repair,
+        hysteresis=not args.no_hysteresis,
+        drift=not args.no_drift,
+        chunk_frames=args.chunk_frames,
+    )
+
+
 def run_process(args: argparse.Namespace) -> int:
-    """Run ``texsense process``."""
-    from texsense.calibration import MatCalibration
+    """Run ``texsense process``: one file in blocks, or an archive on Dask."""
+    from texsense.archive import archive_jobs, process_archive, process_file
+    from texsense.calibration import load_calibration
+
+    options = _options(args)
+    single = (
+        len(args.inputs) == 1
+        and Path(args.inputs[0]).is_file()
+        and not args.output.is_dir()
+        and args.scheduler is None
+    )
+    if single:
+        src = Path(args.inputs[0])
+        cal = load_calibration(args.calibration)
+        if args.output.suffix.lower() in (".h5", ".hdf5"):
+            report = process_file(src, cal, args.output, options)
+            if report.status == "skipped":
+                print(f"{args.output} is up to date (same calibration {cal.id} and input)")
+            else:
+                print(
+                    f"wrote {args.output}: {report.frames} frames; "
+                    f"{report.failed_share:.1%} of readings failed"
+                )
+            return 0
+        return _process_in_memory(src, cal, args.output, options)
+    jobs, ignored = archive_jobs(args.inputs, args.output)
+    if ignored:
+        names = ", ".join(str(p) for p in ignored[:5]) + (" ..." if len(ignored) > 5 else "")
+        print(f"ignored {len(ignored)} file(s) that are not recordings: {names}")
+    reports = process_archive(
+        jobs, args.calibration, options, scheduler=args.scheduler, workers=args.workers
+    )
+    counts = {s: sum(r.status == s for r in reports) for s in ("done", "skipped", "failed")}
+    print(
+        f"{len(reports)} files -> {args.output}: {counts['done']} processed, "
+        f"{counts['skipped']} up to date, {counts['failed']} failed"
+    )
+    for r in reports:
+        if r.status == "failed":
+            print(f"  failed: {r.source}: {r.error}", file=sys.stderr)
+    return 1 if counts["failed"] else 0
+
+
+def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
+    """Any output format other than HDF5: the whole recording in memory."""
     from texsense.pipeline import Pipeline
 
-    cal = MatCalibration.load(args.calibration)
-    raw = _capacitance(args.raw)
+    raw = load(src)
     pipe = Pipeline(
         cal,
         raw.layout,
-        hysteresis=not args.no_hysteresis,
-        drift=not args.no_drift,
-        repair=None if args.repair == "none" else args.repair,
+        hysteresis=options.hysteresis,
+        drift=options.drift,
+        repair=options.repair,
     )
     out = pipe.run(raw)
-    save(out, args.output)
+    save(out, output)
     failed = pipe.codes_ > 0
     print(
-        f"wrote {args.output}: {out.n_frames} frames x {out.n_elements} elements, stages "
+        f"wrote {output}: {out.n_frames} frames x {out.n_elements} elements, stages "
         f"{', '.join(out.meta['stages'])}; {failed.mean():.1%} of readings failed, "
         f"{int(failed.any(axis=0).sum())} elements failed at least once"
     )

@@ -1,4 +1,5 @@
-"""``texsense simulate PROTOCOL``: run a test-machine protocol on the virtual sensor."""
+"""``texsense simulate PROTOCOL``: run a test-machine protocol on the virtual sensor;
+``texsense seat-sessions``: capacitance sessions of the virtual seat with its calibration."""
 
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--p3", type=float, help="upper pressure of cyclic compression, N/cm²")
     p.add_argument("--duration", type=float, help="duration, s")
     p.set_defaults(run=run)
+    register_sessions(sub)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -99,5 +101,51 @@ def run(args: argparse.Namespace) -> int:
         f"{args.protocol} on {args.spacer} (seed {args.seed}): {rec.n_frames} samples over "
         f"{rec.duration_s:.6g} s, pressure 0-{p.max():.3g} N/cm², capacitance "
         f"{rec.frames.min():.3f}-{rec.frames.max():.3f} pF"
+    )
+    return 0
+
+
+def register_sessions(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``seat-sessions`` command."""
+    p = sub.add_parser(
+        "seat-sessions",
+        help="write capacitance sessions of the virtual seat and its calibration",
+        description="Simulate subjects' sessions on the 96-element virtual seat (thesis §6.2: "
+        "the 16 postures in rounds, with the thesis's failure rates) and write each as a "
+        "capacitance recording (session-NNN.h5), with the seat's calibration "
+        "(calibration.json, made as a user would: zeroing, 1 N/cm² equilibration, spacer "
+        "model and drift from another specimen's test-machine records). Input for "
+        "'texsense process' on an archive.",
+    )
+    p.add_argument("-n", "--sessions", type=int, default=4, help="number of sessions")
+    p.add_argument("--rounds", type=int, default=1, help="posture rounds per session")
+    p.add_argument("--rest-s", type=float, default=60.0, help="unloaded rest before the last round")
+    p.add_argument("--mat-seed", type=int, default=5, help="the physical mat (same for all)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="folder to write")
+    p.set_defaults(run=run_sessions)
+
+
+def run_sessions(args: argparse.Namespace) -> int:
+    """Run ``texsense seat-sessions``."""
+    from texsense._progress import progress
+    from texsense.io import save
+    from texsense.sim.seated import Subject, simulate_session
+    from texsense.workflows import seat_calibration
+
+    if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
+        raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")
+    args.output.mkdir(parents=True, exist_ok=True)
+    cal = seat_calibration(mat_seed=args.mat_seed)
+    cal.save(args.output / "calibration.json")
+    frames = 0
+    for k in progress(range(args.sessions), total=args.sessions, desc="sessions", unit="file"):
+        s = simulate_session(
+            Subject.random(k), mat_seed=args.mat_seed, rounds=args.rounds, rest_s=args.rest_s
+        )
+        save(s.capacitance, args.output / f"session-{k + 1:03d}.h5")
+        frames += s.capacitance.n_frames
+    print(
+        f"wrote {args.sessions} sessions ({frames} frames of 96 elements) and "
+        f"calibration.json (id {cal.id}) to {args.output}"
     )
     return 0

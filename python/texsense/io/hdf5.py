@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,14 @@ from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "RecordingWriter", "read_hdf5", "write_hdf5"]
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "HDF5Chunks",
+    "RecordingWriter",
+    "read_hdf5",
+    "write_hdf5",
+]
 
 FORMAT_NAME = "texsense.recording"
 FORMAT_VERSION = 1
@@ -418,3 +426,97 @@ def read_hdf5(path: str | Path) -> Recording:
         labels=labels,
         meta=meta,
     )
+
+
+class HDF5Chunks:
+    """Read a texsense HDF5 recording a block of frames at a time (constant memory).
+
+    The header (layout, quantity, unit, meta, label names) is read on opening; iterating
+    yields :class:`Recording` blocks of at most ``frames`` frames. A file left open by an
+    interrupted writer is read whole by :func:`read_hdf5` instead (its recovery needs the
+    time stamps of every frame) and yielded in blocks.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from texsense import Layout, Recording
+    >>> path = os.path.join(tempfile.mkdtemp(), "r.h5")
+    >>> _ = write_hdf5(Recording(np.ones((10, 4)), np.arange(10.0), Layout.grid(2, 2)), path)
+    >>> with HDF5Chunks(path, frames=4) as chunks:
+    ...     [block.n_frames for block in chunks]
+    [4, 4, 2]
+    """
+
+    def __init__(self, path: str | Path, frames: int = 4096) -> None:
+        if frames < 1:
+            raise ParameterError(f"frames per block must be >= 1, got {frames}")
+        self.path = Path(path)
+        self.frames = int(frames)
+        self._file = _open(self.path)
+        f = self._file
+        try:
+            if f.attrs.get("format") != FORMAT_NAME:
+                raise FormatError(self.path, "HDF5 file is not a texsense recording")
+            if int(f.attrs.get("version", -1)) != FORMAT_VERSION:
+                raise FormatError(
+                    self.path, f"unknown texsense recording version {f.attrs.get('version')}"
+                )
+            self.layout = _read_layout(f["layout"])
+            self.quantity = str(f.attrs["quantity"])
+            self.unit = units.canonical(str(f.attrs["unit"]))
+            self.meta = json.loads(f.attrs.get("meta", "{}"))
+            self.label_names = sorted(f["labels"])
+            self.has_element_times = "element_times" in f
+            keys = ["frames", "times", "valid"] + (
+                ["element_times"] if self.has_element_times else []
+            )
+            sets = [f[k] for k in keys] + [f["labels"][k] for k in self.label_names]
+            self.n_frames = min(ds.shape[0] for ds in sets)
+            self._interrupted = bool(int(f.attrs.get("open", 0)))
+        except KeyError as e:
+            self.close()
+            raise FormatError(self.path, f"missing dataset or attribute: {e}") from None
+        except Exception:
+            self.close()
+            raise
+
+    def __iter__(self) -> Iterator[Recording]:
+        if self._interrupted:
+            whole = read_hdf5(self.path)
+            for a in range(0, whole.n_frames, self.frames):
+                yield whole.select(slice(a, a + self.frames))
+            return
+        f = self._file
+        for a in range(0, self.n_frames, self.frames):
+            b = min(self.n_frames, a + self.frames)
+            labels = {}
+            for name in self.label_names:
+                ds = f["labels"][name]
+                values = ds[a:b]
+                labels[name] = (
+                    np.array([v.decode() if isinstance(v, bytes) else v for v in values], dtype=str)
+                    if ds.dtype.kind == "O"
+                    else values
+                )
+            yield Recording(
+                f["frames"][a:b],
+                f["times"][a:b],
+                self.layout,
+                self.quantity,
+                self.unit,
+                valid=f["valid"][a:b],
+                element_times=f["element_times"][a:b] if self.has_element_times else None,
+                labels=labels,
+                meta=self.meta,
+            )
+
+    def close(self) -> None:
+        """Close the file."""
+        if self._file.id.valid:
+            self._file.close()
+
+    def __enter__(self) -> HDF5Chunks:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

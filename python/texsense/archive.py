@@ -1,0 +1,333 @@
+"""Processing recordings in constant memory, and whole archives of them on Dask
+(docs/pipeline.md, "Archives").
+
+- :func:`process_file`: one recording through the compiled pipeline a block of frames at a
+  time (HDF5 input is read block by block, so the peak memory does not grow with the
+  recording's length), written to a temporary name and renamed when complete. The output's
+  ``meta`` carries the calibration id and the SHA-256 of the input, so a second run skips a
+  file whose output is already there for the same calibration and input.
+- :func:`process_archive`: one task per file on a Dask cluster: local worker processes by
+  default (one thread each), or any ``dask.distributed`` scheduler. A file that fails is
+  reported at the end with its error and does not stop the others.
+
+Examples
+--------
+>>> from texsense.archive import archive_jobs
+>>> archive_jobs  # doctest: +ELLIPSIS
+<function archive_jobs at ...>
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from texsense.calibration import (
+    LinearCalibration,
+    MatCalibration,
+    calibration_from_dict,
+    load_calibration,
+)
+from texsense.exceptions import FormatError, ParameterError
+from texsense.recording import Recording
+
+__all__ = [
+    "FileReport",
+    "ProcessOptions",
+    "archive_jobs",
+    "input_hash",
+    "process_archive",
+    "process_file",
+]
+
+
+@dataclass(frozen=True)
+class ProcessOptions:
+    """Pipeline settings of a processing run (see :class:`texsense.pipeline.Pipeline`)."""
+
+    repair: str | None = "harmonic"
+    hysteresis: bool = True
+    drift: bool = True
+    chunk_frames: int = 4096
+
+
+@dataclass(frozen=True)
+class FileReport:
+    """What happened to one file: ``done``, ``skipped`` (output already there for the same
+    calibration and input) or ``failed`` (with the error)."""
+
+    source: str
+    output: str
+    status: str
+    frames: int = 0
+    failed_share: float = 0.0
+    error: str = ""
+
+
+def input_hash(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (read in 1 MiB blocks)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
+    """True when ``dst`` is a complete output of the same calibration and input."""
+    if not dst.is_file():
+        return False
+    import h5py
+
+    try:
+        with h5py.File(dst, "r") as f:
+            meta = json.loads(f.attrs.get("meta", "{}"))
+            complete = not int(f.attrs.get("open", 1))
+    except (OSError, ValueError):
+        return False
+    return (
+        complete
+        and meta.get("calibration_id") == calibration_id
+        and meta.get("input_sha256") == digest
+    )
+
+
+def _blocks(src: Path, frames: int) -> tuple[Recording, Iterator[Recording], Any]:
+    """The first block (for the header), an iterator over all blocks, and what to close."""
+    from texsense.io import load, sniff_format
+
+    if sniff_format(src) == "hdf5":
+        from texsense.io.hdf5 import HDF5Chunks
+
+        chunks = HDF5Chunks(src, frames=frames)
+        it = iter(chunks)
+        try:
+            first = next(it)
+        except StopIteration:
+            chunks.close()
+            raise FormatError(src, "the recording has no frames") from None
+        return first, _chain_first(first, it), chunks
+    rec = load(src)
+    if rec.n_frames == 0:
+        raise FormatError(src, "the recording has no frames")
+    it = (rec.select(slice(a, a + frames)) for a in range(0, rec.n_frames, frames))
+    first = next(it)
+    return first, _chain_first(first, it), None
+
+
+def _chain_first(first: Recording, rest: Iterator[Recording]) -> Iterator[Recording]:
+    yield first
+    yield from rest
+
+
+def process_file(
+    src: str | Path,
+    calibration: MatCalibration | LinearCalibration | str | Path,
+    dst: str | Path,
+    options: ProcessOptions | None = None,
+) -> FileReport:
+    """Process one recording block by block into ``dst`` (HDF5), atomically.
+
+    Skips the work (status ``skipped``) when ``dst`` already holds the output of the same
+    calibration for the same input bytes. Errors propagate; nothing is left at ``dst`` (nor
+    at its temporary name) by a run that fails.
+    """
+    from texsense.io.hdf5 import RecordingWriter
+    from texsense.pipeline import Pipeline
+
+    opts = options or ProcessOptions()
+    src, dst = Path(src), Path(dst)
+    cal = (
+        calibration
+        if isinstance(calibration, MatCalibration | LinearCalibration)
+        else load_calibration(calibration)
+    )
+    digest = input_hash(src)
+    if _output_matches(dst, cal.id, digest):
+        return FileReport(str(src), str(dst), "skipped")
+    first, blocks, closer = _blocks(src, opts.chunk_frames)
+    tmp = dst.with_name(f".{dst.name}.{os.getpid()}.partial")
+    try:
+        pipe = Pipeline(
+            cal,
+            first.layout,
+            hysteresis=opts.hysteresis,
+            drift=opts.drift,
+            repair=opts.repair,
+        )
+        quantity, unit = pipe.input_quantity
+        if first.quantity != quantity:
+            raise FormatError(src, f"holds {first.quantity}, the calibration reads {quantity}")
+        out_quantity, out_unit = pipe.output_quantity
+        meta = {
+            **first.meta,
+            **pipe.provenance(),
+            "source": src.name,
+            "input_sha256": digest,
+        }
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        frames, failed = 0, 0
+        with RecordingWriter(
+            tmp,
+            first.layout,
+            out_quantity,
+            out_unit,
+            meta=meta,
+            element_times=first.element_times is not None,
+            compress=True,
+        ) as writer:
+            for block in blocks:
+                values = block.to_unit(unit).frames if block.unit != unit else block.frames
+                p, ok, codes = pipe.process(values, block.times, block.valid)
+                writer.append(
+                    p,
+                    block.times,
+                    valid=ok,
+                    element_times=block.element_times,
+                    labels=block.labels or None,
+                )
+                frames += block.n_frames
+                failed += int(np.count_nonzero(codes))
+        os.replace(tmp, dst)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        if closer is not None:
+            closer.close()
+    share = failed / max(1, frames * first.n_elements)
+    return FileReport(str(src), str(dst), "done", frames, share)
+
+
+def archive_jobs(
+    inputs: Sequence[str | Path], out_dir: str | Path
+) -> tuple[list[tuple[Path, Path]], list[Path]]:
+    """(source, output) pairs of everything named by ``inputs``, and the files of the named
+    folders that are not recordings (ignored).
+
+    ``inputs`` are files, folders (searched recursively for files that a texsense reader
+    recognises) and glob patterns. Outputs mirror the sources' paths below their folder (or
+    the pattern's fixed part) in ``out_dir``, with the ending ``.h5``.
+    """
+    from texsense.io import sniff_format
+
+    out = Path(out_dir)
+    jobs: list[tuple[Path, Path]] = []
+    ignored: list[Path] = []
+    for spec in map(str, inputs):
+        path = Path(spec)
+        if path.is_dir():
+            for p in sorted(q for q in path.rglob("*") if q.is_file()):
+                try:
+                    sniff_format(p)
+                except FormatError:
+                    ignored.append(p)
+                    continue
+                jobs.append((p, out / p.relative_to(path).with_suffix(".h5")))
+        elif path.is_file():
+            jobs.append((path, out / path.with_suffix(".h5").name))
+        elif glob.has_magic(spec):
+            # outputs mirror the paths below the pattern's fixed folder
+            prefix = spec[: min(i for i in (spec.find(c) for c in "*?[") if i >= 0)]
+            base = Path(prefix) if prefix.endswith(("/", os.sep)) else Path(prefix).parent
+            files = sorted(Path(p) for p in glob.glob(spec, recursive=True) if Path(p).is_file())
+            jobs += [(p, out / p.relative_to(base).with_suffix(".h5")) for p in files]
+        else:
+            raise ParameterError(f"{spec}: no such file or folder, and not a glob pattern")
+    seen: dict[Path, Path] = {}
+    for src, dst in jobs:
+        if dst in seen and seen[dst] != src:
+            raise ParameterError(f"{seen[dst]} and {src} would both be written to {dst}")
+        seen[dst] = src
+    if not jobs:
+        raise ParameterError(f"no recordings found in {', '.join(map(str, inputs))}")
+    return jobs, ignored
+
+
+def _task(src: str, calibration: dict[str, Any], dst: str, options: dict[str, Any]) -> dict:
+    """One file on a worker: the report as a dict; an expected failure (a bad file or
+    parameter) is a ``failed`` report, anything else propagates to the driver."""
+    cal = calibration_from_dict(calibration, "<calibration>")
+    try:
+        return asdict(process_file(src, cal, dst, ProcessOptions(**options)))
+    except (OSError, ValueError) as e:  # FormatError, ParameterError, ShapeError among them
+        return asdict(FileReport(src, dst, "failed", error=f"{type(e).__name__}: {e}"))
+
+
+def process_archive(
+    jobs: Sequence[tuple[Path, Path]],
+    calibration: str | Path,
+    options: ProcessOptions | None = None,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> list[FileReport]:
+    """Process every (source, output) pair, one Dask task per file.
+
+    Parameters
+    ----------
+    jobs : sequence of (Path, Path)
+        From :func:`archive_jobs`. Sources and outputs must be reachable by the workers
+        under the same paths (a shared file system for a remote cluster).
+    calibration : path
+        The calibration file; it is read here and sent to the workers with each task.
+    options : ProcessOptions, optional
+        Pipeline settings (default: all stages, harmonic repair).
+    scheduler : str, optional
+        Address of a running ``dask.distributed`` scheduler (``tcp://host:8786``). Default:
+        a local cluster of worker processes, one thread each.
+    workers : int, optional
+        Worker processes of the local cluster (default: one per core).
+    """
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    from texsense._progress import progress
+
+    cal_path = Path(calibration)
+    load_calibration(cal_path)  # a bad file fails here, once, not in every task
+    cal_dict = json.loads(cal_path.read_text(encoding="utf-8"))
+    opts = asdict(options or ProcessOptions())
+    cluster = None
+    if scheduler is None:
+        n = workers or os.cpu_count() or 1
+        one_thread = {
+            k: "1" for k in ("RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+        }
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env=one_thread,
+        )
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    reports: list[FileReport] = []
+    try:
+        futures = {
+            client.submit(_task, str(src), cal_dict, str(dst), opts, pure=False): (src, dst)
+            for src, dst in jobs
+        }
+        for fut in progress(as_completed(futures), total=len(futures), desc="files", unit="file"):
+            src, dst = futures[fut]
+            try:
+                reports.append(FileReport(**fut.result()))
+            except Exception as e:  # a worker died or an unexpected error: report, go on
+                reports.append(
+                    FileReport(str(src), str(dst), "failed", error=f"{type(e).__name__}: {e}")
+                )
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    order = {str(src): k for k, (src, _) in enumerate(jobs)}
+    return sorted(reports, key=lambda r: order.get(r.source, 0))
