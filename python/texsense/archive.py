@@ -56,7 +56,14 @@ class ProcessOptions:
     repair: str | None = "harmonic"
     hysteresis: bool = True
     drift: bool = True
-    chunk_frames: int = 4096
+    #: Frames per block; None: about 2^18 element-samples (2 MiB per float64 array).
+    chunk_frames: int | None = None
+
+    def frames_per_block(self, n_elements: int) -> int:
+        """The block length for a mat of ``n_elements``."""
+        if self.chunk_frames is not None:
+            return max(1, int(self.chunk_frames))
+        return max(1, (1 << 18) // max(1, n_elements))
 
 
 @dataclass(frozen=True)
@@ -100,13 +107,15 @@ def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
     )
 
 
-def _blocks(src: Path, frames: int) -> tuple[Recording, Iterator[Recording], Any]:
+def _blocks(src: Path, opts: ProcessOptions) -> tuple[Recording, Iterator[Recording], Any]:
     """The first block (for the header), an iterator over all blocks, and what to close."""
     from texsense.io import load, sniff_format
 
     if sniff_format(src) == "hdf5":
         from texsense.io.hdf5 import HDF5Chunks
 
+        with HDF5Chunks(src) as probe:
+            frames = opts.frames_per_block(probe.layout.n_elements)
         chunks = HDF5Chunks(src, frames=frames)
         it = iter(chunks)
         try:
@@ -118,6 +127,7 @@ def _blocks(src: Path, frames: int) -> tuple[Recording, Iterator[Recording], Any
     rec = load(src)
     if rec.n_frames == 0:
         raise FormatError(src, "the recording has no frames")
+    frames = opts.frames_per_block(rec.n_elements)
     it = (rec.select(slice(a, a + frames)) for a in range(0, rec.n_frames, frames))
     first = next(it)
     return first, _chain_first(first, it), None
@@ -153,7 +163,7 @@ def process_file(
     digest = input_hash(src)
     if _output_matches(dst, cal.id, digest):
         return FileReport(str(src), str(dst), "skipped")
-    first, blocks, closer = _blocks(src, opts.chunk_frames)
+    first, blocks, closer = _blocks(src, opts)
     tmp = dst.with_name(f".{dst.name}.{os.getpid()}.partial")
     try:
         pipe = Pipeline(
@@ -252,10 +262,17 @@ def archive_jobs(
     return jobs, ignored
 
 
+#: Calibrations parsed on this worker, by their id (a task gets the JSON description).
+_CALIBRATIONS: dict[str, MatCalibration | LinearCalibration] = {}
+
+
 def _task(src: str, calibration: dict[str, Any], dst: str, options: dict[str, Any]) -> dict:
     """One file on a worker: the report as a dict; an expected failure (a bad file or
     parameter) is a ``failed`` report, anything else propagates to the driver."""
-    cal = calibration_from_dict(calibration, "<calibration>")
+    key = str(calibration.get("id"))
+    cal = _CALIBRATIONS.get(key)
+    if cal is None:
+        cal = _CALIBRATIONS[key] = calibration_from_dict(calibration, "<calibration>")
     try:
         return asdict(process_file(src, cal, dst, ProcessOptions(**options)))
     except (OSError, ValueError) as e:  # FormatError, ParameterError, ShapeError among them
@@ -313,8 +330,10 @@ def process_archive(
         client = Client(scheduler)
     reports: list[FileReport] = []
     try:
+        # the calibration goes to every worker once, not with every task
+        cal_on_workers = client.scatter(cal_dict, broadcast=True)
         futures = {
-            client.submit(_task, str(src), cal_dict, str(dst), opts, pure=False): (src, dst)
+            client.submit(_task, str(src), cal_on_workers, str(dst), opts, pure=False): (src, dst)
             for src, dst in jobs
         }
         for fut in progress(as_completed(futures), total=len(futures), desc="files", unit="file"):

@@ -85,7 +85,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--repair", choices=(*METHODS, "none"), default="harmonic")
     p.add_argument("--no-hysteresis", action="store_true", help="first-loading curve only")
     p.add_argument("--no-drift", action="store_true", help="skip the drift stage")
-    p.add_argument("--chunk-frames", type=int, default=4096, help="frames per block (default 4096)")
+    p.add_argument(
+        "--chunk-frames",
+        type=int,
+        help="frames per block (default: about 2^18 element-samples, 256 frames of 1024)",
+    )
     p.add_argument("--scheduler", help="dask.distributed scheduler address (archives)")
     p.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
     p.set_defaults(run=run_process)
@@ -181,7 +185,7 @@ def run_calibrate_linear(args: argparse.Namespace) -> int:
 
 
 def _options(args: argparse.Namespace) -> ProcessOptions:
-    if args.chunk_frames < 1:
+    if args.chunk_frames is not None and args.chunk_frames < 1:
         raise ParameterError(f"--chunk-frames must be >= 1, got {args.chunk_frames}")
     return ProcessOptions(
         repair=None if args.repair == "none" else args.repair,
