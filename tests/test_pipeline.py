@@ -245,13 +245,17 @@ def test_cli_calibrate_process_repair_health(mat_setup, tmp_path, capsys):
     args = ["calibrate", "mat", "--material", str(tmp_path / "material.csv"), "--baseline"]
     args += [str(tmp_path / "base.h5"), "--uniform", str(tmp_path / "uni.h5"), "--pressure", "1"]
     assert main([*args, "--thickness-mm", "3", "-o", str(calf)]) == 0
-    assert MatCalibration.load(calf).id == cal.id
+    from texsense.stages import load_chain
+
+    chain = load_chain(calf)  # the calibration file is the mat's chain of stages
+    assert [s.name for s in chain.stages] == ["detect", "convert", "hysteresis"]
+    assert chain.calibration().id == cal.id
     out = tmp_path / "p.h5"
     assert (
         main(["process", str(tmp_path / "raw.h5"), "--calibration", str(calf), "-o", str(out)]) == 0
     )
     p = load(out)
-    assert p.quantity == "pressure" and p.meta["calibration_id"] == cal.id
+    assert p.quantity == "pressure" and p.meta["calibration_id"] == chain.id
     assert not np.isnan(p.frames).any() and (~p.valid).sum() == scan.failed.sum()
     # repair: elements marked invalid in the input get values
     holes = p._with(frames=np.where(p.valid, p.frames, np.nan))

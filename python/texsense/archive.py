@@ -38,6 +38,7 @@ from texsense.calibration import (
 )
 from texsense.exceptions import FormatError, ParameterError
 from texsense.recording import Recording
+from texsense.stages import StageChain
 
 __all__ = [
     "FileReport",
@@ -140,7 +141,7 @@ def _chain_first(first: Recording, rest: Iterator[Recording]) -> Iterator[Record
 
 def process_file(
     src: str | Path,
-    calibration: MatCalibration | LinearCalibration | str | Path,
+    calibration: MatCalibration | LinearCalibration | StageChain | str | Path,
     dst: str | Path,
     options: ProcessOptions | None = None,
 ) -> FileReport:
@@ -155,11 +156,7 @@ def process_file(
 
     opts = options or ProcessOptions()
     src, dst = Path(src), Path(dst)
-    cal = (
-        calibration
-        if isinstance(calibration, MatCalibration | LinearCalibration)
-        else load_calibration(calibration)
-    )
+    cal = load_calibration(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
     if _output_matches(dst, cal.id, digest):
         return FileReport(str(src), str(dst), "skipped")
@@ -263,7 +260,7 @@ def archive_jobs(
 
 
 #: Calibrations parsed on this worker, by their id (a task gets the JSON description).
-_CALIBRATIONS: dict[str, MatCalibration | LinearCalibration] = {}
+_CALIBRATIONS: dict[str, MatCalibration | LinearCalibration | StageChain] = {}
 
 
 def _task(src: str, calibration: dict[str, Any], dst: str, options: dict[str, Any]) -> dict:

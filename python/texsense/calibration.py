@@ -48,6 +48,7 @@ __all__ = [
     "LinearCalibration",
     "MatCalibration",
     "calibration_from_dict",
+    "fit_conversion",
     "load_calibration",
     "material_curve",
     "rising_compression",
@@ -103,6 +104,43 @@ def rising_compression(
     p0, p1 = p[first - 1], p[first]
     w = (level_ncm2 - p0) / (p1 - p0) if p1 > p0 else 1.0
     return float(e[first - 1] + w * (e[first] - e[first - 1]))
+
+
+def fit_conversion(
+    material: dict[str, np.ndarray],
+    baseline: Recording,
+    uniform: Recording,
+    uniform_pressure_ncm2: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. 2.1 per element from zeroing and equilibration: the material curve
+    (compression, capacitance) and every element's offset and gain (see
+    :meth:`MatCalibration.fit` for the arguments)."""
+    for name in ("compression_mm", "capacitance_pF", "pressure_ncm2"):
+        if name not in material:
+            raise ParameterError(f"the material record has no column {name!r}")
+    for name, rec in (("baseline", baseline), ("uniform", uniform)):
+        if rec.quantity != "capacitance":
+            raise ParameterError(f"the {name} recording holds {rec.quantity}, not capacitance")
+    if baseline.n_elements != uniform.n_elements:
+        raise ParameterError(
+            f"baseline has {baseline.n_elements} elements, uniform {uniform.n_elements}"
+        )
+    ce, cc = material_curve(material["compression_mm"], material["capacitance_pF"])
+    e_u = rising_compression(
+        material["compression_mm"], material["pressure_ncm2"], uniform_pressure_ncm2
+    )
+    c0_ref = float(np.interp(0.0, ce, cc))
+    cu_ref = float(np.interp(e_u, ce, cc))
+    c0 = _mean_reading(baseline, "baseline")
+    cu = _mean_reading(uniform, "uniform")
+    gain = (cu - c0) / (cu_ref - c0_ref)
+    bad = ~(gain > 0.05)
+    if bad.any():
+        raise ParameterError(
+            f"elements {np.flatnonzero(bad).tolist()[:20]} do not respond to the uniform "
+            "load (failed during calibration?)"
+        )
+    return ce, cc, c0 - gain * c0_ref, gain
 
 
 @dataclass
@@ -189,32 +227,7 @@ class MatCalibration:
         model : HysteresisModel, optional
             compression_mm -> pressure; default: fitted to ``material``.
         """
-        for name in ("compression_mm", "capacitance_pF", "pressure_ncm2"):
-            if name not in material:
-                raise ParameterError(f"the material record has no column {name!r}")
-        for name, rec in (("baseline", baseline), ("uniform", uniform)):
-            if rec.quantity != "capacitance":
-                raise ParameterError(f"the {name} recording holds {rec.quantity}, not capacitance")
-        if baseline.n_elements != uniform.n_elements:
-            raise ParameterError(
-                f"baseline has {baseline.n_elements} elements, uniform {uniform.n_elements}"
-            )
-        ce, cc = material_curve(material["compression_mm"], material["capacitance_pF"])
-        e_u = rising_compression(
-            material["compression_mm"], material["pressure_ncm2"], uniform_pressure_ncm2
-        )
-        c0_ref = float(np.interp(0.0, ce, cc))
-        cu_ref = float(np.interp(e_u, ce, cc))
-        c0 = _mean_reading(baseline, "baseline")
-        cu = _mean_reading(uniform, "uniform")
-        gain = (cu - c0) / (cu_ref - c0_ref)
-        bad = ~(gain > 0.05)
-        if bad.any():
-            raise ParameterError(
-                f"elements {np.flatnonzero(bad).tolist()[:20]} do not respond to the uniform "
-                "load (failed during calibration?)"
-            )
-        offset = c0 - gain * c0_ref
+        ce, cc, offset, gain = fit_conversion(material, baseline, uniform, uniform_pressure_ncm2)
         if model is None:
             from texsense.hysteresis import HysteresisModel
 
@@ -490,10 +503,13 @@ def _check_envelope(d: Any, source: str | Path) -> None:
         )
 
 
-def calibration_from_dict(
-    d: Any, source: str | Path = "<dict>"
-) -> MatCalibration | LinearCalibration:
-    """A calibration of either kind from its JSON description."""
+def calibration_from_dict(d: Any, source: str | Path = "<dict>") -> Any:
+    """A calibration from its JSON description: a stage chain (``texsense.chain``, what
+    ``texsense calibrate mat`` writes), a first-round mat calibration or a linear one."""
+    from texsense.stages import CHAIN_FORMAT, StageChain
+
+    if isinstance(d, dict) and d.get("format") == CHAIN_FORMAT:
+        return StageChain.from_dict(d, source)
     _check_envelope(d, source)
     kind = d.get("kind", "mat")
     if kind == "linear":
@@ -503,8 +519,9 @@ def calibration_from_dict(
     return MatCalibration.from_dict(d, source)
 
 
-def load_calibration(path: str | Path) -> MatCalibration | LinearCalibration:
-    """Read a calibration file of either kind (``mat`` or ``linear``)."""
+def load_calibration(path: str | Path) -> Any:
+    """Read a calibration file: a stage chain (:class:`texsense.stages.StageChain`), a
+    first-round mat calibration or a linear one (:func:`calibration_from_dict`)."""
     path = Path(path)
     try:
         d = json.loads(path.read_text(encoding="utf-8"))

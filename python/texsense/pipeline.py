@@ -33,6 +33,7 @@ from texsense.health import FailureDetector
 from texsense.layout import Layout
 from texsense.recording import Recording
 from texsense.repair import METHODS, Repair, idw_weights
+from texsense.stages import StageChain
 
 __all__ = ["Pipeline"]
 
@@ -60,7 +61,7 @@ class Pipeline:
 
     def __init__(
         self,
-        calibration: MatCalibration | LinearCalibration,
+        calibration: MatCalibration | LinearCalibration | StageChain,
         layout: Layout,
         *,
         detect: bool = True,
@@ -74,6 +75,11 @@ class Pipeline:
                 f"the calibration is for {calibration.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
             )
+        self.calibration_id = calibration.id
+        if isinstance(calibration, StageChain):
+            # the chain's stages, compiled: its detect stage's thresholds, its numbers
+            detector = detector or calibration.detector()
+            calibration = calibration.calibration()
         linear = isinstance(calibration, LinearCalibration)
         model = None if linear else calibration.model
         if not linear and model is None:
@@ -183,7 +189,7 @@ class Pipeline:
         from texsense import __version__
 
         return {
-            "calibration_id": self.calibration.id,
+            "calibration_id": self.calibration_id,
             "software": f"texsense {__version__}",
             "stages": [k for k, v in self.stages.items() if v]
             + ["convert" if isinstance(self.calibration, MatCalibration) else "convert:linear"]

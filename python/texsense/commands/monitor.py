@@ -162,14 +162,14 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
 
 def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.calibration import MatCalibration
+    from texsense.calibration import load_calibration
     from texsense.monitor import EventStore, ExposureTracker, Monitor
     from texsense.pipeline import Pipeline
     from texsense.posture import PostureModel
 
     source, calibration = make_source(args)
     if args.calibration is not None:
-        calibration = MatCalibration.load(args.calibration)
+        calibration = load_calibration(args.calibration)
     pipeline = None
     if source.quantity == "capacitance":
         if calibration is None:

@@ -151,11 +151,15 @@ def run_calibrate(args: argparse.Namespace) -> int:
             "uniform": str(args.uniform),
         },
     )
-    cal.save(args.output)
+    from texsense.stages import StageChain
+
+    layout = load(args.baseline).layout
+    chain = StageChain.from_calibration(cal, layout=layout)
+    chain.save(args.output)
     print(
-        f"wrote {args.output}: {cal.n_elements} elements, id {cal.id}, gain "
-        f"{cal.gain.min():.3f}..{cal.gain.max():.3f}, offset {cal.offset_pF.min():+.3f}.."
-        f"{cal.offset_pF.max():+.3f} pF" + (", with drift stage" if args.drift else "")
+        f"wrote {args.output}: stages {', '.join(s.name for s in chain.stages)} for "
+        f"{cal.n_elements} elements, id {chain.id}, gain {cal.gain.min():.3f}.."
+        f"{cal.gain.max():.3f}, offset {cal.offset_pF.min():+.3f}..{cal.offset_pF.max():+.3f} pF"
     )
     return 0
 
@@ -278,13 +282,17 @@ def run_health(args: argparse.Namespace) -> int:
     from texsense.health import FailureDetector, health_report
 
     raw = _capacitance(args.raw)
-    kwargs = {}
+    detector = FailureDetector(raw.layout)
     if args.calibration:
-        from texsense.calibration import MatCalibration
+        from texsense.calibration import LinearCalibration, load_calibration
+        from texsense.pipeline import Pipeline
 
-        lo, hi = MatCalibration.load(args.calibration).expected_range_pF()
-        kwargs = {"baseline_pF": lo, "max_pF": hi}
-    codes = FailureDetector(raw.layout, **kwargs).run(raw)
+        cal = load_calibration(args.calibration)
+        if isinstance(cal, LinearCalibration):
+            raise ParameterError("health reads capacitance: give a mat calibration")
+        # the detector the pipeline would run with this calibration
+        detector = Pipeline(cal, raw.layout, repair=None).detector
+    codes = detector.run(raw)
     report = health_report(codes, raw.times, raw.layout)
     if args.json:
         print(
