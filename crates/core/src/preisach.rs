@@ -225,10 +225,9 @@ impl Element {
         // pushes it as a new extremum
         let turned = rising != (len % 2 == 1);
         if len == self.room(capacity) {
-            // rare: test the unpredictable `turned` only here
-            if turned {
-                self.make_room(capacity, &mut len);
-            }
+            // rare; `turned` is tested inside, out of line, so that the compiler cannot
+            // test it first (it is as unpredictable as a coin on a real input)
+            self.make_room(capacity, turned, &mut len);
         }
         let Element {
             inline,
@@ -246,7 +245,11 @@ impl Element {
         len += usize::from(turned);
         // wiping-out: the new input passes the extremum before the top
         let dir = if rising { 1.0 } else { -1.0 };
-        while len >= 3 && (u - s[len - 2][0]) * dir >= 0.0 {
+        // the first level without a branch (whether a step wipes out one loop is as
+        // unpredictable as a coin on a real input); deeper levels are rare
+        let wipes = (len >= 3) & ((u - s[len.max(2) - 2][0]) * dir >= 0.0);
+        len = std::hint::select_unpredictable(wipes, len.wrapping_sub(2), len);
+        while wipes && len >= 3 && (u - s[len - 2][0]) * dir >= 0.0 {
             len -= 2;
         }
         if len == 2 && u <= s[0][0] {
@@ -274,11 +277,15 @@ impl Element {
         (self.stack().len() - 1).min(capacity)
     }
 
-    /// The stack is full and the input turned: grow it on the heap (doubling) while below
+    /// The stack is full: if the input turned, grow it on the heap (doubling) while below
     /// `capacity`, else forget the most recent completed minor loop (the two entries below
     /// the top).
     #[cold]
-    fn make_room(&mut self, capacity: usize, len: &mut usize) {
+    #[inline(never)]
+    fn make_room(&mut self, capacity: usize, turned: bool, len: &mut usize) {
+        if !turned {
+            return;
+        }
         let room = self.stack().len() - 1;
         if room < capacity {
             self.grow_to((2 * room).min(capacity));
