@@ -570,7 +570,7 @@ impl PreisachBank {
 
 /// Frames in a row-major batch of `len` values of `n` elements each.
 pub(crate) fn frames_of(what: &'static str, len: usize, n: usize) -> Result<usize, CoreError> {
-    if n == 0 || len % n != 0 {
+    if n == 0 || !len.is_multiple_of(n) {
         return Err(CoreError::Shape {
             what,
             expected: format!("a multiple of {n} elements"),

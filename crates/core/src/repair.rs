@@ -94,7 +94,7 @@ impl NeighbourMeanRepair {
         if n == 0 {
             return Ok(());
         }
-        if frames.len() % n != 0 {
+        if !frames.len().is_multiple_of(n) {
             return Err(CoreError::Shape {
                 what: "frames",
                 expected: format!("a multiple of {n} elements"),
