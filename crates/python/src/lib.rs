@@ -388,7 +388,7 @@ fn batch_shape(
     let ok = values.len() == 2
         && valid == values
         && values[1] == n
-        && dt.map_or(true, |len| len == values[0]);
+        && dt.is_none_or(|len| len == values[0]);
     if !ok {
         let dt_txt = |len: Option<usize>| len.map_or(String::new(), |l| format!("dt ({l},), "));
         return Err(to_py(CoreError::Shape {
