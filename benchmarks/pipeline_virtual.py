@@ -14,7 +14,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
-from texsense import Layout, Recording
+from pipeline_speed import mat_case
+from texsense import Recording
 from texsense.calibration import MatCalibration
 from texsense.drift import DriftModel
 from texsense.pipeline import Pipeline
@@ -133,7 +134,6 @@ def accuracy(minutes: float = 30.0) -> None:
 
 def speed() -> None:
     cal = calibrate()
-    rng = np.random.default_rng(1)
     print(
         "| elements | frames | pipeline batch: element-samples/s | per-frame latency (step) | "
         "repair alone, Rust eq. 6.14: element-samples/s | harmonic repair, ms/frame: "
@@ -142,22 +142,14 @@ def speed() -> None:
     print("|---:|---:|---:|---:|---:|---:|")
     for rows, cols in ((8, 12), (32, 32), (64, 64)):
         n = rows * cols
-        lay = Layout.grid(rows, cols, pitch_cm=1.0)
-        c = MatCalibration.from_parts(
-            cal.curve_compression_mm,
-            cal.curve_capacitance_pF,
-            rng.normal(0, 0.05, n),
-            rng.normal(1, 0.03, n),
-            cal.model,
-            3.0,
-        )
         frames = 200 if n > 1000 else 1000
-        t = np.arange(frames) * 0.1
-        e = 1.2 + 0.8 * np.sin(t[:, None] / 3 + np.arange(n)[None, :] / 50)
-        cap = c.offset_pF + c.gain * np.interp(e, c.curve_compression_mm, c.curve_capacitance_pF)
-        valid = rng.random((frames, n)) > 0.02
-        cap = np.where(valid, cap, 0.0)
-        rec = Recording(cap, t, lay, "capacitance", "pF")
+        c, lay, rec = mat_case(cal, rows, cols, frames)  # the cases of pipeline_speed.py
+        t = rec.times
+        valid = rec.frames > 0
+        e = np.interp(
+            (rec.frames - c.offset_pF) / c.gain, c.curve_capacitance_pF, c.curve_compression_mm
+        )
+        cap = rec.frames
         pipe = Pipeline(c, lay, repair="neighbour-mean")
         batch = best_of(lambda: pipe.reset().run(rec))[0]  # noqa: B023
         pipe.reset()

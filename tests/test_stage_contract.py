@@ -26,10 +26,11 @@ from texsense.stages import (
 from texsense.workflows import material_record
 
 
-@pytest.fixture(scope="module")
-def world():
-    """Fitted stages of the virtual seat and, for each, a recording of what it reads (the
-    previous stage's output on a session with failures)."""
+def seat_records():
+    """What a user calibrates the virtual seat from: its layout, unloaded and 1 N/cm² scans,
+    a test-machine record and held steps of another specimen."""
+    from texsense.drift import split_steps
+
     mat = VirtualMat.seat(seed=5)
     n = mat.layout.n_elements
     ft = mat.cdc.frame_time_s(n)
@@ -39,9 +40,15 @@ def world():
         protocols.run_protocol("calibration", "textile-3mm", seed=11, sample_hz=None)
     )
     st = protocols.run_protocol("steps", "textile-3mm", seed=11, sample_hz=10)
-    from texsense.drift import split_steps
-
     steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
+    return mat, base, uni, material, steps
+
+
+@pytest.fixture(scope="module")
+def world():
+    """Fitted stages of the virtual seat and, for each, a recording of what it reads (the
+    previous stage's output on a session with failures)."""
+    mat, base, uni, material, steps = seat_records()
     fits = {
         "detect": lambda: Detect(mat.layout, stuck_frames=8).fit(base),
         "convert": lambda: Convert(3.0, 1.0).fit(material, base, uni),
@@ -172,19 +179,9 @@ def test_bad_stage_files_name_the_problem(tmp_path):
 def test_a_mat_calibration_is_one_chain_of_stages(world, tmp_path):
     """The chain's file round trip; the compiled pipeline equals the stages run one after
     the other; a first-round calibration file loads as the same chain."""
-    from texsense.drift import split_steps
     from texsense.workflows import calibrate_mat
 
-    mat = VirtualMat.seat(seed=5)
-    n = mat.layout.n_elements
-    ft = mat.cdc.frame_time_s(n)
-    base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance
-    uni = VirtualMat.seat(seed=5).scan((11 + np.arange(10)) * ft, np.ones((10, n))).capacitance
-    material = material_record(
-        protocols.run_protocol("calibration", "textile-3mm", seed=11, sample_hz=None)
-    )
-    st = protocols.run_protocol("steps", "textile-3mm", seed=11, sample_hz=10)
-    steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
+    _, base, uni, material, steps = seat_records()
     chain = StageChain.fit_mat(material, base, uni, 1.0, 3.0, steps=steps)
     assert [s.name for s in chain.stages] == ["detect", "convert", "hysteresis", "drift"]
     loaded = load_chain(chain.save(tmp_path / "mat.chain.json"))

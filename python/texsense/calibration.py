@@ -143,8 +143,43 @@ def fit_conversion(
     return ce, cc, c0 - gain * c0_ref, gain
 
 
+class _CalibrationFile:
+    """The file side shared by every calibration kind: a content-hash id over the numbers
+    (``_body``) and the versioned JSON envelope around them."""
+
+    provenance: dict[str, Any]
+
+    def _body(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    @property
+    def id(self) -> str:
+        """Content hash: changes whenever any number of the calibration does."""
+        body = json.dumps(self._body(), sort_keys=True).encode()
+        return hashlib.sha256(body).hexdigest()[:16]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The versioned, JSON-able description."""
+        from texsense import __version__
+
+        return {
+            "format": CALIBRATION_FORMAT,
+            "version": CALIBRATION_VERSION,
+            "id": self.id,
+            "software": f"texsense {__version__}",
+            "provenance": self.provenance,
+            **self._body(),
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the calibration file (JSON)."""
+        path = Path(path)
+        path.write_text(json.dumps(self.to_dict(), indent=1), encoding="utf-8")
+        return path
+
+
 @dataclass
-class MatCalibration:
+class MatCalibration(_CalibrationFile):
     """Per-element capacitance -> compression conversion plus the spacer model.
 
     Use :meth:`fit` (from recordings) or :meth:`load` (from a file).
@@ -262,12 +297,6 @@ class MatCalibration:
         ref = (c - self.offset_pF) / self.gain
         return np.interp(ref, self.curve_capacitance_pF, self.curve_compression_mm)
 
-    @property
-    def id(self) -> str:
-        """Content hash: changes whenever any number of the calibration does."""
-        body = json.dumps(self._body(), sort_keys=True).encode()
-        return hashlib.sha256(body).hexdigest()[:16]
-
     # ------------------------------------------------------------------ files
     def _body(self) -> dict[str, Any]:
         return {
@@ -280,25 +309,6 @@ class MatCalibration:
             "elements": {"offset_pF": self.offset_pF.tolist(), "gain": self.gain.tolist()},
             "model": None if self.model is None else self.model.to_dict(),
         }
-
-    def to_dict(self) -> dict[str, Any]:
-        """The versioned, JSON-able description."""
-        from texsense import __version__
-
-        return {
-            "format": CALIBRATION_FORMAT,
-            "version": CALIBRATION_VERSION,
-            "id": self.id,
-            "software": f"texsense {__version__}",
-            "provenance": self.provenance,
-            **self._body(),
-        }
-
-    def save(self, path: str | Path) -> Path:
-        """Write the calibration file (JSON)."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=1), encoding="utf-8")
-        return path
 
     @classmethod
     def from_dict(cls, d: Any, source: str | Path = "<dict>") -> MatCalibration:
@@ -364,7 +374,7 @@ def _mean_reading(rec: Recording, name: str) -> np.ndarray:
 
 
 @dataclass
-class LinearCalibration:
+class LinearCalibration(_CalibrationFile):
     """A mat with a static per-element calibration and no spacer model:
     ``value = (reading - offset_i) / gain_i``.
 
@@ -439,31 +449,6 @@ class LinearCalibration:
             "full_scale": self.full_scale,
             "elements": {"offset": self.offset.tolist(), "gain": self.gain.tolist()},
         }
-
-    @property
-    def id(self) -> str:
-        """Content hash: changes whenever any number of the calibration does."""
-        body = json.dumps(self._body(), sort_keys=True).encode()
-        return hashlib.sha256(body).hexdigest()[:16]
-
-    def to_dict(self) -> dict[str, Any]:
-        """The versioned, JSON-able description."""
-        from texsense import __version__
-
-        return {
-            "format": CALIBRATION_FORMAT,
-            "version": CALIBRATION_VERSION,
-            "id": self.id,
-            "software": f"texsense {__version__}",
-            "provenance": self.provenance,
-            **self._body(),
-        }
-
-    def save(self, path: str | Path) -> Path:
-        """Write the calibration file (JSON)."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=1), encoding="utf-8")
-        return path
 
     @classmethod
     def from_dict(cls, d: Any, source: str | Path = "<dict>") -> LinearCalibration:

@@ -18,12 +18,10 @@
 //! in parallel (the repair pass reads the neighbours' measured values, which no pass writes
 //! any more). `step` is the same code with T = 1.
 
-use rayon::prelude::*;
-
 use crate::compensation::{Compensation, CompensationBlock};
 use crate::detect::{code, Changes, FailureDetector};
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, parallel, Columns};
+use crate::par::{block_size, each_block, each_chunk, parallel, Columns};
 use crate::topology::Neighbours;
 
 /// A piecewise-linear curve `y(x)` over increasing `x`, held at its ends (`np.interp`).
@@ -332,19 +330,14 @@ impl Chain {
                         }
                     }
                 };
-                let blocks = comp.blocks();
-                if par {
-                    blocks.into_par_iter().enumerate().for_each(work);
-                } else {
-                    blocks.into_iter().enumerate().for_each(work);
-                }
+                each_block(comp.blocks(), par, work);
             }
             response @ (Response::Loading(_) | Response::Direct) => {
                 let curve = match &*response {
                     Response::Loading(c) => Some(c),
                     _ => None,
                 };
-                let work = |start: usize| {
+                let work = |(_, start): (usize, usize)| {
                     let end = (start + size).min(n);
                     for r in 0..dt.len() {
                         for i in start..end {
@@ -360,11 +353,7 @@ impl Chain {
                         }
                     }
                 };
-                if par {
-                    (0..n).into_par_iter().step_by(size).for_each(work);
-                } else {
-                    (0..n).step_by(size).for_each(work);
-                }
+                each_block((0..n).step_by(size).collect(), par, work);
             }
         }
     }
@@ -431,13 +420,6 @@ impl Chain {
                 }
             }
         };
-        if par {
-            self.elements
-                .par_chunks_mut(size)
-                .enumerate()
-                .for_each(work);
-        } else {
-            self.elements.chunks_mut(size).enumerate().for_each(work);
-        }
+        each_chunk(&mut self.elements, size, par, work);
     }
 }

@@ -1,11 +1,9 @@
 //! The combined compensation stage: Preisach model, then drift (thesis eq. 5.8), frame by
 //! frame in one pass, so a batch needs no intermediate array.
 
-use rayon::prelude::*;
-
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, parallel, Columns};
+use crate::par::{block_size, each_block, parallel, Columns};
 use crate::preisach::{PreisachBank, PreisachBlock};
 
 /// Preisach output `sign (h + offset)`, followed by an optional drift stage.
@@ -153,12 +151,8 @@ impl Compensation {
                 }
             }
         };
-        let blocks = self.blocks();
-        if parallel(dt.len(), n) {
-            blocks.into_par_iter().enumerate().for_each(work);
-        } else {
-            blocks.into_iter().enumerate().for_each(work);
-        }
+        let par = parallel(dt.len(), n);
+        each_block(self.blocks(), par, work);
         Ok(())
     }
 }

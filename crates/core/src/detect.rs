@@ -14,10 +14,8 @@
 //! reading first (each element on its own), then the codes (which read the neighbours'
 //! changes of the same frame). Same results as frame after frame (tested).
 
-use rayon::prelude::*;
-
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, parallel, Columns};
+use crate::par::{block_size, each_chunk, parallel, Columns};
 use crate::topology::Neighbours;
 
 /// Failure codes.
@@ -187,14 +185,7 @@ impl FailureDetector {
                     }
                 }
             };
-            if par {
-                self.elements
-                    .par_chunks_mut(size)
-                    .enumerate()
-                    .for_each(work);
-            } else {
-                self.elements.chunks_mut(size).enumerate().for_each(work);
-            }
+            each_chunk(&mut self.elements, size, par, work);
         }
         // pass 2: the codes, with the neighbours' median change of the same frame
         let (delta, first) = (&scratch.delta[..], &scratch.first[..]);
@@ -262,11 +253,7 @@ impl FailureDetector {
                 }
             }
         };
-        if par {
-            elements.par_chunks_mut(size).enumerate().for_each(work);
-        } else {
-            elements.chunks_mut(size).enumerate().for_each(work);
-        }
+        each_chunk(&mut elements, size, par, work);
         self.elements = elements;
         Ok(())
     }

@@ -13,10 +13,8 @@
 //! same machinery runs any non-negative Prony series (a fitted kernel where the logarithm does
 //! not hold).
 
-use rayon::prelude::*;
-
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, parallel, Columns};
+use crate::par::{block_size, each_block, parallel, Columns};
 
 /// A kernel `k(t) = Σ_j c_j (1 - exp(-t / τ_j))` (c_j >= 0, τ_j > 0).
 #[derive(Debug, Clone, PartialEq)]
@@ -321,12 +319,8 @@ impl DriftBank {
                 }
             }
         };
-        let blocks = self.blocks();
-        if parallel(dt.len(), n) {
-            blocks.into_par_iter().enumerate().for_each(work);
-        } else {
-            blocks.into_iter().enumerate().for_each(work);
-        }
+        let par = parallel(dt.len(), n);
+        each_block(self.blocks(), par, work);
         Ok(())
     }
 }

@@ -9,6 +9,8 @@
 //! Small batches (fewer than [`PARALLEL_MIN`] element-samples, e.g. one live frame) run the
 //! same blocks one after the other on the calling thread: identical arithmetic, no hand-off.
 
+use rayon::prelude::*;
+
 /// Most elements per block (128 elements' states fit in a core's first-level cache).
 pub const MAX_BLOCK: usize = 128;
 
@@ -81,5 +83,33 @@ impl<T: Copy> Columns<T> {
         debug_assert!(idx < self.len);
         // SAFETY: as for `write`; nobody writes idx concurrently.
         unsafe { self.ptr.add(idx).read() }
+    }
+}
+
+/// `work((b, chunk))` for every chunk of `size` items (chunk `b` starts at item `b * size`),
+/// on the thread pool when `par`, else one after the other on this thread.
+pub fn each_chunk<T, F>(items: &mut [T], size: usize, par: bool, work: F)
+where
+    T: Send,
+    F: Fn((usize, &mut [T])) + Sync + Send,
+{
+    if par {
+        items.par_chunks_mut(size).enumerate().for_each(work);
+    } else {
+        items.chunks_mut(size).enumerate().for_each(work);
+    }
+}
+
+/// `work((b, block))` for every block (e.g. the per-block views of a bank), on the thread
+/// pool when `par`, else one after the other on this thread.
+pub fn each_block<B, F>(blocks: Vec<B>, par: bool, work: F)
+where
+    B: Send,
+    F: Fn((usize, B)) + Sync + Send,
+{
+    if par {
+        blocks.into_par_iter().enumerate().for_each(work);
+    } else {
+        blocks.into_iter().enumerate().for_each(work);
     }
 }

@@ -27,10 +27,8 @@
 
 use std::sync::Arc;
 
-use rayon::prelude::*;
-
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, parallel, Columns};
+use crate::par::{block_size, each_chunk, parallel, Columns};
 
 /// An Everett function on a uniform grid.
 #[derive(Debug, Clone, PartialEq)]
@@ -556,14 +554,8 @@ impl PreisachBank {
                 }
             }
         };
-        if schedule == Schedule::Parallel && parallel(t, n) {
-            self.elements
-                .par_chunks_mut(size)
-                .enumerate()
-                .for_each(work);
-        } else {
-            self.elements.chunks_mut(size).enumerate().for_each(work);
-        }
+        let par = schedule == Schedule::Parallel && parallel(t, n);
+        each_chunk(&mut self.elements, size, par, work);
         Ok(())
     }
 }
