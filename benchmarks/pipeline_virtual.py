@@ -158,11 +158,12 @@ def speed() -> None:
         pres = Recording(np.where(valid, e, np.nan), t, lay, "pressure", "N/cm2", valid=valid)
         rep_t = best_of(lambda: rep.reset().run(pres))[0]  # noqa: B023
         harm = Repair(lay, "harmonic")
-        hk = best_of(lambda: harm.step(np.where(valid[7], e[7], 0), valid[7]), repeat=5)[0]  # noqa: B023
+        k = int(np.argmax((~valid).sum(axis=1) >= 2))  # a frame with failures to fill
+        hk = best_of(lambda: harm.step(np.where(valid[k], e[k], 0), valid[k]), repeat=5)[0]  # noqa: B023
 
         def fresh(harm: Repair = harm) -> None:
             harm._cache.clear()  # a new failure pattern: factorise again
-            harm.step(np.where(valid[7], e[7], 0), valid[7])  # noqa: B023
+            harm.step(np.where(valid[k], e[k], 0), valid[k])  # noqa: B023
 
         hf = best_of(fresh, repeat=3)[0]
         print(
