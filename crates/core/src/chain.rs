@@ -24,6 +24,9 @@ use crate::error::{check_len, CoreError};
 use crate::par::{block_size, each_block, each_chunk, parallel, Columns};
 use crate::topology::Neighbours;
 
+/// Element-samples per tile of frames in a batch (a float64 array of a tile is 1 MiB).
+const TILE_SAMPLES: usize = 1 << 17;
+
 /// A piecewise-linear curve `y(x)` over increasing `x`, held at its ends (`np.interp`).
 ///
 /// The segment of an input is found without a search: a table of uniform buckets over `x`
@@ -277,8 +280,34 @@ impl Chain {
         if n == 0 {
             return Ok(());
         }
-        let par = parallel(t, n);
-        // detect
+        // tiles of frames small enough that a tile's arrays stay in cache from one pass to
+        // the next (each pass streams through the whole tile)
+        let tile = (TILE_SAMPLES / n).max(1);
+        for a in (0..t).step_by(tile) {
+            let b = (a + tile).min(t);
+            let rows = a * n..b * n;
+            self.run_tile(
+                &dt[a..b],
+                &readings[rows.clone()],
+                &valid[rows.clone()],
+                &mut out[rows.clone()],
+                &mut codes[rows],
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The passes over one tile of frames: detect, convert and respond, repair.
+    fn run_tile(
+        &mut self,
+        dt: &[f64],
+        readings: &[f64],
+        valid: &[bool],
+        out: &mut [f64],
+        codes: &mut [u8],
+    ) -> Result<(), CoreError> {
+        let t = dt.len();
+        let par = parallel(t, self.len());
         match &mut self.detector {
             Some(d) => d.run(readings, valid, codes, &mut self.changes)?,
             None => {
@@ -291,9 +320,7 @@ impl Chain {
                 }
             }
         }
-        // convert and respond
         self.respond(dt, readings, codes, out, par);
-        // repair
         self.repair(t, codes, out, par);
         Ok(())
     }
