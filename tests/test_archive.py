@@ -155,3 +155,17 @@ def test_cli_single_file_and_errors(sessions, tmp_path, capsys):
     assert "no recordings found" in capsys.readouterr().err
     assert main(["process", str(src), "--calibration", str(src), "-o", str(tmp_path / "z.h5")]) == 1
     assert "not JSON" in capsys.readouterr().err
+
+
+def test_cli_seat_sessions_write_capacitance_and_the_chain(tmp_path, capsys):
+    from texsense.stages import load_chain
+
+    assert main(["seat-sessions", "-n", "2", "--rest-s", "5", "-o", str(tmp_path)]) == 0
+    assert "wrote 2 sessions" in capsys.readouterr().out
+    chain = load_chain(tmp_path / "calibration.json")
+    assert [s.name for s in chain.stages] == ["detect", "convert", "hysteresis", "drift"]
+    recs = [load(p) for p in sorted(tmp_path.glob("session-*.h5"))]
+    assert len(recs) == 2 and all(r.quantity == "capacitance" for r in recs)
+    assert recs[0].labels["subject"][0] != recs[1].labels["subject"][0]
+    assert main(["seat-sessions", "-n", "0", "-o", str(tmp_path)]) == 1
+    assert "--sessions" in capsys.readouterr().err
