@@ -7,6 +7,20 @@ cd "$ROOT"
 
 say() { printf '\033[1m[texsense]\033[0m %s\n' "$*" >&2; }
 
+# need_debian PROGRAM PACKAGE WHAT: install Debian's PACKAGE when PROGRAM is missing (as root
+# with apt-get), else say what will not work
+need_debian() {
+  if command -v "$1" >/dev/null 2>&1 || [ -x "/usr/sbin/$1" ] || [ -x "/usr/bin/$1" ]; then
+    return 0
+  fi
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    say "installing Debian's $2 ($3)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$2" >/dev/null
+  else
+    say "$2 is missing and apt-get is not available as root: $3 will not work"
+  fi
+}
+
 python_ok() { "$1" -c 'import sys; sys.exit(sys.version_info < (3, 11))' >/dev/null 2>&1; }
 PYTHON_BIN="${PYTHON:-}"
 if [ -z "$PYTHON_BIN" ]; then

@@ -16,4 +16,6 @@ if [ ! -x "${TEXSENSE_CHROMIUM:-/usr/bin/chromium}" ] && ! command -v chromium >
     say "chromium is missing and apt-get is not available as root: the browser test will fail"
   fi
 fi
+# the station tests run a real MQTT broker (docs/station.md)
+need_debian mosquitto mosquitto "the station tests"
 say "pytest";                python -m pytest -q "$@"

@@ -12,6 +12,9 @@ from texsense.commands import (
     plot,
     posture,
     simulate,
+    station,
 )
 
-COMMANDS = (info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor)
+COMMANDS = (
+    info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor, station,
+)  # fmt: skip

@@ -57,18 +57,25 @@ def _safe_file(folder: Path, name: str) -> Path | None:
     return path
 
 
+def token_ok(headers: Any, query: Any, token: str | None) -> bool:
+    """The token rule of every HTTP and WebSocket request: without a token everything is
+    allowed (loopback only); with one, ``?token=``, ``X-Texsense-Token`` or a bearer header
+    must carry it."""
+    if token is None:
+        return True
+    given = query.get("token") or headers.get("x-texsense-token") or ""
+    auth = headers.get("authorization", "")
+    if not given and auth.lower().startswith("bearer "):
+        given = auth[7:]
+    return hmac.compare_digest(given.encode(), token.encode())
+
+
 def create_app(monitor: Monitor, *, token: str | None = None, run_source: bool = True) -> Any:
     """The FastAPI application around ``monitor``. With ``run_source`` the monitor consumes
     its source while the app runs."""
 
     def authorised(headers: Any, query: Any) -> bool:
-        if token is None:
-            return True
-        given = query.get("token") or headers.get("x-texsense-token") or ""
-        auth = headers.get("authorization", "")
-        if not given and auth.lower().startswith("bearer "):
-            given = auth[7:]
-        return hmac.compare_digest(given.encode(), token.encode())
+        return token_ok(headers, query, token)
 
     @asynccontextmanager
     async def lifespan(_app: Any) -> Any:

@@ -119,14 +119,16 @@ function render() {
   $("status").textContent = `t = ${fmt(last.t, 1)} s · failed now: ${last.failed.length} (repaired ${last.repaired.length})`;
 }
 
+// the page's own folder: "" for the monitor at "/", "/mats/<id>" for a mat of a ward station
+const BASE = location.pathname.replace(/\/[^/]*$/, "");
 async function api(path, method = "GET") {
-  const r = await fetch(withToken(path), { method });
+  const r = await fetch(withToken(BASE + path), { method });
   if (!r.ok) throw new Error(`${method} ${path}: ${r.status}`);
   return r.json();
 }
 function connect() {
   const proto = location.protocol === "https:" ? "wss" : "ws";
-  const ws = new WebSocket(withToken(`${proto}://${location.host}/ws`));
+  const ws = new WebSocket(withToken(`${proto}://${location.host}${BASE}/ws`));
   ws.onmessage = (m) => { last = JSON.parse(m.data); requestAnimationFrame(render); };
   ws.onclose = () => { $("source").textContent = "disconnected — retrying…"; setTimeout(connect, 1000); };
 }

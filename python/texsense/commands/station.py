@@ -1,0 +1,144 @@
+"""``texsense station``: a ward of mats over MQTT, with an overview page (docs/station.md)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from texsense.exceptions import FormatError, ParameterError
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``station`` command."""
+    p = sub.add_parser(
+        "station",
+        help="a ward station: many mats over MQTT, alerts, an overview page",
+        description="Ingest many mats at once — each with its layout, calibration, pipeline "
+        "state, exposure and reposition alerts — from an MQTT broker (a Mosquitto of its own "
+        "on loopback unless --broker names one) and from serial, IIO or replay sources named "
+        "in a TOML file; serve the ward overview, one dashboard per mat, REST and a "
+        "WebSocket.",
+    )
+    p.add_argument(
+        "--virtual-mats", type=int, default=0, metavar="N",
+        help="N simulated people on virtual seats publishing through the broker",
+    )  # fmt: skip
+    p.add_argument(
+        "--speed", type=float, default=1.0,
+        help="virtual mats: simulated seconds per second (a frame per 1.6 s at 1)",
+    )  # fmt: skip
+    p.add_argument("--config", type=Path, help="TOML file of the ward's mats (docs/station.md)")
+    p.add_argument("--broker", help="mqtt://[user:password@]host[:port] or mqtts://... "
+                   "(default: start Mosquitto on loopback)")  # fmt: skip
+    p.add_argument(
+        "--mats", default="texsense/+/frames",
+        help="MQTT topic filter of this station's mats (split a site: 'ward3/+/frames')",
+    )  # fmt: skip
+    p.add_argument("--virtual-prefix", default="texsense", help="topic prefix of virtual mats")
+    p.add_argument("--reposition-min", type=float, default=20.0, help="reposition interval")
+    p.add_argument("--db", default="station.sqlite", help="event store: SQLite file")
+    p.add_argument("--record-dir", type=Path, default=Path("recordings"))
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8766)
+    p.add_argument("--token", help="required on every request when binding beyond loopback")
+    p.set_defaults(run=run)
+
+
+def _layout(spec: Any, where: str) -> Any:
+    from texsense.io import load
+    from texsense.layout import Layout
+
+    if isinstance(spec, str) and spec.startswith("grid:"):
+        try:
+            rows, cols = (int(v) for v in spec[5:].lower().split("x"))
+        except ValueError:
+            raise ParameterError(f"{where}: layout {spec!r}: expected grid:ROWSxCOLS") from None
+        return Layout.grid(rows, cols)
+    if isinstance(spec, str):
+        return load(spec).layout
+    raise ParameterError(f"{where}: layout must be 'grid:ROWSxCOLS' or a recording's path")
+
+
+def read_config(path: Path, reposition_min: float) -> tuple[list[Any], dict[str, Any]]:
+    """Mats and local sources of a TOML ward file::
+
+    [[mat]]
+    id = "bed12"                      # the topic segment: <prefix>/bed12/frames
+    layout = "grid:64x32"             # or the path of a recording of the mat
+    calibration = "bed12.json"        # omit for a mat that sends pressure
+    source = "mqtt"                   # or "serial:/dev/ttyUSB0", "iio:DIR", "replay:FILE"
+    """
+    from texsense.calibration import load_calibration
+    from texsense.monitor import sources
+    from texsense.station.ward import MatConfig
+
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise FormatError(path, f"cannot read: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise FormatError(path, f"not TOML: {e}") from None
+    mats, local = [], {}
+    for k, m in enumerate(doc.get("mat", [])):
+        where = f"{path} [[mat]] #{k + 1}"
+        if not isinstance(m, dict) or "id" not in m or "layout" not in m:
+            raise FormatError(path, f"[[mat]] #{k + 1} needs an id and a layout")
+        layout = _layout(m["layout"], where)
+        cal = load_calibration(m["calibration"]) if m.get("calibration") else None
+        quantity = "capacitance" if cal is not None else "pressure"
+        kind, _, rest = str(m.get("source", "mqtt")).partition(":")
+        if kind == "serial":
+            local[m["id"]] = sources.SerialSource(rest, layout)
+        elif kind == "iio":
+            local[m["id"]] = sources.IIOSource(rest, layout)
+        elif kind == "replay":
+            local[m["id"]] = sources.ReplaySource(Path(rest), speed=1.0, loop=True)
+        elif kind != "mqtt":
+            raise FormatError(path, f"[[mat]] #{k + 1}: unknown source {m.get('source')!r}")
+        mats.append(MatConfig(str(m["id"]), layout, cal, quantity, str(m.get("source", "mqtt")),
+                              float(m.get("reposition_min", reposition_min))))  # fmt: skip
+    return mats, local
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``texsense station``."""
+    from texsense.monitor.store import EventStore
+    from texsense.station.broker import Broker, parse_broker_url
+    from texsense.station.server import serve_ward
+    from texsense.station.virtual import VirtualMats
+    from texsense.station.ward import Station
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    if args.virtual_mats < 0:
+        raise ParameterError("--virtual-mats must be >= 0")
+    mats, local = read_config(args.config, args.reposition_min) if args.config else ([], {})
+    own = None
+    if args.broker:
+        url = parse_broker_url(args.broker)
+    else:
+        own = Broker().start()
+        url = own.url
+        print(f"texsense station: Mosquitto on {url}")
+    background = []
+    if args.virtual_mats:
+        from texsense.workflows import seat_calibration
+
+        vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
+        mats += vm.configs(seat_calibration(), args.reposition_min)
+        background.append(vm.run())
+    if not mats:
+        raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
+    station = Station(url, mats, topic=args.mats, store=EventStore(args.db),
+                      record_dir=args.record_dir)  # fmt: skip
+    background += [station.consume(mat_id, src) for mat_id, src in local.items()]
+    print(f"texsense station: {len(mats)} mats -> http://{args.host}:{args.port}/")
+    try:
+        serve_ward(station, host=args.host, port=args.port, token=args.token,
+                   background=background)  # fmt: skip
+    finally:
+        if own is not None:
+            own.stop()
+    return 0

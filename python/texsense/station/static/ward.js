@@ -1,0 +1,69 @@
+// texsense ward overview: one tile per mat, most urgent first. No build step, no dependencies.
+"use strict";
+const token = new URLSearchParams(location.search).get("token");
+const withToken = (url) => token ? url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token) : url;
+const $ = (id) => document.getElementById(id);
+const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "reposition!", acknowledged: "acknowledged", stale: "no data", refused: "refused" };
+const STOPS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37], [255, 255, 255]];
+function colour(f) {
+  if (!Number.isFinite(f)) return "#e5e7eb";
+  f = Math.min(Math.max(f, 0), 1) * (STOPS.length - 2);
+  const i = Math.min(Math.floor(f), STOPS.length - 3), t = f - i;
+  const c = STOPS[i].map((v, k) => Math.round(v + t * (STOPS[i + 1][k] - v)));
+  return `rgb(${c[0]},${c[1]},${c[2]})`;
+}
+function drawMini(canvas, mat) {
+  const ctx = canvas.getContext("2d");
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (!mat.shape || !mat.cells || !mat.pressure) return;
+  const [rows, cols] = mat.shape;
+  const s = Math.min(canvas.width / cols, canvas.height / rows);
+  const ox = (canvas.width - s * cols) / 2, oy = (canvas.height - s * rows) / 2;
+  mat.cells.forEach((cell, i) => {
+    const r = Math.floor(cell / cols), c = cell % cols, v = mat.pressure[i];
+    ctx.fillStyle = v === null ? "#d1d5db" : colour(v / 4.0);  // 0-4 N/cm²
+    ctx.fillRect(ox + c * s, oy + r * s, Math.ceil(s), Math.ceil(s));
+  });
+}
+function tile(mat) {
+  const el = document.createElement("div");
+  el.className = `tile ${mat.state}`;
+  el.dataset.id = mat.id;
+  el.setAttribute("data-state", mat.state);
+  const since = mat.seconds_since_frame === null ? "–" : `${mat.seconds_since_frame.toFixed(1)} s ago`;
+  el.innerHTML = `
+    <div class="top"><span class="id"></span><span class="state"></span></div>
+    <canvas width="160" height="110"></canvas>
+    <div class="line"><span>${mat.occupied ? "occupied" : "empty"}</span><span class="big">${mat.minutes_since_reposition.toFixed(1)} min</span></div>
+    <div class="line"><span>${mat.frames} frames · last ${since}</span><span>${mat.malformed ? mat.malformed + " malformed" : ""}</span></div>`;
+  el.querySelector(".id").textContent = mat.id;
+  el.querySelector(".state").textContent = STATE_TEXT[mat.state] || mat.state;
+  if (mat.refused) el.title = mat.refused;
+  drawMini(el.querySelector("canvas"), mat);
+  if (mat.alert && mat.alert.active) {
+    const b = document.createElement("button");
+    b.textContent = "acknowledge";
+    b.className = "ack";
+    b.onclick = async (e) => {
+      e.stopPropagation();
+      await fetch(withToken(`/api/mats/${encodeURIComponent(mat.id)}/alerts/${mat.alert.id}/ack`), { method: "POST" });
+    };
+    el.appendChild(b);
+  }
+  el.onclick = () => { location.href = withToken(`mats/${encodeURIComponent(mat.id)}/`); };
+  return el;
+}
+function render(ward) {
+  $("broker").textContent = `${ward.broker || "local sources"} · ${ward.connected ? "connected" : "disconnected — retrying"} · ${ward.topic}`;
+  const alerts = ward.mats.filter((m) => m.state === "alert").length;
+  const stale = ward.mats.filter((m) => m.state === "stale" || m.state === "refused").length;
+  $("counts").textContent = `${ward.mats.length} mats · ${alerts} alert(s) · ${stale} without data`;
+  $("tiles").replaceChildren(...ward.mats.map(tile));
+}
+function connect() {
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  const ws = new WebSocket(withToken(`${proto}://${location.host}/ws/ward`));
+  ws.onmessage = (m) => render(JSON.parse(m.data));
+  ws.onclose = () => { $("broker").textContent = "station unreachable — retrying…"; setTimeout(connect, 1000); };
+}
+connect();

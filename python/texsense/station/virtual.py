@@ -1,0 +1,101 @@
+"""Virtual mats for the station: simulated people on virtual seats who publish their frames
+through the broker, so that a ward can be seen and load-tested without hardware."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+from typing import Any
+
+from texsense.monitor.protocol import Frame
+from texsense.monitor.sources import VirtualSeatSource
+from texsense.station.broker import BrokerURL
+from texsense.station.ward import MatConfig
+
+__all__ = ["VirtualMats", "frame_payload"]
+
+
+def frame_payload(frame: Frame) -> bytes:
+    """The MQTT payload of a frame (docs/monitor.md): JSON with ``null`` for failed readings."""
+    values = [None if not math.isfinite(v) else round(float(v), 5) for v in frame.values]
+    return json.dumps(
+        {
+            "seq": frame.seq,
+            "t": round(frame.t, 6),
+            "dt": round(float(frame.element_times[1] - frame.element_times[0]), 9)
+            if frame.element_times.size > 1
+            else 0.0,
+            "values": values,
+            "unit": frame.unit,
+        },
+        separators=(",", ":"),
+    ).encode()
+
+
+class VirtualMats:
+    """``n`` simulated people, each on a virtual 96-element textile seat (postures, standing
+    up, failing elements: :class:`~texsense.monitor.sources.VirtualSeatSource`), publishing to
+    ``<prefix>/vmat-NN/frames``.
+
+    Parameters
+    ----------
+    speed : float
+        Simulated time per wall second (the seat scans a frame every 1.6 s simulated).
+    """
+
+    def __init__(
+        self,
+        n: int,
+        broker: BrokerURL,
+        *,
+        prefix: str = "texsense",
+        speed: float = 1.0,
+        seed: int = 0,
+        hold_s: float = 90.0,
+    ) -> None:
+        self.broker = broker
+        self.prefix = prefix.strip("/")
+        self.ids = [f"vmat-{k + 1:02d}" for k in range(n)]
+        self.sources = [
+            VirtualSeatSource(speed=speed, seed=seed + k, hold_s=hold_s) for k in range(n)
+        ]
+        self.published = 0
+        self._client: Any = None
+
+    def configs(self, calibration: Any, reposition_min: float = 20.0) -> list[MatConfig]:
+        """The station's view of these mats (all share the seat's calibration)."""
+        return [
+            MatConfig(i, s.layout, calibration, source="mqtt (virtual seat)",
+                      reposition_min=reposition_min)
+            for i, s in zip(self.ids, self.sources, strict=True)
+        ]  # fmt: skip
+
+    async def _one(self, mat_id: str, source: VirtualSeatSource) -> None:
+        topic = f"{self.prefix}/{mat_id}/frames"
+        async for frame in source.frames():
+            self._client.publish(topic, frame_payload(frame), qos=0)
+            self.published += 1
+
+    async def run(self) -> None:
+        """Publish until cancelled (paho reconnects by itself if the broker restarts)."""
+        import paho.mqtt.client as mqtt
+
+        client = mqtt.Client(
+            mqtt.CallbackAPIVersion.VERSION2, client_id=f"texsense-vmats-{id(self)}"
+        )
+        if self.broker.username:
+            client.username_pw_set(self.broker.username, self.broker.password)
+        if self.broker.tls:
+            client.tls_set()
+        client.reconnect_delay_set(min_delay=1, max_delay=2)
+        client.connect_async(self.broker.host, self.broker.port, keepalive=10)
+        client.loop_start()
+        self._client = client
+        try:
+            await asyncio.gather(
+                *(self._one(i, s) for i, s in zip(self.ids, self.sources, strict=True))
+            )
+        finally:
+            client.disconnect()
+            client.loop_stop()

@@ -1,0 +1,215 @@
+"""The ward station against a real Mosquitto (started by the test): virtual mats, stale mats,
+malformed payloads, a refused mat, a broker restart, the token rule."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from conftest import free_port
+from texsense.station.broker import Broker, parse_broker_url
+from texsense.station.ward import mat_id_of
+
+
+@pytest.fixture
+def broker():
+    with Broker() as b:
+        yield b
+
+
+class StationProcess:
+    """``texsense station ARGS`` as a child process on a free port."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}/"
+        self.log_path = tmp_path / "station.log"
+        cmd = [sys.executable, "-m", "texsense.cli", "station", *args]
+        cmd += ["--db", str(tmp_path / "s.sqlite"), "--port", str(self.port)]
+        cmd += ["--record-dir", str(tmp_path / "rec")]
+        with self.log_path.open("wb") as log:
+            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path)
+
+    def get(self, path: str, token: str | None = None):
+        req = urllib.request.Request(self.url + path)
+        if token:
+            req.add_header("Authorization", f"Bearer {token}")
+        with urllib.request.urlopen(req, timeout=3) as r:
+            return json.load(r)
+
+    def mats(self) -> dict:
+        return {m["id"]: m for m in self.get("api/mats")}
+
+    def until(self, what, cond, timeout: float = 30.0):
+        deadline = time.monotonic() + timeout
+        while True:
+            if self.proc.poll() is not None:
+                pytest.fail(f"the station exited ({self.proc.returncode}):\n{self.log()}")
+            try:
+                value = what()
+                if cond(value):
+                    return value
+            except (OSError, KeyError):
+                value = None
+            if time.monotonic() > deadline:
+                pytest.fail(f"condition not reached (last: {value}):\n{self.log()[-3000:]}")
+            time.sleep(0.05)
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def stop(self) -> None:
+        self.proc.kill()
+        self.proc.wait(timeout=20)
+
+
+@pytest.fixture
+def station(tmp_path):
+    started: list[StationProcess] = []
+
+    def start(*args: str) -> StationProcess:
+        started.append(StationProcess(tmp_path, *args))
+        return started[-1]
+
+    yield start
+    for s in started:
+        s.stop()
+
+
+class Publisher:
+    """A paho client publishing raw payloads to the test broker."""
+
+    def __init__(self, broker: Broker) -> None:
+        import paho.mqtt.client as mqtt
+
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+        self.client.connect("127.0.0.1", broker.port)
+        self.client.loop_start()
+
+    def frame(self, mat: str, seq: int, values, prefix: str = "texsense") -> None:
+        payload = json.dumps({"seq": seq, "t": seq * 0.1, "values": values, "unit": "N/cm2"})
+        self.client.publish(f"{prefix}/{mat}/frames", payload).wait_for_publish(2)
+
+    def raw(self, mat: str, payload: bytes) -> None:
+        self.client.publish(f"texsense/{mat}/frames", payload).wait_for_publish(2)
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+        if self.client.socket() is not None:
+            self.client.socket().close()
+
+
+def ward_file(tmp_path: Path, *ids: str) -> Path:
+    """Pressure mats of 4 x 4 elements over MQTT."""
+    text = "".join(f'[[mat]]\nid = "{i}"\nlayout = "grid:4x4"\n\n' for i in ids)
+    path = tmp_path / "ward.toml"
+    path.write_text(text)
+    return path
+
+
+def test_virtual_mats_through_the_broker(broker, station):
+    st = station(
+        "--virtual-mats", "3", "--speed", "8", "--broker", f"mqtt://127.0.0.1:{broker.port}"
+    )
+    first = st.until(st.mats, lambda m: len(m) == 3 and all(v["frames"] >= 3 for v in m.values()))
+    later = st.until(st.mats, lambda m: all(m[k]["frames"] > first[k]["frames"] + 3 for k in first))
+    assert set(later) == {"vmat-01", "vmat-02", "vmat-03"}
+    assert all(m["state"] == "live" and m["malformed"] == 0 for m in later.values())
+    one = st.get("api/mats/vmat-02")
+    assert len(one["pressure"]) == 96 and one["shape"] == [15, 16]
+    status = st.get("mats/vmat-02/api/status")  # the single-mat dashboard of that mat
+    assert status["frames"] >= 1 and status["source"]["name"].startswith("mat vmat-02")
+    ward = st.get("api/ward")
+    assert ward["connected"] and ward["topic"] == "texsense/+/frames"
+
+
+def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
+    st = station("--config", str(ward_file(tmp_path, "bed1", "bed2")), "--broker",
+                 f"mqtt://127.0.0.1:{broker.port}")  # fmt: skip
+    st.until(lambda: st.get("api/ward")["connected"], bool)
+    pub = Publisher(broker)
+    try:
+        for k in range(12):  # 10 Hz on both mats
+            pub.frame("bed1", k, [0.5] * 16)
+            pub.frame("bed2", k, [0.2] * 16)
+            time.sleep(0.1)
+        st.until(st.mats, lambda m: m["bed1"]["frames"] == 12 and m["bed2"]["frames"] == 12)
+        # malformed payloads: counted for that mat and skipped
+        pub.raw("bed1", b"{not json")
+        pub.raw("bed1", json.dumps({"seq": 99, "values": [1] * 16}).encode())  # no "t"
+        # a mat whose frames do not fit its layout is refused; the others go on
+        pub.frame("bed2", 12, [0.2] * 64)
+        pub.frame("bed2", 13, [0.2] * 16)
+        pub.frame("bed1", 12, [0.5] * 16)
+        m = st.until(st.mats, lambda m: m["bed1"]["malformed"] == 2 and m["bed2"]["refused"])
+        assert m["bed2"]["state"] == "refused" and "64 values" in m["bed2"]["refused"]
+        assert "16 elements" in m["bed2"]["refused"] and m["bed2"]["ignored"] >= 1
+        assert m["bed2"]["frames"] == 12 and m["bed1"]["frames"] == 13
+        # bed1 stops: stale within two frame periods (0.1 s) -- at most 0.5 s by default
+        stopped = time.monotonic()
+        st.until(st.mats, lambda m: m["bed1"]["state"] == "stale", timeout=5)
+        assert time.monotonic() - stopped < 2.0
+        # ... and live again with its next frame
+        pub.frame("bed1", 14, [0.5] * 16)
+        st.until(st.mats, lambda m: m["bed1"]["state"] == "live")
+    finally:
+        pub.close()
+    import sqlite3
+
+    db = sqlite3.connect(tmp_path / "s.sqlite")
+    st.until(lambda: {r[0] for r in db.execute("SELECT kind FROM events")},
+             lambda kinds: {"stale", "resumed", "refused"} <= kinds)  # fmt: skip
+
+
+def test_the_station_reconnects_when_the_broker_restarts(station, tmp_path):
+    b = Broker().start()
+    try:
+        st = station("--config", str(ward_file(tmp_path, "bed1")), "--broker",
+                     f"mqtt://127.0.0.1:{b.port}")  # fmt: skip
+        st.until(lambda: st.get("api/ward")["connected"], bool)
+        pub = Publisher(b)
+        pub.frame("bed1", 0, [0.3] * 16)
+        st.until(st.mats, lambda m: m["bed1"]["frames"] == 1)
+        pub.close()
+        b.stop()
+        st.until(lambda: st.get("api/ward")["connected"], lambda c: c is False, timeout=20)
+        b.start()  # the same port
+        st.until(lambda: st.get("api/ward")["connected"], bool, timeout=20)
+        pub = Publisher(b)
+        time.sleep(0.3)  # the station subscribes again after it reconnects
+        for k in range(1, 4):
+            pub.frame("bed1", k, [0.3] * 16)
+        st.until(st.mats, lambda m: m["bed1"]["frames"] >= 3, timeout=10)
+        pub.close()
+    finally:
+        b.stop()
+
+
+def test_every_request_needs_the_token(broker, station, tmp_path):
+    st = station("--config", str(ward_file(tmp_path, "bed1")), "--token", "s3cret",
+                 "--broker", f"mqtt://127.0.0.1:{broker.port}")  # fmt: skip
+    st.until(lambda: st.get("api/ward", token="s3cret")["connected"], bool)
+    for path in ("api/mats", "api/ward", "mats/bed1/api/status", ""):
+        with pytest.raises(urllib.error.HTTPError) as e:
+            st.get(path)
+        e.value.close()
+        assert e.value.code == 401
+    assert st.get("mats/bed1/api/status", token="s3cret")["frames"] == 0
+
+
+def test_topics_urls_and_errors():
+    assert mat_id_of("texsense/bed12/frames") == "bed12"
+    assert mat_id_of("ward3/bed12/frames") == "bed12"
+    assert mat_id_of("texsense/bed12/status") is None
+    url = parse_broker_url("mqtt://nurse:p%40ss@10.1.2.3:1999")
+    assert (url.host, url.port, url.username, url.password) == ("10.1.2.3", 1999, "nurse", "p@ss")
+    with pytest.raises(ValueError, match="expected mqtt://"):
+        parse_broker_url("http://x")
