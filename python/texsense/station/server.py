@@ -20,10 +20,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
+
+from fastapi import FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, JSONResponse
 
 from texsense.exceptions import ParameterError
 from texsense.monitor.server import STATIC as MONITOR_STATIC
@@ -42,8 +46,6 @@ def create_ward_app(
 ) -> Any:
     """The FastAPI application of a station. ``background``: coroutines to run while the
     app runs (e.g. the virtual mats)."""
-    from fastapi import FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
-    from fastapi.responses import FileResponse, JSONResponse
 
     @asynccontextmanager
     async def lifespan(_app: Any) -> Any:
@@ -120,8 +122,6 @@ def create_ward_app(
         await websocket.accept()
         q = station.subscribe()
         try:
-            import json
-
             await websocket.send_text(json.dumps(station.ward(), separators=(",", ":")))
             while True:
                 await websocket.send_text(await q.get())

@@ -27,15 +27,15 @@ function drawMini(canvas, mat) {
 }
 function tile(mat) {
   const el = document.createElement("div");
-  el.className = `tile ${mat.state}`;
+  el.className = `tile is-${mat.state}`;  // not the monitor's .alert band style
   el.dataset.id = mat.id;
   el.setAttribute("data-state", mat.state);
-  const since = mat.seconds_since_frame === null ? "–" : `${mat.seconds_since_frame.toFixed(1)} s ago`;
+  const since = mat.seconds_since_frame === null ? "no frame yet" : `${mat.seconds_since_frame.toFixed(1)} s ago`;
   el.innerHTML = `
     <div class="top"><span class="id"></span><span class="state"></span></div>
     <canvas width="160" height="110"></canvas>
-    <div class="line"><span>${mat.occupied ? "occupied" : "empty"}</span><span class="big">${mat.minutes_since_reposition.toFixed(1)} min</span></div>
-    <div class="line"><span>${mat.frames} frames · last ${since}</span><span>${mat.malformed ? mat.malformed + " malformed" : ""}</span></div>`;
+    <div class="line"><span>${mat.occupied ? "occupied" : "empty"}</span><span><span class="big">${mat.minutes_since_reposition.toFixed(1)}</span> min</span></div>
+    <div class="line"><span>${mat.frames} frames · ${since}</span><span>${mat.malformed ? mat.malformed + " malformed" : ""}</span></div>`;
   el.querySelector(".id").textContent = mat.id;
   el.querySelector(".state").textContent = STATE_TEXT[mat.state] || mat.state;
   if (mat.refused) el.title = mat.refused;
