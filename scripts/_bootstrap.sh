@@ -53,3 +53,5 @@ VIRTUAL_ENV="$ROOT/.venv" PATH="$ROOT/.venv/bin:$PATH" \
   .venv/bin/maturin develop --release --quiet >/dev/null
 export PATH="$ROOT/.venv/bin:$PATH"
 export PYO3_PYTHON="$ROOT/.venv/bin/python"
+# `texsense station` (docs/station.md) starts Debian's Mosquitto; its tests run it too
+need_debian mosquitto mosquitto "texsense station and its tests"

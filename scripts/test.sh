@@ -16,6 +16,8 @@ if [ ! -x "${TEXSENSE_CHROMIUM:-/usr/bin/chromium}" ] && ! command -v chromium >
     say "chromium is missing and apt-get is not available as root: the browser test will fail"
   fi
 fi
-# the station tests run a real MQTT broker (docs/station.md)
-need_debian mosquitto mosquitto "the station tests"
+# ... and a real PostgreSQL server for the event store on PostgreSQL
+if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
+  need_debian initdb postgresql "the PostgreSQL tests"
+fi
 say "pytest";                python -m pytest -q "$@"

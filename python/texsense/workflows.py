@@ -24,7 +24,13 @@ if TYPE_CHECKING:
     from texsense.drift import Step
     from texsense.sim.mat import VirtualMat
 
-__all__ = ["calibrate_mat", "calibrate_virtual_mat", "material_record", "seat_calibration"]
+__all__ = [
+    "bed_calibration",
+    "calibrate_mat",
+    "calibrate_virtual_mat",
+    "material_record",
+    "seat_calibration",
+]
 
 
 def calibrate_mat(
@@ -93,3 +99,14 @@ def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> MatCalibrati
     from texsense.sim.mat import VirtualMat
 
     return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
+
+
+def bed_calibration(material_seed: int = 11) -> MatCalibration:
+    """Calibrate the virtual 32 x 16 bed mat of the station's virtual beds
+    (:class:`texsense.monitor.sources.VirtualBedSource`, the same physical mat) as a user
+    would."""
+    from texsense.sim.bed import bed_layout
+    from texsense.sim.mat import VirtualMat
+
+    mat = VirtualMat(bed_layout(), "textile-3mm", converters=8, seed=7)
+    return calibrate_virtual_mat(mat, material_seed)

@@ -37,7 +37,9 @@ class StationProcess:
         self.url = f"http://127.0.0.1:{self.port}/"
         self.log_path = tmp_path / "station.log"
         cmd = [sys.executable, "-m", "texsense.cli", "station", *args]
-        cmd += ["--db", str(tmp_path / "s.sqlite"), "--port", str(self.port)]
+        if "--db" not in args:
+            cmd += ["--db", str(tmp_path / "s.sqlite")]
+        cmd += ["--port", str(self.port)]
         cmd += ["--record-dir", str(tmp_path / "rec")]
         with self.log_path.open("wb") as log:
             self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path)
@@ -128,8 +130,10 @@ def test_virtual_mats_through_the_broker(broker, station):
     later = st.until(st.mats, lambda m: all(m[k]["frames"] > first[k]["frames"] + 3 for k in first))
     assert set(later) == {"vmat-01", "vmat-02", "vmat-03"}
     assert all(m["state"] == "live" and m["malformed"] == 0 for m in later.values())
-    one = st.get("api/mats/vmat-02")
-    assert len(one["pressure"]) == 96 and one["shape"] == [15, 16]
+    seat, bed = st.get("api/mats/vmat-01"), st.get("api/mats/vmat-02")
+    assert len(seat["pressure"]) == 96 and seat["shape"] == [15, 16]  # a seat
+    assert len(bed["pressure"]) == 512 and bed["shape"] == [32, 16]  # a bed mat
+    assert "bed" in bed["source"] and "seat" in seat["source"]
     status = st.get("mats/vmat-02/api/status")  # the single-mat dashboard of that mat
     assert status["frames"] >= 1 and status["source"]["name"].startswith("mat vmat-02")
     ward = st.get("api/ward")
@@ -272,3 +276,49 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
             assert not errors, errors
         finally:
             browser.close()
+
+
+def test_two_stations_split_a_site_by_topic(broker, tmp_path):
+    """ward3 and ward4 publish under their own prefixes; each station sees only its ward."""
+    made = []
+    try:
+        for ward in ("ward3", "ward4"):
+            folder = tmp_path / ward
+            folder.mkdir()
+            made.append(StationProcess(folder, "--config", str(ward_file(folder, "bed1", "bed2")),
+                                       "--mats", f"{ward}/+/frames",
+                                       "--broker", f"mqtt://127.0.0.1:{broker.port}"))  # fmt: skip
+        for st in made:
+            st.until(lambda st=st: st.get("api/ward")["connected"], bool)
+        pub = Publisher(broker)
+        for k in range(3):
+            pub.frame("bed1", k, [0.1] * 16, prefix="ward3")
+        pub.frame("bed2", 0, [0.2] * 16, prefix="ward4")
+        pub.close()
+        w3, w4 = made
+        m3 = w3.until(w3.mats, lambda m: m["bed1"]["frames"] == 3)
+        m4 = w4.until(w4.mats, lambda m: m["bed2"]["frames"] == 1)
+        assert m3["bed2"]["frames"] == 0 and m4["bed1"]["frames"] == 0
+    finally:
+        for st in made:
+            st.stop()
+
+
+def test_a_mat_from_a_local_replay_source(broker, station, tmp_path):
+    """A ward file can name local sources too: a replayed pressure recording here."""
+    import numpy as np
+
+    from texsense.io import save
+    from texsense.layout import Layout
+    from texsense.recording import Recording
+
+    rec = Recording(np.full((50, 16), 0.6), np.arange(50) * 0.05, Layout.grid(4, 4))
+    save(rec, tmp_path / "chair.h5")
+    (tmp_path / "ward.toml").write_text(
+        f'[[mat]]\nid = "chair1"\nlayout = "{tmp_path / "chair.h5"}"\n'
+        f'source = "replay:{tmp_path / "chair.h5"}"\n'
+    )
+    st = station("--config", str(tmp_path / "ward.toml"), "--broker",
+                 f"mqtt://127.0.0.1:{broker.port}")  # fmt: skip
+    m = st.until(st.mats, lambda m: m["chair1"]["frames"] >= 10)
+    assert m["chair1"]["source"].startswith("replay:") and m["chair1"]["state"] == "live"

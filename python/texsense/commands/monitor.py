@@ -81,9 +81,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
     p.add_argument(
         "--db",
-        type=Path,
-        default=Path("texsense-monitor.sqlite"),
-        help="SQLite file of sessions and events",
+        default="texsense-monitor.sqlite",
+        help="sessions and events: a SQLite file or postgresql://user:password@host/db",
     )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8765)
@@ -163,7 +162,8 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
 def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
     from texsense.calibration import load_calibration
-    from texsense.monitor import EventStore, ExposureTracker, Monitor
+    from texsense.monitor import ExposureTracker, Monitor
+    from texsense.monitor.store import open_store
     from texsense.pipeline import Pipeline
     from texsense.posture import PostureModel
 
@@ -190,7 +190,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
         pipeline=pipeline,
         tracker=tracker,
         posture_model=model,
-        store=EventStore(args.db),
+        store=open_store(args.db),
         record_dir=args.record_dir,
     )
     if args.record:

@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--virtual-mats", type=int, default=0, metavar="N",
-        help="N simulated people on virtual seats publishing through the broker",
+        help="N simulated people on virtual seats and bed mats (alternating), publishing "
+        "through the broker",
     )  # fmt: skip
     p.add_argument(
         "--speed", type=float, default=1.0,
@@ -39,7 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )  # fmt: skip
     p.add_argument("--virtual-prefix", default="texsense", help="topic prefix of virtual mats")
     p.add_argument("--reposition-min", type=float, default=20.0, help="reposition interval")
-    p.add_argument("--db", default="station.sqlite", help="event store: SQLite file")
+    p.add_argument(
+        "--db", default="station.sqlite", help="event store: a SQLite file or postgresql://..."
+    )
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8766)
@@ -82,12 +85,18 @@ def read_config(path: Path, reposition_min: float) -> tuple[list[Any], dict[str,
     except tomllib.TOMLDecodeError as e:
         raise FormatError(path, f"not TOML: {e}") from None
     mats, local = [], {}
+    calibrations: dict[str, Any] = {}  # a file named by many mats is read once
     for k, m in enumerate(doc.get("mat", [])):
         where = f"{path} [[mat]] #{k + 1}"
         if not isinstance(m, dict) or "id" not in m or "layout" not in m:
             raise FormatError(path, f"[[mat]] #{k + 1} needs an id and a layout")
         layout = _layout(m["layout"], where)
-        cal = load_calibration(m["calibration"]) if m.get("calibration") else None
+        cal = None
+        if m.get("calibration"):
+            key = str(m["calibration"])
+            if key not in calibrations:
+                calibrations[key] = load_calibration(key)
+            cal = calibrations[key]
         quantity = "capacitance" if cal is not None else "pressure"
         kind, _, rest = str(m.get("source", "mqtt")).partition(":")
         if kind == "serial":
@@ -105,7 +114,7 @@ def read_config(path: Path, reposition_min: float) -> tuple[list[Any], dict[str,
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense station``."""
-    from texsense.monitor.store import EventStore
+    from texsense.monitor.store import open_store
     from texsense.station.broker import Broker, parse_broker_url
     from texsense.station.server import serve_ward
     from texsense.station.virtual import VirtualMats
@@ -124,14 +133,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"texsense station: Mosquitto on {url}")
     background = []
     if args.virtual_mats:
-        from texsense.workflows import seat_calibration
+        from texsense.workflows import bed_calibration, seat_calibration
 
         vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
-        mats += vm.configs(seat_calibration(), args.reposition_min)
+        beds = bed_calibration() if args.virtual_mats > 1 else None
+        mats += vm.configs(seat_calibration(), beds, args.reposition_min)
         background.append(vm.run())
     if not mats:
         raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
-    station = Station(url, mats, topic=args.mats, store=EventStore(args.db),
+    station = Station(url, mats, topic=args.mats, store=open_store(args.db),
                       record_dir=args.record_dir)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]
     print(f"texsense station: {len(mats)} mats -> http://{args.host}:{args.port}/")

@@ -29,6 +29,7 @@ __all__ = [
     "ReplaySource",
     "SerialSource",
     "Source",
+    "VirtualBedSource",
     "VirtualSeatSource",
 ]
 
@@ -161,6 +162,71 @@ class VirtualSeatSource(Source):
 
         truth = POSTURES[self.posture] if self.posture else None
         return {**super().info(), "speed": self.speed, "true_posture": truth}
+
+
+class VirtualBedSource(Source):
+    """A simulated person lying on a virtual 32 x 16 bed mat (:mod:`texsense.sim.bed`, textile
+    spacer, eight converters in parallel: a frame about every second): supine, left and right
+    lateral in turn, each held ``hold_s`` (± 30 %), out of bed for ``away_s`` after every
+    ``positions_per_stay`` positions."""
+
+    name = "virtual bed"
+
+    def __init__(
+        self,
+        *,
+        speed: float = 1.0,
+        seed: int = 0,
+        hold_s: float = 600.0,
+        positions_per_stay: int = 6,
+        away_s: float = 300.0,
+    ) -> None:
+        from texsense.sim.bed import bed_layout
+        from texsense.sim.mat import VirtualMat
+
+        super().__init__()
+        if speed < 0 or hold_s <= 0 or away_s < 0 or positions_per_stay < 1:
+            raise ParameterError("speed >= 0, hold_s > 0, away_s >= 0, positions >= 1 required")
+        self.mat = VirtualMat(bed_layout(), "textile-3mm", converters=8, seed=7)
+        self.layout = self.mat.layout
+        self.speed, self.hold_s, self.away_s = float(speed), float(hold_s), float(away_s)
+        self.per_stay = int(positions_per_stay)
+        self._rng = np.random.default_rng(seed)
+        self.weight = float(self._rng.uniform(0.8, 1.25))
+        self.frame_s = self.mat.cdc.frame_time_s(self.layout.n_elements, self.mat.converters)
+        self.position: str | None = None
+
+    async def frames(self) -> AsyncIterator[Frame]:
+        """Endless frames, paced to ``speed``."""
+        from texsense.sim.bed import POSITIONS, lying_pressure
+
+        start = time.monotonic()
+        t, seq, k = 0.0, 0, int(self._rng.integers(0, 3))
+        while True:
+            plan = [POSITIONS[(k + j) % 3] for j in range(self.per_stay)]
+            k += self.per_stay
+            for position, duration in [
+                *((p, self.hold_s * self._rng.uniform(0.7, 1.3)) for p in plan),
+                (None, self.away_s),
+            ]:
+                shift = self._rng.normal(0.0, 2.0, 2)
+                end = t + duration
+                while t < end:
+                    self.position = position
+                    p = (
+                        lying_pressure(self.layout, position, self.weight, shift)
+                        if position
+                        else np.zeros(self.layout.n_elements)
+                    )
+                    cap = self.mat.scan(np.array([t]), p[None, :]).capacitance
+                    await _pace(start, t, self.speed)
+                    yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
+                    seq += 1
+                    t += self.frame_s
+
+    def info(self) -> dict[str, Any]:
+        """Status, with the simulated truth (the position now, None when out of bed)."""
+        return {**super().info(), "speed": self.speed, "true_position": self.position}
 
 
 class ReplaySource(Source):

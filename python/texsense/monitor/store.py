@@ -1,4 +1,5 @@
-"""Sessions and events of the monitor in SQLite (the embedded default; one file, no server).
+"""Sessions and events of the monitor and the station: SQLite (the embedded default; one file,
+no server) or PostgreSQL (``--db postgresql://...``).
 
 Examples
 --------
@@ -22,7 +23,7 @@ from typing import Any
 
 from texsense.monitor.alerts import Event
 
-__all__ = ["EventStore"]
+__all__ = ["EventStore", "PostgresEventStore", "open_store"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS sessions (
@@ -39,62 +40,69 @@ CREATE INDEX IF NOT EXISTS events_session ON events(session);
 
 
 class EventStore:
-    """SQLite store of sessions (a monitor run) and their events. Every write commits at once
-    (a killed monitor keeps every event written before)."""
+    """SQLite store of sessions (a monitor run, or one mat of a station) and their events.
+    Every write commits at once (a killed monitor keeps every event written before)."""
+
+    #: The placeholder of query parameters.
+    _mark = "?"
 
     def __init__(self, path: str | Path = "texsense-monitor.sqlite") -> None:
         self.path = str(path)
-        self._db = sqlite3.connect(self.path, check_same_thread=False)
-        self._db.row_factory = sqlite3.Row
         self._lock = threading.Lock()
+        self._db = self._connect()
+        self._init_schema()
+
+    # ---------------------------------------------------------------- the SQL dialect
+    def _connect(self) -> Any:
+        db = sqlite3.connect(self.path, check_same_thread=False)
+        db.row_factory = sqlite3.Row
+        return db
+
+    def _init_schema(self) -> None:
         with self._lock, self._db:
             self._db.executescript(_SCHEMA)
 
+    def _rows(self, sql: str, args: tuple[Any, ...] = ()) -> list[dict[str, Any]]:
+        with self._lock:
+            return [dict(r) for r in self._db.execute(self._sql(sql), args).fetchall()]
+
+    def _write(self, sql: str, args: tuple[Any, ...]) -> int:
+        """Run an INSERT or UPDATE and commit; returns the new row's id for an INSERT."""
+        with self._lock, self._db:
+            cur = self._db.execute(self._sql(sql), args)
+        return int(cur.lastrowid or 0)
+
+    def _sql(self, sql: str) -> str:
+        return sql.replace("?", self._mark)
+
+    # ---------------------------------------------------------------- the store
     def start_session(self, source: str) -> int:
         """A new session; returns its id."""
-        with self._lock, self._db:
-            cur = self._db.execute(
-                "INSERT INTO sessions (source, started) VALUES (?, ?)", (source, time.time())
-            )
-        return int(cur.lastrowid or 0)
+        return self._write(
+            "INSERT INTO sessions (source, started) VALUES (?, ?)", (source, time.time())
+        )
 
     def end_session(self, session: int) -> None:
         """Mark a session ended."""
-        with self._lock, self._db:
-            self._db.execute("UPDATE sessions SET ended = ? WHERE id = ?", (time.time(), session))
+        self._write("UPDATE sessions SET ended = ? WHERE id = ?", (time.time(), session))
 
     def set_recording(self, session: int, paths: list[str]) -> None:
         """Add recording files to a session."""
-        with self._lock, self._db:
-            row = self._db.execute(
-                "SELECT recordings FROM sessions WHERE id = ?", (session,)
-            ).fetchone()
-            files = [*json.loads(row["recordings"]), *paths] if row else paths
-            self._db.execute(
-                "UPDATE sessions SET recordings = ? WHERE id = ?", (json.dumps(files), session)
-            )
+        rows = self._rows("SELECT recordings FROM sessions WHERE id = ?", (session,))
+        files = [*json.loads(rows[0]["recordings"]), *paths] if rows else paths
+        self._write("UPDATE sessions SET recordings = ? WHERE id = ?", (json.dumps(files), session))
 
     def add_event(self, session: int, event: Event) -> int:
         """Store an event; returns its id."""
-        with self._lock, self._db:
-            cur = self._db.execute(
-                "INSERT INTO events (session, wall, t, kind, alert, detail) VALUES (?,?,?,?,?,?)",
-                (
-                    session,
-                    time.time(),
-                    event.t,
-                    event.kind,
-                    event.alert_id,
-                    json.dumps(event.detail),
-                ),
-            )
-        return int(cur.lastrowid or 0)
+        return self._write(
+            "INSERT INTO events (session, wall, t, kind, alert, detail) VALUES (?,?,?,?,?,?)",
+            (session, time.time(), event.t, event.kind, event.alert_id, json.dumps(event.detail)),
+        )
 
     def sessions(self) -> list[dict[str, Any]]:
         """All sessions, newest first."""
-        with self._lock:
-            rows = self._db.execute("SELECT * FROM sessions ORDER BY id DESC").fetchall()
-        return [{**dict(r), "recordings": json.loads(r["recordings"])} for r in rows]
+        rows = self._rows("SELECT * FROM sessions ORDER BY id DESC")
+        return [{**r, "recordings": json.loads(r["recordings"])} for r in rows]
 
     def events(
         self, session: int | None = None, kind: str | None = None, limit: int = 1000
@@ -109,10 +117,65 @@ class EventStore:
             args.append(kind)
         sql += " ORDER BY id DESC LIMIT ?"
         args.append(int(limit))
-        with self._lock:
-            rows = self._db.execute(sql, args).fetchall()
-        return [{**dict(r), "detail": json.loads(r["detail"])} for r in rows]
+        return [{**r, "detail": json.loads(r["detail"])} for r in self._rows(sql, tuple(args))]
 
     def close(self) -> None:
         """Close the database."""
         self._db.close()
+
+
+_PG_SCHEMA = """
+CREATE TABLE IF NOT EXISTS sessions (
+    id BIGSERIAL PRIMARY KEY, source TEXT NOT NULL, started DOUBLE PRECISION NOT NULL,
+    ended DOUBLE PRECISION, recordings TEXT NOT NULL DEFAULT '[]'
+);
+CREATE TABLE IF NOT EXISTS events (
+    id BIGSERIAL PRIMARY KEY, session BIGINT NOT NULL REFERENCES sessions(id),
+    wall DOUBLE PRECISION NOT NULL, t DOUBLE PRECISION NOT NULL, kind TEXT NOT NULL,
+    alert BIGINT, detail TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX IF NOT EXISTS events_session ON events(session);
+"""
+
+
+class PostgresEventStore(EventStore):
+    """The same store on a PostgreSQL server (``postgresql://user:password@host/db``), with
+    psycopg 3; the tables are created when missing. For a ward whose events several systems
+    read, or a site with several stations writing to one database."""
+
+    _mark = "%s"
+
+    def _connect(self) -> Any:
+        import psycopg
+        from psycopg.rows import dict_row
+
+        try:
+            return psycopg.connect(self.path, autocommit=True, row_factory=dict_row)
+        except psycopg.OperationalError as e:
+            from texsense.exceptions import ParameterError
+
+            where = self.path.split("@")[-1]  # never echo a password
+            raise ParameterError(f"cannot connect to PostgreSQL at {where}: {e}") from None
+
+    def _init_schema(self) -> None:
+        with self._lock:
+            for statement in filter(str.strip, _PG_SCHEMA.split(";")):
+                self._db.execute(statement)
+
+    def _rows(self, sql: str, args: tuple[Any, ...] = ()) -> list[dict[str, Any]]:
+        with self._lock:
+            return list(self._db.execute(self._sql(sql), args).fetchall())
+
+    def _write(self, sql: str, args: tuple[Any, ...]) -> int:
+        returning = sql.lstrip().upper().startswith("INSERT")
+        with self._lock:
+            cur = self._db.execute(self._sql(sql) + (" RETURNING id" if returning else ""), args)
+            return int(cur.fetchone()["id"]) if returning else 0
+
+
+def open_store(where: str | Path) -> EventStore:
+    """An event store: PostgreSQL for a ``postgresql://`` URL, else a SQLite file."""
+    text = str(where)
+    if text.startswith(("postgresql://", "postgres://")):
+        return PostgresEventStore(text)
+    return EventStore(text)

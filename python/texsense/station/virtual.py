@@ -9,7 +9,7 @@ import math
 from typing import Any
 
 from texsense.monitor.protocol import Frame
-from texsense.monitor.sources import VirtualSeatSource
+from texsense.monitor.sources import Source, VirtualBedSource, VirtualSeatSource
 from texsense.station.broker import BrokerURL
 from texsense.station.ward import MatConfig
 
@@ -34,9 +34,11 @@ def frame_payload(frame: Frame) -> bytes:
 
 
 class VirtualMats:
-    """``n`` simulated people, each on a virtual 96-element textile seat (postures, standing
-    up, failing elements: :class:`~texsense.monitor.sources.VirtualSeatSource`), publishing to
-    ``<prefix>/vmat-NN/frames``.
+    """``n`` simulated people publishing to ``<prefix>/vmat-NN/frames``: the odd-numbered
+    ones sit on a virtual 96-element textile seat (postures, standing up, failing elements:
+    :class:`~texsense.monitor.sources.VirtualSeatSource`), the even-numbered ones lie on a
+    virtual 32 x 16 bed mat (supine and lateral in turn, out of bed now and then:
+    :class:`~texsense.monitor.sources.VirtualBedSource`).
 
     Parameters
     ----------
@@ -57,21 +59,32 @@ class VirtualMats:
         self.broker = broker
         self.prefix = prefix.strip("/")
         self.ids = [f"vmat-{k + 1:02d}" for k in range(n)]
-        self.sources = [
-            VirtualSeatSource(speed=speed, seed=seed + k, hold_s=hold_s) for k in range(n)
+        self.sources: list[Source] = [
+            VirtualSeatSource(speed=speed, seed=seed + k, hold_s=hold_s)
+            if k % 2 == 0
+            else VirtualBedSource(speed=speed, seed=seed + k, hold_s=4 * hold_s)
+            for k in range(n)
         ]
         self.published = 0
         self._client: Any = None
 
-    def configs(self, calibration: Any, reposition_min: float = 20.0) -> list[MatConfig]:
-        """The station's view of these mats (all share the seat's calibration)."""
-        return [
-            MatConfig(i, s.layout, calibration, source="mqtt (virtual seat)",
-                      reposition_min=reposition_min)
-            for i, s in zip(self.ids, self.sources, strict=True)
-        ]  # fmt: skip
+    def configs(
+        self, seat_calibration: Any, bed_calibration: Any, reposition_min: float = 20.0
+    ) -> list[MatConfig]:
+        """The station's view of these mats (the seats share the seat's calibration, the beds
+        the bed's)."""
+        out = []
+        for i, src in zip(self.ids, self.sources, strict=True):
+            bed = isinstance(src, VirtualBedSource)
+            out.append(
+                MatConfig(
+                    i, src.layout, bed_calibration if bed else seat_calibration,
+                    source=f"mqtt ({src.name})", reposition_min=reposition_min,
+                )
+            )  # fmt: skip
+        return out
 
-    async def _one(self, mat_id: str, source: VirtualSeatSource) -> None:
+    async def _one(self, mat_id: str, source: Source) -> None:
         topic = f"{self.prefix}/{mat_id}/frames"
         async for frame in source.frames():
             self._client.publish(topic, frame_payload(frame), qos=0)
