@@ -16,7 +16,7 @@ if [ ! -x "${TEXSENSE_CHROMIUM:-/usr/bin/chromium}" ] && ! command -v chromium >
     say "chromium is missing and apt-get is not available as root: the browser test will fail"
   fi
 fi
-# ... and a real PostgreSQL server for the event store on PostgreSQL
+# a real PostgreSQL server for the tests of the event store on PostgreSQL (docs/station.md)
 if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
   need_debian initdb postgresql "the PostgreSQL tests"
 fi
