@@ -9,8 +9,9 @@ any coordination of their own: the broker routes). Every mat is a
 
 - **arrival**: messages, malformed payloads (counted per mat and skipped), the frame period
   (running mean of arrival gaps);
-- **stale**: a mat that has not sent for two of its frame periods (at least ``min_stale_s``)
-  is marked stale and an event is stored; its next frame marks it live again;
+- **stale**: a mat that has not sent for two of its frame periods (checked every 20 ms;
+  ``min_stale_s`` can set a floor for mats with jittery links) is marked stale and an event
+  is stored with how long it was silent; its next frame marks it live again;
 - **refused**: a mat whose frames do not match its layout (another number of elements) is
   refused with an event that says both counts; the other mats go on;
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
@@ -263,7 +264,7 @@ class Station:
         topic: str = "texsense/+/frames",
         store: Any = None,
         record_dir: Path | str = "recordings",
-        min_stale_s: float = 0.5,
+        min_stale_s: float = 0.0,
     ) -> None:
         ids = [m.id for m in mats]
         if len(set(ids)) != len(ids):
@@ -357,7 +358,7 @@ class Station:
         finally:
             source.close()
 
-    async def watch(self, every_s: float = 0.1) -> None:
+    async def watch(self, every_s: float = 0.02) -> None:
         """Mark mats stale as they stop sending (runs until cancelled)."""
         while True:
             now = time.time()
