@@ -349,14 +349,9 @@ class MatCalibration(_CalibrationFile):
     @classmethod
     def load(cls, path: str | Path) -> MatCalibration:
         """Read a calibration file."""
-        path = Path(path)
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except UnicodeDecodeError:
-            raise FormatError(path, "not JSON: a binary file, not a calibration") from None
-        except json.JSONDecodeError as e:
-            raise FormatError(path, f"not JSON: {e.msg}", line=e.lineno) from None
-        return cls.from_dict(d, path)
+        from texsense.stages import read_json
+
+        return cls.from_dict(read_json(path), path)
 
 
 def _mean_reading(rec: Recording, name: str) -> np.ndarray:
@@ -507,13 +502,6 @@ def calibration_from_dict(d: Any, source: str | Path = "<dict>") -> Any:
 def load_calibration(path: str | Path) -> Any:
     """Read a calibration file: a stage chain (:class:`texsense.stages.StageChain`), a
     first-round mat calibration or a linear one (:func:`calibration_from_dict`)."""
-    path = Path(path)
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise FormatError(path, f"cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not JSON: a binary file, not a calibration") from None
-    except json.JSONDecodeError as e:
-        raise FormatError(path, f"not JSON: {e.msg}", line=e.lineno) from None
-    return calibration_from_dict(d, path)
+    from texsense.stages import read_json
+
+    return calibration_from_dict(read_json(path), path)

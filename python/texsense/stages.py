@@ -183,7 +183,7 @@ class Stage:
     @classmethod
     def load(cls, path: str | Path) -> Stage:
         """Read a stage file (any stage)."""
-        return stage_from_dict(_read_json(path), path)
+        return stage_from_dict(read_json(path), path)
 
     def __repr__(self) -> str:
         state = "fitted" if self.is_fitted() else "not fitted"
@@ -493,7 +493,9 @@ class Repair(Stage):
 STAGES: dict[str, type[Stage]] = {s.name: s for s in (Detect, Convert, Hysteresis, Drift, Repair)}
 
 
-def _read_json(path: str | Path) -> Any:
+def read_json(path: str | Path) -> Any:
+    """A JSON file's content; an unreadable, binary or malformed file raises
+    :class:`FormatError` naming it (and the line)."""
     path = Path(path)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -675,7 +677,7 @@ class StageChain:
 def load_chain(path: str | Path, layout: Layout | None = None) -> StageChain:
     """Read a chain file, or a mat calibration file of the first round (``layout`` adds the
     detect stage to the latter)."""
-    d = _read_json(path)
+    d = read_json(path)
     if isinstance(d, dict) and d.get("format") == CHAIN_FORMAT:
         return StageChain.from_dict(d, path)
     from texsense.calibration import MatCalibration, calibration_from_dict

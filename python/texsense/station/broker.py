@@ -21,11 +21,12 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 from urllib.parse import unquote, urlsplit
 
 from texsense.exceptions import ParameterError
 
-__all__ = ["Broker", "BrokerURL", "parse_broker_url"]
+__all__ = ["Broker", "BrokerURL", "mqtt_client", "parse_broker_url"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,22 @@ def parse_broker_url(url: str) -> BrokerURL:
         unquote(parts.password) if parts.password else None,
         tls,
     )
+
+
+def mqtt_client(broker: BrokerURL, name: str) -> Any:
+    """A paho client for ``broker`` (credentials and TLS set, reconnecting every 1-2 s),
+    connecting in its own network thread; the caller sets its callbacks first if it needs
+    them, then calls ``loop_start()``."""
+    import paho.mqtt.client as mqtt
+
+    client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=name)
+    if broker.username:
+        client.username_pw_set(broker.username, broker.password)
+    if broker.tls:
+        client.tls_set()
+    client.reconnect_delay_set(min_delay=1, max_delay=2)
+    client.connect_async(broker.host, broker.port, keepalive=10)
+    return client
 
 
 def _free_port() -> int:

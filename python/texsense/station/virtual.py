@@ -92,17 +92,9 @@ class VirtualMats:
 
     async def run(self) -> None:
         """Publish until cancelled (paho reconnects by itself if the broker restarts)."""
-        import paho.mqtt.client as mqtt
+        from texsense.station.broker import mqtt_client
 
-        client = mqtt.Client(
-            mqtt.CallbackAPIVersion.VERSION2, client_id=f"texsense-vmats-{id(self)}"
-        )
-        if self.broker.username:
-            client.username_pw_set(self.broker.username, self.broker.password)
-        if self.broker.tls:
-            client.tls_set()
-        client.reconnect_delay_set(min_delay=1, max_delay=2)
-        client.connect_async(self.broker.host, self.broker.port, keepalive=10)
+        client = mqtt_client(self.broker, f"texsense-vmats-{id(self)}")
         client.loop_start()
         self._client = client
         try:

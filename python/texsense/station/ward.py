@@ -318,23 +318,15 @@ class Station:
 
     def start(self) -> None:
         """Connect (in paho's network thread) from within the running event loop."""
-        import paho.mqtt.client as mqtt
+        from texsense.station.broker import mqtt_client
 
         if self.broker is None:
             return
         self._loop = asyncio.get_running_loop()
-        client = mqtt.Client(
-            mqtt.CallbackAPIVersion.VERSION2, client_id=f"texsense-station-{id(self)}"
-        )
-        if self.broker.username:
-            client.username_pw_set(self.broker.username, self.broker.password)
-        if self.broker.tls:
-            client.tls_set()
+        client = mqtt_client(self.broker, f"texsense-station-{id(self)}")
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
         client.on_message = self._on_message
-        client.reconnect_delay_set(min_delay=1, max_delay=2)
-        client.connect_async(self.broker.host, self.broker.port, keepalive=10)
         client.loop_start()
         self._client = client
 
