@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from texsense._progress import logger
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.stats import centre_of_force_values
@@ -151,12 +152,36 @@ def mirror_samples(
 
 
 def pool_maps(maps: npt.ArrayLike, k: int) -> np.ndarray:
-    """Means of k x k blocks of maps (T, rows, cols); k must divide both sides."""
+    """Means of k x k blocks of maps (T, rows, cols). Where k does not divide a side, the
+    blocks at that edge are partial and average the cells they hold (the grid is padded with
+    missing cells, not trimmed: no element is dropped), and the log says so once per shape."""
     m = np.asarray(maps, dtype=np.float64)
     rows, cols = m.shape[1:]
-    if rows % k or cols % k:
-        raise ParameterError(f"pool {k} does not divide the {(rows, cols)} grid")
-    return m.reshape(-1, rows // k, k, cols // k, k).mean(axis=(2, 4))
+    pr, pc = (-rows) % k, (-cols) % k
+    if pr or pc:
+        _say_partial(rows, cols, k, pr, pc)
+        m = np.pad(m, ((0, 0), (0, pr), (0, pc)), constant_values=np.nan)
+    blocks = m.reshape(-1, (rows + pr) // k, k, (cols + pc) // k, k)
+    with np.errstate(invalid="ignore"):
+        return np.nanmean(blocks, axis=(2, 4)) if (pr or pc) else blocks.mean(axis=(2, 4))
+
+
+_SAID: set[tuple[int, int, int]] = set()
+
+
+def _say_partial(rows: int, cols: int, k: int, pr: int, pc: int) -> None:
+    if (rows, cols, k) in _SAID:
+        return
+    _SAID.add((rows, cols, k))
+    parts = []
+    if pr:
+        parts.append(f"the last row of blocks averages {k - pr} of {k} rows")
+    if pc:
+        parts.append(f"the last column of blocks averages {k - pc} of {k} columns")
+    logger.warning(
+        "pool %d on a %d x %d grid: %s (padded with missing cells, nothing dropped)",
+        k, rows, cols, " and ".join(parts),
+    )  # fmt: skip
 
 
 def reduce_maps(
@@ -233,8 +258,6 @@ class FeatureSet:
         shape = layout.shape
         if shape is None:
             raise ParameterError("align and pool need a grid layout")
-        if shape[0] % self.pool or shape[1] % self.pool:
-            raise ParameterError(f"pool {self.pool} does not divide the {shape} grid")
         return shape
 
     def _element_values(self, v: np.ndarray, layout: Layout) -> np.ndarray:
@@ -250,8 +273,9 @@ class FeatureSet:
             if kind == "elements":
                 if self.pool > 1:
                     rows, cols = self._check_grid(layout)
-                    k = self.pool
-                    names += [f"b{r}_{c}" for r in range(rows // k) for c in range(cols // k)]
+                    k = self.pool  # partial blocks at an edge count (pool_maps)
+                    nr, nc = -(-rows // k), -(-cols // k)
+                    names += [f"b{r}_{c}" for r in range(nr) for c in range(nc)]
                 else:
                     names += [f"e{i + 1}" for i in range(layout.n_elements)]
             elif kind == "centre":
