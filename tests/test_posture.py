@@ -249,3 +249,25 @@ def test_posture_model_round_trip_and_bad_files(tmp_path):
         PostureModel.load(bad)
     with pytest.raises(ParameterError, match="not trained"):
         PostureModel(FeatureSet(), lay).predict(frames)
+
+
+def test_window_vote_follows_the_majority_of_the_last_seconds():
+    from texsense.posture.smoothing import WindowVote, window_vote
+
+    vote = WindowVote(window_s=2.0)
+    got = [vote.step(t, lab) for t, lab in enumerate("aabbbba")]
+    # t=3: a,b,b in [1,3] -> b; a lone 'a' at t=6 after four 'b' stays 'b'
+    assert got == ["a", "a", "a", "b", "b", "b", "b"]
+    # a confident frame outweighs two unsure ones; ties go to the most recent label
+    vote = WindowVote(window_s=10.0)
+    vote.step(0, "x", 0.2)
+    vote.step(1, "x", 0.2)
+    assert vote.step(2, "y", 0.9) == "y"
+    assert WindowVote(10.0).step(0, "p") == "p"
+    with pytest.raises(ParameterError, match="must not decrease"):
+        vote.step(1.0, "x")
+    with pytest.raises(ParameterError, match=">= 0 s"):
+        WindowVote(-1.0)
+    # recorded sequences: the vote restarts at a new subject, never carries over
+    out = window_vote([0, 1, 2, 0, 1], ["a", "a", "a", "b", "a"], 5.0, ["s1"] * 3 + ["s2"] * 2)
+    assert out.tolist() == ["a", "a", "a", "b", "a"]  # s2 starts afresh; a tie: the latest

@@ -45,6 +45,9 @@ def test_posture_evaluate_prints_loso_and_json(labelled, capsys):
     )
     out = capsys.readouterr().out
     assert "leave-one-subject-out accuracy" in out and "S3" in out and "confusion" in out
+    assert main(["posture", "evaluate", str(labelled), "--where", "hold", "--window", "5"]) == 0
+    text = capsys.readouterr().out
+    assert "a vote over the last 5 s" in text and "per frame" in text
     assert main(["posture", "evaluate", str(labelled), "--drop", "0", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert sorted(report["per_subject"]) == ["S0", "S1", "S2", "S3"]

@@ -55,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     e = ps.add_parser("evaluate", help="leave-one-subject-out accuracy, per subject, confusion")
     _selection_args(e)
     e.add_argument("--group", default="subject", help="the label naming the subject")
+    e.add_argument(
+        "--window", type=float, metavar="S",
+        help="also report the accuracy of a vote over the last S seconds (live smoothing)",
+    )  # fmt: skip
     _feature_args(e)
     e.add_argument("--json", action="store_true", help="print the report as JSON")
     e.set_defaults(run=run_evaluate)
@@ -160,9 +164,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
         b = None if back is None else back[src]
         extra = (fs.transform(flipped, rec.layout, b), y_m, groups[src])
     report = loso(X, y, groups, args.classifier, extra=extra, show_progress=not args.json)
+    window = None
+    if args.window is not None:
+        window = _window_accuracy(rec.times[idx], y, report.predictions, groups, args.window)
     if args.json:
         print(json.dumps({"classifier": args.classifier, "frames": int(idx.size),
-                          "mirror": mirror,
+                          "mirror": mirror, "window": window,
                           "features": fs.to_dict(), **report.to_dict()}, indent=1))  # fmt: skip
         return 0
     print(
@@ -170,6 +177,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
         f"{len(report.labels)} classes of {args.label!r}: leave-one-subject-out accuracy "
         f"{report.accuracy:.1%} (worst {report.minimum[0]}: {report.minimum[1]:.1%})"
     )
+    if window is not None:
+        print(
+            f"a vote over the last {args.window:g} s (each subject's frames in time order): "
+            f"{window['accuracy']:.1%} (worst {window['minimum']['subject']}: "
+            f"{window['minimum']['accuracy']:.1%}), per frame {report.accuracy:.1%}"
+        )
     for s, a in sorted(report.per_subject.items()):
         print(f"  {s:>10}  {a:6.1%}")
     print("confusion (rows true, columns predicted):")
@@ -178,6 +191,26 @@ def run_evaluate(args: argparse.Namespace) -> int:
     for v, row in zip(report.labels, report.confusion, strict=True):
         print(f"{v!s:>{width}}" + "".join(f"{c:>{width}}" for c in row))
     return 0
+
+
+def _window_accuracy(
+    times: np.ndarray, y: np.ndarray, pred: np.ndarray, groups: np.ndarray, window_s: float
+) -> dict[str, Any]:
+    """Accuracy of the live vote over the last ``window_s`` s, per subject (mean) and worst.
+    The vote restarts only at a new subject: posture changes within a subject's recording
+    are voted across, as they would be live."""
+    from texsense.posture.smoothing import window_vote
+
+    smoothed = window_vote(times, pred, window_s, sequences=groups)
+    hit = smoothed == y
+    per = {str(s): float(np.mean(hit[groups == s])) for s in np.unique(groups)}
+    worst = min(per, key=per.__getitem__)
+    return {
+        "window_s": window_s,
+        "accuracy": float(np.mean(list(per.values()))),
+        "per_subject": per,
+        "minimum": {"subject": worst, "accuracy": per[worst]},
+    }
 
 
 def run_train(args: argparse.Namespace) -> int:

@@ -32,6 +32,9 @@ log = logging.getLogger("texsense.monitor")
 
 #: Longest time between two flushes of a live recording: a killed monitor loses at most this.
 FLUSH_S = 0.5
+#: The posture shown live is the vote over this many seconds of frame-by-frame predictions
+#: (``posture.frame_label`` in the snapshot is the present frame's own).
+POSTURE_WINDOW_S = 5.0
 
 
 class Recorder:
@@ -140,6 +143,9 @@ class Monitor:
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_offset: float | None = None
         self._cof_trace: list[list[float]] = []
+        from texsense.posture.smoothing import WindowVote
+
+        self._vote = WindowVote(POSTURE_WINDOW_S)
 
     # ------------------------------------------------------------------ viewers
     def subscribe(self) -> asyncio.Queue[str]:
@@ -226,7 +232,15 @@ class Monitor:
         posture = None
         if self.posture_model is not None and load > 0:
             label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
-            posture = {"label": str(label[0]), "confidence": float(confidence[0])}
+            conf = float(confidence[0])
+            posture = {
+                "label": str(self._vote.step(frame.t, str(label[0]), conf)),
+                "frame_label": str(label[0]),
+                "confidence": conf,
+                "window_s": POSTURE_WINDOW_S,
+            }
+        else:
+            self._vote.reset()  # nobody there: the next person starts a new vote
         alert = self.tracker.open_alert
         self.frames += 1
 

@@ -99,6 +99,7 @@ function render() {
   $("peak").textContent = `${fmt(st.peak_ncm2 * f, unit === "mmHg" ? 0 : 2)} ${LABEL[unit]}`;
   $("ppi").textContent = `${fmt(st.ppi_ncm2 * f, unit === "mmHg" ? 0 : 2)} ${LABEL[unit]}`;
   $("posture").textContent = last.posture ? `${last.posture.label} (${fmt(100 * last.posture.confidence, 0)} %)` : (status && status.posture_model ? "nobody" : "no model");
+  $("posture").title = last.posture ? `vote over ${last.posture.window_s} s; this frame alone: ${last.posture.frame_label}` : "";
   $("posture-truth").textContent = last.source.true_posture !== undefined
     ? `simulated person: ${last.source.true_posture === null ? "away" : last.source.true_posture}` : "";
   const a = last.alert;
