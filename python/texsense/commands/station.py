@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
     if args.virtual_mats < 0:
         raise ParameterError("--virtual-mats must be >= 0")
     mats, local = read_config(args.config, args.reposition_min) if args.config else ([], {})
+    if not mats and not args.virtual_mats:
+        raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
     own = None
     if args.broker:
         url = parse_broker_url(args.broker)
@@ -131,21 +133,19 @@ def run(args: argparse.Namespace) -> int:
         own = Broker().start()
         url = own.url
         print(f"texsense station: Mosquitto on {url}")
-    background = []
-    if args.virtual_mats:
-        from texsense.workflows import bed_calibration, seat_calibration
-
-        vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
-        beds = bed_calibration() if args.virtual_mats > 1 else None
-        mats += vm.configs(seat_calibration(), beds, args.reposition_min)
-        background.append(vm.run())
-    if not mats:
-        raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
-    station = Station(url, mats, topic=args.mats, store=open_store(args.db),
-                      record_dir=args.record_dir)  # fmt: skip
-    background += [station.consume(mat_id, src) for mat_id, src in local.items()]
-    print(f"texsense station: {len(mats)} mats -> http://{args.host}:{args.port}/")
     try:
+        background = []
+        if args.virtual_mats:
+            from texsense.workflows import bed_calibration, seat_calibration
+
+            vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
+            beds = bed_calibration() if args.virtual_mats > 1 else None
+            mats += vm.configs(seat_calibration(), beds, args.reposition_min)
+            background.append(vm.run())
+        station = Station(url, mats, topic=args.mats, store=open_store(args.db),
+                          record_dir=args.record_dir)  # fmt: skip
+        background += [station.consume(mat_id, src) for mat_id, src in local.items()]
+        print(f"texsense station: {len(mats)} mats -> http://{args.host}:{args.port}/")
         serve_ward(station, host=args.host, port=args.port, token=args.token,
                    background=background)  # fmt: skip
     finally:

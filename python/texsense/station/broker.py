@@ -80,6 +80,18 @@ def mqtt_client(broker: BrokerURL, name: str) -> Any:
     return client
 
 
+def _die_with_parent() -> None:
+    """In the child before exec (Linux): end with the parent, even one that is killed. (As
+    root, Mosquitto drops to its own user at start, which clears this: a station killed with
+    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
+    import contextlib
+    import ctypes
+    import signal
+
+    with contextlib.suppress(OSError):  # not Linux: the parent's stop() is the only way
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -128,7 +140,10 @@ class Broker:
         errors = self._dir / "mosquitto.err"
         with errors.open("wb") as err:
             self._proc = subprocess.Popen(
-                [self.exe, "-c", str(self.config)], stdout=subprocess.DEVNULL, stderr=err
+                [self.exe, "-c", str(self.config)],
+                stdout=subprocess.DEVNULL,
+                stderr=err,
+                preexec_fn=_die_with_parent,
             )
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
