@@ -50,6 +50,8 @@ def test_serial_line_round_trip_and_errors():
 
 def test_mqtt_payload_and_errors():
     f = parse_mqtt_payload(json.dumps({"seq": 1, "t": 2.0, "dt": 0.5, "values": [1, None]}), 2)
+    fast = parse_mqtt_payload(json.dumps({"seq": 1, "t": 2.0, "values": [1, 2.5]}), 2)
+    np.testing.assert_array_equal(fast.values, [1.0, 2.5])
     np.testing.assert_allclose(f.element_times, [2.0, 2.5])
     assert np.isnan(f.values[1]) and f.unit == "pF"
     for payload, msg in [
@@ -58,6 +60,9 @@ def test_mqtt_payload_and_errors():
         (json.dumps({"t": 1, "values": [1, 2]}), "lacks 'seq'"),
         (json.dumps({"seq": 1, "t": 1, "values": [1]}), "list of 2"),
         (json.dumps({"seq": 1, "t": 1, "values": [1, "a"]}), "value 2"),
+        (json.dumps({"seq": 1, "t": 1, "values": [1, "2.5"]}), "value 2"),  # no number as text
+        (json.dumps({"seq": 1, "t": 1, "values": [True, 2]}), "value 1"),
+        ('{"seq": 1, "t": 1, "values": [1, 1e999]}', "value 2"),  # infinite
         (json.dumps({"seq": 1, "t": 1, "values": [1, 2], "unit": "furlong"}), "unknown unit"),
         (json.dumps({"seq": 1, "t": 1, "values": [1, 2], "unit": "mm"}), "neither"),
         (json.dumps({"seq": True, "t": 1, "values": [1, 2]}), "'seq'"),

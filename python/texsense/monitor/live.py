@@ -139,7 +139,7 @@ class Monitor:
         self.frames = 0
         self.started = time.time()
         self._latest: dict[str, Any] | None = None
-        self._latest_text = "null"
+        self._latest_text: str | None = "null"
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_offset: float | None = None
         self._cof_trace: list[list[float]] = []
@@ -278,8 +278,9 @@ class Monitor:
             "processed_ms": round(1e3 * (time.time() - received_at), 3),
         }
         self._latest = snap
-        self._latest_text = json.dumps(snap, separators=(",", ":"))
-        self._publish(self._latest_text)
+        self._latest_text = None  # serialised when somebody asks (no viewer: no cost)
+        if self._subscribers:
+            self._publish(self.latest_text)
         return snap
 
     def _cof_cell(self, pressure: np.ndarray) -> np.ndarray:
@@ -301,7 +302,9 @@ class Monitor:
 
     @property
     def latest_text(self) -> str:
-        """The latest snapshot as JSON text."""
+        """The latest snapshot as JSON text (serialised once per frame, when first asked)."""
+        if self._latest_text is None:
+            self._latest_text = json.dumps(self._latest, separators=(",", ":"))
         return self._latest_text
 
     async def run(self, max_frames: int | None = None) -> None:

@@ -138,6 +138,25 @@ def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
     return Frame(seq, times, values, "pF")
 
 
+def _values(vals: list[Any], n: int) -> np.ndarray:
+    """The values of a payload: numbers, ``null`` for a failed reading (NaN). One numpy
+    conversion for the common case of plain numbers; the element-wise check names the first
+    bad value otherwise."""
+    if all(type(v) is float or type(v) is int for v in vals):  # not bool, str, None
+        values = np.array(vals, dtype=np.float64)
+        if values.shape == (n,) and np.all(np.isfinite(values)):
+            return values
+    values = np.empty(n)
+    for i, v in enumerate(vals):
+        if v is None:
+            values[i] = np.nan
+        elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+            values[i] = v
+        else:
+            raise ProtocolError(f"value {i + 1} is not a finite number or null")
+    return values
+
+
 def parse_mqtt_payload(payload: bytes | str, n_elements: int) -> Frame:
     """Parse one MQTT message (JSON, see the module docstring)."""
     if len(payload) > 16 * MAX_LINE:
@@ -159,14 +178,7 @@ def parse_mqtt_payload(payload: bytes | str, n_elements: int) -> Frame:
     if not isinstance(vals, list) or len(vals) != n_elements:
         got = len(vals) if isinstance(vals, list) else type(vals).__name__
         raise ProtocolError(f"'values' must be a list of {n_elements} numbers, got {got}")
-    values = np.empty(n_elements)
-    for i, v in enumerate(vals):
-        if v is None:
-            values[i] = np.nan
-        elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-            values[i] = v
-        else:
-            raise ProtocolError(f"value {i + 1} is not a finite number or null")
+    values = _values(vals, n_elements)
     unit = d.get("unit", "pF")
     if not isinstance(unit, str):
         raise ProtocolError("'unit' must be a string")
