@@ -197,6 +197,39 @@ def test_virtual_seat_source_gives_capacitance_with_failures():
     assert np.all(np.diff(t) > 0)
 
 
+def test_virtual_bed_source_turns_and_leaves_the_bed():
+    from texsense.monitor.sources import VirtualBedSource
+
+    src = VirtualBedSource(speed=0, hold_s=3, positions_per_stay=3, away_s=3, seed=1)
+    seen = []
+    frames = []
+    for f in first_with(src, 40, lambda: seen.append(src.position)):
+        frames.append(f)
+    assert src.layout.n_elements == 512 and src.layout.shape == (32, 16)
+    assert {"supine", "left", "right"} <= set(seen) and None in seen  # turns, gets up
+    v = np.array([f.values for f in frames])
+    assert np.all(np.isfinite(v)) and np.all(np.diff([f.t for f in frames]) > 0)
+    # lying changes the capacitance under the body, an empty bed does not
+    lying = v[[k for k, p in enumerate(seen) if p]].mean(axis=0)
+    empty = v[[k for k, p in enumerate(seen) if p is None]].mean(axis=0)
+    assert np.max(lying - empty) > 0.2
+
+
+def first_with(source, n, each):
+    """The first n frames of a source, calling ``each()`` after every one."""
+
+    async def go():
+        out = []
+        async for f in source.frames():
+            each()
+            out.append(f)
+            if len(out) >= n:
+                break
+        return out
+
+    return asyncio.run(go())
+
+
 def test_replay_source_refuses_what_it_cannot_monitor():
     lay = Layout.grid(1, 2)
     raw = Recording(np.ones((2, 2)), [0.0, 1.0], lay, "raw", "count")

@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--source",
         default="virtual",
-        help="virtual | replay:FILE | serial:PORT | iio:DEVICE_DIR | mqtt:HOST[:PORT]",
+        help="virtual | virtual-bed | replay:FILE | serial:PORT | iio:DEVICE_DIR | "
+        "mqtt:HOST[:PORT]",
     )
     p.add_argument(
         "--speed",
@@ -140,6 +141,10 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
         from texsense.workflows import seat_calibration
 
         return sources.VirtualSeatSource(speed=args.speed), seat_calibration()
+    if kind == "virtual-bed":
+        from texsense.workflows import bed_calibration
+
+        return sources.VirtualBedSource(speed=args.speed), bed_calibration()
     if kind == "replay":
         return sources.ReplaySource(Path(rest), speed=args.speed, loop=True), None
     if kind == "serial":
@@ -156,7 +161,9 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
     if kind == "mqtt":
         host, _, port = rest.partition(":")
         return sources.MQTTSource(host, _grid(args), port=int(port or 1883)), None
-    raise ParameterError(f"unknown source {args.source!r} (virtual, replay:, serial:, iio:, mqtt:)")
+    raise ParameterError(
+        f"unknown source {args.source!r} (virtual, virtual-bed, replay:, serial:, iio:, mqtt:)"
+    )
 
 
 def build_monitor(args: argparse.Namespace) -> Any:
