@@ -19,9 +19,12 @@ function drawMini(canvas, mat) {
   const [rows, cols] = mat.shape;
   const s = Math.min(canvas.width / cols, canvas.height / rows);
   const ox = (canvas.width - s * cols) / 2, oy = (canvas.height - s * rows) / 2;
+  // each tile to its own peak (at least 0.5 N/cm²): the shape of a light bed shows as well
+  // as a seat's ischial peaks
+  const top = Math.max(0.5, ...mat.pressure.filter((v) => v !== null));
   mat.cells.forEach((cell, i) => {
     const r = Math.floor(cell / cols), c = cell % cols, v = mat.pressure[i];
-    ctx.fillStyle = v === null ? "#d1d5db" : colour(v / 4.0);  // 0-4 N/cm²
+    ctx.fillStyle = v === null ? "#d1d5db" : colour(v / top);
     ctx.fillRect(ox + c * s, oy + r * s, Math.ceil(s), Math.ceil(s));
   });
 }
