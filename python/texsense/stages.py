@@ -8,7 +8,8 @@ Every stage
   ``run(recording)`` for many return values and validity the same way (``run`` gives a
   recording), the same numbers either way (tested for every stage);
 - leaves an element's state untouched by a reading that is invalid or not a number (only time
-  passes for it), and marks that reading invalid in its output;
+  passes for it; the detector's stuck counter restarts after a reading that is not a number),
+  and marks that reading invalid in its output;
 - forgets its stream with ``reset()``;
 - saves and loads itself in one versioned envelope
   ``{"format": "texsense.stage", "version": 1, "stage": NAME, "params": {...}, "fitted": {...}}``.
