@@ -30,6 +30,7 @@ __all__ = [
     "calibrate_virtual_mat",
     "material_record",
     "seat_calibration",
+    "strip_calibration",
 ]
 
 
@@ -110,3 +111,14 @@ def bed_calibration(material_seed: int = 11) -> MatCalibration:
 
     mat = VirtualMat(bed_layout(), "textile-3mm", converters=8, seed=7)
     return calibrate_virtual_mat(mat, material_seed)
+
+
+def strip_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration:
+    """Calibrate the stocking sensor strip (:func:`texsense.sim.stocking.strip_layout`, the
+    same physical strip as ``wear(..., seed=seed)``) as a user would."""
+    from texsense.sim.mat import VirtualMat
+    from texsense.sim.stocking import strip_layout
+
+    return calibrate_virtual_mat(
+        VirtualMat(strip_layout(), "textile-3mm", seed=seed), material_seed
+    )

@@ -13,8 +13,10 @@ from texsense.commands import (
     posture,
     simulate,
     station,
+    stocking,
 )
 
 COMMANDS = (
     info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor, station,
+    stocking,
 )  # fmt: skip
