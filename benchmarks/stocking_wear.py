@@ -76,6 +76,26 @@ def main() -> None:
         print(f"| {cls} | {leg_name} | {p} | {truth_cls} | {' | '.join(cells)} |")
     print("\nclass read right after 8 h: " + ", ".join(
         f"{n} {right[n]}/{len(rows)}" for n in VARIANTS))  # fmt: skip
+    # at every point: the RAL-GZ 387 range (or gap) its reading falls in, against the truth's
+    points_right = {
+        n: sum(
+            compression_class(float(out[n][j])) == compression_class(float(out["truth"][j]))
+            for _, _, out in rows
+            for j in range(len(POINTS))
+        )
+        for n in VARIANTS
+    }
+    total = len(rows) * len(POINTS)
+    print("readings in the same class range (or gap) as the true pressure, all points: "
+          + ", ".join(f"{n} {points_right[n]}/{total}" for n in VARIANTS))  # fmt: skip
+    name = next(iter(VARIANTS))
+    for cls, leg_name, out in rows:
+        for j, point in enumerate(POINTS):
+            t, m = float(out["truth"][j]), float(out[name][j])
+            if compression_class(m) != compression_class(t):
+                where = f"class {cls} {leg_name} leg, {point}"
+                print(f"  {name}, {where}: true {t:.2f} mmHg ({compression_class(t)}), "
+                      f"read {m:.2f} ({compression_class(m)})")  # fmt: skip
     errs = {n: [] for n in VARIANTS}
     for _, _, out in rows:
         for n in VARIANTS:
