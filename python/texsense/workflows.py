@@ -30,6 +30,7 @@ __all__ = [
     "calibrate_virtual_mat",
     "material_record",
     "seat_calibration",
+    "sleeve_calibration",
     "strip_calibration",
 ]
 
@@ -122,3 +123,13 @@ def strip_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration:
     return calibrate_virtual_mat(
         VirtualMat(strip_layout(), "textile-3mm", seed=seed), material_seed
     )
+
+
+def sleeve_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration:
+    """Calibrate the muscle sleeve (:func:`texsense.sim.muscle.sleeve_layout`, high-rate
+    readout, the same physical sleeve as ``session(..., seed=seed)``) as a user would."""
+    from texsense.sim.mat import VirtualMat
+    from texsense.sim.muscle import HIGH_RATE_CDC, sleeve_layout
+
+    mat = VirtualMat(sleeve_layout(), "textile-3mm", cdc=HIGH_RATE_CDC, seed=seed)
+    return calibrate_virtual_mat(mat, material_seed)

@@ -8,6 +8,7 @@ from texsense.commands import (
     hysteresis,
     info,
     monitor,
+    muscle,
     pipeline,
     plot,
     posture,
@@ -18,5 +19,5 @@ from texsense.commands import (
 
 COMMANDS = (
     info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor, station,
-    stocking,
+    stocking, muscle,
 )  # fmt: skip
