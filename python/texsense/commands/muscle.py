@@ -6,8 +6,6 @@ import argparse
 import json
 from pathlib import Path
 
-from texsense.exceptions import ParameterError
-
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``muscle`` command."""
@@ -58,17 +56,11 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_detect(args: argparse.Namespace) -> int:
     """Run ``texsense muscle detect``."""
+    from texsense.commands.pipeline import to_pressure
     from texsense.io import load
     from texsense.muscle import activation, detect
 
-    rec = load(args.recording)
-    if rec.quantity == "capacitance":
-        if args.calibration is None:
-            raise ParameterError("a capacitance recording needs --calibration")
-        from texsense.calibration import load_calibration
-        from texsense.pipeline import Pipeline
-
-        rec = Pipeline(load_calibration(args.calibration), rec.layout, repair=None).run(rec)
+    rec = to_pressure(load(args.recording), args.calibration)
     act = activation(rec)
     found = detect(rec.times, act, on_ncm2=args.threshold)
     if args.plot:

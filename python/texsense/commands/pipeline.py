@@ -118,6 +118,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     h.set_defaults(run=run_health)
 
 
+def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
+    """A recording as pressure: a capacitance recording through the pipeline of
+    ``calibration`` (``stages``: e.g. ``hysteresis=False, drift=False``; no repair), a
+    pressure recording as it is."""
+    if rec.quantity != "capacitance":
+        return rec
+    if calibration is None:
+        raise ParameterError("a capacitance recording needs --calibration")
+    from texsense.calibration import load_calibration
+    from texsense.pipeline import Pipeline
+
+    return Pipeline(load_calibration(calibration), rec.layout, repair=None, **stages).run(rec)
+
+
 def _capacitance(path: Path):  # type: ignore[no-untyped-def]
     rec = load(path)
     if rec.quantity != "capacitance":

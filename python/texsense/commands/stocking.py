@@ -7,8 +7,6 @@ import argparse
 import json
 from pathlib import Path
 
-from texsense.exceptions import ParameterError
-
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``stocking`` command."""
@@ -58,22 +56,15 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_report(args: argparse.Namespace) -> int:
     """Run ``texsense stocking report``."""
+    from texsense.commands.pipeline import to_pressure
     from texsense.io import load
     from texsense.stocking import POINTS, report
 
     rec = load(args.recording)
+    pressure = to_pressure(rec, args.calibration)
     unc = None
-    if rec.quantity == "capacitance":
-        if args.calibration is None:
-            raise ParameterError("a capacitance recording needs --calibration")
-        from texsense.calibration import load_calibration
-        from texsense.pipeline import Pipeline
-
-        cal = load_calibration(args.calibration)
-        pressure = Pipeline(cal, rec.layout, repair=None).run(rec)
-        unc = Pipeline(cal, rec.layout, hysteresis=False, drift=False, repair=None).run(rec)
-    else:
-        pressure = rec
+    if rec.quantity == "capacitance":  # the uncompensated reading beside it
+        unc = to_pressure(rec, args.calibration, hysteresis=False, drift=False)
     rep = report(pressure, unc, every_h=args.every)
     if args.json:
         print(json.dumps(rep.to_dict(), indent=1))
