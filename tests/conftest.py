@@ -80,45 +80,53 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class MonitorProcess:
-    """``texsense monitor ARGS`` as a real child process on a free port, its output in
-    ``tmp_path/monitor.log``; ``status()`` reads /api/status."""
+class ChildServer:
+    """``texsense COMMAND ARGS`` as a real child process on a free port (its own SQLite file
+    unless ``--db`` is given), its output in ``tmp_path/COMMAND.log``."""
 
-    def __init__(self, tmp_path: Path, *args: str) -> None:
+    def __init__(self, tmp_path: Path, command: str, *args: str) -> None:
         import subprocess
         import sys
 
+        self.name = command
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}/"
-        self.log_path = tmp_path / "monitor.log"
-        cmd = [sys.executable, "-m", "texsense.cli", "monitor", *args]
-        cmd += ["--db", str(tmp_path / "m.sqlite"), "--port", str(self.port)]
+        self.log_path = tmp_path / f"{command}.log"
+        cmd = [sys.executable, "-m", "texsense.cli", command, *args]
+        if "--db" not in args:
+            cmd += ["--db", str(tmp_path / f"{command[0]}.sqlite")]
+        cmd += ["--port", str(self.port)]
         with self.log_path.open("wb") as log:
-            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path)
 
-    def status(self) -> dict:
+    def get(self, path: str, token: str | None = None):
+        """GET ``path`` (JSON), with a bearer token if given."""
         import json
         import urllib.request
 
-        with urllib.request.urlopen(self.url + "api/status", timeout=2) as r:
+        req = urllib.request.Request(self.url + path)
+        if token:
+            req.add_header("Authorization", f"Bearer {token}")
+        with urllib.request.urlopen(req, timeout=3) as r:
             return json.load(r)
 
-    def wait_for_frames(self, frames: int = 1, timeout: float = 60.0) -> None:
-        """Until the monitor has processed ``frames`` frames (fails with its log otherwise)."""
+    def until(self, what, cond, timeout: float = 30.0):
+        """Poll ``what()`` until ``cond`` holds; fail with the server's log otherwise."""
         import time
 
         deadline = time.monotonic() + timeout
         while True:
             if self.proc.poll() is not None:
-                pytest.fail(f"the monitor exited ({self.proc.returncode}):\n{self.log()}")
+                pytest.fail(f"the {self.name} exited ({self.proc.returncode}):\n{self.log()}")
             try:
-                if self.status()["frames"] >= frames:
-                    return
-            except OSError:
-                pass
+                value = what()
+                if cond(value):
+                    return value
+            except (OSError, KeyError):
+                value = None
             if time.monotonic() > deadline:
-                pytest.fail(f"the monitor did not reach {frames} frames:\n{self.log()}")
-            time.sleep(0.1)
+                pytest.fail(f"condition not reached (last: {value}):\n{self.log()[-3000:]}")
+            time.sleep(0.05)
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace")
@@ -126,6 +134,20 @@ class MonitorProcess:
     def stop(self) -> None:
         self.proc.kill()
         self.proc.wait(timeout=20)
+
+
+class MonitorProcess(ChildServer):
+    """``texsense monitor ARGS``; ``status()`` reads /api/status."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        super().__init__(tmp_path, "monitor", *args)
+
+    def status(self) -> dict:
+        return self.get("api/status")
+
+    def wait_for_frames(self, frames: int = 1, timeout: float = 60.0) -> None:
+        """Until the monitor has processed ``frames`` frames (fails with its log otherwise)."""
+        self.until(lambda: self.status()["frames"], lambda n: n >= frames, timeout)
 
 
 @pytest.fixture

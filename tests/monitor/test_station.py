@@ -8,8 +8,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
-import sys
 import time
 import urllib.error
 import urllib.request
@@ -18,7 +16,7 @@ from pathlib import Path
 import pytest
 from test_browser import CHROMIUM_ARGS, chromium
 
-from conftest import free_port
+from conftest import ChildServer
 from texsense.station.broker import Broker, parse_broker_url
 from texsense.station.ward import mat_id_of
 
@@ -29,52 +27,14 @@ def broker():
         yield b
 
 
-class StationProcess:
+class StationProcess(ChildServer):
     """``texsense station ARGS`` as a child process on a free port."""
 
     def __init__(self, tmp_path: Path, *args: str) -> None:
-        self.port = free_port()
-        self.url = f"http://127.0.0.1:{self.port}/"
-        self.log_path = tmp_path / "station.log"
-        cmd = [sys.executable, "-m", "texsense.cli", "station", *args]
-        if "--db" not in args:
-            cmd += ["--db", str(tmp_path / "s.sqlite")]
-        cmd += ["--port", str(self.port)]
-        cmd += ["--record-dir", str(tmp_path / "rec")]
-        with self.log_path.open("wb") as log:
-            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path)
-
-    def get(self, path: str, token: str | None = None):
-        req = urllib.request.Request(self.url + path)
-        if token:
-            req.add_header("Authorization", f"Bearer {token}")
-        with urllib.request.urlopen(req, timeout=3) as r:
-            return json.load(r)
+        super().__init__(tmp_path, "station", *args, "--record-dir", str(tmp_path / "rec"))
 
     def mats(self) -> dict:
         return {m["id"]: m for m in self.get("api/mats")}
-
-    def until(self, what, cond, timeout: float = 30.0):
-        deadline = time.monotonic() + timeout
-        while True:
-            if self.proc.poll() is not None:
-                pytest.fail(f"the station exited ({self.proc.returncode}):\n{self.log()}")
-            try:
-                value = what()
-                if cond(value):
-                    return value
-            except (OSError, KeyError):
-                value = None
-            if time.monotonic() > deadline:
-                pytest.fail(f"condition not reached (last: {value}):\n{self.log()[-3000:]}")
-            time.sleep(0.05)
-
-    def log(self) -> str:
-        return self.log_path.read_text(errors="replace")
-
-    def stop(self) -> None:
-        self.proc.kill()
-        self.proc.wait(timeout=20)
 
 
 @pytest.fixture
