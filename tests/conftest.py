@@ -82,7 +82,8 @@ def free_port() -> int:
 
 class ChildServer:
     """``texsense COMMAND ARGS`` as a real child process on a free port (its own SQLite file
-    unless ``--db`` is given), its output in ``tmp_path/COMMAND.log``."""
+    ``db_path`` = ``tmp_path/COMMAND.sqlite`` unless ``--db`` is given, then ``None``), its
+    output in ``tmp_path/COMMAND.log``."""
 
     def __init__(self, tmp_path: Path, command: str, *args: str) -> None:
         import subprocess
@@ -93,8 +94,9 @@ class ChildServer:
         self.url = f"http://127.0.0.1:{self.port}/"
         self.log_path = tmp_path / f"{command}.log"
         cmd = [sys.executable, "-m", "texsense.cli", command, *args]
-        if "--db" not in args:
-            cmd += ["--db", str(tmp_path / f"{command[0]}.sqlite")]
+        self.db_path = None if "--db" in args else tmp_path / f"{command}.sqlite"
+        if self.db_path is not None:
+            cmd += ["--db", str(self.db_path)]
         cmd += ["--port", str(self.port)]
         with self.log_path.open("wb") as log:
             self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path)

@@ -133,7 +133,7 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
         pub.close()
     import sqlite3
 
-    db = sqlite3.connect(tmp_path / "s.sqlite")
+    db = sqlite3.connect(st.db_path)
     st.until(lambda: {r[0] for r in db.execute("SELECT kind FROM events")},
              lambda kinds: {"stale", "resumed", "refused"} <= kinds)  # fmt: skip
     last = "SELECT detail FROM events WHERE kind = 'stale' ORDER BY id DESC"

@@ -107,4 +107,4 @@ def test_the_station_stores_its_events_in_postgresql(postgres, tmp_path):
     assert "stale" in kinds
     assert any(s["source"].startswith("mat bed7") for s in store.sessions())
     store.close()
-    assert Path(tmp_path / "s.sqlite").exists() is False  # nothing went to SQLite
+    assert not (tmp_path / "station.sqlite").exists()  # nothing went to SQLite (the default)
