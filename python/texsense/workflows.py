@@ -104,14 +104,11 @@ def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> MatCalibrati
 
 
 def bed_calibration(material_seed: int = 11) -> MatCalibration:
-    """Calibrate the virtual 32 x 16 bed mat of the station's virtual beds
-    (:class:`texsense.monitor.sources.VirtualBedSource`, the same physical mat) as a user
-    would."""
-    from texsense.sim.bed import bed_layout
-    from texsense.sim.mat import VirtualMat
+    """Calibrate the virtual 64 x 32 bed mat (:class:`texsense.monitor.sources.VirtualBedSource`
+    and the station's virtual beds: the same physical mat) as a user would."""
+    from texsense.sim.bed import bed_mat
 
-    mat = VirtualMat(bed_layout(), "textile-3mm", converters=8, seed=7)
-    return calibrate_virtual_mat(mat, material_seed)
+    return calibrate_virtual_mat(bed_mat(failures=False), material_seed)
 
 
 def strip_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration:

@@ -203,10 +203,11 @@ def test_virtual_bed_source_turns_and_leaves_the_bed():
     src = VirtualBedSource(speed=0, hold_s=3, positions_per_stay=3, away_s=3, seed=1)
     seen = []
     frames = []
-    for f in first_with(src, 40, lambda: seen.append(src.position)):
+    for f in first_with(src, 40, lambda: seen.append(src.side)):
         frames.append(f)
-    assert src.layout.n_elements == 512 and src.layout.shape == (32, 16)
-    assert {"supine", "left", "right"} <= set(seen) and None in seen  # turns, gets up
+    assert src.layout.n_elements == 2048 and src.layout.shape == (64, 32)
+    sides = set(seen) - {None, "transition"}
+    assert len(sides) >= 3 and "transition" in seen and None in seen  # turns, gets up
     v = np.array([f.values for f in frames])
     assert np.all(np.isfinite(v)) and np.all(np.diff([f.t for f in frames]) > 0)
     # lying changes the capacitance under the body, an empty bed does not

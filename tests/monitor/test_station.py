@@ -92,7 +92,7 @@ def test_virtual_mats_through_the_broker(broker, station):
     assert all(m["state"] == "live" and m["malformed"] == 0 for m in later.values())
     seat, bed = st.get("api/mats/vmat-01"), st.get("api/mats/vmat-02")
     assert len(seat["pressure"]) == 96 and seat["shape"] == [15, 16]  # a seat
-    assert len(bed["pressure"]) == 512 and bed["shape"] == [32, 16]  # a bed mat
+    assert len(bed["pressure"]) == 2048 and bed["shape"] == [64, 32]  # a bed mat
     assert "bed" in bed["source"] and "seat" in seat["source"]
     status = st.get("mats/vmat-02/api/status")  # the single-mat dashboard of that mat
     assert status["frames"] >= 1 and status["source"]["name"].startswith("mat vmat-02")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -165,10 +165,13 @@ class VirtualSeatSource(Source):
 
 
 class VirtualBedSource(Source):
-    """A simulated person lying on a virtual 32 x 16 bed mat (:mod:`texsense.sim.bed`, textile
-    spacer, eight converters in parallel: a frame about every second): supine, left and right
-    lateral in turn, each held ``hold_s`` (± 30 %), out of bed for ``away_s`` after every
-    ``positions_per_stay`` positions."""
+    """A simulated person on the virtual 64 x 32 bed mat (:func:`texsense.sim.bed.bed_mat`:
+    textile spacer, failing elements, 32 converters in parallel: a frame about every second):
+    lying positions of every
+    side and their variants in a random order, each held ``hold_s`` times 0.3-2.2 (the
+    default: 18 min to 2 h 12 min, so a 2 h turning schedule is sometimes overrun), turning
+    for a few seconds between them, sitting up after every 5 positions and out of bed for
+    ``away_s`` after every ``positions_per_stay``."""
 
     name = "virtual bed"
 
@@ -177,56 +180,58 @@ class VirtualBedSource(Source):
         *,
         speed: float = 1.0,
         seed: int = 0,
-        hold_s: float = 600.0,
-        positions_per_stay: int = 6,
+        hold_s: float = 3600.0,
+        positions_per_stay: int = 8,
         away_s: float = 300.0,
     ) -> None:
-        from texsense.sim.bed import bed_layout
-        from texsense.sim.mat import VirtualMat
+        from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat
 
         super().__init__()
         if speed < 0 or hold_s <= 0 or away_s < 0 or positions_per_stay < 1:
             raise ParameterError("speed >= 0, hold_s > 0, away_s >= 0, positions >= 1 required")
-        self.mat = VirtualMat(bed_layout(), "textile-3mm", converters=8, seed=7)
+        self.mat = bed_mat()
         self.layout = self.mat.layout
         self.speed, self.hold_s, self.away_s = float(speed), float(hold_s), float(away_s)
         self.per_stay = int(positions_per_stay)
         self._rng = np.random.default_rng(seed)
-        self.weight = float(self._rng.uniform(0.8, 1.25))
-        self.frame_s = self.mat.cdc.frame_time_s(self.layout.n_elements, self.mat.converters)
+        self.sleeper = Sleeper.random(seed, seed=202)
+        self.frame_s = self.mat.cdc.frame_time_s(self.layout.n_elements, BED_CONVERTERS)
         self.position: str | None = None
+        self.side: str | None = None
+
+    def _plan(self) -> Iterator[tuple[str, float]]:
+        from texsense.sim.bed import night_plan
+
+        while True:
+            yield from night_plan(
+                self._rng, self.per_stay, self.hold_s, out_every=self.per_stay,
+                away_s=self.away_s, spread=(0.3, 2.2),
+            )  # fmt: skip
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-        from texsense.sim.bed import POSITIONS, lying_pressure
+        from texsense.sim.bed import night_frames
 
         start = time.monotonic()
-        t, seq, k = 0.0, 0, int(self._rng.integers(0, 3))
-        while True:
-            plan = [POSITIONS[(k + j) % 3] for j in range(self.per_stay)]
-            k += self.per_stay
-            for position, duration in [
-                *((p, self.hold_s * self._rng.uniform(0.7, 1.3)) for p in plan),
-                (None, self.away_s),
-            ]:
-                shift = self._rng.normal(0.0, 2.0, 2)
-                end = t + duration
-                while t < end:
-                    self.position = position
-                    p = (
-                        lying_pressure(self.layout, position, self.weight, shift)
-                        if position
-                        else np.zeros(self.layout.n_elements)
-                    )
-                    cap = self.mat.scan(np.array([t]), p[None, :]).capacitance
-                    await _pace(start, t, self.speed)
-                    yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
-                    seq += 1
-                    t += self.frame_s
+        turn_s = min(6.0, self.hold_s / 3)
+        plan = self._plan()
+        frames = night_frames(self.sleeper, plan, self._rng, frame_s=self.frame_s, turn_s=turn_s)
+        for seq, f in enumerate(frames):
+            self.position = None if f.position == "out" else f.position
+            self.side = None if f.side == "out" else f.side
+            cap = self.mat.scan(np.array([f.t]), f.pressure[None, :]).capacitance
+            await _pace(start, f.t, self.speed)
+            yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
 
     def info(self) -> dict[str, Any]:
-        """Status, with the simulated truth (the position now, None when out of bed)."""
-        return {**super().info(), "speed": self.speed, "true_position": self.position}
+        """Status, with the simulated truth (the position and side now, None when out of
+        bed)."""
+        return {
+            **super().info(),
+            "speed": self.speed,
+            "true_position": self.position,
+            "true_side": self.side,
+        }
 
 
 class ReplaySource(Source):

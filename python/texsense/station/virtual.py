@@ -37,7 +37,7 @@ class VirtualMats:
     """``n`` simulated people publishing to ``<prefix>/vmat-NN/frames``: the odd-numbered
     ones sit on a virtual 96-element textile seat (postures, standing up, failing elements:
     :class:`~texsense.monitor.sources.VirtualSeatSource`), the even-numbered ones lie on a
-    virtual 32 x 16 bed mat (supine and lateral in turn, out of bed now and then:
+    virtual 64 x 32 bed mat (every side and its variants, turning, sitting up, out of bed:
     :class:`~texsense.monitor.sources.VirtualBedSource`).
 
     Parameters
