@@ -271,3 +271,48 @@ def test_window_vote_follows_the_majority_of_the_last_seconds():
     # recorded sequences: the vote restarts at a new subject, never carries over
     out = window_vote([0, 1, 2, 0, 1], ["a", "a", "a", "b", "a"], 5.0, ["s1"] * 3 + ["s2"] * 2)
     assert out.tolist() == ["a", "a", "a", "b", "a"]  # s2 starts afresh; a tie: the latest
+
+
+class _GroupSpy(_SubjectSpy):
+    """Records the subjects it is given: only the training subjects may reach it."""
+
+    def fit(self, X, y, groups=None):
+        self.groups_ = set(np.asarray(groups).tolist())
+        return super().fit(X, y)
+
+    def predict(self, X):
+        held = {str(int(v)) for v in X[:, 0]}
+        assert not held & self.groups_, "the held-out subject reached the inner choice"
+        return super().predict(X)
+
+
+def test_loso_passes_the_training_subjects_to_a_classifier_that_takes_them():
+    groups = np.repeat(np.arange(5), 6)
+    X = np.c_[groups, np.zeros(30)]
+    y = np.tile([0, 1], 15)
+    report = loso(X, y, groups.astype(str), _GroupSpy())
+    assert report.confusion.sum() == 30
+
+
+def test_auto_chooses_by_subject_and_says_what_it_chose():
+    from texsense.posture.evaluate import SubjectSelect, make_classifier
+
+    rng = np.random.default_rng(3)
+    y = np.repeat([0, 1, 2], 40)
+    groups = np.tile(np.repeat(["a", "b", "c", "d"], 10), 3)
+    X = np.c_[y + 0.25 * rng.standard_normal(120), rng.standard_normal((120, 3))]
+    chooser = SubjectSelect(candidates=(("naive-bayes", None), ("logistic", 1.0)))
+    chooser.fit(X, y, groups=groups)
+    assert len(chooser.scores_) == 2 and "inner score" in chooser.choice_
+    assert chooser.chosen_ in ("naive-bayes", "logistic C=1")
+    assert np.mean(chooser.predict(X) == y) > 0.9 and chooser.predict_proba(X).shape == (120, 3)
+    alone = SubjectSelect().fit(X, y)  # no subjects: the first candidate, said so
+    assert alone.chosen_ == "logistic C=0.3" and "not chosen" in alone.choice_
+    svm = SubjectSelect(candidates=(("linear-svm", 0.01),)).fit(X, y)
+    assert not hasattr(svm, "predict_proba")
+    calibrated = SubjectSelect(candidates=(("linear-svm", 0.01),), probability=True).fit(X, y)
+    assert calibrated.predict_proba(X).shape == (120, 3)
+    report = loso(X, y, groups, "auto")
+    assert report.accuracy > 0.85
+    with pytest.raises(ParameterError, match="auto has no regularisation C"):
+        make_classifier("auto", c=1.0)

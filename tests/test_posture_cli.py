@@ -95,3 +95,68 @@ def test_mirror_option_trains_on_mirrored_frames_and_checks_its_map(labelled, tm
     assert main(["posture", "train", str(labelled), "--where", "hold", "--mirror", "1:3,2",
                  "-o", str(out)]) == 0  # fmt: skip
     assert PostureModel.load(out).mirror == {"1": "3", "3": "1", "2": "2"}
+
+
+def test_defaults_are_used_without_options_and_named(labelled, tmp_path, capsys):
+    from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
+
+    assert main(["posture", "evaluate", str(labelled), "--where", "hold"]) == 0
+    name = DEFAULT_CLASSIFIER + ("" if DEFAULT_C is None else f" C={DEFAULT_C:g}")
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first == f"{name} on {DEFAULT_FEATURES.describe()}"
+    model_path = tmp_path / "default.joblib"
+    assert main(["posture", "train", str(labelled), "--where", "hold", "-o", str(model_path)]) == 0
+    model = PostureModel.load(model_path)
+    assert model.features == DEFAULT_FEATURES and model.classifier_name.startswith(
+        DEFAULT_CLASSIFIER
+    )
+    # the thesis's classifier brings the thesis's features
+    nb = tmp_path / "nb.joblib"
+    args = ["posture", "train", str(labelled), "--where", "hold", "--classifier", "naive-bayes"]
+    assert main([*args, "-o", str(nb)]) == 0
+    assert PostureModel.load(nb).features.kinds == ("elements", "centre", "areas4", "areas16")
+    assert not PostureModel.load(nb).features.align
+    # any feature option replaces the default set
+    capsys.readouterr()
+    assert main(["posture", "evaluate", str(labelled), "--where", "hold", "--features", "centre",
+                 "--json"]) == 0  # fmt: skip
+    assert json.loads(capsys.readouterr().out)["features"]["kinds"] == ["centre"]
+
+
+def test_c_option_and_its_errors(labelled, capsys):
+    base = ["posture", "evaluate", str(labelled), "--where", "hold", "--json"]
+    assert main([*base, "--classifier", "linear-svm", "--c", "0.5"]) == 0
+    assert json.loads(capsys.readouterr().out)["classifier"] == "linear-svm C=0.5"
+    assert main([*base, "--classifier", "naive-bayes", "--c", "0.5"]) != 0
+    assert "naive-bayes has no regularisation C" in capsys.readouterr().err
+    assert main([*base, "--classifier", "logistic", "--c", "0"]) != 0
+    assert "C must be > 0" in capsys.readouterr().err
+
+
+def test_mirror_is_on_by_default_where_the_recording_declares_it(tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    lay = Layout.grid(4, 4, pitch_cm=2.0)
+    frames, side, subject = [], [], []
+    for s in range(3):
+        for label, col in (("left", 0), ("right", 3), ("middle", 1)):
+            for _ in range(6):
+                m = np.zeros((4, 4))
+                m[:, col] = rng.uniform(1, 2)
+                if label == "middle":
+                    m[:, 2] = m[:, 1]
+                frames.append(lay.from_grid(m))
+                side.append(label)
+                subject.append(f"S{s}")
+    rec = Recording(np.array(frames), np.arange(len(frames), dtype=float), lay,
+                    labels={"side": np.array(side), "subject": np.array(subject)},
+                    meta={"mirror": {"side": {"left": "right", "right": "left",
+                                              "middle": "middle"}}})  # fmt: skip
+    path = tmp_path / "declared.h5"
+    save(rec, path)
+    base = ["posture", "evaluate", str(path), "--label", "side", "--json"]
+    assert main(base) == 0
+    assert json.loads(capsys.readouterr().out)["mirror"]["left"] == "right"
+    assert main([*base, "--no-mirror"]) == 0
+    assert json.loads(capsys.readouterr().out)["mirror"] is None
+    assert main([*base, "--no-mirror", "--mirror"]) != 0
+    assert "contradict" in capsys.readouterr().err

@@ -13,9 +13,13 @@ import numpy as np
 
 from texsense.exceptions import ParameterError
 from texsense.io import load
+from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
 from texsense.posture.evaluate import CLASSIFIERS
 from texsense.posture.features import KINDS, FeatureSet, mirror_samples
 from texsense.recording import Recording
+
+#: The thesis's feature kinds (§6.3.2), used when feature options are given without --features.
+THESIS_KINDS = "elements,centre,areas4,areas16"
 
 
 def _selection_args(p: argparse.ArgumentParser) -> None:
@@ -29,18 +33,46 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
 
 
 def _feature_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--classifier", choices=tuple(CLASSIFIERS), default="naive-bayes")
-    p.add_argument("--features", default="elements,centre,areas4,areas16",
-                   help=f"comma-separated feature kinds of {', '.join(KINDS)}")  # fmt: skip
-    p.add_argument("--back-label", default="back", help="label holding the back sensor")
-    p.add_argument("--align", action="store_true", help="centre each map's centre of force")
-    p.add_argument("--rotate", action="store_true", help="with --align: turn to the body axis")
-    p.add_argument("--log", action="store_true", help="log(1 + value) of element values")
-    p.add_argument("--pool", type=int, default=1, help="mean of N x N element blocks")
-    p.add_argument("--mirror", nargs="?", const="auto", metavar="MAP",
+    g = p.add_argument_group(
+        "classifier and features",
+        f"default: {describe_defaults()} (chosen by benchmarks/posture_defaults.py, "
+        "docs/posture.md); any feature option below replaces the default feature set",
+    )
+    g.add_argument("--classifier", choices=tuple(CLASSIFIERS), default=None,
+                   help=f"default {DEFAULT_CLASSIFIER}; naive-bayes is the thesis's (and brings "
+                   "the thesis's features unless feature options are given)")  # fmt: skip
+    g.add_argument("--c", type=float, default=None, metavar="C",
+                   help="regularisation of logistic / SVMs (default: the default classifier's "
+                   f"{DEFAULT_C}, else the registry's)")  # fmt: skip
+    g.add_argument("--features", default=None,
+                   help=f"comma-separated feature kinds of {', '.join(KINDS)} (with options: "
+                   "elements,centre,areas4,areas16, the thesis's)")  # fmt: skip
+    g.add_argument("--back-label", default="back", help="label holding the back sensor")
+    g.add_argument("--align", action="store_true", help="centre each map's centre of force")
+    g.add_argument("--rotate", action="store_true", help="with --align: turn to the body axis")
+    g.add_argument("--log", action="store_true", help="log(1 + value) of element values")
+    g.add_argument("--pool", type=int, default=None, help="mean of N x N element blocks")
+    g.add_argument("--mirror", nargs="?", const="auto", metavar="MAP",
                    help="also train on left-right mirrored frames; MAP names each label's mirror "
-                   "image ('2:3,4:6,1' = 2 and 3 swap, 4 and 6 swap, 1 is its own), default: "
-                   "the map the recording declares (PMD does)")  # fmt: skip
+                   "image ('2:3,4:6,1' = 2 and 3 swap, 4 and 6 swap, 1 is its own); without "
+                   "MAP the map the recording declares. Default: on when the recording "
+                   "declares one (PMD does)")  # fmt: skip
+    g.add_argument("--no-mirror", action="store_true", help="no mirrored training copies")
+
+
+def describe_defaults() -> str:
+    """The default classifier and features in words."""
+    c = "" if DEFAULT_C is None else f" (C={DEFAULT_C:g})"
+    return f"{DEFAULT_CLASSIFIER}{c} on {DEFAULT_FEATURES.describe()}"
+
+
+def _classifier(args: argparse.Namespace) -> tuple[str, Any]:
+    """(name shown, unfitted estimator) of --classifier / --c or the defaults."""
+    from texsense.posture.evaluate import make_classifier
+
+    name = args.classifier or DEFAULT_CLASSIFIER
+    c = args.c if args.c is not None or args.classifier else DEFAULT_C
+    return name + ("" if c is None else f" C={c:g}"), make_classifier(name, c)
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -65,6 +97,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     t = ps.add_parser("train", help="train a classifier on all frames and save it")
     _selection_args(t)
     _feature_args(t)
+    t.add_argument("--group", default="subject",
+                   help="the label naming the subject (the auto classifier chooses by subject; "
+                   "without it, its first candidate)")  # fmt: skip
     t.add_argument("-o", "--output", type=Path, required=True, help="model file (joblib)")
     t.set_defaults(run=run_train)
 
@@ -109,14 +144,26 @@ def _frames(args: argparse.Namespace) -> tuple[Recording, np.ndarray, np.ndarray
 
 
 def _feature_set(args: argparse.Namespace) -> FeatureSet:
-    kinds = tuple(k.strip() for k in args.features.split(",") if k.strip())
-    return FeatureSet(kinds, align=args.align, rotate=args.rotate, log=args.log, pool=args.pool)
+    """The features of the options; when none is given, the default set (the thesis's
+    with ``--classifier naive-bayes``: the thesis's classifier on the thesis's features)."""
+    if args.features is None and not (args.align or args.rotate or args.log or args.pool):
+        return FeatureSet(THESIS_KINDS.split(",")) if args.classifier == "naive-bayes" else (
+            DEFAULT_FEATURES)  # fmt: skip
+    kinds = tuple(k.strip() for k in (args.features or THESIS_KINDS).split(",") if k.strip())
+    return FeatureSet(kinds, align=args.align, rotate=args.rotate, log=args.log,
+                      pool=args.pool or 1)  # fmt: skip
 
 
 def _mirror_map(args: argparse.Namespace, rec: Recording) -> dict[str, str] | None:
-    """The label -> mirror-image map of ``--mirror`` (None without the option)."""
-    if args.mirror is None:
+    """The label -> mirror-image map of ``--mirror``; without the option the map the
+    recording declares for the label, if any; None with ``--no-mirror``."""
+    if args.no_mirror:
+        if args.mirror is not None:
+            raise ParameterError("--mirror and --no-mirror contradict each other")
         return None
+    if args.mirror is None:
+        declared = rec.meta.get("mirror", {}).get(args.label)
+        return None if declared is None else {str(k): str(v) for k, v in declared.items()}
     if args.mirror == "auto":
         declared = rec.meta.get("mirror", {})
         if args.label not in declared:
@@ -163,17 +210,20 @@ def run_evaluate(args: argparse.Namespace) -> int:
         flipped, y_m, src = mirror_samples(rec.frames[idx], y, rec.layout, mirror)
         b = None if back is None else back[src]
         extra = (fs.transform(flipped, rec.layout, b), y_m, groups[src])
-    report = loso(X, y, groups, args.classifier, extra=extra, show_progress=not args.json)
+    name, estimator = _classifier(args)
+    report = loso(X, y, groups, estimator, extra=extra, show_progress=not args.json)
     window = None
     if args.window is not None:
         window = _window_accuracy(rec.times[idx], y, report.predictions, groups, args.window)
     if args.json:
-        print(json.dumps({"classifier": args.classifier, "frames": int(idx.size),
+        print(json.dumps({"classifier": name, "frames": int(idx.size),
                           "mirror": mirror, "window": window,
                           "features": fs.to_dict(), **report.to_dict()}, indent=1))  # fmt: skip
         return 0
+    mirrored = "" if mirror is None else ", mirrored training copies"
+    print(f"{name} on {fs.describe()}{mirrored}")
     print(
-        f"{args.classifier}, {idx.size} frames, {len(report.per_subject)} subjects, "
+        f"{idx.size} frames, {len(report.per_subject)} subjects, "
         f"{len(report.labels)} classes of {args.label!r}: leave-one-subject-out accuracy "
         f"{report.accuracy:.1%} (worst {report.minimum[0]}: {report.minimum[1]:.1%})"
     )
@@ -219,11 +269,15 @@ def run_train(args: argparse.Namespace) -> int:
 
     rec, idx, y = _frames(args)
     fs = _feature_set(args)
-    model = PostureModel(fs, rec.layout, args.classifier, mirror=_mirror_map(args, rec))
-    model.fit(rec.frames[idx], y, _back(args, rec, fs, idx))
+    name, estimator = _classifier(args)
+    model = PostureModel(fs, rec.layout, estimator, mirror=_mirror_map(args, rec))
+    model.classifier_name = name
+    groups = np.asarray(rec.labels[args.group])[idx] if args.group in rec.labels else None
+    model.fit(rec.frames[idx], y, _back(args, rec, fs, idx), groups=groups)
     model.save(args.output)
-    print(f"trained {args.classifier} on {idx.size} frames, {len(model.classes_)} classes "  # type: ignore[arg-type]
-          f"-> {args.output}")  # fmt: skip
+    chose = getattr(model.estimator, "choice_", None)
+    print(f"trained {name}{'' if chose is None else f' ({chose})'} on {fs.describe()} "
+          f"({idx.size} frames, {len(model.classes_)} classes) -> {args.output}")  # type: ignore[arg-type]  # fmt: skip
     return 0
 
 

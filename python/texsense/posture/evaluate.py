@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from sklearn.base import BaseEstimator, clone
+from sklearn.base import BaseEstimator, ClassifierMixin, clone
+from sklearn.utils.metaestimators import available_if
 
 from texsense._progress import progress
 from texsense.exceptions import ParameterError
@@ -36,10 +37,12 @@ from texsense.exceptions import ParameterError
 __all__ = [
     "CLASSIFIERS",
     "LosoReport",
+    "SubjectSelect",
     "class_distances",
     "loso",
     "make_classifier",
     "sequential_forward_selection",
+    "takes_groups",
 ]
 
 
@@ -85,7 +88,105 @@ def _boosting() -> BaseEstimator:
     return HistGradientBoostingClassifier(max_iter=150, learning_rate=0.1, random_state=0)
 
 
-#: Classifier factories by name. ``naive-bayes`` is the thesis's (§6.3.1).
+class SubjectSelect(ClassifierMixin, BaseEstimator):
+    """A classifier that chooses its own set-up on the training data: every candidate
+    (classifier name, regularisation C) is scored by a ``folds``-fold split *by subject* of
+    every ``subsample``-th training sample, the best is refitted on all of them. Given no
+    subjects (``groups``) or fewer than ``folds`` of them, it takes the first candidate and
+    says so in ``choice_``.
+
+    :func:`loso` and :class:`~texsense.posture.model.PostureModel` pass the subjects, so a
+    leave-one-subject-out run of it is nested: the held-out subject never takes part in the
+    choice. ``probability=True`` gives a chosen classifier without probabilities
+    sigmoid-calibrated ones (for a dashboard's confidence).
+    """
+
+    def __init__(
+        self,
+        candidates: tuple[tuple[str, float | None], ...] = (
+            ("logistic", 0.3),
+            ("linear-svm", 0.01),
+        ),
+        folds: int = 3,
+        subsample: int = 5,
+        probability: bool = False,
+    ) -> None:
+        self.candidates = candidates
+        self.folds = folds
+        self.subsample = subsample
+        self.probability = probability
+
+    def _make(self, k: int) -> BaseEstimator:
+        name, c = self.candidates[k]
+        return make_classifier(name, c)
+
+    def fit(
+        self, X: npt.ArrayLike, y: npt.ArrayLike, groups: npt.ArrayLike | None = None
+    ) -> SubjectSelect:
+        """Choose by subject and refit on everything."""
+        Xa, ya = np.asarray(X, dtype=np.float64), np.asarray(y)
+        if not self.candidates:
+            raise ParameterError("SubjectSelect needs at least one candidate")
+        subjects = None if groups is None else np.asarray(groups).astype(str)
+        scores: list[float] = []
+        if subjects is None or np.unique(subjects).size < self.folds:
+            best = 0
+            self.choice_ = f"{self._label(0)} (fewer than {self.folds} subjects: not chosen)"
+        else:
+            keep = np.arange(ya.size)[:: max(int(self.subsample), 1)]
+            names = np.unique(subjects)
+            fold_of = {s: i % self.folds for i, s in enumerate(names)}
+            fold = np.array([fold_of[s] for s in subjects[keep]])
+            for k in range(len(self.candidates)):
+                acc = []
+                for f in range(self.folds):
+                    test = fold == f
+                    if np.unique(ya[keep][~test]).size < 2:
+                        continue
+                    model = self._make(k).fit(Xa[keep][~test], ya[keep][~test])
+                    acc.append(float(np.mean(model.predict(Xa[keep][test]) == ya[keep][test])))
+                scores.append(float(np.mean(acc)) if acc else 0.0)
+            best = int(np.argmax(scores))
+            self.choice_ = f"{self._label(best)} (inner score {scores[best]:.1%})"
+        self.scores_ = scores
+        self.chosen_ = self._label(best)
+        estimator = self._make(best)
+        if self.probability and not hasattr(estimator, "predict_proba"):
+            from sklearn.calibration import CalibratedClassifierCV
+
+            estimator = CalibratedClassifierCV(estimator, ensemble=False)
+        self.estimator_ = estimator.fit(Xa, ya)
+        self.classes_ = self.estimator_.classes_
+        return self
+
+    def _label(self, k: int) -> str:
+        name, c = self.candidates[k]
+        return name if c is None else f"{name} C={c:g}"
+
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
+        """Labels of the chosen classifier."""
+        return self.estimator_.predict(X)  # type: ignore[no-any-return]
+
+    def _has_proba(self) -> bool:
+        est = getattr(self, "estimator_", None)
+        return est is None or hasattr(est, "predict_proba")
+
+    @available_if(_has_proba)
+    def predict_proba(self, X: npt.ArrayLike) -> np.ndarray:
+        """Probabilities of the chosen classifier (when it has them)."""
+        return self.estimator_.predict_proba(X)  # type: ignore[no-any-return]
+
+
+def takes_groups(estimator: BaseEstimator) -> bool:
+    """Whether ``estimator.fit`` takes the subjects (``groups=``)."""
+    import inspect
+
+    return "groups" in inspect.signature(estimator.fit).parameters
+
+
+#: Classifier factories by name. ``naive-bayes`` is the thesis's (§6.3.1); ``auto`` chooses
+#: between logistic regression and a linear SVM by subject on the training data
+#: (:class:`SubjectSelect`).
 CLASSIFIERS: dict[str, Callable[[], BaseEstimator]] = {
     "naive-bayes": _naive_bayes,
     "lda": _lda,
@@ -93,14 +194,29 @@ CLASSIFIERS: dict[str, Callable[[], BaseEstimator]] = {
     "linear-svm": _linear_svm,
     "svm": _rbf_svm,
     "boosting": _boosting,
+    "auto": SubjectSelect,
 }
 
 
-def make_classifier(name: str) -> BaseEstimator:
-    """A fresh, unfitted classifier by name (see :data:`CLASSIFIERS`)."""
+#: The classifiers whose regularisation ``c`` can be set, and the parameter that holds it.
+C_PARAMETER = {"logistic": "logisticregression__C", "linear-svm": "svc__C", "svm": "svc__C"}
+
+
+def make_classifier(name: str, c: float | None = None) -> BaseEstimator:
+    """A fresh, unfitted classifier by name (see :data:`CLASSIFIERS`), with the
+    regularisation ``c`` of a logistic regression or SVM when given (None: the registry's)."""
     if name not in CLASSIFIERS:
         raise ParameterError(f"unknown classifier {name!r}; known: {', '.join(CLASSIFIERS)}")
-    return CLASSIFIERS[name]()
+    estimator = CLASSIFIERS[name]()
+    if c is not None:
+        if name not in C_PARAMETER:
+            raise ParameterError(
+                f"{name} has no regularisation C to set (only {', '.join(C_PARAMETER)})"
+            )
+        if not c > 0:
+            raise ParameterError(f"C must be > 0, got {c}")
+        estimator.set_params(**{C_PARAMETER[name]: float(c)})
+    return estimator
 
 
 @dataclass
@@ -195,9 +311,13 @@ def loso(
     for s in it if show_progress else subjects:
         test = ga == s
         train_extra = ge != s
-        model = clone(template).fit(
+        model = clone(template)
+        kwargs = {"groups": np.concatenate([ga[~test], ge[train_extra]])} if takes_groups(
+            model) else {}  # fmt: skip
+        model.fit(
             np.vstack([Xa[~test], Xe[train_extra]]),
             np.concatenate([ya[~test], ye[train_extra]]),
+            **kwargs,
         )
         pred[test] = model.predict(Xa[test])
         per_subject[str(s)] = float(np.mean(pred[test] == ya[test]))

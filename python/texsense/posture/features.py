@@ -330,6 +330,21 @@ class FeatureSet:
                 parts.append(np.nan_to_num(b))
         return np.hstack(parts)
 
+    def describe(self) -> str:
+        """In words, e.g. ``elements (centred, log, 2x2 pooled), centre of force, 4 + 16
+        areas``."""
+        how = [w for w, on in (("centred", self.align), ("rotated", self.rotate),
+                               ("log", self.log)) if on]  # fmt: skip
+        if self.pool > 1:
+            how.append(f"{self.pool}x{self.pool} pooled")
+        words = {"elements": "elements" + (f" ({', '.join(how)})" if how else ""),
+                 "centre": "centre of force", "back": "back sensor"}  # fmt: skip
+        areas = [n for k, n in (("areas4", "4"), ("areas16", "16")) if k in self.kinds]
+        out = [words[k] for k in self.kinds if k in words]
+        if areas:
+            out.append(" + ".join(areas) + " areas")
+        return ", ".join(out) + ("" if self.normalise else " (not normalised)")
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready definition."""
         d = asdict(self)

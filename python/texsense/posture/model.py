@@ -83,20 +83,34 @@ class PostureModel:
         return X if self.columns is None else X[:, self.columns]
 
     def fit(
-        self, frames: npt.ArrayLike, labels: npt.ArrayLike, back: npt.ArrayLike | None = None
+        self,
+        frames: npt.ArrayLike,
+        labels: npt.ArrayLike,
+        back: npt.ArrayLike | None = None,
+        groups: npt.ArrayLike | None = None,
     ) -> PostureModel:
         """Train on frames (T, N) with one label per frame (and their mirror images when the
-        model has a ``mirror`` map)."""
+        model has a ``mirror`` map). ``groups`` (the subject of every frame) reach a
+        classifier that chooses its set-up by subject (``auto``)."""
+        from texsense.posture.evaluate import takes_groups
+
         y = np.asarray(labels)
         X = self.features_of(frames, back)
         if y.shape != (X.shape[0],):
             raise ParameterError(f"expected {X.shape[0]} labels, got shape {y.shape}")
+        g = None if groups is None else np.asarray(groups).astype(str)
+        if g is not None and g.shape != y.shape:
+            raise ParameterError(f"expected {y.size} groups, got shape {g.shape}")
         if self.mirror is not None:
             flipped, y_m, source = mirror_samples(frames, y, self.layout, self.mirror)
             b = None if back is None else np.asarray(back)[source]
             X = np.vstack([X, self.features_of(flipped, b)])
             y = np.concatenate([y, y_m])
-        self.estimator.fit(X, y)
+            g = None if g is None else np.concatenate([g, g[source]])
+        if takes_groups(self.estimator):
+            self.estimator.fit(X, y, groups=g)
+        else:
+            self.estimator.fit(X, y)
         self.classes_ = np.unique(y)
         return self
 
