@@ -111,3 +111,41 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
             assert errors == [], errors
         finally:
             browser.close()
+
+
+@pytest.mark.slow
+def test_bed_dashboard_in_headless_chromium(monitor_process, tmp_path):
+    """`texsense monitor --source virtual-bed`: the turning schedule panel, the at-risk
+    regions, time per side and the turn-due band (15 min schedule, positions held 18 min or
+    more). TEXSENSE_SCREENSHOT_BED=docs/img/monitor_bed.png refreshes the one in docs/bed.md."""
+    from playwright.sync_api import expect, sync_playwright
+
+    m = monitor_process("--source", "virtual-bed", "--speed", "600", "--turn-every", "15",
+                        "--record-dir", str(tmp_path / "rec"))  # fmt: skip
+    m.wait_for_frames(1, timeout=300)  # the first run trains the virtual bed's side model
+    assert m.status()["bed"] is True
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1180, "height": 1000})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(m.url)
+            expect(page.locator("#bed")).to_be_visible(timeout=20_000)
+            expect(page.locator("#regions li").first).to_be_visible(timeout=20_000)
+            expect(page.locator("#sides .side-row").first).to_be_visible()
+            expect(page.locator("#since-turn")).not_to_have_text("–")
+            expect(page.locator("#turn-alert")).to_be_visible(timeout=90_000)
+            expect(page.locator("#turn-alert-text")).to_contain_text("Turn due")
+            expect(page.locator("#events")).to_contain_text("turn due", timeout=5_000)
+            page.select_option("#unit", "mmHg")
+            expect(page.locator("#regions")).to_contain_text("mmHg")
+            page.wait_for_timeout(300)
+            shot = tmp_path / "bed.png"
+            page.screenshot(path=str(shot))
+            assert shot.stat().st_size > 20_000
+            if os.environ.get("TEXSENSE_SCREENSHOT_BED"):
+                shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_BED"])
+            assert errors == [], errors
+        finally:
+            browser.close()

@@ -78,6 +78,19 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=1.0,
         help="minutes below the threshold that reset the exposure (default 1)",
     )
+    p.add_argument(
+        "--bed",
+        action="store_true",
+        help="a bed mat: turning schedule and at-risk regions (on with --source virtual-bed; "
+        "--model must report sides: supine, prone, left, right, sitting)",
+    )
+    p.add_argument(
+        "--turn-every",
+        type=float,
+        default=120.0,
+        metavar="MIN",
+        help="bed: turning-schedule alert after this many minutes on one side (default 120)",
+    )
     p.add_argument("--record", action="store_true", help="record from the start")
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
     p.add_argument(
@@ -192,6 +205,21 @@ def build_monitor(args: argparse.Namespace) -> Any:
     model = PostureModel.load(args.model) if args.model else None
     if model is None and args.source == "virtual" and not args.no_posture:
         model = virtual_seat_model()
+    bed = None
+    if args.bed or args.source == "virtual-bed":
+        from texsense.bed import BedWatch
+
+        if model is None and args.source == "virtual-bed":
+            model = virtual_bed_model()
+        if model is None:
+            raise ParameterError("--bed needs --model: a posture model of sides")
+        bed = BedWatch(
+            source.layout,
+            interval_min=args.turn_every,
+            threshold=args.threshold,
+            unit=args.threshold_unit,
+            offload_min=args.offload_min,
+        )
     monitor = Monitor(
         source,
         pipeline=pipeline,
@@ -199,37 +227,56 @@ def build_monitor(args: argparse.Namespace) -> Any:
         posture_model=model,
         store=open_store(args.db),
         record_dir=args.record_dir,
+        bed=bed,
     )
     if args.record:
         monitor.start_recording()
     return monitor
 
 
-def virtual_seat_model() -> Any:
-    """A posture model for the virtual seat, trained on simulated sessions of other people
-    (compensated pressure, §6.5.2), cached under ~/.cache/texsense."""
+def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
+    """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
+    when missing (a stale or broken cache is rebuilt, and said so)."""
     import os
 
     from texsense.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
-    path = cache / "virtual-seat-posture-v3.joblib"
+    path = cache / f"{name}.joblib"
     if path.is_file():
         try:
             return PostureModel.load(path)
-        except Exception as e:  # a stale or broken cache is rebuilt, and said so
+        except Exception as e:
             logging.getLogger("texsense.monitor").warning("rebuilding %s: %s", path, e)
-    from texsense.posture.training import train_virtual_seat_model
-
     cache.mkdir(parents=True, exist_ok=True)
     print(
-        "texsense monitor: training the virtual seat's posture model on simulated people "
-        f"(once, about 15 s; cached in {path})",
+        f"texsense monitor: training {what} on simulated people (once, about {seconds} s; "
+        f"cached in {path})",
         flush=True,
     )
-    model = train_virtual_seat_model()
+    model = train()
     model.save(path)
     return model
+
+
+def virtual_seat_model() -> Any:
+    """A posture model for the virtual seat, trained on simulated sessions of other people
+    (compensated pressure, §6.5.2), cached under ~/.cache/texsense."""
+    from texsense.posture.training import train_virtual_seat_model
+
+    return _cached_model(
+        "virtual-seat-posture-v3", "the virtual seat's posture model", 15, train_virtual_seat_model
+    )
+
+
+def virtual_bed_model() -> Any:
+    """A model of the side a person lies on for the virtual bed, trained on other simulated
+    people (compensated pressure), cached under ~/.cache/texsense."""
+    from texsense.posture.training import train_virtual_bed_model
+
+    return _cached_model(
+        "virtual-bed-sides-v1", "the virtual bed's side model", 40, train_virtual_bed_model
+    )
 
 
 def _check_port_free(host: str, port: int) -> None:

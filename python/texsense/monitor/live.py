@@ -109,6 +109,10 @@ class Monitor:
         SQLite store of sessions and events (default: in memory).
     record_dir : Path, optional
         Where recordings go (default ``recordings``).
+    bed : BedWatch, optional
+        For a bed mat: the turning schedule on the side the posture model reports (its
+        labels must be sides: supine, prone, left, right, sitting) and the at-risk regions
+        (:mod:`texsense.bed`).
     """
 
     def __init__(
@@ -120,6 +124,7 @@ class Monitor:
         posture_model: Any = None,
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
+        bed: Any = None,
     ) -> None:
         if source.quantity == "capacitance" and pipeline is None:
             raise ParameterError("a capacitance source needs a pipeline (a calibration)")
@@ -127,11 +132,23 @@ class Monitor:
             raise ParameterError("the pipeline and the source have different element counts")
         if posture_model is not None and posture_model.layout != source.layout:
             raise ParameterError("the posture model was trained on another layout")
+        if bed is not None:
+            from texsense.bed import BANDS
+
+            if posture_model is None:
+                raise ParameterError("bed monitoring needs a posture model that reports sides")
+            unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
+            if unknown:
+                raise ParameterError(
+                    f"bed monitoring needs a posture model of sides ({', '.join(BANDS)}); "
+                    f"this one also knows {', '.join(unknown)}"
+                )
         self.source = source
         self.layout = source.layout
         self.pipeline = pipeline
         self.tracker = tracker or ExposureTracker(source.layout)
         self.posture_model = posture_model
+        self.bed = bed
         self.store = store or EventStore(":memory:")
         self.record_dir = Path(record_dir)
         self.recorder: Recorder | None = None
@@ -241,6 +258,10 @@ class Monitor:
             }
         else:
             self._vote.reset()  # nobody there: the next person starts a new vote
+        bed = None
+        if self.bed is not None:
+            self._events(self.bed.step(frame.t, pressure, posture["label"] if posture else None))
+            bed = self.bed.status(frame.t)
         alert = self.tracker.open_alert
         self.frames += 1
 
@@ -270,6 +291,7 @@ class Monitor:
             },
             "cof_trace": self._cof_trace,  # grid cells (row, col)
             "posture": posture,
+            "bed": bed,
             "exposure_s": r(self.tracker.exposure_map(), 1),
             "alert": alert.to_dict() if alert is not None else None,
             "recording": self.recorder is not None,

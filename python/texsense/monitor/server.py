@@ -128,8 +128,10 @@ def create_app(monitor: Monitor, *, token: str | None = None, run_source: bool =
             },
             "reposition_min": monitor.tracker.reposition_s / 60,
             "posture_model": monitor.posture_model is not None,
+            "bed": monitor.bed is not None,
             "layout": {
                 "shape": lay.shape,
+                "pitch_cm": lay.pitch_cm,
                 "cells": None if lay.cells is None else lay.cells.tolist(),
                 "elements": lay.n_elements,
                 "xy_cm": lay.xy_cm.round(3).tolist(),

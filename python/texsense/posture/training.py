@@ -7,7 +7,7 @@ import numpy as np
 from texsense.posture.features import FeatureSet
 from texsense.posture.model import PostureModel
 
-__all__ = ["train_virtual_seat_model"]
+__all__ = ["BED_MIRROR", "train_virtual_bed_model", "train_virtual_seat_model"]
 
 
 def train_virtual_seat_model(
@@ -47,3 +47,50 @@ def train_virtual_seat_model(
         estimator = CalibratedClassifierCV(estimator, ensemble=False)
     model = PostureModel(fs, lay, estimator)
     return model.fit(np.vstack(frames), np.concatenate(labels))
+
+
+#: The mirror image of each side on the bed (a bed has no preferred side).
+BED_MIRROR = {"left": "right", "right": "left", "supine": "supine", "prone": "prone",
+              "sitting": "sitting"}  # fmt: skip
+
+
+def train_virtual_bed_model(
+    people: int = 10,
+    seed: int = 41,
+    hold_s: float = 20.0,
+    classifier: str | None = None,
+    features: FeatureSet | None = None,
+) -> PostureModel:
+    """A model of the side a person lies on (``supine``, ``prone``, ``left``, ``right``,
+    ``sitting``) on the virtual bed mat, trained on the compensated pressure of ``people``
+    simulated people on the virtual bed mat with its failing elements (every position once,
+    held ``hold_s``; turning frames left out) and
+    their mirror images — none of them the person the monitor's virtual bed simulates. The
+    classifier and features are the posture defaults (:mod:`texsense.posture.defaults`);
+    a classifier without probabilities gets sigmoid-calibrated ones for the dashboard."""
+    from sklearn.calibration import CalibratedClassifierCV
+
+    from texsense.pipeline import Pipeline
+    from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
+    from texsense.posture.evaluate import make_classifier
+    from texsense.sim.bed import POSITIONS, Sleeper, bed_layout, bed_mat, bed_session
+    from texsense.workflows import bed_calibration
+
+    lay = bed_layout()
+    pipeline = Pipeline(bed_calibration(), lay)
+    frames, labels, subjects = [], [], []
+    for i in range(people):
+        rng = np.random.default_rng([seed, i])
+        plan = [(str(p), hold_s) for p in rng.permutation(list(POSITIONS))]
+        s = bed_session(Sleeper.random(i, seed=seed), plan, seed=seed + i, mat=bed_mat(),
+                        turn_s=min(6.0, hold_s / 3))  # fmt: skip
+        out = pipeline.reset().run(s.capacitance).frames.astype(np.float64)  # type: ignore[arg-type]
+        hold = s.truth.labels["hold"]
+        frames.append(np.nan_to_num(out[hold]))
+        labels.append(s.truth.labels["side"][hold])
+        subjects.append(s.truth.labels["subject"][hold])
+    estimator = make_classifier(classifier or DEFAULT_CLASSIFIER, None if classifier else DEFAULT_C)
+    if not hasattr(estimator, "predict_proba"):
+        estimator = CalibratedClassifierCV(estimator, ensemble=False)
+    model = PostureModel(features or DEFAULT_FEATURES, lay, estimator, mirror=BED_MIRROR)
+    return model.fit(np.vstack(frames), np.concatenate(labels), groups=np.concatenate(subjects))

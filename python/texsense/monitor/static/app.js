@@ -48,10 +48,12 @@ function drawMap(canvas, values, fill, marks) {
     }
   });
   if (!marks) return;
-  ctx.lineWidth = 2; ctx.strokeStyle = "#111";
+  const small = g.s < 10;  // a large mat: rings would hide the map, a dot marks a repair
+  ctx.lineWidth = small ? 1 : 2; ctx.strokeStyle = "#111"; ctx.fillStyle = "rgba(17,17,17,0.55)";
   for (const i of marks.repaired) {
     const cell = layout.cells[i], r = Math.floor(cell / g.cols), c = cell % g.cols;
-    ctx.beginPath(); ctx.arc(g.ox + (c + 0.5) * g.s, g.oy + (r + 0.5) * g.s, g.s * 0.32, 0, 2 * Math.PI); ctx.stroke();
+    ctx.beginPath(); ctx.arc(g.ox + (c + 0.5) * g.s, g.oy + (r + 0.5) * g.s, g.s * (small ? 0.18 : 0.32), 0, 2 * Math.PI);
+    small ? ctx.fill() : ctx.stroke();
   }
   const trace = marks.trace || [];
   if (trace.length) {
@@ -82,12 +84,14 @@ function render() {
     $("scale-text").textContent = `${fmt(lo)} – ${fmt(hi)} ${scaleUnit}`;
   } else {
     values = last.pressure.map((v) => v === null ? null : v * f);
-    top = Math.max(3 * f, ...values.filter((v) => v !== null));
+    // the colour scale reaches at least 3 N/cm² on a seat, 1.5 on a bed (its peaks are lower)
+    top = Math.max((status && status.bed ? 1.5 : 3) * f, ...values.filter((v) => v !== null));
     title = "pressure (compensated)";
     $("scale-text").textContent = `0 – ${fmt(top, 1)} ${LABEL[unit]}`;
   }
   $("map-title").textContent = title;
   drawMap($("heatmap"), values, (v) => colour(v / top), { repaired: mode === "raw" ? [] : last.repaired, trace: last.cof_trace });
+  if (last.bed) drawRegions($("heatmap"), last.bed.regions);
   const exp = last.exposure_s.map((v) => v === null ? 0 : v);
   const limit = status ? status.reposition_min * 60 : 1200;
   drawMap($("exposure"), exp, (v) => heat(v / limit), null);
@@ -102,6 +106,7 @@ function render() {
   $("posture").title = last.posture ? `vote over ${last.posture.window_s} s; this frame alone: ${last.posture.frame_label}` : "";
   $("posture-truth").textContent = last.source.true_posture !== undefined
     ? `simulated person: ${last.source.true_posture === null ? "away" : last.source.true_posture}` : "";
+  renderBed(last.bed, f);
   const a = last.alert;
   $("alert").hidden = !a;
   if (a) {
@@ -118,6 +123,43 @@ function render() {
   const src = last.source;
   $("source").textContent = `${src.name} · ${src.elements} elements · ${src.errors} malformed input(s) skipped`;
   $("status").textContent = `t = ${fmt(last.t, 1)} s · failed now: ${last.failed.length} (repaired ${last.repaired.length})`;
+}
+
+const SIDE_COLOUR = { supine: "#2764c5", prone: "#7c3aed", left: "#059669", right: "#d97706", sitting: "#db2777" };
+function drawRegions(canvas, regions) {  // rings over the bony prominences, red when at risk
+  const ctx = canvas.getContext("2d"), g = gridOf(canvas), [py, px] = layout.pitch_cm || [1, 1];
+  ctx.font = "11px system-ui, sans-serif";
+  for (const r of regions) {
+    const x = g.ox + (r.xy_cm[0] / px) * g.s, y = g.oy + (r.xy_cm[1] / py) * g.s;
+    ctx.lineWidth = 2; ctx.strokeStyle = r.at_risk ? "#dc2626" : "#e5e7eb";
+    ctx.beginPath(); ctx.arc(x, y, 2.2 * g.s, 0, 2 * Math.PI); ctx.stroke();
+    ctx.fillStyle = "#fff"; ctx.fillText(r.name, x + 2.4 * g.s, y + 4);
+  }
+}
+function renderBed(bed, f) {
+  $("bed").hidden = !bed;
+  $("turn-alert").hidden = !(bed && bed.turn_due);
+  if (!bed) return;
+  $("since-turn").textContent = bed.since_turn_s === null ? "out of bed" : `${clock(bed.since_turn_s)} ${bed.side}`;
+  const overdue = bed.due_in_s !== null && bed.due_in_s < 0;
+  $("due-label").textContent = overdue ? "turn overdue by" : "next turn due in";
+  $("due-in").textContent = bed.due_in_s === null ? "–" : clock(Math.abs(bed.due_in_s));
+  $("due-in").classList.toggle("overdue", overdue);
+  if (bed.turn_due) $("turn-alert-text").textContent = `Turn due: ${clock(bed.since_turn_s)} on ${bed.side} (schedule: every ${clock(bed.interval_s)}).`;
+  const total = Object.values(bed.time_per_side_s).reduce((a, b) => a + b, 0) || 1;
+  $("sides").replaceChildren(...Object.entries(bed.time_per_side_s).map(([side, s]) => {
+    const row = document.createElement("div"); row.className = "side-row";
+    const name = document.createElement("span"); name.textContent = side;
+    const bar = document.createElement("span"); bar.className = "bar";
+    bar.style.width = `${Math.round(140 * s / total)}px`; bar.style.background = SIDE_COLOUR[side] || "#677189";
+    const val = document.createElement("span"); val.className = "small"; val.textContent = clock(s);
+    row.append(name, bar, val); return row;
+  }));
+  $("regions").replaceChildren(...bed.regions.map((r) => {
+    const li = document.createElement("li"); li.className = r.at_risk ? "risk" : "";
+    li.textContent = `${r.name}: ${fmt(r.peak_ncm2 * f, unit === "mmHg" ? 0 : 2)} ${LABEL[unit]}`;
+    return li;
+  }));
 }
 
 // the page's own folder: "" for the monitor at "/", "/mats/<id>" for a mat of a ward station
@@ -146,6 +188,8 @@ function updateThreshold() {
 const EVENT_TEXT = {
   seated: "load on the mat", left: "mat unloaded", reposition: "reposition alert",
   acknowledged: "alert acknowledged", cleared: "alert cleared (skin offloaded)",
+  "in-bed": "in bed", "out-of-bed": "out of bed", turn: "turned", "turn-due": "turn due",
+  "turn-done": "turn alert closed",
 };
 function clock(s) {
   const m = Math.floor(s / 60), h = Math.floor(m / 60);
@@ -160,7 +204,8 @@ async function refreshEvents() {
     list.replaceChildren(...events.map((e) => {
       const li = document.createElement("li");
       const when = document.createElement("span"); when.className = "when"; when.textContent = clock(e.t);
-      const what = document.createElement("span"); what.className = e.kind; what.textContent = EVENT_TEXT[e.kind] || e.kind;
+      const what = document.createElement("span"); what.className = e.kind;
+      what.textContent = (EVENT_TEXT[e.kind] || e.kind) + (e.kind === "turn" ? ` ${e.detail.from} → ${e.detail.to}` : "");
       li.append(when, what);
       return li;
     }));
