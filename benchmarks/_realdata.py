@@ -48,3 +48,17 @@ def vhb_cycle(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def vhb_relaxation(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A VHB 4910 relaxation record: time (s), displacement (mm), force (N)."""
     return _vhb(DATA / "vhb4910" / "relaxation" / f"{name}.csv")
+
+
+def pmd_reliable() -> tuple:
+    """PhysioNet PMD experiment I, the frames its publishers mark reliable: layout, frames
+    (float64), posture file number, main class (supine / left / right), subject and the
+    frame's index in its file."""
+    from texsense.io.pmd import POSTURE_CLASS, read_pmd
+
+    rec = read_pmd(DATA / "pmd" / "experiment-i")
+    keep = rec.labels["reliable"]
+    posture = rec.labels["posture"][keep]
+    main = np.array([POSTURE_CLASS[int(p)] for p in posture])
+    return (rec.layout, rec.frames[keep].astype(np.float64), posture, main,
+            rec.labels["subject"][keep], rec.labels["file_frame"][keep])  # fmt: skip

@@ -32,9 +32,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _realdata import DATA
+from _realdata import DATA, pmd_reliable
 from texsense.bed import TurningSchedule, find_regions
-from texsense.io.pmd import POSTURE_CLASS, read_pmd
 from texsense.pipeline import Pipeline
 from texsense.posture.training import train_virtual_bed_model
 from texsense.sim.bed import (
@@ -230,12 +229,7 @@ def night_figure(r: dict) -> None:
 
 
 def pmd_check(model) -> dict:
-    rec = read_pmd(DATA / "pmd" / "experiment-i")
-    keep = rec.labels["reliable"]
-    frames = rec.frames[keep].astype(np.float64)
-    posture = rec.labels["posture"][keep]
-    subject = rec.labels["subject"][keep]
-    main = np.array([POSTURE_CLASS[int(p)] for p in posture])
+    lay, frames, posture, main, subject, _ = pmd_reliable()
     pred = model.predict(frames)
     print(f"\nPMD, sim-to-real: the virtual bed's side model on all {len(main)} reliable real "
           "frames, unchanged (the maps are raw counts; the features are normalised)\n")  # fmt: skip
@@ -255,7 +249,6 @@ def pmd_check(model) -> dict:
 
     with open(DATA / "pmd" / "experiment-i" / "subject-info-i.csv") as f:
         height = {f"S{row['Subject-Number']}": float(row["Height/cm"]) for row in csv.DictReader(f)}
-    lay = rec.layout
     dist, proportion, found_all = {}, {}, []
     plain = np.isin(posture, [1])  # supine, flat bed, no variant
     for k in np.flatnonzero(plain):

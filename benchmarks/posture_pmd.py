@@ -18,9 +18,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _realdata import DATA
+from _realdata import pmd_reliable
 from texsense import Layout
-from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS, read_pmd
+from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS
 from texsense.posture import FeatureSet, loso, make_classifier, mirror_frames
 from texsense.posture.features import reduce_maps
 from texsense.posture.study import (
@@ -45,14 +45,8 @@ DESCRIPTION = {
 
 def load() -> tuple:
     """All reliable frames and the every-EVERY-th subsample mask."""
-    rec = read_pmd(DATA / "pmd" / "experiment-i")
-    keep = rec.labels["reliable"]
-    frames = rec.frames[keep].astype(np.float64)
-    posture = rec.labels["posture"][keep]
-    subject = rec.labels["subject"][keep]
-    main = np.array([POSTURE_CLASS[int(p)] for p in posture])
-    sub = rec.labels["file_frame"][keep] % EVERY == 0
-    return rec.layout, frames, posture, main, subject, sub
+    layout, frames, posture, main, subject, file_frame = pmd_reliable()
+    return layout, frames, posture, main, subject, file_frame % EVERY == 0
 
 
 def mirrored(frames, posture, subject, layout):

@@ -281,3 +281,19 @@ def test_a_wrong_first_side_on_getting_into_bed_is_corrected_not_counted():
     assert run(s, steps) == [("in-bed", 10.0)]
     st = s.status(390.0)
     assert st["side"] == "supine" and st["turns"] == 0 and st["since_turn_s"] == 380.0
+
+
+def test_monitor_command_refuses_a_bed_mode_it_cannot_run(tmp_path, capsys):
+    from conftest import free_port
+    from texsense import Recording
+    from texsense.cli import main
+    from texsense.io import save
+
+    path = tmp_path / "bed.h5"
+    save(Recording(np.ones((3, 16)), [0.0, 1.0, 2.0], Layout.grid(4, 4), "pressure", "N/cm2"),
+         path)  # fmt: skip
+    base = ["monitor", "--source", f"replay:{path}", "--port", str(free_port()), "--bed"]
+    assert main(base) != 0
+    assert "--bed needs --model" in capsys.readouterr().err
+    assert main([*base, "--no-posture"]) != 0
+    assert "drop --no-posture" in capsys.readouterr().err

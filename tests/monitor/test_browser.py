@@ -8,6 +8,7 @@ Set TEXSENSE_SCREENSHOT=docs/img/monitor_dashboard.png to refresh the one in doc
 
 import os
 import shutil
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -37,6 +38,23 @@ def chromium() -> str:
     return CHROMIUM
 
 
+@contextmanager
+def open_page(url: str, width: int, height: int):
+    """A page of a headless Chromium at ``url``, and the list its script errors go to."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": width, "height": height})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(url)
+            yield page, errors
+        finally:
+            browser.close()
+
+
 @pytest.fixture()
 def monitor_url(tmp_path, monitor_process):
     rec_dir = str(tmp_path / "rec")
@@ -47,70 +65,62 @@ def monitor_url(tmp_path, monitor_process):
 
 @pytest.mark.slow
 def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
-    from playwright.sync_api import expect, sync_playwright
+    from playwright.sync_api import expect
 
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1180, "height": 830})
-            errors: list[str] = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(monitor_url)
-            frames = page.locator("#frames")
-            expect(frames).not_to_have_text("0", timeout=20_000)
-            first = int(frames.inner_text())
-            # no alert yet (5 min of exposure at 60x takes longer than the page load): the
-            # band must not be rendered at all, not merely be empty (issue 18)
-            status = page.request.get(monitor_url + "api/status").json()
-            assert status["alert"] is None, f"alert before the no-alert check: {status['alert']}"
-            alert = page.locator("#alert")
-            expect(alert).to_be_hidden()
-            assert alert.bounding_box() is None
-            page.wait_for_timeout(1500)
-            assert int(frames.inner_text()) > first, "the frame counter does not grow"
+    with open_page(monitor_url, 1180, 830) as (page, errors):
+        frames = page.locator("#frames")
+        expect(frames).not_to_have_text("0", timeout=20_000)
+        first = int(frames.inner_text())
+        # no alert yet (5 min of exposure at 60x takes longer than the page load): the
+        # band must not be rendered at all, not merely be empty (issue 18)
+        status = page.request.get(monitor_url + "api/status").json()
+        assert status["alert"] is None, f"alert before the no-alert check: {status['alert']}"
+        alert = page.locator("#alert")
+        expect(alert).to_be_hidden()
+        assert alert.bounding_box() is None
+        page.wait_for_timeout(1500)
+        assert int(frames.inner_text()) > first, "the frame counter does not grow"
 
-            title = page.locator("#map-title")
-            expect(title).to_have_text("pressure (compensated)")
-            page.click("#show-raw")
-            expect(title).to_have_text("raw readings")
-            expect(page.locator("#show-raw")).to_have_class("on")
-            expect(page.locator("#scale-text")).to_contain_text("pF")
-            page.click("#show-pressure")
-            expect(title).to_have_text("pressure (compensated)")
-            page.select_option("#unit", "mmHg")
-            expect(page.locator("#scale-text")).to_contain_text("mmHg")
+        title = page.locator("#map-title")
+        expect(title).to_have_text("pressure (compensated)")
+        page.click("#show-raw")
+        expect(title).to_have_text("raw readings")
+        expect(page.locator("#show-raw")).to_have_class("on")
+        expect(page.locator("#scale-text")).to_contain_text("pF")
+        page.click("#show-pressure")
+        expect(title).to_have_text("pressure (compensated)")
+        page.select_option("#unit", "mmHg")
+        expect(page.locator("#scale-text")).to_contain_text("mmHg")
 
-            expect(page.locator("#posture")).to_contain_text("%", timeout=20_000)
-            expect(alert).to_be_visible(timeout=60_000)  # 5 min of exposure at 60x: ~5 s
-            expect(page.locator("#alert-text")).to_contain_text("Reposition")
-            expect(page.locator("#ack")).to_be_visible()
-            expect(page.locator("#events")).to_contain_text("reposition alert", timeout=5_000)
-            page.wait_for_timeout(300)
-            shot = tmp_path / "monitor.png"
-            page.screenshot(path=str(shot))
-            assert shot.stat().st_size > 20_000
-            if os.environ.get("TEXSENSE_SCREENSHOT"):
-                shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT"])
+        expect(page.locator("#posture")).to_contain_text("%", timeout=20_000)
+        expect(alert).to_be_visible(timeout=60_000)  # 5 min of exposure at 60x: ~5 s
+        expect(page.locator("#alert-text")).to_contain_text("Reposition")
+        expect(page.locator("#ack")).to_be_visible()
+        expect(page.locator("#events")).to_contain_text("reposition alert", timeout=5_000)
+        page.wait_for_timeout(300)
+        shot = tmp_path / "monitor.png"
+        page.screenshot(path=str(shot))
+        assert shot.stat().st_size > 20_000
+        if os.environ.get("TEXSENSE_SCREENSHOT"):
+            shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT"])
 
-            page.click("#ack")
-            expect(alert).to_have_class("alert acked", timeout=5_000)
-            expect(alert).to_be_visible()
-            expect(page.locator("#alert-text")).to_contain_text("acknowledged")
-            expect(page.locator("#ack")).to_be_hidden()
-            expect(page.locator("#events")).to_contain_text("alert acknowledged", timeout=5_000)
+        page.click("#ack")
+        expect(alert).to_have_class("alert acked", timeout=5_000)
+        expect(alert).to_be_visible()
+        expect(page.locator("#alert-text")).to_contain_text("acknowledged")
+        expect(page.locator("#ack")).to_be_hidden()
+        expect(page.locator("#events")).to_contain_text("alert acknowledged", timeout=5_000)
 
-            record = page.locator("#record")
-            record.click()
-            expect(record).to_have_text("■ stop recording", timeout=5_000)
-            page.wait_for_timeout(500)
-            record.click()
-            expect(record).to_have_text("● record", timeout=5_000)
-            files = page.request.get(monitor_url + "api/sessions").json()[0]["recordings"]
-            assert len(files) == 2 and all(Path(f).is_file() for f in files)
-            assert load(files[1]).n_frames > 0
-            assert errors == [], errors
-        finally:
-            browser.close()
+        record = page.locator("#record")
+        record.click()
+        expect(record).to_have_text("■ stop recording", timeout=5_000)
+        page.wait_for_timeout(500)
+        record.click()
+        expect(record).to_have_text("● record", timeout=5_000)
+        files = page.request.get(monitor_url + "api/sessions").json()[0]["recordings"]
+        assert len(files) == 2 and all(Path(f).is_file() for f in files)
+        assert load(files[1]).n_frames > 0
+        assert errors == [], errors
 
 
 @pytest.mark.slow
@@ -118,34 +128,26 @@ def test_bed_dashboard_in_headless_chromium(monitor_process, tmp_path):
     """`texsense monitor --source virtual-bed`: the turning schedule panel, the at-risk
     regions, time per side and the turn-due band (15 min schedule, positions held 18 min or
     more). TEXSENSE_SCREENSHOT_BED=docs/img/monitor_bed.png refreshes the one in docs/bed.md."""
-    from playwright.sync_api import expect, sync_playwright
+    from playwright.sync_api import expect
 
     m = monitor_process("--source", "virtual-bed", "--speed", "600", "--turn-every", "15",
                         "--record-dir", str(tmp_path / "rec"))  # fmt: skip
     m.wait_for_frames(1, timeout=300)  # the first run trains the virtual bed's side model
     assert m.status()["bed"] is True
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1180, "height": 1000})
-            errors: list[str] = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(m.url)
-            expect(page.locator("#bed")).to_be_visible(timeout=20_000)
-            expect(page.locator("#regions li").first).to_be_visible(timeout=20_000)
-            expect(page.locator("#sides .side-row").first).to_be_visible()
-            expect(page.locator("#since-turn")).not_to_have_text("–")
-            expect(page.locator("#turn-alert")).to_be_visible(timeout=90_000)
-            expect(page.locator("#turn-alert-text")).to_contain_text("Turn due")
-            expect(page.locator("#events")).to_contain_text("turn due", timeout=5_000)
-            page.select_option("#unit", "mmHg")
-            expect(page.locator("#regions")).to_contain_text("mmHg")
-            page.wait_for_timeout(300)
-            shot = tmp_path / "bed.png"
-            page.screenshot(path=str(shot))
-            assert shot.stat().st_size > 20_000
-            if os.environ.get("TEXSENSE_SCREENSHOT_BED"):
-                shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_BED"])
-            assert errors == [], errors
-        finally:
-            browser.close()
+    with open_page(m.url, 1180, 1000) as (page, errors):
+        expect(page.locator("#bed")).to_be_visible(timeout=20_000)
+        expect(page.locator("#regions li").first).to_be_visible(timeout=20_000)
+        expect(page.locator("#sides .side-row").first).to_be_visible()
+        expect(page.locator("#since-turn")).not_to_have_text("–")
+        expect(page.locator("#turn-alert")).to_be_visible(timeout=90_000)
+        expect(page.locator("#turn-alert-text")).to_contain_text("Turn due")
+        expect(page.locator("#events")).to_contain_text("turn due", timeout=5_000)
+        page.select_option("#unit", "mmHg")
+        expect(page.locator("#regions")).to_contain_text("mmHg")
+        page.wait_for_timeout(300)
+        shot = tmp_path / "bed.png"
+        page.screenshot(path=str(shot))
+        assert shot.stat().st_size > 20_000
+        if os.environ.get("TEXSENSE_SCREENSHOT_BED"):
+            shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_BED"])
+        assert errors == [], errors

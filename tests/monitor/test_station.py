@@ -14,7 +14,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from test_browser import CHROMIUM_ARGS, chromium
+from test_browser import open_page
 
 from conftest import ChildServer
 from texsense.station.broker import Broker, parse_broker_url
@@ -191,7 +191,7 @@ def test_topics_urls_and_errors():
 
 @pytest.mark.slow
 def test_ward_page_in_headless_chromium(broker, station, tmp_path):
-    from playwright.sync_api import expect, sync_playwright
+    from playwright.sync_api import expect
 
     st = station("--virtual-mats", "5", "--speed", "60", "--reposition-min", "5",
                  "--config", str(ward_file(tmp_path, "bed-9")),
@@ -203,44 +203,36 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         time.sleep(0.1)
     pub.close()
     st.until(st.mats, lambda m: m["bed-9"]["state"] == "stale", 10)
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1240, "height": 760})
-            errors: list[str] = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(st.url)
-            tiles = page.locator(".tile")
-            expect(tiles).to_have_count(6, timeout=20_000)
-            expect(page.locator('.tile[data-id="bed-9"] .state')).to_have_text("no data")
-            expect(page.locator("#broker")).to_contain_text("connected")
-            # 5 min of exposure at 60x: an alert within seconds, on top of the ward
-            alert = page.locator(".tile.is-alert").first
-            expect(alert).to_be_visible(timeout=60_000)
-            expect(tiles.first).to_have_class("tile is-alert")
-            expect(alert.locator("button.ack")).to_be_visible()
-            page.wait_for_timeout(400)
-            shot = tmp_path / "ward.png"
-            page.screenshot(path=str(shot))
-            assert shot.stat().st_size > 20_000
-            if os.environ.get("TEXSENSE_SCREENSHOT_WARD"):
-                shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_WARD"])
-            mat_id = alert.get_attribute("data-id")
-            alert.locator("button.ack").click()
-            expect(page.locator(f'.tile[data-id="{mat_id}"]')).to_have_attribute(
-                "data-state", "acknowledged", timeout=5_000
-            )
-            one = st.get(f"api/mats/{mat_id}")
-            assert one["alert"] is not None and one["alert"]["active"] is False
-            # a click opens that mat's own dashboard
-            page.locator(f'.tile[data-id="{mat_id}"] canvas').click()
-            expect(page).to_have_url(st.url + f"mats/{mat_id}/", timeout=5_000)
-            frames = page.locator("#frames")
-            expect(frames).not_to_have_text("0", timeout=10_000)
-            expect(page.locator("#source")).to_contain_text(f"mat {mat_id}")
-            assert not errors, errors
-        finally:
-            browser.close()
+    with open_page(st.url, 1240, 760) as (page, errors):
+        tiles = page.locator(".tile")
+        expect(tiles).to_have_count(6, timeout=20_000)
+        expect(page.locator('.tile[data-id="bed-9"] .state')).to_have_text("no data")
+        expect(page.locator("#broker")).to_contain_text("connected")
+        # 5 min of exposure at 60x: an alert within seconds, on top of the ward
+        alert = page.locator(".tile.is-alert").first
+        expect(alert).to_be_visible(timeout=60_000)
+        expect(tiles.first).to_have_class("tile is-alert")
+        expect(alert.locator("button.ack")).to_be_visible()
+        page.wait_for_timeout(400)
+        shot = tmp_path / "ward.png"
+        page.screenshot(path=str(shot))
+        assert shot.stat().st_size > 20_000
+        if os.environ.get("TEXSENSE_SCREENSHOT_WARD"):
+            shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_WARD"])
+        mat_id = alert.get_attribute("data-id")
+        alert.locator("button.ack").click()
+        expect(page.locator(f'.tile[data-id="{mat_id}"]')).to_have_attribute(
+            "data-state", "acknowledged", timeout=5_000
+        )
+        one = st.get(f"api/mats/{mat_id}")
+        assert one["alert"] is not None and one["alert"]["active"] is False
+        # a click opens that mat's own dashboard
+        page.locator(f'.tile[data-id="{mat_id}"] canvas').click()
+        expect(page).to_have_url(st.url + f"mats/{mat_id}/", timeout=5_000)
+        frames = page.locator("#frames")
+        expect(frames).not_to_have_text("0", timeout=10_000)
+        expect(page.locator("#source")).to_contain_text(f"mat {mat_id}")
+        assert not errors, errors
 
 
 def test_two_stations_split_a_site_by_topic(broker, tmp_path):

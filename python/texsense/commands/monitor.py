@@ -62,7 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--no-posture",
         action="store_true",
-        help="no posture classification (the virtual seat trains one otherwise)",
+        help="no posture classification (the virtual seat and bed train one otherwise; the "
+        "bed mode needs it)",
     )
     p.add_argument("--threshold", type=float, default=32.0, help="exposure threshold (default 32)")
     p.add_argument("--threshold-unit", default="mmHg", help="its unit (default mmHg)")
@@ -206,7 +207,9 @@ def build_monitor(args: argparse.Namespace) -> Any:
     if model is None and args.source == "virtual" and not args.no_posture:
         model = virtual_seat_model()
     bed = None
-    if args.bed or args.source == "virtual-bed":
+    if args.bed and args.no_posture:
+        raise ParameterError("--bed needs the side model: drop --no-posture")
+    if args.bed or (args.source == "virtual-bed" and not args.no_posture):
         from texsense.bed import BedWatch
 
         if model is None and args.source == "virtual-bed":
