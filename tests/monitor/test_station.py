@@ -94,7 +94,11 @@ def test_virtual_mats_through_the_broker(broker, station):
     assert len(seat["pressure"]) == 96 and seat["shape"] == [15, 16]  # a seat
     assert len(bed["pressure"]) == 2048 and bed["shape"] == [64, 32]  # a bed mat
     assert "bed" in bed["source"] and "seat" in seat["source"]
+    # the bed runs the turning schedule on its side model's sides, the seat does not
+    assert seat["bed"] is None and bed["bed"]["interval_s"] == 7200.0
+    assert bed["bed"]["side"] in ("supine", "prone", "left", "right", "sitting", None)
     status = st.get("mats/vmat-02/api/status")  # the single-mat dashboard of that mat
+    assert status["bed"] is True
     assert status["frames"] >= 1 and status["source"]["name"].startswith("mat vmat-02")
     ward = st.get("api/ward")
     assert ward["connected"] and ward["topic"] == "texsense/+/frames"
@@ -177,6 +181,22 @@ def test_every_request_needs_the_token(broker, station, tmp_path):
         e.value.close()
         assert e.value.code == 401
     assert st.get("mats/bed1/api/status", token="s3cret")["frames"] == 0
+
+
+def test_a_bed_in_the_ward_file_needs_a_side_model(tmp_path):
+    from texsense.commands.station import read_config
+    from texsense.exceptions import FormatError
+
+    path = tmp_path / "ward.toml"
+    path.write_text('[[mat]]\nid = "bed1"\nlayout = "grid:4x4"\nbed = true\n')
+    with pytest.raises(FormatError, match="a bed needs model"):
+        read_config(path, 20.0)
+    path.write_text('[[mat]]\nid = "bed1"\nlayout = "grid:4x4"\nbed = "yes"\n')
+    with pytest.raises(FormatError, match="bed must be true or false"):
+        read_config(path, 20.0)
+    path.write_text('[[mat]]\nid = "seat1"\nlayout = "grid:4x4"\n')
+    (mat,), _ = read_config(path, 20.0, 90.0)
+    assert not mat.bed and mat.posture_model is None and mat.turn_every_min == 90.0
 
 
 def test_topics_urls_and_errors():

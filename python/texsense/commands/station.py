@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )  # fmt: skip
     p.add_argument("--virtual-prefix", default="texsense", help="topic prefix of virtual mats")
     p.add_argument("--reposition-min", type=float, default=20.0, help="reposition interval")
+    p.add_argument("--turn-every", type=float, default=120.0, metavar="MIN",
+                   help="beds: turning-schedule alert after this many minutes on one side "
+                   "(default 120; a mat of the ward file is a bed with `bed = true`)")  # fmt: skip
     p.add_argument(
         "--db", default="station.sqlite", help="event store: a SQLite file or postgresql://..."
     )
@@ -65,7 +68,9 @@ def _layout(spec: Any, where: str) -> Any:
     raise ParameterError(f"{where}: layout must be 'grid:ROWSxCOLS' or a recording's path")
 
 
-def read_config(path: Path, reposition_min: float) -> tuple[list[Any], dict[str, Any]]:
+def read_config(
+    path: Path, reposition_min: float, turn_every_min: float = 120.0
+) -> tuple[list[Any], dict[str, Any]]:
     """Mats and local sources of a TOML ward file::
 
     [[mat]]
@@ -73,6 +78,9 @@ def read_config(path: Path, reposition_min: float) -> tuple[list[Any], dict[str,
     layout = "grid:64x32"             # or the path of a recording of the mat
     calibration = "bed12.json"        # omit for a mat that sends pressure
     source = "mqtt"                   # or "serial:/dev/ttyUSB0", "iio:DIR", "replay:FILE"
+    bed = true                        # a bed: turning schedule and at-risk regions ...
+    model = "sides.joblib"            # ... on the sides this posture model reports
+    turn_every_min = 120              # default: --turn-every
     """
     from texsense.calibration import load_calibration
     from texsense.monitor import sources
@@ -107,8 +115,21 @@ def read_config(path: Path, reposition_min: float) -> tuple[list[Any], dict[str,
             local[m["id"]] = sources.ReplaySource(Path(rest), speed=1.0, loop=True)
         elif kind != "mqtt":
             raise FormatError(path, f"[[mat]] #{k + 1}: unknown source {m.get('source')!r}")
+        bed = m.get("bed", False)
+        if not isinstance(bed, bool):
+            raise FormatError(path, f"[[mat]] #{k + 1}: bed must be true or false, got {bed!r}")
+        model = None
+        if bed:
+            if not m.get("model"):
+                raise FormatError(path, f"[[mat]] #{k + 1}: a bed needs model = \"FILE\", a "
+                                  "posture model of sides (texsense posture train)")  # fmt: skip
+            from texsense.posture import PostureModel
+
+            model = PostureModel.load(str(m["model"]))
+        every = float(m.get("turn_every_min", turn_every_min))
         mats.append(MatConfig(str(m["id"]), layout, cal, quantity, str(m.get("source", "mqtt")),
-                              float(m.get("reposition_min", reposition_min))))  # fmt: skip
+                              float(m.get("reposition_min", reposition_min)), bed=bed,
+                              posture_model=model, turn_every_min=every))  # fmt: skip
     return mats, local
 
 
@@ -123,7 +144,9 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     if args.virtual_mats < 0:
         raise ParameterError("--virtual-mats must be >= 0")
-    mats, local = read_config(args.config, args.reposition_min) if args.config else ([], {})
+    mats, local = (
+        read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
+    )
     if not mats and not args.virtual_mats:
         raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
     own = None
@@ -139,8 +162,13 @@ def run(args: argparse.Namespace) -> int:
             from texsense.workflows import bed_calibration, seat_calibration
 
             vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
-            beds = bed_calibration() if args.virtual_mats > 1 else None
-            mats += vm.configs(seat_calibration(), beds, args.reposition_min)
+            beds, sides = None, None
+            if args.virtual_mats > 1:
+                from texsense.commands.monitor import virtual_bed_model
+
+                beds, sides = bed_calibration(), virtual_bed_model()
+            mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
+                               args.turn_every)  # fmt: skip
             background.append(vm.run())
         station = Station(url, mats, topic=args.mats, store=open_store(args.db),
                           record_dir=args.record_dir)  # fmt: skip

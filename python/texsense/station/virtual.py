@@ -69,10 +69,15 @@ class VirtualMats:
         self._client: Any = None
 
     def configs(
-        self, seat_calibration: Any, bed_calibration: Any, reposition_min: float = 20.0
+        self,
+        seat_calibration: Any,
+        bed_calibration: Any,
+        reposition_min: float = 20.0,
+        bed_model: Any = None,
+        turn_every_min: float = 120.0,
     ) -> list[MatConfig]:
         """The station's view of these mats (the seats share the seat's calibration, the beds
-        the bed's)."""
+        the bed's; with ``bed_model``, a side model, the beds run the turning schedule)."""
         out = []
         for i, src in zip(self.ids, self.sources, strict=True):
             bed = isinstance(src, VirtualBedSource)
@@ -80,6 +85,8 @@ class VirtualMats:
                 MatConfig(
                     i, src.layout, bed_calibration if bed else seat_calibration,
                     source=f"mqtt ({src.name})", reposition_min=reposition_min,
+                    bed=bed and bed_model is not None, posture_model=bed_model if bed else None,
+                    turn_every_min=turn_every_min,
                 )
             )  # fmt: skip
         return out

@@ -59,8 +59,9 @@ def mat_id_of(topic: str) -> str | None:
 @dataclass
 class MatConfig:
     """One mat of the ward: its id (the topic segment before ``/frames``), layout, calibration
-    (a stage chain or mat calibration; None for a mat that sends pressure) and where its
-    frames come from (``mqtt``, or a local source built by the command line)."""
+    (a stage chain or mat calibration; None for a mat that sends pressure), where its
+    frames come from (``mqtt``, or a local source built by the command line) and, for a bed,
+    its side model and turning schedule."""
 
     id: str
     layout: Layout
@@ -69,6 +70,11 @@ class MatConfig:
     source: str = "mqtt"
     reposition_min: float = 20.0
     extra: dict[str, Any] = field(default_factory=dict)
+    #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
+    #: regions (:class:`texsense.bed.BedWatch`); the model's labels must be sides.
+    bed: bool = False
+    posture_model: Any = None
+    turn_every_min: float = 120.0
 
 
 class _FedSource(Source):
@@ -102,12 +108,21 @@ class MatEntry:
                 raise ParameterError(f"mat {config.id}: a capacitance mat needs a calibration")
             pipeline = Pipeline(config.calibration, config.layout)
         tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
+        bed = None
+        if config.bed:
+            from texsense.bed import BedWatch
+
+            if config.posture_model is None:
+                raise ParameterError(f"mat {config.id}: a bed needs a side model (model = ...)")
+            bed = BedWatch(config.layout, interval_min=config.turn_every_min)
         self.monitor = Monitor(
             self.source,
             pipeline=pipeline,
             tracker=tracker,
+            posture_model=config.posture_model,
             store=store,
             record_dir=record_dir / config.id,
+            bed=bed,
         )
         self.min_stale_s = min_stale_s
         self.messages = 0
@@ -199,6 +214,11 @@ class MatEntry:
         state = self.state
         if state == "live" and alert is not None:
             state = "alert" if alert.active else "acknowledged"
+        bed = latest.get("bed") if latest and state != "stale" else None
+        if bed is not None:
+            bed = {"side": bed["side"], "since_turn_s": bed["since_turn_s"],
+                   "turn_due": bed["turn_due"], "interval_s": bed["interval_s"]}  # fmt: skip
+        turn_due = bool(bed and bed["turn_due"])
         return {
             "id": self.id,
             "source": self.config.source,
@@ -224,7 +244,8 @@ class MatEntry:
             "minutes_since_reposition": round(float(np.nanmax(exposure, initial=0.0)) / 60.0, 1),
             "alert": alert.to_dict() if alert is not None else None,
             "pressure": latest["pressure"] if latest else None,
-            "urgency": URGENCY[state],
+            "urgency": max(URGENCY[state], URGENCY["alert"] if turn_due else 0),
+            "bed": bed,
         }
 
 

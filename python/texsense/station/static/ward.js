@@ -38,7 +38,16 @@ function tile(mat) {
     <div class="top"><span class="id"></span><span class="state"></span></div>
     <canvas width="160" height="110"></canvas>
     <div class="line"><span>${mat.occupied ? "occupied" : "empty"}</span><span><span class="big">${mat.minutes_since_reposition.toFixed(1)}</span> min</span></div>
+    <div class="line bed-line" hidden></div>
     <div class="line"><span>${mat.frames} frames · ${since}</span><span>${mat.malformed ? mat.malformed + " malformed" : ""}</span></div>`;
+  if (mat.bed) {  // a bed: its side and the turning schedule
+    const line = el.querySelector(".bed-line");
+    const mins = mat.bed.since_turn_s === null ? null : Math.floor(mat.bed.since_turn_s / 60);
+    line.hidden = false;
+    line.classList.toggle("turn-due", mat.bed.turn_due);
+    line.textContent = mat.bed.side === null ? "out of bed"
+      : `${mat.bed.side} ${Math.floor(mins / 60)}:${String(mins % 60).padStart(2, "0")} h${mat.bed.turn_due ? " · turn due" : ""}`;
+  }
   el.querySelector(".id").textContent = mat.id;
   el.querySelector(".state").textContent = STATE_TEXT[mat.state] || mat.state;
   if (mat.refused) el.title = mat.refused;
