@@ -130,26 +130,41 @@ def _grid(pressure: npt.ArrayLike, layout: Layout) -> np.ndarray:
     return np.clip(np.nan_to_num(layout.to_grid(p, fill=0.0)), 0.0, None)
 
 
-def body_axis(
-    pressure: npt.ArrayLike, layout: Layout, floor: float = 0.05
-) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """The loaded area's centre (x, y cm), its long axis (unit vector pointing from the head
-    end, i.e. towards growing rows) and its length along that axis in cm — or None when
-    nothing carries more than ``floor`` N/cm²."""
-    g = _grid(pressure, layout)
-    loaded = g > max(floor, 0.03 * g.max())
-    if loaded.sum() < 3:
+#: A cell carries load above this pressure (N/cm²) and 3 % of the frame's largest.
+_LOADED_NCM2 = 0.05
+
+
+def _cell_xy(rows: np.ndarray, cols: np.ndarray, pitch: tuple[float, float]) -> np.ndarray:
+    """Centres (x, y cm) of grid cells, as :attr:`Layout.xy_cm` places a grid's elements."""
+    return np.column_stack([(cols + 0.5) * pitch[1], (rows + 0.5) * pitch[0]])
+
+
+def _axis(
+    g: np.ndarray, pitch: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+    """Centre, long axis (from the head end), head end (along the axis from the centre) and
+    length of the loaded cells of the map ``g``; None with fewer than 3 loaded cells."""
+    rows, cols = np.nonzero(g > max(_LOADED_NCM2, 0.03 * g.max()))
+    if rows.size < 3:
         return None
-    pitch = layout.pitch_cm or (1.0, 1.0)
-    rows, cols = np.nonzero(loaded)
-    xy = np.column_stack([(cols + 0.5) * pitch[1], (rows + 0.5) * pitch[0]])
+    xy = _cell_xy(rows, cols, pitch)
     centre = xy.mean(axis=0)
     w, v = np.linalg.eigh(np.cov((xy - centre).T))
     axis = v[:, np.argmax(w)]
     if axis[1] < 0:
         axis = -axis
     u = (xy - centre) @ axis
-    return centre, axis, float(u.max() - u.min() + min(pitch))
+    return centre, axis, float(u.min()), float(u.max() - u.min() + min(pitch))
+
+
+def body_axis(
+    pressure: npt.ArrayLike, layout: Layout
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The loaded area's centre (x, y cm), its long axis (unit vector pointing from the head
+    end, i.e. towards growing rows) and its length along that axis in cm — or None when
+    nothing carries load (above 0.05 N/cm² and 3 % of the frame's peak)."""
+    found = _axis(_grid(pressure, layout), layout.pitch_cm or (1.0, 1.0))
+    return None if found is None else (found[0], found[1], found[3])
 
 
 def find_regions(
@@ -170,27 +185,24 @@ def find_regions(
         raise ParameterError(f"threshold unit must be a pressure unit, got {unit!r}")
     limit = float(units.convert(threshold, unit, "N/cm2"))
     g = _grid(pressure, layout)
-    axis_info = body_axis(pressure, layout)
-    if axis_info is None:
-        return {}
-    centre, axis, length = axis_info
     pitch = layout.pitch_cm or (1.0, 1.0)
+    found_axis = _axis(g, pitch)
+    if found_axis is None:
+        return {}
+    centre, axis, head_u, length = found_axis
     smooth = ndimage.gaussian_filter(g, 0.7, mode="constant")
     peaks = (smooth == ndimage.maximum_filter(smooth, size=3)) & (smooth > 0.1 * smooth.max())
     pr, pc = np.nonzero(peaks)
-    pxy = np.column_stack([(pc + 0.5) * pitch[1], (pr + 0.5) * pitch[0]])
+    pxy = _cell_xy(pr, pc, pitch)
     across_axis = np.array([axis[1], -axis[0]])  # towards the mat's last column at angle 0
     if across_axis[0] < 0:
         across_axis = -across_axis
-    rows, cols = np.nonzero(g > max(0.05, 0.03 * g.max()))
-    all_u = (np.column_stack([(cols + 0.5) * pitch[1], (rows + 0.5) * pitch[0]]) - centre) @ axis
-    head_u = float(all_u.min())
     frac = ((pxy - centre) @ axis - head_u) / length
     off = (pxy - centre) @ across_axis
     value = smooth[pr, pc]
-    cell_row, cell_col = np.divmod(layout.cells, layout.shape[1])  # type: ignore[index, arg-type]
-    exy = np.column_stack([(cell_col + 0.5) * pitch[1], (cell_row + 0.5) * pitch[0]])
-    found: dict[str, Region] = {}
+    flat = np.nan_to_num(np.asarray(pressure, dtype=np.float64))
+    exy = layout.xy_cm
+    regions: dict[str, Region] = {}
     for name, (lo, hi, where, widest) in BANDS[side].items():
         ok = (frac >= lo) & (frac <= hi) & (np.abs(off) <= widest)
         if where == "l":
@@ -201,13 +213,11 @@ def find_regions(
             continue
         k = np.flatnonzero(ok)[np.argmax(value[ok])]
         x, y = pxy[k]
-        near = np.hypot(exy[:, 0] - x, exy[:, 1] - y) <= _REGION_CM
-        flat = np.asarray(pressure, dtype=np.float64)
-        near &= np.nan_to_num(flat) >= 0.5 * value[k]
+        near = (np.hypot(exy[:, 0] - x, exy[:, 1] - y) <= _REGION_CM) & (flat >= 0.5 * value[k])
         if not near.any():
             continue
-        vals = np.nan_to_num(flat[near])
-        found[name] = Region(
+        vals = flat[near]
+        regions[name] = Region(
             name,
             float(x),
             float(y),
@@ -216,7 +226,7 @@ def find_regions(
             float(vals.mean()),
             bool(vals.max() > limit),
         )
-    return found
+    return regions
 
 
 class TurningSchedule:
@@ -271,24 +281,25 @@ class TurningSchedule:
             self.side, self.since_t, self._candidate_t = side, t, t
             events.append(Event("in-bed", t, detail={"side": side}))
         elif self._candidate != self.side:
+            # here somebody is (or was) in bed: side and since_t are set together
             held = t - self._candidate_t
-            if self._candidate is None and held >= self.offload_s:
-                events.append(Event("out-of-bed", t, detail={"after_s": round(held, 1)}))
-                events += self._close(t, "offloaded")
-                self.side, self.since_t = None, None
-            elif self._candidate is not None and (self.side is None or held >= self.settle_s):
+            if self._candidate is None:
+                if held >= self.offload_s:
+                    events.append(Event("out-of-bed", t, detail={"after_s": round(held, 1)}))
+                    events += self._close(t, "offloaded")
+                    self.side, self.since_t = None, None
+            elif held >= self.settle_s and self.since_t is not None:
                 start = self._candidate_t
-                if self.since_t is not None and start - self.since_t < self.settle_s:
-                    # the side before never settled (the first frames of somebody getting
-                    # into bed): a correction, not a turn
-                    self.side = self._candidate
-                elif self.side is not None and self.since_t is not None:
+                # a side held shorter than settle_s (the first frames of somebody getting
+                # into bed) is corrected, not turned from
+                if start - self.since_t >= self.settle_s:
                     self.turns += 1
                     events.append(Event("turn", start, detail={
                         "from": self.side, "to": self._candidate,
                         "after_s": round(start - self.since_t, 1)}))  # fmt: skip
                     events += self._close(t, "turned")
-                    self.side, self.since_t = self._candidate, start
+                    self.since_t = start
+                self.side = self._candidate
         if (
             self.side is not None
             and self.since_t is not None
