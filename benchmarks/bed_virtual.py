@@ -42,6 +42,7 @@ from texsense.sim.bed import (
     bed_layout,
     bed_mat,
     bed_session,
+    every_position,
     night_plan,
 )
 from texsense.workflows import bed_calibration
@@ -63,9 +64,7 @@ def regions_table(cal) -> dict:
     dist = {k: [] for k in sources}
     per_side: dict = {}
     for i in range(8):
-        rng = np.random.default_rng([PEOPLE_SEED, i])
-        plan = [(str(p), 30.0) for p in rng.permutation(list(POSITIONS))]
-        s = bed_session(Sleeper.random(i, seed=PEOPLE_SEED), plan, seed=i, mat=bed_mat())
+        s = every_position(i, PEOPLE_SEED, 30.0)
         maps = {"true map": s.truth.frames}
         for name, opts in sources.items():
             if opts is not None:

@@ -136,16 +136,14 @@ def bed_runs(people: int = 10, hold_s: float = 45.0, seed: int = 31) -> list:
     """Compensated pressure of ``people`` on the virtual bed, every position once (random
     order) held ``hold_s``: (frames, side labels, subject, times) per person, all frames
     (transitions and an empty bed included)."""
-    from texsense.sim.bed import POSITIONS, Sleeper, bed_layout, bed_mat, bed_session
+    from texsense.sim.bed import bed_layout, every_position
     from texsense.workflows import bed_calibration
 
     cal = bed_calibration()
     pipe_layout = bed_layout()
     runs = []
     for i in range(people):
-        rng = np.random.default_rng([seed, i])
-        plan = [(str(p), hold_s) for p in rng.permutation(list(POSITIONS))]
-        s = bed_session(Sleeper.random(i, seed=seed), plan, seed=i, mat=bed_mat())
+        s = every_position(i, seed, hold_s)
         out = Pipeline(cal, pipe_layout).run(s.capacitance).frames.astype(np.float64)
         runs.append((np.nan_to_num(out), s.truth.labels, s.truth.times))
     return runs

@@ -73,17 +73,14 @@ def train_virtual_bed_model(
     from texsense.pipeline import Pipeline
     from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
     from texsense.posture.evaluate import make_classifier
-    from texsense.sim.bed import POSITIONS, Sleeper, bed_layout, bed_mat, bed_session
+    from texsense.sim.bed import bed_layout, every_position
     from texsense.workflows import bed_calibration
 
     lay = bed_layout()
     pipeline = Pipeline(bed_calibration(), lay)
     frames, labels, subjects = [], [], []
     for i in range(people):
-        rng = np.random.default_rng([seed, i])
-        plan = [(str(p), hold_s) for p in rng.permutation(list(POSITIONS))]
-        s = bed_session(Sleeper.random(i, seed=seed), plan, seed=seed + i, mat=bed_mat(),
-                        turn_s=min(6.0, hold_s / 3))  # fmt: skip
+        s = every_position(i, seed, hold_s, session_seed=seed + i)
         out = pipeline.reset().run(s.capacitance).frames.astype(np.float64)  # type: ignore[arg-type]
         hold = s.truth.labels["hold"]
         frames.append(np.nan_to_num(out[hold]))

@@ -36,6 +36,8 @@ Examples
 >>> p = lying_pressure(lay, "supine", Sleeper())
 >>> p.shape, round(float(p.sum()) * 2.54**2)  # elements, N (of 736: the rest is off the mat)
 ((2048,), 733)
+>>> [round(float(lying_pressure(lay, k).max()) * 75.006) for k in ("supine", "left")]  # mmHg
+[68, 120]
 """
 
 from __future__ import annotations
@@ -65,6 +67,7 @@ __all__ = [
     "bed_layout",
     "bed_mat",
     "bed_session",
+    "every_position",
     "lying_pressure",
     "night_frames",
     "night_plan",
@@ -510,3 +513,21 @@ def bed_session(
         capacitance = mat.scan(truth.times, truth.frames).capacitance
         capacitance.labels.update(labels)
     return BedSession(truth, [f.prominences for f in frames], capacitance, sleeper)
+
+
+def every_position(
+    index: int, seed: int = 0, hold_s: float = 30.0, session_seed: int | None = None
+) -> BedSession:
+    """Person ``index`` of the population ``seed`` (:meth:`Sleeper.random`) takes every
+    position once in a random order, each held ``hold_s``, on a fresh :func:`bed_mat` — the
+    labelled data of the side model and of the bed benchmarks. ``session_seed`` (default
+    ``index``) draws the takes."""
+    rng = np.random.default_rng([seed, index])
+    plan = [(str(p), hold_s) for p in rng.permutation(list(POSITIONS))]
+    return bed_session(
+        Sleeper.random(index, seed=seed),
+        plan,
+        seed=index if session_seed is None else session_seed,
+        mat=bed_mat(),
+        turn_s=min(6.0, hold_s / 3),
+    )
