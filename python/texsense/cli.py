@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 from texsense import __version__
 from texsense.commands import COMMANDS
-from texsense.exceptions import FormatError, ParameterError, UnitError
+from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 
 __all__ = ["main"]
 
@@ -40,7 +40,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)
-    except (FormatError, ParameterError, UnitError, FileNotFoundError) as e:
+    except (FormatError, ParameterError, UnitError, WriteError, FileNotFoundError) as e:
         print(f"texsense {args.command}: error: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -18,6 +18,7 @@ __all__ = [
     "ParameterError",
     "ShapeError",
     "UnitError",
+    "WriteError",
 ]
 
 
@@ -48,3 +49,26 @@ class FormatError(ValueError):
         self.detail = message
         where = f"{self.path}" if line is None else f"{self.path}, line {line}"
         super().__init__(f"{where}: {message}")
+
+
+class WriteError(OSError):
+    """A file could not be written (disk full, no permission, a folder in the way, ...).
+
+    The write went to a temporary name (see :mod:`texsense.files`), so the previous file at
+    ``path`` is unchanged.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file that was to be written.
+    message : str
+        Why it failed.
+    """
+
+    def __init__(self, path: str | Path, message: str) -> None:
+        self.path = Path(path)
+        self.detail = message
+        super().__init__(f"{self.path}: {message}")
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.detail}"
