@@ -19,7 +19,7 @@ import pytest
 
 #: the outcomes a case can have, in the words of docs/reliability.md
 OUTCOMES = {
-    "clear error": "refused with one line naming the file (and line or field), exit 1, no traceback",
+    "clear error": "one line naming the file (and line or field), exit 1, no traceback",
     "data kept": "the previous file (or recording) is unchanged, no half-written file is left",
     "read, warned": "what is there is read and the loss is said in one line",
     "invalid readings": "the readings are marked invalid, counted and reported",
