@@ -10,6 +10,12 @@ from texsense.monitor.protocol import Frame
 from texsense.monitor.server import create_app, is_loopback, serve
 
 
+def local_client(app, **kwargs):
+    """A test client that reaches the app as a browser on this machine would (Host
+    127.0.0.1:8765; the default Host ``testserver`` is refused)."""
+    return TestClient(app, base_url="http://127.0.0.1:8765", **kwargs)
+
+
 @pytest.fixture()
 def monitor(tmp_path):
     lay = Layout.grid(2, 3)
@@ -28,7 +34,7 @@ def feed(m, seconds, p=1.0, start=0.0):
 
 
 def test_rest_api_status_frames_events_alert_and_recording(monitor):
-    client = TestClient(create_app(monitor, run_source=False))
+    client = local_client(create_app(monitor, run_source=False))
     assert client.get("/api/frame/latest").status_code == 503
     feed(monitor, 320)
     st = client.get("/api/status").json()
@@ -43,7 +49,7 @@ def test_rest_api_status_frames_events_alert_and_recording(monitor):
     assert client.post("/api/alerts/77/ack").status_code == 404
     files = client.post("/api/record/start").json()["files"]
     assert client.post("/api/record/start").status_code == 409
-    feed(monitor, 5, start=400.0)
+    feed(monitor, 5, start=320.0)
     assert client.post("/api/record/stop").json() == {"frames": 5}
     assert load(files[0]).n_frames == 5
     name = files[0].rsplit("/", 1)[1]
@@ -56,9 +62,9 @@ def test_rest_api_status_frames_events_alert_and_recording(monitor):
 
 
 def test_websocket_sends_snapshots(monitor):
-    client = TestClient(create_app(monitor, run_source=False))
+    client = local_client(create_app(monitor, run_source=False))
     feed(monitor, 1)
-    with client.websocket_connect("/ws") as ws:
+    with client.websocket_connect("ws://127.0.0.1:8765/ws") as ws:
         assert ws.receive_json()["frames"] == 1
         feed(monitor, 1, start=1.0)
         assert ws.receive_json()["frames"] == 2
@@ -66,7 +72,7 @@ def test_websocket_sends_snapshots(monitor):
 
 def test_no_path_traversal(monitor, tmp_path):
     (tmp_path / "secret.h5").write_text("x")
-    client = TestClient(create_app(monitor, run_source=False))
+    client = local_client(create_app(monitor, run_source=False))
     for url in [
         "/static/..%2F..%2Fexceptions.py",
         "/static/../live.py",
@@ -82,7 +88,7 @@ def test_no_path_traversal(monitor, tmp_path):
 
 
 def test_token_is_required_on_every_request_when_set(monitor):
-    client = TestClient(create_app(monitor, token="s3cret", run_source=False))
+    client = local_client(create_app(monitor, token="s3cret", run_source=False))
     feed(monitor, 1)
     for url in ["/", "/api/status", "/api/frame/latest", "/openapi.json", "/static/app.js"]:
         assert client.get(url).status_code == 401, url
@@ -90,9 +96,12 @@ def test_token_is_required_on_every_request_when_set(monitor):
     assert client.post("/api/record/start?token=wrong").status_code == 401
     assert client.get("/api/status", headers={"X-Texsense-Token": "s3cret"}).status_code == 200
     assert client.get("/api/status?token=s3cret").status_code == 200
-    with pytest.raises(WebSocketDisconnect), client.websocket_connect("/ws") as ws:
+    with (
+        pytest.raises(WebSocketDisconnect),
+        client.websocket_connect("ws://127.0.0.1:8765/ws") as ws,
+    ):
         ws.receive_json()
-    with client.websocket_connect("/ws?token=s3cret") as ws:
+    with client.websocket_connect("ws://127.0.0.1:8765/ws?token=s3cret") as ws:
         assert ws.receive_json()["frames"] == 1
 
 
@@ -122,3 +131,22 @@ def test_cli_refuses_a_public_address_without_a_token(capsys):
 
     assert main(["monitor", "--host", "0.0.0.0", "--no-posture"]) == 1
     assert "--token" in capsys.readouterr().err
+
+
+def test_a_recording_name_is_never_reused(monitor):
+    """POST /api/record/start?name=x twice used to truncate the first recording."""
+    client = local_client(create_app(monitor, run_source=False))
+    feed(monitor, 3)
+    (first,) = client.post("/api/record/start?name=x").json()["files"]
+    feed(monitor, 4, start=3.0)
+    assert client.post("/api/record/stop").json() == {"frames": 4}
+    again = client.post("/api/record/start?name=x")
+    assert again.status_code == 409 and "exists already" in again.json()["detail"]
+    assert load(first).n_frames == 4  # the first recording is whole
+    # unnamed recordings started within the same second get names of their own
+    names = []
+    for k in range(2):
+        names += client.post("/api/record/start").json()["files"]
+        feed(monitor, 1, start=7.0 + k)
+        client.post("/api/record/stop")
+    assert len(set(names)) == 2 and all(load(f).n_frames == 1 for f in names)

@@ -36,6 +36,12 @@ class StationProcess(ChildServer):
     def mats(self) -> dict:
         return {m["id"]: m for m in self.get("api/mats")}
 
+    def post(self, path: str, headers: dict | None = None):
+        """POST ``path`` (no body), JSON back."""
+        req = urllib.request.Request(self.url + path, method="POST", headers=headers or {})
+        with urllib.request.urlopen(req, timeout=3) as r:
+            return json.load(r)
+
 
 @pytest.fixture
 def station(tmp_path):
@@ -106,7 +112,7 @@ def test_virtual_mats_through_the_broker(broker, station):
 
 def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
     st = station("--config", str(ward_file(tmp_path, "bed1", "bed2")), "--broker",
-                 f"mqtt://127.0.0.1:{broker.port}")  # fmt: skip
+                 f"mqtt://127.0.0.1:{broker.port}", "--refuse-after", "1")  # fmt: skip
     st.until(lambda: st.get("api/ward")["connected"], bool)
     pub = Publisher(broker)
     try:
@@ -118,20 +124,32 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
         # malformed payloads: counted for that mat and skipped
         pub.raw("bed1", b"{not json")
         pub.raw("bed1", json.dumps({"seq": 99, "values": [1] * 16}).encode())  # no "t"
-        # a mat whose frames do not fit its layout is refused; the others go on
+        # one frame that does not fit the layout is skipped like any malformed one ...
         pub.frame("bed2", 12, [0.2] * 64)
         pub.frame("bed2", 13, [0.2] * 16)
         pub.frame("bed1", 12, [0.5] * 16)
-        m = st.until(st.mats, lambda m: m["bed1"]["malformed"] == 2 and m["bed2"]["refused"])
+        m = st.until(st.mats, lambda m: m["bed1"]["malformed"] == 2 and m["bed2"]["frames"] == 13)
+        assert m["bed2"]["state"] == "live" and m["bed2"]["malformed"] == 1
+        # ... but a mat whose frames keep not fitting is refused; the others go on
+        for k in range(14, 26):
+            pub.frame("bed2", k, [0.2] * 64)
+            pub.frame("bed1", k - 1, [0.5] * 16)
+            time.sleep(0.1)
+        pub.frame("bed2", 26, [0.2] * 16)  # ignored: the mat is refused
+        m = st.until(st.mats, lambda m: m["bed2"]["refused"] and m["bed2"]["ignored"] >= 1)
         assert m["bed2"]["state"] == "refused" and "64 values" in m["bed2"]["refused"]
-        assert "16 elements" in m["bed2"]["refused"] and m["bed2"]["ignored"] >= 1
-        assert m["bed2"]["frames"] == 12 and m["bed1"]["frames"] == 13
+        assert "16 elements" in m["bed2"]["refused"]
+        assert m["bed2"]["frames"] == 13 and m["bed1"]["frames"] == 25
+        # admitted again (the API of the ward page's button): its frames count again
+        st.post("api/mats/bed2/admit")
+        pub.frame("bed2", 27, [0.2] * 16)
+        st.until(st.mats, lambda m: m["bed2"]["frames"] == 14 and m["bed2"]["state"] == "live")
         # bed1 stops: stale within two of its frame periods (0.1 s each)
         m = st.until(st.mats, lambda m: m["bed1"]["state"] == "stale", timeout=5)
         period = m["bed1"]["period_s"]
         assert 0.08 < period < 0.2
         # ... and live again with its next frame
-        pub.frame("bed1", 14, [0.5] * 16)
+        pub.frame("bed1", 25, [0.5] * 16)
         st.until(st.mats, lambda m: m["bed1"]["state"] == "live")
     finally:
         pub.close()
@@ -139,7 +157,7 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
 
     db = sqlite3.connect(st.db_path)
     st.until(lambda: {r[0] for r in db.execute("SELECT kind FROM events")},
-             lambda kinds: {"stale", "resumed", "refused"} <= kinds)  # fmt: skip
+             lambda kinds: {"stale", "resumed", "refused", "admitted"} <= kinds)  # fmt: skip
     last = "SELECT detail FROM events WHERE kind = 'stale' ORDER BY id DESC"
     (detail,) = db.execute(last).fetchone()  # the stop above (earlier pauses count too)
     silent = json.loads(detail)["silent_s"]
@@ -157,7 +175,7 @@ def test_the_station_reconnects_when_the_broker_restarts(station, tmp_path):
         pub.frame("bed1", 0, [0.3] * 16)
         st.until(st.mats, lambda m: m["bed1"]["frames"] == 1)
         pub.close()
-        b.stop()
+        b.pause()
         st.until(lambda: st.get("api/ward")["connected"], lambda c: c is False, timeout=20)
         b.start()  # the same port
         st.until(lambda: st.get("api/ward")["connected"], bool, timeout=20)
@@ -172,15 +190,15 @@ def test_the_station_reconnects_when_the_broker_restarts(station, tmp_path):
 
 
 def test_every_request_needs_the_token(broker, station, tmp_path):
-    st = station("--config", str(ward_file(tmp_path, "bed1")), "--token", "s3cret",
+    st = station("--config", str(ward_file(tmp_path, "bed1")), "--token", "s3cret-token",
                  "--broker", f"mqtt://127.0.0.1:{broker.port}")  # fmt: skip
-    st.until(lambda: st.get("api/ward", token="s3cret")["connected"], bool)
+    st.until(lambda: st.get("api/ward", token="s3cret-token")["connected"], bool)
     for path in ("api/mats", "api/ward", "mats/bed1/api/status", ""):
         with pytest.raises(urllib.error.HTTPError) as e:
             st.get(path)
         e.value.close()
         assert e.value.code == 401
-    assert st.get("mats/bed1/api/status", token="s3cret")["frames"] == 0
+    assert st.get("mats/bed1/api/status", token="s3cret-token")["frames"] == 0
 
 
 def test_a_bed_in_the_ward_file_needs_a_side_model(tmp_path):

@@ -99,14 +99,53 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default="texsense-monitor.sqlite",
         help="sessions and events: a SQLite file or postgresql://user:password@host/db",
     )
+    add_web_options(p, 8765)
+    p.set_defaults(run=run_monitor)
+
+
+def add_web_options(p: argparse.ArgumentParser, port: int) -> None:
+    """The options of a server (``monitor`` and ``station``): address, port, token, and the
+    names and page origins it answers to (docs/monitor.md, "Security")."""
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8765)
+    p.add_argument("--port", type=int, default=port)
     p.add_argument(
         "--token",
         default=None,
-        help="required on every request; mandatory when binding beyond loopback",
+        help="required on every request; mandatory when binding beyond loopback (every user "
+        "of the machine can read it here: prefer --token-file or $TEXSENSE_TOKEN)",
     )
-    p.set_defaults(run=run_monitor)
+    p.add_argument("--token-file", type=Path, default=None,
+                   help="read the token from this file (its first line)")  # fmt: skip
+    p.add_argument(
+        "--allow-host", action="append", default=[], metavar="NAME",
+        help="also answer to this Host name (the server's DNS name, a reverse proxy's); "
+        "repeatable",
+    )  # fmt: skip
+    p.add_argument(
+        "--allow-origin", action="append", default=[], metavar="URL",
+        help="also serve pages of this origin (e.g. https://portal.example); repeatable",
+    )  # fmt: skip
+
+
+def web_access(args: argparse.Namespace, what: str) -> Any:
+    """The :class:`~texsense.monitor.web.Access` of the command's options; refuses binding
+    beyond loopback without a token."""
+    from texsense.monitor.web import Access, is_loopback, resolve_token
+
+    token = resolve_token(args.token, args.token_file)
+    if not is_loopback(args.host) and not token:
+        raise ParameterError(
+            f"binding {args.host} exposes the {what} beyond this machine: give a token "
+            "(--token-file FILE, $TEXSENSE_TOKEN or --token)"
+        )
+    return Access(token, bind=args.host, hosts=args.allow_host, origins=args.allow_origin)
+
+
+def page_url(args: argparse.Namespace, token: str | None) -> str:
+    """The address to open in a browser."""
+    host = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+    host = f"[{host}]" if ":" in host else host
+    return f"http://{host}:{args.port}/" + (f"?token={token}" if token else "")
 
 
 def _grid(args: argparse.Namespace) -> Any:
@@ -282,7 +321,7 @@ def virtual_bed_model() -> Any:
     )
 
 
-def _check_port_free(host: str, port: int) -> None:
+def check_port_free(host: str, port: int) -> None:
     """Fail before the (slow) set-up when the port is taken."""
     import socket
 
@@ -298,19 +337,20 @@ def _check_port_free(host: str, port: int) -> None:
 
 
 def run_monitor(args: argparse.Namespace) -> int:
-    """Run ``texsense monitor``."""
-    from texsense.monitor.server import is_loopback, serve
+    """Run ``texsense monitor`` (until Ctrl-C or SIGTERM)."""
+    import signal
 
-    if not is_loopback(args.host) and not args.token:
-        raise ParameterError(
-            f"binding {args.host} exposes the monitor beyond this machine: pass --token"
-        )
-    _check_port_free(args.host, args.port)
+    from texsense.monitor.server import serve
+    from texsense.monitor.web import stop_on_sigterm
+
+    access = web_access(args, "monitor")
+    check_port_free(args.host, args.port)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    monitor = build_monitor(args)
-    url = f"http://{'127.0.0.1' if args.host in ('0.0.0.0', '::') else args.host}:{args.port}/"
-    if args.token:
-        url += f"?token={args.token}"
-    print(f"texsense monitor: {monitor.source.name} -> {url}", flush=True)
-    serve(monitor, host=args.host, port=args.port, token=args.token)
+    with stop_on_sigterm():  # SIGTERM before the server runs: like Ctrl-C
+        monitor = build_monitor(args)
+        url = page_url(args, access.token)
+        print(f"texsense monitor: {monitor.source.name} -> {url}", flush=True)
+        stopped = serve(monitor, host=args.host, port=args.port, access=access)
+    if stopped is not None:
+        print(f"texsense monitor: stopped ({signal.Signals(stopped).name})", flush=True)
     return 0

@@ -8,6 +8,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from texsense.commands.monitor import add_web_options, check_port_free, page_url, web_access
 from texsense.exceptions import FormatError, ParameterError
 
 
@@ -32,8 +33,21 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="virtual mats: simulated seconds per second (a frame per 1.6 s at 1)",
     )  # fmt: skip
     p.add_argument("--config", type=Path, help="TOML file of the ward's mats (docs/station.md)")
-    p.add_argument("--broker", help="mqtt://[user:password@]host[:port] or mqtts://... "
-                   "(default: start Mosquitto on loopback)")  # fmt: skip
+    p.add_argument("--broker", help="a site broker: mqtt://[user@]host[:port] or mqtts://... "
+                   "(default: start a Mosquitto of its own on loopback)")  # fmt: skip
+    p.add_argument("--broker-password-file", type=Path, metavar="FILE",
+                   help="the broker user's password (its first line); or set "
+                   "$TEXSENSE_BROKER_PASSWORD")  # fmt: skip
+    p.add_argument("--broker-ca", metavar="FILE", help="mqtts: the CA certificate(s) to trust "
+                   "(default: the system's)")  # fmt: skip
+    p.add_argument("--broker-cert", metavar="FILE", help="mqtts: a client certificate")
+    p.add_argument("--broker-key", metavar="FILE", help="mqtts: the client certificate's key")
+    p.add_argument("--mat-credentials", type=Path, default=Path("mat-credentials.toml"),
+                   metavar="FILE", help="own broker: the MQTT mats' passwords, made when "
+                   "missing (mode 0600; default mat-credentials.toml)")  # fmt: skip
+    p.add_argument("--refuse-after", type=float, default=10.0, metavar="S",
+                   help="refuse a mat whose frames have had another element count for this "
+                   "long (and 10 messages in a row; default 10 s)")  # fmt: skip
     p.add_argument(
         "--mats", default="texsense/+/frames",
         help="MQTT topic filter of this station's mats (split a site: 'ward3/+/frames')",
@@ -47,9 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--db", default="station.sqlite", help="event store: a SQLite file or postgresql://..."
     )
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8766)
-    p.add_argument("--token", help="required on every request when binding beyond loopback")
+    add_web_options(p, 8766)
     p.set_defaults(run=run)
 
 
@@ -133,50 +145,113 @@ def read_config(
     return mats, local
 
 
+def site_broker(args: argparse.Namespace) -> Any:
+    """The ``--broker`` URL with the password from its file or the environment and the TLS
+    files."""
+    import os
+
+    from texsense.monitor.web import resolve_token
+    from texsense.station.broker import parse_broker_url
+
+    url = parse_broker_url(args.broker)
+    password = url.password
+    if args.broker_password_file is not None:
+        password = resolve_token(None, args.broker_password_file, {})
+    elif password is None and os.environ.get("TEXSENSE_BROKER_PASSWORD"):
+        password = os.environ["TEXSENSE_BROKER_PASSWORD"]
+    if password is not None and not url.username:
+        raise ParameterError("a broker password needs a user: --broker mqtt://USER@host")
+    tls_files = (args.broker_ca, args.broker_cert, args.broker_key)
+    if any(tls_files) and not url.tls:
+        raise ParameterError("--broker-ca/--broker-cert/--broker-key need an mqtts:// broker")
+    for f in tls_files:
+        if f is not None and not Path(f).is_file():
+            raise ParameterError(f"no such file: {f}")
+    from dataclasses import replace
+
+    return replace(url, password=password, ca_file=args.broker_ca, cert_file=args.broker_cert,
+                   key_file=args.broker_key)  # fmt: skip
+
+
+def own_broker(args: argparse.Namespace, mats: list[Any], local: dict[str, Any], vm: Any) -> Any:
+    """Start the station's own broker: (broker, the station's login, the virtual mats'
+    logins)."""
+    from texsense.monitor.protocol import payload_limit
+    from texsense.station.broker import mat_topic, station_broker
+
+    mqtt_mats = {m.id: mat_topic(args.mats, m.id) for m in mats if m.id not in local}
+    virtual = vm.topics() if vm is not None else {}
+    largest = max((payload_limit(m.layout.n_elements) for m in mats), default=0)
+    vmats = max(payload_limit(2048), largest) if vm is not None else largest
+    broker, url, logins = station_broker(
+        args.mats, mqtt_mats, virtual, args.mat_credentials if mqtt_mats else None,
+        max(262_144, vmats + 1024),
+    )  # fmt: skip
+    where = f"; the mats' passwords are in {args.mat_credentials}" if mqtt_mats else ""
+    print(f"texsense station: Mosquitto on {broker.url} (log-in required{where})", flush=True)
+    return broker, url, {k: v for k, v in logins.items() if k in virtual}
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run ``texsense station``."""
+    """Run ``texsense station`` (until Ctrl-C or SIGTERM; its own broker stops with it)."""
+    import signal
+
+    from texsense.monitor.web import stop_on_sigterm
+
+    access = web_access(args, "ward")
+    check_port_free(args.host, args.port)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    if args.virtual_mats < 0:
+        raise ParameterError("--virtual-mats must be >= 0")
+    started: list[Any] = []  # the station's own broker, once it runs
+    with stop_on_sigterm():  # SIGTERM before the server runs: like Ctrl-C, clean-up included
+        try:
+            stopped = _serve(args, access, started)
+        finally:
+            for broker in started:
+                broker.stop()  # the process, and its temporary folder
+    if stopped is not None:
+        print(f"texsense station: stopped ({signal.Signals(stopped).name})", flush=True)
+    return 0
+
+
+def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | None:
     from texsense.monitor.store import open_store
-    from texsense.station.broker import Broker, parse_broker_url
     from texsense.station.server import serve_ward
     from texsense.station.virtual import VirtualMats
     from texsense.station.ward import Station
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    if args.virtual_mats < 0:
-        raise ParameterError("--virtual-mats must be >= 0")
     mats, local = (
         read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
     )
     if not mats and not args.virtual_mats:
         raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
-    own = None
+    vm = None
+    if args.virtual_mats:
+        vm = VirtualMats(args.virtual_mats, None, prefix=args.virtual_prefix, speed=args.speed)
     if args.broker:
-        url = parse_broker_url(args.broker)
+        url = site_broker(args)
     else:
-        own = Broker().start()
-        url = own.url
-        print(f"texsense station: Mosquitto on {url}")
-    try:
-        background = []
-        if args.virtual_mats:
-            from texsense.workflows import bed_calibration, seat_calibration
+        broker, url, logins = own_broker(args, mats, local, vm)
+        started.append(broker)
+        if vm is not None:
+            vm.logins = logins
+    background = []
+    if vm is not None:
+        from texsense.workflows import bed_calibration, seat_calibration
 
-            vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
-            beds, sides = None, None
-            if args.virtual_mats > 1:
-                from texsense.commands.monitor import virtual_bed_model
+        vm.broker = url
+        beds, sides = None, None
+        if args.virtual_mats > 1:
+            from texsense.commands.monitor import virtual_bed_model
 
-                beds, sides = bed_calibration(), virtual_bed_model()
-            mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
-                               args.turn_every)  # fmt: skip
-            background.append(vm.run())
-        station = Station(url, mats, topic=args.mats, store=open_store(args.db),
-                          record_dir=args.record_dir)  # fmt: skip
-        background += [station.consume(mat_id, src) for mat_id, src in local.items()]
-        print(f"texsense station: {len(mats)} mats -> http://{args.host}:{args.port}/")
-        serve_ward(station, host=args.host, port=args.port, token=args.token,
-                   background=background)  # fmt: skip
-    finally:
-        if own is not None:
-            own.stop()
-    return 0
+            beds, sides = bed_calibration(), virtual_bed_model()
+        mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
+                           args.turn_every)  # fmt: skip
+        background.append(vm.run())
+    station = Station(url, mats, topic=args.mats, store=open_store(args.db),
+                      record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
+    background += [station.consume(mat_id, src) for mat_id, src in local.items()]
+    print(f"texsense station: {len(mats)} mats -> {page_url(args, access.token)}", flush=True)
+    return serve_ward(station, host=args.host, port=args.port, access=access,  # type: ignore[no-any-return]
+                      background=background)  # fmt: skip

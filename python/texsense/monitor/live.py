@@ -1,10 +1,16 @@
 """The monitor's engine: frames from a source, through the pipeline, into statistics, the
 posture model, the exposure alerts, the recorder and the viewers (docs/monitor.md).
 
-:class:`Monitor` is independent of the web server: ``await monitor.run()`` consumes the source;
+:class:`Monitor` is independent of the web server: ``await monitor.run()`` consumes the source
+and ``await monitor.watch()`` says when it falls silent;
 :meth:`Monitor.snapshot` is the latest state as a JSON-ready dict (what the dashboard draws);
 subscribers (``subscribe()``) get every snapshot as an already serialised JSON text, so twenty
 viewers cost one serialisation per frame.
+
+Every frame passes the mat's :class:`~texsense.monitor.clock.FrameClock` first: a frame whose
+time is off the mat's clock (from the future, or backwards) is counted, logged once and
+skipped, so a glitch never reaches the pipeline, the exposure and the alerts; a clock that
+really jumped is re-synchronised with an event ``clock``.
 """
 
 from __future__ import annotations
@@ -20,7 +26,9 @@ import numpy as np
 
 from texsense import stats
 from texsense.exceptions import ParameterError
+from texsense.files import unused_name
 from texsense.monitor.alerts import Event, ExposureTracker
+from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
@@ -35,6 +43,27 @@ FLUSH_S = 0.5
 #: The posture shown live is the vote over this many seconds of frame-by-frame predictions
 #: (``posture.frame_label`` in the snapshot is the present frame's own).
 POSTURE_WINDOW_S = 5.0
+#: A source that has sent nothing for this long is said to be silent (console and page).
+SILENT_S = 10.0
+
+
+def recording_paths(folder: Path, name: str, quantity: str) -> list[Path]:
+    """The files of a recording named ``name``: ``<name>-raw.h5`` and, for capacitance, the
+    pressure ``<name>.h5``."""
+    paths = [folder / f"{name}-raw.h5"]
+    return [*paths, folder / f"{name}.h5"] if quantity == "capacitance" else paths
+
+
+def unused_recording_name(folder: Path, name: str, quantity: str) -> str:
+    """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
+    (:func:`texsense.files.unused_name` on each file of the recording)."""
+    k = 1
+    while True:
+        candidate = name if k == 1 else f"{name}-{k}"
+        paths = recording_paths(folder, candidate, quantity)
+        if all(unused_name(p) == p for p in paths):
+            return candidate
+        k += 1
 
 
 class Recorder:
@@ -47,7 +76,10 @@ class Recorder:
 
         folder.mkdir(parents=True, exist_ok=True)
         lay = source.layout
-        self.paths = [folder / f"{name}-raw.h5"]
+        self.paths = recording_paths(folder, name, source.quantity)
+        taken = [p.name for p in self.paths if p.exists()]
+        if taken:  # never write over an earlier recording
+            raise ParameterError(f"a recording named {name!r} exists already ({taken[0]})")
         self._raw = RecordingWriter(
             self.paths[0],
             lay,
@@ -59,7 +91,6 @@ class Recorder:
         )
         self._pressure = None
         if source.quantity == "capacitance":
-            self.paths.append(folder / f"{name}.h5")
             self._pressure = RecordingWriter(
                 self.paths[1],
                 lay,
@@ -158,8 +189,13 @@ class Monitor:
         self._latest: dict[str, Any] | None = None
         self._latest_text: str | None = "null"
         self._subscribers: set[asyncio.Queue[str]] = set()
-        self._t_offset: float | None = None
         self._cof_trace: list[list[float]] = []
+        self.clock = FrameClock()
+        self.quiet = Quiet(log)
+        self.last_wall: float | None = None  # wall time of the last frame processed
+        self.last_pressure: np.ndarray | None = None  # N/cm², NaN where unknown
+        self.changes = 0  # grows with every frame, acknowledgement and recording start/stop
+        self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
         from texsense.posture.smoothing import WindowVote
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
@@ -184,17 +220,23 @@ class Monitor:
 
     # ------------------------------------------------------------------ recording
     def start_recording(self, name: str | None = None) -> list[str]:
-        """Start recording to ``record_dir``; returns the file paths."""
+        """Start recording to ``record_dir``; returns the file paths. A ``name`` that an
+        earlier recording has is refused; the default name (session and time) gets a
+        ``-2``, ``-3``... suffix when needed: no recording is ever written over."""
         if self.recorder is not None:
             raise ParameterError("already recording")
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        name = name or f"session-{self.session_id}-{stamp}"
-        if not name.replace("-", "").replace("_", "").isalnum():
+        if name is not None and not name.replace("-", "").replace("_", "").isalnum():
             raise ParameterError("recording names may hold letters, digits, - and _ only")
+        if name is None:
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            name = unused_recording_name(
+                self.record_dir, f"session-{self.session_id}-{stamp}", self.source.quantity
+            )
         meta = {"source": self.source.name, "session": self.session_id}
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
         self.recorder = Recorder(self.record_dir, name, self.source, meta)
+        self.changes += 1
         paths = [str(p) for p in self.recorder.paths]
         self.store.set_recording(self.session_id, paths)
         return paths
@@ -206,6 +248,7 @@ class Monitor:
         n = self.recorder.frames
         self.recorder.close()
         self.recorder = None
+        self.changes += 1
         return n
 
     # ------------------------------------------------------------------ processing
@@ -219,11 +262,37 @@ class Monitor:
         t = self._latest["t"] if self._latest else 0.0
         e = self.tracker.acknowledge(alert_id, t)
         self._events([e])
+        self.changes += 1
         return e
 
-    def process(self, frame: Frame) -> dict[str, Any]:
-        """One frame through everything; returns the snapshot."""
-        received_at = time.time()
+    def _in_step(self, frame: Frame, wall: float) -> bool:
+        """Place the frame on the mat's time line (:class:`FrameClock`); False when it is
+        skipped (counted and logged once)."""
+        verdict, t, jump = self.clock.place(frame.t, wall)
+        if verdict in ("ahead", "backwards"):
+            self.source.errors += 1
+            what = "from the future" if verdict == "ahead" else "from the past"
+            self.source.last_error = f"frame {frame.seq}: time {frame.t:.6g} s is {what}"
+            text = f"skipped frame {frame.seq}: its time {frame.t:.6g} s is {jump:+.4g} s off"
+            self.quiet.warn(self.source.name, "clock", f"{text} the mat's clock ({what})")
+            return False
+        shift = t - frame.t
+        if shift != 0.0:
+            frame.element_times = frame.element_times + shift
+        if verdict == "resync":
+            detail = {"jump_s": round(jump, 3), "source_t": frame.t, "seq": frame.seq}
+            log.warning("%s: the clock jumped %+.4g s; re-synchronised", self.source.name, jump)
+            self._events([Event("clock", t, None, detail)])
+        return True
+
+    def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
+        """One frame through everything; returns the snapshot, or None for a frame whose
+        time is off the mat's clock (skipped: see :class:`FrameClock`). ``wall``: when it
+        arrived (Unix s, default now)."""
+        received_at = time.time() if wall is None else wall
+        if not self._in_step(frame, received_at):
+            return None
+        self.last_wall = received_at
         raw = frame.values
         if self.pipeline is not None and self.source.quantity == "capacitance":
             valid = np.isfinite(raw)
@@ -264,6 +333,8 @@ class Monitor:
             bed = self.bed.status(frame.t)
         alert = self.tracker.open_alert
         self.frames += 1
+        self.changes += 1
+        self.last_pressure = np.array(pressure, dtype=np.float64)
 
         def r(v: np.ndarray, nd: int = 3) -> list[Any]:  # rounded, NaN -> None (JSON null)
             a = np.asarray(v, dtype=np.float64)
@@ -330,17 +401,56 @@ class Monitor:
         return self._latest_text
 
     async def run(self, max_frames: int | None = None) -> None:
-        """Consume the source (until it ends or ``max_frames``)."""
+        """Consume the source (until it ends or ``max_frames``). A frame that fails to be
+        processed is counted and logged once, and the monitor goes on."""
         try:
             async for frame in self.source.frames():
-                self.process(frame)
+                try:
+                    self.process(frame)
+                except Exception as e:  # one bad frame must not end the monitor
+                    self.source.errors += 1
+                    self.quiet.warn(self.source.name, "failed",
+                                    f"frame {frame.seq} could not be processed: {e}")  # fmt: skip
                 if max_frames is not None and self.frames >= max_frames:
                     break
         finally:
             self.close()
 
-    def close(self) -> None:
-        """Stop recording, end the session."""
+    def feed_state(self, now: float | None = None) -> dict[str, Any]:
+        """Whether frames come: ``live``, ``waiting`` (none yet), ``silent`` (none for
+        :data:`SILENT_S` s) or ``trouble`` (the device is missing or refuses), with the
+        sentence the page shows."""
+        now = time.time() if now is None else now
+        name = self.source.name
+        problem = getattr(self.source, "problem", None)
+        since = now - (self.last_wall if self.last_wall is not None else self.started)
+        if problem:
+            state, text = "trouble", f"{name}: {problem}"
+        elif since >= SILENT_S:
+            state, text = "silent", f"no frames from {name} for {since:.0f} s"
+        elif self.last_wall is None:
+            state, text = "waiting", f"waiting for the first frame from {name}"
+        else:
+            state, text = "live", f"frames from {name}"
+        return {"state": state, "text": text, "since_frame_s": round(since, 1)}
+
+    async def watch(self, every_s: float = 0.5) -> None:
+        """Say on the console when the source falls silent and when it comes back (runs until
+        cancelled)."""
+        while True:
+            feed = self.feed_state()
+            was = self.feed["state"]
+            if feed["state"] == "silent" and was != "silent":
+                log.warning("%s", feed["text"])
+            elif feed["state"] == "live" and was == "silent":
+                log.warning("frames from %s again", self.source.name)
+            self.feed = feed
+            await asyncio.sleep(every_s)
+
+    def close(self, end_session: bool = True) -> None:
+        """Stop recording, end the session (``end_session=False``: the caller ends many
+        sessions at once, :meth:`EventStore.end_sessions`)."""
         if self.recorder is not None:
             self.stop_recording()
-        self.store.end_session(self.session_id)
+        if end_session:
+            self.store.end_session(self.session_id)

@@ -19,7 +19,10 @@ or ``element_times`` (s, one per element) instead; ``unit`` any capacitance or p
 (default pF); ``null`` for a failed reading.
 
 Both parsers raise :class:`ProtocolError` naming what is wrong; the sources count, log and skip
-such lines (the monitor keeps running).
+such lines (the monitor keeps running). A payload longer than :func:`payload_limit` allows
+for the mat's element count is refused by its length, before any parsing
+(:class:`PayloadSizeError`); a payload with another number of values than the mat has elements
+raises :class:`CountError`, which says how many it had.
 
 Examples
 --------
@@ -44,18 +47,46 @@ import numpy.typing as npt
 from texsense import units
 
 __all__ = [
+    "CountError",
     "Frame",
+    "PayloadSizeError",
     "ProtocolError",
     "format_serial_line",
     "parse_mqtt_payload",
     "parse_serial_line",
+    "payload_limit",
 ]
 
 MAX_LINE = 65536  # characters; longer lines are rejected before parsing
+#: Largest integer the protocol's counters and time stamps may hold (int64).
+MAX_INT = 2**63 - 1
 
 
 class ProtocolError(ValueError):
     """A line or payload that does not follow the protocol."""
+
+
+class CountError(ProtocolError):
+    """A payload with another number of values than the mat has elements (``got`` values)."""
+
+    def __init__(self, message: str, got: int) -> None:
+        super().__init__(message)
+        self.got = got
+
+
+class PayloadSizeError(ProtocolError):
+    """A payload longer than :func:`payload_limit` (``size`` bytes): refused unparsed."""
+
+    def __init__(self, size: int, limit: int) -> None:
+        super().__init__(f"a payload of {size} bytes, more than the {limit} a frame can need")
+        self.size, self.limit = size, limit
+
+
+def payload_limit(n_elements: int) -> int:
+    """The longest MQTT payload a frame of ``n_elements`` can need, bytes: room for every value
+    and every element time written with 17 significant digits, spaces, and the keys (4 kB +
+    64 bytes per element: 10 kB for 96 elements, 135 kB for 2048)."""
+    return 4096 + 64 * int(n_elements)
 
 
 @dataclass
@@ -91,9 +122,12 @@ def format_serial_line(
 
 def _int(text: str, what: str) -> int:
     try:
-        return int(text)
+        value = int(text)
     except ValueError:
         raise ProtocolError(f"{what} is not an integer: {text[:20]!r}") from None
+    if abs(value) > MAX_INT:
+        raise ProtocolError(f"{what} is out of range: {text[:20]!r}")
+    return value
 
 
 def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
@@ -134,7 +168,7 @@ def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
             raise ProtocolError(f"value {i + 1} is not a number: {text[:20]!r}") from None
         if not math.isfinite(values[i]):
             raise ProtocolError(f"value {i + 1} is not finite: {text[:20]!r}")
-    times = (t0 + dt * np.arange(n_elements)) * 1e-6
+    times = (float(t0) + float(dt) * np.arange(n_elements)) * 1e-6
     return Frame(seq, times, values, "pF")
 
 
@@ -157,10 +191,14 @@ def _values(vals: list[Any], n: int) -> np.ndarray:
     return values
 
 
-def parse_mqtt_payload(payload: bytes | str, n_elements: int) -> Frame:
-    """Parse one MQTT message (JSON, see the module docstring)."""
-    if len(payload) > 16 * MAX_LINE:
-        raise ProtocolError("payload too large")
+def parse_mqtt_payload(
+    payload: bytes | str, n_elements: int, max_bytes: int | None = None
+) -> Frame:
+    """Parse one MQTT message (JSON, see the module docstring); ``max_bytes`` (default
+    :func:`payload_limit`) is checked first, before anything is parsed."""
+    limit = payload_limit(n_elements) if max_bytes is None else max_bytes
+    if len(payload) > limit:
+        raise PayloadSizeError(len(payload), limit)
     try:
         d: Any = json.loads(payload)
     except (ValueError, UnicodeDecodeError) as e:
@@ -171,13 +209,16 @@ def parse_mqtt_payload(payload: bytes | str, n_elements: int) -> Frame:
         if key not in d:
             raise ProtocolError(f"payload lacks {key!r}")
     seq, t, vals = d["seq"], d["t"], d["values"]
-    if not isinstance(seq, int) or isinstance(seq, bool) or seq < 0:
-        raise ProtocolError(f"'seq' must be an integer >= 0, got {str(seq)[:20]!r}")
+    if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
+        raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {str(seq)[:20]!r}")
     if not isinstance(t, (int, float)) or isinstance(t, bool) or not math.isfinite(t):
         raise ProtocolError(f"'t' must be a finite number, got {str(t)[:20]!r}")
-    if not isinstance(vals, list) or len(vals) != n_elements:
-        got = len(vals) if isinstance(vals, list) else type(vals).__name__
-        raise ProtocolError(f"'values' must be a list of {n_elements} numbers, got {got}")
+    if not isinstance(vals, list):
+        raise ProtocolError(f"'values' must be a list of {n_elements} numbers")
+    if len(vals) != n_elements:
+        raise CountError(
+            f"'values' must be a list of {n_elements} numbers, got {len(vals)}", len(vals)
+        )
     values = _values(vals, n_elements)
     unit = d.get("unit", "pF")
     if not isinstance(unit, str):
@@ -201,4 +242,6 @@ def parse_mqtt_payload(payload: bytes | str, n_elements: int) -> Frame:
         if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt >= 0:
             raise ProtocolError("'dt' must be a number >= 0")
         times = float(t) + float(dt) * np.arange(n_elements)
+        if not np.isfinite(times[-1]):
+            raise ProtocolError("'t' + 'dt' x elements is not a finite time")
     return Frame(seq, times, values, unit)

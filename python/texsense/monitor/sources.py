@@ -5,12 +5,21 @@ Every source has a ``layout``, a ``quantity`` (``capacitance`` or ``pressure``) 
 iterator :meth:`Source.frames` yielding :class:`~texsense.monitor.protocol.Frame` objects with
 per-element time stamps. Sources that parse bytes from outside count malformed input in
 ``errors`` (and log it) and skip it; they never stop on bad input.
+
+Hardware that is missing, refuses or goes away (a serial port that is not there, a TCP device
+that refuses, an unplugged USB cable, an IIO device folder that is missing, a broker that is
+down) is one line on the console and the source's ``problem`` (shown on the page); the source
+tries again every :data:`RETRY_S` s and says so once it works. Device calls that block run in
+daemon threads, so a stopping monitor never waits for a device.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import re
+import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
@@ -35,6 +44,40 @@ __all__ = [
 
 log = logging.getLogger("texsense.monitor")
 
+#: Seconds between two attempts to open a device that is missing or refuses.
+RETRY_S = 2.0
+
+
+def reason(e: BaseException) -> str:
+    """The short reason of an OS or device error: ``No such file or directory``,
+    ``Connection refused`` (pyserial nests them in longer texts)."""
+    found = re.findall(r"\[Errno \d+\] ([^:\]]+)", str(e))
+    if found:
+        return str(found[-1]).strip()
+    return getattr(e, "strerror", None) or str(e) or type(e).__name__
+
+
+async def blocking(fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)`` in a daemon thread (a device call that may block): unlike
+    ``asyncio.to_thread``, a stopping process never waits for it."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[Any] = loop.create_future()
+
+    def settle(ok: bool, value: Any) -> None:
+        if not future.done():
+            future.set_result(value) if ok else future.set_exception(value)
+
+    def work() -> None:
+        try:
+            result: tuple[bool, Any] = (True, fn(*args))
+        except BaseException as e:  # handed to the awaiting coroutine
+            result = (False, e)
+        with contextlib.suppress(RuntimeError):  # a closed loop: nobody waits any more
+            loop.call_soon_threadsafe(settle, *result)
+
+    threading.Thread(target=work, daemon=True, name=f"texsense-{fn.__name__}").start()
+    return await future
+
 
 class Source:
     """Base of all sources."""
@@ -47,6 +90,19 @@ class Source:
     def __init__(self) -> None:
         self.errors = 0  # malformed lines / payloads skipped
         self.last_error: str | None = None
+        self.problem: str | None = None  # the device is missing, refuses or went away
+
+    def _trouble(self, text: str) -> None:
+        """The device is missing or refuses: one console line (again only when the reason
+        changes) and the state the page shows."""
+        if text != self.problem:
+            log.warning("%s: %s", self.name, text)
+        self.problem = text
+
+    def _fine(self) -> None:
+        if self.problem is not None:
+            log.warning("%s: working again", self.name)
+        self.problem = None
 
     def _bad(self, where: str, e: Exception) -> None:
         self.errors += 1
@@ -73,6 +129,7 @@ class Source:
             "elements": self.layout.n_elements,
             "errors": self.errors,
             "last_error": self.last_error,
+            "problem": self.problem,
         }
 
     def close(self) -> None:
@@ -290,7 +347,8 @@ class ReplaySource(Source):
 class SerialSource(Source):
     """Frames from a serial line in the texsense line protocol
     (:mod:`texsense.monitor.protocol`). ``port`` is a device (``/dev/ttyACM0``) or any pySerial
-    URL (``socket://host:port``, ``loop://``)."""
+    URL (``socket://host:port``, ``loop://``). A port that is missing or refuses is tried
+    again every :data:`RETRY_S` s (and said once); so is one that goes away while reading."""
 
     name = "serial"
 
@@ -305,13 +363,25 @@ class SerialSource(Source):
         super().__init__()
         self.layout = layout
         self.port = port
-        self.name = f"serial {port}"
+        self.name = f"serial:{port}"
         if opener is None:
             import serial
 
             opener = serial.serial_for_url
-        self._dev = opener(port, baudrate=baudrate, timeout=0.2)
+        self._opener = opener
+        self._baudrate = baudrate
+        self._dev: Any = None
         self.lines = 0
+        self._open()  # at once: a missing device is said before the server starts
+
+    def _open(self) -> bool:
+        try:
+            self._dev = self._opener(self.port, baudrate=self._baudrate, timeout=0.2)
+        except (OSError, ValueError) as e:  # serial.SerialException is an OSError
+            self._trouble(f"cannot open it ({reason(e)}); trying again every {RETRY_S:g} s")
+            return False
+        self._fine()
+        return True
 
     def parse(self, line: bytes) -> Frame | None:
         """One line -> a frame, None (comment, blank, malformed: counted and skipped)."""
@@ -325,7 +395,16 @@ class SerialSource(Source):
     async def frames(self) -> AsyncIterator[Frame]:
         """Frames as lines arrive."""
         while True:
-            raw = await asyncio.to_thread(self._dev.readline)
+            if self._dev is None and not await blocking(self._open):
+                await asyncio.sleep(RETRY_S)
+                continue
+            try:
+                raw = await blocking(self._dev.readline)
+            except OSError as e:  # unplugged, or the remote end closed
+                self._trouble(f"lost it ({reason(e)}); trying again every {RETRY_S:g} s")
+                self.close()
+                await asyncio.sleep(RETRY_S)
+                continue
             if not raw:
                 continue
             frame = self.parse(raw)
@@ -334,7 +413,10 @@ class SerialSource(Source):
 
     def close(self) -> None:
         """Close the port."""
-        self._dev.close()
+        dev, self._dev = self._dev, None
+        if dev is not None:
+            with contextlib.suppress(OSError):
+                dev.close()
 
 
 class IIOSource(Source):
@@ -366,10 +448,8 @@ class IIOSource(Source):
     ) -> None:
         super().__init__()
         self.dir = Path(device)
-        if not self.dir.is_dir():
-            raise FormatError(self.dir, "no such IIO device folder")
         self.layout = layout
-        self.name = f"iio {self.dir.name}"
+        self.name = f"iio:{self.dir}"
         n = layout.n_elements
         self.mux = multiplexer
         self.channels = (
@@ -377,10 +457,26 @@ class IIOSource(Source):
         )
         if multiplexer is None and len(self.channels) != n:
             raise ParameterError(f"without a multiplexer, {n} elements need {n} channels")
+        if capdac_pF is not None and capdac_pF < 0:
+            raise ParameterError(f"capdac_pF must be >= 0, got {capdac_pF}")
         self.settle_s = settle_s
+        self._settings = (sampling_frequency, capdac_pF)
+        self._scale: dict[int, float] = {}
+        self._offset: dict[int, float] = {}
+        self.ready = False
+        if self.dir.is_dir():  # a device that is there but is not a CDC: an error at once
+            self._set_up()
+        else:
+            self._trouble(f"no such IIO device folder; trying again every {RETRY_S:g} s")
+
+    def _set_up(self) -> None:
+        """Check the channels, write the settings, read scale and offset."""
+        if not self.dir.is_dir():
+            raise FormatError(self.dir, "no such IIO device folder")
         for c in set(self.channels):
             if not (self.dir / f"in_capacitance{c}_raw").is_file():
                 raise FormatError(self.dir, f"no in_capacitance{c}_raw (not a CDC, or channel?)")
+        sampling_frequency, capdac_pF = self._settings
         if sampling_frequency is not None:
             self._write("sampling_frequency", f"{sampling_frequency:g}")
         self._scale = {
@@ -388,8 +484,6 @@ class IIOSource(Source):
             for c in set(self.channels)
         }
         if capdac_pF is not None:
-            if capdac_pF < 0:
-                raise ParameterError(f"capdac_pF must be >= 0, got {capdac_pF}")
             for c in set(self.channels):
                 counts = round(capdac_pF / self._scale[c])
                 self._write(f"in_capacitance{c}_offset", str(counts))
@@ -397,6 +491,8 @@ class IIOSource(Source):
             c: self._number(f"in_capacitance{c}_offset", "in_capacitance_offset", 0.0)
             for c in set(self.channels)
         }
+        self.ready = True
+        self._fine()
 
     def _write(self, name: str, value: str) -> None:
         path = self.dir / name
@@ -436,11 +532,18 @@ class IIOSource(Source):
         return times, values
 
     async def frames(self) -> AsyncIterator[Frame]:
-        """Frames, one full multiplexer cycle each."""
+        """Frames, one full multiplexer cycle each (a missing device is waited for)."""
         seq = 0
         t0 = time.monotonic()
         while True:
-            times, values = await asyncio.to_thread(self.read_frame)
+            if not self.ready:
+                try:
+                    await blocking(self._set_up)
+                except FormatError as e:
+                    self._trouble(f"{e.detail}; trying again every {RETRY_S:g} s")
+                    await asyncio.sleep(RETRY_S)
+                    continue
+            times, values = await blocking(self.read_frame)
             yield Frame(seq, times - t0, values, "pF")
             seq += 1
 
@@ -490,8 +593,28 @@ class MQTTSource(Source):
 
     def _on_message(self, _client: Any, _userdata: Any, msg: Any) -> None:
         frame = self.handle(msg.payload)
-        if frame is not None and self._loop is not None and self._queue is not None:
-            self._loop.call_soon_threadsafe(self._queue.put_nowait, frame)
+        if frame is not None and self._loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop has closed
+                self._loop.call_soon_threadsafe(self._put, frame)
+
+    def _put(self, frame: Frame) -> None:
+        """Queue a frame; a consumer that lags loses the oldest (counted), never the newest."""
+        if self._queue is None:
+            return
+        if self._queue.full():
+            self._queue.get_nowait()
+            self._bad(f"message {self.messages}", ProtocolError("the monitor lags: dropped"))
+        self._queue.put_nowait(frame)
+
+    def _on_connect(self, client: Any, _u: Any, _f: Any, code: Any, _p: Any = None) -> None:
+        if getattr(code, "is_failure", False):
+            self._trouble(f"the broker refused the connection ({code}); trying again")
+            return
+        self._fine()
+        client.subscribe(self.topic)
+
+    def _on_connect_fail(self, _client: Any, _userdata: Any) -> None:
+        self._trouble(f"cannot connect to the broker; trying again every {RETRY_S:g} s")
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Frames as messages arrive."""
@@ -501,7 +624,9 @@ class MQTTSource(Source):
         self._queue = asyncio.Queue(maxsize=1000)
         client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
         client.on_message = self._on_message
-        client.on_connect = lambda c, *_: c.subscribe(self.topic)
+        client.on_connect = self._on_connect
+        client.on_connect_fail = self._on_connect_fail
+        client.reconnect_delay_set(min_delay=1, max_delay=int(RETRY_S))
         client.connect_async(self.host, self.port)
         client.loop_start()
         self._client = client
@@ -509,5 +634,5 @@ class MQTTSource(Source):
             while True:
                 yield await self._queue.get()
         finally:
-            client.loop_stop()
             client.disconnect()
+            client.loop_stop()

@@ -86,6 +86,14 @@ class EventStore:
         """Mark a session ended."""
         self._write("UPDATE sessions SET ended = ? WHERE id = ?", (time.time(), session))
 
+    def end_sessions(self, sessions: list[int]) -> None:
+        """Mark many sessions ended in one write (a station of hundreds of mats stops within
+        a second)."""
+        for k in range(0, len(sessions), 500):
+            ids = [int(s) for s in sessions[k : k + 500]]
+            marks = ",".join("?" * len(ids))
+            self._write(f"UPDATE sessions SET ended = ? WHERE id IN ({marks})", (time.time(), *ids))
+
     def set_recording(self, session: int, paths: list[str]) -> None:
         """Add recording files to a session."""
         rows = self._rows("SELECT recordings FROM sessions WHERE id = ?", (session,))

@@ -1,48 +1,87 @@
-"""A Mosquitto broker of the station's own on loopback (Debian's ``mosquitto``).
+"""A Mosquitto broker of the station's own on loopback (Debian's ``mosquitto``), and how the
+station and its mats log in to any broker.
 
-``texsense station`` starts one unless ``--broker URL`` names a running broker; the tests use
-it to stop and restart a real broker under a running station. ``scripts/test.sh`` and
-``scripts/run.sh`` install the package with apt-get when it is missing.
+``texsense station`` starts one unless ``--broker URL`` names a running broker. Its own broker
+lets nobody in without credentials: the station generates a password for itself (allowed to
+read its topic filter only) and one per mat (allowed to publish to that mat's topic only: a
+mat cannot pose as another), writes the password file and the ACL into the broker's
+temporary folder and removes the folder when it stops. The MQTT mats' passwords are kept in a
+file of the station's (``--mat-credentials``, mode 0600) so that real mats keep theirs from
+one start to the next; the virtual mats get new ones at every start.
+
+``scripts/test.sh`` and ``scripts/run.sh`` install the package with apt-get when it is missing.
 
 Examples
 --------
->>> parse_broker_url("mqtt://ward:secret@10.0.0.2:1884").port
+>>> parse_broker_url("mqtt://ward@10.0.0.2:1884").port
 1884
 >>> parse_broker_url("mqtts://broker.example").tls
 True
+>>> str(parse_broker_url("mqtt://ward:secret@10.0.0.2"))   # never shows the password
+'mqtt://ward@10.0.0.2:1883'
 """
 
 from __future__ import annotations
 
+import base64
+import contextlib
+import hashlib
+import os
+import re
+import secrets
 import shutil
 import socket
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
-from texsense.exceptions import ParameterError
+from texsense.exceptions import FormatError, ParameterError
 
-__all__ = ["Broker", "BrokerURL", "mqtt_client", "parse_broker_url"]
+__all__ = [
+    "STATION_USER",
+    "Broker",
+    "BrokerURL",
+    "mat_topic",
+    "mqtt_client",
+    "parse_broker_url",
+    "read_mat_credentials",
+    "station_broker",
+]
+
+#: The station's own user on its own broker.
+STATION_USER = "texsense-station"
+#: What a mat id (and so an MQTT user name, a topic segment, a URL segment and a folder name)
+#: may be.
+MAT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 
 @dataclass(frozen=True)
 class BrokerURL:
-    """Where a broker is and how to log in (passed through to paho)."""
+    """Where a broker is and how to log in (passed through to paho): user name and password,
+    TLS (``mqtts://``) with an optional CA file (default: the system's) and an optional client
+    certificate and key."""
 
     host: str
     port: int
     username: str | None = None
     password: str | None = None
     tls: bool = False
+    ca_file: str | None = None
+    cert_file: str | None = None
+    key_file: str | None = None
 
     def __str__(self) -> str:
         scheme = "mqtts" if self.tls else "mqtt"
         user = f"{self.username}@" if self.username else ""
         return f"{scheme}://{user}{self.host}:{self.port}"
+
+    def login(self, username: str, password: str) -> BrokerURL:
+        """The same broker with other credentials."""
+        return replace(self, username=username, password=password)
 
 
 def parse_broker_url(url: str) -> BrokerURL:
@@ -74,7 +113,12 @@ def mqtt_client(broker: BrokerURL, name: str) -> Any:
     if broker.username:
         client.username_pw_set(broker.username, broker.password)
     if broker.tls:
-        client.tls_set()
+        try:
+            client.tls_set(
+                ca_certs=broker.ca_file, certfile=broker.cert_file, keyfile=broker.key_file
+            )
+        except (OSError, ValueError) as e:  # ssl.SSLError is an OSError
+            raise ParameterError(f"broker {broker}: cannot set up TLS: {e}") from None
     client.reconnect_delay_set(min_delay=1, max_delay=2)
     client.connect_async(broker.host, broker.port, keepalive=10)
     return client
@@ -84,7 +128,6 @@ def _die_with_parent() -> None:
     """In the child before exec (Linux): end with the parent, even one that is killed. (As
     root, Mosquitto drops to its own user at start, which clears this: a station killed with
     SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
-    import contextlib
     import ctypes
     import signal
 
@@ -98,45 +141,99 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def _hash(password: str) -> str:
+    """Mosquitto's password-file hash (``$7$``: PBKDF2-SHA512, 101 rounds, as
+    ``mosquitto_passwd`` writes it)."""
+    salt = secrets.token_bytes(12)
+    digest = hashlib.pbkdf2_hmac("sha512", password.encode(), salt, 101)
+    return f"$7$101${base64.b64encode(salt).decode()}${base64.b64encode(digest).decode()}"
+
+
+def _mosquitto() -> str:
+    exe = shutil.which("mosquitto") or next(
+        (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if Path(p).exists()),
+        None,
+    )
+    if exe is None:
+        raise ParameterError(
+            "Mosquitto is not installed: 'apt-get install mosquitto' (scripts/run.sh does "
+            "it when run as root), or give a running broker with --broker mqtt://host:port"
+        )
+    return exe
+
+
 class Broker:
-    """A Mosquitto process listening on 127.0.0.1 only (anonymous clients, no persistence).
+    """A Mosquitto process listening on 127.0.0.1 only (no persistence), in a temporary
+    folder that :meth:`stop` removes.
 
     Parameters
     ----------
     port : int, optional
         Default: a free port.
+    users : dict of name -> password, optional
+        Only these may connect (default: anyone, for tests that stand in for a site broker).
+    acl : list of (user, access, topic), optional
+        What each user may do: ``access`` is ``read``, ``write`` or ``readwrite``; nothing
+        else is allowed. Default with ``users``: nothing at all.
+    max_packet_bytes : int, optional
+        A client that sends a larger packet is disconnected by the broker.
     """
 
-    def __init__(self, port: int | None = None) -> None:
-        exe = shutil.which("mosquitto") or next(
-            (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if Path(p).exists()),
-            None,
-        )
-        if exe is None:
-            raise ParameterError(
-                "Mosquitto is not installed: 'apt-get install mosquitto' (scripts/run.sh does "
-                "it when run as root), or give a running broker with --broker mqtt://host:port"
-            )
-        self.exe = exe
+    def __init__(
+        self,
+        port: int | None = None,
+        *,
+        users: dict[str, str] | None = None,
+        acl: list[tuple[str, str, str]] | None = None,
+        max_packet_bytes: int | None = None,
+    ) -> None:
+        self.exe = _mosquitto()
         self.port = port or _free_port()
+        self.users = dict(users or {})
         self._dir = Path(tempfile.mkdtemp(prefix="texsense-broker-"))
         self.config = self._dir / "mosquitto.conf"
-        self.config.write_text(
-            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
-            f"log_dest file {self._dir / 'mosquitto.log'}\n",
-            encoding="utf-8",
-        )
+        lines = [f"listener {self.port} 127.0.0.1", "persistence false",
+                 f"log_dest file {self._dir / 'mosquitto.log'}"]  # fmt: skip
+        if max_packet_bytes:
+            lines.append(f"max_packet_size {int(max_packet_bytes)}")
+        if users is None:
+            lines.append("allow_anonymous true")
+        else:
+            passwd = "".join(f"{u}:{_hash(p)}\n" for u, p in self.users.items())
+            rules = "".join(f"user {u}\ntopic {a} {t}\n" for u, a, t in acl or [])
+            (self._dir / "passwd").write_text(passwd, encoding="utf-8")
+            (self._dir / "acl").write_text(rules, encoding="utf-8")
+            lines += ["allow_anonymous false", f"password_file {self._dir / 'passwd'}",
+                      f"acl_file {self._dir / 'acl'}"]  # fmt: skip
+        self.config.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        self._own_files()
         self._proc: subprocess.Popen[bytes] | None = None
+
+    def _own_files(self) -> None:
+        """As root, Mosquitto drops to its own user before it reads the password file and
+        opens its log: hand it the folder (still closed to everybody else)."""
+        if os.geteuid() != 0:
+            return
+        import pwd
+
+        try:
+            user = pwd.getpwnam("mosquitto")
+        except KeyError:
+            return
+        for path in [self._dir, *self._dir.iterdir()]:
+            os.chown(path, user.pw_uid, user.pw_gid)
 
     @property
     def url(self) -> BrokerURL:
-        """Where clients connect."""
+        """Where clients connect (no credentials: see :meth:`BrokerURL.login`)."""
         return BrokerURL("127.0.0.1", self.port)
 
     def start(self, timeout_s: float = 10.0) -> Broker:
         """Start the process and wait until it accepts connections."""
         if self.running:
             return self
+        if not self._dir.is_dir():
+            raise ParameterError("this broker was stopped for good (its folder is removed)")
         errors = self._dir / "mosquitto.err"
         with errors.open("wb") as err:
             self._proc = subprocess.Popen(
@@ -149,6 +246,7 @@ class Broker:
         while time.monotonic() < deadline:
             if self._proc.poll() is not None:
                 text = errors.read_text(errors="replace").strip()[:300]
+                self.stop()
                 raise ParameterError(f"mosquitto exited at start: {text}")
             try:
                 with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
@@ -163,19 +261,123 @@ class Broker:
         """True while the process runs."""
         return self._proc is not None and self._proc.poll() is None
 
-    def stop(self) -> None:
-        """Stop the process (clients see the connection drop)."""
+    def pause(self) -> None:
+        """Stop the process but keep its folder (:meth:`start` starts it again)."""
         if self._proc is not None and self._proc.poll() is None:
             self._proc.terminate()
             try:
-                self._proc.wait(timeout=5)
+                self._proc.wait(timeout=1.0)
             except subprocess.TimeoutExpired:
                 self._proc.kill()
                 self._proc.wait()
         self._proc = None
+
+    def stop(self) -> None:
+        """Stop the process (clients see the connection drop) and remove its folder."""
+        self.pause()
+        shutil.rmtree(self._dir, ignore_errors=True)
 
     def __enter__(self) -> Broker:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def mat_topic(topic_filter: str, mat_id: str) -> str:
+    """The topic a mat publishes to under a station's filter (``texsense/+/frames`` ->
+    ``texsense/bed12/frames``)."""
+    parts = topic_filter.split("/")
+    if parts.count("+") != 1 or "#" in parts or len(parts) < 2 or parts[-2:] != ["+", "frames"]:
+        raise ParameterError(
+            f"--mats {topic_filter!r}: with its own broker the station needs a filter "
+            "PREFIX/+/frames (one '+', for the mat id)"
+        )
+    return "/".join([*parts[:-2], mat_id, "frames"])
+
+
+def check_mat_id(mat_id: str) -> str:
+    """``mat_id`` if it may be a mat id: letters, digits, ``.``, ``_``, ``-`` (at most 64,
+    not starting with a sign)."""
+    if not MAT_ID.match(mat_id):
+        raise ParameterError(
+            f"mat id {mat_id[:80]!r}: use letters, digits, '.', '_' and '-' only (at most 64, "
+            "starting with a letter or digit)"
+        )
+    return mat_id
+
+
+def read_mat_credentials(path: Path) -> dict[str, str]:
+    """The mats' passwords in ``path`` (TOML: ``[mats]`` ``id = "password"``); empty when the
+    file does not exist yet."""
+    import tomllib
+
+    if not path.exists():
+        return {}
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise FormatError(path, f"cannot read the mats' credentials: {e}") from None
+    mats = doc.get("mats", {})
+    if not isinstance(mats, dict) or not all(isinstance(v, str) for v in mats.values()):
+        raise FormatError(path, 'expected a table [mats] of id = "password"')
+    return dict(mats)
+
+
+def _write_mat_credentials(path: Path, creds: dict[str, str]) -> None:
+    import json
+
+    from texsense.files import write_text
+
+    text = (
+        "# MQTT credentials of the mats for the broker of `texsense station` (keep private):\n"
+        "# a mat logs in with its id as the user name and publishes to <prefix>/<id>/frames.\n"
+        "[mats]\n" + "".join(f"{json.dumps(k)} = {json.dumps(v)}\n" for k, v in creds.items())
+    )
+    write_text(path, text)  # a temporary file of mode 0600, renamed: private from the start
+    os.chmod(path, 0o600)
+
+
+def station_broker(
+    topic_filter: str,
+    mats: dict[str, str],
+    virtual: dict[str, str],
+    credentials_file: Path | None,
+    max_packet_bytes: int,
+) -> tuple[Broker, BrokerURL, dict[str, BrokerURL]]:
+    """The station's own broker, started: every client logs in, each with its own rights.
+
+    Parameters
+    ----------
+    topic_filter : str
+        The station's subscription (``PREFIX/+/frames``); it may read that only.
+    mats : dict of mat id -> topic
+        The MQTT mats of the ward file: each may publish to its topic only; their passwords
+        are kept in ``credentials_file`` (made when missing, mode 0600).
+    virtual : dict of mat id -> topic
+        The virtual mats: the same rights, new passwords at every start.
+    credentials_file : Path, optional
+        Where the MQTT mats' passwords are kept.
+    max_packet_bytes : int
+        Larger packets are refused by the broker.
+
+    Returns
+    -------
+    (broker, station's login, each mat's login)
+    """
+    for mat_id in [*mats, *virtual]:
+        check_mat_id(mat_id)
+    kept = read_mat_credentials(credentials_file) if credentials_file is not None else {}
+    missing = [m for m in mats if m not in kept]
+    for m in missing:
+        kept[m] = secrets.token_urlsafe(18)
+    if credentials_file is not None and missing:
+        _write_mat_credentials(credentials_file, kept)
+    passwords = {STATION_USER: secrets.token_urlsafe(18)}
+    passwords |= {m: kept[m] for m in mats}
+    passwords |= {m: secrets.token_urlsafe(18) for m in virtual}
+    acl = [(STATION_USER, "read", topic_filter)]
+    acl += [(m, "write", t) for m, t in {**mats, **virtual}.items()]
+    broker = Broker(users=passwords, acl=acl, max_packet_bytes=max_packet_bytes).start()
+    logins = {m: broker.url.login(m, passwords[m]) for m in [*mats, *virtual]}
+    return broker, broker.url.login(STATION_USER, passwords[STATION_USER]), logins

@@ -8,130 +8,130 @@ Endpoints (OpenAPI at ``/docs``):
   first;
 - ``GET /api/mats/{id}``: one mat's summary with its latest pressure map;
 - ``POST /api/mats/{id}/alerts/{alert_id}/ack``: acknowledge a reposition alert;
-- ``GET /api/ward``: the broker connection and the mats;
-- ``WS /ws/ward``: the ward after every change (at most 5 times a second);
+- ``POST /api/mats/{id}/admit``: lift a mat's refusal;
+- ``GET /api/ward``: the broker connection, the unknown mats and every mat;
+- ``WS /ws/ward``: the ward's tiles as they change (:mod:`texsense.station.tiles`);
 - ``/mats/{id}/``: the single-mat dashboard of :mod:`texsense.monitor` for that mat.
 
-The monitor's token rule applies to every HTTP and WebSocket request, the mounted
-dashboards included.
+The monitor's access rules (:mod:`texsense.monitor.web`: Host, Origin, token, security
+headers) apply to every HTTP and WebSocket request, the mounted dashboards included.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import json
-import logging
+import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-from fastapi import FastAPI, HTTPException, Request, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi import APIRouter, FastAPI, HTTPException, WebSocket
+from fastapi.responses import FileResponse
 
 from texsense.exceptions import ParameterError
-from texsense.monitor.server import STATIC as MONITOR_STATIC
-from texsense.monitor.server import _safe_file, create_app, is_loopback, token_ok
-from texsense.station.ward import Station
+from texsense.monitor.routes.static import STATIC as MONITOR_STATIC
+from texsense.monitor.routes.static import TYPES
+from texsense.monitor.server import create_app
+from texsense.monitor.web import Access, Guard, finish, is_loopback, safe_file, serve_app, stream
+from texsense.station.tiles import WardFeed
+from texsense.station.ward import MatEntry, Station
 
 __all__ = ["create_ward_app", "serve_ward"]
 
-log = logging.getLogger("texsense.station")
 STATIC = Path(__file__).with_name("static")
-_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css"}
 
 
-def create_ward_app(
-    station: Station, *, token: str | None = None, background: list[Any] | None = None
-) -> Any:
-    """The FastAPI application of a station. ``background``: coroutines to run while the
-    app runs (e.g. the virtual mats)."""
+def _pages() -> APIRouter:
+    r = APIRouter(include_in_schema=False)
 
-    @asynccontextmanager
-    async def lifespan(_app: Any) -> Any:
-        station.start()
-        tasks = [asyncio.create_task(station.watch()), asyncio.create_task(station.publish())]
-        tasks += [asyncio.create_task(c) for c in (background or [])]
-        yield
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await t
-        station.stop()
-
-    app = FastAPI(title="texsense ward station", version="1", lifespan=lifespan)
-
-    @app.middleware("http")
-    async def check_token(request: Request, call_next: Any) -> Any:
-        if not token_ok(request.headers, request.query_params, token):
-            return JSONResponse({"detail": "missing or wrong token"}, status_code=401)
-        return await call_next(request)
-
-    @app.get("/", include_in_schema=False)
+    @r.get("/")
     async def index() -> Any:
         return FileResponse(STATIC / "ward.html", media_type="text/html")
 
-    @app.get("/static/{name}", include_in_schema=False)
+    @r.get("/static/{name}")
     async def static(name: str) -> Any:
-        path = _safe_file(STATIC, name) or _safe_file(MONITOR_STATIC, name)
-        if path is None or path.suffix not in _TYPES:
+        path = safe_file(STATIC, name) or safe_file(MONITOR_STATIC, name)
+        if path is None or path.suffix not in TYPES:
             raise HTTPException(404, "no such file")
-        return FileResponse(path, media_type=_TYPES[path.suffix])
+        return FileResponse(path, media_type=TYPES[path.suffix])
 
-    @app.get("/api/ward")
-    async def ward() -> dict[str, Any]:
-        """Broker connection, unknown mats, and every mat (most urgent first)."""
-        return station.ward()
+    return r
 
-    @app.get("/api/mats")
-    async def mats() -> list[dict[str, Any]]:
-        """Every mat: id, source, frames received, last frame time, state; most urgent first."""
-        maps = ("pressure", "cells")
-        return [{k: v for k, v in m.items() if k not in maps} for m in station.summaries()]
 
-    def entry_of(mat_id: str) -> Any:
+def _api(station: Station) -> APIRouter:
+    r = APIRouter(tags=["ward"])
+
+    def entry_of(mat_id: str) -> MatEntry:
         entry = station.mats.get(mat_id)
         if entry is None:
             raise HTTPException(404, f"no mat {mat_id!r}")
         return entry
 
-    @app.get("/api/mats/{mat_id}")
+    @r.get("/api/ward")
+    async def ward() -> dict[str, Any]:
+        """Broker connection, unknown mats, and every mat (most urgent first)."""
+        return station.ward()
+
+    @r.get("/api/mats")
+    async def mats() -> list[dict[str, Any]]:
+        """Every mat: id, source, frames received, last frame time, state; most urgent first."""
+        rows = [e.status() for e in station.mats.values()]
+        return sorted(rows, key=lambda r: (-r["urgency"], -r["minutes_since_reposition"], r["id"]))
+
+    @r.get("/api/mats/{mat_id}")
     async def mat(mat_id: str) -> dict[str, Any]:
         """One mat's summary with its latest pressure map (N/cm², null where unknown)."""
-        import time
-
         return entry_of(mat_id).summary(time.time())
 
-    @app.post("/api/mats/{mat_id}/alerts/{alert_id}/ack")
+    @r.post("/api/mats/{mat_id}/alerts/{alert_id}/ack")
     async def acknowledge(mat_id: str, alert_id: int) -> dict[str, Any]:
         """Acknowledge a mat's reposition alert."""
-        entry = entry_of(mat_id)
         try:
-            event = entry.monitor.acknowledge(alert_id)
+            return entry_of(mat_id).monitor.acknowledge(alert_id).to_dict()
         except ParameterError as e:
             raise HTTPException(409, str(e)) from None
-        station._changed()
-        return event.to_dict()
 
-    @app.websocket("/ws/ward")
-    async def ws(websocket: WebSocket) -> None:
-        if not token_ok(websocket.headers, websocket.query_params, token):
-            await websocket.close(code=4401)
-            return
-        await websocket.accept()
-        q = station.subscribe()
+    @r.post("/api/mats/{mat_id}/admit")
+    async def admit(mat_id: str) -> dict[str, Any]:
+        """Lift a mat's refusal: its frames are read again (event ``admitted``)."""
         try:
-            await websocket.send_text(json.dumps(station.ward(), separators=(",", ":")))
-            while True:
-                await websocket.send_text(await q.get())
-        except (WebSocketDisconnect, RuntimeError):
-            pass
-        finally:
-            station.unsubscribe(q)
+            return entry_of(mat_id).admit().to_dict()
+        except ParameterError as e:
+            raise HTTPException(409, str(e)) from None
 
+    @r.websocket("/ws/ward")
+    async def ws(websocket: WebSocket) -> None:
+        await stream(websocket, None, WardFeed(station).next)
+
+    return r
+
+
+def create_ward_app(
+    station: Station,
+    *,
+    token: str | None = None,
+    access: Access | None = None,
+    background: list[Any] | None = None,
+) -> Any:
+    """The FastAPI application of a station. ``background``: coroutines to run while the
+    app runs (e.g. the virtual mats); ``access``: the rules of Host, Origin and token
+    (default: loopback, ``token``)."""
+
+    @asynccontextmanager
+    async def lifespan(_app: Any) -> Any:
+        station.start()
+        tasks = [asyncio.create_task(station.watch())]
+        tasks += [asyncio.create_task(c) for c in (background or [])]
+        yield
+        await finish(tasks)
+        station.stop()
+
+    app = FastAPI(title="texsense ward station", version="1", lifespan=lifespan)
+    app.include_router(_pages())
+    app.include_router(_api(station))
     for mat_id, entry in station.mats.items():
-        app.mount(f"/mats/{mat_id}", create_app(entry.monitor, token=token, run_source=False))
+        app.mount(f"/mats/{mat_id}", create_app(entry.monitor, run_source=False, guarded=False))
+    app.add_middleware(Guard, access=access or Access(token))
     return app
 
 
@@ -141,14 +141,13 @@ def serve_ward(
     host: str = "127.0.0.1",
     port: int = 8766,
     token: str | None = None,
+    access: Access | None = None,
     background: list[Any] | None = None,
-) -> None:
-    """Run the ward station's server until interrupted."""
-    import uvicorn
-
-    if not is_loopback(host) and not token:
+) -> int | None:
+    """Run the ward station's server until Ctrl-C or SIGTERM (returns the signal)."""
+    if not is_loopback(host) and not (token or (access and access.token)):
         raise ParameterError(
             f"binding {host} exposes the ward beyond this machine: pass a token (--token)"
         )
-    app = create_ward_app(station, token=token, background=background)
-    uvicorn.run(app, host=host, port=port, log_level="warning")
+    access = access or Access(token, bind=host)
+    return serve_app(create_ward_app(station, access=access, background=background), host, port)

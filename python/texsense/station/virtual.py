@@ -44,12 +44,18 @@ class VirtualMats:
     ----------
     speed : float
         Simulated time per wall second (the seat scans a frame every 1.6 s simulated).
+
+    Attributes
+    ----------
+    logins : dict of mat id -> BrokerURL, optional
+        Each mat's own credentials (the station's own broker): each mat then connects as
+        itself, as real mats do; without them the mats share one connection of ``broker``.
     """
 
     def __init__(
         self,
         n: int,
-        broker: BrokerURL,
+        broker: BrokerURL | None,
         *,
         prefix: str = "texsense",
         speed: float = 1.0,
@@ -66,7 +72,11 @@ class VirtualMats:
             for k in range(n)
         ]
         self.published = 0
-        self._client: Any = None
+        self.logins: dict[str, BrokerURL] | None = None
+
+    def topics(self) -> dict[str, str]:
+        """Each mat's topic."""
+        return {i: f"{self.prefix}/{i}/frames" for i in self.ids}
 
     def configs(
         self,
@@ -91,23 +101,28 @@ class VirtualMats:
             )  # fmt: skip
         return out
 
-    async def _one(self, mat_id: str, source: Source) -> None:
+    async def _one(self, mat_id: str, source: Source, client: Any) -> None:
         topic = f"{self.prefix}/{mat_id}/frames"
         async for frame in source.frames():
-            self._client.publish(topic, frame_payload(frame), qos=0)
+            client.publish(topic, frame_payload(frame), qos=0)
             self.published += 1
 
     async def run(self) -> None:
         """Publish until cancelled (paho reconnects by itself if the broker restarts)."""
         from texsense.station.broker import mqtt_client
 
-        client = mqtt_client(self.broker, f"texsense-vmats-{id(self)}")
-        client.loop_start()
-        self._client = client
+        if self.logins is None:
+            shared = mqtt_client(self.broker, f"texsense-vmats-{id(self)}")
+            clients = dict.fromkeys(self.ids, shared)
+        else:
+            clients = {i: mqtt_client(self.logins[i], f"texsense-{i}-{id(self)}") for i in self.ids}
+        for c in set(clients.values()):
+            c.loop_start()
         try:
             await asyncio.gather(
-                *(self._one(i, s) for i, s in zip(self.ids, self.sources, strict=True))
+                *(self._one(i, s, clients[i]) for i, s in zip(self.ids, self.sources, strict=True))
             )
         finally:
-            client.disconnect()
-            client.loop_stop()
+            for c in set(clients.values()):
+                c.disconnect()
+                c.loop_stop()

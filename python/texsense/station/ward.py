@@ -7,13 +7,23 @@ A mat publishes its frames to ``<prefix>/<mat id>/frames`` with the payload of
 any coordination of their own: the broker routes). Every mat is a
 :class:`~texsense.monitor.live.Monitor` fed by the station; what the station adds per mat:
 
-- **arrival**: messages, malformed payloads (counted per mat and skipped), the frame period
-  (running mean of arrival gaps);
+- **arrival**: messages, malformed payloads (counted per mat, logged once and skipped), the
+  frame period (running mean of arrival gaps);
+- **glitches never blind a mat**: a payload longer than a frame of the mat can need is refused
+  by its length, unparsed; a frame with another number of values is skipped like any
+  malformed payload; a frame whose time is off the mat's clock is skipped and a clock that
+  really jumped is re-synchronised (:class:`~texsense.monitor.clock.FrameClock`, event
+  ``clock``). None of them reaches the pipeline or the exposure, so no glitch clears an
+  alert;
 - **stale**: a mat that has not sent for two of its frame periods (checked every 20 ms;
   ``min_stale_s`` can set a floor for mats with jittery links) is marked stale and an event
   is stored with how long it was silent; its next frame marks it live again;
-- **refused**: a mat whose frames do not match its layout (another number of elements) is
-  refused with an event that says both counts; the other mats go on;
+- **refused**: a mat whose every frame has had another number of elements than its layout for
+  ``refuse_after_s`` (and at least :data:`REFUSE_AFTER_N` messages in a row) is refused with
+  an event that says both counts; the other mats go on. :meth:`MatEntry.admit` (the API and
+  the ward page) lifts it;
+- **unknown topics**: counted, at most :data:`UNKNOWN_MAX` of them, each forgotten
+  :data:`UNKNOWN_TTL_S` after its last message;
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
   back, and subscribes again.
 """
@@ -21,9 +31,10 @@ any coordination of their own: the broker routes). Every mat is a
 from __future__ import annotations
 
 import asyncio
-import json
+import contextlib
 import logging
 import time
+from collections import OrderedDict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,11 +45,20 @@ import numpy as np
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.monitor.alerts import Event, ExposureTracker
-from texsense.monitor.live import Monitor
-from texsense.monitor.protocol import Frame, ProtocolError, parse_mqtt_payload
+from texsense.monitor.clock import Quiet
+from texsense.monitor.live import SILENT_S, Monitor
+from texsense.monitor.protocol import (
+    CountError,
+    Frame,
+    PayloadSizeError,
+    ProtocolError,
+    parse_mqtt_payload,
+    payload_limit,
+)
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.station.broker import BrokerURL
+from texsense.station.broker import BrokerURL, check_mat_id
+from texsense.station.tiles import BlockMap
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -46,6 +66,12 @@ log = logging.getLogger("texsense.station")
 
 #: Urgency order of a mat's state on the ward page (highest first).
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
+#: Messages in a row with another element count, at least, before a mat is refused.
+REFUSE_AFTER_N = 10
+#: Unknown topics kept at most (the least recently seen go first) ...
+UNKNOWN_MAX = 100
+#: ... and each forgotten this long after its last message, s.
+UNKNOWN_TTL_S = 600.0
 
 
 def mat_id_of(topic: str) -> str | None:
@@ -91,96 +117,151 @@ class _FedSource(Source):
         raise NotImplementedError("the station hands frames to the monitor")
 
 
+def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: Path) -> Monitor:
+    """The single-mat monitor of a mat of the ward."""
+    from texsense.pipeline import Pipeline
+
+    pipeline = None
+    if config.quantity == "capacitance":
+        if config.calibration is None:
+            raise ParameterError(f"mat {config.id}: a capacitance mat needs a calibration")
+        pipeline = Pipeline(config.calibration, config.layout)
+    tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
+    bed = None
+    if config.bed:
+        from texsense.bed import BedWatch
+
+        if config.posture_model is None:
+            raise ParameterError(f"mat {config.id}: a bed needs a side model (model = ...)")
+        bed = BedWatch(config.layout, interval_min=config.turn_every_min)
+    return Monitor(source, pipeline=pipeline, tracker=tracker, posture_model=config.posture_model,
+                   store=store, record_dir=record_dir / config.id, bed=bed)  # fmt: skip
+
+
 class MatEntry:
-    """One mat's state in the station."""
+    """One mat's state in the station. ``version`` counts its visible changes (the ward
+    WebSocket sends a mat again only when it changed)."""
 
     def __init__(
-        self, config: MatConfig, store: EventStore, record_dir: Path, min_stale_s: float
+        self,
+        config: MatConfig,
+        store: EventStore,
+        record_dir: Path,
+        min_stale_s: float,
+        refuse_after_s: float = 10.0,
+        quiet: Quiet | None = None,
     ) -> None:
-        from texsense.pipeline import Pipeline
-
         self.config = config
         self.id = config.id
         self.source = _FedSource(config)
-        pipeline = None
-        if config.quantity == "capacitance":
-            if config.calibration is None:
-                raise ParameterError(f"mat {config.id}: a capacitance mat needs a calibration")
-            pipeline = Pipeline(config.calibration, config.layout)
-        tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
-        bed = None
-        if config.bed:
-            from texsense.bed import BedWatch
-
-            if config.posture_model is None:
-                raise ParameterError(f"mat {config.id}: a bed needs a side model (model = ...)")
-            bed = BedWatch(config.layout, interval_min=config.turn_every_min)
-        self.monitor = Monitor(
-            self.source,
-            pipeline=pipeline,
-            tracker=tracker,
-            posture_model=config.posture_model,
-            store=store,
-            record_dir=record_dir / config.id,
-            bed=bed,
-        )
+        self.monitor = _monitor(config, self.source, store, record_dir)
+        self.quiet = quiet or Quiet(log)
+        self.blocks = BlockMap(config.layout)
+        self.max_bytes = payload_limit(config.layout.n_elements)
         self.min_stale_s = min_stale_s
-        self.messages = 0
-        self.malformed = 0
-        self.ignored = 0
+        self.refuse_after_s = refuse_after_s
+        self.messages = self.malformed = self.ignored = self.failed = 0
         self.last_error: str | None = None
         self.last_wall: float | None = None
         self.period_s: float | None = None
         self.state = "waiting"
         self.refused: str | None = None
+        self.local: Source | None = None  # a serial, IIO or replay source read by the station
+        self.problem: str | None = None
+        self.created = time.time()
+        self.version = 0
+        self._mismatch: tuple[int, float, int] | None = None  # (run length, since, count)
+        self._tile: tuple[int, str] | None = None
 
     # ---------------------------------------------------------------- messages
     def _event(self, kind: str, detail: dict[str, Any]) -> None:
-        t = self.monitor.latest["t"] if self.monitor.latest else 0.0
+        t = self.monitor.clock.last_t or 0.0
         self.monitor._events([Event(kind, t, None, {"mat": self.id, **detail})])
 
+    def _malformed(self, kind: str, text: str) -> None:
+        """Count a message that gave no frame and log it once (then once a minute)."""
+        self.malformed += 1
+        self.source.errors += 1
+        self.last_error = text
+        self.source.last_error = f"message {self.messages}: {text}"
+        self.version += 1
+        self.quiet.warn(f"mat {self.id}", kind, f"skipped message {self.messages}: {text}")
+
     def handle(self, payload: bytes, now: float) -> bool:
-        """One message; True when it gave a frame."""
+        """One message; True when it gave a frame. Its length is checked first: an oversized
+        payload is never parsed."""
         if self.refused is not None:
             self.ignored += 1
             return False
         self.messages += 1
-        n = self.config.layout.n_elements
         try:
-            frame = parse_mqtt_payload(payload, n)
+            frame = parse_mqtt_payload(payload, self.config.layout.n_elements, self.max_bytes)
+        except PayloadSizeError as e:
+            self._malformed("size", str(e))
+            return False
+        except CountError as e:
+            self._malformed("count", str(e))
+            self._count_mismatch(e.got, now)
+            return False
         except ProtocolError as e:
-            got = _value_count(payload)
-            if got is not None and got != n:
-                self.refused = (
-                    f"frames of {got} values, but the mat's layout has {n} elements: refused"
-                )
-                self.state = "refused"
-                self._event("refused", {"reason": self.refused})
-                log.warning("mat %s: %s", self.id, self.refused)
-                return False
-            self.malformed += 1
-            self.source.errors += 1
-            self.last_error = str(e)
-            self.source.last_error = f"message {self.messages}: {e}"
+            self._malformed("malformed", str(e))
             return False
         return self.feed(frame, now)
+
+    def _count_mismatch(self, got: int, now: float) -> None:
+        """Refuse the mat once its frames have had another element count for
+        ``refuse_after_s`` and :data:`REFUSE_AFTER_N` messages in a row."""
+        n = self.config.layout.n_elements
+        run, since, _ = self._mismatch or (0, now, got)
+        self._mismatch = (run + 1, since, got)
+        if run + 1 < REFUSE_AFTER_N or now - since < self.refuse_after_s:
+            return
+        self.refused = (
+            f"{run + 1} frames in a row over {now - since:.0f} s had {got} values, but the "
+            f"mat's layout has {n} elements: refused until admitted again"
+        )
+        self.state = "refused"
+        self.version += 1
+        self._event("refused", {"reason": self.refused, "values": got, "elements": n})
+        log.warning("mat %s: %s", self.id, self.refused)
+
+    def admit(self) -> Event:
+        """Lift a refusal: the mat's next frames are read again (event ``admitted``)."""
+        if self.refused is None:
+            raise ParameterError(f"mat {self.id} is not refused")
+        self.refused, self._mismatch = None, None
+        self.state, self.last_wall = "waiting", None
+        self.version += 1
+        self._event("admitted", {})
+        log.warning("mat %s: admitted again", self.id)
+        t = self.monitor.clock.last_t or 0.0
+        return Event("admitted", t, None, {"mat": self.id})
 
     def feed(self, frame: Frame, now: float) -> bool:
         """One frame (from MQTT or a local source); True when it was processed."""
         from texsense import units
 
         if frame.values.size != self.config.layout.n_elements:
-            self.malformed += 1
-            self.last_error = f"a frame of {frame.values.size} values"
+            self._malformed("count", f"a frame of {frame.values.size} values")
             return False
         if units.quantity_of(frame.unit) != self.config.quantity:
-            self.malformed += 1
-            self.last_error = f"unit {frame.unit!r} is not {self.config.quantity}"
+            self._malformed("unit", f"unit {frame.unit!r} is not {self.config.quantity}")
             return False
+        self._mismatch = None
         if frame.unit != self.source.unit:
             frame.values = units.convert(frame.values, frame.unit, self.source.unit)
             frame.unit = self.source.unit
-        self.monitor.process(frame)
+        try:
+            snapshot = self.monitor.process(frame, wall=now)
+        except Exception as e:  # one mat's failure must not stop the ward: one line, no trace
+            self.failed += 1
+            self.version += 1
+            self.quiet.warn(f"mat {self.id}", "failed", f"frame {frame.seq} could not be "
+                            f"processed ({type(e).__name__}: {e})")  # fmt: skip
+            return False
+        self.version += 1
+        if snapshot is None:  # off the mat's clock: counted and logged by the monitor
+            return False
         self._arrived(now)
         return True
 
@@ -193,71 +274,118 @@ class MatEntry:
         self.state = "live"
         self.last_wall = now
 
-    def check_stale(self, now: float) -> bool:
-        """Mark the mat stale (and store an event) when it stopped sending; True if it just
-        became stale."""
+    def check(self, now: float) -> bool:
+        """Mark the mat stale (and store an event) when it stopped sending, and follow its
+        local source's trouble; True if anything changed."""
+        problem = self._problem(now)
+        changed = problem != self.problem
+        if changed:
+            if problem is not None:
+                log.warning("mat %s: %s", self.id, problem)
+            self.problem = problem
+            self.version += 1
         if self.state != "live" or self.last_wall is None or self.period_s is None:
-            return False
+            return changed
         if now - self.last_wall > max(2.0 * self.period_s, self.min_stale_s):
             self.state = "stale"
+            self.version += 1
             self._event("stale", {"silent_s": round(now - self.last_wall, 2)})
             return True
-        return False
+        return changed
+
+    def _problem(self, now: float) -> str | None:
+        """What is wrong with a local source: its device's trouble, or its silence."""
+        if self.local is None:
+            return None
+        if self.local.problem:
+            return f"{self.local.name}: {self.local.problem}"
+        since = now - (self.last_wall or self.created)
+        if since >= max(SILENT_S, 2.0 * (self.period_s or 0.0)):
+            return f"no frames from {self.local.name} for {since // 10 * 10:.0f} s"
+        return None
 
     # ---------------------------------------------------------------- views
-    def summary(self, now: float) -> dict[str, Any]:
-        """What the ward tile and ``GET /api/mats`` show."""
-        latest = self.monitor.latest
-        alert = self.monitor.tracker.open_alert
-        exposure = self.monitor.tracker.exposure_map()
-        stats = latest["stats"] if latest else None
+    @property
+    def revision(self) -> int:
+        """Grows with every visible change of the mat (its own and its monitor's: a frame, an
+        acknowledgement on its dashboard)."""
+        return self.version + self.monitor.changes
+
+    def view_state(self) -> tuple[str, int]:
+        """The state the ward shows (an open alert on a live mat shows as ``alert`` or
+        ``acknowledged``) and its urgency."""
         state = self.state
+        alert = self.monitor.tracker.open_alert
         if state == "live" and alert is not None:
             state = "alert" if alert.active else "acknowledged"
+        latest = self.monitor.latest
+        bed = latest.get("bed") if latest and state != "stale" else None
+        turn_due = bool(bed and bed["turn_due"])
+        return state, max(URGENCY[state], URGENCY["alert"] if turn_due else 0)
+
+    def status(self) -> dict[str, Any]:
+        """The mat's state without its maps (what ``GET /api/mats`` and a ward tile show)."""
+        latest = self.monitor.latest
+        alert = self.monitor.tracker.open_alert
+        stats = latest["stats"] if latest else None
+        state, urgency = self.view_state()
         bed = latest.get("bed") if latest and state != "stale" else None
         if bed is not None:
             bed = {"side": bed["side"], "since_turn_s": bed["since_turn_s"],
                    "turn_due": bed["turn_due"], "interval_s": bed["interval_s"]}  # fmt: skip
-        turn_due = bool(bed and bed["turn_due"])
+        exposure = self.monitor.tracker.exposure_s
         return {
             "id": self.id,
             "source": self.config.source,
             "quantity": self.config.quantity,
             "elements": self.config.layout.n_elements,
-            "shape": list(self.config.layout.shape) if self.config.layout.shape else None,
-            "cells": None
-            if self.config.layout.cells is None
-            else self.config.layout.cells.tolist(),
             "frames": self.monitor.frames,
             "messages": self.messages,
             "malformed": self.malformed,
+            "skipped": self.monitor.clock.skipped,
+            "failed": self.failed,
             "ignored": self.ignored,
             "last_error": self.last_error,
+            "problem": self.problem,
             "last_frame_wall": self.last_wall,
-            "seconds_since_frame": None
-            if self.last_wall is None
-            else round(now - self.last_wall, 2),
             "period_s": None if self.period_s is None else round(self.period_s, 3),
             "state": state,
             "refused": self.refused,
             "occupied": bool(stats and stats["load_N"] > 5.0),
-            "minutes_since_reposition": round(float(np.nanmax(exposure, initial=0.0)) / 60.0, 1),
+            "minutes_since_reposition": round(float(np.max(exposure, initial=0.0)) / 60.0, 1),
             "alert": alert.to_dict() if alert is not None else None,
-            "pressure": latest["pressure"] if latest else None,
-            "urgency": max(URGENCY[state], URGENCY["alert"] if turn_due else 0),
+            "urgency": urgency,
             "bed": bed,
         }
 
+    def summary(self, now: float) -> dict[str, Any]:
+        """The status with the layout and the latest pressure map (``GET /api/mats/{id}``)."""
+        lay = self.config.layout
+        latest = self.monitor.latest
+        return {
+            **self.status(),
+            "shape": list(lay.shape) if lay.shape else None,
+            "cells": None if lay.cells is None else lay.cells.tolist(),
+            "seconds_since_frame": None
+            if self.last_wall is None
+            else round(now - self.last_wall, 2),
+            "pressure": latest["pressure"] if latest else None,
+        }
 
-def _value_count(payload: bytes) -> int | None:
-    """How many values a payload carries, if it is a JSON object with a list of values."""
-    try:
-        d = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
-        return None
-    if isinstance(d, dict) and isinstance(d.get("values"), list):
-        return len(d["values"])
-    return None
+    def tile(self) -> str:
+        """The mat's tile on the ward WebSocket (JSON text): the status and the pressure map
+        downsampled and quantised (:class:`~texsense.station.tiles.BlockMap`); made once per
+        change, whoever asks."""
+        revision = self.revision
+        if self._tile is not None and self._tile[0] == revision:
+            return self._tile[1]
+        import json
+
+        pressure = self.monitor.last_pressure
+        body = {**self.status(), "map": None if pressure is None else self.blocks.encode(pressure)}
+        text = json.dumps(body, separators=(",", ":"))
+        self._tile = (revision, text)
+        return text
 
 
 class Station:
@@ -275,6 +403,9 @@ class Station:
         Events and sessions (default: SQLite in memory).
     min_stale_s : float
         A mat is stale after two frame periods, but never sooner than this.
+    refuse_after_s : float
+        A mat whose frames have had another element count for this long (and at least
+        :data:`REFUSE_AFTER_N` messages in a row) is refused.
     """
 
     def __init__(
@@ -286,56 +417,82 @@ class Station:
         store: Any = None,
         record_dir: Path | str = "recordings",
         min_stale_s: float = 0.0,
+        refuse_after_s: float = 10.0,
     ) -> None:
-        ids = [m.id for m in mats]
+        ids = [check_mat_id(m.id) for m in mats]
         if len(set(ids)) != len(ids):
             raise ParameterError(f"mat ids must be unique, got {ids}")
         self.broker = broker
         self.topic = topic
         self.store = store or EventStore(":memory:")
-        self.mats = {m.id: MatEntry(m, self.store, Path(record_dir), min_stale_s) for m in mats}
-        self.unknown: dict[str, int] = {}
+        self.quiet = Quiet(log)
+        self.mats = {
+            m.id: MatEntry(m, self.store, Path(record_dir), min_stale_s, refuse_after_s, self.quiet)
+            for m in mats
+        }
+        self.unknown: OrderedDict[str, list[float]] = OrderedDict()  # key -> [count, last]
+        self.unknown_forgotten = 0
         self.connected = False
         self.connects = 0
+        self.refusal: str | None = None  # why the broker refused the station, if it did
         self.started = time.time()
         self._client: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._subscribers: set[asyncio.Queue[str]] = set()
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
         if getattr(reason, "is_failure", False):
-            log.warning("broker refused the connection: %s", reason)
+            if self.refusal != str(reason):
+                log.warning("the broker %s refused the station: %s", self.broker, reason)
+            self.refusal = str(reason)
             return
-        self.connected = True
+        self.connected, self.refusal = True, None
         self.connects += 1
         client.subscribe(self.topic, qos=0)
         log.info("connected to %s, subscribed to %s", self.broker, self.topic)
 
     def _on_disconnect(self, *_args: Any) -> None:
+        if self.connected:
+            log.warning("lost the broker %s; reconnecting", self.broker)
         self.connected = False
-        log.warning("lost the broker %s; reconnecting", self.broker)
 
     def _on_message(self, _client: Any, _u: Any, msg: Any) -> None:
         if self._loop is not None:
-            self._loop.call_soon_threadsafe(self.handle, msg.topic, msg.payload)
+            with contextlib.suppress(RuntimeError):  # the loop has closed: the station stops
+                self._loop.call_soon_threadsafe(self.handle, msg.topic, msg.payload)
 
-    def handle(self, topic: str, payload: bytes) -> None:
+    def handle(self, topic: str, payload: bytes, now: float | None = None) -> None:
         """One MQTT message (in the event loop)."""
+        now = time.time() if now is None else now
         mat = mat_id_of(topic)
         entry = self.mats.get(mat) if mat is not None else None
         if entry is None:
-            key = mat or topic
-            self.unknown[key] = self.unknown.get(key, 0) + 1
-            if self.unknown[key] == 1:
-                log.warning("frames for an unknown mat %r (topic %s) are ignored", key, topic)
+            self._unknown((mat or topic)[:120], now)
             return
-        try:
-            if entry.handle(payload, time.time()):
-                self._changed()
-        except Exception:  # one mat's failure must not stop the ward
-            log.exception("mat %s: a frame could not be processed", entry.id)
-            entry.malformed += 1
+        entry.handle(payload, now)
+
+    def _unknown(self, key: str, now: float) -> None:
+        """Count a message for an unknown mat (bounded: :data:`UNKNOWN_MAX` keys)."""
+        seen = self.unknown.get(key)
+        if seen is None:
+            self.quiet.warn("station", "unknown", f"frames for an unknown mat {key!r} are "
+                            "ignored")  # fmt: skip
+            seen = self.unknown[key] = [0, now]
+            while len(self.unknown) > UNKNOWN_MAX:
+                self.unknown.popitem(last=False)
+                self.unknown_forgotten += 1
+        self.unknown.move_to_end(key)
+        seen[0] += 1
+        seen[1] = now
+
+    def forget_unknown(self, now: float) -> None:
+        """Forget unknown mats silent for :data:`UNKNOWN_TTL_S`."""
+        while self.unknown:
+            key, (_count, last) = next(iter(self.unknown.items()))
+            if now - last < UNKNOWN_TTL_S:
+                break
+            del self.unknown[key]
+            self.unknown_forgotten += 1
 
     def start(self) -> None:
         """Connect (in paho's network thread) from within the running event loop."""
@@ -352,31 +509,39 @@ class Station:
         self._client = client
 
     def stop(self) -> None:
-        """Disconnect and end every mat's session."""
+        """Disconnect and end every mat's session (in one write)."""
         if self._client is not None:
             self._client.disconnect()
             self._client.loop_stop()
             self._client = None
         for entry in self.mats.values():
-            entry.monitor.close()
+            entry.monitor.close(end_session=False)
+        self.store.end_sessions([e.monitor.session_id for e in self.mats.values()])
 
     async def consume(self, mat_id: str, source: Source) -> None:
         """Feed a mat from a local source (serial, IIO, replay) until it ends."""
         entry = self.mats[mat_id]
+        entry.local = source
         try:
             async for frame in source.frames():
-                if entry.feed(frame, time.time()):
-                    self._changed()
+                entry.feed(frame, time.time())
                 entry.malformed = max(entry.malformed, source.errors)
+        except Exception as e:  # the source gave up: said, and the mat shows it
+            log.warning("mat %s: %s stopped: %s", mat_id, source.name, e)
+            source.problem = f"stopped: {e}"
         finally:
             source.close()
 
     async def watch(self, every_s: float = 0.02) -> None:
         """Mark mats stale as they stop sending (runs until cancelled)."""
+        k = 0
         while True:
             now = time.time()
-            if any([e.check_stale(now) for e in self.mats.values()]):
-                self._changed()
+            for e in self.mats.values():
+                e.check(now)
+            k += 1
+            if k % 50 == 0:
+                self.forget_unknown(now)
             await asyncio.sleep(every_s)
 
     # ---------------------------------------------------------------- views
@@ -387,40 +552,19 @@ class Station:
         rows = [e.summary(now) for e in self.mats.values()]
         return sorted(rows, key=lambda r: (-r["urgency"], -r["minutes_since_reposition"], r["id"]))
 
-    def subscribe(self) -> asyncio.Queue[str]:
-        """A queue that receives the ward (JSON text) after every change, at most 5 times a
-        second; a slow viewer gets the newest."""
-        q: asyncio.Queue[str] = asyncio.Queue(maxsize=2)
-        self._subscribers.add(q)
-        return q
-
-    def unsubscribe(self, q: asyncio.Queue[str]) -> None:
-        """Stop sending to ``q``."""
-        self._subscribers.discard(q)
-
-    def _changed(self) -> None:
-        self._dirty = True
-
-    async def publish(self, every_s: float = 0.2) -> None:
-        """Send the ward to the viewers whenever it changed (runs until cancelled)."""
-        self._dirty = True
-        while True:
-            if self._dirty and self._subscribers:
-                self._dirty = False
-                text = json.dumps(self.ward(), separators=(",", ":"))
-                for q in self._subscribers:
-                    if q.full():
-                        q.get_nowait()
-                    q.put_nowait(text)
-            await asyncio.sleep(every_s)
-
-    def ward(self) -> dict[str, Any]:
-        """The whole ward: connection and every mat's summary."""
+    def header(self) -> dict[str, Any]:
+        """The broker, the connection and the unknown mats (the 20 busiest)."""
+        busiest = sorted(self.unknown.items(), key=lambda kv: -kv[1][0])[:20]
         return {
             "broker": None if self.broker is None else str(self.broker),
             "connected": self.connected,
+            "refusal": self.refusal,
             "topic": self.topic,
-            "unknown": self.unknown,
-            "wall": time.time(),
-            "mats": self.summaries(),
+            "unknown": {k: int(v[0]) for k, v in busiest},
+            "unknown_topics": len(self.unknown),
+            "unknown_forgotten": self.unknown_forgotten,
         }
+
+    def ward(self) -> dict[str, Any]:
+        """The whole ward: connection and every mat's summary."""
+        return {**self.header(), "wall": time.time(), "mats": self.summaries()}

@@ -1,0 +1,67 @@
+"""Frames and status: ``GET /api/status``, ``GET /api/frame/latest``, ``WS /ws``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, HTTPException, WebSocket
+from fastapi.responses import Response
+
+from texsense.monitor.live import Monitor
+from texsense.monitor.web import stream
+
+__all__ = ["router"]
+
+
+def router(monitor: Monitor) -> APIRouter:
+    """The routes of live frames and the monitor's status."""
+    r = APIRouter(tags=["frames"])
+
+    @r.get("/api/status")
+    async def status() -> dict[str, Any]:
+        """Source, whether frames come (``feed``), frame count, recording, open alert,
+        layout."""
+        lay = monitor.layout
+        alert = monitor.tracker.open_alert
+        return {
+            "source": monitor.source.info(),
+            "feed": monitor.feed_state(),
+            "frames": monitor.frames,
+            "skipped": monitor.clock.skipped,
+            "session": monitor.session_id,
+            "recording": monitor.recorder.paths if monitor.recorder else None,
+            "alert": alert.to_dict() if alert else None,
+            "threshold": {
+                "value": monitor.tracker.threshold,
+                "unit": monitor.tracker.unit,
+                "ncm2": monitor.tracker.threshold_ncm2,
+            },
+            "reposition_min": monitor.tracker.reposition_s / 60,
+            "posture_model": monitor.posture_model is not None,
+            "bed": monitor.bed is not None,
+            "layout": {
+                "shape": lay.shape,
+                "pitch_cm": lay.pitch_cm,
+                "cells": None if lay.cells is None else lay.cells.tolist(),
+                "elements": lay.n_elements,
+                "xy_cm": lay.xy_cm.round(3).tolist(),
+            },
+        }
+
+    @r.get("/api/frame/latest")
+    async def latest() -> Response:
+        """The latest snapshot (pressure in N/cm²)."""
+        if monitor.latest is None:
+            raise HTTPException(503, "no frame yet")
+        return Response(monitor.latest_text, media_type="application/json")
+
+    @r.websocket("/ws")
+    async def ws(websocket: WebSocket) -> None:
+        q = monitor.subscribe()
+        try:
+            first = monitor.latest_text if monitor.latest is not None else None
+            await stream(websocket, first, q.get)
+        finally:
+            monitor.unsubscribe(q)
+
+    return r

@@ -1,0 +1,421 @@
+"""What every web request to ``texsense monitor`` and ``texsense station`` passes through
+(docs/monitor.md, "Security"), in one place for both servers.
+
+:class:`Access` holds the rules; :class:`Guard` is the ASGI middleware that applies them to
+every HTTP request and WebSocket handshake before any route sees it (so a new router cannot
+forget them), and adds the security headers to every response:
+
+- **Host**: a request must name this server: a loopback address or ``localhost`` when bound
+  to loopback; also any IP address, this machine's name and the names given with
+  ``--allow-host`` when bound beyond it. A page of another site whose name was re-pointed at
+  127.0.0.1 (DNS rebinding) is refused (403).
+- **Origin**: a browser names the page that makes a request; a page of another origin (another
+  host or port, or ``null``) is refused on every route, WebSockets included (403), unless
+  listed with ``--allow-origin``. Requests without an Origin (scripts, curl) pass.
+  State-changing requests (POST, PUT, PATCH, DELETE) are also refused when the browser says
+  they come from another site (``Sec-Fetch-Site``), Origin or not.
+- **Token**: with a token, every request carries it (``Authorization: Bearer``, header
+  ``X-Texsense-Token`` or ``?token=``), else 401. :func:`resolve_token` takes it from
+  ``--token``, ``--token-file`` or the environment variable ``TEXSENSE_TOKEN``.
+- **Headers**: a Content-Security-Policy that allows scripts, styles and connections of this
+  origin only and no framing (``frame-ancestors 'none'``, ``X-Frame-Options: DENY``),
+  ``Referrer-Policy: no-referrer`` (a token in the address never leaks to another site),
+  ``X-Content-Type-Options: nosniff`` and same-origin opener and resource policies.
+
+:func:`serve_app` runs an app with uvicorn so that Ctrl-C and SIGTERM stop it within about a
+second in every state (open WebSockets, no data flowing) and without tracebacks;
+:func:`stream` sends texts to a WebSocket until the viewer leaves.
+
+Examples
+--------
+>>> access = Access(token=None, bind="127.0.0.1")
+>>> access.host_ok("127.0.0.1:8765"), access.host_ok("localhost"), access.host_ok("evil.example")
+(True, True, False)
+>>> access.origin_ok("http://127.0.0.1:8765", "127.0.0.1:8765")
+True
+>>> access.origin_ok("http://localhost:9000", "127.0.0.1:8765")
+False
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import ipaddress
+import json
+import logging
+import os
+import signal
+import socket
+import time
+from collections.abc import Awaitable, Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+from texsense.exceptions import ParameterError
+
+__all__ = [
+    "Access",
+    "Guard",
+    "finish",
+    "is_loopback",
+    "resolve_token",
+    "safe_file",
+    "serve_app",
+    "stop_on_sigterm",
+    "stream",
+]
+
+log = logging.getLogger("texsense.web")
+
+#: Environment variable that can hold the token (instead of ``--token`` on the command line,
+#: where every user of the machine can read it in the process list).
+TOKEN_ENV = "TEXSENSE_TOKEN"
+#: Methods that change state: refused from other origins and sites.
+UNSAFE_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+#: Longest a server waits for open requests when told to stop, s.
+SHUTDOWN_S = 1.0
+
+_CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+    "connect-src 'self' ws://{host} wss://{host}; frame-ancestors 'none'; base-uri 'none'; "
+    "form-action 'self'"
+)
+#: FastAPI's /docs and /redoc pages load Swagger UI / ReDoc from a CDN with inline scripts.
+_CSP_DOCS = (
+    "default-src 'none'; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; "
+    "style-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; "
+    "font-src https://fonts.gstatic.com; img-src 'self' data: https://fastapi.tiangolo.com "
+    "https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; frame-ancestors 'none'; "
+    "base-uri 'none'"
+)
+_HEADERS = [
+    (b"x-frame-options", b"DENY"),
+    (b"referrer-policy", b"no-referrer"),
+    (b"x-content-type-options", b"nosniff"),
+    (b"cross-origin-opener-policy", b"same-origin"),
+    (b"cross-origin-resource-policy", b"same-origin"),
+]
+
+
+def is_loopback(host: str) -> bool:
+    """True for 127.0.0.0/8, ::1 and ``localhost``."""
+    if host.lower().rstrip(".") == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def _is_ip(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
+def host_name(host: str) -> str:
+    """The name part of a Host header or an origin's network location (no port, no brackets,
+    lower case): ``[::1]:8765`` -> ``::1``."""
+    host = host.strip().lower()
+    if host.startswith("["):
+        return host[1 : host.find("]")] if "]" in host else host[1:]
+    if host.count(":") == 1:
+        host = host.split(":", 1)[0]
+    return host.rstrip(".")
+
+
+def safe_file(folder: Path, name: str) -> Path | None:
+    """``folder / name`` if it is a plain file inside ``folder`` (no traversal), else None."""
+    if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
+        return None
+    base = folder.resolve()
+    path = (base / name).resolve()
+    if path.parent != base or not path.is_file():
+        return None
+    return path
+
+
+def resolve_token(
+    token: str | None = None, token_file: str | Path | None = None, env: Any = None
+) -> str | None:
+    """The token from ``--token``, else ``--token-file`` (its first line), else the
+    environment variable :data:`TOKEN_ENV`; None when none is given.
+
+    Raises
+    ------
+    ParameterError
+        Both ``--token`` and ``--token-file``, an unreadable or empty token file, or a token
+        shorter than 8 characters.
+    """
+    env = os.environ if env is None else env
+    if token is not None and token_file is not None:
+        raise ParameterError("give the token once: --token or --token-file, not both")
+    where = "--token"
+    if token_file is not None:
+        path = Path(token_file)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            reason = getattr(e, "strerror", None) or "not UTF-8 text"
+            raise ParameterError(f"--token-file {path}: cannot read it ({reason})") from None
+        token = text.strip().splitlines()[0].strip() if text.strip() else ""
+        where = f"--token-file {path}"
+    elif token is None and env.get(TOKEN_ENV):
+        token, where = env[TOKEN_ENV].strip(), f"${TOKEN_ENV}"
+    if token is None:
+        return None
+    if len(token) < 8 or any(c.isspace() for c in token):
+        raise ParameterError(f"{where}: a token needs at least 8 characters and no spaces")
+    return token
+
+
+class Access:
+    """The rules of :class:`Guard`: who may ask what.
+
+    Parameters
+    ----------
+    token : str, optional
+        Required on every request when given.
+    bind : str
+        The address the server listens on: loopback (the default) admits loopback Host names
+        only; beyond loopback, IP addresses and this machine's names are admitted too.
+    hosts : iterable of str
+        More Host names to admit (``--allow-host``: a DNS name of the station, a reverse
+        proxy's name).
+    origins : iterable of str
+        More page origins to admit (``--allow-origin https://portal.example``).
+    """
+
+    def __init__(
+        self,
+        token: str | None = None,
+        bind: str = "127.0.0.1",
+        hosts: Iterable[str] = (),
+        origins: Iterable[str] = (),
+    ) -> None:
+        self.token = token
+        self.bind = bind
+        self.loopback = is_loopback(bind)
+        self.hosts = {host_name(h) for h in hosts}
+        if not self.loopback:
+            self.hosts |= {host_name(socket.gethostname()), host_name(socket.getfqdn())}
+        self.origins = {o.rstrip("/").lower() for o in origins}
+
+    def host_ok(self, host: str) -> bool:
+        """Whether a Host header names this server."""
+        name = host_name(host)
+        if not name:
+            return False
+        if is_loopback(name) or name in self.hosts:
+            return True
+        return not self.loopback and _is_ip(name)
+
+    def origin_ok(self, origin: str, host: str) -> bool:
+        """Whether a page of ``origin`` may talk to this server reached as ``host``."""
+        origin = origin.strip().rstrip("/").lower()
+        if origin in self.origins:
+            return True
+        parts = urlsplit(origin)
+        return parts.scheme in ("http", "https") and parts.netloc == host.strip().lower()
+
+    def token_ok(self, headers: dict[str, str], query: str) -> bool:
+        """The token rule: ``?token=``, ``X-Texsense-Token`` or a bearer header."""
+        if self.token is None:
+            return True
+        given = (parse_qs(query).get("token") or [""])[0] or headers.get("x-texsense-token", "")
+        auth = headers.get("authorization", "")
+        if not given and auth.lower().startswith("bearer "):
+            given = auth[7:]
+        return hmac.compare_digest(given.encode(), self.token.encode())
+
+    def check(self, method: str, headers: dict[str, str], query: str) -> tuple[int, str] | None:
+        """None when the request may pass, else (HTTP status, reason)."""
+        host = headers.get("host", "")
+        if not self.host_ok(host):
+            return 403, f"unknown Host {host[:80]!r}: this server answers to its own address " \
+                "(add a name with --allow-host)"  # fmt: skip
+        origin = headers.get("origin")
+        if origin is not None and not self.origin_ok(origin, host):
+            return 403, f"cross-origin request from {origin[:80]!r} refused"
+        site = headers.get("sec-fetch-site", "")
+        if method in UNSAFE_METHODS and site in ("cross-site", "same-site"):
+            return 403, f"a {site} {method} is refused"
+        if not self.token_ok(headers, query):
+            return 401, "missing or wrong token"
+        return None
+
+
+class Guard:
+    """ASGI middleware: :meth:`Access.check` on every HTTP request and WebSocket handshake,
+    the security headers on every HTTP response (add it with
+    ``app.add_middleware(Guard, access=...)``)."""
+
+    def __init__(self, app: Any, access: Access) -> None:
+        self.app = app
+        self.access = access
+        self._logged: dict[str, float] = {}
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        kind = scope["type"]
+        if kind not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
+        method = scope.get("method", "GET") if kind == "http" else "GET"
+        refused = self.access.check(method, headers, scope.get("query_string", b"").decode())
+        if refused is not None:
+            self._log(refused[1], scope, method)
+            if kind == "websocket":
+                await send({"type": "websocket.close", "code": 4000 + refused[0]})
+                return
+            await self._refuse(send, refused, headers.get("host", ""))
+            return
+        if kind == "websocket":
+            await self.app(scope, receive, send)
+            return
+        policy = _csp(scope.get("path", ""), headers.get("host", ""))
+
+        async def send_with_headers(message: dict[str, Any]) -> None:
+            if message["type"] == "http.response.start":
+                message["headers"] = [*message.get("headers", []), *policy]
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+    async def _refuse(self, send: Any, refused: tuple[int, str], host: str) -> None:
+        status, reason = refused
+        body = json.dumps({"detail": reason}).encode()
+        head = [(b"content-type", b"application/json"), (b"content-length", b"%d" % len(body))]
+        head += _csp("", host)
+        await send({"type": "http.response.start", "status": status, "headers": head})
+        await send({"type": "http.response.body", "body": body})
+
+    def _log(self, reason: str, scope: dict[str, Any], method: str) -> None:
+        """One console line per kind of refusal and minute (a page that retries does not fill
+        the log)."""
+        now = time.monotonic()
+        key = f"{scope['type']} {method} {reason[:40]}"
+        if now - self._logged.get(key, -1e9) >= 60.0:
+            self._logged[key] = now
+            if len(self._logged) > 1000:
+                self._logged.clear()
+            client = scope.get("client") or ("?", 0)
+            what = "WebSocket" if scope["type"] == "websocket" else method
+            log.warning("refused %s %s from %s: %s", what, scope.get("path", ""), client[0], reason)
+
+
+def _csp(path: str, host: str) -> list[tuple[bytes, bytes]]:
+    docs = path.endswith(("/docs", "/redoc", "/docs/oauth2-redirect"))
+    safe_host = "".join(c for c in host if c.isalnum() or c in ".-:[]") or "localhost"
+    policy = _CSP_DOCS if docs else _CSP.format(host=safe_host)
+    return [(b"content-security-policy", policy.encode()), *_HEADERS]
+
+
+async def finish(tasks: list[asyncio.Task[Any]]) -> None:
+    """Cancel ``tasks`` and wait for them (their cancellation is no error; an error of theirs
+    was reported where it happened)."""
+    for t in tasks:
+        t.cancel()
+    for t in tasks:
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await t
+
+
+async def stream(
+    websocket: Any, first: str | None, next_text: Callable[[], Awaitable[str]]
+) -> None:
+    """Accept ``websocket``, send ``first`` (if any) and then each text ``next_text()`` gives,
+    until the viewer leaves or the server stops. It listens for the viewer's departure while it
+    waits, so a closed browser tab ends it at once even when no data is flowing."""
+    from starlette.websockets import WebSocketDisconnect
+
+    await websocket.accept()
+    gone = asyncio.ensure_future(_until_disconnect(websocket))
+    try:
+        if first is not None:
+            await websocket.send_text(first)
+        while True:
+            text = asyncio.ensure_future(next_text())
+            done, _ = await asyncio.wait({text, gone}, return_when=asyncio.FIRST_COMPLETED)
+            if gone in done:
+                text.cancel()
+                return
+            await websocket.send_text(text.result())
+    except (WebSocketDisconnect, RuntimeError, ConnectionError):
+        return
+    finally:
+        gone.cancel()
+
+
+async def _until_disconnect(websocket: Any) -> None:
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
+
+
+def _server_class() -> Any:
+    import uvicorn
+
+    class Server(uvicorn.Server):  # type: ignore[misc]
+        """uvicorn's server, but a signal only stops it (uvicorn would re-raise SIGTERM
+        after its shutdown, which ends the process before the caller can clean up: its
+        broker, its temporary folder)."""
+
+        signal_received: int | None = None
+
+        @contextlib.contextmanager
+        def capture_signals(self) -> Iterator[None]:
+            def stop(sig: int, _frame: Any) -> None:
+                self.signal_received = sig
+                if self.should_exit:
+                    self.force_exit = True  # a second Ctrl-C: stop waiting for anything
+                self.should_exit = True
+
+            previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+            try:
+                yield
+            finally:
+                for s, handler in previous.items():
+                    signal.signal(s, handler)
+
+    return Server
+
+
+def serve_app(app: Any, host: str, port: int) -> int | None:
+    """Run ``app`` until Ctrl-C or SIGTERM; returns the signal that stopped it (None if it
+    stopped by itself). Open connections get :data:`SHUTDOWN_S` to finish."""
+    import uvicorn
+
+    config = uvicorn.Config(
+        app,
+        host=host,
+        port=port,
+        log_level="warning",
+        timeout_graceful_shutdown=SHUTDOWN_S,
+        proxy_headers=False,
+        server_header=False,
+    )
+    server = _server_class()(config)
+    server.run()
+    return server.signal_received
+
+
+@contextlib.contextmanager
+def stop_on_sigterm() -> Iterator[None]:
+    """While a command sets up (before its server handles signals), SIGTERM raises
+    KeyboardInterrupt like Ctrl-C, so that its clean-up (a broker, temporary files) runs."""
+
+    def interrupt(_sig: int, _frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -1,0 +1,210 @@
+"""A glitch never blinds a mat (issue 28): frames from the future or the past, clocks that
+jump, wrong element counts, oversized payloads, floods of unknown topics; the monitor's own
+sources (serial, replay) included. Engine-level: no broker, no server (tests/faults/test_ward.py
+does the same through a real Mosquitto against a running station)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+
+import numpy as np
+import pytest
+
+from texsense import Layout, Recording
+from texsense.calibration import LinearCalibration
+from texsense.monitor import ExposureTracker, Monitor, ReplaySource, SerialSource
+from texsense.monitor.clock import FrameClock
+from texsense.monitor.protocol import Frame, format_serial_line
+from texsense.pipeline import Pipeline
+from texsense.station.ward import UNKNOWN_MAX, UNKNOWN_TTL_S, MatConfig, Station
+
+LAY = Layout.grid(2, 3)
+#: pF -> N/cm², unchanged values (a mat calibration without a spacer model)
+LINEAR = (np.zeros(6), np.ones(6), "capacitance", "pF", "pressure", "N/cm2")
+
+
+def pressure_monitor(reposition_min: float = 5.0) -> Monitor:
+    rec = Recording(np.ones((2, 6)), [0.0, 1.0], LAY, "pressure", "N/cm2")
+    tracker = ExposureTracker(LAY, reposition_min=reposition_min)
+    return Monitor(ReplaySource(rec, speed=0), tracker=tracker)
+
+
+def frame(seq: int, t: float, p: float = 1.0, n: int = 6) -> Frame:
+    return Frame(seq, np.full(n, t), np.full(n, p), "N/cm2")
+
+
+def test_the_clock_skips_a_glitch_and_resynchronises_a_jump():
+    clock = FrameClock()
+    assert [clock.place(float(t), wall=float(t))[0] for t in range(5)] == ["ok"] * 5
+    assert clock.place(1e12, wall=5.0)[0] == "ahead"  # from the future: skipped
+    assert clock.place(5.0, wall=5.1) == ("ok", 5.0, 0.0)  # the next frame passes as it is
+    assert clock.place(-3.0, wall=6.0)[0] == "backwards"  # from the past: skipped
+    assert clock.place(6.0, wall=6.1)[0] == "ok"
+    # the device restarts its clock at 0: one frame skipped, then re-synchronised so that
+    # the time line goes on by the wall time that passed
+    assert clock.place(0.0, wall=7.0)[0] == "backwards"
+    verdict, t, jump = clock.place(1.0, wall=8.0)
+    assert verdict == "resync" and t == pytest.approx(8.0, abs=0.2)
+    assert jump == pytest.approx(-7.0, abs=0.2)
+    assert clock.place(2.0, wall=9.0) == ("ok", pytest.approx(t + 1.0), 0.0)
+    assert (clock.skipped, clock.resyncs) == (3, 1)
+
+
+def test_the_clock_follows_sped_up_and_slow_sources():
+    fast = FrameClock()  # a virtual seat at 60x: a frame every 1.6 s simulated, 27 ms wall
+    assert all(fast.place(k * 1.6, wall=k * 1.6 / 60)[0] == "ok" for k in range(200))
+    slow = FrameClock()  # a recording of a frame every 10 s, replayed as fast as possible
+    verdicts = [slow.place(k * 10.0, wall=k * 1e-3)[0] for k in range(50)]
+    assert verdicts[1] == "ahead" and verdicts[2:] == ["ok"] * 48  # learnt from two frames
+    burst = FrameClock()  # frames processed late, back to back (a busy event loop)
+    assert all(burst.place(k * 1.0, wall=100.0)[0] == "ok" for k in range(100))
+
+
+def test_a_frame_from_the_future_keeps_the_alert_and_the_mat_live():
+    m = pressure_monitor()
+    for k in range(320):  # 5 min 20 s under load: the reposition alert opens
+        assert m.process(frame(k, float(k))) is not None
+    alert = m.tracker.open_alert
+    assert alert is not None and alert.active
+    # one frame of an unloaded mat, stamped far in the future: skipped, the alert stays
+    assert m.process(frame(320, 1e9, p=0.0)) is None
+    assert m.tracker.open_alert is alert and alert.cleared_t is None
+    # the real frames that follow are processed at once (no "frame times must not decrease")
+    for k in range(321, 325):
+        assert m.process(frame(k, float(k - 1))) is not None
+    assert m.frames == 324 and m.clock.skipped == 1 and m.source.errors == 1
+    assert m.tracker.open_alert is alert
+
+
+def test_a_capacitance_mat_survives_times_that_go_backwards():
+    rec = Recording(np.ones((2, 6)), [0.0, 1.0], LAY, "capacitance", "pF")
+    m = Monitor(ReplaySource(rec, speed=0), pipeline=Pipeline(LinearCalibration(*LINEAR), LAY))
+    cap = [Frame(k, np.full(6, t), np.full(6, 2.0)) for k, t in enumerate([0, 1, 2, -50, 3, 4])]
+    snaps = [m.process(f) for f in cap]  # the pipeline would refuse -50 ("must not decrease")
+    assert [s is None for s in snaps] == [False, False, False, True, False, False]
+    assert m.frames == 5
+
+
+def test_a_restarted_clock_is_resynchronised_with_an_event():
+    m = pressure_monitor()
+    for k in range(10):
+        m.process(frame(k, 1000.0 + k), wall=float(k))
+    got = [m.process(frame(k, float(k - 10)), wall=float(k)) for k in range(10, 14)]
+    assert [g is None for g in got] == [True, False, False, False]  # live again at once
+    times = [g["t"] for g in got[1:]]
+    assert times[0] > 1009.0 and np.all(np.diff(times) > 0)  # the time line goes on
+    (event,) = m.store.events(kind="clock")
+    assert event["detail"]["jump_s"] == pytest.approx(-1010.0, abs=1.5)
+
+
+class FakeSerial:
+    def __init__(self, lines):
+        self.lines = list(lines)
+
+    def readline(self):
+        if not self.lines:
+            raise EOFError
+        return self.lines.pop(0) + b"\n"
+
+    def close(self):
+        pass
+
+
+def test_a_serial_frame_with_a_bad_time_does_not_blind_the_monitor():
+    lines = [format_serial_line(k, k * 1_000_000, 0, [1.0] * 6).encode() for k in range(10)]
+    lines.append(format_serial_line(10, 9 * 10**15, 0, [0.0] * 6).encode())  # a glitch
+    lines += [format_serial_line(k, k * 1_000_000, 0, [1.0] * 6).encode() for k in range(11, 21)]
+    src = SerialSource("fake", LAY, opener=lambda *a, **k: FakeSerial(lines))
+    m = Monitor(src, pipeline=Pipeline(LinearCalibration(*LINEAR), LAY))
+    with pytest.raises(EOFError):  # the fake line ends; the monitor never stopped before
+        asyncio.run(m.run())
+    assert m.frames == 20 and m.clock.skipped == 1
+
+
+def test_a_replayed_recording_whose_time_goes_back_is_played_around_it():
+    rec = Recording(np.ones((6, 6)), [0, 1, 2, 1.5, 3, 4], LAY, "pressure", "N/cm2")
+    m = Monitor(ReplaySource(rec, speed=0))
+    asyncio.run(m.run())
+    assert m.frames == 5 and m.clock.skipped == 1
+
+
+# ------------------------------------------------------------------------------ station
+def station(*ids: str, n: int = 96, refuse_after_s: float = 10.0) -> Station:
+    mats = [MatConfig(i, Layout.grid(8, n // 8), quantity="pressure") for i in ids]
+    return Station(None, mats, refuse_after_s=refuse_after_s)
+
+
+def payload(seq: int, n: int = 96, t: float | None = None) -> bytes:
+    t = seq * 1.0 if t is None else t
+    return json.dumps({"seq": seq, "t": t, "values": [0.5] * n, "unit": "N/cm2"}).encode()
+
+
+def test_a_wrong_element_count_is_skipped_and_only_a_sustained_one_refuses(caplog):
+    st = station("bed1", "bed2")
+    bed1 = st.mats["bed1"]
+    for k in range(3):
+        st.handle("texsense/bed1/frames", payload(k), now=float(k))
+    st.handle("texsense/bed1/frames", payload(3, n=95), now=3.0)  # 95 of 96 values
+    st.handle("texsense/bed1/frames", payload(4), now=4.0)
+    assert bed1.refused is None and bed1.monitor.frames == 4 and bed1.malformed == 1
+    assert bed1.state == "live"
+    # 10 s of frames of 95 values: refused, with an event; the other mat goes on
+    for k in range(5, 16):
+        st.handle("texsense/bed1/frames", payload(k, n=95), now=float(k))
+        st.handle("texsense/bed2/frames", payload(k), now=float(k))
+        assert (bed1.refused is None) == (k < 15)
+    assert "95 values" in bed1.refused and "96 elements" in bed1.refused
+    assert bed1.view_state()[0] == "refused" and st.mats["bed2"].monitor.frames == 11
+    st.handle("texsense/bed1/frames", payload(17), now=17.0)
+    assert bed1.ignored == 1 and bed1.monitor.frames == 4
+    assert [e["kind"] for e in st.store.events(kind="refused")] == ["refused"]
+    bed1.admit()  # the ward page's button
+    st.handle("texsense/bed1/frames", payload(18), now=18.0)
+    assert bed1.monitor.frames == 5 and bed1.state == "live"
+    assert st.store.events(kind="admitted")
+    lines = [r for r in caplog.records if "bed1" in r.getMessage() and "95" in r.getMessage()]
+    assert 1 <= len(lines) <= 2 and not any(r.exc_info for r in caplog.records)
+
+
+def test_an_oversized_payload_is_refused_before_it_is_parsed(monkeypatch):
+    st = station("bed1")
+    st.handle("texsense/bed1/frames", payload(0), now=0.0)
+    parsed = []
+    real = json.loads
+    monkeypatch.setattr(json, "loads", lambda s, *a, **k: parsed.append(len(s)) or real(s))
+    big = b'{"seq":1,"t":1,"values":[' + b"1.5," * 3_000_000 + b'1],"unit":"N/cm2"}'
+    st.handle("texsense/bed1/frames", big, now=1.0)
+    assert parsed == []  # 12 MB refused by its length
+    entry = st.mats["bed1"]
+    assert entry.malformed == 1 and "bytes" in entry.last_error and entry.refused is None
+    st.handle("texsense/bed1/frames", payload(2), now=2.0)
+    assert entry.monitor.frames == 2 and entry.state == "live"
+
+
+def test_unknown_topics_are_bounded_and_expire(caplog):
+    st = station("bed1")
+    for k in range(20_000):
+        st.handle(f"texsense/intruder-{k}/frames", b"{}", now=float(k) * 1e-3)
+    assert len(st.unknown) == UNKNOWN_MAX and st.unknown_forgotten == 20_000 - UNKNOWN_MAX
+    assert len(json.dumps(st.ward())) < 20_000  # was 4.5 MB
+    assert sum("unknown mat" in r.getMessage() for r in caplog.records) == 1
+    st.forget_unknown(now=20.0 + UNKNOWN_TTL_S)
+    assert not st.unknown and st.header()["unknown_forgotten"] == 20_000
+
+
+def test_one_mat_failing_is_one_line_and_the_ward_goes_on(caplog, monkeypatch):
+    st = station("bed1", "bed2")
+
+    def broken(*_a, **_k):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(st.mats["bed1"].monitor, "process", broken)
+    with caplog.at_level(logging.WARNING):
+        for k in range(5):
+            st.handle("texsense/bed1/frames", payload(k), now=float(k))
+            st.handle("texsense/bed2/frames", payload(k), now=float(k))
+    assert st.mats["bed1"].failed == 5 and st.mats["bed2"].monitor.frames == 5
+    lines = [r for r in caplog.records if "boom" in r.getMessage()]
+    assert len(lines) == 1 and lines[0].exc_info is None and "bed1" in lines[0].getMessage()
