@@ -160,7 +160,7 @@ def test_every_response_has_the_security_headers(server, fault_row):
     page = client.get("/").headers["content-security-policy"]
     assert "script-src 'self';" in page and "unsafe-inline" not in page
     fault_row("web", f"{kind}: framing, sniffing and referrer leaks (security headers)",
-              "refused")  # fmt: skip
+              "headers set", "CSP, X-Frame-Options, Referrer-Policy, nosniff")  # fmt: skip
 
 
 def test_names_and_origins_can_be_allowed(tmp_path, fault_row):
@@ -231,6 +231,26 @@ def chromium() -> str:
     return found
 
 
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run"]
+
+
+@contextlib.contextmanager
+def open_page(url: str, width: int, height: int, *args: str):
+    """A page of a headless Chromium at ``url``, and the list its script errors go to."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium(), args=[*CHROMIUM_ARGS, *args])
+        try:
+            page = browser.new_page(viewport={"width": width, "height": height})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(url)
+            yield page, errors
+        finally:
+            browser.close()
+
+
 def status(url: str) -> dict:
     import json
 
@@ -249,9 +269,8 @@ def test_a_foreign_page_in_chromium_reads_no_map_and_acknowledges_no_alert(tmp_p
     try:
         alert = m.until(lambda: status(m.url)["alert"], lambda a: a and a["active"], 60)
         with attacker_site() as evil, sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium(), args=[
-                "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
-                "--host-resolver-rules=MAP rebound.test 127.0.0.1"])  # fmt: skip
+            rules = "--host-resolver-rules=MAP rebound.test 127.0.0.1"
+            browser = pw.chromium.launch(executable_path=chromium(), args=[*CHROMIUM_ARGS, rules])
             try:
                 page = browser.new_page()
                 page.goto(evil)

@@ -18,13 +18,14 @@ reposition alert would clear. :class:`FrameClock` stands between a source and th
     most :data:`MAX_PERIOD_S`), the source just has longer steps than the clock had seen (a
     replay of a slow recording as fast as possible): the frame passes, and the period is
     learnt;
-  - otherwise the source's clock jumped (a device that restarted its clock, or a clock that
-    was set): the clock **re-synchronises**, choosing its offset so that the time line goes
-    on from the last accepted frame by the wall time that passed, and the frame passes.
-    The caller reports this as an event.
+  - otherwise, if it is not before the skipped one and at most :data:`MAX_PERIOD_S` after it,
+    the source's clock jumped (a device that restarted its clock, or a clock that was set):
+    the clock **re-synchronises**, choosing its offset so that the time line goes on from the
+    last accepted frame by the wall time that passed, and the frame passes. The caller
+    reports this as an event.
 
-So a glitch costs one frame, and so does a real jump; no time ever goes backwards
-downstream.
+So a glitch costs one frame, and so does a real jump; two frames in a row of any sane clock
+get a mat going again, and no time ever goes backwards downstream.
 
 Examples
 --------
@@ -115,7 +116,7 @@ class FrameClock:
                 self._period = step
                 self._pending = None
                 return self._accept(t, wall, "ok", 0.0)
-            if self._in_step(t, wall, pending):  # two frames agree: the clock jumped
+            if 0.0 <= step <= max(MAX_PERIOD_S, self._limit(wall - pending[1])):  # they agree
                 expected = last_t + self.rate * max(wall - last_wall, 0.0)
                 base = self.last_t if self.last_t is not None else t
                 self.offset = base + (expected - last_t) - t

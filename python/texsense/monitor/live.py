@@ -276,11 +276,11 @@ class Monitor:
             text = f"skipped frame {frame.seq}: its time {frame.t:.6g} s is {jump:+.4g} s off"
             self.quiet.warn(self.source.name, "clock", f"{text} the mat's clock ({what})")
             return False
-        shift = t - frame.t
+        source_t, shift = frame.t, t - frame.t
         if shift != 0.0:
             frame.element_times = frame.element_times + shift
         if verdict == "resync":
-            detail = {"jump_s": round(jump, 3), "source_t": frame.t, "seq": frame.seq}
+            detail = {"jump_s": round(jump, 3), "source_t": source_t, "seq": frame.seq}
             log.warning("%s: the clock jumped %+.4g s; re-synchronised", self.source.name, jump)
             self._events([Event("clock", t, None, detail)])
         return True

@@ -200,8 +200,12 @@ def parse_mqtt_payload(
     if len(payload) > limit:
         raise PayloadSizeError(len(payload), limit)
     try:
-        d: Any = json.loads(payload)
-    except (ValueError, UnicodeDecodeError) as e:
+        text = payload.decode("utf-8") if isinstance(payload, bytes) else payload
+    except UnicodeDecodeError:
+        raise ProtocolError("payload is not JSON: not UTF-8 text") from None
+    try:
+        d: Any = json.loads(text)
+    except ValueError as e:
         raise ProtocolError(f"payload is not JSON: {e}") from None
     if not isinstance(d, dict):
         raise ProtocolError("payload must be a JSON object")

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import hmac
 import ipaddress
 import json
@@ -402,6 +403,10 @@ def serve_app(app: Any, host: str, port: int) -> int | None:
         server_header=False,
     )
     server = _server_class()(config)
+    # Everything made so far (modules, models, calibrations) lives as long as the process: out
+    # of the collector's sight it costs no collection pauses, and the interpreter's teardown
+    # after a stop takes 0.1 s instead of 0.7 s (scipy, scikit-learn).
+    gc.freeze()
     server.run()
     return server.signal_received
 

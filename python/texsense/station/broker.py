@@ -220,6 +220,14 @@ class Broker:
             user = pwd.getpwnam("mosquitto")
         except KeyError:
             return
+        for parent in self._dir.parents:  # the user must be able to walk down to it
+            info = parent.stat()
+            if not info.st_mode & 0o001 and info.st_uid != user.pw_uid:
+                shutil.rmtree(self._dir, ignore_errors=True)
+                raise ParameterError(
+                    f"Mosquitto runs as the user 'mosquitto', who cannot enter {parent}: set "
+                    "TMPDIR to a folder others may enter (e.g. /tmp)"
+                )
         for path in [self._dir, *self._dir.iterdir()]:
             os.chown(path, user.pw_uid, user.pw_gid)
 

@@ -280,7 +280,8 @@ class MatEntry:
         problem = self._problem(now)
         changed = problem != self.problem
         if changed:
-            if problem is not None:
+            said = self.local is not None and self.local.problem  # the source said it
+            if problem is not None and not said:
                 log.warning("mat %s: %s", self.id, problem)
             self.problem = problem
             self.version += 1
