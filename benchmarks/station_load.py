@@ -1,6 +1,8 @@
-"""How many 1024-element mats one station holds, through a real Mosquitto.
+"""How many 1024-element mats one station holds, through a real Mosquitto, and what its
+ward page costs.
 
 Run:  .venv/bin/python benchmarks/station_load.py [--quick]
+      .venv/bin/python benchmarks/station_load.py --loads 600x1 --ward-viewers 0,10
 
 For each load (mats x rate) a fresh `texsense station` (its own process) reads M mats of
 32 x 32 elements (capacitance, the seat's spacer model with per-element gain and offset, the
@@ -10,6 +12,13 @@ unsynchronised mats are), each stamped with its wall-clock send time as the fram
 Viewers on the WebSockets of five mats' dashboards measure frame-to-viewer latency: the time
 from publishing a frame to the viewer receiving that mat's processed snapshot. At the
 end `GET /api/mats` says how many frames each mat processed, against how many were published.
+
+With ``--ward-viewers``, each load is also run with that many viewers of the ward page's
+WebSocket (``/ws/ward``): each counts the bytes and messages it receives after the first
+5 s (the first message holds the whole ward). The row with 0 ward viewers is the baseline of
+the dashboards' latency. For comparison, the column "before" is what each ward viewer
+received before the ward feed sent only changed, downsampled tiles: the whole ward
+(``GET /api/ward``, measured at the end of the row) five times a second.
 """
 
 from __future__ import annotations
@@ -83,7 +92,25 @@ async def viewer(url: str, latencies: list[float], stop: float) -> None:
             latencies.append(time.time() - snap["t"])
 
 
-def run_load(tmp: Path, broker: Broker, mats: int, hz: float, seconds: float) -> dict:
+async def ward_viewer(url: str, got: dict, stop: float, settle: float) -> None:
+    """Count what a ward page's WebSocket receives after ``settle`` (wall time)."""
+    import websockets
+
+    async with websockets.connect(url, max_size=None) as ws:
+        while time.time() < stop:
+            try:
+                text = await asyncio.wait_for(ws.recv(), timeout=max(0.1, stop - time.time()))
+            except TimeoutError:
+                break
+            if time.time() >= settle:
+                got["bytes"] += len(text)
+                got["messages"] += 1
+                got["tiles"] += text.count('"map":')
+
+
+def run_load(
+    tmp: Path, broker: Broker, mats: int, hz: float, seconds: float, ward_viewers: int = 0
+) -> dict:
     ward = tmp / f"ward-{mats}-{hz}.toml"
     ward.write_text("".join(
         f'[[mat]]\nid = "m{m:03d}"\nlayout = "grid:32x32"\ncalibration = "{tmp / "cal.json"}"\n\n'
@@ -113,26 +140,40 @@ def run_load(tmp: Path, broker: Broker, mats: int, hz: float, seconds: float) ->
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
         latencies: list[float] = []
-        stop = time.time() + seconds
+        start = time.time()
+        stop = start + seconds
         watched = [f"m{m:03d}" for m in np.linspace(0, mats - 1, min(5, mats)).astype(int)]
+        wards = [{"bytes": 0, "messages": 0, "tiles": 0} for _ in range(ward_viewers)]
 
         async def view_all() -> None:
             await asyncio.gather(*(
                 viewer(f"ws://127.0.0.1:{port}/mats/{w}/ws", latencies, stop) for w in watched
+            ), *(
+                ward_viewer(f"ws://127.0.0.1:{port}/ws/ward", got, stop, start + 5.0)
+                for got in wards
             ))  # fmt: skip
 
         asyncio.run(view_all())
         out, _ = pub.communicate(timeout=120)
         sent = json.loads(out)
         time.sleep(1.0)  # the station drains what is in flight
-        with urllib.request.urlopen(base + "api/mats", timeout=5) as r:
+        with urllib.request.urlopen(base + "api/mats", timeout=30) as r:
             rows = json.load(r)
+        with urllib.request.urlopen(base + "api/ward", timeout=30) as r:
+            whole_ward = len(r.read())
         processed = sum(r["frames"] for r in rows)
+        window = seconds - 5.0
+        ward = {
+            "ward_kBps": max((w["bytes"] / window / 1e3 for w in wards), default=0.0),
+            "ward_msgs": max((w["messages"] / window for w in wards), default=0.0),
+            "ward_tiles": max((w["tiles"] / window for w in wards), default=0.0),
+            "before_MBps": 5 * whole_ward / 1e6,
+        }
         lat = np.asarray(latencies[len(latencies) // 10 :]) * 1e3  # after the start
         return {
             "mats": mats, "hz": hz, "sent": sent["sent"], "processed": processed,
             "lost": sent["sent"] - processed, "p50": float(np.percentile(lat, 50)),
-            "p99": float(np.percentile(lat, 99)), "views": lat.size,
+            "p99": float(np.percentile(lat, 99)), "views": lat.size, **ward,
         }  # fmt: skip
     finally:
         st.kill()
@@ -145,7 +186,10 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--loads", help="MATSxHZ,... (default: the table of docs/station.md)")
+    ap.add_argument("--ward-viewers", default="0",
+                    help="ward-page viewers, a row for each: e.g. 0,10")  # fmt: skip
     args = ap.parse_args()
+    viewers = [int(v) for v in args.ward_viewers.split(",")]
     loads = [(100, 1.0), (200, 1.0), (300, 1.0), (400, 1.0), (20, 10.0), (40, 10.0),
              (60, 10.0), (80, 10.0)]  # fmt: skip
     if args.quick:
@@ -157,15 +201,29 @@ def main() -> None:
         cal = big_calibration(1024, tmp / "cal.json")
         np.savez(tmp / "cal.npz", offset=cal.offset_pF, gain=cal.gain,
                  curve_e=cal.curve_compression_mm, curve_c=cal.curve_capacitance_pF)  # fmt: skip
-        print("| mats (1024 elements) | rate | frames published | processed | lost | "
-              "frame-to-viewer p50 | p99 | holds (p99 < 100 ms, none lost) |")  # fmt: skip
-        print("|---:|---:|---:|---:|---:|---:|---:|---|")
+        if viewers == [0]:
+            print("| mats (1024 elements) | rate | frames published | processed | lost | "
+                  "frame-to-viewer p50 | p99 | holds (p99 < 100 ms, none lost) |")  # fmt: skip
+            print("|---:|---:|---:|---:|---:|---:|---:|---|")
+        else:
+            print("| mats (1024 elements) | rate | ward viewers | frames published | processed "
+                  "| lost | frame-to-viewer p50 | p99 | each ward viewer | messages/s | tiles/s "
+                  "| before (whole ward 5/s) |")  # fmt: skip
+            print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
         for mats, hz in loads:
-            r = run_load(tmp, broker, mats, hz, args.seconds)
-            ok = r["p99"] < 100 and r["lost"] == 0
-            print(f"| {mats} | {hz:g} Hz | {r['sent']} | {r['processed']} | {r['lost']} | "
-                  f"{r['p50']:.0f} ms | {r['p99']:.0f} ms | {'yes' if ok else 'no'} |",
-                  flush=True)  # fmt: skip
+            for n in viewers:
+                r = run_load(tmp, broker, mats, hz, args.seconds, n)
+                ok = r["p99"] < 100 and r["lost"] == 0
+                head = f"| {mats} | {hz:g} Hz |"
+                tail = (f" {r['sent']} | {r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
+                        f"{r['p99']:.0f} ms |")  # fmt: skip
+                if viewers == [0]:
+                    print(f"{head}{tail} {'yes' if ok else 'no'} |", flush=True)
+                    continue
+                ward = (f" {r['ward_kBps']:.0f} kB/s | {r['ward_msgs']:.1f} | "
+                        f"{r['ward_tiles']:.0f} | {r['before_MBps']:.1f} MB/s |" if n else
+                        f" – | – | – | {r['before_MBps']:.1f} MB/s |")  # fmt: skip
+                print(f"{head} {n} |{tail}{ward}", flush=True)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -43,8 +44,10 @@ class WardStation:
         *args: str,
         connected: bool = True,
         more: str = "",
+        token: str | None = None,
     ) -> None:
         self.folder = folder
+        self.token = token
         text = "".join(f'[[mat]]\nid = "{m}"\nlayout = "grid:{g}"\nreposition_min = 5\n\n'
                        for m, g in mats.items()) + more  # fmt: skip
         (folder / "ward.toml").write_text(text)
@@ -55,7 +58,7 @@ class WardStation:
         with self.log_path.open("wb") as out:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "texsense.cli", "station", "--config", "ward.toml",
-                 "--port", str(self.port), "--db", "station.sqlite", "--refuse-after", "1",
+                 "--port", str(self.port), "--db", "station.sqlite",
                  *args],
                 stdout=out, stderr=subprocess.STDOUT, cwd=folder, env=env,
             )  # fmt: skip
@@ -67,7 +70,10 @@ class WardStation:
 
     # ----------------------------------------------------------------- reading
     def get(self, path: str):
-        with urllib.request.urlopen(self.url + path, timeout=5) as r:
+        req = urllib.request.Request(self.url + path)
+        if self.token:
+            req.add_header("Authorization", f"Bearer {self.token}")
+        with urllib.request.urlopen(req, timeout=5) as r:
             return json.load(r)
 
     def post(self, path: str):
@@ -155,13 +161,19 @@ class WardStation:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
+        from faults.test_stop import broker_processes
+
+        own = Path(f"{self.folder}/texsense-broker-")  # (not a site broker of the test's)
+        for pid in broker_processes(own):  # a station that failed to stop its broker
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
 
 
 @pytest.fixture(scope="module")
 def ward():
     folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))  # Mosquitto (as root drops
     folder.chmod(0o755)  # to its own user) must be able to enter its folder in here
-    st = WardStation(folder, MATS)
+    st = WardStation(folder, MATS, "--refuse-after", "1")
     try:
         for mat in MATS:
             for _ in range(3):
@@ -310,12 +322,34 @@ def test_oversized_payloads_are_never_parsed(ward, fault_row):
               "refused by the station's broker")  # fmt: skip
 
 
+def test_the_stations_broker_lets_nobody_in_without_credentials(fault_row):
+    """(Before: `mosquitto_pub` without credentials reached any mat of a station started
+    with --token.)"""
+    folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))
+    folder.chmod(0o755)
+    try:
+        st = WardStation(folder, {"bed1": "4x4"}, "--token", "t0ken-1234", token="t0ken-1234")
+        try:
+            c, answers = st.client(None)
+            body = json.dumps({"seq": 0, "t": 0, "values": [0.5] * 16, "unit": "N/cm2"})
+            c.publish("texsense/bed1/frames", body)
+            time.sleep(0.5)
+            c.disconnect()
+            c.loop_stop()
+            assert answers and answers[0] != 0 and answers[0].is_failure, answers
+            assert st.mat("bed1")["frames"] == 0
+        finally:
+            st.stop()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    fault_row("MQTT", "publish to the station's own broker without credentials", "refused")
+
+
 def test_nobody_publishes_without_credentials(ward, fault_row):
     st = ward
     import paho.mqtt.client as mqtt
 
-    for user, password in [(None, None), ("victim", "wrong-password"), ("texsense-station",
-                                                                          "guess")]:  # fmt: skip
+    for user, password in [("victim", "wrong-password"), ("texsense-station", "a-guess")]:
         c, answers = st.client(user, password)
         try:
             assert answers and answers[0].is_failure, (user, answers)
@@ -325,8 +359,7 @@ def test_nobody_publishes_without_credentials(ward, fault_row):
         finally:
             c.disconnect()
             c.loop_stop()
-    fault_row("MQTT", "publish to the station's broker without (the right) credentials",
-              "refused")  # fmt: skip
+    fault_row("MQTT", "log in to the station's broker with a wrong password", "refused")
     before = st.mat("victim")["frames"]
     body = {"seq": 99, "t": 99, "values": [9.0] * 16, "unit": "N/cm2"}
     st.raw("victim", json.dumps(body).encode(), as_mat="intruder")  # another mat's topic

@@ -25,7 +25,6 @@ from texsense.io import save
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource
 from texsense.monitor.protocol import Frame
 from texsense.monitor.server import create_app
-from texsense.monitor.web import Access, resolve_token
 from texsense.station.server import create_ward_app
 from texsense.station.ward import MatConfig, Station
 
@@ -124,6 +123,8 @@ def test_a_cross_site_post_changes_nothing(server, fault_row):
 def test_the_token_is_needed_everywhere_and_comes_from_a_file_or_the_environment(
     tmp_path, fault_row
 ):
+    from texsense.monitor.web import Access, resolve_token
+
     m = loaded_monitor(tmp_path)
     client = TestClient(create_app(m, access=Access("s3cret-token")), base_url=BASE)
     for path in ("/", "/api/status", "/api/events", "/static/app.js", "/openapi.json"):
@@ -164,6 +165,8 @@ def test_every_response_has_the_security_headers(server, fault_row):
 
 
 def test_names_and_origins_can_be_allowed(tmp_path, fault_row):
+    from texsense.monitor.web import Access
+
     m = loaded_monitor(tmp_path)
     access = Access(None, hosts=["ward3.example"], origins=["https://portal.example"])
     client = TestClient(create_app(m, access=access), base_url=BASE)

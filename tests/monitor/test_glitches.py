@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import time
 
 import numpy as np
 import pytest
@@ -15,10 +16,9 @@ import pytest
 from texsense import Layout, Recording
 from texsense.calibration import LinearCalibration
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource, SerialSource
-from texsense.monitor.clock import FrameClock
 from texsense.monitor.protocol import Frame, format_serial_line
 from texsense.pipeline import Pipeline
-from texsense.station.ward import UNKNOWN_MAX, UNKNOWN_TTL_S, MatConfig, Station
+from texsense.station.ward import MatConfig, Station
 
 LAY = Layout.grid(2, 3)
 #: pF -> N/cm², unchanged values (a mat calibration without a spacer model)
@@ -36,6 +36,8 @@ def frame(seq: int, t: float, p: float = 1.0, n: int = 6) -> Frame:
 
 
 def test_the_clock_skips_a_glitch_and_resynchronises_a_jump():
+    from texsense.monitor.clock import FrameClock
+
     clock = FrameClock()
     assert [clock.place(float(t), wall=float(t))[0] for t in range(5)] == ["ok"] * 5
     assert clock.place(1e12, wall=5.0)[0] == "ahead"  # from the future: skipped
@@ -53,6 +55,8 @@ def test_the_clock_skips_a_glitch_and_resynchronises_a_jump():
 
 
 def test_the_clock_follows_sped_up_and_slow_sources():
+    from texsense.monitor.clock import FrameClock
+
     fast = FrameClock()  # a virtual seat at 60x: a frame every 1.6 s simulated, 27 ms wall
     assert all(fast.place(k * 1.6, wall=k * 1.6 / 60)[0] == "ok" for k in range(200))
     slow = FrameClock()  # a recording of a frame every 10 s, replayed as fast as possible
@@ -131,9 +135,10 @@ def test_a_replayed_recording_whose_time_goes_back_is_played_around_it():
 
 
 # ------------------------------------------------------------------------------ station
-def station(*ids: str, n: int = 96, refuse_after_s: float = 10.0) -> Station:
+def station(*ids: str, n: int = 96) -> Station:
+    """A station of pressure mats (refusing after 10 s of wrong element counts)."""
     mats = [MatConfig(i, Layout.grid(8, n // 8), quantity="pressure") for i in ids]
-    return Station(None, mats, refuse_after_s=refuse_after_s)
+    return Station(None, mats)
 
 
 def payload(seq: int, n: int = 96, t: float | None = None) -> bytes:
@@ -141,27 +146,44 @@ def payload(seq: int, n: int = 96, t: float | None = None) -> bytes:
     return json.dumps({"seq": seq, "t": t, "values": [0.5] * n, "unit": "N/cm2"}).encode()
 
 
-def test_a_wrong_element_count_is_skipped_and_only_a_sustained_one_refuses(caplog):
+class Clock:
+    """The wall clock the station sees (``texsense.station.ward``'s ``time.time``)."""
+
+    def __init__(self, monkeypatch) -> None:
+        import texsense.station.ward as ward
+
+        self.now = 0.0
+        monkeypatch.setattr(ward.time, "time", lambda: self.now)
+
+
+def test_a_wrong_element_count_is_skipped_and_only_a_sustained_one_refuses(caplog, monkeypatch):
+    clock = Clock(monkeypatch)
     st = station("bed1", "bed2")
     bed1 = st.mats["bed1"]
     for k in range(3):
-        st.handle("texsense/bed1/frames", payload(k), now=float(k))
-    st.handle("texsense/bed1/frames", payload(3, n=95), now=3.0)  # 95 of 96 values
-    st.handle("texsense/bed1/frames", payload(4), now=4.0)
-    assert bed1.refused is None and bed1.monitor.frames == 4 and bed1.malformed == 1
-    assert bed1.state == "live"
+        clock.now = float(k)
+        st.handle("texsense/bed1/frames", payload(k))
+    clock.now = 3.0
+    st.handle("texsense/bed1/frames", payload(3, n=95))  # 95 of 96 values
+    assert bed1.refused is None  # (it used to be refused for good, at once)
+    clock.now = 4.0
+    st.handle("texsense/bed1/frames", payload(4))
+    assert bed1.monitor.frames == 4 and bed1.malformed == 1 and bed1.state == "live"
     # 10 s of frames of 95 values: refused, with an event; the other mat goes on
     for k in range(5, 16):
-        st.handle("texsense/bed1/frames", payload(k, n=95), now=float(k))
-        st.handle("texsense/bed2/frames", payload(k), now=float(k))
+        clock.now = float(k)
+        st.handle("texsense/bed1/frames", payload(k, n=95))
+        st.handle("texsense/bed2/frames", payload(k))
         assert (bed1.refused is None) == (k < 15)
     assert "95 values" in bed1.refused and "96 elements" in bed1.refused
     assert bed1.view_state()[0] == "refused" and st.mats["bed2"].monitor.frames == 11
-    st.handle("texsense/bed1/frames", payload(17), now=17.0)
+    clock.now = 17.0
+    st.handle("texsense/bed1/frames", payload(17))
     assert bed1.ignored == 1 and bed1.monitor.frames == 4
     assert [e["kind"] for e in st.store.events(kind="refused")] == ["refused"]
     bed1.admit()  # the ward page's button
-    st.handle("texsense/bed1/frames", payload(18), now=18.0)
+    clock.now = 18.0
+    st.handle("texsense/bed1/frames", payload(18))
     assert bed1.monitor.frames == 5 and bed1.state == "live"
     assert st.store.events(kind="admitted")
     lines = [r for r in caplog.records if "bed1" in r.getMessage() and "95" in r.getMessage()]
@@ -170,27 +192,29 @@ def test_a_wrong_element_count_is_skipped_and_only_a_sustained_one_refuses(caplo
 
 def test_an_oversized_payload_is_refused_before_it_is_parsed(monkeypatch):
     st = station("bed1")
-    st.handle("texsense/bed1/frames", payload(0), now=0.0)
+    st.handle("texsense/bed1/frames", payload(0, t=time.time()))
     parsed = []
     real = json.loads
     monkeypatch.setattr(json, "loads", lambda s, *a, **k: parsed.append(len(s)) or real(s))
     big = b'{"seq":1,"t":1,"values":[' + b"1.5," * 3_000_000 + b'1],"unit":"N/cm2"}'
-    st.handle("texsense/bed1/frames", big, now=1.0)
+    st.handle("texsense/bed1/frames", big)
     assert parsed == []  # 12 MB refused by its length
     entry = st.mats["bed1"]
     assert entry.malformed == 1 and "bytes" in entry.last_error and entry.refused is None
-    st.handle("texsense/bed1/frames", payload(2), now=2.0)
+    st.handle("texsense/bed1/frames", payload(2, t=time.time()))
     assert entry.monitor.frames == 2 and entry.state == "live"
 
 
 def test_unknown_topics_are_bounded_and_expire(caplog):
     st = station("bed1")
     for k in range(20_000):
-        st.handle(f"texsense/intruder-{k}/frames", b"{}", now=float(k) * 1e-3)
-    assert len(st.unknown) == UNKNOWN_MAX and st.unknown_forgotten == 20_000 - UNKNOWN_MAX
+        st.handle(f"texsense/intruder-{k}/frames", b"{}")
     assert len(json.dumps(st.ward())) < 20_000  # was 4.5 MB
+    assert len(st.unknown) == 100 and st.unknown_forgotten == 20_000 - 100
     assert sum("unknown mat" in r.getMessage() for r in caplog.records) == 1
-    st.forget_unknown(now=20.0 + UNKNOWN_TTL_S)
+    from texsense.station.ward import UNKNOWN_TTL_S
+
+    st.forget_unknown(now=time.time() + UNKNOWN_TTL_S)
     assert not st.unknown and st.header()["unknown_forgotten"] == 20_000
 
 
@@ -203,8 +227,8 @@ def test_one_mat_failing_is_one_line_and_the_ward_goes_on(caplog, monkeypatch):
     monkeypatch.setattr(st.mats["bed1"].monitor, "process", broken)
     with caplog.at_level(logging.WARNING):
         for k in range(5):
-            st.handle("texsense/bed1/frames", payload(k), now=float(k))
-            st.handle("texsense/bed2/frames", payload(k), now=float(k))
-    assert st.mats["bed1"].failed == 5 and st.mats["bed2"].monitor.frames == 5
+            st.handle("texsense/bed1/frames", payload(k))
+            st.handle("texsense/bed2/frames", payload(k))
     lines = [r for r in caplog.records if "boom" in r.getMessage()]
     assert len(lines) == 1 and lines[0].exc_info is None and "bed1" in lines[0].getMessage()
+    assert st.mats["bed1"].failed == 5 and st.mats["bed2"].monitor.frames == 5

@@ -110,6 +110,16 @@ def test_virtual_mats_through_the_broker(broker, station):
     assert ward["connected"] and ward["topic"] == "texsense/+/frames"
 
 
+def test_virtual_mats_log_in_to_the_stations_own_broker(station, tmp_path):
+    """Without --broker: the station's Mosquitto, where each virtual mat logs in as itself."""
+    st = station("--virtual-mats", "1", "--speed", "8")
+    m = st.until(st.mats, lambda m: m["vmat-01"]["frames"] >= 3, timeout=120)
+    assert m["vmat-01"]["malformed"] == 0
+    assert "log-in required" in st.log()
+    ward = st.get("api/ward")
+    assert ward["connected"] and ward["broker"].startswith("mqtt://texsense-station@127.0.0.1:")
+
+
 def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
     st = station("--config", str(ward_file(tmp_path, "bed1", "bed2")), "--broker",
                  f"mqtt://127.0.0.1:{broker.port}", "--refuse-after", "1")  # fmt: skip
@@ -232,19 +242,25 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
     from playwright.sync_api import expect
 
     st = station("--virtual-mats", "5", "--speed", "60", "--reposition-min", "5",
-                 "--config", str(ward_file(tmp_path, "bed-9")),
+                 "--config", str(ward_file(tmp_path, "bed-9", "bed-8")), "--refuse-after", "0.5",
                  "--broker", f"mqtt://127.0.0.1:{broker.port}")  # fmt: skip
     st.until(st.mats, lambda m: all(m[f"vmat-0{k}"]["frames"] > 2 for k in range(1, 6)), 120)
     pub = Publisher(broker)
-    for k in range(8):  # bed-9 sends a few frames of pressure, then falls silent
-        pub.frame("bed-9", k, [0.4] * 16)
+    for k in range(12):  # bed-9 sends a few frames of pressure, then falls silent; bed-8
+        pub.frame("bed-9", k, [0.4] * 16)  # sends frames of 64 values: it is refused
+        pub.frame("bed-8", k, [0.4] * 64)
         time.sleep(0.1)
     pub.close()
     st.until(st.mats, lambda m: m["bed-9"]["state"] == "stale", 10)
+    st.until(st.mats, lambda m: m["bed-8"]["state"] == "refused", 10)
     with open_page(st.url, 1240, 760) as (page, errors):
         tiles = page.locator(".tile")
-        expect(tiles).to_have_count(6, timeout=20_000)
+        expect(tiles).to_have_count(7, timeout=20_000)
         expect(page.locator('.tile[data-id="bed-9"] .state')).to_have_text("no data")
+        refused = page.locator('.tile[data-id="bed-8"]')
+        expect(refused.locator(".problem")).to_contain_text("64 values")
+        refused.locator("button.admit").click()  # admitted again: it waits for frames
+        expect(refused).to_have_attribute("data-state", "waiting", timeout=5_000)
         expect(page.locator("#broker")).to_contain_text("connected")
         # 5 min of exposure at 60x: an alert within seconds, on top of the ward
         alert = page.locator(".tile.is-alert").first

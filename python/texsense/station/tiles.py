@@ -115,7 +115,7 @@ class WardFeed:
         self.sent_at: dict[str, float] = {}
         self.reset = True
         self.credit = self.rate  # the first message may fill a second's budget
-        self.last = time.monotonic() - tick_s
+        self.last: float | None = None  # when the last message went out (monotonic s)
         self.last_header: str | None = None
         self.bytes = 0
         self.messages = 0
@@ -123,11 +123,12 @@ class WardFeed:
     def message(self, now: float | None = None) -> str | None:
         """The next message, or None when there is nothing to say yet."""
         now = time.monotonic() if now is None else now
-        self.credit = min(self.rate, self.credit + self.rate * (now - self.last))
+        elapsed = self.tick_s if self.last is None else max(now - self.last, 0.0)
+        self.credit = min(self.rate, self.credit + self.rate * elapsed)
         header = json.dumps(self.station.header(), separators=(",", ":"))
         changed = [e for e in self.station.mats.values() if self.sent.get(e.id) != e.revision]
         quiet = not changed and header == self.last_header
-        if quiet and now - self.last < self.heartbeat_s:
+        if quiet and elapsed < self.heartbeat_s:
             return None
         changed.sort(key=lambda e: (-e.view_state()[1], self.sent_at.get(e.id, 0.0)))
         tiles: list[str] = []
@@ -151,7 +152,7 @@ class WardFeed:
     async def next(self) -> str:
         """Wait for the next message (at most one per ``tick_s``)."""
         while True:
-            wait = self.last + self.tick_s - time.monotonic()
+            wait = 0.0 if self.last is None else self.last + self.tick_s - time.monotonic()
             if wait > 0:
                 await asyncio.sleep(wait)
             text = self.message()

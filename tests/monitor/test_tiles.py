@@ -1,0 +1,79 @@
+"""The ward WebSocket's feed (docs/station.md): downsampled, quantised tiles; only what changed;
+within a byte budget per viewer, without starving any mat."""
+
+from __future__ import annotations
+
+import base64
+import json
+
+import numpy as np
+
+from texsense import Layout
+from texsense.monitor.protocol import Frame
+from texsense.station.tiles import NO_ELEMENT, NO_READING, BlockMap, WardFeed
+from texsense.station.ward import MatConfig, Station
+
+
+def decode(tile: dict) -> np.ndarray:
+    return np.frombuffer(base64.b64decode(tile["b64"]), np.uint8).reshape(tile["rows"], -1)
+
+
+def test_a_bed_is_reduced_to_its_block_peaks():
+    lay = Layout.grid(64, 32)
+    p = np.zeros(2048)
+    p[5 * 32 + 7] = 2.0  # one peak, in block (1, 2) of 3 x 3 elements
+    p[40 * 32 + 20] = np.nan  # a failed element in an otherwise empty block
+    tile = BlockMap(lay).encode(p)
+    q = decode(tile)
+    assert q.shape == (22, 11) and tile["top"] == 2.0
+    assert q[1, 2] == 250 and q[13, 6] == 0  # the peak survives; the NaN is one of nine
+    assert np.count_nonzero(q == 250) == 1 and not np.any(q == NO_READING)
+    grid = p.reshape(64, 32)
+    grid[39:42, 18:21] = np.nan  # a whole block without a reading
+    q = decode(BlockMap(lay).encode(grid.ravel()))
+    assert q[13, 6] == NO_READING
+
+
+def test_a_checkerboard_seat_keeps_its_empty_cells():
+    from texsense.sim.mat import VirtualMat
+
+    lay = VirtualMat.seat(seed=5).layout  # 96 of 240 cells
+    q = decode(BlockMap(lay).encode(np.full(96, 0.2)))
+    assert q.shape == (15, 16) and np.count_nonzero(q != NO_ELEMENT) == 96
+    assert set(np.unique(q[q != NO_ELEMENT])) == {100}  # 0.2 of the 0.5 N/cm² floor
+
+
+def ward(n: int) -> Station:
+    mats = [MatConfig(f"m{k:03d}", Layout.grid(32, 32), quantity="pressure") for k in range(n)]
+    return Station(None, mats)
+
+
+def test_the_feed_sends_what_changed_within_its_budget_and_starves_nobody():
+    st = ward(100)
+    rng = np.random.default_rng(0)
+    budget = 40_000  # bytes/s: about 50 tiles a second, for 100 mats changing every second
+    feed = WardFeed(st, max_bytes_per_s=budget)
+    first = feed.message(now=0.0)
+    assert json.loads(first)["reset"] and len(first) <= budget
+    clock, sizes = 0.0, []
+    for second in range(5):  # 100 mats at 1 Hz for 5 s: a feed message every 0.2 s
+        for tick in range(5):
+            for k in range(tick * 20, (tick + 1) * 20):
+                frame = Frame(second, np.full(1024, float(second)), rng.uniform(0, 2, 1024))
+                frame.unit = "N/cm2"
+                st.mats[f"m{k:03d}"].feed(frame, clock)
+            clock += 0.2
+            sizes.append(len(feed.message(now=clock)))
+    assert sum(sizes) / 5.0 <= 1.05 * budget, sizes
+    # the frames stop: within a few seconds every mat's latest state has been sent
+    for _ in range(20):
+        clock += 0.2
+        feed.message(now=clock)
+    assert all(feed.sent[e.id] == e.revision for e in st.mats.values())
+    clock += 0.2
+    assert feed.message(now=clock) is None  # nothing changed: nothing to say ...
+    beat = json.loads(feed.message(now=clock + 1.0))  # ... but a heartbeat a second
+    assert beat["mats"] == [] and not beat["reset"]
+    st.mats["m007"].feed(Frame(5, np.full(1024, 5.0), np.ones(1024), "N/cm2"), clock)
+    one = json.loads(feed.message(now=clock + 1.2))
+    assert [m["id"] for m in one["mats"]] == ["m007"] and one["mats"][0]["frames"] == 6
