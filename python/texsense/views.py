@@ -133,7 +133,7 @@ MODES: dict[str, Mode] = {
         0.0,
         True,
         "turn",
-        "turn the patient",
+        "turn the patient onto another side",
     ),
     "foot": Mode("foot", "kPa", (0.0, 600.0), None, None, 0.0, False, "offload", ""),
     "generic": Mode(

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from texsense import stats
+from texsense import stats, units
 from texsense.exceptions import ParameterError
 from texsense.monitor.alerts import Event, ExposureTracker
 from texsense.monitor.protocol import Frame
@@ -214,6 +214,14 @@ class Monitor:
             "mode": self.mode.name,
             "started_at": time.time(),
             "orientation": orientation_of(self.layout, mode=self.mode.name),
+            "alerts": {
+                "threshold_mmhg": round(
+                    units.convert(self.tracker.threshold_ncm2, "N/cm2", "mmHg"), 3
+                ),
+                "reposition_min": self.tracker.reposition_s / 60,
+                "offload_min": self.tracker.offload_s / 60,
+                "turn_every_min": self.bed.schedule.interval_s / 60 if self.bed else 120.0,
+            },
         }
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
