@@ -48,8 +48,8 @@ def eleven_subjects(tmp_path):
                 frames.append(lay.from_grid(m + rng.uniform(0, 0.05, (2, 3))))
                 posture.append(p)
                 subject.append(f"S{s}")
-    rec = Recording(np.array(frames), np.arange(len(frames), dtype=float), lay,
-                    labels={"posture": np.array(posture), "subject": np.array(subject)})  # fmt: skip
+    labels = {"posture": np.array(posture), "subject": np.array(subject)}
+    rec = Recording(np.array(frames), np.arange(len(frames), dtype=float), lay, labels=labels)
     save(rec, tmp_path / "s.h5")
     return tmp_path / "s.h5"
 

@@ -283,9 +283,11 @@ def playback_router(monitor: Monitor) -> APIRouter:
         if len(body) > MAX_ROI_BYTES:
             raise HTTPException(413, f"regions: at most {MAX_ROI_BYTES // 1024} KiB")
         try:
-            rois = parse_rois(json.loads(body))
+            data = json.loads(body)
         except (ValueError, UnicodeDecodeError) as e:
             raise HTTPException(400, f"regions: not JSON ({e})") from None
+        try:
+            rois = parse_rois(data)
         except ParameterError as e:
             raise _status_of(e) from None
         save_rois(path, rois)
