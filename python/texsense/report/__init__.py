@@ -40,21 +40,16 @@ def write_report(
     source: str | Path | Recording,
     out: str | Path,
     *,
-    name: str | None = None,
     rois: list[dict[str, Any]] | None = None,
-    mode: str | None = None,
-    unit: str | None = None,
-    scale: tuple[float, float] | None = None,
-    threshold_mmhg: float | None = None,
-    reposition_min: float | None = None,
-    turn_every_min: float | None = None,
-    model: Any = None,
+    **options: Any,
 ) -> Path:
     """Write the report of ``source`` (a path texsense reads, or a Recording) to ``out``
     (``.pdf`` or ``.html``); returns the path.
 
     ``rois``: regions of interest (:mod:`texsense.roi`; default: the sidecar saved beside a
-    recording file). The other parameters are those of :func:`texsense.review.open_review`.
+    recording file). ``options`` go to :func:`texsense.review.open_review` (``mode``,
+    ``unit``, ``scale``, ``threshold_mmhg``, ``reposition_min``, ``turn_every_min``,
+    ``model``, ``name``).
     """
     from texsense.files import check_not_input
     from texsense.report._content import report_content
@@ -70,17 +65,7 @@ def write_report(
             from texsense.roi import load_rois
 
             rois = load_rois(source)
-    review = open_review(
-        source,
-        mode=mode,
-        unit=unit,
-        scale=scale,
-        threshold_mmhg=threshold_mmhg,
-        reposition_min=reposition_min,
-        turn_every_min=turn_every_min,
-        model=model,
-        name=name,
-    )
+    review = open_review(source, **options)
     content = report_content(review, rois or [])
     if fmt == "pdf":
         from texsense.report._pdf import write_pdf

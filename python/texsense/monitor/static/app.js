@@ -93,8 +93,7 @@ function render() {
   ROI.render(PB.active ? PB.info.layout : status.layout, values, areas(), ncm2, shownUnit, pressure ? digits() : 0);
   renderCards(st, f, pb);
   renderCharts(f);
-  if (pb) PB.renderEvents();
-  else renderLive(f);
+  if (pb) { PB.renderEvents(); $("status").textContent = ""; } else renderLive(f);
 }
 
 function renderCards(st, f, pb) {
