@@ -131,3 +131,17 @@ def test_render_report_pages_for_the_docs(night, shared_data):
         write_report(src, out)
         subprocess.run(["pdftoppm", "-r", "70", "-png", "-f", "1", "-l", "3", out,
                         f"{target}/report_{name}"], check=True)  # fmt: skip
+
+
+def test_health_finds_a_dead_element_inside_the_load_not_the_edges():
+    from texsense.review_events import element_health
+
+    lay = Layout.grid(8, 8)
+    m = np.zeros((20, 8, 8))
+    m[:, 2:6, 2:6] = np.linspace(0.5, 1.0, 20)[:, None, None]  # a loaded square, edges empty
+    m[:, 3, 4] = 0.0  # a dead element inside it
+    valid = np.ones((20, 64), bool)
+    valid[5:10, lay.element_at(0, 0)] = False  # a reading flagged invalid for 5 frames
+    h = element_health(Recording(lay.from_grid(m), np.arange(20.0), lay, valid=valid))
+    assert np.flatnonzero(h["silent"]).tolist() == [lay.element_at(3, 4)]
+    assert h["invalid_share"][lay.element_at(0, 0)] == 0.25 and h["invalid_share"].sum() == 0.25

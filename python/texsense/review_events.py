@@ -10,8 +10,8 @@ and per-element health (part of :mod:`texsense.review`).
 - **Places**: an alert names the at-risk regions of the bed's side at that frame
   (:func:`texsense.bed.find_regions`) or the seat's zones, else rows and columns.
 - **Health**: the share of frames each element was invalid (failed and repaired, or not
-  read), and *silent* elements: never above zero while a neighbour was (a dead element on
-  a mat the reader did not flag).
+  read), and *silent* elements: near zero throughout while all their neighbours carried
+  load (a dead element on a mat the reader did not flag).
 """
 
 from __future__ import annotations
@@ -131,9 +131,10 @@ def recompute_events(
 
 
 def element_health(rec: Recording) -> dict[str, np.ndarray]:
-    """Per element: ``invalid_share`` (share of frames flagged invalid) and ``silent``
-    (never above zero although each of its 3 or 4 neighbours was above zero in some frame:
-    inside a loaded area, not at its edge)."""
+    """Per element: ``invalid_share`` (share of frames flagged invalid) and ``silent``: its
+    highest valid reading stays under 2 % of the mat's high values (the 99th percentile of
+    the elements' highest readings) while each of its 3 or 4 neighbours reached a tenth of
+    them — a dead element inside a loaded area, not one at its edge or in noise."""
     from texsense.review import BLOCK
 
     n = rec.n_elements
@@ -145,9 +146,12 @@ def element_health(rec: Recording) -> dict[str, np.ndarray]:
         v = np.where(valid, rec.frames[start : start + BLOCK], -np.inf)
         top = np.maximum(top, v.max(axis=0))
     indptr, indices = rec.layout.neighbours
-    surrounded = np.zeros(n, bool)
-    for i in np.flatnonzero(top <= 0):
+    finite = top[np.isfinite(top)]
+    ref = float(np.percentile(finite, 99)) if finite.size else 0.0
+    # never valid: already counted as invalid, not silent
+    quiet = np.flatnonzero(np.isfinite(top) & (top <= 0.02 * ref)) if ref > 0 else []
+    silent = np.zeros(n, bool)
+    for i in quiet:  # neighbours that carried real load (a tenth of the mat's high values)
         nb = indices[indptr[i] : indptr[i + 1]]
-        surrounded[i] = nb.size >= 3 and bool(np.all(top[nb] > 0))
-    silent = (top <= 0) & surrounded
+        silent[i] = nb.size >= 3 and bool(np.all(top[nb] > 0.1 * ref))
     return {"invalid_share": invalid / max(rec.n_frames, 1), "silent": silent}

@@ -87,8 +87,10 @@ def folder(tmp_path, shared_data):
     frames = np.zeros((5, 12))
     frames[:, 5] = 40 / MMHG  # the same 40 mmHg in every frame
     frames[np.arange(5), 0] = np.array([50, 100, 150, 200, 250]) / MMHG
-    rec = Recording(frames, np.arange(5) * 60.0, lay, meta={"mode": "seat",
-                    "orientation": lay.orientation})  # fmt: skip
+    valid = np.ones((5, 12), bool)
+    valid[3, 7] = False  # a repaired element: its value (0) counts, as live
+    meta = {"mode": "seat", "orientation": lay.orientation}
+    rec = Recording(frames, np.arange(5) * 60.0, lay, valid=valid, meta=meta)
     save(rec, rec_dir / "tiny.h5")
     shutil.copyfile(shared_data / "vendor-formats" / "fscan_testL.asf", rec_dir / "walk.asf")
     (rec_dir / "notes.txt").write_text("not a recording\n")
@@ -118,6 +120,7 @@ def test_recordings_are_listed_and_played(client):
     )
     f3 = client.get("/api/playback/tiny.h5/frames/3").json()
     assert f3["t"] == 180 and f3["values"][0] == pytest.approx(200 / MMHG, abs=1e-4)
+    assert f3["repaired"] == [7] and f3["values"][7] == 0.0
     walk = client.get("/api/playback/walk.asf").json()
     assert walk["mode"]["name"] == "foot" and walk["frames"] == 205 and walk["started_at"]
     assert len(client.get("/api/playback/walk.asf/frames/204").json()["values"]) == 955  # sensels

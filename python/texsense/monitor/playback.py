@@ -182,69 +182,123 @@ def _status_of(e: Exception) -> HTTPException:
     return HTTPException(422, str(e).splitlines()[0] if str(e) else type(e).__name__)
 
 
-def playback_router(monitor: Monitor) -> APIRouter:
-    """The routes of this module for ``monitor`` (its recordings folder and mode)."""
-    router = APIRouter()
-    reviews = _Reviews()
-    folder = Path(monitor.record_dir)
+class _Folder:
+    """The monitor's recordings folder: names resolved inside it, reviews cached."""
 
-    def path_of(name: str) -> Path:
-        path = resolve_recording(folder, name) if folder.is_dir() else None
+    def __init__(self, monitor: Monitor) -> None:
+        self.monitor = monitor
+        self.path = Path(monitor.record_dir)
+        self.reviews = _Reviews()
+
+    def path_of(self, name: str) -> Path:
+        path = resolve_recording(self.path, name) if self.path.is_dir() else None
         if path is None:
             raise HTTPException(404, "no such recording")
         return path
 
-    async def review_of(name: str) -> tuple[Path, Review]:
-        path = path_of(name)
+    async def review_of(self, name: str) -> tuple[Path, Review]:
+        path = self.path_of(name)
         try:
-            return path, await asyncio.to_thread(reviews.get, path)
+            return path, await asyncio.to_thread(self.reviews.get, path)
         except (FormatError, ParameterError, UnitError, OSError) as e:
             raise _status_of(e) from None
+
+    def listing(self) -> list[dict[str, Any]]:
+        if not self.path.is_dir():
+            return []
+        rec = self.monitor.recorder
+        now = {Path(p).name for p in (rec.paths if rec else [])}
+        rows = []
+        for p in self.path.iterdir():
+            if p.name.startswith(".") or p.name.endswith(".rois.json") or p.name == "reports":
+                continue
+            st = p.stat()
+            rows.append({"name": p.name, "bytes": st.st_size, "modified": st.st_mtime,
+                         "folder": p.is_dir(), "recording": p.name in now})  # fmt: skip
+        return sorted(rows, key=lambda r: -r["modified"])
+
+
+def _view(monitor: Monitor) -> dict[str, Any]:
+    from texsense.views import orientation_of
+
+    mode = monitor.mode
+    scale = None
+    if mode.scale is not None:
+        f = units.factor(mode.unit, "N/cm2")
+        scale = [mode.scale[0] * f, mode.scale[1] * f]
+    return {
+        "mode": mode.to_dict(),
+        "scale_ncm2": scale,
+        "threshold_ncm2": monitor.tracker.threshold_ncm2 if mode.threshold_mmhg else None,
+        "orientation": orientation_of(monitor.layout, mode=mode.name),
+        "area_cm2": monitor.layout.area_cm2.round(4).tolist(),
+    }
+
+
+def _frame(review: Review, i: int) -> dict[str, Any]:
+    if not 0 <= i < review.rec.n_frames:
+        raise HTTPException(404, f"frame {i} is out of range 0..{review.rec.n_frames - 1}")
+    repaired = [] if review.repaired is None else np.flatnonzero(review.repaired[i]).tolist()
+    return {"i": i, "t": round(float(review.series["t"][i]), 3),
+            "values": _rounded(review.frame(i), 4), "repaired": repaired}  # fmt: skip
+
+
+async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, Any]:
+    from texsense.roi import parse_rois, save_rois
+
+    path, review = await folder.review_of(name)
+    body = await request.body()
+    if len(body) > MAX_ROI_BYTES:
+        raise HTTPException(413, f"regions: at most {MAX_ROI_BYTES // 1024} KiB")
+    try:
+        data = json.loads(body)
+    except (ValueError, UnicodeDecodeError) as e:
+        raise HTTPException(400, f"regions: not JSON ({e})") from None
+    try:
+        rois = parse_rois(data)
+    except ParameterError as e:
+        raise _status_of(e) from None
+    save_rois(path, rois)
+    return {"rois": rois, "stats": await asyncio.to_thread(_roi_stats, review, rois)}
+
+
+async def _report(folder: _Folder, name: str, format: str) -> Any:
+    from texsense.report import write_report
+    from texsense.roi import load_rois
+
+    if format not in ("pdf", "html"):
+        raise HTTPException(422, "format must be pdf or html")
+    path, review = await folder.review_of(name)
+    out = folder.path / "reports" / f"{path.name}-report.{format}"
+    try:
+        rois = load_rois(path)
+        out.parent.mkdir(exist_ok=True)
+        await asyncio.to_thread(write_report, review.rec, out, name=path.name, rois=rois)
+    except (FormatError, ParameterError, UnitError) as e:
+        raise _status_of(e) from None
+    media = "application/pdf" if format == "pdf" else "text/html"
+    return FileResponse(out, media_type=media, filename=out.name)
+
+
+def playback_router(monitor: Monitor) -> APIRouter:
+    """The routes of this module for ``monitor`` (its recordings folder and mode)."""
+    router = APIRouter()
+    folder = _Folder(monitor)
 
     @router.get("/api/view")
     async def view() -> dict[str, Any]:
         """The live mode, its fixed scale (N/cm²), threshold and the map's orientation."""
-        from texsense.views import orientation_of
-
-        mode = monitor.mode
-        scale = None
-        if mode.scale is not None:
-            f = units.factor(mode.unit, "N/cm2")
-            scale = [mode.scale[0] * f, mode.scale[1] * f]
-        return {
-            "mode": mode.to_dict(),
-            "scale_ncm2": scale,
-            "threshold_ncm2": monitor.tracker.threshold_ncm2 if mode.threshold_mmhg else None,
-            "orientation": orientation_of(monitor.layout, mode=mode.name),
-            "area_cm2": monitor.layout.area_cm2.round(4).tolist(),
-        }
+        return _view(monitor)
 
     @router.get("/api/playback")
     async def recordings() -> list[dict[str, Any]]:
         """The recordings in the monitor's folder, newest first."""
-        if not folder.is_dir():
-            return []
-        now = {Path(p).name for p in (monitor.recorder.paths if monitor.recorder else [])}
-        rows = []
-        for p in folder.iterdir():
-            if p.name.startswith(".") or p.name.endswith(".rois.json") or p.name == "reports":
-                continue
-            st = p.stat()
-            rows.append(
-                {
-                    "name": p.name,
-                    "bytes": st.st_size,
-                    "modified": st.st_mtime,
-                    "folder": p.is_dir(),
-                    "recording": p.name in now,
-                }
-            )
-        return sorted(rows, key=lambda r: -r["modified"])
+        return folder.listing()
 
     @router.get("/api/playback/{name}")
     async def recording(name: str) -> dict[str, Any]:
         """One recording: layout, scale, statistics per frame, events, regions of interest."""
-        path, review = await review_of(name)
+        path, review = await folder.review_of(name)
         try:
             return _summary(review, path)
         except ParameterError as e:
@@ -252,15 +306,9 @@ def playback_router(monitor: Monitor) -> APIRouter:
 
     @router.get("/api/playback/{name}/frames/{i}")
     async def frame(name: str, i: int) -> dict[str, Any]:
-        """Frame ``i``: its time and values (N/cm² for pressure), null where invalid."""
-        _, review = await review_of(name)
-        if not 0 <= i < review.rec.n_frames:
-            raise HTTPException(404, f"frame {i} is out of range 0..{review.rec.n_frames - 1}")
-        return {
-            "i": i,
-            "t": round(float(review.series["t"][i]), 3),
-            "values": _rounded(review.frame(i), 4),
-        }
+        """Frame ``i``: its time, values (N/cm² for pressure; null: no value) and the
+        elements whose values are repairs."""
+        return _frame((await folder.review_of(name))[1], i)
 
     @router.get("/api/playback/{name}/rois")
     async def get_rois(name: str) -> list[dict[str, Any]]:
@@ -268,7 +316,7 @@ def playback_router(monitor: Monitor) -> APIRouter:
         from texsense.roi import load_rois
 
         try:
-            return load_rois(path_of(name))
+            return load_rois(folder.path_of(name))
         except ParameterError as e:
             raise _status_of(e) from None
 
@@ -276,40 +324,11 @@ def playback_router(monitor: Monitor) -> APIRouter:
     async def put_rois(name: str, request: Request) -> dict[str, Any]:
         """Save the regions of interest (a JSON list of {name, kind, points}); answers with
         their elements and statistics over time."""
-        from texsense.roi import parse_rois, save_rois
-
-        path, review = await review_of(name)
-        body = await request.body()
-        if len(body) > MAX_ROI_BYTES:
-            raise HTTPException(413, f"regions: at most {MAX_ROI_BYTES // 1024} KiB")
-        try:
-            data = json.loads(body)
-        except (ValueError, UnicodeDecodeError) as e:
-            raise HTTPException(400, f"regions: not JSON ({e})") from None
-        try:
-            rois = parse_rois(data)
-        except ParameterError as e:
-            raise _status_of(e) from None
-        save_rois(path, rois)
-        return {"rois": rois, "stats": await asyncio.to_thread(_roi_stats, review, rois)}
+        return await _put_rois(folder, name, request)
 
     @router.get("/api/playback/{name}/report")
     async def report(name: str, format: str = "pdf") -> Any:
         """The report of the recording (PDF or HTML), kept in the folder ``reports``."""
-        from texsense.report import write_report
-        from texsense.roi import load_rois
-
-        if format not in ("pdf", "html"):
-            raise HTTPException(422, "format must be pdf or html")
-        path, review = await review_of(name)
-        out = folder / "reports" / f"{path.name}-report.{format}"
-        try:
-            rois = load_rois(path)
-            out.parent.mkdir(exist_ok=True)
-            await asyncio.to_thread(write_report, review.rec, out, name=path.name, rois=rois)
-        except (FormatError, ParameterError, UnitError) as e:
-            raise _status_of(e) from None
-        media = "application/pdf" if format == "pdf" else "text/html"
-        return FileResponse(out, media_type=media, filename=out.name)
+        return await _report(folder, name, format)
 
     return router

@@ -262,7 +262,9 @@ def _health_table(review: Review) -> Table:
     rows = []
     for i in bad[np.argsort(-h["invalid_share"][bad], kind="stable")][:60]:
         where = place_names([int(i)], lay)[0]
-        what = "silent (never above zero, its neighbours were)" if h["silent"][i] else "invalid"
+        what = (
+            "silent (near zero throughout, its neighbours loaded)" if h["silent"][i] else "invalid"
+        )
         rows.append([where, f"{100 * h['invalid_share'][i]:.1f} %", what])
     note = (
         f"{int((h['invalid_share'] > 0).sum())} element(s) invalid in some frames, "
