@@ -111,12 +111,13 @@ async function refreshEvents() {
   } catch (err) { /* the next refresh tries again; the connection line shows outages */ }
 }
 
+let drawing = false;  // one render per animation frame, however many snapshots came
 function onSnapshot(snap) {
   last = snap;
   const st = snap.stats, t0 = live.length ? live[0].t0 : snap.t;
   live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null });
   if (live.length > 1200) { const t00 = live[0].t0; live.shift(); live.forEach((p) => { p.t0 = t00; }); }
-  if (!PB.active) requestAnimationFrame(render);
+  if (!PB.active && !drawing) { drawing = true; requestAnimationFrame(() => { drawing = false; render(); }); }
 }
 function connect() {
   const proto = location.protocol === "https:" ? "wss" : "ws";

@@ -87,11 +87,11 @@ class MapView {
   }
 
   marks(ctx, o) {
-    const small = this.t.s < 10;  // a large mat: rings would hide the map, a dot marks a repair
-    ctx.lineWidth = small ? 1 : 2; ctx.strokeStyle = "#111"; ctx.fillStyle = "rgba(17,17,17,0.55)";
+    const small = this.t.s < 14;  // a large mat: rings would hide the map, a dot marks a repair
+    ctx.lineWidth = 2; ctx.strokeStyle = "#111"; ctx.fillStyle = "rgba(255,255,255,0.75)";
     for (const i of o.repaired || []) {
       const [x, y] = this.centre(i);
-      ctx.beginPath(); ctx.arc(x, y, this.t.s * (small ? 0.18 : 0.32), 0, 2 * Math.PI);
+      ctx.beginPath(); ctx.arc(x, y, small ? Math.max(1, 0.12 * this.t.s) : 0.32 * this.t.s, 0, 2 * Math.PI);
       small ? ctx.fill() : ctx.stroke();
     }
     const trace = o.trace || [];

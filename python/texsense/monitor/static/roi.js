@@ -75,24 +75,35 @@ const ROI = {
     return { mean: n ? sum / n : null, peak: n ? peak : null, area, load: pressureNcm2 ? load : null };
   },
 
-  // the table of regions with the frame's numbers; values in the display unit
+  // the table of regions with the frame's numbers; values in the display unit. The rows are
+  // rebuilt only when the regions change (a name being typed keeps its focus)
   render(layout, values, areas, pressureNcm2, unitLabel, digits) {
     $("roi-table").hidden = this.list.length === 0;
-    $("roi-rows").replaceChildren(...this.list.map((roi, k) => {
-      const idx = this.elements(roi, layout), st = this.stats(idx, values, areas, pressureNcm2);
-      const tr = document.createElement("tr");
-      const name = document.createElement("input");
-      name.value = roi.name; name.size = 10; name.className = "roi-name";
-      name.onchange = () => { const v = name.value.trim(); if (v && !this.list.some((r) => r.name === v)) roi.name = v; this.onChange(true); };
+    const key = JSON.stringify(this.list) + JSON.stringify(layout.shape);
+    if (key !== this.renderedKey) {
+      this.renderedKey = key;
+      this.members = this.list.map((roi) => this.elements(roi, layout));
+      $("roi-rows").replaceChildren(...this.list.map((roi, k) => this.row(roi, k)));
+    }
+    [...$("roi-rows").children].forEach((tr, k) => {
+      const idx = this.members[k], st = this.stats(idx, values, areas, pressureNcm2);
       const cells = [idx.length, fmt(st.mean, digits) + " " + unitLabel, fmt(st.peak, digits) + " " + unitLabel,
         fmt(st.area, 0) + " cm²", st.load === null ? "–" : fmt(st.load, 0) + " N"];
-      const first = document.createElement("td"); first.append(name);
-      const del = document.createElement("button"); del.textContent = "×"; del.title = "remove";
-      del.onclick = () => { this.list.splice(k, 1); this.onChange(true); };
-      const last = document.createElement("td"); last.append(del);
-      tr.append(first, ...cells.map((v) => { const td = document.createElement("td"); td.textContent = v; return td; }), last);
+      cells.forEach((v, j) => { tr.children[j + 1].textContent = v; });
       tr.dataset.elements = idx.length;
-      return tr;
-    }));
+    });
+  },
+
+  row(roi, k) {
+    const tr = document.createElement("tr");
+    const name = document.createElement("input");
+    name.value = roi.name; name.size = 10; name.className = "roi-name";
+    name.onchange = () => { const v = name.value.trim(); if (v && !this.list.some((r) => r.name === v)) roi.name = v; this.onChange(true); };
+    const first = document.createElement("td"); first.append(name);
+    const del = document.createElement("button"); del.textContent = "×"; del.title = "remove";
+    del.onclick = () => { this.list.splice(k, 1); this.onChange(true); };
+    const last = document.createElement("td"); last.append(del);
+    tr.append(first, ...[0, 1, 2, 3, 4].map(() => document.createElement("td")), last);
+    return tr;
   },
 };
