@@ -132,6 +132,8 @@ function layoutMaps() {  // the map of the live mat or of the recording open
   exposure.setLayout(status.layout, view.orientation, true);
   $("exposure-panel").hidden = !view.mode.alerts || PB.active;
   fillPresets();
+  autoTop = 0;
+  syncRange();
 }
 
 function wire() {
@@ -154,9 +156,11 @@ function wire() {
   $("roi-save").onclick = saveRois;
 }
 function syncRange() {  // the range boxes show the scale in use
-  const values = PB.active && PB.frame ? PB.frame.values : last ? last.pressure : [];
-  const sc = scale(values || []);
-  $("scale-min").value = fmt(sc[0], digits()); $("scale-max").value = fmt(sc[1], digits());
+  const f = pressureShown() ? FACTOR[unit] : 1;
+  const raw = PB.active && PB.frame ? PB.frame.values : last ? last.pressure : [];
+  const values = (raw || []).map((v) => (v === null ? null : v * f));
+  const sc = scale(values), d = pressureShown() ? digits() : 0;
+  $("scale-min").value = fmt(sc[0], d); $("scale-max").value = fmt(sc[1], d);
 }
 function updateThreshold() {
   if (!status) return;
