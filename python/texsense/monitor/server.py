@@ -22,6 +22,7 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 
 from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
+from texsense.monitor.playback import playback_router
 
 __all__ = ["create_app", "is_loopback", "serve"]
 
@@ -92,6 +93,7 @@ def create_app(monitor: Monitor, *, token: str | None = None, run_source: bool =
             log.error("the source stopped: %r", task.exception())
 
     app = FastAPI(title="texsense monitor", version="1", lifespan=lifespan)
+    app.include_router(playback_router(monitor))  # playback, regions, reports (playback.py)
 
     @app.middleware("http")
     async def check_token(request: Request, call_next: Any) -> Any:

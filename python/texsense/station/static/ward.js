@@ -3,15 +3,8 @@
 const token = new URLSearchParams(location.search).get("token");
 const withToken = (url) => token ? url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token) : url;
 const $ = (id) => document.getElementById(id);
+const TOP_NCM2 = 100 / 75.00615;  // 100 mmHg
 const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "reposition!", acknowledged: "acknowledged", stale: "no data", refused: "refused" };
-const STOPS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37], [255, 255, 255]];
-function colour(f) {
-  if (!Number.isFinite(f)) return "#e5e7eb";
-  f = Math.min(Math.max(f, 0), 1) * (STOPS.length - 2);
-  const i = Math.min(Math.floor(f), STOPS.length - 3), t = f - i;
-  const c = STOPS[i].map((v, k) => Math.round(v + t * (STOPS[i + 1][k] - v)));
-  return `rgb(${c[0]},${c[1]},${c[2]})`;
-}
 function drawMini(canvas, mat) {
   const ctx = canvas.getContext("2d");
   ctx.clearRect(0, 0, canvas.width, canvas.height);
@@ -19,12 +12,11 @@ function drawMini(canvas, mat) {
   const [rows, cols] = mat.shape;
   const s = Math.min(canvas.width / cols, canvas.height / rows);
   const ox = (canvas.width - s * cols) / 2, oy = (canvas.height - s * rows) / 2;
-  // each tile to its own peak (at least 0.5 N/cm²): the shape of a light bed shows as well
-  // as a seat's ischial peaks
-  const top = Math.max(0.5, ...mat.pressure.filter((v) => v !== null));
+  // one fixed scale on every tile, 0-100 mmHg (the dashboards' seat and bed preset): one
+  // colour is one pressure on every mat of the ward
   mat.cells.forEach((cell, i) => {
     const r = Math.floor(cell / cols), c = cell % cols, v = mat.pressure[i];
-    ctx.fillStyle = v === null ? "#d1d5db" : colour(v / top);
+    ctx.fillStyle = v === null ? "#d1d5db" : colourOf("viridis", v / TOP_NCM2);
     ctx.fillRect(ox + c * s, oy + r * s, Math.ceil(s), Math.ceil(s));
   });
 }
@@ -78,4 +70,8 @@ function connect() {
   ws.onmessage = (m) => render(JSON.parse(m.data));
   ws.onclose = () => { $("broker").textContent = "station unreachable — retrying…"; setTimeout(connect, 1000); };
 }
+(function legend() {
+  const c = $("ward-scale"), ctx = c.getContext("2d");
+  for (let x = 0; x < c.width; x++) { ctx.fillStyle = colourOf("viridis", x / (c.width - 1)); ctx.fillRect(x, 0, 1, c.height); }
+})();
 connect();
