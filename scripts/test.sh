@@ -20,4 +20,6 @@ fi
 if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
   need_debian initdb postgresql "the PostgreSQL tests"
 fi
+# the report tests read the PDFs back as text with poppler's pdftotext (docs/report.md)
+need_debian pdftotext poppler-utils "the report tests"
 say "pytest";                python -m pytest -q "$@"

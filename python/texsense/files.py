@@ -102,6 +102,7 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     os.close(fd)
     tmp = Path(tmp_name)
     try:
+        os.chmod(tmp, _mode_for(target))
         yield tmp
         _fsync_file(tmp)
         os.replace(tmp, target)
@@ -194,6 +195,17 @@ def unused_name(path: str | Path) -> Path:
         if not candidate.exists():
             return candidate
         k += 1
+
+
+def _mode_for(target: Path) -> int:
+    """The permissions of the file being replaced, or what a plain ``open(..., "w")`` would
+    give under the umask (``mkstemp`` alone would make every output private)."""
+    try:
+        return target.stat().st_mode & 0o7777
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
 
 
 def _remove(path: Path) -> None:

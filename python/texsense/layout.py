@@ -2,7 +2,11 @@
 
 A layout holds, for N elements, their centres and sizes in cm, the 4-neighbour topology used
 by the repair of failed elements (thesis eq. 6.14), optional element names and named regions
-(for example the thesis's 4 and 16 equal aggregated areas, §6.3.2).
+(for example the thesis's 4 and 16 equal aggregated areas, §6.3.2) and, optionally, an
+**orientation**: what lies beyond each edge of the map as it is drawn (row 0 at the top,
+column 0 on the left), e.g. ``{"top": "head", "bottom": "foot", "left": "left", "right":
+"right"}`` for a bed mat. Viewers and reports label the map's edges with it; a layout without
+one (the default, and every layout written before it existed) is drawn without labels.
 
 Coordinates: ``x`` grows along a row (to the right, with the column index), ``y`` grows down
 the columns (with the row index), both in cm from the top-left corner of the sensing area.
@@ -20,6 +24,12 @@ A 3 x 4 grid with 2 cm pitch whose centre cell is empty:
 (11, (3, 4))
 >>> lay.xy_cm[0].tolist()
 [1.0, 1.0]
+
+A bed mat whose head end is row 0 (the preset of :data:`ORIENTATIONS`):
+
+>>> bed = Layout.grid(64, 32, pitch_cm=2.54).with_orientation("bed")
+>>> bed.orientation["top"], bed.orientation["left"]
+('head', 'left')
 """
 
 from __future__ import annotations
@@ -32,7 +42,42 @@ import numpy.typing as npt
 
 from texsense.exceptions import ParameterError
 
-__all__ = ["Layout"]
+__all__ = ["EDGES", "ORIENTATIONS", "Layout"]
+
+#: The edges of a map as drawn: ``top`` is row 0 (small y), ``left`` is column 0 (small x).
+EDGES = ("top", "bottom", "left", "right")
+
+#: Orientation presets. ``left`` / ``right`` are the body's own left and right: the patient's
+#: lying on the back on a bed (head at the top), the sitter's on a seat (front edge at the top).
+#: A foot sensor declares toes and heel only (its sides depend on which foot it is).
+ORIENTATIONS: dict[str, dict[str, str]] = {
+    "bed": {"top": "head", "bottom": "foot", "left": "left", "right": "right"},
+    "seat": {"top": "front", "bottom": "back", "left": "left", "right": "right"},
+    "foot": {"top": "toes", "bottom": "heel"},
+}
+
+
+def _orientation(value: Mapping[str, str] | str | None) -> dict[str, str]:
+    """Check an orientation (a preset name or edge -> label) and return it as a dict."""
+    if value is None:
+        return {}
+    if isinstance(value, str):
+        if value not in ORIENTATIONS:
+            raise ParameterError(
+                f"orientation: unknown preset {value!r}; known: {', '.join(ORIENTATIONS)}"
+            )
+        return dict(ORIENTATIONS[value])
+    if not isinstance(value, Mapping):
+        raise ParameterError("orientation: expected a preset name or a mapping edge -> label")
+    out: dict[str, str] = {}
+    for edge, label in value.items():
+        if edge not in EDGES:
+            raise ParameterError(f"orientation: unknown edge {edge!r}; edges: {', '.join(EDGES)}")
+        if not isinstance(label, str) or not label.strip() or len(label) > 40:
+            raise ParameterError(f"orientation: the {edge} label must be a short text")
+        out[edge] = label.strip()
+    return out
+
 
 _FloatArray = npt.NDArray[np.float64]
 _IntArray = npt.NDArray[np.int64]
@@ -72,6 +117,10 @@ class Layout:
         A name per element (for example the vendor's sensor number).
     regions : mapping of str to array_like of int, optional
         Named groups of element indices.
+    orientation : mapping of str to str, or str, optional
+        What lies beyond each edge of the map (:data:`EDGES` -> a label such as ``"head"``),
+        or a preset name of :data:`ORIENTATIONS`. Default: none declared. It labels the
+        drawing only: layouts that differ in nothing else compare equal.
     """
 
     def __init__(
@@ -86,6 +135,7 @@ class Layout:
         neighbours: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
         names: Sequence[str] | None = None,
         regions: Mapping[str, npt.ArrayLike] | None = None,
+        orientation: Mapping[str, str] | str | None = None,
     ) -> None:
         xy = np.asarray(xy_cm, dtype=np.float64)
         if xy.ndim != 2 or xy.shape[1] != 2:
@@ -167,6 +217,7 @@ class Layout:
             if m.size and (m.min() < 0 or m.max() >= n):
                 raise ParameterError(f"region {name!r}: element indices must lie in 0..{n - 1}")
             self._regions[str(name)] = _readonly(m)
+        self._orientation = _orientation(orientation)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -359,6 +410,18 @@ class Layout:
         return dict(self._regions)
 
     @property
+    def orientation(self) -> dict[str, str]:
+        """What lies beyond each edge of the drawn map (edge -> label; a copy, empty when the
+        layout declares none)."""
+        # layouts pickled before the field existed (cached models) have none
+        return dict(getattr(self, "_orientation", {}))
+
+    def with_orientation(self, orientation: Mapping[str, str] | str | None) -> Layout:
+        """A copy of this layout with ``orientation`` (a preset name of :data:`ORIENTATIONS`
+        or edge -> label; None removes it)."""
+        return self._replace(orientation=orientation)
+
+    @property
     def extent_cm(self) -> tuple[float, float, float, float]:
         """Bounding box of the elements (x0, x1, y0, y1) in cm, including their size."""
         half = self._size / 2
@@ -440,6 +503,7 @@ class Layout:
             "neighbours": (self._indptr, self._indices),
             "names": self._names,
             "regions": self._regions,
+            "orientation": self.orientation,
         }
         args.update(changes)
         xy, size = args.pop("xy_cm"), args.pop("size_cm")
@@ -459,6 +523,7 @@ class Layout:
             "neighbours_indices": self._indices.tolist(),
             "names": None if self._names is None else list(self._names),
             "regions": {k: v.tolist() for k, v in self._regions.items()},
+            "orientation": self.orientation,
         }
 
     @classmethod
@@ -475,11 +540,14 @@ class Layout:
                 neighbours=(d["neighbours_indptr"], d["neighbours_indices"]),
                 names=d.get("names"),
                 regions=d.get("regions") or {},
+                orientation=d.get("orientation") or None,
             )
         except KeyError as e:
             raise ParameterError(f"layout description lacks the field {e.args[0]!r}") from None
 
     def __eq__(self, other: object) -> bool:
+        """Equal geometry, topology, names and regions (the orientation only labels the
+        drawing: it does not take part)."""
         if not isinstance(other, Layout):
             return NotImplemented
         return (

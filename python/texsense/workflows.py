@@ -4,7 +4,9 @@
   the material curve and spacer model from a test-machine record, zeroing and equilibration
   from two mat recordings, and optionally a drift stage from step-and-hold records;
 - :func:`calibrate_virtual_mat` and :func:`seat_calibration`: the virtual mats of the
-  simulator calibrated the same way, as a user would calibrate them.
+  simulator calibrated the same way, as a user would calibrate them;
+- :func:`processed_bed_night`: a simulated night on the virtual bed, read by the mat and
+  compensated with its calibration (what a monitor would have recorded; docs/report.md).
 
 The simulator (:mod:`texsense.sim`) knows nothing of calibration or compensation: it is the
 ground truth that these workflows and the compensation are graded against.
@@ -29,6 +31,7 @@ __all__ = [
     "calibrate_mat",
     "calibrate_virtual_mat",
     "material_record",
+    "processed_bed_night",
     "seat_calibration",
     "sleeve_calibration",
     "strip_calibration",
@@ -130,3 +133,42 @@ def sleeve_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration
 
     mat = VirtualMat(sleeve_layout(), "textile-3mm", cdc=HIGH_RATE_CDC, seed=seed)
     return calibrate_virtual_mat(mat, material_seed)
+
+
+def processed_bed_night(
+    hours: float = 8.0, frame_s: float = 10.0, seed: int = 0, turn_every_min: float = 120.0
+) -> Recording:
+    """A night of a simulated person on the virtual bed (positions held 20 min to 2 h 12 min,
+    sitting up and getting out of bed now and then; :func:`texsense.sim.bed.night_plan`), a
+    frame every ``frame_s`` s, read by the textile mat with its failing elements and
+    compensated by the pipeline with :func:`bed_calibration`: pressure in N/cm², ``valid``
+    False where an element was repaired, the true ``side`` of every frame as a label, and the
+    settings a bed monitor would declare (``meta``: mode, orientation, alerts)."""
+    from texsense.pipeline import Pipeline
+    from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
+
+    rng = np.random.default_rng([seed, 7])
+    plan: list[tuple[str, float]] = []
+    while sum(d for _, d in plan) < hours * 3600:
+        plan += night_plan(rng, 4, 3600.0, sit_every=4, out_every=4, away_s=600.0,
+                           spread=(0.33, 2.2))  # fmt: skip
+    cut, total = [], 0.0
+    for position, seconds in plan:
+        cut.append((position, min(seconds, hours * 3600 - total)))
+        total += seconds
+        if total >= hours * 3600:
+            break
+    night = bed_session(Sleeper.random(seed), cut, seed=seed, mat=bed_mat(), frame_s=frame_s)
+    assert night.capacitance is not None
+    pressure = Pipeline(bed_calibration(), bed_layout()).run(night.capacitance)
+    meta = {
+        **pressure.meta,
+        "source": f"virtual bed night (person {seed}, {hours:g} h, a frame every {frame_s:g} s)",
+        "mode": "bed",
+        "orientation": bed_layout().orientation,
+        "alerts": {"threshold_mmhg": 32.0, "reposition_min": 20.0, "offload_min": 1.0,
+                   "turn_every_min": turn_every_min},
+    }  # fmt: skip
+    labels = {**pressure.labels, "side": night.truth.labels["side"]}
+    return Recording(pressure.frames, pressure.times, pressure.layout, "pressure",
+                     pressure.unit, valid=pressure.valid, labels=labels, meta=meta)  # fmt: skip

@@ -284,7 +284,7 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         page.locator(f'.tile[data-id="{mat_id}"] canvas').click()
         expect(page).to_have_url(st.url + f"mats/{mat_id}/", timeout=5_000)
         frames = page.locator("#frames")
-        expect(frames).not_to_have_text("0", timeout=10_000)
+        expect(frames).not_to_have_text("0", timeout=30_000)  # a busy machine
         expect(page.locator("#source")).to_contain_text(f"mat {mat_id}")
         assert not errors, errors
 

@@ -21,13 +21,15 @@ def decode(tile: dict) -> np.ndarray:
 def test_a_bed_is_reduced_to_its_block_peaks():
     lay = Layout.grid(64, 32)
     p = np.zeros(2048)
-    p[5 * 32 + 7] = 2.0  # one peak, in block (1, 2) of 3 x 3 elements
+    p[5 * 32 + 7] = 2.0  # one peak (150 mmHg), in block (1, 2) of 3 x 3 elements
     p[40 * 32 + 20] = np.nan  # a failed element in an otherwise empty block
     tile = BlockMap(lay).encode(p)
     q = decode(tile)
-    assert q.shape == (22, 11) and tile["top"] == 2.0
-    assert q[1, 2] == 250 and q[13, 6] == 0  # the peak survives; the NaN is one of nine
-    assert np.count_nonzero(q == 250) == 1 and not np.any(q == NO_READING)
+    assert q.shape == (22, 11) and tile["unit"] == "mmHg"
+    assert q[1, 2] == 150 and q[13, 6] == 0  # the peak survives; the NaN is one of nine
+    assert np.count_nonzero(q) == 1 and not np.any(q == NO_READING)
+    p[0] = 5.0  # 375 mmHg: the top of the range
+    assert decode(BlockMap(lay).encode(p))[0, 0] == 250
     grid = p.reshape(64, 32)
     grid[39:42, 18:21] = np.nan  # a whole block without a reading
     q = decode(BlockMap(lay).encode(grid.ravel()))
@@ -40,7 +42,7 @@ def test_a_checkerboard_seat_keeps_its_empty_cells():
     lay = VirtualMat.seat(seed=5).layout  # 96 of 240 cells
     q = decode(BlockMap(lay).encode(np.full(96, 0.2)))
     assert q.shape == (15, 16) and np.count_nonzero(q != NO_ELEMENT) == 96
-    assert set(np.unique(q[q != NO_ELEMENT])) == {100}  # 0.2 of the 0.5 N/cm² floor
+    assert set(np.unique(q[q != NO_ELEMENT])) == {15}  # 0.2 N/cm² = 15 mmHg
 
 
 def ward(n: int) -> Station:

@@ -12,6 +12,7 @@ from texsense.commands import (
     pipeline,
     plot,
     posture,
+    report,
     simulate,
     station,
     stocking,
@@ -19,5 +20,5 @@ from texsense.commands import (
 
 COMMANDS = (
     info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor, station,
-    stocking, muscle,
+    stocking, muscle, report,
 )  # fmt: skip

@@ -92,6 +92,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="MIN",
         help="bed: turning-schedule alert after this many minutes on one side (default 120)",
     )
+    p.add_argument(
+        "--mode",
+        choices=("auto", "seat", "bed", "foot", "generic"),
+        default="auto",
+        help="what the mat is under: the words of events and alerts, the unit and colour scale "
+        "(auto: bed for the virtual bed and --bed, from the file for a replay, else seat; "
+        "foot raises no seated/left events and no exposure alerts)",
+    )
     p.add_argument("--record", action="store_true", help="record from the start")
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
     p.add_argument(
@@ -270,10 +278,26 @@ def build_monitor(args: argparse.Namespace) -> Any:
         store=open_store(args.db),
         record_dir=args.record_dir,
         bed=bed,
+        mode=_mode(args, source, bed),
     )
     if args.record:
         monitor.start_recording()
     return monitor
+
+
+def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
+    """``--mode``, or for ``auto``: bed with a bed watch, the file's for a replay, else seat."""
+    mode = getattr(args, "mode", "auto")
+    if mode != "auto":
+        return str(mode)
+    if bed is not None or args.source == "virtual-bed":
+        return "bed"
+    rec = getattr(source, "rec", None)
+    if rec is not None:
+        from texsense.views import guess_mode
+
+        return guess_mode(rec.layout, rec.meta)
+    return "seat"
 
 
 def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:

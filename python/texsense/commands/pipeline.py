@@ -333,16 +333,33 @@ def run_health(args: argparse.Namespace) -> int:
         f"{raw.n_elements} elements over {raw.duration_s:.0f} s: {np.sum(status == 'ok')} ok, "
         f"{np.sum(status == 'intermittent')} intermittent, {np.sum(status == 'dead')} dead"
     )
-    print(f"{'element':>8} {'status':>12} {'episodes':>8} {'failed':>7} {'first s':>9} "
-          f"{'last s':>9}  kinds")  # fmt: skip
+    from texsense.tables import text_table
+
+    lay = raw.layout
+    rc = None if lay.cells is None or lay.shape is None else np.divmod(lay.cells, lay.shape[1])
+    rows = []
     for e in report:
         if e.status == "ok" and not args.all:
             continue
+        where = ["-", "-"] if rc is None else [str(rc[0][e.element] + 1), str(rc[1][e.element] + 1)]
         first = "-" if e.first_failed_s is None else f"{e.first_failed_s:.1f}"
         last = "-" if e.last_failed_s is None else f"{e.last_failed_s:.1f}"
         kinds = ", ".join(f"{k} {v}" for k, v in e.kinds.items())
-        print(
-            f"{e.name:>8} {e.status:>12} {e.episodes:>8} {e.failed_share:>7.1%} {first:>9} "
-            f"{last:>9}  {kinds}"
+        rows.append(
+            [e.name, *where, e.status, e.episodes, f"{e.failed_share:.1%}", first, last, kinds]
         )
+    columns = [
+        "element",
+        "row",
+        "column",
+        "status",
+        "episodes",
+        "failed",
+        "first s",
+        "last s",
+        "kinds",
+    ]
+    print("\n".join(text_table(columns, rows, "lrrrrrrrl")))
+    if rc is not None:
+        print("(rows and columns count from 1 at the top left of the map)")
     return 0

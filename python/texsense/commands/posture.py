@@ -233,13 +233,16 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"{window['accuracy']:.1%} (worst {window['minimum']['subject']}: "
             f"{window['minimum']['accuracy']:.1%}), per frame {report.accuracy:.1%}"
         )
-    for s, a in sorted(report.per_subject.items()):
-        print(f"  {s:>10}  {a:6.1%}")
+    from texsense.tables import confusion_lines, natural_key, text_table
+
+    rows = [
+        [s, f"{a:.1%}"]
+        for s, a in sorted(report.per_subject.items(), key=lambda kv: natural_key(kv[0]))
+    ]
+    print("\n".join("  " + line for line in text_table([args.group, "accuracy"], rows)))
     print("confusion (rows true, columns predicted):")
-    width = max(len(str(v)) for v in report.labels) + 1
-    print(" " * width + "".join(f"{v!s:>{width}}" for v in report.labels))
-    for v, row in zip(report.labels, report.confusion, strict=True):
-        print(f"{v!s:>{width}}" + "".join(f"{c:>{width}}" for c in row))
+    names = rec.meta.get("postures") if args.label == "posture" else None
+    print("\n".join(confusion_lines(report.labels, report.confusion, names)))
     return 0
 
 

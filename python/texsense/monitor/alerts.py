@@ -44,8 +44,9 @@ REPOSITION_RANGE_MIN = (5.0, 120.0)
 @dataclass
 class Event:
     """Something the monitor reports: ``kind`` is ``reposition`` (an alert opened),
-    ``cleared`` (it ended: the exposed skin was offloaded), ``acknowledged``, ``seated`` /
-    ``left`` (the load appeared / disappeared)."""
+    ``cleared`` (it ended: the exposed skin was offloaded), ``acknowledged``, or the load
+    appearing / disappearing in the mode's words (``seated`` / ``left`` on a seat, ``in-bed``
+    / ``out-of-bed`` on a bed, ``loaded`` / ``unloaded`` otherwise)."""
 
     kind: str
     t: float
@@ -67,6 +68,9 @@ class Alert:
     peak_exposure_s: float
     acknowledged_t: float | None = None
     cleared_t: float | None = None
+    #: where, in words: the regions the mode knows, else rows and columns (the monitor
+    #: names them; :func:`texsense.views.place_names`)
+    where: list[str] = field(default_factory=list)
 
     @property
     def active(self) -> bool:
@@ -83,6 +87,7 @@ class Alert:
             "acknowledged_t": self.acknowledged_t,
             "cleared_t": self.cleared_t,
             "active": self.active,
+            "where": self.where,
         }
 
 
@@ -105,6 +110,11 @@ class ExposureTracker:
         Track the mean pressure of each region instead of single elements (e.g.
         ``layout.equal_areas(16)``); the exposure map then repeats a region's value on its
         elements.
+    occupancy : (str, str) or None
+        Event kinds when the mat becomes loaded / unloaded (default ``seated`` / ``left``);
+        None: no such events (a foot sensor, loaded at every step).
+    occupancy_hold_s : float
+        A change of occupancy is reported once it has held this long (default 0: at once).
     """
 
     def __init__(
@@ -116,6 +126,8 @@ class ExposureTracker:
         reposition_min: float = 20.0,
         offload_min: float = 1.0,
         regions: dict[str, npt.ArrayLike] | None = None,
+        occupancy: tuple[str, str] | None = ("seated", "left"),
+        occupancy_hold_s: float = 0.0,
     ) -> None:
         if not units.is_pressure_unit(unit):
             raise ParameterError(f"threshold unit {unit!r} is not a pressure unit")
@@ -149,11 +161,19 @@ class ExposureTracker:
         self._ids = itertools.count(1)
         self.alerts: list[Alert] = []
         self.seated = False
+        self.occupancy = occupancy
+        self.occupancy_hold_s = float(occupancy_hold_s)
+        self._occupancy_since: float | None = None  # when the load last changed state
 
     @property
     def open_alert(self) -> Alert | None:
         """The alert not yet cleared, if any."""
         return next((a for a in self.alerts if a.cleared_t is None), None)
+
+    @property
+    def by_region(self) -> bool:
+        """True when the tracker follows regions (its indices and names are the regions')."""
+        return self._groups is not None
 
     def exposure_map(self) -> np.ndarray:
         """Exposure in seconds per element (a region's value on each of its elements)."""
@@ -189,10 +209,7 @@ class ExposureTracker:
         self._relief_s[loaded] = 0.0
         self._relief_s[~loaded] += dt
         self.exposure_s[self._relief_s >= self.offload_s] = 0.0
-        any_load = bool(loaded.any())
-        if any_load != self.seated:
-            self.seated = any_load
-            events.append(Event("seated" if any_load else "left", t))
+        events += self._occupancy(t, bool(loaded.any()))
         alert = self.open_alert
         if alert is None:
             over = np.flatnonzero(self.exposure_s >= self.reposition_s)
@@ -207,6 +224,20 @@ class ExposureTracker:
                 alert.cleared_t = t
                 events.append(Event("cleared", t, alert.id))
         return events
+
+    def _occupancy(self, t: float, any_load: bool) -> list[Event]:
+        """The load appearing or disappearing, once the change has held ``occupancy_hold_s``."""
+        if any_load == self.seated:
+            self._occupancy_since = None
+            return []
+        if self._occupancy_since is None:
+            self._occupancy_since = t
+        if t - self._occupancy_since < self.occupancy_hold_s:
+            return []
+        self.seated, self._occupancy_since = any_load, None
+        if self.occupancy is None:
+            return []
+        return [Event(self.occupancy[0] if any_load else self.occupancy[1], t)]
 
     def acknowledge(self, alert_id: int, t: float) -> Event:
         """Silence an alert (it stays open until the skin is offloaded)."""

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from texsense import stats
+from texsense import stats, units
 from texsense.exceptions import ParameterError
 from texsense.files import unused_name
 from texsense.monitor.alerts import Event, ExposureTracker
@@ -144,6 +144,10 @@ class Monitor:
         For a bed mat: the turning schedule on the side the posture model reports (its
         labels must be sides: supine, prone, left, right, sitting) and the at-risk regions
         (:mod:`texsense.bed`).
+    mode : str, optional
+        ``seat``, ``bed``, ``foot`` or ``generic`` (:data:`texsense.views.MODES`): the words
+        of the events and alerts, whether there are any, the page's unit and colour scale.
+        Default: ``bed`` with ``bed``, else ``seat``.
     """
 
     def __init__(
@@ -156,7 +160,10 @@ class Monitor:
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
         bed: Any = None,
+        mode: str | None = None,
     ) -> None:
+        from texsense.views import MODES
+
         if source.quantity == "capacitance" and pipeline is None:
             raise ParameterError("a capacitance source needs a pipeline (a calibration)")
         if pipeline is not None and pipeline.layout.n_elements != source.layout.n_elements:
@@ -174,10 +181,17 @@ class Monitor:
                     f"bed monitoring needs a posture model of sides ({', '.join(BANDS)}); "
                     f"this one also knows {', '.join(unknown)}"
                 )
+        mode = mode or ("bed" if bed is not None else "seat")
+        if mode not in MODES:
+            raise ParameterError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
+        self.mode = MODES[mode]
         self.source = source
         self.layout = source.layout
         self.pipeline = pipeline
         self.tracker = tracker or ExposureTracker(source.layout)
+        # the mode's words; a bed's schedule says in-bed / out-of-bed itself
+        self.tracker.occupancy = None if bed is not None else self.mode.occupancy
+        self.tracker.occupancy_hold_s = self.mode.occupancy_hold_s
         self.posture_model = posture_model
         self.bed = bed
         self.store = store or EventStore(":memory:")
@@ -189,6 +203,7 @@ class Monitor:
         self._latest: dict[str, Any] | None = None
         self._latest_text: str | None = "null"
         self._subscribers: set[asyncio.Queue[str]] = set()
+        self._t_first: float | None = None  # the time of the first frame
         self._cof_trace: list[list[float]] = []
         self.clock = FrameClock()
         self.quiet = Quiet(log)
@@ -232,7 +247,23 @@ class Monitor:
             name = unused_recording_name(
                 self.record_dir, f"session-{self.session_id}-{stamp}", self.source.quantity
             )
-        meta = {"source": self.source.name, "session": self.session_id}
+        from texsense.views import orientation_of
+
+        meta = {
+            "source": self.source.name,
+            "session": self.session_id,
+            "mode": self.mode.name,
+            "started_at": time.time(),
+            "orientation": orientation_of(self.layout, mode=self.mode.name),
+            "alerts": {
+                "threshold_mmhg": round(
+                    units.convert(self.tracker.threshold_ncm2, "N/cm2", "mmHg"), 3
+                ),
+                "reposition_min": self.tracker.reposition_s / 60,
+                "offload_min": self.tracker.offload_s / 60,
+                "turn_every_min": self.bed.schedule.interval_s / 60 if self.bed else 120.0,
+            },
+        }
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
         self.recorder = Recorder(self.record_dir, name, self.source, meta)
@@ -253,9 +284,31 @@ class Monitor:
 
     # ------------------------------------------------------------------ processing
     def _events(self, events: list[Event]) -> None:
+        from texsense.views import format_duration
+
         for e in events:
             self.store.add_event(self.session_id, e)
-            log.info("event %s at %.1f s %s", e.kind, e.t, e.detail or "")
+            log.info(
+                "%s: %s %s into the session %s",
+                self.source.name,
+                e.kind,
+                format_duration(e.t - (self._t_first or 0.0)),
+                e.detail or "",
+            )
+
+    def _where(self, elements: list[int]) -> list[str]:
+        """Where elements lie, in words: the bed's at-risk regions or the seat's zones, else
+        rows and columns (:func:`texsense.views.place_names`)."""
+        from texsense.views import place_names, seat_zones
+
+        if self.tracker.by_region:
+            return [self.tracker.names[i] for i in elements]
+        regions: dict[str, Any] = {}
+        if self.bed is not None:
+            regions = {r.name: list(r.elements) for r in self.bed.regions.values()}
+        elif self.mode.name == "seat" and self.layout.shape is not None:
+            regions = seat_zones(self.layout)
+        return place_names(elements, self.layout, regions)
 
     def acknowledge(self, alert_id: int) -> Event:
         """Acknowledge an alert."""
@@ -304,7 +357,9 @@ class Monitor:
             pressure = units.convert(raw, frame.unit, "N/cm2")
             measured = np.isfinite(pressure)
             codes = np.where(measured, 0, 2)
-        self._events(self.tracker.step(frame.t, pressure))
+        if self._t_first is None:
+            self._t_first = frame.t
+        exposure_events = self.tracker.step(frame.t, pressure) if self.mode.alerts else []
         if self.recorder is not None:
             self.recorder.append(frame, pressure, measured)
         rec = Recording(
@@ -329,8 +384,16 @@ class Monitor:
             self._vote.reset()  # nobody there: the next person starts a new vote
         bed = None
         if self.bed is not None:
-            self._events(self.bed.step(frame.t, pressure, posture["label"] if posture else None))
+            exposure_events += self.bed.step(
+                frame.t, pressure, posture["label"] if posture else None
+            )
             bed = self.bed.status(frame.t)
+        for e in exposure_events:  # name the places (the bed's regions are this frame's)
+            if e.kind == "reposition" and e.alert_id is not None:
+                alert = next(a for a in self.tracker.alerts if a.id == e.alert_id)
+                alert.where = self._where(alert.elements)
+                e.detail = {"where": alert.where, "elements": alert.elements}
+        self._events(exposure_events)
         alert = self.tracker.open_alert
         self.frames += 1
         self.changes += 1

@@ -10,6 +10,16 @@ was read, ``dt_us`` the time between two elements (element i was read at
 reading that failed), ``*XX`` an optional checksum: the XOR of all bytes between the start of
 the line and ``*``, two hex digits (as in NMEA). Lines starting with ``#`` are comments.
 
+A device may announce its layout in a comment line (first, and again now and then for a
+reader that opens the port later), so that no ``--grid`` is needed::
+
+    #layout {"grid": [15, 16], "pitch_cm": [2.07, 2.07], "element_cm": [2.0, 2.0],
+             "active": "<hex>", "elements": 96, "spacer": "textile-3mm", ...}
+
+(one line; ``active`` is the hex bitmask of the active cells, row by row, omitted when every
+cell is active; further keys describe the device). A grid layout is all the announcement
+carries (4-neighbours linked across one empty cell, as :meth:`Layout.grid` does).
+
 MQTT (topic ``texsense/<mat>/frames``), a JSON object per message::
 
     {"seq": 17, "t": 12.25, "dt": 0.0005, "values": [0.0, 12.3, ...], "unit": "pF"}
@@ -39,12 +49,15 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+
+if TYPE_CHECKING:
+    from texsense.layout import Layout
 
 __all__ = [
     "CountError",
@@ -52,6 +65,8 @@ __all__ = [
     "PayloadSizeError",
     "ProtocolError",
     "format_serial_line",
+    "layout_announcement",
+    "parse_announcement",
     "parse_mqtt_payload",
     "parse_serial_line",
     "payload_limit",
@@ -249,3 +264,85 @@ def parse_mqtt_payload(
         if not np.isfinite(times[-1]):
             raise ProtocolError("'t' + 'dt' x elements is not a finite time")
     return Frame(seq, times, values, unit)
+
+
+ANNOUNCE = "#layout "
+
+
+def layout_announcement(layout: Layout, **info: Any) -> str:
+    """The ``#layout`` comment line of a grid ``layout`` (without newline), with ``info``
+    (JSON-able: the device, its spacer, frame time, ...) added to it.
+
+    >>> from texsense.layout import Layout
+    >>> line = layout_announcement(Layout.grid(2, 3, pitch_cm=1.5), spacer="textile-3mm")
+    >>> line[:61]
+    '#layout {"grid": [2, 3], "pitch_cm": [1.5, 1.5], "element_cm"'
+    >>> parse_announcement(line)[0] == Layout.grid(2, 3, pitch_cm=1.5)
+    True
+    """
+    if layout.shape is None or layout.pitch_cm is None:
+        raise ProtocolError("only a grid layout can be announced on the serial line")
+    rows, cols = layout.shape
+    size = np.unique(layout.size_cm, axis=0)
+    if size.shape[0] != 1:
+        raise ProtocolError("only a grid of equal elements can be announced")
+    d: dict[str, Any] = {
+        "grid": [int(rows), int(cols)],
+        "pitch_cm": [float(v) for v in layout.pitch_cm],
+        "element_cm": [float(size[0, 1]), float(size[0, 0])],  # (height, width)
+    }
+    active = layout.active
+    if active is not None and not bool(np.all(active)):
+        bits = np.packbits(np.asarray(active, dtype=bool).ravel())
+        d["active"] = bits.tobytes().hex()
+    d["elements"] = layout.n_elements
+    d.update(info)
+    line = ANNOUNCE + json.dumps(d)
+    if len(line) > MAX_LINE:
+        raise ProtocolError(f"the announcement is longer than {MAX_LINE} characters")
+    return line
+
+
+def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | None:
+    """(layout, the other keys) of a ``#layout`` line; None for any other line;
+    :class:`ProtocolError` naming the field for a malformed announcement."""
+    from texsense.layout import Layout
+
+    if isinstance(line, bytes):
+        line = line.decode("ascii", errors="replace")
+    line = line.strip()
+    if not line.startswith(ANNOUNCE.strip()):
+        return None
+    if len(line) > MAX_LINE:
+        raise ProtocolError(f"announcement longer than {MAX_LINE} characters")
+    try:
+        d = json.loads(line[len(ANNOUNCE) - 1 :])
+    except ValueError as e:
+        raise ProtocolError(f"layout announcement is not JSON: {e}") from None
+    if not isinstance(d, dict):
+        raise ProtocolError("layout announcement must be a JSON object")
+    try:
+        rows, cols = (int(v) for v in d["grid"])
+        pitch = tuple(float(v) for v in d["pitch_cm"])
+        element = tuple(float(v) for v in d.get("element_cm", pitch))
+        if not (0 < rows <= 4096 and 0 < cols <= 4096) or len(pitch) != 2 or len(element) != 2:
+            raise ValueError("grid, pitch_cm and element_cm need two positive numbers each")
+        active = None
+        if "active" in d:
+            bits = np.unpackbits(np.frombuffer(bytes.fromhex(str(d["active"])), np.uint8))
+            if bits.size < rows * cols:
+                raise ValueError("'active' has fewer bits than the grid has cells")
+            active = bits[: rows * cols].reshape(rows, cols).astype(bool)
+        layout = Layout.grid(
+            rows, cols, pitch_cm=(pitch[0], pitch[1]), active=active,
+            element_size_cm=(element[0], element[1]),
+        )  # fmt: skip
+    except (KeyError, TypeError, ValueError) as e:
+        what = f"lacks {e}" if isinstance(e, KeyError) else str(e)
+        raise ProtocolError(f"layout announcement {what}") from None
+    if "elements" in d and d["elements"] != layout.n_elements:
+        raise ProtocolError(
+            f"layout announcement says {d['elements']} elements, its grid has {layout.n_elements}"
+        )
+    info = {k: v for k, v in d.items() if k not in ("grid", "pitch_cm", "element_cm", "active")}
+    return layout, info

@@ -92,6 +92,12 @@ _CSP_DOCS = (
     "https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; frame-ancestors 'none'; "
     "base-uri 'none'"
 )
+#: A report (texsense.report) is a document of its own: its styles inline, its figures in
+#: ``data:`` images, no script at all.
+_CSP_REPORT = (
+    "default-src 'none'; style-src 'unsafe-inline'; img-src data:; frame-ancestors 'none'; "
+    "base-uri 'none'; form-action 'none'"
+)
 _HEADERS = [
     (b"x-frame-options", b"DENY"),
     (b"referrer-policy", b"no-referrer"),
@@ -311,9 +317,13 @@ class Guard:
 
 
 def _csp(path: str, host: str) -> list[tuple[bytes, bytes]]:
-    docs = path.endswith(("/docs", "/redoc", "/docs/oauth2-redirect"))
     safe_host = "".join(c for c in host if c.isalnum() or c in ".-:[]") or "localhost"
-    policy = _CSP_DOCS if docs else _CSP.format(host=safe_host)
+    if path.endswith(("/docs", "/redoc", "/docs/oauth2-redirect")):
+        policy = _CSP_DOCS
+    elif path.endswith("/report"):
+        policy = _CSP_REPORT
+    else:
+        policy = _CSP.format(host=safe_host)
     return [(b"content-security-policy", policy.encode()), *_HEADERS]
 
 

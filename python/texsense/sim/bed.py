@@ -248,8 +248,10 @@ PROMINENCES: dict[str, tuple[str, ...]] = {
 
 
 def bed_layout() -> Layout:
-    """The 64 x 32 bed mat at 2.54 cm, head end at row 0."""
-    return Layout.grid(BED_ROWS, BED_COLS, pitch_cm=BED_PITCH_CM, element_size_cm=2.2)
+    """The 64 x 32 bed mat at 2.54 cm, head end at row 0; the first column is the side the
+    virtual body's left (``scapula-l``, ``heel-l``) lies on when it lies on its back."""
+    lay = Layout.grid(BED_ROWS, BED_COLS, pitch_cm=BED_PITCH_CM, element_size_cm=2.2)
+    return lay.with_orientation("bed")
 
 
 def bed_mat(seed: int = 7, failures: bool = True) -> VirtualMat:

@@ -156,7 +156,7 @@ class VirtualMat:
             pitch_cm=SEAT_PITCH_CM,
             active=seat_checkerboard(),
             element_size_cm=2.0,
-        )
+        ).with_orientation("seat")  # row 0 is the front edge, the backrest is below
         return cls(layout, spacer, **kwargs)  # type: ignore[arg-type]
 
     @classmethod

@@ -335,15 +335,16 @@ def read_mat_credentials(path: Path) -> dict[str, str]:
 def _write_mat_credentials(path: Path, creds: dict[str, str]) -> None:
     import json
 
-    from texsense.files import write_text
+    from texsense.files import atomic_path
 
     text = (
         "# MQTT credentials of the mats for the broker of `texsense station` (keep private):\n"
         "# a mat logs in with its id as the user name and publishes to <prefix>/<id>/frames.\n"
         "[mats]\n" + "".join(f"{json.dumps(k)} = {json.dumps(v)}\n" for k, v in creds.items())
     )
-    write_text(path, text)  # a temporary file of mode 0600, renamed: private from the start
-    os.chmod(path, 0o600)
+    with atomic_path(path) as tmp:  # written privately, then renamed over the old one
+        os.chmod(tmp, 0o600)
+        tmp.write_text(text, encoding="utf-8")
 
 
 def station_broker(

@@ -7,8 +7,8 @@ second to every viewer: tens of megabytes a second each.
 
 - :class:`BlockMap` turns a mat's pressure map into a grid of at most :data:`MAX_SIDE` x
   :data:`MAX_SIDE` blocks (the highest reading of each block: peaks matter for pressure
-  injuries), one byte each relative to the tile's own peak (at least 0.5 N/cm², as the tiles
-  were always drawn), base64: 344 characters for a 32 x 32 mat, 324 for a 64 x 32 bed.
+  injuries), one byte each: the pressure in mmHg, 0-250 (the ward draws 0-100 mmHg), base64:
+  344 characters for a 32 x 32 mat, 324 for a 64 x 32 bed.
 - :class:`WardFeed` is one viewer's feed. The first message has ``reset: true``; every
   message carries the broker's state and the tiles of the mats whose ``revision`` changed since
   this viewer got them, the most urgent first, as many as the viewer's byte budget allows
@@ -22,9 +22,11 @@ Examples
 >>> blocks = BlockMap(Layout.grid(64, 32))
 >>> (blocks.rows, blocks.cols)
 (22, 11)
->>> tile = blocks.encode(np.full(2048, 1.0))
->>> tile["rows"], tile["cols"], tile["top"], len(tile["b64"])
-(22, 11, 1.0, 324)
+>>> tile = blocks.encode(np.full(2048, 1.0))          # N/cm²: 75 mmHg
+>>> tile["rows"], tile["cols"], tile["unit"], len(tile["b64"])
+(22, 11, 'mmHg', 324)
+>>> base64.b64decode(tile["b64"])[0]
+75
 """
 
 from __future__ import annotations
@@ -50,9 +52,11 @@ TICK_S = 0.2
 MAX_BYTES_PER_S = 600_000
 #: A message at least this often, even when nothing changed, s.
 HEARTBEAT_S = 1.0
-#: Byte values of the map: 0..250 the reading relative to ``top``; these two mean no reading
-#: (a failed element) and no element.
+#: Byte values of the map: 0..250 the block's highest reading in mmHg (250: 250 or more);
+#: these two mean no reading (a failed element) and no element.
 NO_READING, NO_ELEMENT = 254, 255
+#: mmHg per N/cm² (texsense.units).
+MMHG_PER_NCM2 = 75.00615
 
 
 class BlockMap:
@@ -72,7 +76,7 @@ class BlockMap:
         self.has[self.block] = True
 
     def encode(self, pressure: np.ndarray) -> dict[str, Any] | None:
-        """The map of ``pressure`` (N/cm², NaN where unknown): rows, cols, top (N/cm²) and
+        """The map of ``pressure`` (N/cm², NaN where unknown): rows, cols, unit (mmHg) and
         the bytes in base64, row by row."""
         if not self.ok:
             return None
@@ -81,12 +85,11 @@ class BlockMap:
         valid = np.isfinite(v)
         np.maximum.at(out, self.block[valid], v[valid])
         read = np.isfinite(out)
-        top = max(0.5, float(out[read].max())) if read.any() else 0.5
         q = np.full(out.shape, NO_READING, np.uint8)
-        q[read] = np.clip(np.round(out[read] / top * 250.0), 0, 250).astype(np.uint8)
+        q[read] = np.clip(np.round(out[read] * MMHG_PER_NCM2), 0, 250).astype(np.uint8)
         q[~self.has] = NO_ELEMENT
         b64 = base64.b64encode(q.tobytes()).decode()
-        return {"rows": self.rows, "cols": self.cols, "top": round(top, 3), "b64": b64}
+        return {"rows": self.rows, "cols": self.cols, "unit": "mmHg", "b64": b64}
 
 
 class WardFeed:

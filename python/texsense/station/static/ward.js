@@ -1,23 +1,16 @@
 // texsense ward overview: one tile per mat, most urgent first. No build step, no dependencies.
 // The WebSocket sends only the tiles that changed (docs/station.md, "The ward page's feed"),
-// each with its map downsampled to at most 24 x 24 blocks of one byte.
+// each with its map downsampled to at most 24 x 24 blocks of one byte: mmHg, 0-250.
 "use strict";
 const token = new URLSearchParams(location.search).get("token");
 const withToken = (url) => token ? url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token) : url;
 const $ = (id) => document.getElementById(id);
 const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "reposition!", acknowledged: "acknowledged", stale: "no data", refused: "refused" };
-const STOPS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37], [255, 255, 255]];
+const TOP_MMHG = 100;  // one fixed scale on every tile, 0-100 mmHg (the dashboards' preset)
 const NO_READING = 254, NO_ELEMENT = 255;
 const mats = new Map();   // id -> the latest tile data
 const tiles = new Map();  // id -> its element
 let wall = 0;             // the station's clock at the latest message
-function colour(f) {
-  if (!Number.isFinite(f)) return "#e5e7eb";
-  f = Math.min(Math.max(f, 0), 1) * (STOPS.length - 2);
-  const i = Math.min(Math.floor(f), STOPS.length - 3), t = f - i;
-  const c = STOPS[i].map((v, k) => Math.round(v + t * (STOPS[i + 1][k] - v)));
-  return `rgb(${c[0]},${c[1]},${c[2]})`;
-}
 function drawMini(canvas, map) {
   const ctx = canvas.getContext("2d");
   ctx.clearRect(0, 0, canvas.width, canvas.height);
@@ -25,11 +18,11 @@ function drawMini(canvas, map) {
   const bytes = Uint8Array.from(atob(map.b64), (ch) => ch.charCodeAt(0));
   const s = Math.min(canvas.width / map.cols, canvas.height / map.rows);
   const ox = (canvas.width - s * map.cols) / 2, oy = (canvas.height - s * map.rows) / 2;
-  // each tile to its own peak (at least 0.5 N/cm²; the station scales the bytes so)
+  // one colour is one pressure on every mat of the ward (each byte: the block's peak, mmHg)
   bytes.forEach((v, k) => {
     if (v === NO_ELEMENT) return;
     const r = Math.floor(k / map.cols), c = k % map.cols;
-    ctx.fillStyle = v === NO_READING ? "#d1d5db" : colour(v / 250);
+    ctx.fillStyle = v === NO_READING ? "#d1d5db" : colourOf("viridis", v / TOP_MMHG);
     ctx.fillRect(ox + c * s, oy + r * s, Math.ceil(s), Math.ceil(s));
   });
 }
@@ -114,4 +107,8 @@ function connect() {
   ws.onmessage = (m) => render(JSON.parse(m.data));
   ws.onclose = () => { $("broker").textContent = "station unreachable — retrying…"; setTimeout(connect, 1000); };
 }
+(function legend() {
+  const c = $("ward-scale"), ctx = c.getContext("2d");
+  for (let x = 0; x < c.width; x++) { ctx.fillStyle = colourOf("viridis", x / (c.width - 1)); ctx.fillRect(x, 0, 1, c.height); }
+})();
 connect();

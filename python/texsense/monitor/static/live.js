@@ -1,0 +1,213 @@
+// The live side of the dashboard: alerts in the mode's words, the bed's schedule, exposure,
+// events with clock times, the WebSocket, the controls and the start.
+"use strict";
+const EVENT_TEXT = {  // as texsense.review.EVENT_TEXT
+  seated: "sat down", left: "got up", "in-bed": "in bed", "out-of-bed": "out of bed",
+  loaded: "load on the mat", unloaded: "mat unloaded", reposition: "reposition alert",
+  acknowledged: "alert acknowledged", cleared: "alert cleared (skin offloaded)",
+  turn: "turned", "turn-due": "turn due", "turn-done": "turn alert closed",
+};
+const SIDE_COLOUR = { supine: "#2764c5", prone: "#7c3aed", left: "#059669", right: "#d97706", sitting: "#db2777" };
+
+function heat(f) {  // exposure: white -> orange -> dark red
+  if (!(f > 0)) return "#f3f4f6";
+  f = Math.min(f, 1);
+  return `rgb(${255 - Math.round(90 * f)},${Math.round(235 - 200 * f)},${Math.round(200 - 190 * f)})`;
+}
+
+function renderLive(f) {
+  const exp = last.exposure_s.map((v) => (v === null ? 0 : v));
+  const limit = status ? status.reposition_min * 60 : 1200;
+  drawExposure(exp, limit);
+  $("exposure-max").textContent = duration(limit);
+  $("posture").textContent = last.posture ? `${last.posture.label} (${fmt(100 * last.posture.confidence, 0)} %)` : (status && status.posture_model ? "nobody" : "no model");
+  $("posture").title = last.posture ? `vote over ${last.posture.window_s} s; this frame alone: ${last.posture.frame_label}` : "";
+  $("posture-truth").textContent = last.source.true_posture !== undefined
+    ? `simulated person: ${last.source.true_posture === null ? "away" : last.source.true_posture}` : "";
+  renderBed(last.bed, f);
+  renderAlert(last.alert, f);
+  $("record").classList.toggle("on", last.recording);
+  $("record").textContent = last.recording ? "■ stop recording" : "● record";
+  const src = last.source;
+  $("source").textContent = `${src.name} · ${src.elements} elements · ${src.errors} malformed input(s) skipped`;
+  $("status").textContent = `${duration(last.t - (live.length ? live[0].t0 : last.t))} shown · failed now: ${last.failed.length} (repaired ${last.repaired.length})`;
+}
+
+function drawExposure(exp, limit) {  // time above the threshold, white to dark red
+  const ctx = exposure.canvas.getContext("2d");
+  ctx.clearRect(0, 0, exposure.canvas.width, exposure.canvas.height);
+  exp.forEach((v, i) => { const [x, y, w, h] = exposure.rects[i]; ctx.fillStyle = heat(v / limit); ctx.fillRect(x, y, w, h); });
+}
+
+function renderAlert(a, f) {
+  $("alert").hidden = !a;
+  if (!a) return;
+  const m = view ? view.mode : { action: "reposition", advice: "shift weight or stand up" };
+  const thr = view && view.threshold_ncm2 ? `${fmt(view.threshold_ncm2 * f, digits())} ${LABEL[unit]}` : "the threshold";
+  const where = a.where && a.where.length ? ` at ${a.where.slice(0, 4).join(", ")}${a.where.length > 4 ? ` and ${a.where.length - 4} more` : ""}` : "";
+  const head = m.action.charAt(0).toUpperCase() + m.action.slice(1);
+  $("alert").classList.toggle("acked", !a.active);
+  $("alert-text").textContent = a.active
+    ? `${head}: pressure above ${thr} for ${duration(a.peak_exposure_s)}${where} — ${m.advice}.`
+    : `${head} alert acknowledged (${duration(a.peak_exposure_s)}${where}); it clears once the skin is offloaded.`;
+  $("ack").hidden = !a.active;
+  $("ack").dataset.id = a.id;
+}
+
+function renderBed(bed, f) {
+  $("bed").hidden = !bed;
+  $("turn-alert").hidden = !(bed && bed.turn_due);
+  if (!bed) return;
+  $("since-turn").textContent = bed.since_turn_s === null ? "out of bed" : `${duration(bed.since_turn_s)} ${bed.side}`;
+  const overdue = bed.due_in_s !== null && bed.due_in_s < 0;
+  $("due-label").textContent = overdue ? "turn overdue by" : "next turn due in";
+  $("due-in").textContent = bed.due_in_s === null ? "–" : duration(Math.abs(bed.due_in_s));
+  $("due-in").classList.toggle("overdue", overdue);
+  if (bed.turn_due) $("turn-alert-text").textContent = `Turn due: ${duration(bed.since_turn_s)} on the ${bed.side} side (schedule: every ${duration(bed.interval_s)}).`;
+  const total = Object.values(bed.time_per_side_s).reduce((a, b) => a + b, 0) || 1;
+  $("sides").replaceChildren(...Object.entries(bed.time_per_side_s).map(([side, s]) => {
+    const row = document.createElement("div"); row.className = "side-row";
+    const name = document.createElement("span"); name.textContent = side;
+    const bar = document.createElement("span"); bar.className = "bar";
+    bar.style.width = `${Math.round(140 * s / total)}px`; bar.style.background = SIDE_COLOUR[side] || "#677189";
+    const val = document.createElement("span"); val.className = "small"; val.textContent = duration(s);
+    row.append(name, bar, val); return row;
+  }));
+  $("regions").replaceChildren(...bed.regions.map((r) => {
+    const li = document.createElement("li"); li.className = r.at_risk ? "risk" : "";
+    li.textContent = `${r.name}: ${fmt(r.peak_ncm2 * f, digits())} ${LABEL[unit]}`;
+    return li;
+  }));
+}
+
+async function api(path, method = "GET", body = undefined) {
+  const r = await fetch(withToken(BASE + path), { method, body, headers: body ? { "Content-Type": "application/json" } : {} });
+  if (!r.ok) { const d = await r.json().catch(() => ({})); throw new Error(`${method} ${path}: ${r.status} ${d.detail || ""}`); }
+  return r.json();
+}
+
+let sessionStart = null;
+async function refreshEvents() {
+  if (!status || PB.active) return;
+  try {
+    if (sessionStart === null) {
+      const s = (await api("/api/sessions")).find((x) => x.id === status.session);
+      sessionStart = s ? s.started : 0;
+      if (s) $("session-start").textContent = `session started ${new Date(s.started * 1000).toLocaleString()}`;
+    }
+    const events = await api(`/api/events?session=${status.session}&limit=12`);
+    $("events").replaceChildren(...events.map((e) => {
+      const li = document.createElement("li");
+      const when = document.createElement("span"); when.className = "when"; when.textContent = new Date(e.wall * 1000).toLocaleTimeString();
+      when.title = `${duration(e.t - (live.length ? live[0].t0 : 0))} into the session`;
+      const what = document.createElement("span"); what.className = e.kind;
+      let text = EVENT_TEXT[e.kind] || e.kind;
+      if (e.kind === "turn") text += ` ${e.detail.from} → ${e.detail.to} after ${duration(e.detail.after_s)}`;
+      if (e.detail && Array.isArray(e.detail.where) && e.detail.where.length) text += `: ${e.detail.where.slice(0, 4).join(", ")}`;
+      what.textContent = text;
+      li.append(when, what);
+      return li;
+    }));
+  } catch (err) { /* the next refresh tries again; the connection line shows outages */ }
+}
+
+let drawing = false;  // one render per animation frame, however many snapshots came
+function onSnapshot(snap) {
+  last = snap;
+  const st = snap.stats, t0 = live.length ? live[0].t0 : snap.t;
+  live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null });
+  if (live.length > 1200) { const t00 = live[0].t0; live.shift(); live.forEach((p) => { p.t0 = t00; }); }
+  if (!PB.active && !drawing) { drawing = true; requestAnimationFrame(() => { drawing = false; render(); }); }
+}
+function connect() {
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  const ws = new WebSocket(withToken(`${proto}://${location.host}${BASE}/ws`));
+  ws.onmessage = (m) => onSnapshot(JSON.parse(m.data));
+  ws.onclose = () => { $("source").textContent = "disconnected — retrying…"; setTimeout(connect, 1000); };
+}
+
+function layoutMaps() {  // the map of the live mat or of the recording open
+  const lay = PB.active ? PB.info.layout : status.layout;
+  map.setLayout(lay, PB.active ? PB.info.orientation : view.orientation);
+  exposure.setLayout(status.layout, view.orientation, true);
+  $("exposure-panel").hidden = !view.mode.alerts || PB.active;
+  fillPresets();
+  autoTop = 0;
+  syncRange();
+}
+
+function wire() {
+  $("show-pressure").onclick = () => { mode = "pressure"; $("show-pressure").classList.add("on"); $("show-raw").classList.remove("on"); fillPresets(); render(); };
+  $("show-raw").onclick = () => { mode = "raw"; rawTop = null; $("show-raw").classList.add("on"); $("show-pressure").classList.remove("on"); render(); };
+  $("unit").onchange = (e) => { unit = e.target.value; saved.set("unit", unit); updateThreshold(); syncRange(); render(); };
+  $("cmap").onchange = (e) => { saved.set("cmap", e.target.value); render(); };
+  $("scale-preset").onchange = (e) => { saved.set(`scale.${modeName()}.${pressureShown() ? "p" : "v"}`, e.target.value); autoTop = 0; syncRange(); render(); };
+  for (const id of ["scale-min", "scale-max"]) {
+    $(id).onchange = () => {
+      const f = pressureShown() ? FACTOR[unit] : 1, lo = Number($("scale-min").value), hi = Number($("scale-max").value);
+      if (!(hi > lo)) return;
+      saved.set(`range.${modeName()}.${pressureShown() ? "p" : "v"}`, [lo / f, hi / f]);
+      saved.set(`scale.${modeName()}.${pressureShown() ? "p" : "v"}`, "custom");
+      $("scale-preset").value = "custom"; render();
+    };
+  }
+  $("ack").onclick = async (e) => { await api(`/api/alerts/${e.target.dataset.id}/ack`, "POST"); };
+  $("record").onclick = async () => { await api(last && last.recording ? "/api/record/stop" : "/api/record/start", "POST"); PB.list(); };
+  $("roi-save").onclick = saveRois;
+}
+function syncRange() {  // the range boxes show the scale in use
+  const f = pressureShown() ? FACTOR[unit] : 1;
+  const raw = PB.active && PB.frame ? PB.frame.values : last ? last.pressure : [];
+  const values = (raw || []).map((v) => (v === null ? null : v * f));
+  const sc = scale(values), d = pressureShown() ? digits() : 0;
+  $("scale-min").value = fmt(sc[0], d); $("scale-max").value = fmt(sc[1], d);
+}
+function updateThreshold() {
+  if (!status) return;
+  const t = status.threshold;
+  $("threshold").textContent = `${fmt(t.ncm2 * FACTOR[unit], digits())} ${LABEL[unit]} (alert after ${duration(status.reposition_min * 60)})`;
+}
+async function saveRois() {
+  if (!PB.active) return;
+  try {
+    const r = await api(`/api/playback/${encodeURIComponent(PB.name)}/rois`, "PUT", JSON.stringify(ROI.list));
+    PB.roiStats = r.stats;
+    $("roi-save").textContent = "saved ✓";
+  } catch (err) { $("roi-save").textContent = "not saved"; $("source").textContent = String(err); }
+  render();
+}
+
+function onPlayback(what) {
+  if (what === "close") { ROI.list = saved.get("rois.live", []); PB.roiStats = null; layoutMaps(); refreshEvents(); render(); return; }
+  if (what === "frame" && PB.info && !PB.opened) {  // the first frame of a recording just opened
+    PB.opened = true; ROI.list = PB.info.rois.slice(); PB.roiStats = null; layoutMaps();
+    $("roi-save").textContent = "save with the recording";
+    if (ROI.list.length) saveRois();
+  }
+  render();
+}
+
+async function start() {
+  wire();
+  ROI.init(map, (changed) => {
+    if (changed && !PB.active) saved.set("rois.live", ROI.list);
+    if (changed && PB.active) $("roi-save").textContent = "save with the recording";
+    $("roi-save").hidden = !PB.active;
+    render();
+  });
+  PB.init(onPlayback);
+  const open = PB.open.bind(PB);
+  PB.open = async (name) => { PB.opened = false; await open(name); $("roi-save").hidden = false; };
+  $("cmap").value = saved.get("cmap", "viridis");
+  try {
+    [status, view] = await Promise.all([api("/api/status"), api("/api/view")]);
+  } catch (e) { $("source").textContent = String(e); return; }
+  unit = saved.get("unit", view.mode.unit);
+  $("unit").value = unit;
+  ROI.list = saved.get("rois.live", []);
+  layoutMaps(); syncRange(); updateThreshold();
+  connect(); refreshEvents(); PB.list();
+  setInterval(refreshEvents, 2000);
+  setInterval(() => PB.list(), 10000);
+}
+start();

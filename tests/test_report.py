@@ -1,0 +1,147 @@
+"""``texsense report`` (docs/report.md) on a real PMD subject, a real Tekscan export and a
+processed virtual bed night: a PDF of several pages whose tables are text (read back with
+Debian's ``pdftotext``), the HTML, the regions saved with a recording, and the numbers in
+the tables checked against the recording itself."""
+
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from texsense import Layout, Recording, load
+from texsense.cli import main
+from texsense.io import save
+from texsense.report import write_report
+from texsense.review import open_review
+from texsense.roi import save_rois
+
+
+def pdf_text(path) -> str:
+    exe = shutil.which("pdftotext")
+    if exe is None:
+        pytest.fail("pdftotext is missing: install Debian's poppler-utils (scripts/test.sh does)")
+    return subprocess.run([exe, "-layout", str(path), "-"], capture_output=True, text=True,
+                          check=True).stdout  # fmt: skip
+
+
+def pages(path) -> int:
+    return pdf_text(path).count("\f")
+
+
+@pytest.fixture(scope="module")
+def night(tmp_path_factory):
+    """4 h of a simulated person on the virtual bed, a frame a minute, through the mat and
+    the pipeline (positions held 20 min to 2 h: turns), as a monitor would record it."""
+    from texsense.workflows import processed_bed_night
+
+    path = tmp_path_factory.mktemp("night") / "night.h5"
+    save(processed_bed_night(hours=4.0, frame_s=60.0, seed=0), path)
+    return path
+
+
+def test_report_of_a_pmd_subject(shared_data, tmp_path):
+    subject = shared_data / "pmd" / "experiment-i" / "S2"
+    out = tmp_path / "s2.pdf"
+    assert main(["report", str(subject), "-o", str(out)]) == 0
+    text = pdf_text(out)
+    assert pages(out) >= 4
+    for words in ("Pressure report: S2", "Vista Medical FSA SoftFlex 2048", "raw in count",
+                  "head (assumed)", "Time per side", "posture_class", "Sensor health"):  # fmt: skip
+        assert words in text, words
+    rec = load(subject)
+    assert f"{rec.n_frames} frames" in text
+    assert f"{int((~rec.labels['reliable']).sum())} frames the reader labels unreliable" in text
+    # the turns in the table are the changes of the file's side (17 files back to back)
+    review = open_review(rec)
+    cls = rec.labels["posture_class"]
+    changes = int(np.sum(cls[1:] != cls[:-1]))
+    assert 0 < review.sides["turns"] <= changes
+    assert re.search(rf"^\s*turns\s+{review.sides['turns']}\s*$", text, re.MULTILINE)
+
+
+def test_report_of_a_tekscan_export(shared_data, tmp_path):
+    src = shared_data / "vendor-formats" / "fscan_testL.asf"
+    out = tmp_path / "fscan.html"
+    write_report(src, out)
+    html = out.read_text()
+    assert '<td class="l">foot</td>' in html and "kPa" in html
+    assert "2017-02-16 11:26:22" in html  # the export's own start time
+    assert html.count("data:image/png;base64,") == 3
+    pdf = tmp_path / "fscan.pdf"
+    write_report(src, pdf)
+    text = pdf_text(pdf)
+    assert "0-600 kPa (fixed)" in text and "tekscan-ascii" in text
+
+
+def test_report_of_a_virtual_night_with_regions(night, tmp_path):
+    save_rois(night, [{"name": "my heel box", "kind": "box", "points": [[30, 140], [50, 162]]}])
+    out = tmp_path / "night.pdf"
+    assert main(["report", str(night), "-o", str(out)]) == 0
+    text = pdf_text(out)
+    review = open_review(night)
+    assert "my heel box" in text and "region(s) of interest drawn by the user" in text
+    assert "calibration id" in text and load(night).meta["calibration_id"] in text
+    assert "0-100 mmHg (fixed)" in text and "32 mmHg held 20 min" in text
+    # the events table lists what the review recomputed, with their places
+    for e in review.events:
+        assert e["text"].split(":")[0] in text
+    alerts = [e for e in review.events if e["kind"] == "reposition"]
+    assert alerts and all(e["detail"]["where"] for e in alerts)
+    assert review.sides["turns"] >= 1 and f"{review.sides['turns']} turn(s)" in text
+    # per side, the at-risk regions found on that side's mean map
+    sides = [s for s in review.sides["time_per_side_s"] if s != "transition"]
+    assert any(f"({s})" in text for s in sides)
+
+
+def test_region_numbers_match_the_recording(tmp_path):
+    """A 2 x 2 mat: the region table's mean, peak and time above the threshold by hand."""
+    lay = Layout.grid(2, 2, pitch_cm=2.0)
+    mmhg = np.array([[10, 50, 0, 0], [20, 60, 0, 0], [30, 20, 0, 0]], float)
+    rec = Recording(mmhg / 75.00615, [0.0, 60.0, 120.0], lay, meta={"mode": "seat"})
+    path = tmp_path / "tiny.h5"
+    save(rec, path)
+    rois = [{"name": "top row", "kind": "box", "points": [[0, 0], [4, 2]]}]
+    out = tmp_path / "tiny.html"
+    write_report(path, out, rois=rois)
+    html = out.read_text()
+    row = html.split("top row</td>")[1].split("</tr>")[0]
+    cells = [c.split(">")[1].split("<")[0] for c in row.split("<td")[1:]]
+    # elements, area, mean of the loaded frames' means (30, 40, 25), highest, time > 32 mmHg
+    assert cells == ["2", "8", "32", "60", "2 min"]
+
+
+def test_report_refuses_to_replace_its_input(night, tmp_path, capsys):
+    copy = tmp_path / "n.h5"
+    shutil.copyfile(night, copy)
+    before = copy.read_bytes()
+    assert main(["report", str(copy), "-o", str(tmp_path / "n.h5")]) == 1
+    assert "a report is .pdf or .html" in capsys.readouterr().err
+    assert copy.read_bytes() == before
+
+
+@pytest.mark.skipif(os.environ.get("TEXSENSE_REPORT_PAGES") is None, reason="docs images only")
+def test_render_report_pages_for_the_docs(night, shared_data):
+    """TEXSENSE_REPORT_PAGES=docs/img renders the first pages of two reports as PNG."""
+    target = os.environ["TEXSENSE_REPORT_PAGES"]
+    for name, src in (("night", night), ("pmd", shared_data / "pmd/experiment-i/S2")):
+        out = f"/tmp/report-{name}.pdf"
+        write_report(src, out)
+        subprocess.run(["pdftoppm", "-r", "70", "-png", "-f", "1", "-l", "3", out,
+                        f"{target}/report_{name}"], check=True)  # fmt: skip
+
+
+def test_health_finds_a_dead_element_inside_the_load_not_the_edges():
+    from texsense.review_events import element_health
+
+    lay = Layout.grid(8, 8)
+    m = np.zeros((20, 8, 8))
+    m[:, 2:6, 2:6] = np.linspace(0.5, 1.0, 20)[:, None, None]  # a loaded square, edges empty
+    m[:, 3, 4] = 0.0  # a dead element inside it
+    valid = np.ones((20, 64), bool)
+    valid[5:10, lay.element_at(0, 0)] = False  # a reading flagged invalid for 5 frames
+    h = element_health(Recording(lay.from_grid(m), np.arange(20.0), lay, valid=valid))
+    assert np.flatnonzero(h["silent"]).tolist() == [lay.element_at(3, 4)]
+    assert h["invalid_share"][lay.element_at(0, 0)] == 0.25 and h["invalid_share"].sum() == 0.25

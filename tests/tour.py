@@ -1,0 +1,242 @@
+"""The tour runner: every ``console`` block of the README and of docs/*.md runs as written.
+
+Rules (also in docs/development.md):
+
+- A page's blocks run in order, in one fresh folder of their own that holds only ``.venv``
+  (a link to the repository's) and, one level up, ``shared`` (a link to the real data), so
+  that ``.venv/bin/texsense ...`` and ``../shared/data/...`` work as written; ``bash
+  scripts/...`` and ``benchmarks/...`` are linked in too.
+- ``$ `` starts a command (a line ending in ``\\`` continues it); the lines after it, up to
+  the next command, are its expected output, compared as doctest does (``...`` matches
+  anything, whitespace runs are equal). A command with no output shown only has to succeed.
+- Servers (``texsense monitor``, ``texsense station``, ``texsense simulate device``, ``bash
+  scripts/run.sh``) start in the background; the runner waits until they answer (their
+  page, or the device's link) and stops them with Ctrl-C (SIGINT) at the end of the
+  block, or before the next server of the block starts. The one thing the runner adds to a
+  command: a free ``--port`` to a monitor or station that names none (tests run side by side).
+- A command with a trailing comment ``# needs: ...`` (outside hardware, a site broker, a
+  cluster) is skipped and listed with its reason.
+"""
+
+from __future__ import annotations
+
+import doctest
+import os
+import re
+import signal
+import socket
+import subprocess
+import time
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BLOCK = re.compile(r"^```console\n(.*?)^```", re.DOTALL | re.MULTILINE)
+NEEDS = re.compile(r"#\s*needs:\s*(.+)$")
+SERVERS = (
+    re.compile(r"(^|\s)(\S*texsense)\s+(monitor|station)(\s|$)"),
+    re.compile(r"(^|\s)(\S*texsense)\s+simulate\s+device(\s|$)"),
+    re.compile(r"(^|\s)bash\s+scripts/run\.sh(\s|$)"),
+)
+_CHECKER = doctest.OutputChecker()
+_FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
+
+
+@dataclass
+class Command:
+    """One ``$`` line of a page (continuations joined) and the output the page shows."""
+
+    page: str
+    block: int
+    text: str
+    expected: str = ""
+
+    @property
+    def needs(self) -> str | None:
+        """Why it cannot run here (a ``# needs:`` comment), else None."""
+        m = NEEDS.search(self.text)
+        return m.group(1).strip() if m else None
+
+    @property
+    def is_server(self) -> bool:
+        """Whether it runs until stopped."""
+        return any(p.search(self.text) for p in SERVERS)
+
+
+@dataclass
+class Outcome:
+    """What happened to the commands of one page."""
+
+    ran: list[str] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+
+
+def commands(page: Path) -> list[Command]:
+    """The commands of ``page``, in order."""
+    out: list[Command] = []
+    for k, body in enumerate(BLOCK.findall(page.read_text(encoding="utf-8"))):
+        current: Command | None = None
+        lines = iter(body.splitlines())
+        for line in lines:
+            if line.startswith("$ "):
+                text = line[2:]
+                while text.endswith("\\"):
+                    text = text[:-1] + " " + next(lines, "").strip()
+                current = Command(page.name, k, text)
+                out.append(current)
+            elif current is not None:
+                current.expected += line + "\n"
+    return out
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _prepare(folder: Path, shared: Path) -> Path:
+    """The fresh folder ``folder/work`` beside ``folder/shared``."""
+    work = folder / "work"
+    work.mkdir(parents=True)
+    (folder / "shared").symlink_to(shared.resolve())
+    for name in (".venv", "scripts", "benchmarks"):
+        (work / name).symlink_to(ROOT / name)
+    return work
+
+
+class _Server:
+    def __init__(self, cmd: Command, work: Path, env: dict[str, str]) -> None:
+        text = cmd.text
+        self.port: int | None = None
+        if re.search(r"texsense\s+(monitor|station)|scripts/run\.sh", text):
+            m = re.search(r"--port[ =](\d+)", text)
+            if m:
+                self.port = int(m.group(1))
+            else:
+                self.port = _free_port()
+                text = _strip_comment(text) + f" --port {self.port}"
+        self.link = None
+        m = re.search(r"--link[ =](\S+)", text)
+        if m:
+            self.link = work / m.group(1)
+        self.cmd = cmd
+        self.log = work / f".tour-server-{time.monotonic_ns()}.log"
+        with self.log.open("wb") as log:
+            self.proc = subprocess.Popen(
+                ["bash", "-c", "exec " + text],
+                cwd=work,
+                env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+
+    def ready(self, timeout: float = 180.0) -> str | None:
+        """None once it answers; else what went wrong."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                return f"exited with {self.proc.returncode} before it was ready"
+            if self.port is not None:
+                try:
+                    url = f"http://127.0.0.1:{self.port}/"
+                    with urllib.request.urlopen(url, timeout=2) as r:
+                        if r.status == 200:
+                            return None
+                except OSError:
+                    pass
+            elif self.link is not None and self.link.exists():
+                return None
+            time.sleep(0.2)
+        return f"not ready after {timeout:.0f} s"
+
+    def stop(self) -> str | None:
+        """Ctrl-C; None if it stopped cleanly within 10 s."""
+        if self.proc.poll() is not None:
+            return f"had exited with {self.proc.returncode}"
+        os.killpg(self.proc.pid, signal.SIGINT)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+            return "did not stop within 10 s of Ctrl-C"
+        if "Traceback" in self.output():
+            return "printed a traceback"
+        return None
+
+    def output(self) -> str:
+        return self.log.read_text(errors="replace")
+
+
+def _strip_comment(text: str) -> str:
+    """The command without a trailing ``# comment`` (a ``#`` after a space, outside quotes)."""
+    quote = None
+    for i, ch in enumerate(text):
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "'\"":
+            quote = ch
+        elif ch == "#" and (i == 0 or text[i - 1].isspace()):
+            return text[:i].rstrip()
+    return text
+
+
+def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) -> Outcome:
+    """Run every command of ``page`` in a fresh folder under ``folder``."""
+    work = _prepare(folder, shared)
+    env = dict(os.environ, TEXSENSE_NO_PROGRESS="1", COLUMNS="100")
+    env.pop("PYTEST_CURRENT_TEST", None)
+    outcome = Outcome()
+    servers: list[_Server] = []
+    block = -1
+
+    def stop_servers() -> None:
+        for s in servers:
+            why = s.stop()
+            if why:
+                outcome.failures.append(f"{s.cmd.text}\n  {why}\n{s.output()[-2000:]}")
+        servers.clear()
+
+    for cmd in commands(page):
+        if cmd.block != block:
+            stop_servers()
+            block = cmd.block
+        if cmd.needs:
+            outcome.skipped.append((cmd.text, cmd.needs))
+            continue
+        if cmd.is_server:
+            if not re.search(r"simulate\s+device", cmd.text):
+                stop_servers()  # alternatives of one block: one at a time
+            server = _Server(cmd, work, env)
+            servers.append(server)
+            why = server.ready()
+            outcome.ran.append(cmd.text)
+            if why:
+                outcome.failures.append(f"{cmd.text}\n  {why}\n{server.output()[-3000:]}")
+            continue
+        proc = subprocess.run(
+            ["bash", "-c", cmd.text],
+            cwd=work,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
+        outcome.ran.append(cmd.text)
+        if proc.returncode != 0:
+            outcome.failures.append(
+                f"{cmd.text}\n  exit {proc.returncode}\n{proc.stderr[-3000:]}{proc.stdout[-1000:]}"
+            )
+        elif cmd.expected.strip() and not _CHECKER.check_output(
+            cmd.expected, proc.stdout + proc.stderr, _FLAGS
+        ):
+            outcome.failures.append(
+                f"{cmd.text}\n  output differs from the page:\n--- page\n{cmd.expected}"
+                f"--- got\n{proc.stdout}{proc.stderr}"
+            )
+    stop_servers()
+    return outcome
