@@ -191,19 +191,29 @@ def _values(vals: list[Any], n: int) -> np.ndarray:
     """The values of a payload: numbers, ``null`` for a failed reading (NaN). One numpy
     conversion for the common case of plain numbers; the element-wise check names the first
     bad value otherwise."""
-    if all(type(v) is float or type(v) is int for v in vals):  # not bool, str, None
-        values = np.array(vals, dtype=np.float64)
+    if set(map(type, vals)) <= {float, int}:  # not bool, str, None (one pass in C)
+        try:
+            values = np.array(vals, dtype=np.float64)
+        except OverflowError:  # an integer beyond any float: named below
+            values = np.empty(0)
         if values.shape == (n,) and np.all(np.isfinite(values)):
             return values
     values = np.empty(n)
     for i, v in enumerate(vals):
         if v is None:
             values[i] = np.nan
-        elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+        elif isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v):
             values[i] = v
         else:
             raise ProtocolError(f"value {i + 1} is not a finite number or null")
     return values
+
+
+def _finite(v: float) -> bool:
+    try:
+        return math.isfinite(v) and math.isfinite(float(v))
+    except OverflowError:  # an integer beyond any float
+        return False
 
 
 def parse_mqtt_payload(
@@ -230,7 +240,7 @@ def parse_mqtt_payload(
     seq, t, vals = d["seq"], d["t"], d["values"]
     if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
         raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {str(seq)[:20]!r}")
-    if not isinstance(t, (int, float)) or isinstance(t, bool) or not math.isfinite(t):
+    if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
         raise ProtocolError(f"'t' must be a finite number, got {str(t)[:20]!r}")
     if not isinstance(vals, list):
         raise ProtocolError(f"'values' must be a list of {n_elements} numbers")
@@ -252,7 +262,7 @@ def parse_mqtt_payload(
         et = d["element_times"]
         ok = isinstance(et, list) and len(et) == n_elements
         if not ok or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in et
+            isinstance(x, (int, float)) and not isinstance(x, bool) and _finite(x) for x in et
         ):
             raise ProtocolError(f"'element_times' must be {n_elements} finite numbers")
         times = np.asarray(et, dtype=np.float64)
@@ -260,6 +270,8 @@ def parse_mqtt_payload(
         dt = d.get("dt", 0.0)
         if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt >= 0:
             raise ProtocolError("'dt' must be a number >= 0")
+        if not _finite(dt):
+            raise ProtocolError("'t' + 'dt' x elements is not a finite time")
         times = float(t) + float(dt) * np.arange(n_elements)
         if not np.isfinite(times[-1]):
             raise ProtocolError("'t' + 'dt' x elements is not a finite time")

@@ -592,7 +592,11 @@ class MQTTSource(Source):
         return frame
 
     def _on_message(self, _client: Any, _userdata: Any, msg: Any) -> None:
-        frame = self.handle(msg.payload)
+        try:
+            frame = self.handle(msg.payload)
+        except Exception as e:  # never end paho's network thread: counted, said once
+            self._bad(f"message {self.messages}", e)
+            return
         if frame is not None and self._loop is not None:
             with contextlib.suppress(RuntimeError):  # the loop has closed
                 self._loop.call_soon_threadsafe(self._put, frame)

@@ -470,7 +470,12 @@ class Station:
         if entry is None:
             self._unknown((mat or topic)[:120], now)
             return
-        entry.handle(payload, now)
+        try:
+            entry.handle(payload, now)
+        except Exception as e:  # a case nobody foresaw: one line, counted, the ward goes on
+            entry.failed += 1
+            self.quiet.warn(f"mat {entry.id}", "failed", f"message {entry.messages} could not "
+                            f"be handled ({type(e).__name__}: {e})")  # fmt: skip
 
     def _unknown(self, key: str, now: float) -> None:
         """Count a message for an unknown mat (bounded: :data:`UNKNOWN_MAX` keys)."""
