@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -92,10 +93,20 @@ async def viewer(url: str, latencies: list[float], stop: float) -> None:
             latencies.append(time.time() - snap["t"])
 
 
-async def ward_viewer(url: str, got: dict, stop: float, settle: float) -> None:
-    """Count what a ward page's WebSocket receives after ``settle`` (wall time)."""
-    import websockets
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
+
+# The ward page's viewers, in a process of their own (receiving megabytes a second must not
+# slow the dashboards' viewers, whose latency is measured): each counts what it receives
+# after the settling time, the counts go to stdout as JSON.
+WARD_VIEWERS = r"""
+import asyncio, json, sys, time
+import websockets
+url, n, stop, settle = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
+async def viewer(got):
     async with websockets.connect(url, max_size=None) as ws:
         while time.time() < stop:
             try:
@@ -106,6 +117,12 @@ async def ward_viewer(url: str, got: dict, stop: float, settle: float) -> None:
                 got["bytes"] += len(text)
                 got["messages"] += 1
                 got["tiles"] += text.count('"map":')
+async def main():
+    got = [{"bytes": 0, "messages": 0, "tiles": 0} for _ in range(n)]
+    await asyncio.gather(*(viewer(g) for g in got))
+    print(json.dumps(got))
+asyncio.run(main())
+"""
 
 
 def run_load(
@@ -143,19 +160,31 @@ def run_load(
         start = time.time()
         stop = start + seconds
         watched = [f"m{m:03d}" for m in np.linspace(0, mats - 1, min(5, mats)).astype(int)]
-        wards = [{"bytes": 0, "messages": 0, "tiles": 0} for _ in range(ward_viewers)]
+        wards_proc = None
+        if ward_viewers:
+            wards_proc = subprocess.Popen(
+                [sys.executable, "-c", WARD_VIEWERS, f"ws://127.0.0.1:{port}/ws/ward",
+                 str(ward_viewers), str(stop), str(start + 5.0)],
+                stdout=subprocess.PIPE, text=True,
+            )  # fmt: skip
+
+        async def station_cpu() -> None:  # the station's CPU over the measuring window
+            await asyncio.sleep(5.0)
+            t0, c0 = time.time(), cpu_seconds(st.pid)
+            await asyncio.sleep(max(stop - time.time(), 0.0))
+            cpu.append((cpu_seconds(st.pid) - c0) / (time.time() - t0))
+
+        cpu: list[float] = []
 
         async def view_all() -> None:
             await asyncio.gather(*(
                 viewer(f"ws://127.0.0.1:{port}/mats/{w}/ws", latencies, stop) for w in watched
-            ), *(
-                ward_viewer(f"ws://127.0.0.1:{port}/ws/ward", got, stop, start + 5.0)
-                for got in wards
-            ))  # fmt: skip
+            ), station_cpu())  # fmt: skip
 
         asyncio.run(view_all())
         out, _ = pub.communicate(timeout=120)
         sent = json.loads(out)
+        wards = json.loads(wards_proc.communicate(timeout=60)[0]) if wards_proc else []
         time.sleep(1.0)  # the station drains what is in flight
         with urllib.request.urlopen(base + "api/mats", timeout=30) as r:
             rows = json.load(r)
@@ -174,6 +203,7 @@ def run_load(
             "mats": mats, "hz": hz, "sent": sent["sent"], "processed": processed,
             "lost": sent["sent"] - processed, "p50": float(np.percentile(lat, 50)),
             "p99": float(np.percentile(lat, 99)), "views": lat.size, **ward,
+            "cpu": 100 * cpu[0] if cpu else float("nan"),
         }  # fmt: skip
     finally:
         st.kill()
@@ -207,9 +237,9 @@ def main() -> None:
             print("|---:|---:|---:|---:|---:|---:|---:|---|")
         else:
             print("| mats (1024 elements) | rate | ward viewers | frames published | processed "
-                  "| lost | frame-to-viewer p50 | p99 | each ward viewer | messages/s | tiles/s "
-                  "| before (whole ward 5/s) |")  # fmt: skip
-            print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+                  "| lost | frame-to-viewer p50 | p99 | station CPU | each ward viewer | "
+                  "messages/s | tiles/s | before (whole ward 5/s) |")  # fmt: skip
+            print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
         for mats, hz in loads:
             for n in viewers:
                 r = run_load(tmp, broker, mats, hz, args.seconds, n)
@@ -223,7 +253,7 @@ def main() -> None:
                 ward = (f" {r['ward_kBps']:.0f} kB/s | {r['ward_msgs']:.1f} | "
                         f"{r['ward_tiles']:.0f} | {r['before_MBps']:.1f} MB/s |" if n else
                         f" – | – | – | {r['before_MBps']:.1f} MB/s |")  # fmt: skip
-                print(f"{head} {n} |{tail}{ward}", flush=True)
+                print(f"{head} {n} |{tail} {r['cpu']:.0f} % |{ward}", flush=True)
 
 
 if __name__ == "__main__":

@@ -74,6 +74,11 @@ class BlockMap:
         self.block = (r // b) * self.cols + c // b
         self.has = np.zeros(self.rows * self.cols, bool)
         self.has[self.block] = True
+        # the elements sorted by block, where each block starts: one reduceat per map
+        self._order = np.argsort(self.block, kind="stable")
+        ordered = self.block[self._order]
+        self._starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
+        self._blocks = ordered[self._starts]
 
     def encode(self, pressure: np.ndarray) -> dict[str, Any] | None:
         """The map of ``pressure`` (N/cm², NaN where unknown): rows, cols, unit (mmHg) and
@@ -81,9 +86,9 @@ class BlockMap:
         if not self.ok:
             return None
         v = np.asarray(pressure, dtype=np.float64)
-        out = np.full(self.rows * self.cols, -np.inf)
-        valid = np.isfinite(v)
-        np.maximum.at(out, self.block[valid], v[valid])
+        out = np.full(self.rows * self.cols, np.nan)
+        with np.errstate(invalid="ignore"):
+            out[self._blocks] = np.fmax.reduceat(v[self._order], self._starts)  # NaN: no reading
         read = np.isfinite(out)
         q = np.full(out.shape, NO_READING, np.uint8)
         q[read] = np.clip(np.round(out[read] * MMHG_PER_NCM2), 0, 250).astype(np.uint8)

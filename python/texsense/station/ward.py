@@ -172,6 +172,7 @@ class MatEntry:
         self.version = 0
         self._mismatch: tuple[int, float, int] | None = None  # (run length, since, count)
         self._tile: tuple[int, str] | None = None
+        self._view: tuple[int, str, int] | None = None
 
     # ---------------------------------------------------------------- messages
     def _event(self, kind: str, detail: dict[str, Any]) -> None:
@@ -314,7 +315,13 @@ class MatEntry:
 
     def view_state(self) -> tuple[str, int]:
         """The state the ward shows (an open alert on a live mat shows as ``alert`` or
-        ``acknowledged``) and its urgency."""
+        ``acknowledged``) and its urgency (worked out once per revision)."""
+        revision = self.revision
+        if self._view is None or self._view[0] != revision:
+            self._view = (revision, *self._view_state())
+        return self._view[1], self._view[2]
+
+    def _view_state(self) -> tuple[str, int]:
         state = self.state
         alert = self.monitor.tracker.open_alert
         if state == "live" and alert is not None:
