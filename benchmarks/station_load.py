@@ -80,7 +80,8 @@ print(json.dumps({"sent": sent, "frames_per_mat": k}))
 """
 
 
-async def viewer(url: str, latencies: list[float], stop: float) -> None:
+async def receive(url: str, stop: float, each) -> None:
+    """Call ``each(text)`` for every message of a WebSocket until ``stop`` (wall time)."""
     import websockets
 
     async with websockets.connect(url, max_size=None) as ws:
@@ -89,40 +90,36 @@ async def viewer(url: str, latencies: list[float], stop: float) -> None:
                 text = await asyncio.wait_for(ws.recv(), timeout=max(0.1, stop - time.time()))
             except TimeoutError:
                 break
-            snap = json.loads(text)
-            latencies.append(time.time() - snap["t"])
+            each(text)
+
+
+async def viewer(url: str, latencies: list[float], stop: float) -> None:
+    """A dashboard's viewer: the latency of each snapshot."""
+    await receive(url, stop, lambda text: latencies.append(time.time() - json.loads(text)["t"]))
+
+
+def count(got: dict, settle: float):
+    """What a ward viewer counts of each message after ``settle`` (wall time)."""
+
+    def each(text: str) -> None:
+        if time.time() >= settle:
+            got["bytes"] += len(text)
+            got["messages"] += 1
+            got["tiles"] += text.count('"map":')
+
+    return each
+
+
+async def ward_viewers(url: str, n: int, stop: float, settle: float) -> list[dict]:
+    got = [{"bytes": 0, "messages": 0, "tiles": 0} for _ in range(n)]
+    await asyncio.gather(*(receive(url, stop, count(g, settle)) for g in got))
+    return got
 
 
 def cpu_seconds(pid: int) -> float:
     """User + system CPU time of a process (Linux /proc)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-# The ward page's viewers, in a process of their own (receiving megabytes a second must not
-# slow the dashboards' viewers, whose latency is measured): each counts what it receives
-# after the settling time, the counts go to stdout as JSON.
-WARD_VIEWERS = r"""
-import asyncio, json, sys, time
-import websockets
-url, n, stop, settle = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
-async def viewer(got):
-    async with websockets.connect(url, max_size=None) as ws:
-        while time.time() < stop:
-            try:
-                text = await asyncio.wait_for(ws.recv(), timeout=max(0.1, stop - time.time()))
-            except TimeoutError:
-                break
-            if time.time() >= settle:
-                got["bytes"] += len(text)
-                got["messages"] += 1
-                got["tiles"] += text.count('"map":')
-async def main():
-    got = [{"bytes": 0, "messages": 0, "tiles": 0} for _ in range(n)]
-    await asyncio.gather(*(viewer(g) for g in got))
-    print(json.dumps(got))
-asyncio.run(main())
-"""
 
 
 def run_load(
@@ -162,8 +159,10 @@ def run_load(
         watched = [f"m{m:03d}" for m in np.linspace(0, mats - 1, min(5, mats)).astype(int)]
         wards_proc = None
         if ward_viewers:
+            # in a process of their own: receiving megabytes a second must not slow the
+            # dashboards' viewers, whose latency is measured
             wards_proc = subprocess.Popen(
-                [sys.executable, "-c", WARD_VIEWERS, f"ws://127.0.0.1:{port}/ws/ward",
+                [sys.executable, __file__, "--ward-viewers-of", f"ws://127.0.0.1:{port}/ws/ward",
                  str(ward_viewers), str(stop), str(start + 5.0)],
                 stdout=subprocess.PIPE, text=True,
             )  # fmt: skip
@@ -218,7 +217,12 @@ def main() -> None:
     ap.add_argument("--loads", help="MATSxHZ,... (default: the table of docs/station.md)")
     ap.add_argument("--ward-viewers", default="0",
                     help="ward-page viewers, a row for each: e.g. 0,10")  # fmt: skip
+    ap.add_argument("--ward-viewers-of", nargs=4, help=argparse.SUPPRESS)  # (the subprocess)
     args = ap.parse_args()
+    if args.ward_viewers_of:
+        url, n, stop, settle = args.ward_viewers_of
+        print(json.dumps(asyncio.run(ward_viewers(url, int(n), float(stop), float(settle)))))
+        return
     viewers = [int(v) for v in args.ward_viewers.split(",")]
     loads = [(100, 1.0), (200, 1.0), (300, 1.0), (400, 1.0), (20, 10.0), (40, 10.0),
              (60, 10.0), (80, 10.0)]  # fmt: skip

@@ -191,7 +191,7 @@ def test_a_missing_or_refusing_device_is_one_line_and_a_state(tmp_path, fault_ro
 def test_a_silent_device_is_said_on_the_console_and_on_the_page(tmp_path, fault_row):
     from playwright.sync_api import expect
 
-    from faults.test_web import open_page
+    from faults.test_web import open_page  # (Debian's Chromium, as the dashboard's tests)
 
     with silent_device() as device:
         m = ChildServer(tmp_path, "monitor", "--source", f"serial:{device}", "--grid", "2x3",

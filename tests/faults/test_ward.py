@@ -66,7 +66,17 @@ class WardStation:
         self.clients: dict[str, object] = {}
         self.client_answers: dict[str, list] = {}
         if connected:
-            self.until(lambda: self.get("api/ward")["connected"], bool, 60)
+            try:
+                self.until(lambda: self.get("api/ward")["connected"], bool, 60)
+            except BaseException:
+                self.stop()
+                raise
+
+    def __enter__(self) -> WardStation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
 
     # ----------------------------------------------------------------- reading
     def get(self, path: str):
@@ -169,20 +179,32 @@ class WardStation:
                 os.kill(pid, signal.SIGKILL)
 
 
+@contextlib.contextmanager
+def enterable_folder():
+    """A temporary folder that Mosquitto may enter (as root it drops to its own user, and
+    pytest's folders are closed to others); removed afterwards."""
+    folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))
+    folder.chmod(0o755)
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
+def folder():
+    with enterable_folder() as f:
+        yield f
+
+
 @pytest.fixture(scope="module")
 def ward():
-    folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))  # Mosquitto (as root drops
-    folder.chmod(0o755)  # to its own user) must be able to enter its folder in here
-    st = WardStation(folder, MATS, "--refuse-after", "1")
-    try:
+    with enterable_folder() as folder, WardStation(folder, MATS, "--refuse-after", "1") as st:
         for mat in MATS:
             for _ in range(3):
                 st.frame(mat)
         st.until(lambda: st.get("api/mats"), lambda ms: all(m["frames"] == 3 for m in ms))
         yield st
-    finally:
-        st.stop()
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def one_line_about(st: WardStation, mat: str, text: str) -> None:
@@ -329,26 +351,18 @@ def test_oversized_payloads_are_never_parsed(ward, fault_row):
               "refused by the station's broker")  # fmt: skip
 
 
-def test_the_stations_broker_lets_nobody_in_without_credentials(fault_row):
+def test_the_stations_broker_lets_nobody_in_without_credentials(folder, fault_row):
     """(Before: `mosquitto_pub` without credentials reached any mat of a station started
     with --token.)"""
-    folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))
-    folder.chmod(0o755)
-    try:
-        st = WardStation(folder, {"bed1": "4x4"}, "--token", "t0ken-1234", token="t0ken-1234")
-        try:
-            c, answers = st.client(None)
-            body = json.dumps({"seq": 0, "t": 0, "values": [0.5] * 16, "unit": "N/cm2"})
-            c.publish("texsense/bed1/frames", body)
-            time.sleep(0.5)
-            c.disconnect()
-            c.loop_stop()
-            assert answers and answers[0] != 0 and answers[0].is_failure, answers
-            assert st.mat("bed1")["frames"] == 0
-        finally:
-            st.stop()
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
+    token = "t0ken-1234"
+    with WardStation(folder, {"bed1": "4x4"}, "--token", token, token=token) as st:
+        c, answers = st.client(None)
+        c.publish("texsense/bed1/frames", body(seq=0, t=0))
+        time.sleep(0.5)
+        c.disconnect()
+        c.loop_stop()
+        assert answers and answers[0] != 0 and answers[0].is_failure, answers
+        assert st.mat("bed1")["frames"] == 0
     fault_row("MQTT", "publish to the station's own broker without credentials", "refused")
 
 
@@ -376,37 +390,30 @@ def test_nobody_publishes_without_credentials(ward, fault_row):
     fault_row("MQTT", "a mat's credentials on another mat's topic", "refused")
 
 
-def test_a_flood_of_unknown_topics_is_bounded(fault_row):
-    folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))
-    folder.chmod(0o755)
-    try:
-        with Broker() as site:  # a site broker that lets anyone publish
-            st = WardStation(folder, {"bed1": "4x4"}, "--broker", f"mqtt://127.0.0.1:{site.port}")
-            try:
-                import paho.mqtt.client as mqtt
+def test_a_flood_of_unknown_topics_is_bounded(folder, fault_row):
+    import paho.mqtt.client as mqtt
+    from websockets.sync.client import connect
 
-                c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
-                c.connect("127.0.0.1", site.port)
-                c.loop_start()
-                for k in range(20_000):
-                    c.publish(f"texsense/intruder-{k}/frames", b"{}")
-                c.publish("texsense/bed1/frames", json.dumps(
-                    {"seq": 0, "t": 0, "values": [0.5] * 16, "unit": "N/cm2"}))  # fmt: skip
-                st.until(lambda: st.mat("bed1")["frames"], lambda n: n == 1, 60)
-                c.disconnect()
-                c.loop_stop()
-                ward = st.until(lambda: st.get("api/ward"),
-                                lambda w: w["unknown_forgotten"] >= 19_900)  # fmt: skip
-                assert ward["unknown_topics"] == 100 and len(json.dumps(ward)) < 20_000
-                from websockets.sync.client import connect
-
-                with connect(f"ws://127.0.0.1:{st.port}/ws/ward") as ws:
-                    assert len(ws.recv(timeout=5)) < 20_000
-                assert st.log().count("unknown mat") == 1
-            finally:
-                st.stop()
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
+    with (
+        Broker() as site,
+        WardStation(  # a site broker that lets anyone publish
+            folder, {"bed1": "4x4"}, "--broker", f"mqtt://127.0.0.1:{site.port}"
+        ) as st,
+    ):
+        c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+        c.connect("127.0.0.1", site.port)
+        c.loop_start()
+        for k in range(20_000):
+            c.publish(f"texsense/intruder-{k}/frames", b"{}")
+        c.publish("texsense/bed1/frames", body(seq=0, t=0))
+        st.until(lambda: st.mat("bed1")["frames"], lambda n: n == 1, 60)
+        c.disconnect()
+        c.loop_stop()
+        ward = st.until(lambda: st.get("api/ward"), lambda w: w["unknown_forgotten"] >= 19_900)
+        assert ward["unknown_topics"] == 100 and len(json.dumps(ward)) < 20_000
+        with connect(f"ws://127.0.0.1:{st.port}/ws/ward") as ws:
+            assert len(ws.recv(timeout=5)) < 20_000
+        assert st.log().count("unknown mat") == 1
     fault_row("MQTT", "20,000 distinct unknown topics", "mat live",
               "100 kept, the rest forgotten; /api/ward < 20 kB")  # fmt: skip
 
@@ -468,71 +475,50 @@ def site_broker(folder: Path):
         proc.wait(timeout=5)
 
 
-def test_a_site_broker_with_tls_and_passwords(fault_row):
+def test_a_site_broker_with_tls_and_passwords(folder, fault_row):
     import paho.mqtt.client as mqtt
 
-    folder = Path(tempfile.mkdtemp(prefix="texsense-test-site-"))
-    folder.chmod(0o755)
-    try:
-        with site_broker(folder) as port:
-            (folder / "station-password").write_text("station-pass-1\n")
-            url = f"mqtts://ward3-station@127.0.0.1:{port}"
-            site = ["--broker", url, "--mats", "ward3/+/frames", "--broker-ca",
-                    str(folder / "ca.pem"), "--broker-password-file",
-                    str(folder / "station-password")]  # fmt: skip
-            st = WardStation(folder, {"bed7": "4x4"}, *site)
-            try:  # (WardStation waited until it was connected)
-                mat = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
-                mat.username_pw_set("bed7", "bed7-pass-12")
-                mat.tls_set(ca_certs=str(folder / "ca.pem"))
-                mat.connect("127.0.0.1", port)
-                mat.loop_start()
-                body = {"seq": 0, "t": 0, "values": [0.5] * 16, "unit": "N/cm2"}
-                mat.publish("ward3/bed7/frames", json.dumps(body)).wait_for_publish(5)
-                st.until(lambda: st.mat("bed7")["frames"], lambda n: n == 1)
-                mat.disconnect()
-                mat.loop_stop()
-                assert "station-pass-1" not in st.log() and "station-pass-1" not in json.dumps(
-                    st.get("api/ward"))  # fmt: skip
-            finally:
-                st.stop()
-            fault_row("MQTT", "a site broker with TLS, passwords and an ACL (--broker mqtts://, "
-                      "--broker-ca, --broker-password-file)", "mat live")  # fmt: skip
-            (folder / "station-password").write_text("a-wrong-password\n")
-            st = WardStation(folder, {"bed7": "4x4"}, *site, connected=False)
-            try:
-                ward = st.until(lambda: st.get("api/ward"), lambda w: w["refusal"])
-                assert "authori" in ward["refusal"].lower() and not ward["connected"]
-                time.sleep(2.5)  # it tries again, and says so only once
-                log = st.log()
-                assert log.count("refused the station") == 1 and "Traceback" not in log, log
-            finally:
-                st.stop()
-            fault_row("MQTT", "a site broker refuses the station's password", "said",
-                      "one line; /api/ward and the ward page say it")  # fmt: skip
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
-
-
-def test_a_mat_whose_serial_device_is_missing_is_said_and_the_ward_goes_on(fault_row):
-    folder = Path(tempfile.mkdtemp(prefix="texsense-test-ward-"))
-    folder.chmod(0o755)
-    more = '[[mat]]\nid = "chair3"\nlayout = "grid:2x3"\nsource = "serial:/dev/ttyTEXSENSE-NONE"\n'
-    try:
-        st = WardStation(folder, {"bed1": "4x4"}, more=more)
-        try:
-            st.frame("bed1")
-            st.until(lambda: st.mat("bed1")["frames"], lambda n: n == 1)
-            chair = st.until(lambda: st.mat("chair3"), lambda m: m["problem"])
-            assert chair["problem"] == ("serial:/dev/ttyTEXSENSE-NONE: cannot open it (No such "
-                                        "file or directory); trying again every 2 s")  # fmt: skip
-            time.sleep(2.5)
+    with site_broker(folder) as port:
+        (folder / "station-password").write_text("station-pass-1\n")
+        url = f"mqtts://ward3-station@127.0.0.1:{port}"
+        site = ["--broker", url, "--mats", "ward3/+/frames", "--broker-ca",
+                str(folder / "ca.pem"), "--broker-password-file",
+                str(folder / "station-password")]  # fmt: skip
+        with WardStation(folder, {"bed7": "4x4"}, *site) as st:  # (connected, or it fails)
+            mat = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
+            mat.username_pw_set("bed7", "bed7-pass-12")
+            mat.tls_set(ca_certs=str(folder / "ca.pem"))
+            mat.connect("127.0.0.1", port)
+            mat.loop_start()
+            mat.publish("ward3/bed7/frames", body(seq=0, t=0)).wait_for_publish(5)
+            st.until(lambda: st.mat("bed7")["frames"], lambda n: n == 1)
+            mat.disconnect()
+            mat.loop_stop()
+            assert "station-pass-1" not in st.log() + json.dumps(st.get("api/ward"))
+        fault_row("MQTT", "a site broker with TLS, passwords and an ACL (--broker mqtts://, "
+                  "--broker-ca, --broker-password-file)", "mat live")  # fmt: skip
+        (folder / "station-password").write_text("a-wrong-password\n")
+        with WardStation(folder, {"bed7": "4x4"}, *site, connected=False) as st:
+            ward = st.until(lambda: st.get("api/ward"), lambda w: w["refusal"])
+            assert "authori" in ward["refusal"].lower() and not ward["connected"]
+            time.sleep(2.5)  # it tries again, and says so only once
             log = st.log()
-            assert log.count("ttyTEXSENSE-NONE: cannot open it") == 1, log
-            assert "Traceback" not in log
-        finally:
-            st.stop()
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
+            assert log.count("refused the station") == 1 and "Traceback" not in log, log
+        fault_row("MQTT", "a site broker refuses the station's password", "said",
+                  "one line; /api/ward and the ward page say it")  # fmt: skip
+
+
+def test_a_mat_whose_serial_device_is_missing_is_said_and_the_ward_goes_on(folder, fault_row):
+    more = '[[mat]]\nid = "chair3"\nlayout = "grid:2x3"\nsource = "serial:/dev/ttyTEXSENSE-NONE"\n'
+    with WardStation(folder, {"bed1": "4x4"}, more=more) as st:
+        st.frame("bed1")
+        st.until(lambda: st.mat("bed1")["frames"], lambda n: n == 1)
+        chair = st.until(lambda: st.mat("chair3"), lambda m: m["problem"])
+        assert chair["problem"] == ("serial:/dev/ttyTEXSENSE-NONE: cannot open it (No such "
+                                    "file or directory); trying again every 2 s")  # fmt: skip
+        time.sleep(2.5)
+        log = st.log()
+        assert log.count("ttyTEXSENSE-NONE: cannot open it") == 1, log
+        assert "Traceback" not in log
     fault_row("hardware", "station: a mat's serial device is missing", "said",
               "its tile says so; the other mats go on")  # fmt: skip

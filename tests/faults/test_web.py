@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import http.server
-import os
-import shutil
+import sys
 import threading
 import urllib.request
 from pathlib import Path
@@ -18,7 +17,7 @@ import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from conftest import ChildServer
+from conftest import ROOT, ChildServer
 from faults.conftest import assert_clear_error, run_cli
 from texsense import Layout, Recording
 from texsense.io import save
@@ -27,6 +26,10 @@ from texsense.monitor.protocol import Frame
 from texsense.monitor.server import create_app
 from texsense.station.server import create_ward_app
 from texsense.station.ward import MatConfig, Station
+
+# Debian's Chromium as the dashboard's tests drive it (open_page: for test_stop.py too)
+sys.path.insert(0, str(ROOT / "tests" / "monitor"))
+from test_browser import CHROMIUM_ARGS, chromium, open_page  # noqa: F401
 
 HOST = "127.0.0.1:8765"
 BASE = f"http://{HOST}"
@@ -223,35 +226,6 @@ def attacker_site():
     finally:
         srv.shutdown()
         srv.server_close()
-
-
-def chromium() -> str:
-    """Debian's Chromium (as tests/monitor/test_browser.py), or a failure saying so."""
-    found = os.environ.get("TEXSENSE_CHROMIUM", "/usr/bin/chromium")
-    found = found if os.access(found, os.X_OK) else shutil.which("chromium")
-    if found is None:
-        pytest.fail("no Chromium: install Debian's `chromium` or set TEXSENSE_CHROMIUM")
-    return found
-
-
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run"]
-
-
-@contextlib.contextmanager
-def open_page(url: str, width: int, height: int, *args: str):
-    """A page of a headless Chromium at ``url``, and the list its script errors go to."""
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=chromium(), args=[*CHROMIUM_ARGS, *args])
-        try:
-            page = browser.new_page(viewport={"width": width, "height": height})
-            errors: list[str] = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(url)
-            yield page, errors
-        finally:
-            browser.close()
 
 
 def status(url: str) -> dict:

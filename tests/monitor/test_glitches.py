@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+from test_sources import FakeSerial
 
 from texsense import Layout, Recording
 from texsense.calibration import LinearCalibration
@@ -101,19 +102,6 @@ def test_a_restarted_clock_is_resynchronised_with_an_event():
     assert times[0] > 1009.0 and np.all(np.diff(times) > 0)  # the time line goes on
     (event,) = m.store.events(kind="clock")
     assert event["detail"]["jump_s"] == pytest.approx(-1010.0, abs=1.5)
-
-
-class FakeSerial:
-    def __init__(self, lines):
-        self.lines = list(lines)
-
-    def readline(self):
-        if not self.lines:
-            raise EOFError
-        return self.lines.pop(0) + b"\n"
-
-    def close(self):
-        pass
 
 
 def test_a_serial_frame_with_a_bad_time_does_not_blind_the_monitor():

@@ -26,36 +26,18 @@ from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, FastAPI, HTTPException, WebSocket
-from fastapi.responses import FileResponse
 
 from texsense.exceptions import ParameterError
 from texsense.monitor.routes.static import STATIC as MONITOR_STATIC
-from texsense.monitor.routes.static import TYPES
+from texsense.monitor.routes.static import pages
 from texsense.monitor.server import create_app
-from texsense.monitor.web import Access, Guard, finish, is_loopback, safe_file, serve_app, stream
+from texsense.monitor.web import Access, Guard, finish, is_loopback, serve_app, stream
 from texsense.station.tiles import WardFeed
 from texsense.station.ward import MatEntry, Station
 
 __all__ = ["create_ward_app", "serve_ward"]
 
 STATIC = Path(__file__).with_name("static")
-
-
-def _pages() -> APIRouter:
-    r = APIRouter(include_in_schema=False)
-
-    @r.get("/")
-    async def index() -> Any:
-        return FileResponse(STATIC / "ward.html", media_type="text/html")
-
-    @r.get("/static/{name}")
-    async def static(name: str) -> Any:
-        path = safe_file(STATIC, name) or safe_file(MONITOR_STATIC, name)
-        if path is None or path.suffix not in TYPES:
-            raise HTTPException(404, "no such file")
-        return FileResponse(path, media_type=TYPES[path.suffix])
-
-    return r
 
 
 def _api(station: Station) -> APIRouter:
@@ -127,7 +109,7 @@ def create_ward_app(
         station.stop()
 
     app = FastAPI(title="texsense ward station", version="1", lifespan=lifespan)
-    app.include_router(_pages())
+    app.include_router(pages(STATIC / "ward.html", STATIC, MONITOR_STATIC))
     app.include_router(_api(station))
     for mat_id, entry in station.mats.items():
         app.mount(f"/mats/{mat_id}", create_app(entry.monitor, run_source=False, guarded=False))

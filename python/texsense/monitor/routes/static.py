@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse
 from texsense.monitor.live import Monitor
 from texsense.monitor.web import safe_file
 
-__all__ = ["STATIC", "TYPES", "router"]
+__all__ = ["STATIC", "TYPES", "file_response", "pages", "router"]
 
 STATIC = Path(__file__).resolve().parents[1] / "static"
 TYPES = {
@@ -24,20 +24,32 @@ TYPES = {
 }
 
 
-def router(monitor: Monitor) -> APIRouter:
-    """The routes of the dashboard's static files."""
-    del monitor  # the page is the same for every monitor
+def file_response(name: str, *folders: Path) -> FileResponse:
+    """The file ``name`` of the first of ``folders`` that has it (by name only, of a served
+    type), else 404."""
+    for folder in folders:
+        path = safe_file(folder, name)
+        if path is not None and path.suffix in TYPES:
+            return FileResponse(path, media_type=TYPES[path.suffix])
+    raise HTTPException(404, "no such file")
+
+
+def pages(index: Path, *folders: Path) -> APIRouter:
+    """``GET /``: the page ``index``; ``GET /static/{name}``: the files of ``folders``."""
     r = APIRouter(include_in_schema=False)
 
     @r.get("/")
-    async def index() -> Any:
-        return FileResponse(STATIC / "index.html", media_type="text/html")
+    async def page() -> Any:
+        return FileResponse(index, media_type="text/html")
 
     @r.get("/static/{name}")
     async def static(name: str) -> Any:
-        path = safe_file(STATIC, name)
-        if path is None or path.suffix not in TYPES:
-            raise HTTPException(404, "no such file")
-        return FileResponse(path, media_type=TYPES[path.suffix])
+        return file_response(name, *folders)
 
     return r
+
+
+def router(monitor: Monitor) -> APIRouter:
+    """The routes of the dashboard's static files."""
+    del monitor  # the page is the same for every monitor
+    return pages(STATIC / "index.html", STATIC)
