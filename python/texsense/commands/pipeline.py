@@ -67,7 +67,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
     add_accept_truncated(lin)
     lin.set_defaults(run=run_calibrate_linear)
+    _register_process(sub)
+    _register_repair_health(sub)
 
+
+def _register_process(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "process",
         help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair); "
@@ -99,6 +103,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_accept_truncated(p)
     p.set_defaults(run=run_process)
 
+
+def _register_repair_health(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r = sub.add_parser(
         "repair",
         help="fill elements marked invalid",

@@ -179,7 +179,11 @@ class BlockReader:
                 self.path, f"{self._shortfall}; {ACCEPT_HINT.format(n=count, what=what)}"
             )
         logger.warning(
-            "%s: %s; read the %d complete %s(s) before it", self.path, self._shortfall, count, what
+            "warning: %s: %s; read the %d complete %s(s) before it",
+            self.path,
+            self._shortfall,
+            count,
+            what,
         )
 
     def close(self) -> None:
@@ -292,11 +296,12 @@ class RecordingReader(BlockReader):
         valid = piece.valid
         if valid is None:
             valid = np.ones(frames.shape, dtype=bool)
-            for reason, mask in self._impossible(frames).items():
-                count = int(np.count_nonzero(mask))
+            for reason, mask in self._impossible(frames).items():  # each reading counted once
+                new = mask & valid
+                count = int(np.count_nonzero(new))
                 if count:
                     self.invalid[reason] += count
-                    valid &= ~mask
+                    valid &= ~new
         self._check_times(piece)
         return Piece(frames, piece.times, piece.labels, piece.lines, valid, piece.element_times)
 
@@ -342,7 +347,7 @@ class RecordingReader(BlockReader):
         if total:
             parts = ", ".join(f"{c} {reason}" for reason, c in self.invalid.items() if c)
             logger.warning(
-                "%s: %d reading(s) marked invalid (%s) of %d",
+                "warning: %s: %d reading(s) marked invalid (%s) of %d",
                 self.path,
                 total,
                 parts,

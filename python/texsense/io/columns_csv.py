@@ -156,7 +156,9 @@ class ColumnsReader(BlockReader):
         if held:
             yield self._block(held)
         if self.not_finite:
-            logger.warning("%s: %d value(s) are not finite numbers", self.path, self.not_finite)
+            logger.warning(
+                "warning: %s: %d value(s) are not finite numbers", self.path, self.not_finite
+            )
 
     def _block(self, rows: list[list[float]]) -> dict[str, npt.NDArray[np.float64]]:
         data = np.array(rows, dtype=np.float64).reshape(len(rows), len(self.names))

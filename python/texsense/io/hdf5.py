@@ -541,13 +541,17 @@ class HDF5Reader(RecordingReader):
         bad = np.nonzero(~(np.diff(t_all) > 0))[0]
         complete = int(bad[0]) + 1 if bad.size else n
         lost = min(ds.shape[0] for ds in self._sets.values()) - complete
-        if lost and self._shortfall is None:
-            logger.warning(
-                "%s: %d frame(s) at the end were unreadable (interrupted write) and are left out",
-                self.path,
-                lost,
-            )
+        if lost:
             self._state["recovered"] = {"frames_read": complete, "frames_unreadable": int(lost)}
+        if self._shortfall is None:
+            unreadable = f"; {lost} frame(s) at the end were unreadable and are left out"
+            logger.warning(
+                "warning: %s: the recording was not closed by its recorder (interrupted); "
+                "read the %d frame(s) written before%s",
+                self.path,
+                complete,
+                unreadable if lost else "",
+            )
         return complete
 
     def _pieces(self) -> Iterator[Piece]:
