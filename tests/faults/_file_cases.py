@@ -291,7 +291,7 @@ def tekscan_cases() -> list[Case]:
         Case("Tekscan", "END_FRAME not a number", "clear error",
              _header(ISCAN, "END_FRAME", "3x9", "end.csv"), "END_FRAME must be an integer"),
         Case("Tekscan", "more frames than END_FRAME declares", "clear error",
-             _header(ISCAN, "END_FRAME", "300", "end.csv"), "declare 300"),
+             _header(ISCAN, "END_FRAME", "300", "end.csv"), "frame 301 is beyond END_FRAME 300"),
         Case("Tekscan", "a byte flipped in UNITS", "clear error",
              _header(ISCAN, "UNITS", "r\u00e1w", "units.csv"), "UNITS: unknown unit"),
         Case("Tekscan", "a byte flipped in ROW_SPACING", "clear error",

@@ -77,7 +77,8 @@ def _register_process(sub: argparse._SubParsersAction) -> None:  # type: ignore[
         help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair); "
         "one file, or a whole archive on Dask",
         description="Run the whole pipeline over recordings. One file: processed block by "
-        "block (an HDF5 input and output keep the memory flat in the recording's length). "
+        "block (any input format, and an HDF5 output, keep the memory flat in the recording's "
+        "length; the output may not be the input). "
         "Several files, a folder or a glob pattern: one task per file on Dask (local worker "
         "processes, or --scheduler ADDRESS), outputs mirrored into the -o folder; a second run "
         "skips files whose output has the same calibration and input; a failed file is "

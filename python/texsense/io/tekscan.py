@@ -151,6 +151,7 @@ class TekscanReader(RecordingReader):
         start = _header_int(path, header, where, "START_FRAME")
         end = _header_int(path, header, where, "END_FRAME")
         self.start_frame = start if start is not None else 1
+        self.end_frame = end
         declared = end - self.start_frame + 1 if end is not None else None
         # the first frame gives the 'B' pattern, hence the layout
         self.ended = False
@@ -230,7 +231,8 @@ class TekscanReader(RecordingReader):
 
     def _frames(self) -> Iterator[FrameRow]:
         frame = self._first
-        count = 0
+        first: list[int] = []  # the first two frame numbers: the export's step
+        last = 0
         while frame is not None:
             cells, is_b, t, number, line = frame
             if not np.array_equal(is_b, ~self.active):
@@ -241,19 +243,26 @@ class TekscanReader(RecordingReader):
                     f"from frame 1 at row {r + 1}, column {c + 1}",
                     line + 1 + r,
                 )
+            if self.end_frame is not None and number > self.end_frame:
+                raise FormatError(
+                    self.path, f"frame {number} is beyond END_FRAME {self.end_frame}", line
+                )
             yield FrameRow(cells[self.active], t, line, {"frame_number": number})
-            count += 1
+            first, last = [*first, number][:2], number
             frame = self._next_frame()
-        declared = self.header.declared_frames
-        if self.ended and declared is not None and count < declared:
-            self._cut(
-                f"truncated: START_FRAME/END_FRAME declare {declared} frames, '@@' came "
-                f"after {count} ({declared - count} missing)"
-            )
-        elif self.ended and declared is not None and count > declared:
-            raise FormatError(
-                self.path, f"{count} frames, but START_FRAME/END_FRAME declare {declared}"
-            )
+        self._check_end(first, last)
+
+    def _check_end(self, first: list[int], last: int) -> None:
+        """After ``@@`` the last frame must be END_FRAME (an export of every k-th frame
+        steps by k): a file closed early is a shortfall."""
+        end = self.end_frame
+        if not self.ended or end is None or not first or last >= end:
+            return
+        step = max(1, first[1] - first[0]) if len(first) == 2 else 1
+        self._cut(
+            f"truncated: END_FRAME is {end}, '@@' came after frame {last} "
+            f"({(end - last) // step} missing)"
+        )
 
     def close(self) -> None:
         """Close the file."""
