@@ -43,7 +43,7 @@ import numpy.typing as npt
 from texsense import units
 from texsense._progress import logger
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
-from texsense.io._text import Line
+from texsense.io._text import Line, TextLines
 from texsense.layout import Layout
 from texsense.recording import Recording
 
@@ -186,8 +186,14 @@ class BlockReader:
             what,
         )
 
+    #: the text file a line-oriented reader holds open (closed by :meth:`close`)
+    _lines: TextLines | None = None
+
     def close(self) -> None:
-        """Release the file (a format that holds one open overrides this)."""
+        """Release the file (the text file in ``_lines``; a format that holds another kind
+        of file overrides this)."""
+        if self._lines is not None:
+            self._lines.close()
 
     def __enter__(self) -> Self:
         return self

@@ -7,6 +7,7 @@ from __future__ import annotations
 import codecs
 import io
 import math
+from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, NamedTuple
 
@@ -152,6 +153,18 @@ class TextLines:
                 return None
             self._pending.append(line)
         return self._pending[-1]
+
+    def data_lines(self, what: str = "the frames") -> Iterator[Line]:
+        """The remaining lines that hold something: empty lines at the end are skipped, an
+        empty line followed by more data is a :class:`FormatError` naming it."""
+        blank: int | None = None
+        for line in self:
+            if not line.text.strip():
+                blank = blank or line.number
+                continue
+            if blank is not None:
+                raise FormatError(self.path, f"an empty line inside {what}", blank)
+            yield line
 
     def push(self, line: Line) -> None:
         """Put ``line`` back: the next line taken is ``line``."""

@@ -115,13 +115,7 @@ class ColumnsReader(BlockReader):
     def _rows(self) -> Iterator[list[float]]:
         n = len(self.names)
         what = f"{n} values ({', '.join(self.names)})"
-        blank: int | None = None
-        for line in self._lines:
-            if not line.text.strip():
-                blank = blank or line.number
-                continue
-            if blank is not None:
-                raise FormatError(self.path, "an empty line inside the table", blank)
+        for line in self._lines.data_lines("the table"):
             if not line.ended and self.declared_rows is not None:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return
@@ -172,10 +166,6 @@ class ColumnsReader(BlockReader):
         if not parts:
             return {n: np.zeros(0) for n in self.names}
         return {n: np.concatenate([p[n] for p in parts]) for n in self.names}
-
-    def close(self) -> None:
-        """Close the file."""
-        self._lines.close()
 
 
 def read_columns_csv(

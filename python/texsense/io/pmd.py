@@ -30,7 +30,7 @@ import numpy as np
 from texsense._progress import progress
 from texsense.exceptions import FormatError
 from texsense.io._base import FrameRow, Header, RecordingReader
-from texsense.io._text import TextLines
+from texsense.io._text import TextLines, is_number
 from texsense.layout import Layout
 from texsense.recording import Recording
 
@@ -290,14 +290,8 @@ class PMDReader(RecordingReader):
         frames are held back until the file ends, which makes them unreliable."""
         held: deque[tuple[np.ndarray, int, int]] = deque()
         count = 0
-        blank: int | None = None
         with TextLines(path) as lines:
-            for line in lines:
-                if not line.text.strip():
-                    blank = blank or line.number
-                    continue
-                if blank is not None:
-                    raise FormatError(path, "an empty line inside the frames", blank)
+            for line in lines.data_lines():
                 values = self._parse(path, line)
                 if values is None:
                     break
@@ -333,18 +327,10 @@ class PMDReader(RecordingReader):
             with np.errstate(over="ignore"):  # 1e308: infinite in float32, an invalid reading
                 return np.array(tokens, dtype=np.float32)
         except ValueError:
-            bad = next(t for t in tokens if not _is_count_like(t))
+            bad = next(t for t in tokens if not is_number(t))
             raise FormatError(
                 path, f"expected integer counts, found {bad!r}", line.number
             ) from None
-
-
-def _is_count_like(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def read_pmd(

@@ -264,12 +264,6 @@ class TekscanReader(RecordingReader):
             f"({(end - last) // step} missing)"
         )
 
-    def close(self) -> None:
-        """Close the file."""
-        lines = getattr(self, "_lines", None)
-        if lines is not None:
-            lines.close()
-
 
 def _frame_time(path: Path, line: Line, rest: str | None) -> float:
     fields = [s.strip() for s in (rest or "").split(",")]

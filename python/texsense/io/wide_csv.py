@@ -217,13 +217,7 @@ class WideCSVReader(RecordingReader):
     def _frames(self) -> Iterator[FrameRow]:
         n = self.header.layout.n_elements
         count = 0
-        blank: int | None = None
-        for line in self._lines:
-            if not line.text.strip():
-                blank = blank or line.number
-                continue
-            if blank is not None:
-                raise FormatError(self.path, "an empty line inside the frames", blank)
+        for line in self._lines.data_lines():
             if self.version >= 2 and not line.ended:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return
@@ -242,12 +236,6 @@ class WideCSVReader(RecordingReader):
             raise FormatError(
                 self.path, f"the file holds {count} frames, '# frames:' declares {declared}"
             )
-
-    def close(self) -> None:
-        """Close the file."""
-        lines = getattr(self, "_lines", None)
-        if lines is not None:
-            lines.close()
 
 
 def read_wide_csv(

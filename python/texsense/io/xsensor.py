@@ -31,7 +31,7 @@ import numpy as np
 from texsense import units
 from texsense.exceptions import FormatError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
-from texsense.io._text import Line, TextLines, parse_float
+from texsense.io._text import Line, TextLines, is_number, parse_float
 from texsense.layout import Layout
 from texsense.recording import Recording
 
@@ -235,7 +235,7 @@ class XSensorReader(RecordingReader):
             if line is None or not line.ended:
                 return  # cut: the block stays incomplete
             row = _fields(line.text)
-            if row and not _numeric(row[0]):
+            if row and not is_number(row[0]):
                 return  # the next key: fewer values than declared (checked by the frame)
             next(self._lines)
             if not row:
@@ -290,20 +290,6 @@ class XSensorReader(RecordingReader):
             t = (frame.stamp - self._t0).total_seconds()  # type: ignore[operator]
             yield FrameRow(values, t, frame.line, labels)
             frame = self._next_frame()
-
-    def close(self) -> None:
-        """Close the file."""
-        lines = getattr(self, "_lines", None)
-        if lines is not None:
-            lines.close()
-
-
-def _numeric(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def _stamp(path: Path, line: Line, date_text: str, value: str) -> datetime:
