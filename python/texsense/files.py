@@ -99,6 +99,10 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
         suffix=target.suffix if suffix is None else suffix,
         dir=folder,
     )
+    # mkstemp makes the file private (0600): give it the mode the file had, or that a new
+    # file gets (0666 less the umask), so that writing safely does not change who may read
+    with contextlib.suppress(OSError):
+        os.fchmod(fd, _mode_of(target))
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -194,6 +198,20 @@ def unused_name(path: str | Path) -> Path:
         if not candidate.exists():
             return candidate
         k += 1
+
+
+def _mode_of(target: Path) -> int:
+    """The permission bits ``target`` has, or a new file would get (0666 less the umask)."""
+    try:
+        return target.stat().st_mode & 0o7777
+    except OSError:
+        pass
+    try:  # the umask without changing it (Linux); else the usual 022
+        status = Path("/proc/self/status").read_text()
+        umask = int(next(ln.split()[1] for ln in status.splitlines() if ln.startswith("Umask")), 8)
+    except (OSError, StopIteration, ValueError, IndexError):
+        umask = 0o022
+    return 0o666 & ~umask
 
 
 def _remove(path: Path) -> None:

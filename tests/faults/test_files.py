@@ -316,3 +316,18 @@ def test_output_onto_an_input_is_refused(onto_input, name, fault_row):
     assert_clear_error(rc, err, "is also an input")
     assert all(_digest(p) == d for p, d in before.items())
     fault_row("output onto input", name, "clear error", "the input is unchanged")
+
+
+def test_written_files_keep_their_permissions(tmp_path, previous):
+    """Writing through a temporary file does not make outputs private: a new file gets
+    0666 less the umask, a replaced file keeps its mode."""
+    from texsense.io import load, save
+
+    rec = load(previous)
+    new = save(rec, tmp_path / "new.h5")
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert new.stat().st_mode & 0o777 == 0o666 & ~umask
+    new.chmod(0o640)
+    save(rec, new)
+    assert new.stat().st_mode & 0o777 == 0o640
