@@ -280,14 +280,14 @@ class RecordingReader(BlockReader):
         )
 
     def _impossible(self, values: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.bool_]]:
-        """Readings that cannot be real, by reason (a format can add its own)."""
+        """Readings that cannot be real, by reason (a format can add its own). The least and
+        the greatest value (NaN if there is one) spare the masks when all are plausible."""
         out: dict[str, npt.NDArray[np.bool_]] = {}
-        finite = np.isfinite(values)
-        if not finite.all():
-            nan = np.isnan(values)
-            out["not a number"] = nan
-            out["infinite or beyond float32"] = ~finite & ~nan
-        if self.header.quantity in NON_NEGATIVE | self.non_negative:
+        lo, hi = (values.min(), values.max()) if values.size else (0.0, 0.0)
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            out["not a number"] = np.isnan(values)
+            out["infinite or beyond float32"] = np.isinf(values)
+        if self.header.quantity in NON_NEGATIVE | self.non_negative and not lo >= 0:
             with np.errstate(invalid="ignore"):
                 out["negative"] = values < 0
         return out
@@ -395,6 +395,7 @@ class RecordingReader(BlockReader):
 
     def read(self) -> Recording:
         """The whole recording (all frames in memory)."""
+        self._block = 1 << 62  # one piece: no copy to join blocks
         pieces = list(self._checked_pieces())
         self._finish()
         if not pieces:
