@@ -9,6 +9,8 @@ Run:  .venv/bin/python benchmarks/archive_scale.py [--quick]
 2. Archive throughput: 100 recordings (1024 elements x 400 frames each) on a Dask
    `LocalCluster` of 1 and of 2 worker processes (one thread each), files per second, in
    the same run.
+3. Peak memory with a text input: the same recordings of 10,000 / 40,000 frames as a wide
+   CSV (``time_s,e0,...``; every reader streams blocks of frames, not only HDF5's).
 """
 
 from __future__ import annotations
@@ -87,17 +89,40 @@ def peak_rss_mib(script: str, *args: str) -> tuple[float, float]:
     return int(out[-1]) / 1024, time.perf_counter() - start
 
 
-def memory(tmp: Path, quick: bool) -> None:
+def write_wide_csv_input(src: Path, dst: Path) -> None:
+    """The HDF5 recording ``src`` as a wide CSV (a foreign-style file: quantity and unit
+    lines, the header, one line per frame), written block by block."""
+    from texsense.io import open_reader
+
+    with open_reader(src) as reader, dst.open("w") as out:
+        n = reader.header.layout.n_elements
+        out.write("# quantity: capacitance\n# unit: pF\n")
+        out.write("time_s," + ",".join(f"e{k}" for k in range(n)) + "\n")
+        for block in reader.blocks(2000):
+            data = np.column_stack([block.times, block.frames.astype(np.float64)])
+            np.savetxt(out, data, fmt="%.9g", delimiter=",")
+
+
+def memory(tmp: Path, quick: bool, text: bool = False) -> None:
     n = 1024
     lay = Layout.grid(32, 32, pitch_cm=1.0)
     cal = big_calibration(n, tmp / "cal.json")
-    lengths = (500, 2000) if quick else (2500, 10_000, 40_000)
-    print("| frames (1024 elements) | input size | `texsense process`: peak RSS | time | "
-          "whole recording in memory (before): peak RSS | time |")  # fmt: skip
+    if text:
+        lengths = (500, 2000) if quick else (10_000, 40_000)
+        print("| frames (1024 elements), wide CSV input | input size | `texsense process`: peak "
+              "RSS | time | whole recording in memory: peak RSS | time |")  # fmt: skip
+    else:
+        lengths = (500, 2000) if quick else (2500, 10_000, 40_000)
+        print("| frames (1024 elements) | input size | `texsense process`: peak RSS | time | "
+              "whole recording in memory (before): peak RSS | time |")  # fmt: skip
     print("|---:|---:|---:|---:|---:|---:|")
     for frames in lengths:
         src = tmp / f"long-{frames}.h5"
         write_recording(cal, lay, frames, src, seed=frames)
+        if text:
+            write_wide_csv_input(src, tmp / f"long-{frames}.csv")
+            src.unlink()
+            src = tmp / f"long-{frames}.csv"
         rss_c, t_c = peak_rss_mib(CHUNKED, str(src), str(tmp / "cal.json"), str(tmp / "c.h5"))
         rss_w, t_w = peak_rss_mib(WHOLE, str(src), str(tmp / "cal.json"), str(tmp / "w.h5"))
         size = src.stat().st_size / 2**20
@@ -144,11 +169,17 @@ def throughput(tmp: Path, quick: bool) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", choices=("hdf5", "throughput", "csv"), help="one part only")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
-        memory(Path(d), args.quick)
-        print()
-        throughput(Path(d), args.quick)
+        if args.only in (None, "hdf5"):
+            memory(Path(d), args.quick)
+            print()
+        if args.only in (None, "throughput"):
+            throughput(Path(d), args.quick)
+            print()
+        if args.only in (None, "csv"):
+            memory(Path(d), args.quick, text=True)
 
 
 if __name__ == "__main__":

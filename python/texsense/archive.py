@@ -2,8 +2,9 @@
 (docs/pipeline.md, "Archives").
 
 - :func:`process_file`: one recording through the compiled pipeline a block of frames at a
-  time (HDF5 input is read block by block, so the peak memory does not grow with the
-  recording's length), written to a temporary name and renamed when complete. The output's
+  time (every format is read block by block by its :mod:`texsense.io` reader, so the peak
+  memory does not grow with the recording's length), written to a temporary name and renamed
+  when complete (:func:`texsense.files.atomic_path`). The output's
   ``meta`` carries the calibration id and the SHA-256 of the input, so a second run skips a
   file whose output is already there for the same calibration and input.
 - :func:`process_archive`: one task per file on a Dask cluster: local worker processes by
@@ -23,7 +24,7 @@ import glob
 import hashlib
 import json
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -37,7 +38,7 @@ from texsense.calibration import (
     load_calibration,
 )
 from texsense.exceptions import FormatError, ParameterError
-from texsense.recording import Recording
+from texsense.files import atomic_path, check_not_input
 from texsense.stages import StageChain
 
 __all__ = [
@@ -59,6 +60,9 @@ class ProcessOptions:
     drift: bool = True
     #: Frames per block; None: about 2^18 element-samples (2 MiB per float64 array).
     chunk_frames: int | None = None
+    #: Read an input cut short up to its last complete frame (with a warning) instead of
+    #: refusing it (``--accept-truncated``).
+    accept_truncated: bool = False
 
     def frames_per_block(self, n_elements: int) -> int:
         """The block length for a mat of ``n_elements``."""
@@ -108,37 +112,6 @@ def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
     )
 
 
-def _blocks(src: Path, opts: ProcessOptions) -> tuple[Recording, Iterator[Recording], Any]:
-    """The first block (for the header), an iterator over all blocks, and what to close."""
-    from texsense.io import load, sniff_format
-
-    if sniff_format(src) == "hdf5":
-        from texsense.io.hdf5 import HDF5Chunks
-
-        with HDF5Chunks(src) as probe:
-            frames = opts.frames_per_block(probe.layout.n_elements)
-        chunks = HDF5Chunks(src, frames=frames)
-        it = iter(chunks)
-        try:
-            first = next(it)
-        except StopIteration:
-            chunks.close()
-            raise FormatError(src, "the recording has no frames") from None
-        return first, _chain_first(first, it), chunks
-    rec = load(src)
-    if rec.n_frames == 0:
-        raise FormatError(src, "the recording has no frames")
-    frames = opts.frames_per_block(rec.n_elements)
-    it = (rec.select(slice(a, a + frames)) for a in range(0, rec.n_frames, frames))
-    first = next(it)
-    return first, _chain_first(first, it), None
-
-
-def _chain_first(first: Recording, rest: Iterator[Recording]) -> Iterator[Recording]:
-    yield first
-    yield from rest
-
-
 def process_file(
     src: str | Path,
     calibration: MatCalibration | LinearCalibration | StageChain | str | Path,
@@ -149,49 +122,50 @@ def process_file(
 
     Skips the work (status ``skipped``) when ``dst`` already holds the output of the same
     calibration for the same input bytes. Errors propagate; nothing is left at ``dst`` (nor
-    at its temporary name) by a run that fails.
+    at its temporary name) by a run that fails, and a previous ``dst`` is kept.
+
+    Raises
+    ------
+    ParameterError
+        If ``dst`` is the input (the raw data would be replaced by the output).
     """
+    from texsense.io import open_reader
     from texsense.io.hdf5 import RecordingWriter
     from texsense.pipeline import Pipeline
 
     opts = options or ProcessOptions()
     src, dst = Path(src), Path(dst)
+    check_not_input(dst, [src])
     cal = load_calibration(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
     if _output_matches(dst, cal.id, digest):
         return FileReport(str(src), str(dst), "skipped")
-    first, blocks, closer = _blocks(src, opts)
-    tmp = dst.with_name(f".{dst.name}.{os.getpid()}.partial")
-    try:
+    with open_reader(src, accept_truncated=opts.accept_truncated) as reader:
+        head = reader.header
         pipe = Pipeline(
-            cal,
-            first.layout,
-            hysteresis=opts.hysteresis,
-            drift=opts.drift,
-            repair=opts.repair,
+            cal, head.layout, hysteresis=opts.hysteresis, drift=opts.drift, repair=opts.repair
         )
         quantity, unit = pipe.input_quantity
-        if first.quantity != quantity:
-            raise FormatError(src, f"holds {first.quantity}, the calibration reads {quantity}")
+        if head.quantity != quantity:
+            raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
         out_quantity, out_unit = pipe.output_quantity
-        meta = {
-            **first.meta,
-            **pipe.provenance(),
-            "source": src.name,
-            "input_sha256": digest,
-        }
+        meta = {**head.meta, **pipe.provenance(), "source": src.name, "input_sha256": digest}
         dst.parent.mkdir(parents=True, exist_ok=True)
         frames, failed = 0, 0
-        with RecordingWriter(
-            tmp,
-            first.layout,
-            out_quantity,
-            out_unit,
-            meta=meta,
-            element_times=first.element_times is not None,
-            compress=True,
-        ) as writer:
-            for block in blocks:
+        with (
+            atomic_path(dst) as tmp,
+            RecordingWriter(
+                tmp,
+                head.layout,
+                out_quantity,
+                out_unit,
+                meta=meta,
+                element_times=head.element_times,
+                compress=True,
+                live=False,
+            ) as writer,
+        ):
+            for block in reader.blocks(opts.frames_per_block(head.layout.n_elements)):
                 values = block.to_unit(unit).frames if block.unit != unit else block.frames
                 p, ok, codes = pipe.process(values, block.times, block.valid)
                 writer.append(
@@ -203,14 +177,9 @@ def process_file(
                 )
                 frames += block.n_frames
                 failed += int(np.count_nonzero(codes))
-        os.replace(tmp, dst)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    finally:
-        if closer is not None:
-            closer.close()
-    share = failed / max(1, frames * first.n_elements)
+            if frames == 0:
+                raise FormatError(src, "the recording has no frames")
+    share = failed / max(1, frames * head.layout.n_elements)
     return FileReport(str(src), str(dst), "done", frames, share)
 
 
@@ -250,10 +219,13 @@ def archive_jobs(
         else:
             raise ParameterError(f"{spec}: no such file or folder, and not a glob pattern")
     seen: dict[Path, Path] = {}
+    sources = {src.resolve(): src for src, _ in jobs}
     for src, dst in jobs:
         if dst in seen and seen[dst] != src:
             raise ParameterError(f"{seen[dst]} and {src} would both be written to {dst}")
         seen[dst] = src
+        if dst.resolve() in sources:  # the output would replace an input
+            check_not_input(dst, [sources[dst.resolve()]])
     if not jobs:
         raise ParameterError(f"no recordings found in {', '.join(map(str, inputs))}")
     return jobs, ignored

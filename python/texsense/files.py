@@ -99,10 +99,13 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
         suffix=target.suffix if suffix is None else suffix,
         dir=folder,
     )
+    # mkstemp makes the file private (0600): give it the mode the file had, or that a new
+    # file gets (0666 less the umask), so that writing safely does not change who may read
+    with contextlib.suppress(OSError):
+        os.fchmod(fd, _mode_of(target))
     os.close(fd)
     tmp = Path(tmp_name)
     try:
-        os.chmod(tmp, _mode_for(target))
         yield tmp
         _fsync_file(tmp)
         os.replace(tmp, target)
@@ -197,15 +200,18 @@ def unused_name(path: str | Path) -> Path:
         k += 1
 
 
-def _mode_for(target: Path) -> int:
-    """The permissions of the file being replaced, or what a plain ``open(..., "w")`` would
-    give under the umask (``mkstemp`` alone would make every output private)."""
+def _mode_of(target: Path) -> int:
+    """The permission bits ``target`` has, or a new file would get (0666 less the umask)."""
     try:
         return target.stat().st_mode & 0o7777
     except OSError:
-        umask = os.umask(0)
-        os.umask(umask)
-        return 0o666 & ~umask
+        pass
+    try:  # the umask without changing it (Linux); else the usual 022
+        status = Path("/proc/self/status").read_text()
+        umask = int(next(ln.split()[1] for ln in status.splitlines() if ln.startswith("Umask")), 8)
+    except (OSError, StopIteration, ValueError, IndexError):
+        umask = 0o022
+    return 0o666 & ~umask
 
 
 def _remove(path: Path) -> None:

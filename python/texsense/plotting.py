@@ -1,7 +1,8 @@
 """Figures of recordings: a pressure map and the load / centre of force over time.
 
 Matplotlib is imported lazily with the non-interactive Agg backend, so nothing here needs a
-display.
+display. Every figure texsense writes goes through :func:`save_figure` (a temporary name in
+the same folder, renamed when complete: :mod:`texsense.files`).
 """
 
 from __future__ import annotations
@@ -13,13 +14,14 @@ import numpy as np
 
 from texsense import stats
 from texsense.exceptions import ParameterError
+from texsense.files import atomic_path
 from texsense.recording import Recording
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["draw_map", "overview_figure", "peak_frame"]
+__all__ = ["draw_map", "overview_figure", "peak_frame", "save_figure"]
 
 
 def _pyplot():
@@ -29,6 +31,27 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig: Figure, path: str | Path, **savefig: object) -> Path:
+    """Write ``fig`` to ``path`` in the format its extension names (PNG without one), under a
+    temporary name that is renamed when complete; returns the path.
+
+    Raises
+    ------
+    ParameterError
+        If matplotlib cannot write the extension's format.
+    WriteError
+        If the file could not be written (the previous file is kept).
+    """
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    if fmt not in fig.canvas.get_supported_filetypes():
+        known = ", ".join(sorted(fig.canvas.get_supported_filetypes()))
+        raise ParameterError(f"{path}: cannot write a figure as .{fmt}; use one of {known}")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=fmt, **savefig)  # type: ignore[arg-type]
+    return path
 
 
 def peak_frame(rec: Recording) -> int:
@@ -156,7 +179,7 @@ def save_overview(
     """Render :func:`overview_figure` to a PNG file."""
     plt = _pyplot()
     fig = overview_figure(rec, frame, title)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -75,3 +76,49 @@ def test_not_a_pmd_folder(tmp_path):
         read_pmd(tmp_path)
     with pytest.raises(FormatError, match="no such file"):
         read_pmd(tmp_path / "missing")
+
+
+def test_conformance(tree, tmp_path, caplog):
+    check_reader(tree / "S2" / "7.txt", tmp_path / "file", caplog)
+    check_reader(tree / "S5", tmp_path / "folder", caplog)
+
+
+def _published_copy(tree, tmp_path, subject="S1"):
+    """A copy of one subject of the published tree with the publisher's checksums."""
+    root = tmp_path / "pmd"
+    (root / "experiment-i" / subject).mkdir(parents=True)
+    sums = (tree.parent / "SHA256SUMS.txt").read_text().splitlines()
+    mine = [s for s in sums if f"experiment-i/{subject}/" in s]
+    (root / "SHA256SUMS.txt").write_text("\n".join(mine) + "\n")
+    for f in (tree / subject).iterdir():
+        (root / "experiment-i" / subject / f.name).write_bytes(f.read_bytes())
+    return root / "experiment-i" / subject
+
+
+def test_published_checksums_catch_a_file_cut_at_a_line_end(tree, tmp_path, caplog):
+    folder = _published_copy(tree, tmp_path)
+    assert read_pmd(folder).n_frames == read_pmd(tree / "S1").n_frames
+    data = (folder / "3.txt").read_bytes()
+    lines = data.split(b"\n")
+    (folder / "3.txt").write_bytes(b"\n".join(lines[:40]) + b"\n")  # 40 whole lines of 90
+    with pytest.raises(FormatError, match=r"3\.txt does not match its SHA-256 .*truncated"):
+        read_pmd(folder)
+    rec = read_pmd(folder, accept_truncated=True)
+    assert (rec.labels["posture"] == 3).sum() == 40
+    assert "does not match" in caplog.text
+    (folder / "5.txt").unlink()
+    with pytest.raises(FormatError, match=r"posture file\(s\) listed in .* are missing"):
+        read_pmd(folder)
+
+
+def test_impossible_counts_are_invalid_readings(tree, tmp_path, caplog):
+    lines = (tree / "S1" / "1.txt").read_text().splitlines()
+    tokens = lines[5].split("\t")
+    for k, bad in enumerate(["1.5", "nan", "-4", "1e308", "inf"]):
+        tokens[k] = bad
+    lines[5] = "\t".join(tokens)
+    path = tmp_path / "1.txt"
+    path.write_text("\n".join(lines) + "\n")
+    rec = read_pmd(path)
+    assert (~rec.valid).sum() == 5 and not rec.valid[5, :5].any()
+    assert "5 reading(s) marked invalid" in caplog.text

@@ -2,6 +2,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -159,3 +160,28 @@ def test_missing_rows_key_and_data_marker(iscan, tmp_path):
         )
     with pytest.raises(FormatError, match="ASCII_DATA"):
         read_tekscan(_corrupt(iscan, tmp_path / "d.csv", lambda ls: ls[:20]))
+
+
+@pytest.mark.parametrize("name", ["iscan_test.csv", "fscan_testL.asf"])
+def test_conformance(shared_data, tmp_path, caplog, name):
+    check_reader(shared_data / "vendor-formats" / name, tmp_path, caplog)
+
+
+def test_conformance_of_a_written_file(iscan, tmp_path, caplog):
+    written = write_tekscan(texsense.load(iscan), tmp_path / "written.asf", unit="raw")
+    check_reader(written, tmp_path, caplog)
+
+
+def test_closed_early_is_refused_or_read_with_a_warning(iscan, tmp_path, caplog):
+    # 100 of the 309 frames (END_FRAME 309), then the end marker: a file closed early
+    lines = iscan.read_text().splitlines()
+    end = next(i for i, s in enumerate(lines) if s.startswith("Frame 101,"))
+    bad = _corrupt(iscan, tmp_path / "early.csv", lambda ls: [*ls[:end], "@@"])
+    with pytest.raises(
+        FormatError,
+        match=r"early\.csv: truncated: END_FRAME is 309, '@@' came after frame 100 \(209 missing",
+    ):
+        read_tekscan(bad)
+    rec = read_tekscan(bad, accept_truncated=True)
+    assert rec.n_frames == 100
+    assert "209 missing" in caplog.text and "early.csv" in caplog.text

@@ -3,6 +3,7 @@ per-frame statistics."""
 
 import numpy as np
 import pytest
+from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -123,3 +124,21 @@ def test_pliance_bad_input(pliance_path, tmp_path):
     bad.write_text("\n".join(edited) + "\n")
     with pytest.raises(FormatError, match="unknown pressure unit 'bananas'"):
         read_pliance(bad)
+
+
+def test_conformance(xsensor_path, pliance_path, tmp_path, caplog):
+    check_reader(xsensor_path, tmp_path / "x", caplog)
+    check_reader(pliance_path, tmp_path / "p", caplog, tail_cut_seen=False)
+
+
+def test_xsensor_cut_in_half(xsensor_path, tmp_path, caplog):
+    data = xsensor_path.read_bytes()
+    half = tmp_path / "half.csv"
+    half.write_bytes(data[: len(data) // 2])
+    with pytest.raises(FormatError, match=r"half\.csv: truncated: .*inside frame 1514"):
+        read_xsensor(half)
+    rec = read_xsensor(half, accept_truncated=True)
+    whole = read_xsensor(xsensor_path)
+    assert rec.n_frames == 50
+    np.testing.assert_array_equal(rec.frames, whole.frames[:50])
+    assert "half.csv" in caplog.text and "50 complete frame" in caplog.text

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -60,3 +61,29 @@ def test_bad_files(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(FormatError, match=message):
         read_wide_csv(path)
+
+
+def test_conformance(tmp_path, caplog):
+    rng = np.random.default_rng(5)
+    lay = Layout.grid(3, 4, pitch_cm=1.5)
+    valid = rng.random((40, 12)) > 0.2
+    rec = Recording(rng.random((40, 12)) * 5, np.arange(40) * 0.05, lay, valid=valid)
+    check_reader(write_wide_csv(rec, tmp_path / "w.csv"), tmp_path, caplog)
+
+
+def test_foreign_file_impossible_values_are_invalid(tmp_path, caplog):
+    path = tmp_path / "f.csv"
+    path.write_text("time_s,a,b\n0,1.5,nan\n0.5,-2,inf\n1.0,1e308,3\n")
+    rec = texsense.load(path, quantity="pressure", unit="kPa")
+    assert rec.valid.tolist() == [[True, False], [False, False], [False, True]]
+    assert "4 reading(s) marked invalid" in caplog.text
+
+
+def test_cut_texsense_file(tmp_path):
+    rec = Recording(np.ones((6, 2)), np.arange(6.0), Layout.grid(1, 2))
+    path = write_wide_csv(rec, tmp_path / "w.csv")
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:-2]) + "\n")  # cut at a line end
+    with pytest.raises(FormatError, match=r"'# frames: 6' but the file holds 4"):
+        read_wide_csv(path)
+    assert read_wide_csv(path, accept_truncated=True).n_frames == 4

@@ -15,6 +15,10 @@ ALLOWED = {
     "texsense.layout",
     "texsense.recording",
     "texsense.units",
+    # the virtual device (sim/device.py) speaks the serial wire format and records its truth:
+    # formats, not models
+    "texsense.monitor.protocol",
+    "texsense.io.hdf5",
 }
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.commands._options import add_accept_truncated
+from texsense.files import check_not_input
 from texsense.io import WRITERS, format_for_output, load, save
 
 
@@ -14,7 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "convert",
         help="convert a recording to HDF5 (.h5), wide CSV (.csv) or Tekscan ASCII (.asf)",
         description="Read any supported recording and write it in another format. The output "
-        "format follows the extension of OUT unless --format is given.",
+        "format follows the extension of OUT unless --format is given. OUT is written under a "
+        "temporary name and renamed when complete (a failed write keeps the previous OUT); "
+        "OUT may not be IN.",
     )
     p.add_argument("input", type=Path, help="recording file or folder to read")
     p.add_argument("output", type=Path, help="file to write (.h5, .csv or .asf)")
@@ -22,13 +26,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--format", choices=sorted(WRITERS), help="output format (default: by extension)"
     )
     p.add_argument("--unit", help="convert values to this unit first (e.g. kPa, mmHg)")
+    add_accept_truncated(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense convert``."""
     fmt = args.format or format_for_output(args.output)
-    rec = load(args.input)
+    check_not_input(args.output, [args.input])
+    rec = load(args.input, accept_truncated=args.accept_truncated)
     if args.unit:
         rec = rec.to_unit(args.unit)
     save(rec, args.output, format=fmt)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from texsense import stats
+from texsense.commands._options import add_accept_truncated
 from texsense.io import load, sniff_format
 from texsense.recording import Recording
 
@@ -23,6 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("file", type=Path, help="recording file or folder")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    add_accept_truncated(p)
     p.set_defaults(run=run)
 
 
@@ -106,7 +108,7 @@ def _text(info: dict[str, Any]) -> str:
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense info``."""
     fmt = sniff_format(args.file)
-    rec = load(args.file, format=fmt)
+    rec = load(args.file, format=fmt, accept_truncated=args.accept_truncated)
     info = describe(rec, args.file, fmt)
     print(json.dumps(info, indent=2) if args.json else _text(info))
     return 0

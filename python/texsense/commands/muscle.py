@@ -6,6 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.commands._options import add_accept_truncated
+from texsense.files import check_not_input, write_text
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``muscle`` command."""
@@ -24,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     d.add_argument("--threshold", type=float, default=0.06, help="onset, N/cm² (default 0.06)")
     d.add_argument("--plot", type=Path, help="a figure of the activation and the onsets")
     d.add_argument("--json", action="store_true")
+    add_accept_truncated(d)
     d.set_defaults(run=run_detect)
     s = ps.add_parser("simulate", help="a session on a virtual forearm")
     s.add_argument("--minutes", type=float, default=10.0)
@@ -47,7 +51,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     chain.save(args.output / "calibration.json")
     truth = {"onsets_s": s.onsets_s.round(3).tolist(), "ends_s": s.ends_s.round(3).tolist(),
              "intensity": s.intensity.round(3).tolist(), "rest_s": s.rest}  # fmt: skip
-    (args.output / "truth.json").write_text(json.dumps(truth, indent=1), encoding="utf-8")
+    write_text(args.output / "truth.json", json.dumps(truth, indent=1))
     every = f"a frame every {1e3 * s.frame_s:.0f} ms"
     print(f"wrote {args.output}/sleeve.h5 ({s.times.size} frames, {len(s.onsets_s)} "
           f"contractions, {every}), calibration.json, truth.json")  # fmt: skip
@@ -60,7 +64,10 @@ def run_detect(args: argparse.Namespace) -> int:
     from texsense.io import load
     from texsense.muscle import activation, detect
 
-    rec = to_pressure(load(args.recording), args.calibration)
+    if args.plot:
+        check_not_input(args.plot, [args.recording])
+    rec = to_pressure(load(args.recording, accept_truncated=args.accept_truncated),
+                      args.calibration)  # fmt: skip
     act = activation(rec)
     found = detect(rec.times, act, on_ncm2=args.threshold)
     if args.plot:
@@ -83,6 +90,8 @@ def _plot(times, act, found, threshold, path) -> None:  # noqa: ANN001
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from texsense.plotting import save_figure
+
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.plot(times, act, lw=0.8, label="activation")
     ax.axhline(threshold, color="tab:orange", ls=":", lw=1, label="onset threshold")
@@ -93,5 +102,7 @@ def _plot(times, act, found, threshold, path) -> None:  # noqa: ANN001
     ax.set_title(f"{found.count} contractions")
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

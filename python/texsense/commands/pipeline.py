@@ -12,7 +12,9 @@ from typing import Any
 import numpy as np
 
 from texsense.archive import ProcessOptions
+from texsense.commands._options import add_accept_truncated
 from texsense.exceptions import FormatError, ParameterError
+from texsense.files import check_not_input
 from texsense.io import load, save
 from texsense.repair import METHODS
 
@@ -41,6 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     m.add_argument("--thickness-mm", type=float, required=True, help="spacer thickness")
     m.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     m.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    add_accept_truncated(m)
     m.set_defaults(run=run_calibrate)
 
     lin = cs.add_parser(
@@ -62,14 +65,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     lin.add_argument("--full-scale", type=float, help="readings beyond it are out of range")
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    add_accept_truncated(lin)
     lin.set_defaults(run=run_calibrate_linear)
+    _register_process(sub)
+    _register_repair_health(sub)
 
+
+def _register_process(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "process",
         help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair); "
         "one file, or a whole archive on Dask",
         description="Run the whole pipeline over recordings. One file: processed block by "
-        "block (an HDF5 input and output keep the memory flat in the recording's length). "
+        "block (any input format, and an HDF5 output, keep the memory flat in the recording's "
+        "length; the output may not be the input). "
         "Several files, a folder or a glob pattern: one task per file on Dask (local worker "
         "processes, or --scheduler ADDRESS), outputs mirrored into the -o folder; a second run "
         "skips files whose output has the same calibration and input; a failed file is "
@@ -92,8 +101,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("--scheduler", help="dask.distributed scheduler address (archives)")
     p.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    add_accept_truncated(p)
     p.set_defaults(run=run_process)
 
+
+def _register_repair_health(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r = sub.add_parser(
         "repair",
         help="fill elements marked invalid",
@@ -103,6 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r.add_argument("input", type=Path)
     r.add_argument("-o", "--output", type=Path, required=True)
     r.add_argument("--method", choices=METHODS, default="neighbour-mean")
+    add_accept_truncated(r)
     r.set_defaults(run=run_repair)
 
     h = sub.add_parser(
@@ -115,6 +128,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     h.add_argument("--calibration", type=Path, help="adds the expected range per element")
     h.add_argument("--all", action="store_true", help="list healthy elements too")
     h.add_argument("--json", action="store_true")
+    add_accept_truncated(h)
     h.set_defaults(run=run_health)
 
 
@@ -132,8 +146,8 @@ def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
     return Pipeline(load_calibration(calibration), rec.layout, repair=None, **stages).run(rec)
 
 
-def _capacitance(path: Path):  # type: ignore[no-untyped-def]
-    rec = load(path)
+def _capacitance(path: Path, accept_truncated: bool = False):  # type: ignore[no-untyped-def]
+    rec = load(path, accept_truncated=accept_truncated)
     if rec.quantity != "capacitance":
         raise FormatError(path, f"holds {rec.quantity}, the command needs capacitance")
     return rec
@@ -144,6 +158,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from texsense.io.columns_csv import read_columns_csv
     from texsense.workflows import calibrate_mat
 
+    inputs = [args.material, args.baseline, args.uniform] + ([args.drift] if args.drift else [])
+    check_not_input(args.output, inputs)
     material = read_columns_csv(
         args.material, required=("compression_mm", "capacitance_pF", "pressure_ncm2")
     )
@@ -154,8 +170,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         steps = load_steps(args.drift)
     cal = calibrate_mat(
         material,
-        _capacitance(args.baseline),
-        _capacitance(args.uniform),
+        _capacitance(args.baseline, args.accept_truncated),
+        _capacitance(args.uniform, args.accept_truncated),
         args.pressure,
         args.thickness_mm,
         steps=steps,
@@ -167,7 +183,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     )
     from texsense.stages import StageChain
 
-    layout = load(args.baseline).layout
+    layout = load(args.baseline, accept_truncated=args.accept_truncated).layout
     chain = StageChain.from_calibration(cal, layout=layout)
     chain.save(args.output)
     print(
@@ -182,7 +198,8 @@ def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
     from texsense.calibration import LinearCalibration
 
-    rec = load(args.like)
+    check_not_input(args.output, [args.like])
+    rec = load(args.like, accept_truncated=args.accept_truncated)
     quantity, unit = rec.quantity, rec.unit
     if args.to is not None:
         if ":" not in args.to:
@@ -210,6 +227,7 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
         hysteresis=not args.no_hysteresis,
         drift=not args.no_drift,
         chunk_frames=args.chunk_frames,
+        accept_truncated=args.accept_truncated,
     )
 
 
@@ -261,7 +279,8 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
     """Any output format other than HDF5: the whole recording in memory."""
     from texsense.pipeline import Pipeline
 
-    raw = load(src)
+    check_not_input(output, [src])
+    raw = load(src, accept_truncated=options.accept_truncated)
     pipe = Pipeline(
         cal,
         raw.layout,
@@ -284,7 +303,8 @@ def run_repair(args: argparse.Namespace) -> int:
     """Run ``texsense repair``."""
     from texsense.repair import Repair
 
-    rec = load(args.input)
+    check_not_input(args.output, [args.input])
+    rec = load(args.input, accept_truncated=args.accept_truncated)
     out = Repair(rec.layout, args.method).run(rec)
     save(out, args.output)
     print(f"wrote {args.output}: {int((~rec.valid).sum())} readings repaired with {args.method}")
@@ -295,7 +315,7 @@ def run_health(args: argparse.Namespace) -> int:
     """Run ``texsense health``."""
     from texsense.health import FailureDetector, health_report
 
-    raw = _capacitance(args.raw)
+    raw = _capacitance(args.raw, args.accept_truncated)
     detector = FailureDetector(raw.layout)
     if args.calibration:
         from texsense.calibration import LinearCalibration, load_calibration

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.commands._options import add_accept_truncated
+from texsense.files import check_not_input
 from texsense.io import load
 from texsense.plotting import peak_frame, save_overview
 
@@ -21,12 +23,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("-o", "--output", type=Path, required=True, help="PNG file to write")
     p.add_argument("--frame", type=int, help="frame index to map (default: the peak frame)")
     p.add_argument("--unit", help="display pressure in this unit (N/cm2, kPa, mmHg, psi)")
+    add_accept_truncated(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense plot``."""
-    rec = load(args.file)
+    check_not_input(args.output, [args.file])
+    rec = load(args.file, accept_truncated=args.accept_truncated)
     if args.unit:
         rec = rec.to_unit(args.unit)
     frame = peak_frame(rec) if args.frame is None else args.frame

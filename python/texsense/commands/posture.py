@@ -11,7 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from texsense.commands._options import add_accept_truncated
 from texsense.exceptions import ParameterError
+from texsense.files import check_not_input, write_text
 from texsense.io import load
 from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
 from texsense.posture.evaluate import CLASSIFIERS
@@ -30,6 +32,7 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop", action="append", default=[], metavar="VALUE",
                    help="leave out frames whose label has this value (repeatable)")  # fmt: skip
     p.add_argument("--every", type=int, default=1, help="use every N-th frame (default 1)")
+    add_accept_truncated(p)
 
 
 def _feature_args(p: argparse.ArgumentParser) -> None:
@@ -121,7 +124,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _frames(args: argparse.Namespace) -> tuple[Recording, np.ndarray, np.ndarray]:
     """The recording, the selected frame indices and their labels."""
-    rec = load(args.recording)
+    rec = load(args.recording, accept_truncated=args.accept_truncated)
     labels = rec.labels
     if args.label not in labels:
         raise ParameterError(
@@ -270,6 +273,7 @@ def run_train(args: argparse.Namespace) -> int:
     """Run ``texsense posture train``."""
     from texsense.posture.model import PostureModel
 
+    check_not_input(args.output, [args.recording])
     rec, idx, y = _frames(args)
     fs = _feature_set(args)
     name, estimator = _classifier(args)
@@ -291,9 +295,11 @@ def run_study(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from texsense.plotting import save_figure
     from texsense.posture.features import reduce_maps
     from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 
+    check_not_input(args.output, [args.recording])
     rec, idx, y = _frames(args)
     frames = np.nan_to_num(rec.frames[idx].astype(np.float64))
     layout = rec.layout
@@ -309,8 +315,10 @@ def run_study(args: argparse.Namespace) -> int:
     out = args.output
     out.mkdir(parents=True, exist_ok=True)
     fig = plot_study(results, f"{args.recording.name}: {classes.size} classes, modelled errors")
-    fig.savefig(out / "study.png", dpi=100)
-    plt.close(fig)
+    try:
+        save_figure(fig, out / "study.png", dpi=100)
+    finally:
+        plt.close(fig)
     numbers = {
         "source": str(args.recording),
         "classes": [str(c) for c in classes],
@@ -319,8 +327,8 @@ def run_study(args: argparse.Namespace) -> int:
         "scaled_to_ncm2": args.range if scaled else None,
         "results": ErrorStudy.to_dict(results),
     }
-    (out / "numbers.json").write_text(json.dumps(numbers, indent=1), encoding="utf-8")
-    (out / "report.html").write_text(_report_html(numbers), encoding="utf-8")
+    write_text(out / "numbers.json", json.dumps(numbers, indent=1))
+    write_text(out / "report.html", _report_html(numbers))
     print(f"wrote {out / 'report.html'}, {out / 'study.png'}, {out / 'numbers.json'}")
     return 0
 

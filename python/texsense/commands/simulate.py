@@ -71,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     """Run ``texsense simulate``."""
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
+    if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
+        raise ParameterError(f"-o and --csv name the same file {args.output}")
     options: dict[str, Any] = {}
     for flag, keyword in _OPTIONS.items():
         value = getattr(args, flag)

@@ -7,6 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.commands._options import add_accept_truncated
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``stocking`` command."""
@@ -25,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r.add_argument("--calibration", type=Path, help="the strip's calibration (for capacitance)")
     r.add_argument("--every", type=float, default=1.0, help="hours between rows (default 1)")
     r.add_argument("--json", action="store_true")
+    add_accept_truncated(r)
     r.set_defaults(run=run_report)
     s = ps.add_parser("simulate", help="a day's wear on a virtual leg, read by the strip")
     s.add_argument("--class", dest="cls", choices=("I", "II", "III", "IV"), default="II")
@@ -60,7 +63,7 @@ def run_report(args: argparse.Namespace) -> int:
     from texsense.io import load
     from texsense.stocking import POINTS, report
 
-    rec = load(args.recording)
+    rec = load(args.recording, accept_truncated=args.accept_truncated)
     pressure = to_pressure(rec, args.calibration)
     unc = None
     if rec.quantity == "capacitance":  # the uncompensated reading beside it

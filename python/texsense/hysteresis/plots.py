@@ -8,6 +8,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.hysteresis._model import HysteresisModel
+from texsense.plotting import save_figure
 
 __all__ = ["model_figure", "validation_figure", "validation_report_figure"]
 
@@ -48,8 +49,7 @@ def model_figure(model: HysteresisModel, path: str | Path) -> Path:
     ax.set_title("modelled loops")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    path = Path(path)
-    fig.savefig(path, dpi=100)
+    path = save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -80,8 +80,7 @@ def validation_figure(
     axes[1].set_ylabel("relative error [%]")
     axes[1].grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
-    path = Path(path)
-    fig.savefig(path, dpi=100)
+    path = save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -122,6 +121,6 @@ def validation_report_figure(
     )
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=110)
+    path = save_figure(fig, path, dpi=110)
     plt.close(fig)
     return Path(path)

@@ -1,8 +1,11 @@
 """Readers and writers for recordings.
 
 :func:`load` opens any supported file or folder and picks the reader by content (not by
-extension alone); :func:`save` writes HDF5, wide CSV or Tekscan ASCII by extension or by
-``format``. One module per format:
+extension alone); :func:`open_reader` does the same but returns the format's reader, which
+parses the header and then yields the frames in blocks (constant memory, what ``texsense
+process`` uses); :func:`save` writes HDF5, wide CSV or Tekscan ASCII by extension or by
+``format``, always under a temporary name that is renamed when complete. One module per
+format, one reader class each over :class:`texsense.io._base.RecordingReader`:
 
 ==============  =====================================  ========  ===========
 format          what                                   read      write
@@ -18,25 +21,31 @@ format          what                                   read      write
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from texsense.exceptions import FormatError, ParameterError
-from texsense.io.hdf5 import RecordingWriter, read_hdf5, write_hdf5
-from texsense.io.pliance import read_pliance
-from texsense.io.pmd import is_pmd_path, read_pmd
-from texsense.io.tekscan import read_tekscan, write_tekscan
+from texsense.io._base import RecordingReader
+from texsense.io._text import decode_head, open_binary
+from texsense.io.hdf5 import HDF5Reader, RecordingWriter, read_hdf5, write_hdf5
+from texsense.io.pliance import PlianceReader, read_pliance
+from texsense.io.pmd import PMDReader, is_pmd_path, read_pmd
+from texsense.io.tekscan import TekscanReader, read_tekscan, write_tekscan
 from texsense.io.wide_csv import MAGIC as _WIDE_MAGIC
-from texsense.io.wide_csv import read_wide_csv, write_wide_csv
-from texsense.io.xsensor import read_xsensor
+from texsense.io.wide_csv import WideCSVReader, read_wide_csv, write_wide_csv
+from texsense.io.xsensor import XSensorReader, read_xsensor
 from texsense.recording import Recording
 
 __all__ = [
     "READERS",
+    "READER_CLASSES",
     "WRITERS",
+    "RecordingReader",
     "RecordingWriter",
     "load",
+    "open_reader",
     "read_hdf5",
     "read_pliance",
     "read_pmd",
@@ -57,6 +66,15 @@ READERS: dict[str, Callable[..., Recording]] = {
     "xsensor": read_xsensor,
     "pliance": read_pliance,
     "wide-csv": read_wide_csv,
+}
+
+READER_CLASSES: dict[str, type[RecordingReader]] = {
+    "hdf5": HDF5Reader,
+    "pmd": PMDReader,
+    "tekscan": TekscanReader,
+    "xsensor": XSensorReader,
+    "pliance": PlianceReader,
+    "wide-csv": WideCSVReader,
 }
 
 WRITERS: dict[str, Callable[..., Path]] = {
@@ -89,14 +107,16 @@ def sniff_format(path: str | Path) -> str:
         if is_pmd_path(path):
             return "pmd"
         raise FormatError(path, "folder is not a PMD tree (no S1, S2, ... or 1.txt .. 17.txt)")
-    with path.open("rb") as fh:
-        head = fh.read(8192)
+    with open_binary(path) as fh:
+        head = fh.read(1 << 16)
     if head.startswith(_HDF5_SIGNATURE):
         return "hdf5"
     hint = _BINARY_HINTS.get(path.suffix.lower())
     if hint:
         raise FormatError(path, f"this is {hint}")
-    text = head.decode("utf-8", errors="replace").lstrip("\ufeff")
+    if not head:
+        raise FormatError(path, "empty file")
+    text = decode_head(head)
     first = text.split("\n", 1)[0].strip()
     if first.startswith("DATA_TYPE") or "Tekscan" in text[:400]:
         return "tekscan"
@@ -106,9 +126,9 @@ def sniff_format(path: str | Path) -> str:
         return "pliance"
     if first.startswith(_WIDE_MAGIC) or first.startswith("time_s,") or first.startswith("# "):
         return "wide-csv"
-    tokens = first.split("\t")
-    if len(tokens) >= 2048 and all(t.strip().isdigit() for t in tokens[:2048]):
-        return "pmd"
+    tokens = [t for t in first.strip().split("\t") if t.strip()]
+    if len(tokens) == 2048 and sum(t.strip().isdigit() for t in tokens) >= 1024:
+        return "pmd"  # (a few impossible counts, "nan" or "1.5", are the reader's to judge)
     raise FormatError(
         path,
         "unknown format; texsense reads texsense HDF5, PhysioNet PMD, Tekscan ASCII, "
@@ -116,7 +136,54 @@ def sniff_format(path: str | Path) -> str:
     )
 
 
-def load(path: str | Path, *, format: str | None = None, **options: Any) -> Recording:
+def open_reader(
+    path: str | Path,
+    *,
+    format: str | None = None,
+    accept_truncated: bool = False,
+    **options: Any,
+) -> RecordingReader:
+    """Open a recording for reading in blocks: its header is parsed, the frames are read by
+    ``reader.blocks(frames)`` (or all at once by ``reader.read()``). Close it when done (a
+    context manager).
+
+    Parameters
+    ----------
+    path : str or Path
+        File or folder.
+    format : str, optional
+        Force a reader (one of :data:`READER_CLASSES`); by default the content decides.
+    accept_truncated : bool
+        Read a file that holds less than it declares (cut short, closed early, datasets of
+        different lengths) up to its last complete frame with a warning, instead of refusing
+        it (``--accept-truncated`` on the command line).
+    **options
+        Passed to the reader (e.g. ``unit=`` for a wide CSV without unit line).
+
+    Examples
+    --------
+    >>> with open_reader("../shared/data/pmd/experiment-i/S1/1.txt") as reader:
+    ...     sum(block.n_frames for block in reader.blocks(32))
+    82
+    """
+    fmt = format or sniff_format(path)
+    if fmt not in READER_CLASSES:
+        raise ParameterError(f"unknown format {fmt!r}; known: {', '.join(READER_CLASSES)}")
+    cls = READER_CLASSES[fmt]
+    known = inspect.signature(cls.__init__).parameters
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise ParameterError(f"the {fmt} reader takes no option {', '.join(unknown)}")
+    return cls(path, accept_truncated=accept_truncated, **options)
+
+
+def load(
+    path: str | Path,
+    *,
+    format: str | None = None,
+    accept_truncated: bool = False,
+    **options: Any,
+) -> Recording:
     """Read a recording from any supported file or folder.
 
     Parameters
@@ -125,6 +192,9 @@ def load(path: str | Path, *, format: str | None = None, **options: Any) -> Reco
         File or folder.
     format : str, optional
         Force a reader (one of :data:`READERS`); by default the content decides.
+    accept_truncated : bool
+        Read a file cut short up to its last complete frame, with a warning (see
+        :func:`open_reader`).
     **options
         Passed to the reader (e.g. ``unit=`` for a wide CSV without unit line).
 
@@ -135,10 +205,8 @@ def load(path: str | Path, *, format: str | None = None, **options: Any) -> Reco
     >>> rec.layout.shape, rec.n_frames
     ((28, 28), 309)
     """
-    fmt = format or sniff_format(path)
-    if fmt not in READERS:
-        raise ParameterError(f"unknown format {fmt!r}; known: {', '.join(READERS)}")
-    return READERS[fmt](path, **options)
+    with open_reader(path, format=format, accept_truncated=accept_truncated, **options) as r:
+        return r.read()
 
 
 def format_for_output(path: str | Path) -> str:

@@ -1,7 +1,10 @@
 """Column tables in CSV: a header of names, then one row of numbers per sample.
 
 The virtual sensor writes ``time_s,compression_mm,pressure_ncm2,capacitance_pF``; the
-hysteresis and drift tools read any such table and pick columns by name.
+hysteresis and drift tools read any such table and pick columns by name. texsense writes a
+first line ``# rows: N``, so a table cut at a line end is noticed; a last row cut mid-line is
+noticed in any table. A table has no validity mask: numbers that are not finite are read as
+they are and counted in one warning line.
 
 Examples
 --------
@@ -14,20 +17,27 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
+from texsense._progress import logger
 from texsense.exceptions import FormatError, ParameterError
-from texsense.io._text import is_number, parse_csv_rows, read_lines
+from texsense.files import atomic_open
+from texsense.io._base import BlockReader
+from texsense.io._text import TextLines, is_number, parse_csv_row
 
-__all__ = ["read_columns_csv", "write_columns_csv"]
+__all__ = ["ColumnsReader", "read_columns_csv", "write_columns_csv"]
 
 
 def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) -> Path:
-    """Write equal-length columns; floats with the shortest text that reads back exactly."""
+    """Write equal-length columns; floats with the shortest text that reads back exactly.
+
+    The first line declares the row count (``# rows: N``); the file is written to a temporary
+    name and renamed (:mod:`texsense.files`).
+    """
     path = Path(path)
     if not columns:
         raise ParameterError("no columns to write")
@@ -39,38 +49,130 @@ def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) ->
     length = arrays[0].size
     if any(a.size != length for a in arrays):
         raise ParameterError("all columns must have the same length")
-    lines = [",".join(names)]
-    lines += [
-        ",".join(repr(v) for v in row) for row in zip(*(a.tolist() for a in arrays), strict=True)
-    ]
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with atomic_open(path, "w", encoding="utf-8") as out:
+        out.write(f"# rows: {length}\n" + ",".join(names) + "\n")
+        for row in zip(*(a.tolist() for a in arrays), strict=True):
+            out.write(",".join(repr(v) for v in row) + "\n")
     return path
 
 
+class ColumnsReader(BlockReader):
+    """A column table read a block of rows at a time.
+
+    Parameters
+    ----------
+    path : str or Path
+        The table.
+    required : sequence of str
+        Columns that must be there (the first missing one is named in the error).
+    accept_truncated : bool
+        Read a table cut short (fewer rows than ``# rows:`` declares, a last row cut mid-line)
+        up to its last complete row, with a warning.
+    """
+
+    format = "columns-csv"
+
+    def __init__(
+        self, path: str | Path, required: Sequence[str] = (), *, accept_truncated: bool = False
+    ) -> None:
+        super().__init__(path, accept_truncated=accept_truncated)
+        self._lines = TextLines(self.path)
+        try:
+            self.names, self.declared_rows = self._read_header(required)
+        except BaseException:
+            self.close()
+            raise
+        self.rows_read = 0
+        self.not_finite = 0
+
+    def _read_header(self, required: Sequence[str]) -> tuple[list[str], int | None]:
+        path, declared = self.path, None
+        while (line := self._lines.peek()) is not None and line.text.startswith("#"):
+            next(self._lines)
+            key, _, value = line.text[1:].partition(":")
+            if key.strip() == "rows":
+                try:
+                    declared = int(value)
+                except ValueError:
+                    raise FormatError(
+                        path, f"rows: expected a count, found {value.strip()!r}", line.number
+                    ) from None
+        head = self._lines.next_nonblank()
+        if head is None:
+            raise FormatError(path, "empty file: expected a header line of column names")
+        names = [s.strip() for s in head.text.split(",")]
+        if any(not n for n in names) or len(set(names)) != len(names):
+            raise FormatError(path, "header must name every column once", head.number)
+        if all(is_number(n) for n in names):
+            raise FormatError(
+                path, "the first line holds numbers: a header of names is expected", head.number
+            )
+        for name in required:
+            if name not in names:
+                raise FormatError(path, f"no column {name!r}; columns are {', '.join(names)}")
+        return names, declared
+
+    def _rows(self) -> Iterator[list[float]]:
+        n = len(self.names)
+        what = f"{n} values ({', '.join(self.names)})"
+        for line in self._lines.data_lines("the table"):
+            if not line.ended and self.declared_rows is not None:
+                self._cut(f"truncated: the file ends in the middle of line {line.number}")
+                return
+            try:
+                yield parse_csv_row(self.path, line, n, what)
+            except FormatError:
+                if line.ended:
+                    raise
+                self._cut(f"truncated: the file ends in the middle of line {line.number}")
+                return
+
+    def blocks(self, rows: int = 65536) -> Iterator[dict[str, npt.NDArray[np.float64]]]:
+        """Yield the table as {column: array} blocks of ``rows`` rows."""
+        held: list[list[float]] = []
+        for row in self._rows():
+            held.append(row)
+            if len(held) == rows:
+                yield self._block(held)
+                held = []
+        declared = self.declared_rows
+        if (
+            declared is not None
+            and self._shortfall is None
+            and self.rows_read + len(held) < declared
+        ):
+            missing = declared - self.rows_read - len(held)
+            self._cut(
+                f"truncated: '# rows: {declared}' but the file holds "
+                f"{declared - missing} ({missing} missing)"
+            )
+        self._finish_cut(self.rows_read + len(held), "row")
+        if held:
+            yield self._block(held)
+        if self.not_finite:
+            logger.warning(
+                "warning: %s: %d value(s) are not finite numbers", self.path, self.not_finite
+            )
+
+    def _block(self, rows: list[list[float]]) -> dict[str, npt.NDArray[np.float64]]:
+        data = np.array(rows, dtype=np.float64).reshape(len(rows), len(self.names))
+        self.rows_read += len(rows)
+        self.not_finite += int(np.count_nonzero(~np.isfinite(data)))
+        return {n: data[:, i].copy() for i, n in enumerate(self.names)}
+
+    def read(self) -> dict[str, npt.NDArray[np.float64]]:
+        """The whole table as {column: array}."""
+        parts = list(self.blocks())
+        if not parts:
+            return {n: np.zeros(0) for n in self.names}
+        return {n: np.concatenate([p[n] for p in parts]) for n in self.names}
+
+
 def read_columns_csv(
-    path: str | Path, required: Sequence[str] = ()
+    path: str | Path, required: Sequence[str] = (), *, accept_truncated: bool = False
 ) -> dict[str, npt.NDArray[np.float64]]:
     """Read a column table; raise :class:`FormatError` naming the line on any bad row, or
-    naming the first of the ``required`` columns that is missing."""
-    path = Path(path)
-    lines = [ln for ln in read_lines(path)]
-    while lines and not lines[-1].strip():
-        lines.pop()
-    start = 0
-    while start < len(lines) and lines[start].startswith("#"):
-        start += 1
-    if start >= len(lines):
-        raise FormatError(path, "empty file: expected a header line of column names")
-    names = [s.strip() for s in lines[start].split(",")]
-    if any(not n for n in names) or len(set(names)) != len(names):
-        raise FormatError(path, "header must name every column once", start + 1)
-    if all(is_number(n) for n in names):
-        raise FormatError(
-            path, "the first line holds numbers: a header of names is expected", start + 1
-        )
-    what = f"{len(names)} values ({', '.join(names)})"
-    for name in required:
-        if name not in names:
-            raise FormatError(path, f"no column {name!r}; columns are {', '.join(names)}")
-    data = parse_csv_rows(path, lines[start + 1 :], start + 2, len(names), what)
-    return {n: data[:, i].copy() for i, n in enumerate(names)}
+    naming the first of the ``required`` columns that is missing, or (unless
+    ``accept_truncated``) a table cut short."""
+    with ColumnsReader(path, required, accept_truncated=accept_truncated) as reader:
+        return reader.read()

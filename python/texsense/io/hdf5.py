@@ -3,7 +3,8 @@
 The schema is documented in ``docs/data-model.md`` so that h5py alone can read a file::
 
     /                      attrs: format="texsense.recording", version=1, quantity, unit,
-                                  meta (JSON text), software="texsense <version>"
+                                  meta (JSON text), software="texsense <version>",
+                                  open (1 while written), live (1: appendable recording)
     /frames                float32 (T, N), chunked, gzip, growable along T
     /times                 float64 (T,), s
     /valid                 bool (T, N)
@@ -19,12 +20,20 @@ The schema is documented in ``docs/data-model.md`` so that h5py alone can read a
     /layout/regions/<name> int64 element indices
 
 :class:`RecordingWriter` appends frames while recording and flushes them to disk, so that a
-process that is killed leaves a readable file holding everything flushed before.
+process that is killed leaves a readable file holding everything flushed before (``live``).
+:func:`write_hdf5` writes a whole recording under a temporary name and renames it when
+complete; a file it did not finish (``open`` still 1, ``live`` 0) is refused by the reader.
+Writes go through a file object that keeps HDF5 from ever seeing a failed write (a full disk,
+a file-size limit): HDF5 then crashed the process when closing; now the writer raises the
+``OSError`` once HDF5 is done, and the previous file is kept.
+
+:class:`HDF5Reader` reads a file a block of frames at a time (:mod:`texsense.io._base`).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -37,13 +46,16 @@ import numpy.typing as npt
 from texsense import units
 from texsense._progress import logger
 from texsense.exceptions import FormatError, ParameterError
+from texsense.files import atomic_path
+from texsense.io._base import Header, Piece, RecordingReader
+from texsense.io._guarded import GuardedFile
 from texsense.layout import Layout
 from texsense.recording import Recording
 
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
-    "HDF5Chunks",
+    "HDF5Reader",
     "RecordingWriter",
     "read_hdf5",
     "write_hdf5",
@@ -142,6 +154,16 @@ class RecordingWriter:
         uncompressed chunk is rewritten in place with the same bytes for the rows already
         there. ``write_hdf5`` (one write, then close) compresses; ``texsense convert`` compacts
         a live recording afterwards.
+    live : bool
+        A live recording (the default): a file left open by a killed writer is read up to its
+        last flushed frame. False for a file written in one go (under a temporary name, see
+        :func:`write_hdf5`): a reader refuses such a file if it was not closed.
+
+    Raises
+    ------
+    OSError
+        From :meth:`append`, :meth:`flush` or :meth:`close` when the disk refused a write (the
+        file is then incomplete; :meth:`close` still releases it).
 
     Examples
     --------
@@ -165,6 +187,7 @@ class RecordingWriter:
         element_times: bool = False,
         flush_interval_s: float = 0.0,
         compress: bool = False,
+        live: bool = True,
     ) -> None:
         # Validate quantity/unit/meta by building an empty recording.
         probe = Recording(
@@ -174,7 +197,18 @@ class RecordingWriter:
         self.n_elements = layout.n_elements
         self.flush_interval_s = float(flush_interval_s)
         self._last_flush = time.monotonic()
-        self._file = h5py.File(self.path, "w")
+        self._guard = GuardedFile(self.path)
+        try:
+            self._file = h5py.File(self._guard, "w")
+            self._create(layout, probe, element_times, compress, live)
+        except BaseException:
+            self.close()
+            raise
+        self.n_frames = 0
+
+    def _create(
+        self, layout: Layout, probe: Recording, element_times: bool, compress: bool, live: bool
+    ) -> None:
         f = self._file
         f.attrs["format"] = FORMAT_NAME
         f.attrs["version"] = FORMAT_VERSION
@@ -183,29 +217,23 @@ class RecordingWriter:
         f.attrs["meta"] = json.dumps(probe.meta)
         f.attrs["software"] = _software()
         f.attrs["open"] = 1  # cleared by close(): a file still open was interrupted
+        f.attrs["live"] = int(live)
         n = layout.n_elements
         rows = _chunk_rows(n)
         comp = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
-        f.create_dataset(
-            "frames", (0, n), np.float32, maxshape=(None, n), chunks=(rows, max(n, 1)), **comp
-        )
+        grow = {"maxshape": (None, n), "chunks": (rows, max(n, 1))}
+        f.create_dataset("frames", (0, n), np.float32, **grow, **comp)
         f.create_dataset("times", (0,), np.float64, maxshape=(None,), chunks=(max(rows, 256),))
-        f.create_dataset(
-            "valid", (0, n), bool, maxshape=(None, n), chunks=(rows, max(n, 1)), **comp
-        )
+        f.create_dataset("valid", (0, n), bool, **grow, **comp)
         if element_times:
-            f.create_dataset(
-                "element_times",
-                (0, n),
-                np.float64,
-                maxshape=(None, n),
-                chunks=(rows, max(n, 1)),
-                **comp,
-            )
+            f.create_dataset("element_times", (0, n), np.float64, **grow, **comp)
         f.create_group("labels")
         _write_layout(f.create_group("layout"), layout)
-        f.flush()
-        self.n_frames = 0
+        self.flush()
+
+    def _check(self) -> None:
+        if self._guard.error is not None:
+            raise self._guard.error
 
     def append(
         self,
@@ -237,25 +265,8 @@ class RecordingWriter:
                 "append: element_times must be given exactly when the writer was opened "
                 "with element_times=True"
             )
-        labels = labels or {}
-        label_group = f["labels"]
-        if self.n_frames > 0 and set(labels) != set(label_group):
-            raise ParameterError(
-                f"append: labels {sorted(labels)} differ from the first append's "
-                f"{sorted(label_group)}"
-            )
         start, stop = self.n_frames, self.n_frames + k
-        for name, values in labels.items():
-            arr = np.atleast_1d(np.asarray(values))
-            if arr.shape != (k,):
-                raise ParameterError(f"append: label {name!r} needs {k} values")
-            if name not in label_group:
-                label_group.create_dataset(
-                    name, (0,), _label_dtype(arr), maxshape=(None,), chunks=(256,)
-                )
-            ds = label_group[name]
-            ds.resize((stop,))
-            ds[start:stop] = arr.astype(object) if arr.dtype.kind == "U" else arr
+        self._append_labels(labels or {}, start, stop)
         for name, data in (("frames", fr), ("valid", v), ("times", t)):
             ds = f[name]
             ds.resize(stop, axis=0)
@@ -265,22 +276,43 @@ class RecordingWriter:
             ds.resize(stop, axis=0)
             ds[start:stop] = np.asarray(element_times, dtype=np.float64).reshape(k, -1)
         self.n_frames = stop
-        now = time.monotonic()
-        if now - self._last_flush >= self.flush_interval_s:
-            f.flush()
-            self._last_flush = now
+        if time.monotonic() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+        self._check()
+
+    def _append_labels(self, labels: dict[str, npt.ArrayLike], start: int, stop: int) -> None:
+        group = self._file["labels"]
+        if self.n_frames > 0 and set(labels) != set(group):
+            raise ParameterError(
+                f"append: labels {sorted(labels)} differ from the first append's {sorted(group)}"
+            )
+        for name, values in labels.items():
+            arr = np.atleast_1d(np.asarray(values))
+            if arr.shape != (stop - start,):
+                raise ParameterError(f"append: label {name!r} needs {stop - start} values")
+            if name not in group:
+                group.create_dataset(name, (0,), _label_dtype(arr), maxshape=(None,), chunks=(256,))
+            ds = group[name]
+            ds.resize((stop,))
+            ds[start:stop] = arr.astype(object) if arr.dtype.kind == "U" else arr
 
     def flush(self) -> None:
         """Write everything appended so far to disk."""
         self._file.flush()
         self._last_flush = time.monotonic()
+        self._check()
 
     def close(self) -> None:
-        """Flush and close the file."""
-        if self._file.id.valid:
-            self._file.attrs["open"] = 0
-            self._file.flush()
-            self._file.close()
+        """Mark the file complete, flush and close it (the file is released also when a
+        write failed; then the kept ``OSError`` is raised)."""
+        f = getattr(self, "_file", None)
+        if f is not None and f.id.valid:
+            if self._guard.error is None:
+                f.attrs["open"] = 0
+            f.close()
+        if not self._guard.closed:
+            self._guard.close()
+        self._check()
 
     def __enter__(self) -> RecordingWriter:
         return self
@@ -290,17 +322,26 @@ class RecordingWriter:
 
 
 def write_hdf5(rec: Recording, path: str | Path) -> Path:
-    """Write ``rec`` to ``path`` (HDF5, schema version 1) and return the path."""
+    """Write ``rec`` to ``path`` (HDF5, schema version 1) and return the path.
+
+    The file is written under a temporary name in the same folder and renamed when complete
+    (:func:`texsense.files.atomic_path`): a write that fails or is killed leaves the previous
+    file, and a failure raises :class:`~texsense.exceptions.WriteError`.
+    """
     path = Path(path)
-    with RecordingWriter(
-        path,
-        rec.layout,
-        rec.quantity,
-        rec.unit,
-        meta=rec.meta,
-        element_times=rec.element_times is not None,
-        compress=True,
-    ) as w:
+    with (
+        atomic_path(path) as tmp,
+        RecordingWriter(
+            tmp,
+            rec.layout,
+            rec.quantity,
+            rec.unit,
+            meta=rec.meta,
+            element_times=rec.element_times is not None,
+            compress=True,
+            live=False,
+        ) as w,
+    ):
         if rec.n_frames:
             w.append(
                 rec.frames,
@@ -318,6 +359,8 @@ def write_hdf5(rec: Recording, path: str | Path) -> Path:
 
 
 def _open(path: Path) -> h5py.File:
+    if path.is_dir():
+        raise FormatError(path, "expected a file, found a folder")
     try:
         return h5py.File(path, "r")
     except OSError as e:
@@ -326,40 +369,85 @@ def _open(path: Path) -> h5py.File:
             # only the "open for writing" flag is left. Reading in SWMR mode is safe.
             return h5py.File(path, "r", libver="latest", swmr=True)
         raise FormatError(path, f"not a readable HDF5 file ({e})") from None
+    except Exception as e:  # h5py raises others for some damaged files
+        raise FormatError(path, f"not a readable HDF5 file ({type(e).__name__}: {e})") from None
 
 
-def _read_prefix(ds: h5py.Dataset, n: int) -> tuple[np.ndarray, int]:
-    """Read the first ``n`` rows of ``ds``; if a chunk is unreadable (a write was killed
-    halfway), return the rows before it and how many there are."""
-    try:
-        return ds[:n], n
-    except OSError:
-        pass
-    rows = ds.chunks[0] if ds.chunks else 1
-    parts = []
-    got = 0
-    while got < n:
-        stop = min(n, got + rows)
+def _readable_rows(ds: h5py.Dataset, n: int) -> int:
+    """How many of the first ``n`` rows of ``ds`` can be read: a writer killed while HDF5
+    rewrote a compressed chunk leaves that chunk (at the end) unreadable."""
+    rows = ds.chunks[0] if ds.chunks else max(n, 1)
+    stop = n
+    while stop > 0:
+        start = (stop - 1) // rows * rows
         try:
-            parts.append(ds[got:stop])
+            ds[start:stop]
+            return stop
         except OSError:
-            break
-        got = stop
-    empty = ds[:0]
-    return (np.concatenate(parts) if parts else empty), got
+            stop = start
+    return 0
 
 
-def read_hdf5(path: str | Path) -> Recording:
-    """Read a texsense HDF5 recording.
+def _held_rows(ds: h5py.Dataset) -> int | None:
+    """Rows of ``ds`` for which the file holds storage (None: cannot tell): a dataset that
+    declares more rows than that was not written (or its length was damaged)."""
+    shape = ds.shape
+    if not shape or shape[0] == 0:
+        return 0
+    try:
+        if ds.chunks is None:
+            row = ds.dtype.itemsize * math.prod(shape[1:])
+            return ds.id.get_storage_size() // row if row and ds.dtype.kind != "O" else None
+        bands = math.prod(-(-s // c) for s, c in zip(shape[1:], ds.chunks[1:], strict=True))
+        return ds.id.get_num_chunks() // max(bands, 1) * ds.chunks[0]
+    except (AttributeError, OSError, ValueError, TypeError):
+        return None
 
-    Raises
-    ------
-    FormatError
-        If the file is not HDF5, not a texsense recording, of an unknown schema version, or
-        lacks a required dataset.
+
+def _labels(group: h5py.Group, a: int, b: int) -> dict[str, np.ndarray]:
+    labels = {}
+    for name, ds in group.items():
+        values = ds[a:b]
+        labels[name] = (
+            np.array([v.decode() if isinstance(v, bytes) else v for v in values], dtype=str)
+            if ds.dtype.kind == "O"
+            else values
+        )
+    return labels
+
+
+class HDF5Reader(RecordingReader):
+    """A texsense HDF5 recording read a block of frames at a time (see :func:`read_hdf5`).
+
+    What the file holds is checked against what it declares: every dataset must have the
+    same length and the storage for it (a file whose datasets differ, or that declares more
+    frames than it holds, is refused, or read up to what all hold with ``accept_truncated``);
+    a file written in one go that its writer did not finish (``open`` = 1, ``live`` = 0) is
+    refused likewise. A live recording left open by a killed recorder is read up to its last
+    complete frame and the loss is reported in one warning line and in ``meta["recovered"]``.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from texsense import Layout, Recording
+    >>> path = os.path.join(tempfile.mkdtemp(), "r.h5")
+    >>> _ = write_hdf5(Recording(np.ones((10, 4)), np.arange(10.0), Layout.grid(2, 2)), path)
+    >>> with HDF5Reader(path) as reader:
+    ...     [block.n_frames for block in reader.blocks(4)]
+    [4, 4, 2]
     """
-    path = Path(path)
-    with _open(path) as f:
+
+    format = "hdf5"
+
+    def _read_header(self) -> Header:
+        self._file = _open(self.path)
+        try:
+            return self._header(self._file)
+        except (KeyError, OSError, ValueError, TypeError) as e:
+            raise FormatError(self.path, f"damaged or incomplete recording: {e}") from None
+
+    def _header(self, f: h5py.File) -> Header:
+        path = self.path
         fmt = f.attrs.get("format")
         if fmt != FORMAT_NAME:
             raise FormatError(
@@ -369,154 +457,142 @@ def read_hdf5(path: str | Path) -> Recording:
         if version != FORMAT_VERSION:
             raise FormatError(
                 path,
-                f"unknown texsense recording version {version}; this texsense reads "
-                f"version {FORMAT_VERSION}",
+                f"unknown texsense recording version {version}; this "
+                f"texsense reads version {FORMAT_VERSION}",
             )
         try:
-            # A writer killed between two dataset resizes can leave them one block apart,
-            # and one killed while writing a compressed chunk leaves that chunk unreadable:
-            # only the frames readable in every dataset are complete.
-            sets = {k: f[k] for k in ("frames", "times", "valid", "element_times") if k in f}
-            sets.update({f"labels/{k}": v for k, v in f["labels"].items()})
-            n = min(ds.shape[0] for ds in sets.values())
-            data = {}
-            for key, ds in sets.items():
-                arr, readable = _read_prefix(ds, n)
-                data[key] = arr
-                n = min(n, readable)
-            if int(f.attrs.get("open", 0)):
-                # interrupted while recording: rows whose time stamp was not written yet
-                # read as 0 and end the complete part
-                t_all = data["times"][:n]
-                bad = np.nonzero(~(np.diff(t_all) > 0))[0]
-                if bad.size:
-                    n = int(bad[0]) + 1
-            lost = min(ds.shape[0] for ds in sets.values()) - n
-            frames, times, valid = (data[k][:n] for k in ("frames", "times", "valid"))
-            element_times = data["element_times"][:n] if "element_times" in data else None
-            labels = {}
-            for name, ds in f["labels"].items():
-                values = data[f"labels/{name}"][:n]
-                labels[name] = (
-                    np.array([v.decode() if isinstance(v, bytes) else v for v in values], dtype=str)
-                    if ds.dtype.kind == "O"
-                    else values
-                )
-            layout = _read_layout(f["layout"])
-            quantity = str(f.attrs["quantity"])
-            unit = units.canonical(str(f.attrs["unit"]))
             meta = json.loads(f.attrs.get("meta", "{}"))
-        except KeyError as e:
-            raise FormatError(path, f"missing dataset or attribute: {e}") from None
-    if lost:
-        logger.warning(
-            "%s: %d frame(s) at the end were unreadable (interrupted write) and are left out",
-            path,
-            lost,
-        )
-        meta = {**meta, "recovered": {"frames_read": int(n), "frames_unreadable": int(lost)}}
-    return Recording(
-        frames,
-        times,
-        layout,
-        quantity,
-        unit,
-        valid=valid,
-        element_times=element_times,
-        labels=labels,
-        meta=meta,
-    )
-
-
-class HDF5Chunks:
-    """Read a texsense HDF5 recording a block of frames at a time (constant memory).
-
-    The header (layout, quantity, unit, meta, label names) is read on opening; iterating
-    yields :class:`Recording` blocks of at most ``frames`` frames. A file left open by an
-    interrupted writer is read whole by :func:`read_hdf5` instead (its recovery needs the
-    time stamps of every frame) and yielded in blocks.
-
-    Examples
-    --------
-    >>> import numpy as np, tempfile, os
-    >>> from texsense import Layout, Recording
-    >>> path = os.path.join(tempfile.mkdtemp(), "r.h5")
-    >>> _ = write_hdf5(Recording(np.ones((10, 4)), np.arange(10.0), Layout.grid(2, 2)), path)
-    >>> with HDF5Chunks(path, frames=4) as chunks:
-    ...     [block.n_frames for block in chunks]
-    [4, 4, 2]
-    """
-
-    def __init__(self, path: str | Path, frames: int = 4096) -> None:
-        if frames < 1:
-            raise ParameterError(f"frames per block must be >= 1, got {frames}")
-        self.path = Path(path)
-        self.frames = int(frames)
-        self._file = _open(self.path)
-        f = self._file
+        except (json.JSONDecodeError, TypeError) as e:
+            raise FormatError(path, f"the attribute 'meta' is not JSON ({e})") from None
+        if not isinstance(meta, dict):
+            raise FormatError(path, "the attribute 'meta' is not a JSON object")
+        for key in ("frames", "times", "valid", "layout", "labels"):
+            if key not in f:
+                raise FormatError(path, f"missing dataset or group '/{key}'")
         try:
-            if f.attrs.get("format") != FORMAT_NAME:
-                raise FormatError(self.path, "HDF5 file is not a texsense recording")
-            if int(f.attrs.get("version", -1)) != FORMAT_VERSION:
-                raise FormatError(
-                    self.path, f"unknown texsense recording version {f.attrs.get('version')}"
-                )
-            self.layout = _read_layout(f["layout"])
-            self.quantity = str(f.attrs["quantity"])
-            self.unit = units.canonical(str(f.attrs["unit"]))
-            self.meta = json.loads(f.attrs.get("meta", "{}"))
-            self.label_names = sorted(f["labels"])
-            self.has_element_times = "element_times" in f
-            keys = ["frames", "times", "valid"] + (
-                ["element_times"] if self.has_element_times else []
-            )
-            sets = [f[k] for k in keys] + [f["labels"][k] for k in self.label_names]
-            self.n_frames = min(ds.shape[0] for ds in sets)
-            self._interrupted = bool(int(f.attrs.get("open", 0)))
-        except KeyError as e:
-            self.close()
-            raise FormatError(self.path, f"missing dataset or attribute: {e}") from None
-        except Exception:
-            self.close()
-            raise
+            layout = _read_layout(f["layout"])
+        except (KeyError, ValueError, TypeError, ParameterError) as e:
+            raise FormatError(path, f"/layout is damaged: {e}") from None
+        self._sets = self._datasets(f, layout.n_elements)
+        n = self._complete_frames(f)
+        if "recovered" in self._state:
+            meta = {**meta, "recovered": self._state["recovered"]}
+        self.n_frames = self._known_complete = n
+        return Header(
+            layout,
+            str(f.attrs["quantity"]),
+            units.canonical(str(f.attrs["unit"])),
+            meta,
+            declared_frames=max(ds.shape[0] for ds in self._sets.values()),
+            label_dtypes={
+                k: (str if ds.dtype.kind == "O" else ds.dtype) for k, ds in f["labels"].items()
+            },
+            element_times="element_times" in f,
+        )
 
-    def __iter__(self) -> Iterator[Recording]:
-        if self._interrupted:
-            whole = read_hdf5(self.path)
-            for a in range(0, whole.n_frames, self.frames):
-                yield whole.select(slice(a, a + self.frames))
-            return
-        f = self._file
-        for a in range(0, self.n_frames, self.frames):
-            b = min(self.n_frames, a + self.frames)
-            labels = {}
-            for name in self.label_names:
-                ds = f["labels"][name]
-                values = ds[a:b]
-                labels[name] = (
-                    np.array([v.decode() if isinstance(v, bytes) else v for v in values], dtype=str)
-                    if ds.dtype.kind == "O"
-                    else values
+    def _datasets(self, f: h5py.File, n: int) -> dict[str, h5py.Dataset]:
+        sets = {k: f[k] for k in ("frames", "times", "valid", "element_times") if k in f}
+        sets.update({f"labels/{k}": v for k, v in f["labels"].items()})
+        for key, ds in sets.items():
+            if not isinstance(ds, h5py.Dataset):
+                raise FormatError(self.path, f"/{key} is not a dataset")
+            per_frame = (n,) if key in ("frames", "valid", "element_times") else ()
+            if ds.shape[1:] != per_frame or not ds.shape:
+                raise FormatError(
+                    self.path,
+                    f"/{key} has shape {ds.shape}, expected "
+                    f"(frames{', ' + str(n) if per_frame else ''})",
                 )
-            yield Recording(
-                f["frames"][a:b],
-                f["times"][a:b],
-                self.layout,
-                self.quantity,
-                self.unit,
-                valid=f["valid"][a:b],
-                element_times=f["element_times"][a:b] if self.has_element_times else None,
-                labels=labels,
-                meta=self.meta,
+        return sets
+
+    def _complete_frames(self, f: h5py.File) -> int:
+        """How many frames every dataset holds; notes a shortfall or a recovery."""
+        lengths = {k: ds.shape[0] for k, ds in self._sets.items()}
+        n, longest = min(lengths.values()), max(lengths.values())
+        self._state: dict[str, Any] = {}
+        if not int(f.attrs.get("open", 0)):
+            held = {k: _held_rows(ds) for k, ds in self._sets.items()}
+            short = {k: h for k, h in held.items() if h is not None and h < lengths[k]}
+            if n != longest:
+                counts = ", ".join(f"{k} {v}" for k, v in lengths.items())
+                self._cut(f"the datasets differ in length ({counts}): the file is damaged")
+            elif short:
+                k, h = next(iter(short.items()))
+                self._cut(
+                    f"/{k} declares {lengths[k]} frames but holds data for at most {h}: "
+                    "the file is damaged"
+                )
+                n = min(n, *short.values())
+            return n
+        if not int(f.attrs.get("live", 1)):
+            self._cut(
+                "the file was not finished by its writer (it is still marked open: "
+                "the write was interrupted)"
             )
+        return self._recover(n)
+
+    def _recover(self, n: int) -> int:
+        """A file left open: the frames readable in every dataset, up to where the time
+        stamps stop increasing (rows whose time stamp was not written yet read as 0)."""
+        for ds in self._sets.values():
+            held = _held_rows(ds)
+            n = min(n, _readable_rows(ds, n if held is None else min(n, held)))
+        t_all = self._sets["times"][:n]
+        bad = np.nonzero(~(np.diff(t_all) > 0))[0]
+        complete = int(bad[0]) + 1 if bad.size else n
+        lost = min(ds.shape[0] for ds in self._sets.values()) - complete
+        if lost:
+            self._state["recovered"] = {"frames_read": complete, "frames_unreadable": int(lost)}
+        if self._shortfall is None:
+            unreadable = f"; {lost} frame(s) at the end were unreadable and are left out"
+            logger.warning(
+                "warning: %s: the recording was not closed by its recorder (interrupted); "
+                "read the %d frame(s) written before%s",
+                self.path,
+                complete,
+                unreadable if lost else "",
+            )
+        return complete
+
+    def _pieces(self) -> Iterator[Piece]:
+        sets = self._sets
+        for a in range(0, self.n_frames, self._block):
+            b = min(self.n_frames, a + self._block)
+            try:
+                yield Piece(
+                    sets["frames"][a:b],
+                    sets["times"][a:b],
+                    _labels(self._file["labels"], a, b),
+                    valid=sets["valid"][a:b],
+                    element_times=sets["element_times"][a:b] if "element_times" in sets else None,
+                )
+            except OSError as e:
+                self._cut(f"frames {a + 1}..{b} cannot be read ({e}): the file is damaged")
+                return
 
     def close(self) -> None:
         """Close the file."""
-        if self._file.id.valid:
-            self._file.close()
+        f = getattr(self, "_file", None)
+        if f is not None and f.id.valid:
+            f.close()
 
-    def __enter__(self) -> HDF5Chunks:
-        return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+def read_hdf5(path: str | Path, *, accept_truncated: bool = False) -> Recording:
+    """Read a texsense HDF5 recording.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    accept_truncated : bool
+        Read a damaged or unfinished file up to the frames that every dataset holds (with a
+        warning) instead of refusing it.
+
+    Raises
+    ------
+    FormatError
+        If the file is not HDF5, not a texsense recording, of an unknown schema version,
+        lacks a required dataset, or holds less than it declares.
+    """
+    with HDF5Reader(path, accept_truncated=accept_truncated) as reader:
+        return reader.read()

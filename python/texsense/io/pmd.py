@@ -6,23 +6,43 @@ and last 3 frames of each file are known to be unreliable: they get ``reliable =
 
 Labels: ``subject`` ("S1".."S13"), ``posture`` (file number 1..17), ``posture_class``
 ("supine" / "right" / "left"), ``reliable`` (bool), ``file_frame`` (frame index in its file).
+
+Nothing in a posture file says how many frames it holds, but the published tree carries the
+publisher's ``SHA256SUMS.txt``: when it is found above the files, every file read is checked
+against it (a file cut at a line end, or changed, is refused or, with ``accept_truncated``,
+read and reported) and a posture file it lists under the folder read must be there. Each line
+ends with a line end: a last line without one was cut mid-frame. Counts that are not a
+number, infinite, negative or not an integer (``1.5``) are invalid readings.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import re
+from collections import deque
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from texsense._progress import progress
 from texsense.exceptions import FormatError
-from texsense.io._text import read_lines
+from texsense.io._base import FrameRow, Header, RecordingReader
+from texsense.io._text import TextLines, is_number
 from texsense.layout import Layout
 from texsense.recording import Recording
 
-__all__ = ["MIRROR_CLASS", "MIRROR_POSTURE", "POSTURES", "POSTURE_CLASS", "is_pmd_path", "read_pmd"]
+__all__ = [
+    "MIRROR_CLASS",
+    "MIRROR_POSTURE",
+    "POSTURES",
+    "POSTURE_CLASS",
+    "PMDReader",
+    "is_pmd_path",
+    "read_pmd",
+]
 
 ROWS, COLS = 64, 32
 #: Frames at each end of a file that the publishers flag as unreliable.
@@ -91,45 +111,236 @@ def is_pmd_path(path: Path) -> bool:
     return False
 
 
-def _read_pmd_file(path: Path) -> np.ndarray:
-    lines = read_lines(path)
-    while lines and not lines[-1].strip():
-        lines.pop()
-    if not lines:
-        raise FormatError(path, f"no frames; expected lines of {ROWS * COLS} tab-separated counts")
-    frames = np.empty((len(lines), ROWS * COLS), dtype=np.float32)
-    for i, line in enumerate(lines):
-        tokens = line.strip().split("\t")
+def _read_subject_info(path: Path) -> dict[str, dict[str, float]]:
+    if not path.is_file():
+        return {}
+    try:
+        with path.open(encoding="utf-8-sig") as fh:
+            rows = list(csv.DictReader(fh))
+        info: dict[str, dict[str, float]] = {}
+        for row in rows:
+            key = f"S{int(row['Subject-Number'])}"
+            info[key] = {k: float(v) for k, v in row.items() if k != "Subject-Number"}
+    except (KeyError, ValueError, TypeError, UnicodeDecodeError) as e:
+        raise FormatError(
+            path, f"expected a CSV with a Subject-Number column and numbers ({e})"
+        ) from None
+    return info
+
+
+def _jobs(path: Path) -> tuple[list[tuple[str, Path]], Path | None]:
+    """The (subject, posture file) pairs under ``path`` and the subject-info file."""
+    if not path.exists():
+        raise FormatError(path, "no such file or folder")
+    if path.is_file():
+        subject = path.parent.name if _SUBJECT.match(path.parent.name) else ""
+        jobs = [(subject, path)]
+        info = None
+    elif _subject_folders(path):
+        jobs = [(s.name, f) for s in _subject_folders(path) for f in _posture_files(s)]
+        info = path / "subject-info-i.csv"
+    elif _posture_files(path):
+        subject = path.name if _SUBJECT.match(path.name) else ""
+        jobs = [(subject, f) for f in _posture_files(path)]
+        info = path.parent / "subject-info-i.csv"
+    else:
+        raise FormatError(
+            path, "not a PMD folder: expected subject folders S1, S2, ... or files 1.txt .. 17.txt"
+        )
+    for _, f in jobs:
+        if not _POSTURE_FILE.match(f.name):
+            raise FormatError(f, "expected a PMD posture file named <number>.txt")
+        if int(f.stem) not in POSTURES:
+            raise FormatError(f, f"posture file number must be 1..17, got {int(f.stem)}")
+    return jobs, info
+
+
+def published_sums(path: Path) -> tuple[Path | None, dict[Path, str]]:
+    """The publisher's ``SHA256SUMS.txt`` in ``path``'s folder or up to three folders above,
+    as {resolved file: hex digest}."""
+    here = path.resolve()
+    for folder in [here, *here.parents][:5]:
+        sums = folder / "SHA256SUMS.txt"
+        if sums.is_file():
+            table: dict[Path, str] = {}
+            with TextLines(sums) as lines:
+                for line in lines:
+                    parts = line.text.split(None, 1)
+                    if len(parts) == 2 and len(parts[0]) == 64:
+                        table[(folder / parts[1].strip().lstrip("*")).resolve()] = parts[0].lower()
+            return sums, table
+    return None, {}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+class PMDReader(RecordingReader):
+    """PhysioNet PMD experiment I: a posture file, a subject folder or the whole tree, read a
+    block of frames at a time (see :func:`read_pmd`)."""
+
+    format = "pmd"
+    non_negative = frozenset({"raw"})
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        pitch_cm: float = DEFAULT_PITCH_CM,
+        accept_truncated: bool = False,
+    ) -> None:
+        self.pitch_cm = float(pitch_cm)
+        self._cuts: list[str] = []
+        super().__init__(path, accept_truncated=accept_truncated)
+
+    def _read_header(self) -> Header:
+        self.jobs, info_file = _jobs(self.path)
+        self.sums_file, self.sums = published_sums(self.path)
+        listed = {
+            p for p in self.sums if _POSTURE_FILE.match(p.name) and self._under_read_folder(p)
+        }
+        missing = sorted(listed - {f.resolve() for _, f in self.jobs})
+        if missing and self.path.is_dir():
+            names = ", ".join(str(p.relative_to(self.sums_file.parent)) for p in missing[:3])  # type: ignore[union-attr]
+            more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+            self._note(
+                f"{len(missing)} posture file(s) listed in {self.sums_file} are missing "
+                f"({names}{more})"
+            )
+        meta: dict[str, Any] = {
+            "format": "physionet-pmd",
+            "source": str(self.path),
+            "device": "Vista Medical FSA SoftFlex 2048",
+            "dataset": "PhysioNet pmd 1.0.0, experiment I (Pouyan et al., IEEE EMBS BHI 2017)",
+            "frame_period_nominal_s": FRAME_PERIOD_S,
+            "pitch_cm_assumed": self.pitch_cm,
+            "postures": {str(k): v for k, v in POSTURES.items()},
+            "mirror": {
+                "posture": {str(k): v for k, v in MIRROR_POSTURE.items()},
+                "posture_class": MIRROR_CLASS,
+            },
+            "files": [str(f) for _, f in self.jobs],
+        }
+        if info_file is not None:
+            subject_info = _read_subject_info(info_file)
+            if subject_info:
+                meta["subject_info"] = subject_info
+        return Header(
+            Layout.grid(ROWS, COLS, pitch_cm=self.pitch_cm),
+            "raw",
+            "count",
+            meta,
+            label_dtypes={
+                "subject": str,
+                "posture": np.int16,
+                "posture_class": str,
+                "reliable": bool,
+                "file_frame": np.int32,
+            },
+        )
+
+    def _under_read_folder(self, p: Path) -> bool:
+        root = self.path.resolve()
+        return self.path.is_dir() and root in p.parents
+
+    def _name(self, f: Path) -> str:
+        """A posture file as the message names it: below the folder read, or its name."""
+        return str(f.relative_to(self.path)) if self.path.is_dir() else f.name
+
+    def _note(self, message: str) -> None:
+        self._cuts.append(message)
+        shown = "; ".join(self._cuts[:3])
+        more = f"; and {len(self._cuts) - 3} more" if len(self._cuts) > 3 else ""
+        self._cut(shown + more)
+
+    def _impossible(self, values: np.ndarray) -> dict[str, np.ndarray]:
+        out = super()._impossible(values)
+        with np.errstate(invalid="ignore"):
+            # (NaN is counted as not a number already: a reading is counted once)
+            for a in range(0, len(values), 256):  # in slices: no copy of the whole block
+                part = values[a : a + 256]
+                if np.any(part != np.floor(part)):
+                    out["not an integer count"] = values != np.floor(values)
+                    break
+        return out
+
+    def _frames(self) -> Iterator[FrameRow]:
+        t = 0
+        jobs = self.jobs
+        for subject, f in progress(jobs, total=len(jobs), desc="reading PMD", unit="file"):
+            expected = self.sums.get(f.resolve())
+            if expected is not None and _sha256(f) != expected:
+                self._note(
+                    f"{self._name(f)} does not match its SHA-256 in {self.sums_file} (truncated "
+                    "or changed)"
+                )
+            for values, line, file_frame, reliable in self._file_frames(f):
+                labels = {
+                    "subject": subject,
+                    "posture": int(f.stem),
+                    "posture_class": POSTURE_CLASS[int(f.stem)],
+                    "reliable": reliable,
+                    "file_frame": file_frame,
+                }
+                yield FrameRow(values, t * FRAME_PERIOD_S, line, labels)
+                t += 1
+
+    def _file_frames(self, path: Path) -> Iterator[tuple[np.ndarray, int, int, bool]]:
+        """(values, line, index in the file, reliable) per frame; the last UNRELIABLE_EDGE
+        frames are held back until the file ends, which makes them unreliable."""
+        held: deque[tuple[np.ndarray, int, int]] = deque()
+        count = 0
+        with TextLines(path) as lines:
+            for line in lines.data_lines():
+                values = self._parse(path, line)
+                if values is None:
+                    break
+                held.append((values, line.number, count))
+                count += 1
+                if len(held) > UNRELIABLE_EDGE:
+                    v, n, k = held.popleft()
+                    yield v, n, k, k >= UNRELIABLE_EDGE
+        if count == 0 and self._shortfall is None:
+            raise FormatError(
+                path, f"no frames; expected lines of {ROWS * COLS} tab-separated counts"
+            )
+        for v, n, k in held:
+            yield v, n, k, False
+
+    def _parse(self, path: Path, line: Any) -> np.ndarray | None:
+        """One frame's counts, or None (noted as a cut) for a last line without its end."""
+        tokens = line.text.strip().split("\t")
+        if not line.ended:
+            self._note(
+                f"truncated: {self._name(path)} ends in the middle of line {line.number} (a "
+                "PMD line ends with a line end)"
+            )
+            return None
         if len(tokens) != ROWS * COLS:
             raise FormatError(
                 path,
                 f"expected {ROWS * COLS} tab-separated values (a {ROWS} x {COLS} map), "
                 f"found {len(tokens)}",
-                i + 1,
+                line.number,
             )
         try:
-            frames[i] = np.array(tokens, dtype=np.float32)
+            with np.errstate(over="ignore"):  # 1e308: infinite in float32, an invalid reading
+                return np.array(tokens, dtype=np.float32)
         except ValueError:
-            bad = next(t for t in tokens if not t.strip().lstrip("-").isdigit())
-            raise FormatError(path, f"expected integer counts, found {bad!r}", i + 1) from None
-        if frames[i].min() < 0:
-            raise FormatError(path, "expected raw counts >= 0, found a negative value", i + 1)
-    return frames
+            bad = next(t for t in tokens if not is_number(t))
+            raise FormatError(
+                path, f"expected integer counts, found {bad!r}", line.number
+            ) from None
 
 
-def _read_subject_info(path: Path) -> dict[str, dict[str, float]]:
-    if not path.is_file():
-        return {}
-    with path.open(encoding="utf-8-sig") as fh:
-        rows = list(csv.DictReader(fh))
-    info: dict[str, dict[str, float]] = {}
-    for row in rows:
-        key = f"S{int(row['Subject-Number'])}"
-        info[key] = {k: float(v) for k, v in row.items() if k != "Subject-Number"}
-    return info
-
-
-def read_pmd(path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM) -> Recording:
+def read_pmd(
+    path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM, accept_truncated: bool = False
+) -> Recording:
     """Read PMD experiment-I data: one posture file, a subject folder or the whole tree.
 
     Parameters
@@ -138,6 +349,9 @@ def read_pmd(path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM) -> Recordi
         ``.../S3/7.txt``, ``.../S3`` or ``.../experiment-i``.
     pitch_cm : float
         Sensor pitch in cm (not stated by the dataset; 2.54 cm assumed).
+    accept_truncated : bool
+        Read files that do not match the publisher's checksums or end mid-line, and a tree
+        with posture files missing, up to what is there (with a warning) instead of refusing.
 
     Returns
     -------
@@ -151,77 +365,5 @@ def read_pmd(path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM) -> Recordi
     >>> rec.layout.shape, sorted(set(rec.labels["posture"].tolist()))[:3]
     ((64, 32), [1, 2, 3])
     """
-    path = Path(path)
-    if not path.exists():
-        raise FormatError(path, "no such file or folder")
-    info_file: Path | None = None
-    if path.is_file():
-        subject = path.parent.name if _SUBJECT.match(path.parent.name) else ""
-        jobs = [(subject, path)]
-    elif _subject_folders(path):
-        jobs = [(s.name, f) for s in _subject_folders(path) for f in _posture_files(s)]
-        info_file = path / "subject-info-i.csv"
-    elif _posture_files(path):
-        subject = path.name if _SUBJECT.match(path.name) else ""
-        jobs = [(subject, f) for f in _posture_files(path)]
-        info_file = path.parent / "subject-info-i.csv"
-    else:
-        raise FormatError(
-            path, "not a PMD folder: expected subject folders S1, S2, ... or files 1.txt .. 17.txt"
-        )
-    for _, f in jobs:
-        if not _POSTURE_FILE.match(f.name):
-            raise FormatError(f, "expected a PMD posture file named <number>.txt")
-    parts: list[np.ndarray] = []
-    subjects: list[np.ndarray] = []
-    postures: list[np.ndarray] = []
-    file_frames: list[np.ndarray] = []
-    for subject, f in progress(jobs, total=len(jobs), desc="reading PMD", unit="file"):
-        frames = _read_pmd_file(f)
-        posture = int(f.stem)
-        if posture not in POSTURES:
-            raise FormatError(f, f"posture file number must be 1..17, got {posture}")
-        n = frames.shape[0]
-        parts.append(frames)
-        subjects.append(np.full(n, subject))
-        postures.append(np.full(n, posture, dtype=np.int16))
-        file_frames.append(np.arange(n, dtype=np.int32))
-    frames = np.concatenate(parts)
-    file_frame = np.concatenate(file_frames)
-    lengths = np.array([p.shape[0] for p in parts])
-    last_index = np.repeat(lengths, lengths) - 1
-    reliable = (file_frame >= UNRELIABLE_EDGE) & (file_frame <= last_index - UNRELIABLE_EDGE)
-    posture = np.concatenate(postures)
-    meta = {
-        "format": "physionet-pmd",
-        "source": str(path),
-        "device": "Vista Medical FSA SoftFlex 2048",
-        "dataset": "PhysioNet pmd 1.0.0, experiment I (Pouyan et al., IEEE EMBS BHI 2017)",
-        "frame_period_nominal_s": FRAME_PERIOD_S,
-        "pitch_cm_assumed": pitch_cm,
-        "postures": {str(k): v for k, v in POSTURES.items()},
-        "mirror": {
-            "posture": {str(k): v for k, v in MIRROR_POSTURE.items()},
-            "posture_class": MIRROR_CLASS,
-        },
-        "files": [str(f) for _, f in jobs],
-    }
-    if info_file is not None:
-        subject_info = _read_subject_info(info_file)
-        if subject_info:
-            meta["subject_info"] = subject_info
-    return Recording(
-        frames,
-        np.arange(frames.shape[0], dtype=np.float64) * FRAME_PERIOD_S,
-        Layout.grid(ROWS, COLS, pitch_cm=pitch_cm),
-        quantity="raw",
-        unit="count",
-        labels={
-            "subject": np.concatenate(subjects),
-            "posture": posture,
-            "posture_class": np.array([POSTURE_CLASS[int(p)] for p in posture]),
-            "reliable": reliable,
-            "file_frame": file_frame,
-        },
-        meta=meta,
-    )
+    with PMDReader(path, pitch_cm=pitch_cm, accept_truncated=accept_truncated) as reader:
+        return reader.read()

@@ -2,82 +2,89 @@
 
 A texsense-written file starts with comment lines that make the round trip exact::
 
-    # texsense wide-csv 1
+    # texsense wide-csv 2
     # quantity: pressure
     # unit: N/cm2
+    # frames: 2
     # layout: {"kind": "grid", ...}        (JSON of Layout.to_dict, one line)
-    time_s,e0,e1,e2
-    0.0,0.5,0.25,nan
+    # meta: {...}
+    time_s,e0,e1,e2,invalid
+    0.0,0.5,0.25,nan,
+    0.1,0.5,0.25,0.75,0 2
 
-Files from elsewhere need only the ``time_s,...`` header; pass ``quantity`` and ``unit`` when
-the file does not name them (units are never guessed). Without a layout line the elements are
-placed in one row at 1 cm pitch and the column names become element names.
+The last column lists the elements whose reading is invalid in that frame (space-separated
+indices; empty when all are valid): the file carries the recording's validity mask.
+``# frames:`` declares the frame count, so a file cut short is noticed.
+
+Files from elsewhere (and version 1 files) need only the ``time_s,...`` header; pass
+``quantity`` and ``unit`` when the file does not name them (units are never guessed). Without
+a layout line the elements are placed in one row at 1 cm pitch and the column names become
+element names. Without an ``invalid`` column, readings that are not a number, infinite or
+impossible for the quantity (a negative pressure) are invalid.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from texsense import units
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.io._text import format_float, parse_csv_rows, read_lines
+from texsense.files import atomic_open
+from texsense.io._base import FrameRow, Header, RecordingReader
+from texsense.io._text import Line, TextLines, format_float, is_number
 from texsense.layout import Layout
 from texsense.recording import QUANTITIES, Recording
 
-__all__ = ["MAGIC", "read_wide_csv", "write_wide_csv"]
+__all__ = ["MAGIC", "WideCSVReader", "read_wide_csv", "write_wide_csv"]
 
-MAGIC = "# texsense wide-csv 1"
+#: The first line of a texsense-written wide CSV (followed by the version).
+MAGIC = "# texsense wide-csv"
+VERSION = 2
+_MASK = "invalid"
 
 
-def read_wide_csv(
-    path: str | Path, *, quantity: str | None = None, unit: str | None = None
-) -> Recording:
-    """Read a wide CSV (``time_s,<element>,...``).
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    quantity, unit : str, optional
-        Needed when the file has no ``# quantity:`` / ``# unit:`` lines; if both are given
-        they must agree.
-    """
-    path = Path(path)
-    lines = read_lines(path)
+def _comments(path: Path, lines: TextLines) -> tuple[dict[str, str], dict[str, int], int]:
+    """``# key: value`` lines, where each is, and the file's version (0: not texsense)."""
     info: dict[str, str] = {}
     where: dict[str, int] = {}
-    i = 0
-    while i < len(lines) and lines[i].startswith("#"):
-        text = lines[i][1:].strip()
+    version = 0
+    while (line := lines.peek()) is not None and line.text.startswith("#"):
+        next(lines)
+        if line.number == 1 and line.text.startswith(MAGIC):
+            try:
+                version = int(line.text[len(MAGIC) :].strip())
+            except ValueError:
+                raise FormatError(path, "expected '# texsense wide-csv <version>'", 1) from None
+            if version > VERSION:
+                raise FormatError(
+                    path,
+                    f"wide-csv version {version} is newer than this texsense reads ({VERSION})",
+                    1,
+                )
+            continue
+        text = line.text[1:].strip()
         if ":" in text:
             key, value = text.split(":", 1)
             info[key.strip()] = value.strip()
-            where[key.strip()] = i + 1
-        i += 1
-    if i >= len(lines):
-        raise FormatError(path, "no header line 'time_s,<element>,...'")
-    header = [s.strip() for s in lines[i].split(",")]
-    if header[0] != "time_s":
-        raise FormatError(
-            path, f"expected the header to start with 'time_s', found {header[0]!r}", i + 1
-        )
-    names = header[1:]
-    if not names:
-        raise FormatError(path, "the header names no element columns", i + 1)
-    if len(set(names)) != len(names):
-        raise FormatError(path, "duplicate element column names in the header", i + 1)
-    q = info.get("quantity")
-    u = info.get("unit")
+            where[key.strip()] = line.number
+    return info, where, version
+
+
+def _quantity_unit(
+    path: Path, info: dict[str, str], where: dict[str, int], quantity: str | None, unit: str | None
+) -> tuple[str, str]:
+    q, u = info.get("quantity"), info.get("unit")
     for key, given, found in (("quantity", quantity, q), ("unit", unit, u)):
         if given is not None and found is not None and given != found:
             raise FormatError(
                 path, f"file says {key} {found!r} but {given!r} was passed", where[key]
             )
-    q = q or quantity
-    u = u or unit
+    q, u = q or quantity, u or unit
     if q is None or u is None:
         raise FormatError(
             path,
@@ -91,62 +98,193 @@ def read_wide_csv(
             where.get("quantity"),
         )
     try:
-        u = units.canonical(u)
+        return q, units.canonical(u)
     except UnitError as e:
         raise FormatError(path, str(e), where.get("unit")) from None
+
+
+def _layout(path: Path, info: dict[str, str], where: dict[str, int], names: list[str]) -> Layout:
     n = len(names)
-    body = lines[i + 1 :]
-    while body and not body[-1].strip():
-        body.pop()
-    data = parse_csv_rows(path, body, i + 2, n + 1, f"{n + 1} comma-separated values")
     if "layout" in info:
         try:
             layout = Layout.from_dict(json.loads(info["layout"]))
-        except (json.JSONDecodeError, ParameterError, TypeError, ValueError) as e:
+        except (json.JSONDecodeError, ParameterError, TypeError, ValueError, KeyError) as e:
             raise FormatError(path, f"bad layout line: {e}", where["layout"]) from None
         if layout.n_elements != n:
             raise FormatError(
                 path, f"layout has {layout.n_elements} elements, header {n}", where["layout"]
             )
-    else:
-        default = [f"e{k}" for k in range(n)]
-        layout = Layout.grid(1, n, pitch_cm=1.0)
-        if names != default:
-            layout = Layout(
-                layout.xy_cm,
-                layout.size_cm,
-                shape=layout.shape,
-                cells=layout.cells,
-                pitch_cm=layout.pitch_cm,
-                neighbours=layout.neighbours,
-                names=names,
+        return layout
+    layout = Layout.grid(1, n, pitch_cm=1.0)
+    if names == [f"e{k}" for k in range(n)]:
+        return layout
+    return Layout(
+        layout.xy_cm,
+        layout.size_cm,
+        shape=layout.shape,
+        cells=layout.cells,
+        pitch_cm=layout.pitch_cm,
+        neighbours=layout.neighbours,
+        names=names,
+    )
+
+
+class WideCSVReader(RecordingReader):
+    """A wide CSV read a block of frames at a time (see :func:`read_wide_csv`)."""
+
+    format = "wide-csv"
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        quantity: str | None = None,
+        unit: str | None = None,
+        accept_truncated: bool = False,
+    ) -> None:
+        self._given = (quantity, unit)
+        super().__init__(path, accept_truncated=accept_truncated)
+
+    def _read_header(self) -> Header:
+        path = self.path
+        self._lines = TextLines(path)
+        info, where, self.version = _comments(path, self._lines)
+        head = self._lines.next_nonblank()
+        if head is None:
+            raise FormatError(path, "no header line 'time_s,<element>,...'")
+        header = [s.strip() for s in head.text.split(",")]
+        if header[0] != "time_s":
+            raise FormatError(
+                path,
+                f"expected the header to start with 'time_s', found {header[0]!r}",
+                head.number,
             )
-    meta = {"format": "wide-csv", "source": str(path)}
-    if "meta" in info:
+        names = header[1:]
+        self.has_mask = self.version >= 2 and names[-1:] == [_MASK]
+        names = names[:-1] if self.has_mask else names
+        if not names:
+            raise FormatError(path, "the header names no element columns", head.number)
+        if len(set(names)) != len(names):
+            raise FormatError(path, "duplicate element column names in the header", head.number)
+        q, u = _quantity_unit(path, info, where, *self._given)
+        layout = _layout(path, info, where, names)
+        meta: dict[str, Any] = {"format": "wide-csv", "source": str(path)}
+        if "meta" in info:
+            try:
+                meta = json.loads(info["meta"])
+            except json.JSONDecodeError as e:
+                raise FormatError(path, f"bad meta line: {e}", where["meta"]) from None
+            if not isinstance(meta, dict):
+                raise FormatError(path, "bad meta line: expected a JSON object", where["meta"])
+        declared = None
+        if "frames" in info:
+            try:
+                declared = int(info["frames"])
+            except ValueError:
+                raise FormatError(
+                    path, f"frames: expected a count, found {info['frames']!r}", where["frames"]
+                ) from None
+        return Header(layout, q, u, meta, declared_frames=declared)
+
+    def _row(self, line: Line, n: int) -> FrameRow | None:
+        tokens = line.text.split(",")
+        width = n + 1 + self.has_mask
+        if len(tokens) != width:
+            self._bad_line(line, f"expected {width} comma-separated values, found {len(tokens)}")
+            return None
+        numbers = tokens[: n + 1]
         try:
-            meta = json.loads(info["meta"])
-        except json.JSONDecodeError as e:
-            raise FormatError(path, f"bad meta line: {e}", where["meta"]) from None
-    return Recording(data[:, 1:].astype(np.float32), data[:, 0], layout, q, u, meta=meta)
+            data = np.array([float(t) for t in numbers])
+        except ValueError:
+            bad = next(t for t in numbers if not is_number(t))
+            self._bad_line(line, f"expected a number, found {bad.strip()!r}")
+            return None
+        valid = None
+        if self.has_mask:
+            valid = np.ones(n, dtype=bool)
+            try:
+                invalid = [int(k) for k in tokens[-1].split()]
+                valid[invalid] = False
+            except (ValueError, IndexError):
+                self._bad_line(
+                    line,
+                    f"the invalid column must list element indices 0..{n - 1}, "
+                    f"found {tokens[-1].strip()!r}",
+                )
+                return None
+        return FrameRow(data[1:], float(data[0]), line.number, {}, valid)
+
+    def _frames(self) -> Iterator[FrameRow]:
+        n = self.header.layout.n_elements
+        count = 0
+        for line in self._lines.data_lines():
+            if self.version >= 2 and not line.ended:
+                self._cut(f"truncated: the file ends in the middle of line {line.number}")
+                return
+            row = self._row(line, n)
+            if row is None:
+                return
+            yield row
+            count += 1
+        declared = self.header.declared_frames
+        if declared is not None and count < declared:
+            self._cut(
+                f"truncated: '# frames: {declared}' but the file holds {count} "
+                f"({declared - count} missing)"
+            )
+        elif declared is not None and count > declared:
+            raise FormatError(
+                self.path, f"the file holds {count} frames, '# frames:' declares {declared}"
+            )
+
+
+def read_wide_csv(
+    path: str | Path,
+    *,
+    quantity: str | None = None,
+    unit: str | None = None,
+    accept_truncated: bool = False,
+) -> Recording:
+    """Read a wide CSV (``time_s,<element>,...``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    quantity, unit : str, optional
+        Needed when the file has no ``# quantity:`` / ``# unit:`` lines; if both are given
+        they must agree.
+    accept_truncated : bool
+        Read a file that holds fewer frames than its ``# frames:`` line declares, or whose
+        last line was cut, up to its last complete frame (with a warning).
+    """
+    with WideCSVReader(
+        path, quantity=quantity, unit=unit, accept_truncated=accept_truncated
+    ) as reader:
+        return reader.read()
 
 
 def write_wide_csv(rec: Recording, path: str | Path) -> Path:
     """Write ``rec`` as a wide CSV that :func:`read_wide_csv` reads back exactly.
 
-    Written exactly: frames (shortest float32 text), times (shortest float64 text), quantity,
-    unit, layout and meta. Not written: the validity mask, labels, per-element times.
+    Written exactly: frames (shortest float32 text), times (shortest float64 text), the
+    validity mask, quantity, unit, layout and meta. Not written: labels, per-element times.
+    The file is written to a temporary name and renamed (:mod:`texsense.files`).
     """
     path = Path(path)
     names = [f"e{k}" for k in range(rec.n_elements)]
-    out = [
-        MAGIC,
+    head = [
+        f"{MAGIC} {VERSION}",
         f"# quantity: {rec.quantity}",
         f"# unit: {rec.unit}",
+        f"# frames: {rec.n_frames}",
         f"# layout: {json.dumps(rec.layout.to_dict(), separators=(',', ':'))}",
         f"# meta: {json.dumps(rec.meta, separators=(',', ':'))}",
-        "time_s," + ",".join(names),
+        "time_s," + ",".join(names) + "," + _MASK,
     ]
-    for t, frame in zip(rec.times.tolist(), rec.frames, strict=True):
-        out.append(repr(t) + "," + ",".join(format_float(v) for v in frame))
-    path.write_text("\n".join(out) + "\n", encoding="utf-8")
+    with atomic_open(path, "w", encoding="utf-8") as out:
+        out.write("\n".join(head) + "\n")
+        for t, frame, valid in zip(rec.times.tolist(), rec.frames, rec.valid, strict=True):
+            invalid = " ".join(map(str, np.flatnonzero(~valid).tolist()))
+            out.write(repr(t) + "," + ",".join(format_float(v) for v in frame) + f",{invalid}\n")
     return path

@@ -12,11 +12,17 @@ statistics ``Est. Load (N)``, ``Contact Area (cm²)``, ``Peak Pressure`` and
 ``Average Pressure`` are kept as labels ``vendor_load_N_s<i>``, ``vendor_contact_area_cm2_s<i>``,
 ``vendor_peak_ncm2_s<i>`` and ``vendor_mean_ncm2_s<i>`` (i = sensor number from 1), useful
 to cross-check :mod:`texsense.stats`. GROUP blocks are skipped (their cell membership is not
-exported).
+exported), but their ``Cells`` count is checked against their ``SENSELS`` values.
+
+The export says nothing of its length, but every frame repeats the first frame's blocks: a
+frame cut short at the end of the file (the file cut in half, a last line without its line
+end) is refused or, with ``accept_truncated``, left out and reported.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
@@ -24,11 +30,12 @@ import numpy as np
 
 from texsense import units
 from texsense.exceptions import FormatError, UnitError
-from texsense.io._text import parse_float, read_lines
+from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
+from texsense.io._text import Line, TextLines, is_number, parse_float
 from texsense.layout import Layout
 from texsense.recording import Recording
 
-__all__ = ["read_xsensor"]
+__all__ = ["XSensorReader", "read_xsensor"]
 
 _GAP = 2  # empty columns between two sensors in the combined grid
 # statistic -> (label prefix, is a pressure in the file's unit)
@@ -41,196 +48,303 @@ _VENDOR_STATS = {
 
 
 def _fields(line: str) -> list[str]:
-    parts = [p.strip() for p in line.split(",")]
+    text = line.rstrip(" \t,")
+    if not text:
+        return []
+    parts = [p.strip() for p in text.split(",")]
     while parts and parts[-1] == "":
         parts.pop()
     return parts
 
 
-class _Sensor:
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self.rows = 0
-        self.cols = 0
-        self.width_cm = 0.0
-        self.height_cm = 0.0
-        self.stats: dict[str, float] = {}
-        self.values: np.ndarray | None = None
+@dataclass
+class _Block:
+    """A SENSOR or GROUP block of one frame."""
+
+    kind: str
+    name: str
+    rows: int = 0
+    cols: int = 0
+    width_cm: float = 0.0
+    height_cm: float = 0.0
+    cells: int | None = None  # GROUP: how many values its SENSELS hold
+    stats: dict[str, float] = field(default_factory=dict)
+    values: np.ndarray | None = None
+    complete: bool = False
+
+    def signature(self) -> tuple[object, ...]:
+        return (self.kind, self.name, self.rows, self.cols, self.width_cm, self.height_cm)
 
 
-def read_xsensor(path: str | Path) -> Recording:
-    """Read an XSENSOR CSV export.
+@dataclass
+class _Frame:
+    number: int
+    line: int
+    date: str = ""
+    stamp: datetime | None = None
+    blocks: list[_Block] = field(default_factory=list)
 
-    Returns
-    -------
-    Recording
-        Pressure in N/cm² (converted from the file's ``Units:``), frames timed from each
-        frame's ``Time`` field relative to the first frame.
-    """
-    path = Path(path)
-    lines = read_lines(path)
-    unit: str | None = None
-    frames: list[list[_Sensor]] = []
-    stamps: list[datetime] = []
-    frame_ids: list[int] = []
-    date_text = ""
-    current: list[_Sensor] | None = None
-    sensor: _Sensor | None = None
-    in_group = False
-    i = 0
-    n = len(lines)
-    while i < n:
-        f = _fields(lines[i])
-        i += 1
+    def sensors(self) -> list[_Block]:
+        return [b for b in self.blocks if b.kind == "SENSOR"]
+
+
+class XSensorReader(RecordingReader):
+    """An XSENSOR CSV export read a frame at a time (see :func:`read_xsensor`)."""
+
+    format = "xsensor"
+
+    def _read_header(self) -> Header:
+        path = self.path
+        self._lines = TextLines(path)
+        unit = None
+        for line in self._lines:
+            f = _fields(line.text)
+            if f and f[0] == "FRAME":
+                self._lines.push(line)
+                break
+            if f and f[0] == "Units:":
+                value = f[1] if len(f) > 1 else ""
+                try:
+                    unit = units.canonical(value)
+                except UnitError:
+                    raise FormatError(
+                        path, f"Units: unknown unit {value!r} (never guessed)", line.number
+                    ) from None
+        if unit is None:
+            raise FormatError(path, "no 'Units:' line: not an XSENSOR CSV export?")
+        first = self._next_frame()
+        if first is None:
+            raise FormatError(path, self._shortfall or "no FRAME blocks found")
+        self._first = first
+        sensors = first.sensors()
+        if not sensors:
+            raise FormatError(path, f"frame {first.number} has no SENSOR block", first.line)
+        self._t0 = first.stamp
+        layout, self._members = _layout(path, sensors)
+        self._signature = [b.signature() for b in first.blocks]
+        to_ncm2 = units.factor(unit, "N/cm2")
+        self._stats = [
+            (si, stat, f"{label}_s{si + 1}", to_ncm2 if is_pressure else 1.0)
+            for si, s in enumerate(sensors)
+            for stat, (label, is_pressure) in _VENDOR_STATS.items()
+            if stat in s.stats
+        ]
+        dtypes = {"frame_number": np.int64, **{name: np.float64 for _, _, name, _ in self._stats}}
+        return Header(
+            layout,
+            "pressure",
+            "N/cm2",
+            {
+                "format": "xsensor-csv",
+                "source": str(path),
+                "source_unit": unit,
+                "sensors": [s.name for s in sensors],
+                "start_time": first.stamp.isoformat(),
+            },  # type: ignore[union-attr]
+            source_unit=unit,
+            label_dtypes=dtypes,
+        )
+
+    def _next_frame(self) -> _Frame | None:
+        """The next frame, complete; None at the end of the file or at a cut (noted)."""
+        start = self._lines.next_nonblank(",")
+        if start is None:
+            return None
+        f = _fields(start.text)
+        if f[0] != "FRAME":
+            raise FormatError(
+                self.path, f"expected 'FRAME,<number>', found {start.text[:40]!r}", start.number
+            )
+        try:
+            frame = _Frame(int(f[1] if len(f) > 1 else ""), start.number)
+        except ValueError:
+            raise FormatError(
+                self.path,
+                f"FRAME: expected a frame number, found {(f[1:] or [''])[0]!r}",
+                start.number,
+            ) from None
+        block: _Block | None = None
+        while True:
+            line = self._lines.peek()
+            if line is None or (
+                line.text.lstrip().startswith("FRAME") and _fields(line.text)[:1] == ["FRAME"]
+            ):
+                break
+            next(self._lines)
+            if not line.ended:
+                self._cut(
+                    f"truncated: the file ends in the middle of line {line.number}, inside "
+                    f"frame {frame.number}"
+                )
+                return None
+            block = self._line(frame, block, line)
+        return self._complete(frame, at_end=line is None)
+
+    def _line(self, frame: _Frame, block: _Block | None, line: Line) -> _Block | None:
+        """Take one line of a frame; returns the block now open."""
+        f = _fields(line.text)
         if not f:
-            continue
-        key = f[0]
-        value = f[1] if len(f) > 1 else ""
-        if key == "Units:":
-            try:
-                unit = units.canonical(value)
-            except UnitError:
-                raise FormatError(
-                    path, f"Units: unknown unit {value!r} (never guessed)", i
-                ) from None
-        elif key == "FRAME":
-            try:
-                frame_ids.append(int(value))
-            except ValueError:
-                raise FormatError(
-                    path, f"FRAME: expected a frame number, found {value!r}", i
-                ) from None
-            current = []
-            frames.append(current)
-            sensor, in_group = None, False
-        elif key == "Date":
-            date_text = value
+            return block
+        key, value = f[0], (f[1] if len(f) > 1 else "")
+        if key == "Date":
+            frame.date = value
         elif key == "Time":
-            if current is None:
-                raise FormatError(path, "Time before the first FRAME line", i)
+            frame.stamp = _stamp(self.path, line, frame.date, value)
+        elif key in ("SENSOR", "GROUP"):
+            block = _Block(key, value)
+            frame.blocks.append(block)
+        elif block is None:
+            pass
+        elif key in ("Rows", "Columns", "Cells"):
             try:
-                stamps.append(datetime.strptime(f"{date_text} {value}", "%Y %b %d %H:%M:%S.%f"))
+                count = int(value)
             except ValueError:
                 raise FormatError(
-                    path,
-                    f"expected 'Date,yyyy Mon dd' and 'Time,hh:mm:ss.fff', found "
-                    f"{date_text!r} {value!r}",
-                    i,
+                    self.path, f"{key}: expected an integer, found {value!r}", line.number
                 ) from None
-        elif key == "SENSOR":
-            if current is None:
-                raise FormatError(path, "SENSOR block before the first FRAME line", i)
-            sensor = _Sensor(value)
-            current.append(sensor)
-            in_group = False
-        elif key == "GROUP":
-            in_group, sensor = True, None
-        elif in_group:
-            continue
-        elif sensor is not None and key in ("Rows", "Columns"):
-            try:
-                setattr(sensor, "rows" if key == "Rows" else "cols", int(value))
-            except ValueError:
-                raise FormatError(path, f"{key}: expected an integer, found {value!r}", i) from None
-        elif sensor is not None and key.startswith("Sensel Width"):
-            sensor.width_cm = parse_float(path, i, value, "Sensel Width (cm)")
-        elif sensor is not None and key.startswith("Sensel Height"):
-            sensor.height_cm = parse_float(path, i, value, "Sensel Height (cm)")
-        elif sensor is not None and key == "SENSELS":
-            if sensor.rows < 1 or sensor.cols < 1:
-                raise FormatError(path, f"SENSELS of {sensor.name!r} before its Rows/Columns", i)
-            values = np.empty((sensor.rows, sensor.cols))
-            r = 0
-            while r < sensor.rows:
-                if i >= n:
-                    raise FormatError(
-                        path,
-                        f"sensor {sensor.name!r}: file ends after {r} of {sensor.rows} "
-                        "SENSELS rows (truncated)",
-                        n,
-                    )
-                row = _fields(lines[i])
-                i += 1
-                if not row:
-                    continue
-                if len(row) != sensor.cols:
-                    raise FormatError(
-                        path,
-                        f"sensor {sensor.name!r}: expected {sensor.cols} values per "
-                        f"SENSELS row, found {len(row)}",
-                        i,
-                    )
-                for c, tok in enumerate(row):
-                    values[r, c] = parse_float(path, i, tok, f"SENSELS row {r + 1}")
-                r += 1
-            sensor.values = values
-        elif sensor is not None:
+            check_declared_size(self.path, f"{key},{count}", count, 2, line.number)
+            setattr(block, {"Rows": "rows", "Columns": "cols", "Cells": "cells"}[key], count)
+        elif key.startswith("Sensel Width"):
+            block.width_cm = parse_float(self.path, line.number, value, "Sensel Width (cm)")
+        elif key.startswith("Sensel Height"):
+            block.height_cm = parse_float(self.path, line.number, value, "Sensel Height (cm)")
+        elif key == "SENSELS":
+            self._sensels(block, line)
+        elif block.kind == "SENSOR":
             for prefix in _VENDOR_STATS:
                 if key.startswith(prefix) and value:
-                    sensor.stats[prefix] = parse_float(path, i, value, key)
-    if unit is None:
-        raise FormatError(path, "no 'Units:' line: not an XSENSOR CSV export?")
-    if not frames:
-        raise FormatError(path, "no FRAME blocks found")
-    if len(stamps) != len(frames):
-        raise FormatError(path, f"{len(frames)} FRAME blocks but {len(stamps)} Time lines")
-    first = frames[0]
-    if not first:
-        raise FormatError(path, f"frame {frame_ids[0]} has no SENSOR block")
-    signature = [(s.name, s.rows, s.cols, s.width_cm, s.height_cm) for s in first]
-    for k, fr in enumerate(frames):
-        sig = [(s.name, s.rows, s.cols, s.width_cm, s.height_cm) for s in fr]
-        if sig != signature:
-            raise FormatError(path, f"frame {frame_ids[k]}: sensors differ from the first frame")
-        for s in fr:
-            if s.values is None:
-                raise FormatError(path, f"frame {frame_ids[k]}: sensor {s.name!r} has no SENSELS")
-    widths = {(s.width_cm, s.height_cm) for s in first}
-    if len(widths) != 1:
+                    block.stats[prefix] = parse_float(self.path, line.number, value, key)
+        return block
+
+    def _sensels(self, block: _Block, at: Line) -> None:
+        """The SENSELS values of a block: Rows x Columns for a sensor, Cells for a group."""
+        if block.kind == "GROUP":
+            want = block.cells
+        elif block.rows < 1 or block.cols < 1:
+            raise FormatError(
+                self.path, f"SENSELS of {block.name!r} before its Rows/Columns", at.number
+            )
+        else:
+            want = block.rows * block.cols
+        if want is None:
+            return  # a group without a Cells count: its values are skipped like other lines
+        check_declared_size(self.path, f"{block.kind} {block.name!r}", want, 2, at.number)
+        values: list[float] = []
+        while len(values) < want:
+            line = self._lines.peek()
+            if line is None or not line.ended:
+                return  # cut: the block stays incomplete
+            row = _fields(line.text)
+            if row and not is_number(row[0]):
+                return  # the next key: fewer values than declared (checked by the frame)
+            next(self._lines)
+            if not row:
+                continue
+            if block.kind == "SENSOR" and len(row) != block.cols:
+                raise FormatError(
+                    self.path,
+                    f"sensor {block.name!r}: expected {block.cols} "
+                    f"values per SENSELS row, found {len(row)}",
+                    line.number,
+                )
+            r = len(values) // max(block.cols, 1) + 1
+            values += [parse_float(self.path, line.number, tok, f"SENSELS row {r}") for tok in row]
+        block.values = (
+            np.asarray(values[:want]).reshape(block.rows, block.cols)
+            if block.kind == "SENSOR"
+            else None
+        )
+        block.complete = len(values) == want
+
+    def _complete(self, frame: _Frame, at_end: bool) -> _Frame | None:
+        """Check a frame against the first; a shortfall in the last frame is a cut."""
+        problem = ""
+        if frame.stamp is None:
+            problem = "has no Time line"
+        elif (
+            hasattr(self, "_signature") and [b.signature() for b in frame.blocks] != self._signature
+        ):
+            problem = "has other SENSOR/GROUP blocks than the first frame"
+        else:
+            short = [b for b in frame.blocks if not b.complete and (b.kind == "SENSOR" or b.cells)]
+            if short:
+                problem = f"has too few SENSELS values in {short[0].kind} {short[0].name!r}"
+        if not problem:
+            return frame
+        if at_end:
+            self._cut(f"truncated: the last frame ({frame.number}, line {frame.line}) {problem}")
+            return None
+        raise FormatError(self.path, f"frame {frame.number} {problem}", frame.line)
+
+    def _frames(self) -> Iterator[FrameRow]:
+        frame = self._first
+        n = self.header.layout.n_elements
+        while frame is not None:
+            values = np.empty(n)
+            for s, members in zip(frame.sensors(), self._members, strict=True):
+                values[members] = s.values.ravel()  # type: ignore[union-attr]
+            sensors = frame.sensors()
+            labels = {"frame_number": frame.number}
+            for si, stat, name, scale in self._stats:
+                labels[name] = sensors[si].stats.get(stat, np.nan) * scale
+            t = (frame.stamp - self._t0).total_seconds()  # type: ignore[operator]
+            yield FrameRow(values, t, frame.line, labels)
+            frame = self._next_frame()
+
+
+def _stamp(path: Path, line: Line, date_text: str, value: str) -> datetime:
+    try:
+        return datetime.strptime(f"{date_text} {value}", "%Y %b %d %H:%M:%S.%f")
+    except ValueError:
+        raise FormatError(
+            path,
+            f"expected 'Date,yyyy Mon dd' and 'Time,hh:mm:ss.fff', found {date_text!r} {value!r}",
+            line.number,
+        ) from None
+
+
+def _layout(path: Path, sensors: list[_Block]) -> tuple[Layout, list[np.ndarray]]:
+    """One grid for all sensors, side by side with _GAP empty columns, a region each."""
+    sizes = {(s.width_cm, s.height_cm) for s in sensors}
+    if len(sizes) != 1:
         raise FormatError(path, "sensors with different sensel sizes are not supported")
-    width_cm, height_cm = widths.pop()
-    rows = max(s.rows for s in first)
-    cols = sum(s.cols for s in first) + _GAP * (len(first) - 1)
+    width_cm, height_cm = sizes.pop()
+    rows = max(s.rows for s in sensors)
+    cols = sum(s.cols for s in sensors) + _GAP * (len(sensors) - 1)
     active = np.zeros((rows, cols), dtype=bool)
-    regions: dict[str, np.ndarray] = {}
     offsets = []
     c0 = 0
-    for s in first:
+    for s in sensors:
         active[: s.rows, c0 : c0 + s.cols] = True
         offsets.append(c0)
         c0 += s.cols + _GAP
     layout = Layout.grid(rows, cols, pitch_cm=(height_cm, width_cm), active=active, neighbour_gap=0)
     cell_to_element = np.full(rows * cols, -1)
     cell_to_element[layout.cells] = np.arange(layout.n_elements)
-    for s, off in zip(first, offsets, strict=True):
+    regions: dict[str, np.ndarray] = {}
+    for s, off in zip(sensors, offsets, strict=True):
         cells = (np.arange(s.rows)[:, None] * cols + off + np.arange(s.cols)[None, :]).ravel()
         regions[s.name] = cell_to_element[cells]
-    layout = layout.with_regions(regions)
-    data = np.empty((len(frames), layout.n_elements))
-    labels: dict[str, np.ndarray] = {"frame_number": np.asarray(frame_ids)}
-    to_ncm2 = units.factor(unit, "N/cm2")
-    for si, s in enumerate(first):
-        members = regions[s.name]
-        for k, fr in enumerate(frames):
-            data[k, members] = fr[si].values.ravel()  # type: ignore[union-attr]
-        for stat, (label, is_pressure) in _VENDOR_STATS.items():
-            if all(stat in fr[si].stats for fr in frames):
-                v = np.array([fr[si].stats[stat] for fr in frames])
-                labels[f"{label}_s{si + 1}"] = v * to_ncm2 if is_pressure else v
-    t0 = stamps[0]
-    times = np.array([(t - t0).total_seconds() for t in stamps])
-    return Recording(
-        (data * to_ncm2).astype(np.float32),
-        times,
-        layout,
-        quantity="pressure",
-        unit="N/cm2",
-        labels=labels,
-        meta={
-            "format": "xsensor-csv",
-            "source": str(path),
-            "source_unit": unit,
-            "sensors": [s.name for s in first],
-            "start_time": t0.isoformat(),
-        },
-    )
+    return layout.with_regions(regions), [regions[s.name] for s in sensors]
+
+
+def read_xsensor(path: str | Path, *, accept_truncated: bool = False) -> Recording:
+    """Read an XSENSOR CSV export.
+
+    Parameters
+    ----------
+    path : str or Path
+        The export.
+    accept_truncated : bool
+        Read an export whose last frame was cut short without it (with a warning) instead
+        of refusing it.
+
+    Returns
+    -------
+    Recording
+        Pressure in N/cm² (converted from the file's ``Units:``), frames timed from each
+        frame's ``Time`` field relative to the first frame. Values that are not a number,
+        infinite or negative are invalid readings.
+    """
+    with XSensorReader(path, accept_truncated=accept_truncated) as reader:
+        return reader.read()

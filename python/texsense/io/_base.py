@@ -1,0 +1,453 @@
+"""The one base of every recording reader: a file is a **header** (layout, quantity and unit,
+metadata, how many frames it declares), then **frames read in blocks** (the MNE pattern: the
+base does everything that is not specific to a format).
+
+A format's reader subclasses :class:`RecordingReader` and writes two methods:
+
+- ``_read_header()`` parses the header and returns a :class:`Header`;
+- ``_frames()`` yields one :class:`FrameRow` per frame (text formats), or ``_pieces()`` yields
+  :class:`Piece` blocks of frames (HDF5); either calls ``_cut(message)`` when the file holds
+  less than it declares (a last frame cut mid-line, fewer frames than the header says), and
+  stops.
+
+The base converts the values to texsense's unit, marks impossible readings invalid (not a
+number, infinite or beyond float32, negative where the quantity cannot be negative: the
+:class:`~texsense.Recording`'s ``valid`` mask), refuses times that go backwards (naming the
+line), cuts the frames into blocks of the requested length and, at the end, either refuses a
+file that was cut short (:class:`~texsense.exceptions.FormatError`) or, with
+``accept_truncated=True`` (``--accept-truncated`` on the command line), reads what is there and
+says how much is missing in one warning line. Invalid readings are counted and reported in one
+warning line too.
+
+Examples
+--------
+>>> from texsense.io import open_reader
+>>> with open_reader("../shared/data/vendor-formats/iscan_test.csv") as reader:
+...     print(reader.header.layout.shape, reader.header.declared_frames)
+...     print([block.n_frames for block in reader.blocks(100)])
+(28, 28) 309
+[100, 100, 100, 9]
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, NamedTuple, Self
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense import units
+from texsense._progress import logger
+from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
+from texsense.io._text import Line, TextLines
+from texsense.layout import Layout
+from texsense.recording import Recording
+
+__all__ = [
+    "NON_NEGATIVE",
+    "BlockReader",
+    "FrameRow",
+    "Header",
+    "Piece",
+    "RecordingReader",
+    "check_declared_size",
+]
+
+#: Quantities whose readings cannot be negative: a negative reading is invalid.
+NON_NEGATIVE = frozenset({"pressure", "capacitance", "force", "resistance"})
+
+#: The hint every "cut short" error ends with.
+ACCEPT_HINT = "--accept-truncated (accept_truncated=True) reads the {n} complete {what}(s)"
+
+
+@dataclass
+class Header:
+    """What a recording file says about itself before its frames.
+
+    Attributes
+    ----------
+    layout : Layout
+        The elements.
+    quantity, unit : str
+        What the frames hold once read (texsense's unit, e.g. N/cm² for pressure).
+    meta : dict
+        Provenance (source file, format, the file's own header keys, ...).
+    source_unit : str, optional
+        The unit of the values in the file, when it is not ``unit`` (converted on reading).
+    declared_frames : int, optional
+        How many frames the file says it holds (Tekscan ``START_FRAME``/``END_FRAME``, a
+        texsense wide CSV's ``# frames:``, HDF5 dataset lengths), if it says.
+    label_dtypes : dict
+        The per-frame labels and their dtypes.
+    element_times : bool
+        Whether the frames carry per-element time stamps.
+    """
+
+    layout: Layout
+    quantity: str
+    unit: str
+    meta: dict[str, Any]
+    source_unit: str | None = None
+    declared_frames: int | None = None
+    label_dtypes: dict[str, Any] = field(default_factory=dict)
+    element_times: bool = False
+
+
+class FrameRow(NamedTuple):
+    """One frame as a text reader parsed it: values in the file's unit, time in s, the line
+    where the frame starts, its labels and, if the file has one, its validity mask."""
+
+    values: npt.NDArray[Any]
+    time: float
+    line: int
+    labels: dict[str, Any]
+    valid: npt.NDArray[np.bool_] | None = None
+
+
+@dataclass
+class Piece:
+    """A block of consecutive frames before the base's checks (values in the file's unit)."""
+
+    values: npt.NDArray[Any]
+    times: npt.NDArray[np.float64]
+    labels: dict[str, npt.NDArray[Any]]
+    lines: npt.NDArray[np.int64] | None = None
+    #: the file's own validity mask (HDF5, texsense wide CSV); None: judged from the values
+    valid: npt.NDArray[np.bool_] | None = None
+    element_times: npt.NDArray[np.float64] | None = None
+
+
+def check_declared_size(
+    path: Path, what: str, count: int, min_bytes_each: int, line: int | None = None
+) -> None:
+    """Refuse a header number that the file cannot hold (``Rows,1000000000`` in a 2 MB
+    file) before anything is allocated from it: ``what`` declares ``count`` values of at
+    least ``min_bytes_each`` bytes each."""
+    size = path.stat().st_size
+    if count < 0 or count * min_bytes_each > size:
+        raise FormatError(
+            path,
+            f"{what} declares {count} values, more than a file of {size} bytes can hold "
+            "(a damaged header?)",
+            line,
+        )
+
+
+class BlockReader:
+    """What every reader shares: the file, the ``accept_truncated`` choice, noting a
+    shortfall (:meth:`_cut`) and, at the end, refusing or reporting it (:meth:`_finish_cut`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file or folder.
+    accept_truncated : bool
+        Read a file that holds less than it declares (cut short, closed early) up to its last
+        complete frame and warn, instead of refusing it.
+    """
+
+    #: the name of the format (``texsense.io.READERS``)
+    format: ClassVar[str] = ""
+
+    def __init__(self, path: str | Path, *, accept_truncated: bool = False) -> None:
+        self.path = Path(path)
+        self.accept_truncated = bool(accept_truncated)
+        self._shortfall: str | None = None
+
+    def _cut(self, message: str) -> None:
+        """Note that the file holds less than it declares (``message`` says what and how
+        much); the format's reader then stops."""
+        self._shortfall = message
+
+    def _bad_line(self, line: Line, message: str) -> None:
+        """A line that does not parse: the end of a file cut mid-line when it is the last
+        line and has no line end, an error naming the line otherwise."""
+        if line.ended:
+            raise FormatError(self.path, message, line.number)
+        self._cut(f"truncated: the file ends in the middle of line {line.number}")
+
+    def _finish_cut(self, count: int, what: str = "frame") -> None:
+        """Refuse (or, accepting, report in one line) a noted shortfall."""
+        if self._shortfall is None:
+            return
+        if not self.accept_truncated:
+            raise FormatError(
+                self.path, f"{self._shortfall}; {ACCEPT_HINT.format(n=count, what=what)}"
+            )
+        logger.warning(
+            "warning: %s: %s; read the %d complete %s(s) before it",
+            self.path,
+            self._shortfall,
+            count,
+            what,
+        )
+
+    #: the text file a line-oriented reader holds open (closed by :meth:`close`)
+    _lines: TextLines | None = None
+
+    def close(self) -> None:
+        """Release the file (the text file in ``_lines``; a format that holds another kind
+        of file overrides this)."""
+        if self._lines is not None:
+            self._lines.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class RecordingReader(BlockReader):
+    """A recording file opened for reading: its :attr:`header`, then :meth:`blocks` of frames
+    (constant memory) or :meth:`read` (the whole :class:`~texsense.Recording`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file or folder.
+    accept_truncated : bool
+        Read a file that holds less than it declares (cut short, closed early) up to its last
+        complete frame and warn, instead of refusing it.
+
+    Attributes
+    ----------
+    header : Header
+        Parsed on opening.
+    frames_read : int
+        Frames yielded so far.
+    invalid : collections.Counter
+        Readings marked invalid so far, by reason.
+    """
+
+    #: quantities whose readings this format cannot hold negative (in addition to NON_NEGATIVE)
+    non_negative: ClassVar[frozenset[str]] = frozenset()
+
+    def __init__(self, path: str | Path, *, accept_truncated: bool = False) -> None:
+        super().__init__(path, accept_truncated=accept_truncated)
+        self.frames_read = 0
+        #: frames known to be complete when the header already shows a shortfall
+        self._known_complete: int | None = None
+        self.invalid: collections.Counter[str] = collections.Counter()
+        self._last_time = -np.inf
+        self._block = 4096
+        try:
+            self.header = h = self._read_header()
+            # what the header says must make a recording (quantity, unit, meta)
+            n = h.layout.n_elements
+            Recording(np.zeros((0, n)), [], h.layout, h.quantity, h.unit, meta=h.meta)
+        except (ParameterError, ShapeError, UnitError) as e:
+            self.close()
+            raise FormatError(self.path, str(e)) from None
+        except BaseException:
+            self.close()
+            raise
+        self._factor = 1.0 if h.source_unit is None else units.factor(h.source_unit, h.unit)
+        if self._shortfall is not None and not self.accept_truncated:
+            self.close()  # the header already shows the file holds less than it declares
+            self._finish_cut(self._known_complete or 0)
+
+    # ------------------------------------------------------------------ for the formats
+    def _read_header(self) -> Header:
+        raise NotImplementedError
+
+    def _frames(self) -> Iterator[FrameRow]:
+        raise NotImplementedError
+
+    def _pieces(self) -> Iterator[Piece]:
+        """Blocks of frames; by default :meth:`_frames` grouped by the block length."""
+        rows: list[FrameRow] = []
+        for row in self._frames():
+            rows.append(row)
+            if len(rows) == self._block:
+                yield self._stack(rows)
+                rows = []
+        if rows:
+            yield self._stack(rows)
+
+    def _stack(self, rows: list[FrameRow]) -> Piece:
+        dtypes = self.header.label_dtypes
+        return Piece(
+            np.stack([r.values for r in rows]),
+            np.array([r.time for r in rows], dtype=np.float64),
+            {k: np.array([r.labels[k] for r in rows], dtype=dt) for k, dt in dtypes.items()},
+            lines=np.array([r.line for r in rows], dtype=np.int64),
+            valid=None if rows[0].valid is None else np.stack([r.valid for r in rows]),
+        )
+
+    def _impossible(self, values: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.bool_]]:
+        """Readings that cannot be real, by reason (a format can add its own). The least and
+        the greatest value (NaN if there is one) spare the masks when all are plausible."""
+        out: dict[str, npt.NDArray[np.bool_]] = {}
+        lo, hi = (values.min(), values.max()) if values.size else (0.0, 0.0)
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            out["not a number"] = np.isnan(values)
+            out["infinite or beyond float32"] = np.isinf(values)
+        if self.header.quantity in NON_NEGATIVE | self.non_negative and not lo >= 0:
+            with np.errstate(invalid="ignore"):
+                out["negative"] = values < 0
+        return out
+
+    # ------------------------------------------------------------------ the base's work
+    def _checked(self, piece: Piece) -> Piece:
+        values = piece.values
+        with np.errstate(over="ignore", invalid="ignore"):  # beyond float32: invalid readings
+            if self._factor != 1.0:
+                values = values.astype(np.float64) * self._factor
+            frames = np.ascontiguousarray(values, dtype=np.float32)
+        valid = piece.valid
+        if valid is None:
+            valid = np.ones(frames.shape, dtype=bool)
+            for reason, mask in self._impossible(frames).items():  # each reading counted once
+                new = mask & valid
+                count = int(np.count_nonzero(new))
+                if count:
+                    self.invalid[reason] += count
+                    valid &= ~new
+        self._check_times(piece)
+        return Piece(frames, piece.times, piece.labels, piece.lines, valid, piece.element_times)
+
+    def _check_times(self, piece: Piece) -> None:
+        t = piece.times
+        previous = np.concatenate(([self._last_time], t[:-1]))
+        with np.errstate(invalid="ignore"):
+            bad = np.nonzero(~np.isfinite(t) | (t < previous))[0]
+        if bad.size:
+            i = int(bad[0])
+            line = None if piece.lines is None else int(piece.lines[i])
+            where = "" if line is not None else f"frame {self.frames_read + i + 1}: "
+            if not np.isfinite(t[i]):
+                raise FormatError(self.path, f"{where}the time is {t[i]}, not a number", line)
+            raise FormatError(
+                self.path,
+                f"{where}the time {t[i]:.9g} s goes back from {previous[i]:.9g} s "
+                "(times must not decrease)",
+                line,
+            )
+        if t.size:
+            self._last_time = float(t[-1])
+
+    def _recording(self, p: Piece) -> Recording:
+        h = self.header
+        return Recording(
+            p.values,
+            p.times,
+            h.layout,
+            h.quantity,
+            h.unit,
+            valid=p.valid,
+            element_times=p.element_times,
+            labels=p.labels,
+            meta=h.meta,
+        )
+
+    def _finish(self) -> None:
+        """At the end: refuse or report a shortfall, report invalid readings."""
+        n = self.frames_read
+        self._finish_cut(n)
+        total = sum(self.invalid.values())
+        if total:
+            parts = ", ".join(f"{c} {reason}" for reason, c in self.invalid.items() if c)
+            logger.warning(
+                "warning: %s: %d reading(s) marked invalid (%s) of %d",
+                self.path,
+                total,
+                parts,
+                n * self.header.layout.n_elements,
+            )
+
+    def _checked_pieces(self) -> Iterator[Piece]:
+        for piece in self._pieces():
+            checked = self._checked(piece)
+            self.frames_read += checked.times.size
+            yield checked
+
+    # ------------------------------------------------------------------ public
+    def blocks(self, frames: int = 4096) -> Iterator[Recording]:
+        """Yield the recording as :class:`~texsense.Recording` blocks of ``frames`` frames
+        (the last may be shorter); memory stays flat in the file's length.
+
+        Raises
+        ------
+        FormatError
+            On a malformed line or field, a time that goes back, or (at the end) a file cut
+            short without ``accept_truncated``.
+        """
+        if frames < 1:
+            raise ParameterError(f"frames per block must be >= 1, got {frames}")
+        self._block = int(frames)
+        held: list[Piece] = []
+        count = 0
+        for piece in self._checked_pieces():
+            held.append(piece)
+            count += piece.times.size
+            while count >= self._block:
+                block, held = _split(held, self._block)
+                count -= self._block
+                yield self._recording(block)
+        self._finish()
+        if count:
+            yield self._recording(_join(held))
+
+    def read(self) -> Recording:
+        """The whole recording (all frames in memory)."""
+        self._block = 1 << 62  # one piece: no copy to join blocks
+        pieces = list(self._checked_pieces())
+        self._finish()
+        if not pieces:
+            h = self.header
+            n = h.layout.n_elements
+            return Recording(
+                np.zeros((0, n), np.float32),
+                np.zeros(0),
+                h.layout,
+                h.quantity,
+                h.unit,
+                labels={k: np.zeros(0, dtype=dt) for k, dt in h.label_dtypes.items()},
+                meta=h.meta,
+            )
+        return self._recording(_join(pieces))
+
+
+def _join(pieces: list[Piece]) -> Piece:
+    if len(pieces) == 1:
+        return pieces[0]
+    first = pieces[0]
+
+    def cat(name: str) -> Any:
+        parts = [getattr(p, name) for p in pieces]
+        return None if parts[0] is None else np.concatenate(parts)
+
+    return Piece(
+        cat("values"),
+        cat("times"),
+        {k: np.concatenate([p.labels[k] for p in pieces]) for k in first.labels},
+        cat("lines"),
+        cat("valid"),
+        cat("element_times"),
+    )
+
+
+def _split(pieces: list[Piece], n: int) -> tuple[Piece, list[Piece]]:
+    """The first ``n`` frames of ``pieces`` as one piece, and the rest."""
+    whole = _join(pieces)
+
+    def part(sl: slice) -> Piece:
+        def take(a: Any) -> Any:
+            return None if a is None else a[sl]
+
+        return Piece(
+            whole.values[sl],
+            whole.times[sl],
+            {k: v[sl] for k, v in whole.labels.items()},
+            take(whole.lines),
+            take(whole.valid),
+            take(whole.element_times),
+        )
+
+    rest = part(slice(n, None))
+    return part(slice(0, n)), ([rest] if rest.times.size else [])
