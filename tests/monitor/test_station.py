@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
 import time
 import urllib.error
 import urllib.request
@@ -35,6 +36,16 @@ class StationProcess(ChildServer):
 
     def mats(self) -> dict:
         return {m["id"]: m for m in self.get("api/mats")}
+
+    def stop(self) -> None:
+        """SIGTERM, as a service manager stops it: a station killed with SIGKILL as root would
+        leave its own broker running (Mosquitto drops its privileges, and with them the
+        signal that would end it with its parent)."""
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            super().stop()
 
     def post(self, path: str, headers: dict | None = None):
         """POST ``path`` (no body), JSON back."""
