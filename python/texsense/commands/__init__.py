@@ -12,6 +12,7 @@ from texsense.commands import (
     pipeline,
     plot,
     posture,
+    record,
     report,
     simulate,
     station,
@@ -20,5 +21,5 @@ from texsense.commands import (
 
 COMMANDS = (
     info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor, station,
-    stocking, muscle, report,
+    stocking, muscle, report, record,
 )  # fmt: skip

@@ -18,45 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         description="Read a sensor live, compensate it, record it and show it in a web "
         "dashboard. Without --source: a simulated person on the virtual 96-element seat.",
     )
-    p.add_argument(
-        "--source",
-        default="virtual",
-        help="virtual | virtual-bed | replay:FILE | serial:PORT | iio:DEVICE_DIR | "
-        "mqtt:HOST[:PORT]",
-    )
-    p.add_argument(
-        "--speed",
-        type=float,
-        default=1.0,
-        help="virtual seat / replay: times faster than real time (0: as fast as possible)",
-    )
-    p.add_argument(
-        "--grid",
-        default=None,
-        metavar="ROWSxCOLS",
-        help="serial/iio/mqtt: the sensor's grid (e.g. 15x16)",
-    )
-    p.add_argument(
-        "--sampling-frequency",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="iio: the converter's conversion rate (the driver picks its nearest)",
-    )
-    p.add_argument(
-        "--multiplexer",
-        default=None,
-        metavar="MODULE:FUNCTION",
-        help="iio: a function called with each element's index before it is read (a module "
-        "name or a .py file, e.g. mymux.py:select)",
-    )
-    p.add_argument(
-        "--capdac-pf",
-        type=float,
-        default=None,
-        metavar="PF",
-        help="iio: CAPDAC offset subtracted before conversion (pF)",
-    )
+    add_source_options(p)
     p.add_argument("--calibration", type=Path, help="mat calibration (texsense pipeline calibrate)")
     p.add_argument("--model", type=Path, help="posture model (texsense posture train)")
     p.add_argument(
@@ -109,6 +71,51 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     add_web_options(p, 8765)
     p.set_defaults(run=run_monitor)
+
+
+def add_source_options(p: argparse.ArgumentParser) -> None:
+    """``--source`` and what a source needs (speed, grid, the IIO converter's settings):
+    shared by ``monitor`` and ``record``."""
+    p.add_argument(
+        "--source",
+        default="virtual",
+        help="virtual | virtual-bed | replay:FILE | serial:PORT | iio:DEVICE_DIR | "
+        "mqtt:HOST[:PORT]",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="virtual seat / replay: times faster than real time (0: as fast as possible)",
+    )
+    p.add_argument(
+        "--grid",
+        default=None,
+        metavar="ROWSxCOLS",
+        help="iio/mqtt: the sensor's grid (e.g. 15x16); serial: only for a device that does "
+        "not announce its layout",
+    )
+    p.add_argument(
+        "--sampling-frequency",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="iio: the converter's conversion rate (the driver picks its nearest)",
+    )
+    p.add_argument(
+        "--multiplexer",
+        default=None,
+        metavar="MODULE:FUNCTION",
+        help="iio: a function called with each element's index before it is read (a module "
+        "name or a .py file, e.g. mymux.py:select)",
+    )
+    p.add_argument(
+        "--capdac-pf",
+        type=float,
+        default=None,
+        metavar="PF",
+        help="iio: CAPDAC offset subtracted before conversion (pF)",
+    )
 
 
 def add_web_options(p: argparse.ArgumentParser, port: int) -> None:
@@ -193,8 +200,9 @@ def load_function(spec: str) -> Any:
     return fn
 
 
-def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
-    """The source named by ``--source`` and its default calibration (or None)."""
+def make_source(args: argparse.Namespace, *, loop: bool = True) -> tuple[Any, Any]:
+    """The source named by ``--source`` and its default calibration (or None); a replay
+    starts again at its end with ``loop``."""
     from texsense.monitor import sources
 
     kind, _, rest = args.source.partition(":")
@@ -207,9 +215,9 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
 
         return sources.VirtualBedSource(speed=args.speed), bed_calibration()
     if kind == "replay":
-        return sources.ReplaySource(Path(rest), speed=args.speed, loop=True), None
+        return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop), None
     if kind == "serial":
-        return sources.SerialSource(rest, _grid(args)), None
+        return sources.SerialSource(rest, _grid(args) if args.grid else None), None
     if kind == "iio":
         iio = sources.IIOSource(
             rest,
@@ -239,10 +247,15 @@ def build_monitor(args: argparse.Namespace) -> Any:
     if args.calibration is not None:
         calibration = load_calibration(args.calibration)
     pipeline = None
-    if source.quantity == "capacitance":
-        if calibration is None:
-            raise ParameterError("a capacitance source needs --calibration")
+    if source.quantity == "capacitance" and calibration is not None:
         pipeline = Pipeline(calibration, source.layout)
+    raw_only = source.quantity == "capacitance" and pipeline is None
+    if raw_only:
+        logging.getLogger("texsense.monitor").warning(
+            "%s: no calibration: showing and recording raw capacitance (pF); "
+            "'texsense calibrate wizard' makes one",
+            source.name,
+        )
     tracker = ExposureTracker(
         source.layout,
         threshold=args.threshold,
@@ -251,6 +264,8 @@ def build_monitor(args: argparse.Namespace) -> Any:
         offload_min=args.offload_min,
     )
     model = PostureModel.load(args.model) if args.model else None
+    if raw_only and (model is not None or args.bed):
+        raise ParameterError("--model and --bed need pressure: give the mat's --calibration")
     if model is None and args.source == "virtual" and not args.no_posture:
         model = virtual_seat_model()
     bed = None

@@ -45,13 +45,19 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "capacitance with the true pressure and compression as labels; the CSV holds "
         "time_s,compression_mm,pressure_ncm2,capacitance_pF.",
     )
-    p.add_argument("protocol", choices=sorted(PROTOCOLS), help="protocol to run")
+    p.add_argument(
+        "protocol",
+        choices=[*sorted(PROTOCOLS), "device"],
+        help="protocol to run; 'device': a virtual mat behind a serial line (--mat, --link)",
+    )
     p.add_argument("--spacer", default="textile-6mm", choices=sorted(PRESETS), help="spacer preset")
     p.add_argument("--seed", type=int, default=0, help="specimen and noise seed (default 0)")
     p.add_argument("-o", "--output", type=Path, help="HDF5 file to write")
     p.add_argument("--csv", type=Path, help="CSV file to write")
     p.add_argument("--sample-hz", type=float, default=10.0, help="output rate (default 10 Hz)")
-    p.add_argument("--speed", type=float, help="platen speed, mm/min")
+    p.add_argument(
+        "--speed", type=float, help="platen speed, mm/min (device: times faster than real time)"
+    )
     p.add_argument("--max", type=float, help="maximal pressure, N/cm²")
     p.add_argument("--cycles", type=int, help="number of cycles")
     p.add_argument("--hold", type=float, help="hold time per step or load, s")
@@ -63,12 +69,26 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--falling", action="store_true", help="falling steps (from 10 N/cm²)")
     p.add_argument("--p3", type=float, help="upper pressure of cyclic compression, N/cm²")
     p.add_argument("--duration", type=float, help="duration, s")
+    device = p.add_argument_group("device (texsense simulate device --mat seat --link PATH)")
+    device.add_argument("--mat", default="seat", help="device: seat (96 elements) or bed (2048)")
+    device.add_argument("--link", type=Path, help="device: the serial port's path to create")
+    device.add_argument(
+        "--load", default="empty", help="device: empty | uniform:P (N/cm²) | person"
+    )
+    device.add_argument(
+        "--failures", action="store_true", help="device: elements fail at the thesis's rates"
+    )
+    device.add_argument(
+        "--truth", type=Path, help="device: record the true pressure of every frame (HDF5)"
+    )
     p.set_defaults(run=run)
     register_sessions(sub)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense simulate``."""
+    if args.protocol == "device":
+        return run_device(args)
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
     if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
@@ -103,6 +123,43 @@ def run(args: argparse.Namespace) -> int:
         f"{args.protocol} on {args.spacer} (seed {args.seed}): {rec.n_frames} samples over "
         f"{rec.duration_s:.6g} s, pressure 0-{p.max():.3g} N/cm², capacitance "
         f"{rec.frames.min():.3f}-{rec.frames.max():.3f} pF"
+    )
+    return 0
+
+
+def run_device(args: argparse.Namespace) -> int:
+    """Run ``texsense simulate device``: serve until Ctrl-C or SIGTERM."""
+    import signal
+    import threading
+
+    from texsense.sim.device import VirtualDevice
+
+    if args.link is None:
+        raise ParameterError("simulate device needs --link PATH (the serial port to create)")
+    if args.output or args.csv:
+        raise ParameterError("simulate device writes no -o/--csv: use --truth FILE.h5")
+    device = VirtualDevice(
+        args.mat,
+        load=args.load,
+        seed=args.seed,
+        failures=args.failures,
+        speed=1.0 if args.speed is None else args.speed,
+    )
+    info = device.info()
+    print(
+        f"texsense simulate device: virtual {info['mat']} ({info['elements']} elements, "
+        f"{info['grid']} grid, spacer {info['spacer']}, a frame every {info['frame_s']:.3g} s, "
+        f"load {info['load']}) on {args.link}; Ctrl-C stops",
+        flush=True,
+    )
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    device.serve(args.link, stop=stop, truth=args.truth)
+    print(
+        f"texsense simulate device: stopped after {device.frames_sent} frames "
+        f"({device.dropped} dropped: no reader)",
+        flush=True,
     )
     return 0
 

@@ -47,20 +47,22 @@ POSTURE_WINDOW_S = 5.0
 SILENT_S = 10.0
 
 
-def recording_paths(folder: Path, name: str, quantity: str) -> list[Path]:
-    """The files of a recording named ``name``: ``<name>-raw.h5`` and, for capacitance, the
-    pressure ``<name>.h5``."""
+def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = True) -> list[Path]:
+    """The files of a recording named ``name``: ``<name>-raw.h5`` and, for capacitance
+    through a calibration, the pressure ``<name>.h5``."""
     paths = [folder / f"{name}-raw.h5"]
-    return [*paths, folder / f"{name}.h5"] if quantity == "capacitance" else paths
+    if quantity == "capacitance" and calibrated:
+        return [*paths, folder / f"{name}.h5"]
+    return paths
 
 
-def unused_recording_name(folder: Path, name: str, quantity: str) -> str:
+def unused_recording_name(folder: Path, name: str, quantity: str, calibrated: bool = True) -> str:
     """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
     (:func:`texsense.files.unused_name` on each file of the recording)."""
     k = 1
     while True:
         candidate = name if k == 1 else f"{name}-{k}"
-        paths = recording_paths(folder, candidate, quantity)
+        paths = recording_paths(folder, candidate, quantity, calibrated)
         if all(unused_name(p) == p for p in paths):
             return candidate
         k += 1
@@ -68,15 +70,23 @@ def unused_recording_name(folder: Path, name: str, quantity: str) -> str:
 
 class Recorder:
     """Crash-safe HDF5 recording of one session: the source's readings (``<name>-raw.h5``,
-    re-processable) and, for capacitance sources, the pressure (``<name>.h5``), both flushed
-    at least every :data:`FLUSH_S` s."""
+    re-processable) and, for capacitance sources through a calibration, the pressure
+    (``<name>.h5``), both flushed at least every :data:`FLUSH_S` s."""
 
-    def __init__(self, folder: Path, name: str, source: Source, meta: dict[str, Any]) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        name: str,
+        source: Source,
+        meta: dict[str, Any],
+        *,
+        calibrated: bool = True,
+    ) -> None:
         from texsense.io.hdf5 import RecordingWriter
 
         folder.mkdir(parents=True, exist_ok=True)
         lay = source.layout
-        self.paths = recording_paths(folder, name, source.quantity)
+        self.paths = recording_paths(folder, name, source.quantity, calibrated)
         taken = [p.name for p in self.paths if p.exists()]
         if taken:  # never write over an earlier recording
             raise ParameterError(f"a recording named {name!r} exists already ({taken[0]})")
@@ -90,7 +100,7 @@ class Recorder:
             flush_interval_s=FLUSH_S,
         )
         self._pressure = None
-        if source.quantity == "capacitance":
+        if len(self.paths) > 1:
             self._pressure = RecordingWriter(
                 self.paths[1],
                 lay,
@@ -131,7 +141,9 @@ class Monitor:
     source : Source
         Where frames come from.
     pipeline : Pipeline, optional
-        Capacitance -> pressure (required for a capacitance source).
+        Capacitance -> pressure. Without one, a capacitance source is shown and recorded
+        raw (pF): no pressure, statistics, posture or alerts — what a new mat needs before
+        it is calibrated (``texsense calibrate wizard``).
     tracker : ExposureTracker, optional
         Default: 32 mmHg, 20 min.
     posture_model : PostureModel, optional
@@ -164,8 +176,12 @@ class Monitor:
     ) -> None:
         from texsense.views import MODES
 
-        if source.quantity == "capacitance" and pipeline is None:
-            raise ParameterError("a capacitance source needs a pipeline (a calibration)")
+        #: a capacitance source without a calibration: raw readings only
+        self.raw_only = source.quantity == "capacitance" and pipeline is None
+        if self.raw_only and (posture_model is not None or bed is not None):
+            raise ParameterError(
+                "posture and bed monitoring need pressure: give the mat's calibration"
+            )
         if pipeline is not None and pipeline.layout.n_elements != source.layout.n_elements:
             raise ParameterError("the pipeline and the source have different element counts")
         if posture_model is not None and posture_model.layout != source.layout:
@@ -245,7 +261,10 @@ class Monitor:
         if name is None:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             name = unused_recording_name(
-                self.record_dir, f"session-{self.session_id}-{stamp}", self.source.quantity
+                self.record_dir,
+                f"session-{self.session_id}-{stamp}",
+                self.source.quantity,
+                not self.raw_only,
             )
         from texsense.views import orientation_of
 
@@ -266,7 +285,9 @@ class Monitor:
         }
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
-        self.recorder = Recorder(self.record_dir, name, self.source, meta)
+        self.recorder = Recorder(
+            self.record_dir, name, self.source, meta, calibrated=not self.raw_only
+        )
         self.changes += 1
         paths = [str(p) for p in self.recorder.paths]
         self.store.set_recording(self.session_id, paths)
@@ -351,6 +372,10 @@ class Monitor:
             valid = np.isfinite(raw)
             pressure, measured = self.pipeline.step(np.nan_to_num(raw), frame.t, valid)
             codes = self.pipeline.codes_
+        elif self.raw_only:
+            pressure = np.full(raw.shape, np.nan)
+            measured = np.zeros(raw.shape, dtype=bool)
+            codes = np.zeros(raw.shape, dtype=np.int8)
         else:
             from texsense import units
 
@@ -359,7 +384,8 @@ class Monitor:
             codes = np.where(measured, 0, 2)
         if self._t_first is None:
             self._t_first = frame.t
-        exposure_events = self.tracker.step(frame.t, pressure) if self.mode.alerts else []
+        alerts = self.mode.alerts and not self.raw_only
+        exposure_events = self.tracker.step(frame.t, pressure) if alerts else []
         if self.recorder is not None:
             self.recorder.append(frame, pressure, measured)
         rec = Recording(
@@ -411,6 +437,7 @@ class Monitor:
             "t": frame.t,
             "raw": r(raw),
             "raw_unit": frame.unit,
+            "calibrated": not self.raw_only,
             "pressure": r(pressure),
             "failed": np.flatnonzero(codes != 0).tolist(),
             "repaired": np.flatnonzero((codes != 0) & np.isfinite(pressure)).tolist(),

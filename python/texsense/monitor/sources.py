@@ -29,7 +29,13 @@ import numpy as np
 
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
-from texsense.monitor.protocol import Frame, ProtocolError, parse_mqtt_payload, parse_serial_line
+from texsense.monitor.protocol import (
+    Frame,
+    ProtocolError,
+    parse_announcement,
+    parse_mqtt_payload,
+    parse_serial_line,
+)
 from texsense.recording import Recording
 
 __all__ = [
@@ -202,20 +208,26 @@ class SerialSource(Source):
     """Frames from a serial line in the texsense line protocol
     (:mod:`texsense.monitor.protocol`). ``port`` is a device (``/dev/ttyACM0``) or any pySerial
     URL (``socket://host:port``, ``loop://``). A port that is missing or refuses is tried
-    again every :data:`RETRY_S` s (and said once); so is one that goes away while reading."""
+    again every :data:`RETRY_S` s (and said once); so is one that goes away while reading.
+
+    Without a ``layout`` the device must announce its own (a ``#layout`` line, see
+    :func:`~texsense.monitor.protocol.parse_announcement`): the source waits up to
+    ``announce_timeout_s`` for it and keeps what else it says (its spacer, ...) in
+    ``announced``."""
 
     name = "serial"
 
     def __init__(
         self,
         port: str,
-        layout: Layout,
+        layout: Layout | None = None,
         *,
         baudrate: int = 115200,
         opener: Callable[..., Any] | None = None,
+        announce_timeout_s: float = 12.0,
     ) -> None:
         super().__init__()
-        self.layout = layout
+        self.announced: dict[str, Any] = {}
         self.port = port
         self.name = f"serial:{port}"
         if opener is None:
@@ -226,7 +238,38 @@ class SerialSource(Source):
         self._baudrate = baudrate
         self._dev: Any = None
         self.lines = 0
-        self._open()  # at once: a missing device is said before the server starts
+        if layout is None:  # the device must be there now, to announce its layout
+            try:
+                self._dev = self._opener(self.port, baudrate=self._baudrate, timeout=0.2)
+            except (OSError, ValueError) as e:
+                raise ParameterError(
+                    f"{self.name}: cannot open it ({reason(e)}); without --grid the device "
+                    "must be there to announce its layout"
+                ) from None
+            layout = self._wait_for_layout(announce_timeout_s)
+        else:
+            self._open()  # at once: a missing device is said before the server starts
+        self.layout = layout
+
+    def _wait_for_layout(self, timeout_s: float) -> Layout:
+        """Read lines until the device announces its layout (frames before it are dropped)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                line = self._dev.readline()
+            except OSError:
+                break
+            try:
+                got = parse_announcement(line)
+            except ProtocolError as e:
+                raise ParameterError(f"{self.name}: {e}") from None
+            if got is not None:
+                layout, self.announced = got
+                return layout
+        raise ParameterError(
+            f"{self.name} announced no layout ('#layout' line) within {timeout_s:g} s: "
+            "give the mat's grid with --grid ROWSxCOLS"
+        )
 
     def _open(self) -> bool:
         try:
@@ -241,6 +284,14 @@ class SerialSource(Source):
         """One line -> a frame, None (comment, blank, malformed: counted and skipped)."""
         self.lines += 1
         try:
+            announced = parse_announcement(line)
+            if announced is not None:
+                if announced[0].n_elements != self.layout.n_elements:
+                    raise ProtocolError(
+                        f"the device announces {announced[0].n_elements} elements, "
+                        f"expected {self.layout.n_elements}"
+                    )
+                return None
             return parse_serial_line(line, self.layout.n_elements)
         except ProtocolError as e:
             self._bad(f"line {self.lines}", e)

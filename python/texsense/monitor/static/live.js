@@ -114,6 +114,12 @@ async function refreshEvents() {
 let drawing = false;  // one render per animation frame, however many snapshots came
 function onSnapshot(snap) {
   last = snap;
+  const uncalibrated = snap.calibrated === false;
+  if ($("uncalibrated").hidden === uncalibrated) {  // a mat with no calibration: raw only
+    $("uncalibrated").hidden = !uncalibrated;
+    $("show-pressure").disabled = uncalibrated;
+    if (uncalibrated && mode !== "raw") $("show-raw").onclick();
+  }
   const st = snap.stats, t0 = live.length ? live[0].t0 : snap.t;
   live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null });
   if (live.length > 1200) { const t00 = live[0].t0; live.shift(); live.forEach((p) => { p.t0 = t00; }); }

@@ -1,0 +1,205 @@
+"""Recording raw frames from any live source, with no calibration (``texsense record``,
+docs/calibration.md): what zeroing, equilibration and a check of a new mat need.
+
+:func:`record` reads a :class:`~texsense.monitor.sources.Source` until ``duration_s`` of
+frame time or ``max_frames`` frames, or until it is stopped, and appends every frame to a
+crash-safe HDF5 recording (flushed every :data:`FLUSH_S` s, so a killed recorder keeps all
+but the last second). Frames pass the mat's :class:`~texsense.monitor.clock.FrameClock`
+first, so a glitching time stamp never makes a recording whose times go backwards; such
+frames, gaps in the frame counter and malformed lines count as dropped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from texsense.exceptions import ParameterError
+from texsense.monitor.clock import FrameClock
+from texsense.monitor.sources import Source
+
+__all__ = ["FLUSH_S", "RecordStats", "record"]
+
+#: Longest time between two flushes: a killed recorder loses at most this.
+FLUSH_S = 0.5
+#: A source that has sent nothing for this long is said to be silent.
+SILENT_S = 10.0
+
+
+@dataclass
+class RecordStats:
+    """What a recording got: frames written, frames dropped (gaps in the frame counter,
+    malformed lines, frames off the mat's clock), frame time spanned, wall time taken."""
+
+    frames: int = 0
+    dropped: int = 0
+    span_s: float = 0.0
+    wall_s: float = 0.0
+    first_t: float | None = None
+    silent: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def rate_hz(self) -> float:
+        """Frames per second of frame time."""
+        return (self.frames - 1) / self.span_s if self.frames > 1 and self.span_s > 0 else 0.0
+
+    def line(self) -> str:
+        """The progress line: frames, rate, dropped."""
+        return (
+            f"{self.frames} frames, {self.span_s:.1f} s, {self.rate_hz:.2f} frames/s, "
+            f"{self.dropped} dropped"
+        )
+
+
+def _writer(path: Path, source: Source, meta: dict[str, Any]) -> Any:
+    from texsense.io.hdf5 import RecordingWriter
+
+    return RecordingWriter(
+        path,
+        source.layout,
+        source.quantity,
+        source.unit,
+        meta=meta,
+        element_times=True,
+        flush_interval_s=FLUSH_S,
+    )
+
+
+async def record(
+    source: Source,
+    path: str | Path,
+    *,
+    duration_s: float | None = None,
+    max_frames: int | None = None,
+    meta: dict[str, Any] | None = None,
+    on_progress: Callable[[RecordStats], None] | None = None,
+    stop: asyncio.Event | None = None,
+) -> RecordStats:
+    """Record ``source`` to the new HDF5 file ``path`` (refused if it exists).
+
+    Parameters
+    ----------
+    source : Source
+        Any live source (virtual, replay, serial, IIO, MQTT).
+    path : str or Path
+        The recording to write; never an existing file.
+    duration_s : float, optional
+        Stop once the frames span this many seconds of their own time.
+    max_frames : int, optional
+        Stop after this many frames.
+    meta : dict, optional
+        Provenance to store (the source's name is added).
+    on_progress : callable, optional
+        Called with the stats after every frame and every second without one.
+    stop : asyncio.Event, optional
+        Set it to end the recording (Ctrl-C does the same through cancellation).
+
+    Returns
+    -------
+    RecordStats
+        What was recorded; the file holds every frame counted in ``frames``.
+    """
+    path = Path(path)
+    if path.exists():
+        raise ParameterError(f"{path} exists: recordings are never written over; choose a new name")
+    if duration_s is not None and not duration_s > 0:
+        raise ParameterError(f"--duration must be > 0 s, got {duration_s}")
+    if max_frames is not None and max_frames < 1:
+        raise ParameterError(f"--frames must be >= 1, got {max_frames}")
+    stats = RecordStats()
+    info = {"source": source.name, "recorded_by": "texsense record", "started_at": time.time()}
+    info.update(getattr(source, "announced", {}) or {})
+    info.update(meta or {})
+    writer = _writer(path, source, info)
+    stop = stop or asyncio.Event()
+    start = time.monotonic()
+    try:
+        frames = _frames_until(source, stop, stats, on_progress)
+        await _consume(frames, writer, source, stats, duration_s, max_frames, on_progress)
+    finally:
+        stats.wall_s = time.monotonic() - start
+        writer.close()
+        source.close()
+    return stats
+
+
+async def _frames_until(
+    source: Source,
+    stop: asyncio.Event,
+    stats: RecordStats,
+    on_progress: Callable[[RecordStats], None] | None,
+) -> Any:
+    """The source's frames until ``stop``; says (once) when the source falls silent."""
+    iterator = source.frames().__aiter__()
+    last = time.monotonic()
+    pending: asyncio.Task[Any] | None = None
+    try:
+        while not stop.is_set():
+            if pending is None:
+                pending = asyncio.ensure_future(iterator.__anext__())
+            done, _ = await asyncio.wait({pending}, timeout=1.0)
+            if not done:
+                stats.silent = time.monotonic() - last >= SILENT_S
+                if on_progress is not None:
+                    on_progress(stats)
+                continue
+            task, pending = pending, None
+            try:
+                frame = task.result()
+            except StopAsyncIteration:
+                return
+            last = time.monotonic()
+            stats.silent = False
+            yield frame
+    finally:
+        if pending is not None:
+            pending.cancel()
+
+
+async def _consume(
+    frames: Any,
+    writer: Any,
+    source: Source,
+    stats: RecordStats,
+    duration_s: float | None,
+    max_frames: int | None,
+    on_progress: Callable[[RecordStats], None] | None,
+) -> None:
+    clock = FrameClock()
+    errors_before = source.errors
+    last_seq: int | None = None
+    async for frame in frames:
+        verdict, t, _jump = clock.place(frame.t)
+        if verdict in ("ahead", "backwards"):
+            stats.dropped += 1
+            continue
+        if last_seq is not None and frame.seq > last_seq + 1:
+            stats.dropped += frame.seq - last_seq - 1
+        last_seq = frame.seq
+        shift = t - frame.t
+        values = np.asarray(frame.values, dtype=np.float64)
+        valid = np.isfinite(values)
+        writer.append(
+            np.where(valid, values, 0.0)[None, :],
+            times=[t],
+            valid=valid[None, :],
+            element_times=(frame.element_times + shift)[None, :],
+        )
+        stats.frames += 1
+        stats.first_t = t if stats.first_t is None else stats.first_t
+        stats.span_s = t - stats.first_t
+        stats.dropped += source.errors - errors_before
+        errors_before = source.errors
+        if on_progress is not None:
+            on_progress(stats)
+        if max_frames is not None and stats.frames >= max_frames:
+            return
+        if duration_s is not None and stats.span_s >= duration_s:
+            return
