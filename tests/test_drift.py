@@ -380,7 +380,7 @@ def test_batch_shapes_are_checked_in_one_place_for_every_stage():
     stages = [
         lambda v, m: PreisachBank(0.0, 1.0, table, 3, 32).run(v, m),
         lambda v, m: DriftBank(np.ones(2), np.array([1.0, 10.0]), -0.02, 3).run(np.zeros(4), v, m),
-        lambda v, m: Compensation(0.0, 1.0, table, 3, 32, 0.0, 1.0, 0.0).run(np.zeros(4), v, m),
+        lambda v, m: Compensation(PreisachBank(0.0, 1.0, table, 3, 32)).run(np.zeros(4), v, m),
     ]
     for run in stages:
         assert run(np.zeros((4, 3)), ok_valid).shape == (4, 3)

@@ -23,14 +23,14 @@ def test_eq_6_14_on_a_checkerboard():
 def test_run_equals_step_and_marks_repaired():
     rng = np.random.default_rng(0)
     lay = Layout.grid(6, 7)
-    frames = rng.random((30, lay.n_elements)).astype(np.float32)
+    frames = rng.random((30, lay.n_elements)).astype(np.float32).astype(np.float64)
     valid = rng.random(frames.shape) > 0.4
     rec = Recording(frames, np.arange(30.0), lay, valid=valid)
     batch = NeighbourMeanRepair(lay).run(rec)
     stream = NeighbourMeanRepair(lay)
     for t in range(30):
         out, repaired = stream.step(frames[t], valid[t])
-        np.testing.assert_array_equal(out, batch.frames[t])
+        np.testing.assert_array_equal(out.astype(np.float32), batch.frames[t])
         np.testing.assert_array_equal(~repaired, batch.valid[t])
     np.testing.assert_array_equal(batch.frames[valid], frames[valid])
 
@@ -48,12 +48,12 @@ def test_all_neighbours_failed_takes_last_value():
 
 
 def test_core_errors_map_to_python_exceptions():
-    from texsense._core import NeighbourMeanRepair as Core
+    from texsense._core import LocalRepair as Core
 
     with pytest.raises(NeighbourIndexError, match="out of range"):
-        Core(np.array([0, 1]), np.array([5]))
-    core = Core(np.array([0, 0, 0]), np.array([], dtype=np.int64))
+        Core("neighbour-mean", 1, np.array([0, 1]), np.array([5]))
+    core = Core("neighbour-mean", 2, np.array([0, 0, 0]), np.array([], dtype=np.int64))
     with pytest.raises(ShapeError, match="2 elements per frame"):
-        core.run(np.zeros((1, 3), np.float32), np.ones((1, 3), bool))
+        core.run(np.zeros((1, 3)), np.ones((1, 3), bool))
     with pytest.raises(ParameterError):
         NeighbourMeanRepair(Layout.grid(2, 2)).step(np.zeros(3), np.ones(3, bool))

@@ -9,18 +9,6 @@ class ShapeError(ValueError): ...
 class NeighbourIndexError(IndexError): ...
 class ParameterError(ValueError): ...
 
-class NeighbourMeanRepair:
-    """Streaming eq. 6.14 repair over a CSR neighbour graph."""
-
-    def __init__(self, indptr: npt.NDArray[np.int64], indices: npt.NDArray[np.int64]) -> None: ...
-    @property
-    def n_elements(self) -> int: ...
-    def last_values(self) -> npt.NDArray[np.float32]: ...
-    def reset(self) -> None: ...
-    def run(
-        self, frames: npt.NDArray[np.float32], valid: npt.NDArray[np.bool_]
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]: ...
-
 class SpacerBank:
     """Spacer mechanics of N specimens (crates/core/src/spacer.rs)."""
 
@@ -58,82 +46,135 @@ class SpacerBank:
         self, dt: float, rate: float, target: float, max_steps: int
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], bool]: ...
 
+F64 = npt.NDArray[np.float64]
+Bools = npt.NDArray[np.bool_]
+U8 = npt.NDArray[np.uint8]
+I64 = npt.NDArray[np.int64]
+
 class PreisachBank:
-    """Preisach stacks of N elements (crates/core/src/preisach.rs)."""
+    """Preisach stacks of N elements (crates/core/src/preisach.rs); output sign (h + offset)."""
 
     def __init__(
         self,
         u_min: float,
         u_max: float,
-        table: npt.NDArray[np.float64],
+        table: F64,
         n_elements: int,
         capacity: int,
+        offset: float = 0.0,
+        sign: float = 1.0,
     ) -> None: ...
     @property
     def n_elements(self) -> int: ...
     def reset(self) -> None: ...
-    def everett(
-        self, alpha: npt.NDArray[np.float64], beta: npt.NDArray[np.float64]
-    ) -> npt.NDArray[np.float64]: ...
-    def run(
-        self, inputs: npt.NDArray[np.float64], valid: npt.NDArray[np.bool_]
-    ) -> npt.NDArray[np.float64]: ...
-    def set_state(
-        self, inputs: npt.NDArray[np.float64], outputs: npt.NDArray[np.float64]
-    ) -> npt.NDArray[np.float64]: ...
+    def everett(self, alpha: F64, beta: F64) -> F64: ...
+    def run(self, inputs: F64, valid: Bools, schedule: str = "parallel") -> F64: ...
+    def state_bytes(self) -> int: ...
+    def set_state(self, inputs: F64, outputs: F64) -> F64: ...
     def clamped(self) -> npt.NDArray[np.uint64]: ...
     def forgotten(self) -> npt.NDArray[np.uint64]: ...
     def depth(self) -> npt.NDArray[np.uint64]: ...
-    def outputs(self) -> npt.NDArray[np.float64]: ...
+    def outputs(self) -> F64: ...
 
 class DriftBank:
     """Recursive drift superposition of N elements (crates/core/src/drift.rs)."""
 
     def __init__(
         self,
-        weights: npt.NDArray[np.float64],
-        taus: npt.NDArray[np.float64],
+        weights: F64,
+        taus: F64,
         gamma: float,
         n_elements: int,
         rest_rate: float = 0.0,
         rest_window: float = 0.5,
         gamma_time: float = 0.0,
     ) -> None: ...
+    @property
+    def n_elements(self) -> int: ...
     def reset(self) -> None: ...
-    def run(
-        self,
-        dt: npt.NDArray[np.float64],
-        h: npt.NDArray[np.float64],
-        valid: npt.NDArray[np.bool_],
-    ) -> npt.NDArray[np.float64]: ...
+    def run(self, dt: F64, h: F64, valid: Bools) -> F64: ...
 
 class Compensation:
     """Preisach then drift in one pass (crates/core/src/compensation.rs)."""
 
-    def __init__(
-        self,
-        u_min: float,
-        u_max: float,
-        table: npt.NDArray[np.float64],
-        n_elements: int,
-        capacity: int,
-        offset: float,
-        sign: float,
-        gamma: float,
-        weights: npt.NDArray[np.float64] | None = None,
-        taus: npt.NDArray[np.float64] | None = None,
-        rest_rate: float = 0.0,
-        rest_window: float = 0.5,
-        gamma_time: float = 0.0,
-    ) -> None: ...
+    def __init__(self, preisach: PreisachBank, drift: DriftBank | None = None) -> None: ...
+    @property
+    def n_elements(self) -> int: ...
     def reset(self) -> None: ...
     def clamped(self) -> npt.NDArray[np.uint64]: ...
-    def run(
+    def run(self, dt: F64, inputs: F64, valid: Bools) -> F64: ...
+
+class FailureDetector:
+    """Failure codes of raw capacitance (crates/core/src/detect.rs)."""
+
+    def __init__(
         self,
-        dt: npt.NDArray[np.float64],
-        inputs: npt.NDArray[np.float64],
-        valid: npt.NDArray[np.bool_],
-    ) -> npt.NDArray[np.float64]: ...
+        indptr: I64,
+        indices: I64,
+        jump_pf: F64,
+        baseline_pf: F64 | None,
+        max_pf: F64 | None,
+        min_pf: float,
+        low_share: float,
+        high_share: float,
+        stuck_frames: int,
+        stuck_pf: float,
+        neighbour_change_pf: float,
+        stuck_floor_pf: float = ...,
+    ) -> None: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, readings: F64, valid: Bools) -> U8: ...
+
+class Curve:
+    """A piecewise-linear curve held at its ends (crates/core/src/convert.rs)."""
+
+    def __init__(self, x: F64, y: F64) -> None: ...
+    def at(self, values: F64) -> F64: ...
+
+class Converter:
+    """Capacitance -> compression per element, eq. 2.1 (crates/core/src/convert.rs)."""
+
+    def __init__(self, offset: F64, gain: F64, curve: Curve | None = None) -> None: ...
+    @property
+    def n_elements(self) -> int: ...
+    def run(self, readings: F64, valid: Bools) -> F64: ...
+
+class LocalRepair:
+    """zero, last-value, eq. 6.14 neighbour mean, weighted mean (crates/core/src/repair.rs)."""
+
+    def __init__(
+        self,
+        method: str,
+        n_elements: int,
+        indptr: I64 | None = None,
+        indices: I64 | None = None,
+        weights: F64 | None = None,
+    ) -> None: ...
+    @property
+    def n_elements(self) -> int: ...
+    def last_values(self) -> F64: ...
+    def reset(self) -> None: ...
+    def run(self, values: F64, valid: Bools) -> tuple[F64, U8]: ...
+
+class Chain:
+    """detect -> convert -> compensation -> repair in one pass (crates/core/src/chain.rs)."""
+
+    def __init__(
+        self,
+        converter: Converter,
+        *,
+        detector: FailureDetector | None = None,
+        compensation: Compensation | None = None,
+        loading: Curve | None = None,
+        repair: LocalRepair | None = None,
+    ) -> None: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def state_bytes_per_element(self) -> int: ...
+    def run(self, dt: F64, readings: F64, valid: Bools) -> tuple[F64, U8]: ...
 
 def everett_terms(
     inputs: npt.NDArray[np.float64], u_min: float, u_max: float

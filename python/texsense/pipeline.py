@@ -123,20 +123,23 @@ class Pipeline:
         return "pressure", "N/cm2"
 
     def _build_chain(self) -> Chain:
+        from texsense._core import Converter, Curve, LocalRepair
+
         cal = self.calibration
         c = np.ascontiguousarray
         detector = self.detector.core if self.stages["detect"] else None
+        response: dict[str, Any] = {}
         if isinstance(cal, LinearCalibration):
-            conversion: dict[str, Any] = {}
-            response: dict[str, Any] = {}
-            offset, gain = cal.offset, cal.gain
+            converter = Converter(c(cal.offset, dtype=np.float64), c(cal.gain, dtype=np.float64))
         else:
             model = cal.model
-            conversion = {
-                "curve_capacitance_pf": c(cal.curve_capacitance_pF, dtype=np.float64),
-                "curve_compression_mm": c(cal.curve_compression_mm, dtype=np.float64),
-            }
-            offset, gain = cal.offset_pF, cal.gain
+            curve = Curve(
+                c(cal.curve_capacitance_pF, dtype=np.float64),
+                c(cal.curve_compression_mm, dtype=np.float64),
+            )
+            converter = Converter(
+                c(cal.offset_pF, dtype=np.float64), c(cal.gain, dtype=np.float64), curve
+            )
             if self.stages["hysteresis"]:
                 response = {
                     "compensation": model.compensation(
@@ -146,30 +149,22 @@ class Pipeline:
             else:
                 e = np.linspace(model.u_min_, model.u_max_, 400)
                 p = np.maximum.accumulate(model.predict(e))
-                response = {"loading": (c(e), c(p, dtype=np.float64))}
+                response = {"loading": Curve(c(e), c(p, dtype=np.float64))}
         method = self.repair_method
-        graph: dict[str, Any] = {}
+        repair = None
+        n = self.layout.n_elements
         if method == "neighbour-mean":
             indptr, indices = self.layout.neighbours
-            graph = {"indptr": c(indptr, dtype=np.int64), "indices": c(indices, dtype=np.int64)}
+            repair = LocalRepair(method, n, c(indptr, dtype=np.int64), c(indices, dtype=np.int64))
         elif method == "idw8":
             w = idw_weights(self.layout)
-            graph = {
-                "indptr": c(w.indptr, dtype=np.int64),
-                "indices": c(w.indices, dtype=np.int64),
-                "weights": c(w.data, dtype=np.float64),
-            }
-            method = "weighted"
-        local = "none" if method is None or method in _GLOBAL_REPAIRS else method
-        return Chain(
-            c(offset, dtype=np.float64),
-            c(gain, dtype=np.float64),
-            **conversion,
-            detector=detector,
-            repair=local,
-            **response,
-            **graph,
-        )
+            repair = LocalRepair(
+                "weighted", n, c(w.indptr, dtype=np.int64), c(w.indices, dtype=np.int64),
+                c(w.data, dtype=np.float64),
+            )  # fmt: skip
+        elif method in ("zero", "last-value"):
+            repair = LocalRepair(method, n)
+        return Chain(converter, detector=detector, repair=repair, **response)
 
     def reset(self) -> Pipeline:
         """Start over: unloaded spacer states, no history."""

@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from texsense._core import NeighbourMeanRepair as _CoreRepair
+from texsense._core import LocalRepair as _CoreRepair
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
@@ -72,6 +72,8 @@ class NeighbourMeanRepair:
         self.layout = layout
         indptr, indices = layout.neighbours
         self._core = _CoreRepair(
+            "neighbour-mean",
+            layout.n_elements,
             np.ascontiguousarray(indptr, dtype=np.int64),
             np.ascontiguousarray(indices, dtype=np.int64),
         )
@@ -89,8 +91,8 @@ class NeighbourMeanRepair:
 
     def _repair(
         self, frames: npt.ArrayLike, valid: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
-        f = np.ascontiguousarray(frames, dtype=np.float32)
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8]]:
+        f = np.ascontiguousarray(frames, dtype=np.float64)
         v = np.ascontiguousarray(valid, dtype=bool)
         if f.ndim != 2 or f.shape[1] != self.layout.n_elements:
             raise ParameterError(

@@ -28,7 +28,7 @@
 use std::sync::Arc;
 
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, each_chunk, parallel, Columns};
+use crate::par::{block_size, for_blocks, parallel, FrameBlock};
 
 /// An Everett function on a uniform grid.
 #[derive(Debug, Clone, PartialEq)]
@@ -308,12 +308,35 @@ pub enum Schedule {
     Parallel,
 }
 
-/// Stacks of N elements.
+/// Stacks of N elements, and the output's offset and sign: the model gives
+/// `sign (h + offset)` with `h` the Preisach sum (an identified model's output may start above
+/// zero at lower saturation, or fall with the input).
 #[derive(Debug, Clone)]
 pub struct PreisachBank {
     everett: Arc<Everett>,
     capacity: usize,
     elements: Vec<Element>,
+    output: Output,
+}
+
+/// `sign (h + offset)`: the model's output from the Preisach sum `h`.
+#[derive(Debug, Clone, Copy)]
+struct Output {
+    offset: f64,
+    sign: f64,
+}
+
+impl Output {
+    #[inline]
+    fn of(self, h: f64) -> f64 {
+        self.sign * (h + self.offset)
+    }
+
+    /// The Preisach sum that gives the output `y` (the sign is +1 or -1).
+    #[inline]
+    fn sum_for(self, y: f64) -> f64 {
+        self.sign * y - self.offset
+    }
 }
 
 /// The elements `start .. start + len` of a bank, for a parallel batch.
@@ -321,14 +344,17 @@ pub struct PreisachBlock<'a> {
     everett: &'a Everett,
     capacity: usize,
     elements: &'a mut [Element],
+    output: Output,
 }
 
 impl PreisachBlock<'_> {
-    /// Element `i` of the block reads `u` (skipped, NaN out, when invalid or not finite).
+    /// Element `i` of the block reads `u`: the model's output (skipped, NaN out, when
+    /// invalid or not finite).
     #[inline]
     pub fn step(&mut self, i: usize, u: f64, valid: bool) -> f64 {
         if valid && u.is_finite() {
-            self.elements[i].step(self.everett, self.capacity, u)
+            self.output
+                .of(self.elements[i].step(self.everett, self.capacity, u))
         } else {
             f64::NAN
         }
@@ -342,6 +368,13 @@ impl PreisachBlock<'_> {
     /// True without elements.
     pub fn is_empty(&self) -> bool {
         self.elements.is_empty()
+    }
+}
+
+impl FrameBlock for PreisachBlock<'_> {
+    #[inline]
+    fn step(&mut self, i: usize, _dt: f64, u: f64, valid: bool) -> f64 {
+        PreisachBlock::step(self, i, u, valid)
     }
 }
 
@@ -359,7 +392,23 @@ impl PreisachBank {
             elements: vec![Element::new(everett.u_min); n],
             capacity,
             everett: Arc::new(everett),
+            output: Output {
+                offset: 0.0,
+                sign: 1.0,
+            },
         })
+    }
+
+    /// The output `sign (h + offset)` instead of the Preisach sum `h` (sign +1 or -1).
+    pub fn with_output(mut self, offset: f64, sign: f64) -> Result<Self, CoreError> {
+        if !offset.is_finite() || (sign != 1.0 && sign != -1.0) {
+            return Err(CoreError::Parameter {
+                what: "output",
+                why: format!("offset must be finite and sign +1 or -1, got {offset}, {sign}"),
+            });
+        }
+        self.output = Output { offset, sign };
+        Ok(self)
     }
 
     /// Number of elements.
@@ -400,7 +449,10 @@ impl PreisachBank {
 
     /// Last output of every element.
     pub fn last_outputs(&self) -> Vec<f64> {
-        self.elements.iter().map(|e| e.last_h).collect()
+        self.elements
+            .iter()
+            .map(|e| self.output.of(e.last_h))
+            .collect()
     }
 
     /// Bytes of state: the elements themselves and the stacks moved to the heap.
@@ -419,7 +471,14 @@ impl PreisachBank {
     /// back to `u`: `M = u` gives the rising branch, `M = u_max` the major falling branch, and
     /// `M` is found by bisection for targets between the two (either orientation of the
     /// loop). Targets outside are clamped to the nearer branch; returns the output set.
+    /// Targets and the result are the model's output (`sign (h + offset)`).
     pub fn set_state(&mut self, i: usize, u: f64, target: f64) -> f64 {
+        let out = self.output;
+        out.of(self.set_sum(i, u, out.sum_for(target)))
+    }
+
+    /// [`PreisachBank::set_state`] for the Preisach sum `h` itself.
+    fn set_sum(&mut self, i: usize, u: f64, target: f64) -> f64 {
         let e = &*self.everett;
         let u = u.clamp(e.u_min, e.u_max);
         // output at u after rising to M and falling back: 2 F(M, m0) - 2 F(M, u)
@@ -468,7 +527,7 @@ impl PreisachBank {
 
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
     pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
-        let (everett, capacity) = (&*self.everett, self.capacity);
+        let (everett, capacity, output) = (&*self.everett, self.capacity, self.output);
         let size = block_size(self.len());
         self.elements
             .chunks_mut(size)
@@ -476,6 +535,7 @@ impl PreisachBank {
                 everett,
                 capacity,
                 elements,
+                output,
             })
             .collect()
     }
@@ -519,8 +579,8 @@ impl PreisachBank {
         let t = frames_of("inputs", inputs.len(), n)?;
         check_len("valid", valid.len(), inputs.len())?;
         check_len("out", out.len(), inputs.len())?;
-        let (everett, capacity) = (&*self.everett, self.capacity);
         if schedule == Schedule::FrameOrder {
+            let (everett, capacity, output) = (&*self.everett, self.capacity, self.output);
             for ((f, v), o) in inputs
                 .chunks_exact(n)
                 .zip(valid.chunks_exact(n))
@@ -528,7 +588,7 @@ impl PreisachBank {
             {
                 for (i, el) in self.elements.iter_mut().enumerate() {
                     o[i] = if v[i] && f[i].is_finite() {
-                        el.step(everett, capacity, f[i])
+                        output.of(el.step(everett, capacity, f[i]))
                     } else {
                         f64::NAN
                     };
@@ -536,26 +596,16 @@ impl PreisachBank {
             }
             return Ok(());
         }
-        let cols = Columns::new(out);
-        let size = block_size(n);
-        let work = |(b, block): (usize, &mut [Element])| {
-            let start = b * size;
+        let par = schedule == Schedule::Parallel && parallel(t, n);
+        for_blocks(out, n, self.blocks(), par, |mut block, o| {
+            let start = o.start();
             for r in 0..t {
                 let row = r * n + start;
-                for (li, el) in block.iter_mut().enumerate() {
-                    let idx = row + li;
-                    let h = if valid[idx] && inputs[idx].is_finite() {
-                        el.step(everett, capacity, inputs[idx])
-                    } else {
-                        f64::NAN
-                    };
-                    // SAFETY: this block owns columns start .. start + block.len()
-                    unsafe { cols.write(idx, h) };
+                for li in 0..o.width() {
+                    o.set(r, li, block.step(li, inputs[row + li], valid[row + li]));
                 }
             }
-        };
-        let par = schedule == Schedule::Parallel && parallel(t, n);
-        each_chunk(&mut self.elements, size, par, work);
+        });
         Ok(())
     }
 }

@@ -47,26 +47,12 @@ class PreisachState:
             raise ParameterError(f"n_elements must be >= 1, got {n_elements}")
         self.model = model
         self.n_elements = int(n_elements)
-        self._bank = PreisachBank(
-            model.u_min_,
-            model.u_max_,
-            np.ascontiguousarray(model.everett_, dtype=np.float64),
-            self.n_elements,
-            int(capacity),
-        )
+        self._bank = model.bank(self.n_elements, capacity)
 
     def reset(self) -> PreisachState:
         """Back to lower saturation (input u_min, output = the model's offset)."""
         self._bank.reset()
         return self
-
-    def _out(self, h: np.ndarray) -> np.ndarray:
-        # in place: batches of millions of samples should not be copied twice
-        if self.model.offset_:
-            h += self.model.offset_
-        if self.model.sign_ != 1.0:
-            np.negative(h, out=h)
-        return h
 
     def run(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
         """Outputs (T, N) for inputs (T, N) (or (T,) for one element), continuing the state.
@@ -75,7 +61,7 @@ class PreisachState:
         one = u.ndim == 1
         u2 = np.ascontiguousarray(u[:, None] if one else u)
         v = np.ones(u2.shape, bool) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
-        out = self._out(self._bank.run(u2, np.ascontiguousarray(v)))
+        out = self._bank.run(u2, np.ascontiguousarray(v))
         return out[:, 0] if one else out
 
     def step(self, frame: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
@@ -89,9 +75,7 @@ class PreisachState:
         model's major loop are clamped to it. Returns the outputs set."""
         u = np.broadcast_to(np.asarray(inputs, np.float64), (self.n_elements,))
         h = np.broadcast_to(np.asarray(outputs, np.float64), (self.n_elements,))
-        internal = self.model.sign_ * h - self.model.offset_
-        got = self._bank.set_state(np.ascontiguousarray(u), np.ascontiguousarray(internal))
-        return self._out(got)
+        return self._bank.set_state(np.ascontiguousarray(u), np.ascontiguousarray(h))
 
     @property
     def clamped(self) -> np.ndarray:
@@ -248,6 +232,20 @@ class HysteresisModel:
         out = self.compensation(n).run(dt, u2, np.ascontiguousarray(v))
         return out[:, 0] if one else out
 
+    def bank(self, n_elements: int = 1, capacity: int = DEFAULT_CAPACITY) -> PreisachBank:
+        """The compiled Preisach bank of ``n_elements`` at lower saturation, with the model's
+        output offset and sign (eq. 4.15-4.22)."""
+        self._check_fitted()
+        return PreisachBank(
+            self.u_min_,
+            self.u_max_,
+            np.ascontiguousarray(self.everett_, dtype=np.float64),
+            int(n_elements),
+            int(capacity),
+            self.offset_,
+            self.sign_,
+        )
+
     def compensation(self, n_elements: int = 1, drift: bool = True) -> Any:
         """The Preisach stage followed by the drift stage (``self.drift_``, when present and
         ``drift``) for ``n_elements``, in one pass of the Rust core
@@ -257,21 +255,7 @@ class HysteresisModel:
         from texsense._core import Compensation
 
         d = getattr(self, "drift_", None) if drift else None
-        return Compensation(
-            self.u_min_,
-            self.u_max_,
-            np.ascontiguousarray(self.everett_, dtype=np.float64),
-            n_elements,
-            DEFAULT_CAPACITY,
-            self.offset_,
-            self.sign_,
-            d.gamma if d is not None else 0.0,
-            np.ascontiguousarray(d.kernel.weights) if d is not None else None,
-            np.ascontiguousarray(d.kernel.taus) if d is not None else None,
-            d.rest_rate if d is not None else 0.0,
-            d.rest_window if d is not None else 0.5,
-            d.gamma_time if d is not None else 0.0,
-        )
+        return Compensation(self.bank(n_elements), None if d is None else d.state(n_elements))
 
     def with_drift(self, drift: Any) -> HysteresisModel:
         """Attach a :class:`texsense.drift.DriftModel` (returns self)."""
