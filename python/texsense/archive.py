@@ -30,15 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration import (
-    LinearCalibration,
-    MatCalibration,
-    calibration_from_dict,
-    load_calibration,
-)
 from texsense.exceptions import FormatError, ParameterError
+from texsense.modelfile import content_hash
 from texsense.recording import Recording
-from texsense.stages import StageChain
+from texsense.stages import StageChain, load_chain
 
 __all__ = [
     "FileReport",
@@ -141,7 +136,7 @@ def _chain_first(first: Recording, rest: Iterator[Recording]) -> Iterator[Record
 
 def process_file(
     src: str | Path,
-    calibration: MatCalibration | LinearCalibration | StageChain | str | Path,
+    calibration: StageChain | str | Path,
     dst: str | Path,
     options: ProcessOptions | None = None,
 ) -> FileReport:
@@ -156,7 +151,7 @@ def process_file(
 
     opts = options or ProcessOptions()
     src, dst = Path(src), Path(dst)
-    cal = load_calibration(calibration) if isinstance(calibration, str | Path) else calibration
+    cal = load_chain(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
     if _output_matches(dst, cal.id, digest):
         return FileReport(str(src), str(dst), "skipped")
@@ -259,17 +254,17 @@ def archive_jobs(
     return jobs, ignored
 
 
-#: Calibrations parsed on this worker, by their id (a task gets the JSON description).
-_CALIBRATIONS: dict[str, MatCalibration | LinearCalibration | StageChain] = {}
+#: Calibrations parsed on this worker, by their id (a task gets the chain's content).
+_CALIBRATIONS: dict[str, StageChain] = {}
 
 
 def _task(src: str, calibration: dict[str, Any], dst: str, options: dict[str, Any]) -> dict:
     """One file on a worker: the report as a dict; an expected failure (a bad file or
     parameter) is a ``failed`` report, anything else propagates to the driver."""
-    key = str(calibration.get("id"))
+    key = content_hash(calibration)
     cal = _CALIBRATIONS.get(key)
     if cal is None:
-        cal = _CALIBRATIONS[key] = calibration_from_dict(calibration, "<calibration>")
+        cal = _CALIBRATIONS[key] = StageChain.from_dict(calibration, "<calibration>")
     try:
         return asdict(process_file(src, cal, dst, ProcessOptions(**options)))
     except (OSError, ValueError) as e:  # FormatError, ParameterError, ShapeError among them
@@ -305,9 +300,8 @@ def process_archive(
 
     from texsense._progress import progress
 
-    cal_path = Path(calibration)
-    load_calibration(cal_path)  # a bad file fails here, once, not in every task
-    cal_dict = json.loads(cal_path.read_text(encoding="utf-8"))
+    # a bad file fails here, once, not in every task; the workers get the chain's content
+    cal_dict = load_chain(calibration).to_dict()
     opts = asdict(options or ProcessOptions())
     cluster = None
     if scheduler is None:

@@ -7,6 +7,7 @@ from texsense.commands import (
     drift,
     hysteresis,
     info,
+    models,
     monitor,
     muscle,
     pipeline,
@@ -19,5 +20,5 @@ from texsense.commands import (
 
 COMMANDS = (
     info, convert, plot, simulate, design, hysteresis, drift, pipeline, posture, monitor, station,
-    stocking, muscle,
+    stocking, muscle, models,
 )  # fmt: skip

@@ -53,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "-o",
         "--output",
         type=Path,
-        help="with --history: write the hysteresis model with the fitted drift stage here",
+        help="with --history: write the hysteresis model and the fitted drift stage here (a "
+        "chain of the two)",
     )
     add_clock_arguments(f)
     f.add_argument("--json", action="store_true", help="print JSON")
@@ -106,9 +107,10 @@ def _columns(path: Path) -> dict:
 
 def run_fit_history(args: argparse.Namespace) -> int:
     """``texsense drift fit REC.csv --history MODEL.json``: γ over a whole load history."""
-    from texsense.hysteresis import HysteresisModel
+    from texsense.commands.hysteresis import load_model
+    from texsense.stages import Drift, Hysteresis, StageChain
 
-    model = HysteresisModel.load(args.history)
+    model, _ = load_model(args.history)
     records = []
     for path in args.steps:
         cols = _columns(path)
@@ -131,9 +133,8 @@ def run_fit_history(args: argparse.Namespace) -> int:
         "samples": int(h.size),
     }
     if args.output:
-        model.with_drift(drift)
-        model.provenance_["drift_history"] = [str(p) for p in args.steps]
-        summary["model"] = str(model.save(args.output))
+        chain = StageChain([Hysteresis.of(model), Drift.of(drift)])
+        summary["model"] = str(chain.save(args.output))
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0

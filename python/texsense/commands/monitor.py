@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.exceptions import ParameterError
+from texsense.stages import load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -182,7 +183,6 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
 
 def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.calibration import load_calibration
     from texsense.monitor import ExposureTracker, Monitor
     from texsense.monitor.store import open_store
     from texsense.pipeline import Pipeline
@@ -190,7 +190,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
 
     source, calibration = make_source(args)
     if args.calibration is not None:
-        calibration = load_calibration(args.calibration)
+        calibration = load_chain(args.calibration)
     pipeline = None
     if source.quantity == "capacitance":
         if calibration is None:

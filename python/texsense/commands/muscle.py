@@ -36,15 +36,12 @@ def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense muscle simulate``: sleeve.h5, calibration.json and truth.json."""
     from texsense.io import save
     from texsense.sim.muscle import session
-    from texsense.stages import StageChain
     from texsense.workflows import sleeve_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
     s = session(args.minutes, seed=args.seed)
     save(s.scan.capacitance, args.output / "sleeve.h5")  # type: ignore[attr-defined]
-    chain = StageChain.from_calibration(sleeve_calibration(seed=args.seed),
-                                        layout=s.scan.capacitance.layout)  # type: ignore[attr-defined]  # fmt: skip
-    chain.save(args.output / "calibration.json")
+    sleeve_calibration(seed=args.seed).save(args.output / "calibration.json")
     truth = {"onsets_s": s.onsets_s.round(3).tolist(), "ends_s": s.ends_s.round(3).tolist(),
              "intensity": s.intensity.round(3).tolist(), "rest_s": s.rest}  # fmt: skip
     (args.output / "truth.json").write_text(json.dumps(truth, indent=1), encoding="utf-8")

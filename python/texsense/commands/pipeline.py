@@ -15,6 +15,7 @@ from texsense.archive import ProcessOptions
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io import load, save
 from texsense.repair import METHODS
+from texsense.stages import Convert, StageChain, load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -126,10 +127,9 @@ def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
         return rec
     if calibration is None:
         raise ParameterError("a capacitance recording needs --calibration")
-    from texsense.calibration import load_calibration
     from texsense.pipeline import Pipeline
 
-    return Pipeline(load_calibration(calibration), rec.layout, repair=None, **stages).run(rec)
+    return Pipeline(load_chain(calibration), rec.layout, repair=None, **stages).run(rec)
 
 
 def _capacitance(path: Path):  # type: ignore[no-untyped-def]
@@ -152,35 +152,29 @@ def run_calibrate(args: argparse.Namespace) -> int:
         from texsense.commands.drift import load_steps
 
         steps = load_steps(args.drift)
-    cal = calibrate_mat(
+    chain = calibrate_mat(
         material,
         _capacitance(args.baseline),
         _capacitance(args.uniform),
         args.pressure,
         args.thickness_mm,
         steps=steps,
-        provenance={
-            "material": str(args.material),
-            "baseline": str(args.baseline),
-            "uniform": str(args.uniform),
-        },
     )
-    from texsense.stages import StageChain
-
-    layout = load(args.baseline).layout
-    chain = StageChain.from_calibration(cal, layout=layout)
     chain.save(args.output)
+    convert = chain.find(Convert)
+    assert convert is not None  # calibrate_mat always converts
+    gain, offset = convert.gain_, convert.offset_pF_
     print(
-        f"wrote {args.output}: stages {', '.join(s.name for s in chain.stages)} for "
-        f"{cal.n_elements} elements, id {chain.id}, gain {cal.gain.min():.3f}.."
-        f"{cal.gain.max():.3f}, offset {cal.offset_pF.min():+.3f}..{cal.offset_pF.max():+.3f} pF"
+        f"wrote {args.output}: stages {', '.join(chain.names)} for {convert.n_elements} "
+        f"elements, id {chain.id}, gain {gain.min():.3f}..{gain.max():.3f}, offset "
+        f"{offset.min():+.3f}..{offset.max():+.3f} pF"
     )
     return 0
 
 
 def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
-    from texsense.calibration import LinearCalibration
+    from texsense.stages import Linear
 
     rec = load(args.like)
     quantity, unit = rec.quantity, rec.unit
@@ -189,15 +183,12 @@ def run_calibrate_linear(args: argparse.Namespace) -> int:
             raise ParameterError(f"--to wants QUANTITY:UNIT (e.g. pressure:N/cm2), got {args.to}")
         quantity, unit = args.to.split(":", 1)
     n = rec.n_elements
-    cal = LinearCalibration(
-        np.full(n, args.offset), np.full(n, args.gain), rec.quantity, rec.unit, quantity, unit,
-        args.full_scale, {"like": str(args.like)},
-    )  # fmt: skip
-    cal.check()
-    cal.save(args.output)
+    stage = Linear(rec.quantity, rec.unit, quantity, unit, args.full_scale)
+    chain = StageChain([stage.fit(np.full(n, args.offset), np.full(n, args.gain))])
+    chain.save(args.output)
     print(
         f"wrote {args.output}: linear calibration of {n} elements, {rec.quantity} "
-        f"[{rec.unit}] -> {quantity} [{unit}], id {cal.id}"
+        f"[{rec.unit}] -> {quantity} [{unit}], id {chain.id}"
     )
     return 0
 
@@ -216,7 +207,6 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
 def run_process(args: argparse.Namespace) -> int:
     """Run ``texsense process``: one file in blocks, or an archive on Dask."""
     from texsense.archive import archive_jobs, process_archive, process_file
-    from texsense.calibration import load_calibration
 
     options = _options(args)
     single = (
@@ -227,7 +217,7 @@ def run_process(args: argparse.Namespace) -> int:
     )
     if single:
         src = Path(args.inputs[0])
-        cal = load_calibration(args.calibration)
+        cal = load_chain(args.calibration)
         if args.output.suffix.lower() in (".h5", ".hdf5"):
             report = process_file(src, cal, args.output, options)
             if report.status == "skipped":
@@ -285,7 +275,7 @@ def run_repair(args: argparse.Namespace) -> int:
     from texsense.repair import Repair
 
     rec = load(args.input)
-    out = Repair(rec.layout, args.method).run(rec)
+    out = Repair(rec.layout, args.method).fit().run(rec)
     save(out, args.output)
     print(f"wrote {args.output}: {int((~rec.valid).sum())} readings repaired with {args.method}")
     return 0
@@ -296,17 +286,17 @@ def run_health(args: argparse.Namespace) -> int:
     from texsense.health import FailureDetector, health_report
 
     raw = _capacitance(args.raw)
-    detector = FailureDetector(raw.layout)
+    detector = FailureDetector(raw.layout).fit()
     if args.calibration:
-        from texsense.calibration import LinearCalibration, load_calibration
         from texsense.pipeline import Pipeline
 
-        cal = load_calibration(args.calibration)
-        if isinstance(cal, LinearCalibration):
+        cal = load_chain(args.calibration)
+        if cal.reads[0] != "capacitance":
             raise ParameterError("health reads capacitance: give a mat calibration")
         # the detector the pipeline would run with this calibration
         detector = Pipeline(cal, raw.layout, repair=None).detector
-    codes = detector.run(raw)
+    frames = raw.frames if raw.unit == "pF" else raw.to_unit("pF").frames
+    codes = detector.detect(frames, raw.valid)
     report = health_report(codes, raw.times, raw.layout)
     if args.json:
         print(

@@ -134,12 +134,8 @@ def run_sessions(args: argparse.Namespace) -> int:
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")
-    from texsense.sim.mat import VirtualMat
-    from texsense.stages import StageChain
-
     args.output.mkdir(parents=True, exist_ok=True)
-    layout = VirtualMat.seat(seed=args.mat_seed).layout
-    cal = StageChain.from_calibration(seat_calibration(mat_seed=args.mat_seed), layout=layout)
+    cal = seat_calibration(mat_seed=args.mat_seed)
     cal.save(args.output / "calibration.json")
     frames = 0
     for k in progress(range(args.sessions), total=args.sessions, desc="sessions", unit="file"):

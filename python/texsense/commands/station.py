@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.exceptions import FormatError, ParameterError
+from texsense.stages import load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -82,7 +83,6 @@ def read_config(
     model = "sides.joblib"            # ... on the sides this posture model reports
     turn_every_min = 120              # default: --turn-every
     """
-    from texsense.calibration import load_calibration
     from texsense.monitor import sources
     from texsense.station.ward import MatConfig
 
@@ -103,7 +103,7 @@ def read_config(
         if m.get("calibration"):
             key = str(m["calibration"])
             if key not in calibrations:
-                calibrations[key] = load_calibration(key)
+                calibrations[key] = load_chain(key)
             cal = calibrations[key]
         quantity = "capacitance" if cal is not None else "pressure"
         kind, _, rest = str(m.get("source", "mqtt")).partition(":")

@@ -39,7 +39,6 @@ def run_simulate(args: argparse.Namespace) -> int:
     calibration.json (the strip's stage chain)."""
     from texsense.io import save
     from texsense.sim.stocking import LEGS, POINTS, wear
-    from texsense.stages import StageChain
     from texsense.workflows import strip_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
@@ -47,8 +46,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     labels = {f"true_{p}_ncm2": truth[:, k] for k, p in enumerate(POINTS)}
     rec = scan.capacitance.with_labels(labels)  # type: ignore[attr-defined]
     save(rec, args.output / "strip.h5")
-    chain = StageChain.from_calibration(strip_calibration(), layout=rec.layout)
-    chain.save(args.output / "calibration.json")
+    strip_calibration().save(args.output / "calibration.json")
     print(f"wrote {args.output}/strip.h5 ({rec.n_frames} frames, class {args.cls} stocking, "
           f"{args.leg} leg, {args.hours:g} h) and calibration.json")  # fmt: skip
     return 0

@@ -227,7 +227,7 @@ class Monitor:
         raw = frame.values
         if self.pipeline is not None and self.source.quantity == "capacitance":
             valid = np.isfinite(raw)
-            pressure, measured = self.pipeline.step(np.nan_to_num(raw), frame.t, valid)
+            pressure, measured = self.pipeline.step(np.nan_to_num(raw), valid, frame.t)
             codes = self.pipeline.codes_
         else:
             from texsense import units
