@@ -30,8 +30,10 @@ from typing import Any
 
 import numpy as np
 
+from texsense._progress import progress
 from texsense.exceptions import FormatError, ParameterError
 from texsense.modelfile import content_hash
+from texsense.pipeline import Pipeline
 from texsense.recording import Recording
 from texsense.stages import StageChain, load_chain
 
@@ -147,7 +149,6 @@ def process_file(
     at its temporary name) by a run that fails.
     """
     from texsense.io.hdf5 import RecordingWriter
-    from texsense.pipeline import Pipeline
 
     opts = options or ProcessOptions()
     src, dst = Path(src), Path(dst)
@@ -297,8 +298,6 @@ def process_archive(
         Worker processes of the local cluster (default: one per core).
     """
     from dask.distributed import Client, LocalCluster, as_completed
-
-    from texsense._progress import progress
 
     # a bad file fails here, once, not in every task; the workers get the chain's content
     cal_dict = load_chain(calibration).to_dict()

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from texsense._core import Chain, Compensation
+from texsense._core import Chain, Compensation, __version__
 from texsense.exceptions import ParameterError
 from texsense.health import FailureDetector
 from texsense.layout import Layout
@@ -147,7 +147,6 @@ class Pipeline:
 
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
-        from texsense._core import __version__
 
         convert = "convert:linear" if "linear" in self.chain else "convert"
         return {

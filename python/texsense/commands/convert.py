@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.commands import HELP
 from texsense.io import WRITERS, format_for_output, load, save
 
 
@@ -12,7 +13,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``convert`` command."""
     p = sub.add_parser(
         "convert",
-        help="convert a recording to HDF5 (.h5), wide CSV (.csv) or Tekscan ASCII (.asf)",
+        help=HELP["convert"],
         description="Read any supported recording and write it in another format. The output "
         "format follows the extension of OUT unless --format is given.",
     )

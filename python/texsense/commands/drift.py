@@ -8,16 +8,19 @@ from pathlib import Path
 
 import numpy as np
 
+from texsense.commands import HELP
 from texsense.drift import DriftModel, split_steps
-from texsense.exceptions import ParameterError
+from texsense.exceptions import FormatError, ParameterError
+from texsense.hysteresis import HysteresisModel
 from texsense.io.columns_csv import read_columns_csv
+from texsense.stages import Drift, Hysteresis, StageChain, load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``drift`` command group."""
     p = sub.add_parser(
         "drift",
-        help="identify drift from step-and-hold records",
+        help=HELP["drift"],
         description="Drift compensation (thesis chapter 5).",
     )
     ds = p.add_subparsers(dest="drift_command", metavar="ACTION")
@@ -105,11 +108,18 @@ def _columns(path: Path) -> dict:
     return read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
 
 
+def load_model(path: Path) -> tuple[HysteresisModel, DriftModel | None]:
+    """The hysteresis model of a model file (a hysteresis model, or a chain of hysteresis
+    and drift) and its drift stage, if any."""
+    chain = load_chain(path)
+    hyst, drift = chain.find(Hysteresis), chain.find(Drift)
+    if hyst is None:
+        raise FormatError(path, f"holds the stages {', '.join(chain.names)}: no hysteresis model")
+    return hyst.model_, None if drift is None else drift.model_
+
+
 def run_fit_history(args: argparse.Namespace) -> int:
     """``texsense drift fit REC.csv --history MODEL.json``: γ over a whole load history."""
-    from texsense.commands.hysteresis import load_model
-    from texsense.stages import Drift, Hysteresis, StageChain
-
     model, _ = load_model(args.history)
     records = []
     for path in args.steps:

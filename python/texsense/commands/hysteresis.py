@@ -9,11 +9,15 @@ from typing import Any
 
 import numpy as np
 
+from texsense.commands import HELP
+from texsense.commands.drift import add_clock_arguments, load_model, load_steps, rest_rate_of
 from texsense.drift import DriftModel
 from texsense.exceptions import FormatError
 from texsense.hysteresis import HysteresisModel
+from texsense.hysteresis.plots import model_figure, validation_report_figure
+from texsense.hysteresis.validation import validate
 from texsense.io.columns_csv import read_columns_csv, write_columns_csv
-from texsense.stages import Drift, Hysteresis, StageChain, load_chain
+from texsense.stages import Drift, Hysteresis, StageChain
 
 #: Pressure bands of the error summary (thesis §4.5), in the output's unit.
 DEFAULT_BANDS = ((0.5, 3.5), (3.5, 10.0))
@@ -41,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``hysteresis`` command group."""
     p = sub.add_parser(
         "hysteresis",
-        help="identify and apply Preisach hysteresis models",
+        help=HELP["hysteresis"],
         description="Preisach hysteresis compensation (thesis chapter 4).",
     )
     hs = p.add_subparsers(dest="hysteresis_command", metavar="ACTION")
@@ -74,8 +78,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     f.add_argument("--folds", type=int, default=4, help="folds of held-out reversal curves (4)")
     f.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     f.add_argument("--drift-kind", choices=("log", "prony"), default="log")
-    from texsense.commands.drift import add_clock_arguments
-
     add_clock_arguments(f, "drift-")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
     f.set_defaults(run=run_fit)
@@ -159,8 +161,6 @@ def run_fit(args: argparse.Namespace) -> int:
     )
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
     if args.drift:
-        from texsense.commands.drift import load_steps, rest_rate_of
-
         drift, _ = DriftModel.fit(
             load_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
         )
@@ -199,16 +199,6 @@ def run_fit(args: argparse.Namespace) -> int:
         elif model.method_ != "thesis":
             print("  too few reversal curves to hold any out: settings not cross-validated")
     return 0
-
-
-def load_model(path: Path) -> tuple[HysteresisModel, DriftModel | None]:
-    """The hysteresis model of a model file (a hysteresis model, or a chain of hysteresis
-    and drift) and its drift stage, if any."""
-    chain = load_chain(path)
-    hyst, drift = chain.find(Hysteresis), chain.find(Drift)
-    if hyst is None:
-        raise FormatError(path, f"holds the stages {', '.join(chain.names)}: no hysteresis model")
-    return hyst.model_, None if drift is None else drift.model_
 
 
 def _model_and_record(
@@ -267,15 +257,12 @@ def run_apply(args: argparse.Namespace) -> int:
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis validate``."""
-    from texsense.hysteresis.validation import validate
 
     model, drift, cols, in_name, out_name, u = _model_and_record(args)
     y = _column(cols, out_name, args.data)
     times = cols.get("time_s")
     report = validate(model, u, y, times_s=times, drift=drift)
     if args.plot:
-        from texsense.hysteresis.plots import validation_report_figure
-
         validation_report_figure(
             report,
             u,
@@ -324,7 +311,6 @@ def run_validate(args: argparse.Namespace) -> int:
 
 def run_plot(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis plot``."""
-    from texsense.hysteresis.plots import model_figure
 
     model, _ = load_model(args.model)
     model_figure(model, args.out)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from texsense import stats
+from texsense.commands import HELP
 from texsense.io import load, sniff_format
 from texsense.recording import Recording
 
@@ -18,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``info`` command."""
     p = sub.add_parser(
         "info",
-        help="summarise a recording (shape, timing, unit, labels, load and peak)",
+        help=HELP["info"],
         description="Summarise any readable recording: file or folder (PMD tree).",
     )
     p.add_argument("file", type=Path, help="recording file or folder")

@@ -6,12 +6,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.commands import HELP
+from texsense.modelfile import rehash
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``rehash`` command."""
     p = sub.add_parser(
         "rehash",
-        help="accept a deliberate edit of a model file (write the hash of its content)",
+        help=HELP["rehash"],
         description="A model file (calibration chain, stage, hysteresis or drift model) whose "
         "content does not match its sha256 was edited after texsense wrote it and is "
         "refused. If the edit is deliberate, this writes the hash of the content as it is "
@@ -23,7 +26,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run_rehash(args: argparse.Namespace) -> int:
     """Run ``texsense rehash``."""
-    from texsense.modelfile import rehash
     from texsense.stages import chain_from_dict
 
     for path in args.files:

@@ -3,19 +3,29 @@
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import logging
+import os
+import socket
 from pathlib import Path
 from typing import Any
 
+from texsense.commands import HELP
 from texsense.exceptions import ParameterError
+from texsense.layout import Layout
+from texsense.monitor import ExposureTracker, Monitor, sources
+from texsense.monitor.store import open_store
+from texsense.pipeline import Pipeline
 from texsense.stages import load_chain
+from texsense.workflows import bed_calibration, seat_calibration
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``monitor`` command."""
     p = sub.add_parser(
         "monitor",
-        help="live pressure map, posture and pressure-injury alerts in the browser",
+        help=HELP["monitor"],
         description="Read a sensor live, compensate it, record it and show it in a web "
         "dashboard. Without --source: a simulated person on the virtual 96-element seat.",
     )
@@ -111,7 +121,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def _grid(args: argparse.Namespace) -> Any:
-    from texsense.layout import Layout
 
     if not args.grid:
         raise ParameterError(f"--source {args.source.split(':')[0]} needs --grid ROWSxCOLS")
@@ -124,8 +133,6 @@ def _grid(args: argparse.Namespace) -> Any:
 
 def load_function(spec: str) -> Any:
     """``module:function`` or ``path/to/file.py:function`` -> the function."""
-    import importlib
-    import importlib.util
 
     where, _, name = spec.rpartition(":")
     if not where or not name:
@@ -149,16 +156,11 @@ def load_function(spec: str) -> Any:
 
 def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
     """The source named by ``--source`` and its default calibration (or None)."""
-    from texsense.monitor import sources
 
     kind, _, rest = args.source.partition(":")
     if kind == "virtual":
-        from texsense.workflows import seat_calibration
-
         return sources.VirtualSeatSource(speed=args.speed), seat_calibration()
     if kind == "virtual-bed":
-        from texsense.workflows import bed_calibration
-
         return sources.VirtualBedSource(speed=args.speed), bed_calibration()
     if kind == "replay":
         return sources.ReplaySource(Path(rest), speed=args.speed, loop=True), None
@@ -183,9 +185,6 @@ def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
 
 def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.monitor import ExposureTracker, Monitor
-    from texsense.monitor.store import open_store
-    from texsense.pipeline import Pipeline
     from texsense.posture import PostureModel
 
     source, calibration = make_source(args)
@@ -240,7 +239,6 @@ def build_monitor(args: argparse.Namespace) -> Any:
 def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
     when missing (a stale or broken cache is rebuilt, and said so)."""
-    import os
 
     from texsense.posture import PostureModel
 
@@ -284,7 +282,6 @@ def virtual_bed_model() -> Any:
 
 def _check_port_free(host: str, port: int) -> None:
     """Fail before the (slow) set-up when the port is taken."""
-    import socket
 
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

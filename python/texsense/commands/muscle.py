@@ -6,12 +6,15 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.commands import HELP
+from texsense.sim.muscle import session
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``muscle`` command."""
     p = sub.add_parser(
         "muscle",
-        help="muscle activity from a sensor sleeve: onsets, count, relative intensity",
+        help=HELP["muscle"],
         description="Find contractions in a recording of a sensor sleeve (1-4 elements at a "
         "high rate): onsets, count and relative intensity, compensated (Preisach + drift: the "
         "sleeve sits preloaded), with a plot; or simulate a session on a virtual forearm.",
@@ -35,7 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense muscle simulate``: sleeve.h5, calibration.json and truth.json."""
     from texsense.io import save
-    from texsense.sim.muscle import session
     from texsense.workflows import sleeve_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)

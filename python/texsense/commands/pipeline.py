@@ -11,18 +11,24 @@ from typing import Any
 
 import numpy as np
 
-from texsense.archive import ProcessOptions
+from texsense.archive import ProcessOptions, archive_jobs, process_archive, process_file
+from texsense.commands import HELP
+from texsense.commands.drift import load_steps
 from texsense.exceptions import FormatError, ParameterError
+from texsense.health import FailureDetector, health_report
 from texsense.io import load, save
-from texsense.repair import METHODS
-from texsense.stages import Convert, StageChain, load_chain
+from texsense.io.columns_csv import read_columns_csv
+from texsense.pipeline import Pipeline
+from texsense.repair import METHODS, Repair
+from texsense.stages import Convert, Linear, StageChain, load_chain
+from texsense.workflows import calibrate_mat
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``calibrate``, ``process``, ``repair`` and ``health`` commands."""
     c = sub.add_parser(
         "calibrate",
-        help="calibrate a whole mat (zeroing, equilibration, spacer model)",
+        help=HELP["calibrate"],
         description="Calibrate a mat from a test-machine record of its spacer and two mat "
         "recordings: unloaded and under a uniform known load.",
     )
@@ -67,8 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     p = sub.add_parser(
         "process",
-        help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair); "
-        "one file, or a whole archive on Dask",
+        help=HELP["process"],
         description="Run the whole pipeline over recordings. One file: processed block by "
         "block (an HDF5 input and output keep the memory flat in the recording's length). "
         "Several files, a folder or a glob pattern: one task per file on Dask (local worker "
@@ -97,7 +102,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     r = sub.add_parser(
         "repair",
-        help="fill elements marked invalid",
+        help=HELP["repair"],
         description="Repair every reading whose valid flag is False; repaired values stay "
         "marked invalid in the output.",
     )
@@ -108,7 +113,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     h = sub.add_parser(
         "health",
-        help="failure report per element of a capacitance recording",
+        help=HELP["health"],
         description="Detect shorts/breaks, out-of-range, stuck readings and jumps; report "
         "per element: failure episodes, share of time failed, first/last seen.",
     )
@@ -127,7 +132,6 @@ def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
         return rec
     if calibration is None:
         raise ParameterError("a capacitance recording needs --calibration")
-    from texsense.pipeline import Pipeline
 
     return Pipeline(load_chain(calibration), rec.layout, repair=None, **stages).run(rec)
 
@@ -141,16 +145,12 @@ def _capacitance(path: Path):  # type: ignore[no-untyped-def]
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate mat``."""
-    from texsense.io.columns_csv import read_columns_csv
-    from texsense.workflows import calibrate_mat
 
     material = read_columns_csv(
         args.material, required=("compression_mm", "capacitance_pF", "pressure_ncm2")
     )
     steps = None
     if args.drift:
-        from texsense.commands.drift import load_steps
-
         steps = load_steps(args.drift)
     chain = calibrate_mat(
         material,
@@ -174,7 +174,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
-    from texsense.stages import Linear
 
     rec = load(args.like)
     quantity, unit = rec.quantity, rec.unit
@@ -206,7 +205,6 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
 
 def run_process(args: argparse.Namespace) -> int:
     """Run ``texsense process``: one file in blocks, or an archive on Dask."""
-    from texsense.archive import archive_jobs, process_archive, process_file
 
     options = _options(args)
     single = (
@@ -249,7 +247,6 @@ def run_process(args: argparse.Namespace) -> int:
 
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
-    from texsense.pipeline import Pipeline
 
     raw = load(src)
     pipe = Pipeline(
@@ -272,7 +269,6 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
 
 def run_repair(args: argparse.Namespace) -> int:
     """Run ``texsense repair``."""
-    from texsense.repair import Repair
 
     rec = load(args.input)
     out = Repair(rec.layout, args.method).fit().run(rec)
@@ -283,13 +279,10 @@ def run_repair(args: argparse.Namespace) -> int:
 
 def run_health(args: argparse.Namespace) -> int:
     """Run ``texsense health``."""
-    from texsense.health import FailureDetector, health_report
 
     raw = _capacitance(args.raw)
     detector = FailureDetector(raw.layout).fit()
     if args.calibration:
-        from texsense.pipeline import Pipeline
-
         cal = load_chain(args.calibration)
         if cal.reads[0] != "capacitance":
             raise ParameterError("health reads capacitance: give a mat calibration")

@@ -11,11 +11,15 @@ from typing import Any
 
 import numpy as np
 
+from texsense.commands import HELP
 from texsense.exceptions import ParameterError
 from texsense.io import load
 from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
-from texsense.posture.evaluate import CLASSIFIERS
-from texsense.posture.features import KINDS, FeatureSet, mirror_samples
+from texsense.posture.evaluate import CLASSIFIERS, loso, make_classifier
+from texsense.posture.features import KINDS, FeatureSet, mirror_samples, reduce_maps
+from texsense.posture.model import PostureModel
+from texsense.posture.smoothing import window_vote
+from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 from texsense.recording import Recording
 
 #: The thesis's feature kinds (§6.3.2), used when feature options are given without --features.
@@ -68,7 +72,6 @@ def describe_defaults() -> str:
 
 def _classifier(args: argparse.Namespace) -> tuple[str, Any]:
     """(name shown, unfitted estimator) of --classifier / --c or the defaults."""
-    from texsense.posture.evaluate import make_classifier
 
     name = args.classifier or DEFAULT_CLASSIFIER
     c = args.c if args.c is not None or args.classifier else DEFAULT_C
@@ -79,7 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``posture`` and ``study`` commands."""
     p = sub.add_parser(
         "posture",
-        help="posture classification: leave-one-subject-out evaluation, training",
+        help=HELP["posture"],
         description="Classify frames of a labelled recording (thesis chapter 6).",
     )
     ps = p.add_subparsers(dest="posture_command", metavar="WHAT")
@@ -105,7 +108,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     s = sub.add_parser(
         "study",
-        help="error-modelling study (noise, hysteresis, drift, failures) with an HTML report",
+        help=HELP["study"],
         description="Thesis §6.4: one reference pattern per posture (the mean of its frames), "
         "test patterns with modelled errors, recognition rate and class distances.",
     )
@@ -195,7 +198,6 @@ def _back(args: argparse.Namespace, rec: Recording, fs: FeatureSet, idx: np.ndar
 
 def run_evaluate(args: argparse.Namespace) -> int:
     """Run ``texsense posture evaluate``."""
-    from texsense.posture.evaluate import loso
 
     rec, idx, y = _frames(args)
     if args.group not in rec.labels:
@@ -249,7 +251,6 @@ def _window_accuracy(
     """Accuracy of the live vote over the last ``window_s`` s, per subject (mean) and worst.
     The vote restarts only at a new subject: posture changes within a subject's recording
     are voted across, as they would be live."""
-    from texsense.posture.smoothing import window_vote
 
     smoothed = window_vote(times, pred, window_s, sequences=groups)
     hit = smoothed == y
@@ -265,7 +266,6 @@ def _window_accuracy(
 
 def run_train(args: argparse.Namespace) -> int:
     """Run ``texsense posture train``."""
-    from texsense.posture.model import PostureModel
 
     rec, idx, y = _frames(args)
     fs = _feature_set(args)
@@ -287,9 +287,6 @@ def run_study(args: argparse.Namespace) -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from texsense.posture.features import reduce_maps
-    from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 
     rec, idx, y = _frames(args)
     frames = np.nan_to_num(rec.frames[idx].astype(np.float64))

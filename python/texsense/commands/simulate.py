@@ -7,9 +7,13 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from texsense._progress import progress
+from texsense.commands import HELP
 from texsense.exceptions import ParameterError
+from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
 from texsense.sim.protocols import PROTOCOLS, run_protocol
+from texsense.sim.seated import Subject, simulate_session
 from texsense.sim.spacer import PRESETS
 
 #: CLI option -> protocol keyword, for the protocols that take it.
@@ -39,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``simulate`` command."""
     p = sub.add_parser(
         "simulate",
-        help="run a test-machine protocol on the virtual textile sensor",
+        help=HELP["simulate"],
         description="Simulate a spacer specimen on a test machine and read it out through an "
         "electrode and an AD7745-class converter. The HDF5 output holds the measured "
         "capacitance with the true pressure and compression as labels; the CSV holds "
@@ -109,7 +113,7 @@ def register_sessions(sub: argparse._SubParsersAction) -> None:  # type: ignore[
     """Add the ``seat-sessions`` command."""
     p = sub.add_parser(
         "seat-sessions",
-        help="write capacitance sessions of the virtual seat and its calibration",
+        help=HELP["seat-sessions"],
         description="Simulate subjects' sessions on the 96-element virtual seat (thesis §6.2: "
         "the 16 postures in rounds, with the thesis's failure rates) and write each as a "
         "capacitance recording (session-NNN.h5), with the seat's calibration "
@@ -127,9 +131,6 @@ def register_sessions(sub: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def run_sessions(args: argparse.Namespace) -> int:
     """Run ``texsense seat-sessions``."""
-    from texsense._progress import progress
-    from texsense.io import save
-    from texsense.sim.seated import Subject, simulate_session
     from texsense.workflows import seat_calibration
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:

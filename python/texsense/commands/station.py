@@ -8,15 +8,25 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from texsense.commands import HELP
+from texsense.commands.monitor import virtual_bed_model
 from texsense.exceptions import FormatError, ParameterError
+from texsense.layout import Layout
+from texsense.monitor import sources
+from texsense.monitor.store import open_store
+from texsense.posture import PostureModel
 from texsense.stages import load_chain
+from texsense.station.broker import Broker, parse_broker_url
+from texsense.station.virtual import VirtualMats
+from texsense.station.ward import MatConfig, Station
+from texsense.workflows import bed_calibration, seat_calibration
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``station`` command."""
     p = sub.add_parser(
         "station",
-        help="a ward station: many mats over MQTT, alerts, an overview page",
+        help=HELP["station"],
         description="Ingest many mats at once — each with its layout, calibration, pipeline "
         "state, exposure and reposition alerts — from an MQTT broker (a Mosquitto of its own "
         "on loopback unless --broker names one) and from serial, IIO or replay sources named "
@@ -56,7 +66,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _layout(spec: Any, where: str) -> Any:
     from texsense.io import load
-    from texsense.layout import Layout
 
     if isinstance(spec, str) and spec.startswith("grid:"):
         try:
@@ -83,8 +92,6 @@ def read_config(
     model = "sides.joblib"            # ... on the sides this posture model reports
     turn_every_min = 120              # default: --turn-every
     """
-    from texsense.monitor import sources
-    from texsense.station.ward import MatConfig
 
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -123,7 +130,6 @@ def read_config(
             if not m.get("model"):
                 raise FormatError(path, f"[[mat]] #{k + 1}: a bed needs model = \"FILE\", a "
                                   "posture model of sides (texsense posture train)")  # fmt: skip
-            from texsense.posture import PostureModel
 
             model = PostureModel.load(str(m["model"]))
         every = float(m.get("turn_every_min", turn_every_min))
@@ -135,11 +141,7 @@ def read_config(
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense station``."""
-    from texsense.monitor.store import open_store
-    from texsense.station.broker import Broker, parse_broker_url
     from texsense.station.server import serve_ward
-    from texsense.station.virtual import VirtualMats
-    from texsense.station.ward import Station
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     if args.virtual_mats < 0:
@@ -159,13 +161,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         background = []
         if args.virtual_mats:
-            from texsense.workflows import bed_calibration, seat_calibration
-
             vm = VirtualMats(args.virtual_mats, url, prefix=args.virtual_prefix, speed=args.speed)
             beds, sides = None, None
             if args.virtual_mats > 1:
-                from texsense.commands.monitor import virtual_bed_model
-
                 beds, sides = bed_calibration(), virtual_bed_model()
             mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
                                args.turn_every)  # fmt: skip

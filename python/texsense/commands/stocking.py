@@ -7,12 +7,16 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.commands import HELP
+from texsense.sim.stocking import LEGS, wear
+from texsense.stocking import POINTS, report
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``stocking`` command."""
     p = sub.add_parser(
         "stocking",
-        help="compression stockings: pressure at B, B1, C, D, gradient, class, hours of wear",
+        help=HELP["stocking"],
         description="Read a sensor strip under a compression stocking (elements named B, B1, "
         "C, D): the pressure at each point in mmHg hour by hour, the gradient from the ankle "
         "up and the compression class of RAL-GZ 387, drift compensated with the uncompensated "
@@ -38,7 +42,6 @@ def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense stocking simulate``: strip.h5 (capacitance, true pressure as labels) and
     calibration.json (the strip's stage chain)."""
     from texsense.io import save
-    from texsense.sim.stocking import LEGS, POINTS, wear
     from texsense.workflows import strip_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
@@ -56,7 +59,6 @@ def run_report(args: argparse.Namespace) -> int:
     """Run ``texsense stocking report``."""
     from texsense.commands.pipeline import to_pressure
     from texsense.io import load
-    from texsense.stocking import POINTS, report
 
     rec = load(args.recording)
     pressure = to_pressure(rec, args.calibration)

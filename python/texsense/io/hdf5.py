@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+from texsense._core import __version__
 from texsense._progress import logger
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
@@ -55,7 +56,6 @@ _STR = h5py.string_dtype("utf-8")
 
 
 def _software() -> str:
-    from texsense import __version__
 
     return f"texsense {__version__}"
 

@@ -18,12 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from texsense import stats
+from texsense import stats, units
+from texsense.bed import BANDS
 from texsense.exceptions import ParameterError
 from texsense.monitor.alerts import Event, ExposureTracker
 from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
+from texsense.posture.smoothing import WindowVote
 from texsense.recording import Recording
 
 __all__ = ["Monitor", "Recorder"]
@@ -133,8 +135,6 @@ class Monitor:
         if posture_model is not None and posture_model.layout != source.layout:
             raise ParameterError("the posture model was trained on another layout")
         if bed is not None:
-            from texsense.bed import BANDS
-
             if posture_model is None:
                 raise ParameterError("bed monitoring needs a posture model that reports sides")
             unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
@@ -160,7 +160,6 @@ class Monitor:
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_offset: float | None = None
         self._cof_trace: list[list[float]] = []
-        from texsense.posture.smoothing import WindowVote
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
 
@@ -230,8 +229,6 @@ class Monitor:
             pressure, measured = self.pipeline.step(np.nan_to_num(raw), valid, frame.t)
             codes = self.pipeline.codes_
         else:
-            from texsense import units
-
             pressure = units.convert(raw, frame.unit, "N/cm2")
             measured = np.isfinite(pressure)
             codes = np.where(measured, 0, 2)

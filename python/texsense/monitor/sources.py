@@ -18,10 +18,14 @@ from typing import Any
 
 import numpy as np
 
+from texsense import units
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
 from texsense.monitor.protocol import Frame, ProtocolError, parse_mqtt_payload, parse_serial_line
 from texsense.recording import Recording
+from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat, night_frames, night_plan
+from texsense.sim.mat import VirtualMat
+from texsense.sim.seated import POSTURES, SEAT_FAILURES, Subject, posture_pressure
 
 __all__ = [
     "IIOSource",
@@ -108,8 +112,6 @@ class VirtualSeatSource(Source):
         postures_per_sitting: int = 20,
         away_s: float = 120.0,
     ) -> None:
-        from texsense.sim.mat import VirtualMat
-        from texsense.sim.seated import SEAT_FAILURES, Subject
 
         super().__init__()
         if speed < 0 or hold_s <= 0 or away_s < 0 or postures_per_sitting < 1:
@@ -132,7 +134,6 @@ class VirtualSeatSource(Source):
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-        from texsense.sim.seated import posture_pressure
 
         n = self.layout.n_elements
         start = time.monotonic()
@@ -158,7 +159,6 @@ class VirtualSeatSource(Source):
 
     def info(self) -> dict[str, Any]:
         """Status, with the simulated truth (the posture's name now, None when away)."""
-        from texsense.sim.seated import POSTURES
 
         truth = POSTURES[self.posture] if self.posture else None
         return {**super().info(), "speed": self.speed, "true_posture": truth}
@@ -184,7 +184,6 @@ class VirtualBedSource(Source):
         positions_per_stay: int = 8,
         away_s: float = 300.0,
     ) -> None:
-        from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat
 
         super().__init__()
         if speed < 0 or hold_s <= 0 or away_s < 0 or positions_per_stay < 1:
@@ -200,7 +199,6 @@ class VirtualBedSource(Source):
         self.side: str | None = None
 
     def _plan(self) -> Iterator[tuple[str, float]]:
-        from texsense.sim.bed import night_plan
 
         while True:
             yield from night_plan(
@@ -210,7 +208,6 @@ class VirtualBedSource(Source):
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-        from texsense.sim.bed import night_frames
 
         start = time.monotonic()
         turn_s = min(6.0, self.hold_s / 3)
@@ -478,7 +475,6 @@ class MQTTSource(Source):
         except ProtocolError as e:
             self._bad(f"message {self.messages}", e)
             return None
-        from texsense import units
 
         if units.quantity_of(frame.unit) != self.quantity:
             self._bad(f"message {self.messages}", ProtocolError(f"unit {frame.unit!r}"))

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from texsense.exceptions import ParameterError
 from texsense.monitor.alerts import Event
 
 __all__ = ["EventStore", "PostgresEventStore", "open_store"]
@@ -152,8 +153,6 @@ class PostgresEventStore(EventStore):
         try:
             return psycopg.connect(self.path, autocommit=True, row_factory=dict_row)
         except psycopg.OperationalError as e:
-            from texsense.exceptions import ParameterError
-
             where = self.path.split("@")[-1]  # never echo a password
             raise ParameterError(f"cannot connect to PostgreSQL at {where}: {e}") from None
 

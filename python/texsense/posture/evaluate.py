@@ -22,6 +22,7 @@ Examples
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -179,7 +180,6 @@ class SubjectSelect(ClassifierMixin, BaseEstimator):
 
 def takes_groups(estimator: BaseEstimator) -> bool:
     """Whether ``estimator.fit`` takes the subjects (``groups=``)."""
-    import inspect
 
     return "groups" in inspect.signature(estimator.fit).parameters
 

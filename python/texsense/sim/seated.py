@@ -36,6 +36,7 @@ from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
 from texsense.sim.failures import FailureModel
+from texsense.sim.mat import SEAT_COLS, SEAT_PITCH_CM, SEAT_ROWS, VirtualMat
 
 if TYPE_CHECKING:
     pass
@@ -191,7 +192,6 @@ class ReferenceMat:
     reading. Not a textile sensor: no hysteresis, drift or failures."""
 
     def __init__(self, size: int = 32, error: float = 0.10, seed: int = 0) -> None:
-        from texsense.sim.mat import SEAT_COLS, SEAT_PITCH_CM, SEAT_ROWS
 
         # over the same seat area as the textile sensor's 15 x 16 grid
         pitch = (SEAT_ROWS * SEAT_PITCH_CM / size, SEAT_COLS * SEAT_PITCH_CM / size)
@@ -257,7 +257,6 @@ def simulate_session(
     the full rate). Frame labels: ``posture`` (1-16, 0 home, -1 unloaded), ``round`` and
     ``hold`` (True from ``settle_s`` after a posture was taken until it ends), ``subject``.
     """
-    from texsense.sim.mat import VirtualMat
 
     rng = np.random.default_rng([seed, zlib.crc32(subject.name.encode())])
     vmat = mat if mat is not None else VirtualMat.seat(seed=mat_seed, failures=SEAT_FAILURES)

@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
+from texsense.sim.mat import VirtualMat
 from texsense.units import convert
 
 __all__ = [
@@ -106,7 +107,6 @@ def wear(
     """Put the stocking on (a 10 s ramp from nothing) and wear it for ``hours``: frame times
     (s), the true pressure (T, 4) in N/cm² and the strip's scan (a :class:`MatScan`: the
     capacitance the strip reads)."""
-    from texsense.sim.mat import VirtualMat
 
     if hours <= 0 or frame_s <= 0:
         raise ParameterError("hours and frame_s must be > 0")

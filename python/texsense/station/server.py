@@ -22,6 +22,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
@@ -99,7 +100,6 @@ def create_ward_app(
     @app.get("/api/mats/{mat_id}")
     async def mat(mat_id: str) -> dict[str, Any]:
         """One mat's summary with its latest pressure map (N/cm², null where unknown)."""
-        import time
 
         return entry_of(mat_id).summary(time.time())
 

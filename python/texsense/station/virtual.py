@@ -10,7 +10,7 @@ from typing import Any
 
 from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source, VirtualBedSource, VirtualSeatSource
-from texsense.station.broker import BrokerURL
+from texsense.station.broker import BrokerURL, mqtt_client
 from texsense.station.ward import MatConfig
 
 __all__ = ["VirtualMats", "frame_payload"]
@@ -99,7 +99,6 @@ class VirtualMats:
 
     async def run(self) -> None:
         """Publish until cancelled (paho reconnects by itself if the broker restarts)."""
-        from texsense.station.broker import mqtt_client
 
         client = mqtt_client(self.broker, f"texsense-vmats-{id(self)}")
         client.loop_start()

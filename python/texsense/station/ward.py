@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from texsense import units
+from texsense.bed import BedWatch
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.monitor.alerts import Event, ExposureTracker
@@ -38,7 +40,7 @@ from texsense.monitor.live import Monitor
 from texsense.monitor.protocol import Frame, ProtocolError, parse_mqtt_payload
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.station.broker import BrokerURL
+from texsense.station.broker import BrokerURL, mqtt_client
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -110,8 +112,6 @@ class MatEntry:
         tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
         bed = None
         if config.bed:
-            from texsense.bed import BedWatch
-
             if config.posture_model is None:
                 raise ParameterError(f"mat {config.id}: a bed needs a side model (model = ...)")
             bed = BedWatch(config.layout, interval_min=config.turn_every_min)
@@ -167,7 +167,6 @@ class MatEntry:
 
     def feed(self, frame: Frame, now: float) -> bool:
         """One frame (from MQTT or a local source); True when it was processed."""
-        from texsense import units
 
         if frame.values.size != self.config.layout.n_elements:
             self.malformed += 1
@@ -339,7 +338,6 @@ class Station:
 
     def start(self) -> None:
         """Connect (in paho's network thread) from within the running event loop."""
-        from texsense.station.broker import mqtt_client
 
         if self.broker is None:
             return
