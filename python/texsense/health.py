@@ -85,8 +85,14 @@ class FailureDetector(Stage):
     """
 
     name = "detect"
-    reads = ("capacitance", "pF")
-    gives = ("capacitance", "pF")
+    _reads = ("capacitance", "pF")
+    _gives = ("capacitance", "pF")
+
+    #: learned: each element's unloaded level and largest expected reading (pF), or None
+    baseline_pF_: np.ndarray | None
+    max_pF_: np.ndarray | None
+    #: the failure codes of the last frames (see FAILURE_KINDS)
+    codes_: np.ndarray
 
     def __init__(
         self,

@@ -204,16 +204,15 @@ class Layout:
         rows, cols = int(rows), int(cols)
         if rows < 1 or cols < 1:
             raise ParameterError(f"grid: rows and cols must be >= 1, got {rows} x {cols}")
-        py, px = (pitch_cm, pitch_cm) if np.isscalar(pitch_cm) else pitch_cm  # type: ignore[misc]
-        py, px = float(py), float(px)
+        pitch = np.broadcast_to(np.asarray(pitch_cm, dtype=np.float64), (2,))
+        py, px = float(pitch[0]), float(pitch[1])
         if not (py > 0 and px > 0):
             raise ParameterError(f"pitch_cm must be positive, got {pitch_cm}")
         if element_size_cm is None:
             sy, sx = py, px
-        elif np.isscalar(element_size_cm):
-            sy = sx = float(element_size_cm)  # type: ignore[arg-type]
         else:
-            sy, sx = (float(v) for v in element_size_cm)  # type: ignore[union-attr]
+            size = np.broadcast_to(np.asarray(element_size_cm, dtype=np.float64), (2,))
+            sy, sx = float(size[0]), float(size[1])
         if active is None:
             mask = np.ones((rows, cols), dtype=bool)
         else:
@@ -469,9 +468,9 @@ class Layout:
                 d["xy_cm"],
                 d["size_cm"],
                 area_cm2=d.get("area_cm2"),
-                shape=None if d.get("shape") is None else tuple(d["shape"]),  # type: ignore[arg-type]
+                shape=None if d.get("shape") is None else tuple(d["shape"]),
                 cells=d.get("cells"),
-                pitch_cm=None if d.get("pitch_cm") is None else tuple(d["pitch_cm"]),  # type: ignore[arg-type]
+                pitch_cm=None if d.get("pitch_cm") is None else tuple(d["pitch_cm"]),
                 neighbours=(d["neighbours_indptr"], d["neighbours_indices"]),
                 names=d.get("names"),
                 regions=d.get("regions") or {},

@@ -269,8 +269,6 @@ class Fields:
     def number(self, key: str, default: Any = ..., finite: bool = True) -> float:
         """A float (bool and strings are errors)."""
         value = self.get(key, default)
-        if value is None and default is None:
-            return value  # type: ignore[return-value]
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(key, f"expected a number, got {value!r}")
         v = float(value)

@@ -94,12 +94,14 @@ class Pipeline:
         }
         self.repair_method = repair
         self.detector: FailureDetector = chain.find(FailureDetector) or conversion.detector(layout)
-        global_repair = repair is not None and repair in GLOBAL_METHODS
-        self._repair = Repair(layout, repair).fit() if global_repair else None
+        self._repair = None
+        if repair is not None and repair in GLOBAL_METHODS:
+            self._repair = Repair(layout, repair).fit()
         self._chain = self._compile(conversion)
         self._chain.reset()  # the kernels' copies start a stream of their own
         self._last_t: float | None = None
-        self.codes_: np.ndarray | None = None
+        #: the failure codes of the last frames (0: measured)
+        self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
 
     @property
     def input_quantity(self) -> tuple[str, str]:

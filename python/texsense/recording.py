@@ -247,7 +247,7 @@ class Recording:
                 raise ParameterError("concatenate: element_times present in only some parts")
         et = None
         if first.element_times is not None:
-            et = np.concatenate([r.element_times for r in recordings])  # type: ignore[misc]
+            et = np.concatenate([r.element_times for r in recordings])
         return cls(
             np.concatenate([r.frames for r in recordings]),
             np.concatenate([r.times for r in recordings]),

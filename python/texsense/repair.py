@@ -100,6 +100,11 @@ class Repair(Stage):
 
     name = "repair"
 
+    #: learned: the number of elements the method was prepared for
+    n_elements_: int
+    #: what happened to each reading of the last frames (see OUTCOME)
+    outcome_: np.ndarray
+
     def __init__(self, layout: Layout, method: str = "harmonic") -> None:
         self.layout = layout
         self.method = method

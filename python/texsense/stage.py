@@ -57,10 +57,20 @@ class Stage:
     #: Name in files and in a chain.
     name: ClassVar[str] = ""
     #: (quantity, unit) read and given; "" passes what comes.
-    reads: tuple[str, str] = ("", "")
-    gives: tuple[str, str] = ("", "")
+    _reads: ClassVar[tuple[str, str]] = ("", "")
+    _gives: ClassVar[tuple[str, str]] = ("", "")
 
     _last_t: float | None = None
+
+    @property
+    def reads(self) -> tuple[str, str]:
+        """(quantity, unit) the stage reads ("" : any)."""
+        return self._reads
+
+    @property
+    def gives(self) -> tuple[str, str]:
+        """(quantity, unit) the stage gives ("": what it reads)."""
+        return self._gives
 
     # ------------------------------------------------------------------ parameters
     @classmethod

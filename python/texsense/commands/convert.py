@@ -9,7 +9,7 @@ from texsense.commands import HELP
 from texsense.io import WRITERS, format_for_output, load, save
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``convert`` command."""
     p = sub.add_parser(
         "convert",

@@ -9,7 +9,7 @@ from texsense.commands import HELP
 from texsense.sensor.design import design_report
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``design`` command."""
     p = sub.add_parser(
         "design",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from texsense.io.columns_csv import read_columns_csv
 from texsense.stages import Drift, Hysteresis, StageChain, load_chain
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``drift`` command group."""
     p = sub.add_parser(
         "drift",
@@ -176,7 +177,7 @@ def run_fit(args: argparse.Namespace) -> int:
         )
     steps = load_steps(args.steps[0])
     model, fit = DriftModel.fit(steps, kind=args.kind, rest_rate=rest_rate_of(args))
-    summary = {
+    summary: dict[str, Any] = {
         "steps": [round(s, 6) for _, _, s in steps],
         "gamma_common": fit.gamma_common,
         "gamma_per_step": fit.gamma_single,

@@ -41,7 +41,7 @@ def _unit_of(name: str) -> str:
     return "1"
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``hysteresis`` command group."""
     p = sub.add_parser(
         "hysteresis",

@@ -15,7 +15,7 @@ from texsense.io import load, sniff_format
 from texsense.recording import Recording
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``info`` command."""
     p = sub.add_parser(
         "info",

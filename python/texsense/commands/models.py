@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from texsense.commands import HELP
 from texsense.modelfile import rehash
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``rehash`` command."""
     p = sub.add_parser(
         "rehash",
@@ -29,7 +30,10 @@ def run_rehash(args: argparse.Namespace) -> int:
     from texsense.stages import chain_from_dict
 
     for path in args.files:
-        # what it now says must still read as its format before the hash is written
-        fmt, digest = rehash(path, check=lambda d, path=path: chain_from_dict(d, path))
+
+        def check(d: dict[str, Any], path: Path = path) -> None:
+            chain_from_dict(d, path)  # what it now says must still read as its format
+
+        fmt, digest = rehash(path, check=check)
         print(f"{path}: {fmt}, content accepted as it is (sha256 {digest[:16]}...)")
     return 0

@@ -21,7 +21,7 @@ from texsense.stages import load_chain
 from texsense.workflows import bed_calibration, seat_calibration
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``monitor`` command."""
     p = sub.add_parser(
         "monitor",

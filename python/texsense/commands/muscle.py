@@ -10,7 +10,7 @@ from texsense.commands import HELP
 from texsense.sim.muscle import session
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``muscle`` command."""
     p = sub.add_parser(
         "muscle",
@@ -42,7 +42,7 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     args.output.mkdir(parents=True, exist_ok=True)
     s = session(args.minutes, seed=args.seed)
-    save(s.scan.capacitance, args.output / "sleeve.h5")  # type: ignore[attr-defined]
+    save(s.scan.capacitance, args.output / "sleeve.h5")
     sleeve_calibration(seed=args.seed).save(args.output / "calibration.json")
     truth = {"onsets_s": s.onsets_s.round(3).tolist(), "ends_s": s.ends_s.round(3).tolist(),
              "intensity": s.intensity.round(3).tolist(), "rest_s": s.rest}  # fmt: skip

@@ -24,7 +24,7 @@ from texsense.stages import Convert, Linear, StageChain, load_chain
 from texsense.workflows import calibrate_mat
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``calibrate``, ``process``, ``repair`` and ``health`` commands."""
     c = sub.add_parser(
         "calibrate",
@@ -136,7 +136,7 @@ def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
     return Pipeline(load_chain(calibration), rec.layout, repair=None, **stages).run(rec)
 
 
-def _capacitance(path: Path):  # type: ignore[no-untyped-def]
+def _capacitance(path: Path):
     rec = load(path)
     if rec.quantity != "capacitance":
         raise FormatError(path, f"holds {rec.quantity}, the command needs capacitance")

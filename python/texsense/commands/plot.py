@@ -10,7 +10,7 @@ from texsense.io import load
 from texsense.plotting import peak_frame, save_overview
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``plot`` command."""
     p = sub.add_parser(
         "plot",

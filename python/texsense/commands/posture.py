@@ -78,7 +78,7 @@ def _classifier(args: argparse.Namespace) -> tuple[str, Any]:
     return name + ("" if c is None else f" C={c:g}"), make_classifier(name, c)
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``posture`` and ``study`` commands."""
     p = sub.add_parser(
         "posture",
@@ -150,7 +150,7 @@ def _feature_set(args: argparse.Namespace) -> FeatureSet:
     """The features of the options; when none is given, the default set (the thesis's
     with ``--classifier naive-bayes``: the thesis's classifier on the thesis's features)."""
     if args.features is None and not (args.align or args.rotate or args.log or args.pool):
-        return FeatureSet(THESIS_KINDS.split(",")) if args.classifier == "naive-bayes" else (
+        return FeatureSet(tuple(THESIS_KINDS.split(","))) if args.classifier == "naive-bayes" else (
             DEFAULT_FEATURES)  # fmt: skip
     kinds = tuple(k.strip() for k in (args.features or THESIS_KINDS).split(",") if k.strip())
     return FeatureSet(kinds, align=args.align, rotate=args.rotate, log=args.log,
@@ -276,8 +276,9 @@ def run_train(args: argparse.Namespace) -> int:
     model.fit(rec.frames[idx], y, _back(args, rec, fs, idx), groups=groups)
     model.save(args.output)
     chose = getattr(model.estimator, "choice_", None)
+    assert model.classes_ is not None  # fitted
     print(f"trained {name}{'' if chose is None else f' ({chose})'} on {fs.describe()} "
-          f"({idx.size} frames, {len(model.classes_)} classes) -> {args.output}")  # type: ignore[arg-type]  # fmt: skip
+          f"({idx.size} frames, {len(model.classes_)} classes) -> {args.output}")  # fmt: skip
     return 0
 
 
@@ -298,7 +299,7 @@ def run_study(args: argparse.Namespace) -> int:
     scaled = rec.quantity != "pressure"
     if scaled:
         refs *= args.range / refs.max()
-    study = ErrorStudy(refs, layout, classes, hysteresis_model=sensor_hysteresis_model())
+    study = ErrorStudy(refs, layout, classes.tolist(), hysteresis_model=sensor_hysteresis_model())
     results = study.run()
     out = args.output
     out.mkdir(parents=True, exist_ok=True)

@@ -39,7 +39,7 @@ _ACCEPTS = {
 }
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``simulate`` command."""
     p = sub.add_parser(
         "simulate",
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register_sessions(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register_sessions(sub: argparse._SubParsersAction) -> None:
     """Add the ``seat-sessions`` command."""
     p = sub.add_parser(
         "seat-sessions",

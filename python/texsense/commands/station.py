@@ -22,7 +22,7 @@ from texsense.station.ward import MatConfig, Station
 from texsense.workflows import bed_calibration, seat_calibration
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``station`` command."""
     p = sub.add_parser(
         "station",
@@ -99,7 +99,8 @@ def read_config(
         raise FormatError(path, f"cannot read: {e.strerror}") from None
     except tomllib.TOMLDecodeError as e:
         raise FormatError(path, f"not TOML: {e}") from None
-    mats, local = [], {}
+    mats: list[Any] = []
+    local: dict[str, sources.Source] = {}
     calibrations: dict[str, Any] = {}  # a file named by many mats is read once
     for k, m in enumerate(doc.get("mat", [])):
         where = f"{path} [[mat]] #{k + 1}"

@@ -12,7 +12,7 @@ from texsense.sim.stocking import LEGS, wear
 from texsense.stocking import POINTS, report
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``stocking`` command."""
     p = sub.add_parser(
         "stocking",
@@ -47,7 +47,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     args.output.mkdir(parents=True, exist_ok=True)
     _, truth, scan = wear(args.cls, LEGS[args.leg], hours=args.hours)
     labels = {f"true_{p}_ncm2": truth[:, k] for k, p in enumerate(POINTS)}
-    rec = scan.capacitance.with_labels(labels)  # type: ignore[attr-defined]
+    rec = scan.capacitance.with_labels(labels)
     save(rec, args.output / "strip.h5")
     strip_calibration().save(args.output / "calibration.json")
     print(f"wrote {args.output}/strip.h5 ({rec.n_frames} frames, class {args.cls} stocking, "
@@ -79,7 +79,7 @@ def run_report(args: argparse.Namespace) -> int:
         vals = " | ".join(f"{v:.1f}" for v in rep.mmhg[k])
         grad = ", ".join(f"{v:.2f}" for v in rep.gradient[k])
         row = f"| {h:g} | {vals} | {grad} | {classes[k]}"
-        if unc_classes is not None:
-            row += f" | {rep.uncompensated_mmhg[k, 0]:.1f} | {unc_classes[k]}"  # type: ignore[index]
+        if unc_classes is not None and rep.uncompensated_mmhg is not None:
+            row += f" | {rep.uncompensated_mmhg[k, 0]:.1f} | {unc_classes[k]}"
         print(row + " |")
     return 0

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -214,7 +214,7 @@ class RecordingWriter:
         *,
         valid: npt.ArrayLike | None = None,
         element_times: npt.ArrayLike | None = None,
-        labels: dict[str, npt.ArrayLike] | None = None,
+        labels: Mapping[str, npt.ArrayLike] | None = None,
     ) -> None:
         """Append one frame (N,) or a block of frames (k, N) with their time stamps."""
         f = self._file

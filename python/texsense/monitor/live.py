@@ -266,7 +266,7 @@ class Monitor:
             a = np.asarray(v, dtype=np.float64)
             out = np.round(a, nd).astype(object)
             out[~np.isfinite(a)] = None
-            return out.tolist()  # type: ignore[no-any-return]
+            return out.tolist()
 
         snap = {
             "seq": frame.seq,

@@ -200,5 +200,5 @@ def parse_mqtt_payload(payload: bytes | str, n_elements: int) -> Frame:
         dt = d.get("dt", 0.0)
         if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt >= 0:
             raise ProtocolError("'dt' must be a number >= 0")
-        times = float(t) + float(dt) * np.arange(n_elements)
+        times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
     return Frame(seq, times, values, unit)

@@ -152,6 +152,7 @@ class VirtualSeatSource(Source):
                     scan = self.mat.scan(np.array([t]), p[None, :])
                     self.failed = scan.failed[0]
                     cap = scan.capacitance
+                    assert cap.element_times is not None  # a scan times every element
                     await _pace(start, t, self.speed)
                     yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
                     seq += 1
@@ -217,6 +218,7 @@ class VirtualBedSource(Source):
             self.position = None if f.position == "out" else f.position
             self.side = None if f.side == "out" else f.side
             cap = self.mat.scan(np.array([f.t]), f.pressure[None, :]).capacitance
+            assert cap.element_times is not None  # a scan times every element
             await _pace(start, f.t, self.speed)
             yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
 

@@ -109,7 +109,7 @@ class EventStore:
         self, session: int | None = None, kind: str | None = None, limit: int = 1000
     ) -> list[dict[str, Any]]:
         """Events, newest first, optionally of one session or kind."""
-        sql, args = "SELECT * FROM events WHERE 1=1", []
+        sql, args = "SELECT * FROM events WHERE 1=1", list[Any]()
         if session is not None:
             sql += " AND session = ?"
             args.append(session)

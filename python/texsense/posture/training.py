@@ -80,7 +80,8 @@ def train_virtual_bed_model(
     frames, labels, subjects = [], [], []
     for i in range(people):
         s = every_position(i, seed, hold_s, session_seed=seed + i)
-        out = pipeline.reset().run(s.capacitance).frames.astype(np.float64)  # type: ignore[arg-type]
+        assert s.capacitance is not None  # every_position reads the mat
+        out = pipeline.reset().run(s.capacitance).frames.astype(np.float64)
         hold = s.truth.labels["hold"]
         frames.append(np.nan_to_num(out[hold]))
         labels.append(s.truth.labels["side"][hold])

@@ -27,7 +27,7 @@ import numpy as np
 
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
-from texsense.sim.mat import VirtualMat
+from texsense.sim.mat import MatScan, VirtualMat
 from texsense.sim.readout import CDC
 
 __all__ = ["HIGH_RATE_CDC", "MuscleSession", "session", "sleeve_layout"]
@@ -58,7 +58,7 @@ class MuscleSession:
     intensity: np.ndarray
     rest: list[tuple[float, float]]
     frame_s: float
-    scan: object
+    scan: MatScan
 
 
 def _envelope(t: np.ndarray, on: float, off: float) -> np.ndarray:

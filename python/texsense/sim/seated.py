@@ -238,7 +238,7 @@ def _timeline(
 def simulate_session(
     subject: Subject,
     *,
-    mat: object | None = None,
+    mat: VirtualMat | None = None,
     mat_seed: int = 5,
     posture_s: float = 30.0,
     home_s: float = 5.0,
@@ -260,8 +260,8 @@ def simulate_session(
 
     rng = np.random.default_rng([seed, zlib.crc32(subject.name.encode())])
     vmat = mat if mat is not None else VirtualMat.seat(seed=mat_seed, failures=SEAT_FAILURES)
-    layout = vmat.layout  # type: ignore[attr-defined]
-    ft = vmat.cdc.frame_time_s(layout.n_elements)  # type: ignore[attr-defined]
+    layout = vmat.layout
+    ft = vmat.cdc.frame_time_s(layout.n_elements)
     segs = _timeline(posture_s, home_s, rest_s, rounds)
     total = segs[-1][1]
     ref = ReferenceMat(seed=mat_seed)
@@ -294,7 +294,7 @@ def simulate_session(
 
     t_tex = np.arange(0.0, total, ft)
     truth, labels, back = run(t_tex, layout)
-    scan = vmat.scan(t_tex, truth)  # type: ignore[attr-defined]
+    scan = vmat.scan(t_tex, truth)
     names = np.full(t_tex.size, subject.name)
     lab = {**labels, "subject": names}
     t_ref = np.arange(0.0, total, 1.0 / reference_hz)

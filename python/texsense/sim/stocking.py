@@ -29,7 +29,7 @@ import numpy.typing as npt
 
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
-from texsense.sim.mat import VirtualMat
+from texsense.sim.mat import MatScan, VirtualMat
 from texsense.units import convert
 
 __all__ = [
@@ -103,7 +103,7 @@ def strip_layout() -> Layout:
 
 def wear(
     cls: str, leg: Leg, *, hours: float = 8.0, frame_s: float = 10.0, seed: int = 0
-) -> tuple[np.ndarray, np.ndarray, object]:
+) -> tuple[np.ndarray, np.ndarray, MatScan]:
     """Put the stocking on (a 10 s ramp from nothing) and wear it for ``hours``: frame times
     (s), the true pressure (T, 4) in N/cm² and the strip's scan (a :class:`MatScan`: the
     capacitance the strip reads)."""

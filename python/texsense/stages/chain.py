@@ -37,7 +37,7 @@ def stage_from_dict(content: Any, source: str | Path = "<dict>") -> Stage:
     if not isinstance(content, dict):
         raise FormatError(source, "a stage must be a JSON object")
     name = content.get("stage")
-    cls = STAGES.get(name)  # type: ignore[arg-type]
+    cls = STAGES.get(name) if isinstance(name, str) else None
     if cls is None:
         raise FormatError(source, f"unknown stage {name!r}; known: {', '.join(sorted(STAGES))}")
     return cls.from_dict(content, source)

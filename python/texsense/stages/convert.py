@@ -37,8 +37,15 @@ class Convert(Stage):
     """
 
     name = "convert"
-    reads = ("capacitance", "pF")
-    gives = ("compression", "mm")
+    _reads = ("capacitance", "pF")
+    _gives = ("compression", "mm")
+
+    #: learned: the material curve (compression in mm, capacitance in pF of a reference
+    #: element) and every element's offset (pF) and gain (eq. 2.1)
+    curve_compression_mm_: np.ndarray
+    curve_capacitance_pF_: np.ndarray
+    offset_pF_: np.ndarray
+    gain_: np.ndarray
 
     def __init__(self, thickness_mm: float, uniform_pressure_ncm2: float = 1.0) -> None:
         self.thickness_mm = thickness_mm
@@ -143,6 +150,10 @@ class Linear(Stage):
 
     name = "linear"
 
+    #: learned: every element's offset and gain
+    offset_: np.ndarray
+    gain_: np.ndarray
+
     def __init__(
         self,
         input_quantity: str,
@@ -157,12 +168,14 @@ class Linear(Stage):
         self.output_unit = output_unit
         self.full_scale = full_scale
 
-    @property  # type: ignore[override]
+    @property
     def reads(self) -> tuple[str, str]:
+        """(quantity, unit) of the readings."""
         return self.input_quantity, self.input_unit
 
-    @property  # type: ignore[override]
+    @property
     def gives(self) -> tuple[str, str]:
+        """(quantity, unit) of the values (the readings' own unless given)."""
         return (
             self.output_quantity or self.input_quantity,
             self.output_unit or self.input_unit,

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense._core import Curve, DriftBank, PreisachBank
-from texsense.drift import DriftModel
+from texsense.drift import DriftModel, StepFit
 from texsense.exceptions import ParameterError
 from texsense.hysteresis import HysteresisModel
 from texsense.modelfile import Fields
@@ -33,8 +33,11 @@ class Hysteresis(Stage):
     """
 
     name = "hysteresis"
-    reads = ("compression", "mm")
-    gives = ("pressure", "N/cm2")
+    _reads = ("compression", "mm")
+    _gives = ("pressure", "N/cm2")
+
+    #: learned: the Preisach model (its Everett function)
+    model_: HysteresisModel
 
     def __init__(
         self,
@@ -123,8 +126,12 @@ class Drift(Stage):
     """
 
     name = "drift"
-    reads = ("pressure", "N/cm2")
-    gives = ("pressure", "N/cm2")
+    _reads = ("pressure", "N/cm2")
+    _gives = ("pressure", "N/cm2")
+
+    #: learned: γ and the kernel; how well γ fitted the held steps (after fit only)
+    model_: DriftModel
+    step_fit_: StepFit
 
     def __init__(self, kind: str = "log", rest_rate: float = 0.0) -> None:
         self.kind = kind
