@@ -32,6 +32,7 @@ import numpy as np
 
 from texsense._progress import progress
 from texsense.exceptions import FormatError, ParameterError
+from texsense.layout import Layout
 from texsense.modelfile import content_hash
 from texsense.pipeline import Pipeline
 from texsense.recording import Recording
@@ -56,6 +57,12 @@ class ProcessOptions:
     drift: bool = True
     #: Frames per block; None: about 2^18 element-samples (2 MiB per float64 array).
     chunk_frames: int | None = None
+
+    def pipeline(self, chain: StageChain, layout: Layout) -> Pipeline:
+        """The compiled pipeline of ``chain`` for ``layout`` with these settings."""
+        return Pipeline(
+            chain, layout, hysteresis=self.hysteresis, drift=self.drift, repair=self.repair
+        )
 
     def frames_per_block(self, n_elements: int) -> int:
         """The block length for a mat of ``n_elements``."""
@@ -159,13 +166,7 @@ def process_file(
     first, blocks, closer = _blocks(src, opts)
     tmp = dst.with_name(f".{dst.name}.{os.getpid()}.partial")
     try:
-        pipe = Pipeline(
-            cal,
-            first.layout,
-            hysteresis=opts.hysteresis,
-            drift=opts.drift,
-            repair=opts.repair,
-        )
+        pipe = opts.pipeline(cal, first.layout)
         quantity, unit = pipe.input_quantity
         if first.quantity != quantity:
             raise FormatError(src, f"holds {first.quantity}, the calibration reads {quantity}")

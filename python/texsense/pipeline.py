@@ -149,7 +149,6 @@ class Pipeline:
 
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
-
         convert = "convert:linear" if "linear" in self.chain else "convert"
         return {
             "calibration_id": self.calibration_id,

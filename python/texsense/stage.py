@@ -36,7 +36,7 @@ from texsense.exceptions import FormatError, NotFittedError, ParameterError
 from texsense.modelfile import Fields, load, write
 from texsense.recording import Recording
 
-__all__ = ["Stage", "time_steps"]
+__all__ = ["Stage", "Stream", "time_steps"]
 
 
 def time_steps(times: npt.ArrayLike, last_t: float | None = None) -> np.ndarray:
@@ -51,7 +51,53 @@ def time_steps(times: npt.ArrayLike, last_t: float | None = None) -> np.ndarray:
     return np.ascontiguousarray(dt)
 
 
-class Stage:
+class Stream:
+    """Streaming and batch over one checked batch path, ``_arrays(values, valid, times)``:
+    what every stage and the chain of stages share."""
+
+    @property
+    def reads(self) -> tuple[str, str]:
+        """(quantity, unit) read ("": any)."""
+        raise NotImplementedError
+
+    @property
+    def gives(self) -> tuple[str, str]:
+        """(quantity, unit) given ("": what is read)."""
+        raise NotImplementedError
+
+    def _what(self) -> str:
+        raise NotImplementedError
+
+    def _arrays(
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, times: npt.ArrayLike
+    ) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def step(
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One frame: values (N,), validity (N,) (None: all valid) at time ``t`` (s) ->
+        values and validity (N,)."""
+        x = np.asarray(values, dtype=np.float64).reshape(1, -1)
+        ok = None if valid is None else np.asarray(valid, dtype=bool).reshape(1, -1)
+        out, out_ok = self._arrays(x, ok, [float(t)])
+        return out[0], out_ok[0]
+
+    def run(self, rec: Recording) -> Recording:
+        """A recording of what is read -> a recording of what is given, with the validity of
+        every reading; continues the stream."""
+        quantity, unit = self.reads
+        if quantity and rec.quantity != quantity:
+            raise ParameterError(f"{self._what()} reads {quantity}, not {rec.quantity}")
+        frames = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
+        out, ok = self._arrays(frames, rec.valid, rec.times)
+        gives_q, gives_u = self.gives
+        return rec._with(
+            frames=out, valid=ok, quantity=gives_q or rec.quantity, unit=gives_u or rec.unit
+        )
+
+
+class Stage(Stream):
     """The contract (see the module documentation)."""
 
     #: Name in files and in a chain.
@@ -118,6 +164,9 @@ class Stage:
     def _reset_stream(self) -> None:
         """Forget the stream state of the kernels."""
 
+    def _what(self) -> str:
+        return f"the {self.name} stage"
+
     def _block(
         self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -145,29 +194,6 @@ class Stage:
         out, out_ok = self._block(x, ok, dt)
         self._last_t = float(np.asarray(times, dtype=np.float64).reshape(-1)[-1])
         return out, out_ok
-
-    def step(
-        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """One frame: values (N,), validity (N,) (None: all valid) at time ``t`` (s) ->
-        values and validity (N,)."""
-        x = np.asarray(values, dtype=np.float64).reshape(1, -1)
-        ok = None if valid is None else np.asarray(valid, dtype=bool).reshape(1, -1)
-        out, out_ok = self._arrays(x, ok, [float(t)])
-        return out[0], out_ok[0]
-
-    def run(self, rec: Recording) -> Recording:
-        """A recording of what the stage reads -> a recording of what it gives, with the
-        validity of every reading; continues the stream."""
-        quantity, unit = self.reads
-        if quantity and rec.quantity != quantity:
-            raise ParameterError(f"the {self.name} stage reads {quantity}, not {rec.quantity}")
-        frames = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
-        out, ok = self._arrays(frames, rec.valid, rec.times)
-        gives_q, gives_u = self.gives
-        return rec._with(
-            frames=out, valid=ok, quantity=gives_q or rec.quantity, unit=gives_u or rec.unit
-        )
 
     # ------------------------------------------------------------------ files
     def _fitted_json(self) -> dict[str, Any]:

@@ -13,9 +13,6 @@ ground truth that these workflows and the compensation are graded against.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
-
 import numpy as np
 
 from texsense.drift import split_steps
@@ -38,21 +35,11 @@ __all__ = [
 ]
 
 
-def calibrate_mat(
-    material: Mapping[str, np.ndarray],
-    baseline: Recording,
-    uniform: Recording,
-    uniform_pressure_ncm2: float,
-    thickness_mm: float,
-    *,
-    steps: Sequence[Any] | None = None,
-) -> StageChain:
-    """Calibrate a mat: detect, convert (eq. 2.1 per element: zeroing and equilibration),
-    hysteresis (the spacer model from ``material``, eq. 4.15-4.22) and, with held ``steps``,
-    drift (eq. 5.8): :meth:`StageChain.fit_mat`."""
-    return StageChain.fit_mat(
-        material, baseline, uniform, uniform_pressure_ncm2, thickness_mm, steps=steps
-    )
+#: Calibrate a mat from its recordings (what ``texsense calibrate mat`` runs): detect, convert
+#: (eq. 2.1 per element: zeroing and equilibration), hysteresis (the spacer model from the
+#: material record, eq. 4.15-4.22) and, with held ``steps``, drift (eq. 5.8); see
+#: :meth:`texsense.stages.StageChain.fit_mat`.
+calibrate_mat = StageChain.fit_mat
 
 
 def material_record(rec: Recording) -> dict[str, np.ndarray]:

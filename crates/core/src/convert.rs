@@ -5,8 +5,7 @@
 //!
 //! [`Curve`] is also the first-loading curve `p(e)` of an uncompensated chain.
 
-use crate::error::{check_len, CoreError};
-use crate::preisach::frames_of;
+use crate::error::{check_len, frames_of, CoreError};
 
 /// A piecewise-linear curve `y(x)` over increasing `x`, held at its ends (`np.interp`).
 ///

@@ -160,10 +160,18 @@ impl FailureDetector {
         check_len("codes", codes.len(), t * n)?;
         scratch.delta.resize(t * n, 0.0);
         let par = parallel(t, n);
-        let size = block_size(n);
-        // pass 1: the change of every reading since the element's last finite one
-        let chunks: Vec<_> = self.elements.chunks_mut(size).collect();
-        for_blocks(&mut scratch.delta, n, chunks, par, |block, o| {
+        self.changes(readings, &mut scratch.delta, par);
+        self.codes(readings, valid, &scratch.delta, codes, par);
+        Ok(())
+    }
+
+    /// Pass 1: the change of every reading since the element's last finite one (NaN for an
+    /// element's first reading or one that is not a number).
+    fn changes(&mut self, readings: &[f64], delta: &mut [f64], par: bool) {
+        let n = self.len();
+        let t = readings.len() / n;
+        let chunks: Vec<_> = self.elements.chunks_mut(block_size(n)).collect();
+        for_blocks(delta, n, chunks, par, |block, o| {
             let start = o.start();
             for r in 0..t {
                 let row = r * n + start;
@@ -176,8 +184,19 @@ impl FailureDetector {
                 }
             }
         });
-        // pass 2: the codes, with the neighbours' median change of the same frame
-        let delta = &scratch.delta[..];
+    }
+
+    /// Pass 2: the codes, with the neighbours' median change of the same frame.
+    fn codes(
+        &mut self,
+        readings: &[f64],
+        valid: &[bool],
+        delta: &[f64],
+        codes: &mut [u8],
+        par: bool,
+    ) {
+        let n = self.len();
+        let t = readings.len() / n;
         let moved = |idx: usize| {
             let d = delta[idx];
             if d.is_nan() {
@@ -190,7 +209,7 @@ impl FailureDetector {
         let mut elements = std::mem::take(&mut self.elements);
         let this = &*self;
         let p = &this.params;
-        let chunks: Vec<_> = elements.chunks_mut(size).collect();
+        let chunks: Vec<_> = elements.chunks_mut(block_size(n)).collect();
         for_blocks(codes, n, chunks, par, |block, o| {
             let start = o.start();
             let mut wide = Vec::new();
@@ -250,7 +269,6 @@ impl FailureDetector {
             }
         });
         self.elements = elements;
-        Ok(())
     }
 }
 

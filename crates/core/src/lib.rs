@@ -12,6 +12,7 @@
 //! - [`repair`]: the local repairs of failed readings: zero, last value, eq. 6.14 neighbour
 //!   mean, weighted mean;
 //! - [`drift`]: drift as a superposition of step responses, recursive (thesis eq. 5.4/5.8);
+//! - [`everett`]: the Everett function on a grid and the Everett terms of a history;
 //! - [`preisach`]: the numerical Preisach model (thesis eq. 4.15-4.22), many elements at once;
 //! - [`compensation`]: Preisach then drift in one pass;
 //! - [`chain`]: detect -> convert -> compensation -> repair, the whole mat in one pass;
@@ -26,6 +27,7 @@ pub mod convert;
 pub mod detect;
 pub mod drift;
 pub mod error;
+pub mod everett;
 pub mod par;
 pub mod preisach;
 pub mod repair;
@@ -38,7 +40,8 @@ pub use compensation::Compensation;
 pub use convert::{Converter, Curve};
 pub use drift::{DriftBank, Kernel};
 pub use error::CoreError;
-pub use preisach::{everett_terms, Everett, EverettTerms, PreisachBank};
+pub use everett::{everett_terms, Everett, EverettTerms};
+pub use preisach::PreisachBank;
 pub use repair::{LocalRepair, Method as RepairMethod};
 pub use spacer::{SpacerBank, SpacerLaw, SpacerParams};
 pub use topology::Neighbours;

@@ -17,9 +17,8 @@
 //! of the frame (which no block changes) and collects its fills, which are written after the
 //! pass (failed readings are few).
 
-use crate::error::{check_len, CoreError};
+use crate::error::{check_len, frames_of, CoreError};
 use crate::par::{block_size, map_blocks, parallel};
-use crate::preisach::frames_of;
 use crate::topology::Neighbours;
 
 /// What happened to one reading.

@@ -257,7 +257,6 @@ def run_apply(args: argparse.Namespace) -> int:
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis validate``."""
-
     model, drift, cols, in_name, out_name, u = _model_and_record(args)
     y = _column(cols, out_name, args.data)
     times = cols.get("time_s")
@@ -311,7 +310,6 @@ def run_validate(args: argparse.Namespace) -> int:
 
 def run_plot(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis plot``."""
-
     model, _ = load_model(args.model)
     model_figure(model, args.out)
     print(f"wrote {args.out}")

@@ -133,7 +133,6 @@ def _grid(args: argparse.Namespace) -> Any:
 
 def load_function(spec: str) -> Any:
     """``module:function`` or ``path/to/file.py:function`` -> the function."""
-
     where, _, name = spec.rpartition(":")
     if not where or not name:
         raise ParameterError(f"--multiplexer: expected MODULE:FUNCTION, got {spec!r}")
@@ -156,7 +155,6 @@ def load_function(spec: str) -> Any:
 
 def make_source(args: argparse.Namespace) -> tuple[Any, Any]:
     """The source named by ``--source`` and its default calibration (or None)."""
-
     kind, _, rest = args.source.partition(":")
     if kind == "virtual":
         return sources.VirtualSeatSource(speed=args.speed), seat_calibration()
@@ -239,7 +237,6 @@ def build_monitor(args: argparse.Namespace) -> Any:
 def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
     when missing (a stale or broken cache is rebuilt, and said so)."""
-
     from texsense.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
@@ -282,7 +279,6 @@ def virtual_bed_model() -> Any:
 
 def _check_port_free(host: str, port: int) -> None:
     """Fail before the (slow) set-up when the port is taken."""
-
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:

@@ -26,6 +26,13 @@ from texsense.workflows import calibrate_mat
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``calibrate``, ``process``, ``repair`` and ``health`` commands."""
+    _register_calibrate(sub)
+    _register_process(sub)
+    _register_repair_and_health(sub)
+
+
+def _register_calibrate(sub: argparse._SubParsersAction) -> None:
+    """``calibrate mat`` and ``calibrate linear``."""
     c = sub.add_parser(
         "calibrate",
         help=HELP["calibrate"],
@@ -71,6 +78,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
     lin.set_defaults(run=run_calibrate_linear)
 
+
+def _register_process(sub: argparse._SubParsersAction) -> None:
+    """``process``."""
     p = sub.add_parser(
         "process",
         help=HELP["process"],
@@ -100,6 +110,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
     p.set_defaults(run=run_process)
 
+
+def _register_repair_and_health(sub: argparse._SubParsersAction) -> None:
+    """``repair`` and ``health``."""
     r = sub.add_parser(
         "repair",
         help=HELP["repair"],
@@ -145,7 +158,6 @@ def _capacitance(path: Path):
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate mat``."""
-
     material = read_columns_csv(
         args.material, required=("compression_mm", "capacitance_pF", "pressure_ncm2")
     )
@@ -174,7 +186,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
-
     rec = load(args.like)
     quantity, unit = rec.quantity, rec.unit
     if args.to is not None:
@@ -205,7 +216,6 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
 
 def run_process(args: argparse.Namespace) -> int:
     """Run ``texsense process``: one file in blocks, or an archive on Dask."""
-
     options = _options(args)
     single = (
         len(args.inputs) == 1
@@ -247,15 +257,8 @@ def run_process(args: argparse.Namespace) -> int:
 
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
-
     raw = load(src)
-    pipe = Pipeline(
-        cal,
-        raw.layout,
-        hysteresis=options.hysteresis,
-        drift=options.drift,
-        repair=options.repair,
-    )
+    pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)
     save(out, output)
     failed = pipe.codes_ > 0
@@ -269,7 +272,6 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
 
 def run_repair(args: argparse.Namespace) -> int:
     """Run ``texsense repair``."""
-
     rec = load(args.input)
     out = Repair(rec.layout, args.method).fit().run(rec)
     save(out, args.output)
@@ -279,7 +281,6 @@ def run_repair(args: argparse.Namespace) -> int:
 
 def run_health(args: argparse.Namespace) -> int:
     """Run ``texsense health``."""
-
     raw = _capacitance(args.raw)
     detector = FailureDetector(raw.layout).fit()
     if args.calibration:

@@ -72,7 +72,6 @@ def describe_defaults() -> str:
 
 def _classifier(args: argparse.Namespace) -> tuple[str, Any]:
     """(name shown, unfitted estimator) of --classifier / --c or the defaults."""
-
     name = args.classifier or DEFAULT_CLASSIFIER
     c = args.c if args.c is not None or args.classifier else DEFAULT_C
     return name + ("" if c is None else f" C={c:g}"), make_classifier(name, c)
@@ -198,7 +197,6 @@ def _back(args: argparse.Namespace, rec: Recording, fs: FeatureSet, idx: np.ndar
 
 def run_evaluate(args: argparse.Namespace) -> int:
     """Run ``texsense posture evaluate``."""
-
     rec, idx, y = _frames(args)
     if args.group not in rec.labels:
         raise ParameterError(f"{args.recording}: no label {args.group!r} naming the subjects")
@@ -251,7 +249,6 @@ def _window_accuracy(
     """Accuracy of the live vote over the last ``window_s`` s, per subject (mean) and worst.
     The vote restarts only at a new subject: posture changes within a subject's recording
     are voted across, as they would be live."""
-
     smoothed = window_vote(times, pred, window_s, sequences=groups)
     hit = smoothed == y
     per = {str(s): float(np.mean(hit[groups == s])) for s in np.unique(groups)}
@@ -266,7 +263,6 @@ def _window_accuracy(
 
 def run_train(args: argparse.Namespace) -> int:
     """Run ``texsense posture train``."""
-
     rec, idx, y = _frames(args)
     fs = _feature_set(args)
     name, estimator = _classifier(args)

@@ -92,7 +92,6 @@ def read_config(
     model = "sides.joblib"            # ... on the sides this posture model reports
     turn_every_min = 120              # default: --turn-every
     """
-
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as e:

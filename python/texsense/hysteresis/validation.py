@@ -87,6 +87,36 @@ def _errors(name: str, y: np.ndarray, m: np.ndarray, floor: float) -> BandError:
     )
 
 
+def _worst_places(
+    branches: list[Any],
+    index: np.ndarray,
+    times: np.ndarray | None,
+    u: np.ndarray,
+    y: np.ndarray,
+    m: np.ndarray,
+) -> list[Place]:
+    """The sample with the largest error of every branch (a turning sample belongs to the
+    branch it ends), at its index in the record."""
+    places = []
+    for n, b in enumerate(branches):
+        first = b.start + (1 if n else 0)
+        if first > b.stop:
+            continue
+        seg = slice(first, b.stop + 1)
+        k = first + int(np.argmax(np.abs(m[seg] - y[seg])))
+        places.append(
+            Place(
+                int(index[k]),
+                None if times is None else float(times[k]),
+                float(u[k]),
+                float(y[k]),
+                float(m[k]),
+                "rising" if b.rising else "falling",
+            )
+        )
+    return places
+
+
 def validate(
     model: HysteresisModel,
     inputs: npt.ArrayLike,
@@ -138,23 +168,8 @@ def validate(
         _errors("falling input", yo[~rising], mo[~rising], floor),
     ]
     index = np.nonzero(ok)[0]
-    places = []
-    for n, b in enumerate(branches):
-        first = b.start + (1 if n else 0)  # a turning sample belongs to the branch it ends
-        if first > b.stop:
-            continue
-        seg = slice(first, b.stop + 1)
-        k = first + int(np.argmax(np.abs(mo[seg] - yo[seg])))
-        places.append(
-            Place(
-                int(index[k]),
-                None if t is None else float(t[index[k]]),
-                float(uo[k]),
-                float(yo[k]),
-                float(mo[k]),
-                "rising" if b.rising else "falling",
-            )
-        )
+    times = None if t is None else t[index]
+    places = _worst_places(branches, index, times, uo, yo, mo)
     places.sort(key=lambda p: -abs(p.model - p.measured))
     rmse = float(np.sqrt(np.mean((mo - yo) ** 2)))
     return ValidationReport(

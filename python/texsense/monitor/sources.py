@@ -134,7 +134,6 @@ class VirtualSeatSource(Source):
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-
         n = self.layout.n_elements
         start = time.monotonic()
         t, seq = 0.0, 0
@@ -160,7 +159,6 @@ class VirtualSeatSource(Source):
 
     def info(self) -> dict[str, Any]:
         """Status, with the simulated truth (the posture's name now, None when away)."""
-
         truth = POSTURES[self.posture] if self.posture else None
         return {**super().info(), "speed": self.speed, "true_posture": truth}
 
@@ -209,7 +207,6 @@ class VirtualBedSource(Source):
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-
         start = time.monotonic()
         turn_s = min(6.0, self.hold_s / 3)
         plan = self._plan()

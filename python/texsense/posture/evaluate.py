@@ -180,7 +180,6 @@ class SubjectSelect(ClassifierMixin, BaseEstimator):
 
 def takes_groups(estimator: BaseEstimator) -> bool:
     """Whether ``estimator.fit`` takes the subjects (``groups=``)."""
-
     return "groups" in inspect.signature(estimator.fit).parameters
 
 

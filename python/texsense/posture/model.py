@@ -92,7 +92,6 @@ class PostureModel:
         """Train on frames (T, N) with one label per frame (and their mirror images when the
         model has a ``mirror`` map). ``groups`` (the subject of every frame) reach a
         classifier that chooses its set-up by subject (``auto``)."""
-
         y = np.asarray(labels)
         X = self.features_of(frames, back)
         if y.shape != (X.shape[0],):

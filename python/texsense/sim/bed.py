@@ -259,7 +259,6 @@ def bed_mat(seed: int = 7, failures: bool = True) -> VirtualMat:
     converters; with ``failures``, elements fail at the rates the thesis measured on its
     textile seat (§6.5.2.5, :data:`texsense.sim.seated.SEAT_FAILURES`: the only measured
     rates for this sensor). The same ``seed`` is the same physical mat."""
-
     return VirtualMat(
         bed_layout(),
         "textile-3mm",
@@ -485,7 +484,6 @@ def bed_session(
     :func:`night_plan`), a frame every ``frame_s`` (default the bed mat's frame time), turning
     for ``turn_s`` seconds between positions (:func:`night_frames`). With ``mat`` (e.g.
     :func:`bed_mat`) the session is also read by the textile sensor."""
-
     rng = np.random.default_rng([seed, 91])
     plan = plan if plan is not None else night_plan(rng, 10, 300.0)
     lay = bed_layout()

@@ -77,7 +77,6 @@ def session(
 ) -> MuscleSession:
     """``minutes`` of activity: contractions at random, a rest of ``rest_min`` every
     ``rest_every_min`` (the first minute is rest: the sleeve is put on)."""
-
     if minutes <= 0 or preload_ncm2 < 0:
         raise ParameterError("minutes must be > 0 and preload_ncm2 >= 0")
     rng = np.random.default_rng(seed)

@@ -257,7 +257,6 @@ def simulate_session(
     the full rate). Frame labels: ``posture`` (1-16, 0 home, -1 unloaded), ``round`` and
     ``hold`` (True from ``settle_s`` after a posture was taken until it ends), ``subject``.
     """
-
     rng = np.random.default_rng([seed, zlib.crc32(subject.name.encode())])
     vmat = mat if mat is not None else VirtualMat.seat(seed=mat_seed, failures=SEAT_FAILURES)
     layout = vmat.layout

@@ -107,7 +107,6 @@ def wear(
     """Put the stocking on (a 10 s ramp from nothing) and wear it for ``hours``: frame times
     (s), the true pressure (T, 4) in N/cm² and the strip's scan (a :class:`MatScan`: the
     capacitance the strip reads)."""
-
     if hours <= 0 or frame_s <= 0:
         raise ParameterError("hours and frame_s must be > 0")
     times = np.arange(0.0, hours * 3600.0 + frame_s / 2, frame_s)

@@ -17,7 +17,7 @@ from texsense.layout import Layout
 from texsense.modelfile import Fields, content_hash, load, unpack, write
 from texsense.recording import Recording
 from texsense.repair import Repair
-from texsense.stage import Stage, time_steps
+from texsense.stage import Stage, Stream, time_steps
 from texsense.stages.convert import Convert, Linear
 from texsense.stages.spacer import Drift, Hysteresis
 
@@ -43,7 +43,7 @@ def stage_from_dict(content: Any, source: str | Path = "<dict>") -> Stage:
     return cls.from_dict(content, source)
 
 
-class StageChain:
+class StageChain(Stream):
     """The fitted stages of a mat in order, each reading what the one before gives: the one
     calibration of texsense (docs/pipeline.md). A mat's chain is ``detect``, ``convert``,
     ``hysteresis`` and ``drift`` (the last optional; ``linear`` in place of convert and the
@@ -171,6 +171,9 @@ class StageChain:
         return cls(stages)
 
     # ------------------------------------------------------------------ the stream
+    def _what(self) -> str:
+        return "the chain"
+
     def reset(self) -> StageChain:
         """Every stage's stream forgotten."""
         self._last_t = None
@@ -199,26 +202,6 @@ class StageChain:
             s._last_t = float(t[-1])
         self._last_t = float(t[-1])
         return x, ok
-
-    def step(
-        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """One frame through every stage: values (N,), validity (N,) at ``t`` (s)."""
-        x = np.asarray(values, dtype=np.float64).reshape(1, -1)
-        ok = None if valid is None else np.asarray(valid, dtype=bool).reshape(1, -1)
-        out, out_ok = self._arrays(x, ok, [float(t)])
-        return out[0], out_ok[0]
-
-    def run(self, rec: Recording) -> Recording:
-        """A recording through the stages, float64 from one stage to the next: the same
-        numbers as :class:`~texsense.pipeline.Pipeline` (tested)."""
-        quantity, unit = self.reads
-        if quantity and rec.quantity != quantity:
-            raise ParameterError(f"the chain reads {quantity}, not {rec.quantity}")
-        frames = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
-        out, ok = self._arrays(frames, rec.valid, rec.times)
-        q, u = self.gives
-        return rec._with(frames=out, valid=ok, quantity=q, unit=u)
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict[str, Any]:

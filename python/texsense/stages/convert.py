@@ -23,7 +23,34 @@ from texsense.stage import Stage
 __all__ = ["Convert", "Linear"]
 
 
-class Convert(Stage):
+class _Conversion(Stage):
+    """What the two conversions share: the compiled converter and the number of elements."""
+
+    gain_: np.ndarray
+    _kernel: Converter
+
+    @property
+    def n_elements(self) -> int:
+        """Number of elements of the mat."""
+        self._check_fitted()
+        return int(self.gain_.size)
+
+    def kernel(self) -> Converter:
+        """The compiled converter (``crates/core/src/convert.rs``)."""
+        self._check_fitted()
+        return self._kernel
+
+    def detector(self, layout: Layout) -> FailureDetector:
+        """The failure detector this calibration implies."""
+        raise NotImplementedError
+
+    def _block(
+        self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return self._kernel.run(values, valid), valid.copy()
+
+
+class Convert(_Conversion):
     """Capacitance -> compression per element (eq. 2.1): ``C_i = a_i + b_i C_ref(e)`` with the
     material curve ``C_ref(e)`` and per element an offset ``a_i`` and a gain ``b_i``
     (:mod:`texsense.calibration`).
@@ -81,12 +108,6 @@ class Convert(Stage):
         self.offset_pF_, self.gain_ = offset, gain
         self._kernel = Converter(offset, gain, Curve(c, e))
 
-    @property
-    def n_elements(self) -> int:
-        """Number of elements of the mat."""
-        self._check_fitted()
-        return int(self.gain_.size)
-
     def expected_range_pF(self) -> tuple[np.ndarray, np.ndarray]:
         """Per element: capacitance unloaded and at the end of the material curve."""
         self._check_fitted()
@@ -98,16 +119,6 @@ class Convert(Stage):
         every element."""
         lo, hi = self.expected_range_pF()
         return FailureDetector(layout).fit(lo, hi)
-
-    def kernel(self) -> Converter:
-        """The compiled converter."""
-        self._check_fitted()
-        return self._kernel
-
-    def _block(
-        self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        return self._kernel.run(values, valid), valid.copy()
 
     def _fitted_json(self) -> dict[str, Any]:
         return {
@@ -128,7 +139,7 @@ class Convert(Stage):
         }
 
 
-class Linear(Stage):
+class Linear(_Conversion):
     """A static calibration per element, ``value = (reading - offset_i) / gain_i``, and no
     spacer model.
 
@@ -201,12 +212,6 @@ class Linear(Stage):
         self.offset_, self.gain_ = offset, gain
         self._kernel = Converter(offset, gain)
 
-    @property
-    def n_elements(self) -> int:
-        """Number of elements of the mat."""
-        self._check_fitted()
-        return int(self.gain_.size)
-
     def detector(self, layout: Layout) -> FailureDetector:
         """The detector a linear calibration implies: only the tests that need no unloaded
         level (a 0 reading is an unloaded mat there, not a short), the jump test off, and
@@ -220,16 +225,6 @@ class Linear(Stage):
         return FailureDetector(
             layout, min_pF=-np.inf, high_share=1.0, jump_pF=np.inf, stuck_floor_pF=floor
         ).fit(None, top)
-
-    def kernel(self) -> Converter:
-        """The compiled converter (no curve)."""
-        self._check_fitted()
-        return self._kernel
-
-    def _block(
-        self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        return self._kernel.run(values, valid), valid.copy()
 
     def _fitted_json(self) -> dict[str, Any]:
         return {"offset": self.offset_.tolist(), "gain": self.gain_.tolist()}

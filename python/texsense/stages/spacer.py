@@ -57,18 +57,12 @@ class Hysteresis(Stage):
     def of(cls, model: HysteresisModel) -> Hysteresis:
         """The stage of a fitted model (its parameters the model's)."""
         model._check_fitted()
-        stage = cls(model.method, model.grid, model.cells, model.smoothing, model.folds)
+        stage = cls(**{name: getattr(model, name) for name in cls._param_names()})
         return stage.set_fitted(model=model)
 
     def fit(self, compression_mm: npt.ArrayLike, pressure_ncm2: npt.ArrayLike) -> Hysteresis:
         """Identify the Everett function from a test-machine record."""
-        model = HysteresisModel(
-            method=self.method,
-            grid=self.grid,
-            cells=self.cells,
-            smoothing=self.smoothing,
-            folds=self.folds,
-        )
+        model = HysteresisModel(**self.get_params())  # the stage's parameters are the model's
         return self.set_fitted(model=model.fit(compression_mm, pressure_ncm2))
 
     def _prepare(self) -> None:

@@ -87,7 +87,6 @@ def _die_with_parent() -> None:
     """In the child before exec (Linux): end with the parent, even one that is killed. (As
     root, Mosquitto drops to its own user at start, which clears this: a station killed with
     SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
-
     with contextlib.suppress(OSError):  # not Linux: the parent's stop() is the only way
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 

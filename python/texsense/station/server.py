@@ -100,7 +100,6 @@ def create_ward_app(
     @app.get("/api/mats/{mat_id}")
     async def mat(mat_id: str) -> dict[str, Any]:
         """One mat's summary with its latest pressure map (N/cm², null where unknown)."""
-
         return entry_of(mat_id).summary(time.time())
 
     @app.post("/api/mats/{mat_id}/alerts/{alert_id}/ack")

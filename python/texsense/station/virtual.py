@@ -99,7 +99,6 @@ class VirtualMats:
 
     async def run(self) -> None:
         """Publish until cancelled (paho reconnects by itself if the broker restarts)."""
-
         client = mqtt_client(self.broker, f"texsense-vmats-{id(self)}")
         client.loop_start()
         self._client = client

@@ -167,7 +167,6 @@ class MatEntry:
 
     def feed(self, frame: Frame, now: float) -> bool:
         """One frame (from MQTT or a local source); True when it was processed."""
-
         if frame.values.size != self.config.layout.n_elements:
             self.malformed += 1
             self.last_error = f"a frame of {frame.values.size} values"
@@ -338,7 +337,6 @@ class Station:
 
     def start(self) -> None:
         """Connect (in paho's network thread) from within the running event loop."""
-
         if self.broker is None:
             return
         self._loop = asyncio.get_running_loop()
