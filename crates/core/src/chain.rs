@@ -221,7 +221,7 @@ mod tests {
     use super::*;
     use crate::detect::DetectorParams;
     use crate::drift::{DriftBank, Kernel};
-    use crate::preisach::{Everett, PreisachBank};
+    use crate::preisach::PreisachBank;
     use crate::repair::Method;
     use crate::topology::Neighbours;
 
@@ -272,15 +272,7 @@ mod tests {
         }
 
         fn compensation(&self, drift: bool) -> Compensation {
-            let k = 21;
-            let mut table = vec![0.0; k * k];
-            for i in 0..k {
-                for j in 0..i {
-                    let d = (i - j) as f64 / 20.0;
-                    table[i * k + j] = 0.5 * d * d;
-                }
-            }
-            let e = Everett::new(k, 0.0, 2.4, table).unwrap();
+            let e = crate::everett::quadratic(21, 2.4);
             let p = PreisachBank::new(e, self.n(), 32)
                 .and_then(|p| p.with_output(0.1, 1.0))
                 .unwrap();

@@ -142,19 +142,10 @@ impl Compensation {
 mod tests {
     use super::*;
     use crate::drift::Kernel;
-    use crate::preisach::Everett;
 
     #[test]
     fn equals_the_stages_run_one_after_the_other() {
-        let k = 21;
-        let mut table = vec![0.0; k * k];
-        for i in 0..k {
-            for j in 0..i {
-                let d = (i - j) as f64 / 20.0;
-                table[i * k + j] = 0.5 * d * d;
-            }
-        }
-        let e = Everett::new(k, 0.0, 1.0, table).unwrap();
+        let e = crate::everett::quadratic(21, 1.0);
         let kernel = Kernel::new(vec![0.5, 0.5], vec![1.0, 100.0]).unwrap();
         let inputs: Vec<f64> = (0..40)
             .map(|t| 0.5 + 0.4 * (t as f64 * 0.7).sin())

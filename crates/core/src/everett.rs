@@ -208,3 +208,17 @@ pub fn everett_terms(inputs: &[f64], u_min: f64, u_max: f64) -> Result<EverettTe
     }
     Ok(out)
 }
+
+/// A test table: `F(α, β) = (α - β)² / 2` on a `k x k` grid over `[0, u_max]` (scaled so that
+/// `k = 21` over `[0, 1]` has steps of 1/20).
+#[cfg(test)]
+pub(crate) fn quadratic(k: usize, u_max: f64) -> Everett {
+    let mut table = vec![0.0; k * k];
+    for i in 0..k {
+        for j in 0..i {
+            let d = (i - j) as f64 / (k - 1) as f64;
+            table[i * k + j] = 0.5 * d * d;
+        }
+    }
+    Everett::new(k, 0.0, u_max, table).unwrap()
+}

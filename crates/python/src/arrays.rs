@@ -50,7 +50,7 @@ pub(crate) fn pairs(
 
 /// Check a batch of `values` (T, N) with a `valid` mask of the same shape (and, for stages
 /// that take time steps, `dt` of length T) against a bank of `n` elements; returns (T, N).
-pub(crate) fn batch_shape(
+fn batch_shape(
     what: &'static str,
     n: usize,
     values: &[usize],
@@ -73,6 +73,38 @@ pub(crate) fn batch_shape(
         }));
     }
     Ok((values[0], values[1]))
+}
+
+/// The slices of a batch checked against a bank of `n` elements: values (T, N), a valid mask
+/// of the same shape and, for stages that take time steps, `dt` (T,) (else empty).
+pub(crate) struct Batch<'a> {
+    pub(crate) t: usize,
+    pub(crate) n: usize,
+    pub(crate) dt: &'a [f64],
+    pub(crate) values: &'a [f64],
+    pub(crate) valid: &'a [bool],
+}
+
+impl<'a> Batch<'a> {
+    pub(crate) fn new(
+        what: &'static str,
+        n: usize,
+        dt: Option<&'a PyReadonlyArray1<'_, f64>>,
+        values: &'a PyReadonlyArray2<'_, f64>,
+        valid: &'a PyReadonlyArray2<'_, bool>,
+    ) -> PyResult<Self> {
+        let (t, n) = batch_shape(what, n, values.shape(), valid.shape(), dt.map(|d| d.len()))?;
+        Ok(Self {
+            t,
+            n,
+            dt: match dt {
+                Some(d) => d.as_slice()?,
+                None => &[],
+            },
+            values: values.as_slice()?,
+            valid: valid.as_slice()?,
+        })
+    }
 }
 
 /// Run a kernel that fills a (T, N) f64 output, with the GIL released, and return the array.

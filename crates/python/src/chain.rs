@@ -1,11 +1,11 @@
 //! `Chain`: the whole chain of a mat in one compiled pass, assembled from the kernels of its
 //! stages.
 
-use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::{Chain, CoreError, Response};
 
-use crate::arrays::{batch_shape, run_detached, to_2d};
+use crate::arrays::{run_detached, to_2d, Batch};
 use crate::compensation::PyCompensation;
 use crate::convert::{PyConverter, PyCurve};
 use crate::detect::PyFailureDetector;
@@ -77,17 +77,12 @@ impl PyChain {
         readings: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u8>>)> {
-        let (t, n) = batch_shape(
-            "chain run",
-            self.inner.len(),
-            readings.shape(),
-            valid.shape(),
-            Some(dt.len()),
-        )?;
-        let (d, r, v) = (dt.as_slice()?, readings.as_slice()?, valid.as_slice()?);
-        let mut codes = vec![0u8; t * n];
+        let b = Batch::new("chain run", self.inner.len(), Some(&dt), &readings, &valid)?;
+        let mut codes = vec![0u8; b.t * b.n];
         let inner = &mut self.inner;
-        let out = run_detached(py, t, n, |out| inner.run(d, r, v, out, &mut codes))?;
-        Ok((out, to_2d(py, codes, t, n)?))
+        let out = run_detached(py, b.t, b.n, |out| {
+            inner.run(b.dt, b.values, b.valid, out, &mut codes)
+        })?;
+        Ok((out, to_2d(py, codes, b.t, b.n)?))
     }
 }

@@ -1,12 +1,10 @@
 //! `Compensation`: a Preisach bank followed by a drift bank, in one pass per frame.
 
-use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::Compensation;
 
-use crate::arrays::{batch_shape, run_detached};
+use crate::arrays::{run_detached, Batch};
 use crate::drift::PyDriftBank;
 use crate::errors::to_py;
 use crate::preisach::PyPreisachBank;
@@ -56,15 +54,14 @@ impl PyCompensation {
         inputs: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let (t, n) = batch_shape(
+        let b = Batch::new(
             "compensation run",
             self.inner.len(),
-            inputs.shape(),
-            valid.shape(),
-            Some(dt.len()),
+            Some(&dt),
+            &inputs,
+            &valid,
         )?;
-        let (d, u, v) = (dt.as_slice()?, inputs.as_slice()?, valid.as_slice()?);
         let inner = &mut self.inner;
-        run_detached(py, t, n, |out| inner.run(d, u, v, out))
+        run_detached(py, b.t, b.n, |out| inner.run(b.dt, b.values, b.valid, out))
     }
 }

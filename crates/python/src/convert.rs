@@ -2,12 +2,11 @@
 
 use numpy::{
     IntoPyArray, PyArray2, PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn,
-    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use texsense_core::{Converter, Curve};
 
-use crate::arrays::{batch_shape, run_detached};
+use crate::arrays::{run_detached, Batch};
 use crate::errors::to_py;
 
 /// A piecewise-linear curve y(x) over strictly increasing x, held at its ends (what
@@ -76,15 +75,8 @@ impl PyConverter {
         readings: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let (t, n) = batch_shape(
-            "readings",
-            self.inner.len(),
-            readings.shape(),
-            valid.shape(),
-            None,
-        )?;
-        let (r, v) = (readings.as_slice()?, valid.as_slice()?);
+        let b = Batch::new("readings", self.inner.len(), None, &readings, &valid)?;
         let inner = &self.inner;
-        run_detached(py, t, n, |out| inner.run(r, v, out))
+        run_detached(py, b.t, b.n, |out| inner.run(b.values, b.valid, out))
     }
 }

@@ -1,10 +1,10 @@
 //! `FailureDetector`: failure codes of raw capacitance readings (thesis §6.5.2.5).
 
-use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::detect::{Changes, DetectorParams, FailureDetector};
 
-use crate::arrays::{batch_shape, neighbours_from, to_2d};
+use crate::arrays::{neighbours_from, to_2d, Batch};
 use crate::errors::to_py;
 
 /// Failure detection on raw capacitance (thesis §6.5.2.5): codes 0 ok, 1 short/break,
@@ -79,14 +79,8 @@ impl PyFailureDetector {
         readings: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<u8>>> {
-        let (t, n) = batch_shape(
-            "readings",
-            self.inner.len(),
-            readings.shape(),
-            valid.shape(),
-            None,
-        )?;
-        let (r, v) = (readings.as_slice()?, valid.as_slice()?);
+        let b = Batch::new("readings", self.inner.len(), None, &readings, &valid)?;
+        let (t, n, r, v) = (b.t, b.n, b.values, b.valid);
         let mut codes = vec![0u8; t * n];
         let (inner, changes) = (&mut self.inner, &mut self.changes);
         py.detach(|| inner.run(r, v, &mut codes, changes))

@@ -1,10 +1,10 @@
 //! `DriftBank`: the recursive drift superposition (thesis eq. 5.4/5.8).
 
-use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::{DriftBank, Kernel};
 
-use crate::arrays::{batch_shape, run_detached};
+use crate::arrays::{run_detached, Batch};
 use crate::errors::to_py;
 
 /// Recursive drift superposition for N elements (thesis eq. 5.4/5.8).
@@ -54,15 +54,8 @@ impl PyDriftBank {
         h: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let (t, n) = batch_shape(
-            "drift run",
-            self.inner.len(),
-            h.shape(),
-            valid.shape(),
-            Some(dt.len()),
-        )?;
-        let (d, x, v) = (dt.as_slice()?, h.as_slice()?, valid.as_slice()?);
+        let b = Batch::new("drift run", self.inner.len(), Some(&dt), &h, &valid)?;
         let inner = &mut self.inner;
-        run_detached(py, t, n, |out| inner.run(d, x, v, out))
+        run_detached(py, b.t, b.n, |out| inner.run(b.dt, b.values, b.valid, out))
     }
 }

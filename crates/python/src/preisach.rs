@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use texsense_core::preisach::Schedule;
 use texsense_core::{everett_terms, CoreError, Everett, PreisachBank};
 
-use crate::arrays::{batch_shape, run_detached};
+use crate::arrays::{run_detached, Batch};
 use crate::errors::to_py;
 
 /// Preisach stacks of N elements over one Everett table (thesis eq. 4.15-4.22).
@@ -100,16 +100,11 @@ impl PyPreisachBank {
                 }))
             }
         };
-        let (t, n) = batch_shape(
-            "inputs",
-            self.inner.len(),
-            inputs.shape(),
-            valid.shape(),
-            None,
-        )?;
-        let (u, v) = (inputs.as_slice()?, valid.as_slice()?);
+        let b = Batch::new("inputs", self.inner.len(), None, &inputs, &valid)?;
         let inner = &mut self.inner;
-        run_detached(py, t, n, |out| inner.run_scheduled(u, v, out, schedule))
+        run_detached(py, b.t, b.n, |out| {
+            inner.run_scheduled(b.values, b.valid, out, schedule)
+        })
     }
 
     /// Bytes of state of the whole bank (elements and stacks moved to the heap).

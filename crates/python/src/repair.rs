@@ -1,12 +1,10 @@
 //! `LocalRepair`: the local repairs of failed readings (thesis §6.5.2.5, eq. 6.14).
 
-use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::{CoreError, LocalRepair, RepairMethod};
 
-use crate::arrays::{batch_shape, neighbours_from, to_2d};
+use crate::arrays::{neighbours_from, to_2d, Batch};
 use crate::errors::to_py;
 
 /// A local repair with its state (the last value of every element). `method`: "zero",
@@ -84,19 +82,12 @@ impl PyLocalRepair {
         values: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u8>>)> {
-        let (t, n) = batch_shape(
-            "values",
-            self.inner.len(),
-            values.shape(),
-            valid.shape(),
-            None,
-        )?;
-        let mut out = values.as_slice()?.to_vec();
-        let v = valid.as_slice()?;
+        let b = Batch::new("values", self.inner.len(), None, &values, &valid)?;
+        let mut out = b.values.to_vec();
         let mut outcome = vec![0u8; out.len()];
         let inner = &mut self.inner;
-        py.detach(|| inner.run(&mut out, |i| v[i], Some(&mut outcome)))
+        py.detach(|| inner.run(&mut out, |i| b.valid[i], Some(&mut outcome)))
             .map_err(to_py)?;
-        Ok((to_2d(py, out, t, n)?, to_2d(py, outcome, t, n)?))
+        Ok((to_2d(py, out, b.t, b.n)?, to_2d(py, outcome, b.t, b.n)?))
     }
 }
