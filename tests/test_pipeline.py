@@ -308,3 +308,25 @@ def test_reference_detector_median_equals_a_brute_force_median():
                 ]
             )
             np.testing.assert_allclose(det.neighbour_median(x), expected, rtol=0, atol=1e-15)
+
+
+def test_the_pipeline_follows_the_streaming_contract(mat_setup):
+    """step(values, valid, t) with t required, run, reset, parameters from the constructor."""
+    import inspect
+
+    cal, *_, scan = mat_setup
+    rec = scan.capacitance
+    pipe = Pipeline(cal, rec.layout, repair="idw8", drift=False)
+    params = pipe.get_params()
+    assert list(params) == ["chain", "layout", "detect", "hysteresis", "drift", "repair"]
+    assert params["repair"] == "idw8" and params["drift"] is False
+    step = inspect.signature(Pipeline.step).parameters
+    assert list(step)[1:] == ["values", "valid", "t"]
+    assert step["t"].default is inspect.Parameter.empty
+    batch = pipe.run(rec)
+    pipe.reset()
+    rows = [pipe.step(rec.frames[k], rec.valid[k], rec.times[k]) for k in range(rec.n_frames)]
+    np.testing.assert_array_equal(np.array([r[0] for r in rows], np.float32), batch.frames)
+    np.testing.assert_array_equal(np.array([r[1] for r in rows]), batch.valid)
+    with pytest.raises(ParameterError, match="must not decrease"):
+        pipe.step(rec.frames[0], None, rec.times[0])

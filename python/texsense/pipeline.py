@@ -24,6 +24,7 @@ batch and streaming: ``step`` is the same code with one frame.
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
@@ -84,15 +85,15 @@ class Pipeline:
         if isinstance(conversion, Convert) and "hysteresis" not in chain:
             raise ParameterError("the calibration has no spacer model (compression -> pressure)")
         self.chain = chain
-        self.calibration_id = chain.id
         self.layout = layout
+        self.detect, self.hysteresis, self.drift, self.repair = detect, hysteresis, drift, repair
+        self.calibration_id = chain.id
         linear = isinstance(conversion, Linear)
         self.stages = {
             "detect": detect,
             "hysteresis": hysteresis and not linear,
             "drift": drift and hysteresis and "drift" in chain,
         }
-        self.repair_method = repair
         self.detector: FailureDetector = chain.find(FailureDetector) or conversion.detector(layout)
         self._repair = None
         if repair is not None and repair in GLOBAL_METHODS:
@@ -102,6 +103,11 @@ class Pipeline:
         self._last_t: float | None = None
         #: the failure codes of the last frames (0: measured)
         self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
+
+    def get_params(self) -> dict[str, Any]:
+        """The constructor's arguments, by name (as every stage has them)."""
+        names = [p for p in inspect.signature(type(self).__init__).parameters if p != "self"]
+        return {name: getattr(self, name) for name in names}
 
     @property
     def input_quantity(self) -> tuple[str, str]:
@@ -125,7 +131,7 @@ class Pipeline:
                 response["compensation"] = Compensation(hyst.bank(n), bank)
             else:
                 response["loading"] = hyst.loading_curve()
-        method = self.repair_method
+        method = self.repair
         local = method is not None and method not in GLOBAL_METHODS
         return Chain(
             conversion.kernel(),
@@ -155,7 +161,7 @@ class Pipeline:
             "software": f"texsense {__version__}",
             "stages": [k for k, v in self.stages.items() if v]
             + [convert]
-            + ([f"repair:{self.repair_method}"] if self.repair_method else []),
+            + ([f"repair:{self.repair}"] if self.repair else []),
         }
 
     def process(
