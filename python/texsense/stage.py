@@ -260,6 +260,17 @@ class Stage(Stream):
             raise FormatError(path, f"holds the {content.get('stage')!r} stage, not {cls.name}")
         return cls.from_dict(content, path)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Parameters and learned state (pickle, deepcopy); the kernels and the stream are
+        rebuilt on the other side, which starts a new stream."""
+        return {k: v for k, v in vars(self).items() if not k.startswith("_")}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if self.is_fitted():
+            self._prepare()
+        self.reset()
+
     def __repr__(self) -> str:
         state = "fitted" if self.is_fitted() else "not fitted"
         params = ", ".join(

@@ -17,6 +17,7 @@ Examples
 from __future__ import annotations
 
 import inspect
+import pickle
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -127,8 +128,11 @@ def check_invalid_readings(stage: Stage, rec: Recording, element: int) -> None:
 
 
 def check_files(stage: Stage, rec: Recording) -> None:
-    """The stage saves and loads itself (the same content, the same numbers)."""
+    """The stage saves and loads itself, and pickles (the same content, the same numbers)."""
     first = stage.reset().run(rec)
+    copy = pickle.loads(pickle.dumps(stage))
+    assert copy.to_dict() == stage.to_dict(), "the unpickled stage's content differs"
+    _same(copy.run(rec).frames, first.frames, "the unpickled stage computes other numbers")
     with tempfile.TemporaryDirectory() as folder:
         path = stage.save(Path(folder) / f"{stage.name}.json")
         loaded = type(stage).load(path)
