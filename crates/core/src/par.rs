@@ -177,21 +177,6 @@ where
     });
 }
 
-/// `work(block)` for every block, on the thread pool when `par`, results in block order
-/// (for passes that read a shared output and collect what to change in it).
-pub fn map_blocks<B, R, F>(blocks: Vec<B>, par: bool, work: F) -> Vec<R>
-where
-    B: Send,
-    R: Send,
-    F: Fn((usize, B)) -> R + Sync + Send,
-{
-    if par {
-        blocks.into_par_iter().enumerate().map(work).collect()
-    } else {
-        blocks.into_iter().enumerate().map(work).collect()
-    }
-}
-
 /// `work((b, chunk))` for every chunk of `size` items (chunk `b` starts at item `b * size`),
 /// on the thread pool when `par`, else one after the other on this thread.
 pub fn each_chunk<T, F>(items: &mut [T], size: usize, par: bool, work: F)

@@ -13,12 +13,10 @@
 //! not contribute. Where no neighbour is available the element's last value is held; an
 //! element that has never had a value stays NaN (*missing*).
 //!
-//! A batch runs over blocks of elements in parallel: each block reads the available values
-//! of the frame (which no block changes) and collects its fills, which are written after the
-//! pass (failed readings are few).
+//! A batch runs frame after frame over all elements, in place: a fill reads only available
+//! readings of its own frame, and a filled reading is not available, so no fill sees another.
 
 use crate::error::{check_len, frames_of, CoreError};
-use crate::par::{block_size, map_blocks, parallel};
 use crate::topology::Neighbours;
 
 /// What happened to one reading.
@@ -108,14 +106,18 @@ impl LocalRepair {
     /// Repair a batch (T x N, row-major) in place: a reading is available when `ok(index)`
     /// and it is a number; the others are filled. `outcome` (T x N), when given, gets a
     /// [`RepairOutcome`] per reading.
+    ///
+    /// Frame after frame over all elements (a fill reads the available neighbours of its own
+    /// frame, and a filled reading is not available, so filling in place changes no other
+    /// fill).
     pub fn run<F>(
         &mut self,
         values: &mut [f64],
         ok: F,
-        outcome: Option<&mut [u8]>,
+        mut outcome: Option<&mut [u8]>,
     ) -> Result<(), CoreError>
     where
-        F: Fn(usize) -> bool + Sync,
+        F: Fn(usize) -> bool,
     {
         let n = self.len();
         if n == 0 {
@@ -125,69 +127,56 @@ impl LocalRepair {
         if let Some(o) = &outcome {
             check_len("outcome", o.len(), values.len())?;
         }
-        let size = block_size(n);
-        let method = &self.method;
-        let shared = &*values;
-        let available = |idx: usize| ok(idx) && shared[idx].is_finite();
-        let fills = map_blocks(
-            self.last.chunks_mut(size).collect(),
-            parallel(t, n),
-            |(b, last): (usize, &mut [f64])| {
-                let start = b * size;
-                let mut fills = Vec::new();
-                for r in 0..t {
-                    let row = r * n;
-                    for (li, el) in last.iter_mut().enumerate() {
-                        let idx = row + start + li;
-                        if available(idx) {
-                            *el = shared[idx];
-                            continue;
-                        }
-                        let (v, how) = fill(method, start + li, row, *el, &available, shared);
-                        if v.is_finite() {
-                            *el = v;
-                        }
-                        fills.push((idx, v, how));
+        // which readings of the frame are available, before any of them is filled
+        let mut avail = vec![false; n];
+        for r in 0..t {
+            let row = r * n;
+            for (i, a) in avail.iter_mut().enumerate() {
+                *a = ok(row + i) && values[row + i].is_finite();
+            }
+            for (i, last) in self.last.iter_mut().enumerate() {
+                let idx = row + i;
+                let v = values[idx];
+                let (v, how) = if avail[i] {
+                    *last = v;
+                    (v, RepairOutcome::Measured)
+                } else {
+                    let (v, how) = fill(&self.method, i, &values[row..row + n], *last, &avail);
+                    if v.is_finite() {
+                        *last = v;
                     }
+                    (v, how)
+                };
+                values[idx] = v;
+                if let Some(o) = outcome.as_deref_mut() {
+                    o[idx] = how as u8;
                 }
-                fills
-            },
-        );
-        let mut outcome = outcome;
-        if let Some(o) = outcome.as_deref_mut() {
-            o.fill(RepairOutcome::Measured as u8);
-        }
-        for (idx, v, how) in fills.into_iter().flatten() {
-            values[idx] = v;
-            if let Some(o) = outcome.as_deref_mut() {
-                o[idx] = how as u8;
             }
         }
         Ok(())
     }
 }
 
-/// The fill of element `i` in the frame starting at `row`, with its last value `last`.
+/// The fill of element `i` of a frame (`frame`, with `avail` the readings that are available),
+/// with its last value `last`: the method's value from the available readings, else the last
+/// value.
 #[inline]
 fn fill(
     method: &Method,
     i: usize,
-    row: usize,
+    frame: &[f64],
     last: f64,
-    available: &impl Fn(usize) -> bool,
-    values: &[f64],
+    avail: &[bool],
 ) -> (f64, RepairOutcome) {
+    let available = |j: u32| avail[j as usize].then(|| frame[j as usize]);
     let mean = match method {
         Method::Zero => Some(0.0),
         Method::LastValue => None,
         Method::NeighbourMean(nb) => {
             let (mut sum, mut count) = (0.0, 0u32);
-            for &j in nb.of(i) {
-                let idx = row + j as usize;
-                if available(idx) {
-                    sum += values[idx];
-                    count += 1;
-                }
+            for v in nb.of(i).iter().filter_map(|&j| available(j)) {
+                sum += v;
+                count += 1;
             }
             (count > 0).then(|| sum / f64::from(count))
         }
@@ -195,9 +184,8 @@ fn fill(
             let (mut num, mut den) = (0.0, 0.0);
             let lo = nb.start(i);
             for (q, &j) in nb.of(i).iter().enumerate() {
-                let idx = row + j as usize;
-                if available(idx) {
-                    num += w[lo + q] * values[idx];
+                if let Some(v) = available(j) {
+                    num += w[lo + q] * v;
                     den += w[lo + q];
                 }
             }
@@ -323,7 +311,7 @@ mod tests {
     }
 
     #[test]
-    fn a_large_batch_in_parallel_blocks_equals_frame_after_frame() {
+    fn a_large_batch_equals_frame_after_frame() {
         let (rows, cols, t) = (64, 64, 12);
         let n = rows * cols;
         let vals: Vec<f64> = (0..n * t)
