@@ -101,6 +101,8 @@ class Pipeline:
         self._chain = self._compile(conversion)
         self._chain.reset()  # the kernels' copies start a stream of their own
         self._last_t: float | None = None
+        self._dt1 = np.zeros(1)
+        self._all_valid = np.ones(layout.n_elements, bool)
         #: the failure codes of the last frames (0: measured)
         self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
 
@@ -184,9 +186,15 @@ class Pipeline:
         )
         if cap.shape[0] == 0:
             return np.empty(cap.shape), np.zeros(cap.shape, bool), np.zeros(cap.shape, np.uint8)
-        dt = time_steps(t, self._last_t)
-        values, codes = self._chain.run(dt, cap, v)
-        self._last_t = float(t[-1])
+        return self._pass(time_steps(t, self._last_t), cap, v, float(t[-1]))
+
+    def _pass(
+        self, dt: np.ndarray, cap: np.ndarray, valid: np.ndarray, last_t: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The compiled chain (and a harmonic repair) over checked arrays: what ``process``
+        and ``step`` share."""
+        values, codes = self._chain.run(dt, cap, valid)
+        self._last_t = last_t
         ok = codes == 0
         if self._repair is not None:
             values, _ = self._repair._block(values, ok & np.isfinite(values), dt)
@@ -200,14 +208,19 @@ class Pipeline:
         values (N,) and the mask of measured (not repaired) elements; the failure codes in
         ``codes_``."""
         n = self.layout.n_elements
-        x = np.asarray(values, dtype=np.float64)
+        x = np.ascontiguousarray(values, dtype=np.float64)
         if x.shape != (n,):
             raise ParameterError(f"expected a frame of {n} elements, got shape {x.shape}")
-        v = None if valid is None else np.asarray(valid, dtype=bool)
-        if v is not None and v.shape != (n,):
+        v = self._all_valid if valid is None else np.ascontiguousarray(valid, dtype=bool)
+        if v.shape != (n,):
             raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
-        # the same compiled chain as a batch, with one frame
-        out, ok, codes = self.process(x.reshape(1, n), [float(t)], v)
+        t = float(t)
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        if not (dt >= 0 and np.isfinite(t)):
+            raise ParameterError("frame times must be numbers and must not decrease")
+        self._dt1[0] = dt
+        # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
+        out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
         self.codes_ = codes[0]
         return out[0], ok[0]
 

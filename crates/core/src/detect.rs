@@ -175,9 +175,10 @@ impl FailureDetector {
             let start = o.start();
             for r in 0..t {
                 let row = r * n + start;
+                let out = o.row(r);
                 for (li, el) in block.iter_mut().enumerate() {
                     let c = readings[row + li];
-                    o.set(r, li, (c - el.last).abs());
+                    out[li] = (c - el.last).abs();
                     if c.is_finite() {
                         el.last = c;
                     }
@@ -216,6 +217,7 @@ impl FailureDetector {
             let mut few = [0.0; 8];
             for r in 0..t {
                 let row = r * n;
+                let out = o.row(r);
                 for (li, el) in block.iter_mut().enumerate() {
                     let i = start + li;
                     let nbs = this.neighbours.of(i);
@@ -264,7 +266,7 @@ impl FailureDetector {
                     if low {
                         k = code::SHORT_OR_BREAK;
                     }
-                    o.set(r, li, k);
+                    out[li] = k;
                 }
             }
         });

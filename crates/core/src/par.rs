@@ -83,17 +83,21 @@ impl<T: Copy> BlockOut<'_, T> {
         self.frames
     }
 
-    /// Write `v` for frame `r` and element `start + li`.
+    /// The block's columns of frame `r` (`width` values, element `start + li` at `li`).
     ///
     /// # Panics
-    /// When `r` or `li` lies outside the block (never, for the loops of this crate).
+    /// When `r` is not a frame of the output.
     #[inline]
-    pub fn set(&mut self, r: usize, li: usize, v: T) {
-        assert!(r < self.frames && li < self.width, "outside the block");
-        // SAFETY: r < frames and li < width put the index inside the output and inside this
-        // block's columns, which no other block writes (for_blocks gives each block its own
-        // columns); the output stays borrowed by for_blocks until every block is done.
-        unsafe { self.cols.ptr.add(r * self.n + self.start + li).write(v) }
+    pub fn row(&mut self, r: usize) -> &mut [T] {
+        assert!(r < self.frames, "frame {r} of {}", self.frames);
+        // SAFETY: r < frames puts the `width` values from r * n + start inside the output
+        // (start + width <= n), and they are this block's columns, which no other block
+        // reads or writes (for_blocks gives each block its own columns); the slice borrows
+        // `self`, so a block holds one row at a time; the output stays borrowed by
+        // for_blocks until every block is done.
+        unsafe {
+            std::slice::from_raw_parts_mut(self.cols.ptr.add(r * self.n + self.start), self.width)
+        }
     }
 }
 
@@ -166,12 +170,11 @@ where
         for (r, &d) in dt.iter().enumerate() {
             block.frame(d);
             let row = r * n + start;
-            for li in 0..o.width() {
-                let v = match input(row + li, start + li) {
+            for (li, slot) in o.row(r).iter_mut().enumerate() {
+                *slot = match input(row + li, start + li) {
                     Some(x) => block.step(li, d, x, true),
                     None => block.step(li, d, f64::NAN, false),
                 };
-                o.set(r, li, v);
             }
         }
     });

@@ -492,8 +492,8 @@ impl PreisachBank {
             let start = o.start();
             for r in 0..t {
                 let row = r * n + start;
-                for li in 0..o.width() {
-                    o.set(r, li, block.step(li, inputs[row + li], valid[row + li]));
+                for (li, slot) in o.row(r).iter_mut().enumerate() {
+                    *slot = block.step(li, inputs[row + li], valid[row + li]);
                 }
             }
         });
