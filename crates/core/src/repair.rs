@@ -13,8 +13,9 @@
 //! not contribute. Where no neighbour is available the element's last value is held; an
 //! element that has never had a value stays NaN (*missing*).
 //!
-//! A batch runs frame after frame over all elements, in place: a fill reads only available
-//! readings of its own frame, and a filled reading is not available, so no fill sees another.
+//! A batch runs frame after frame over all elements, in place: the fills of a frame are
+//! computed from its readings as they came in and written after them, so no fill sees
+//! another.
 
 use crate::error::{check_len, frames_of, CoreError};
 use crate::topology::Neighbours;
@@ -107,9 +108,8 @@ impl LocalRepair {
     /// and it is a number; the others are filled. `outcome` (T x N), when given, gets a
     /// [`RepairOutcome`] per reading.
     ///
-    /// Frame after frame over all elements (a fill reads the available neighbours of its own
-    /// frame, and a filled reading is not available, so filling in place changes no other
-    /// fill).
+    /// Frame after frame over all elements; the fills of a frame are written once all of them
+    /// are known, so a fill reads only the readings as they came in.
     pub fn run<F>(
         &mut self,
         values: &mut [f64],
@@ -124,32 +124,35 @@ impl LocalRepair {
             return Ok(());
         }
         let t = frames_of("values", values.len(), n)?;
-        if let Some(o) = &outcome {
+        if let Some(o) = outcome.as_deref_mut() {
             check_len("outcome", o.len(), values.len())?;
+            o.fill(RepairOutcome::Measured as u8);
         }
-        // which readings of the frame are available, before any of them is filled
-        let mut avail = vec![false; n];
+        let mut fills: Vec<(usize, f64, RepairOutcome)> = Vec::new();
         for r in 0..t {
             let row = r * n;
-            for (i, a) in avail.iter_mut().enumerate() {
-                *a = ok(row + i) && values[row + i].is_finite();
-            }
+            let frame = &values[row..row + n];
+            let available = |j: usize| {
+                let v = frame[j];
+                (ok(row + j) && v.is_finite()).then_some(v)
+            };
+            // the fills of the frame, from its readings as they came in
+            fills.clear();
             for (i, last) in self.last.iter_mut().enumerate() {
-                let idx = row + i;
-                let v = values[idx];
-                let (v, how) = if avail[i] {
+                if let Some(v) = available(i) {
                     *last = v;
-                    (v, RepairOutcome::Measured)
-                } else {
-                    let (v, how) = fill(&self.method, i, &values[row..row + n], *last, &avail);
-                    if v.is_finite() {
-                        *last = v;
-                    }
-                    (v, how)
-                };
-                values[idx] = v;
+                    continue;
+                }
+                let (v, how) = fill(&self.method, i, *last, &available);
+                if v.is_finite() {
+                    *last = v;
+                }
+                fills.push((i, v, how));
+            }
+            for &(i, v, how) in &fills {
+                values[row + i] = v;
                 if let Some(o) = outcome.as_deref_mut() {
-                    o[idx] = how as u8;
+                    o[row + i] = how as u8;
                 }
             }
         }
@@ -157,24 +160,21 @@ impl LocalRepair {
     }
 }
 
-/// The fill of element `i` of a frame (`frame`, with `avail` the readings that are available),
-/// with its last value `last`: the method's value from the available readings, else the last
-/// value.
+/// The fill of element `i` of a frame, with its last value `last`: the method's value from the
+/// readings of the frame that are `available` (their value, or None), else the last value.
 #[inline]
 fn fill(
     method: &Method,
     i: usize,
-    frame: &[f64],
     last: f64,
-    avail: &[bool],
+    available: &impl Fn(usize) -> Option<f64>,
 ) -> (f64, RepairOutcome) {
-    let available = |j: u32| avail[j as usize].then(|| frame[j as usize]);
     let mean = match method {
         Method::Zero => Some(0.0),
         Method::LastValue => None,
         Method::NeighbourMean(nb) => {
             let (mut sum, mut count) = (0.0, 0u32);
-            for v in nb.of(i).iter().filter_map(|&j| available(j)) {
+            for v in nb.of(i).iter().filter_map(|&j| available(j as usize)) {
                 sum += v;
                 count += 1;
             }
@@ -184,7 +184,7 @@ fn fill(
             let (mut num, mut den) = (0.0, 0.0);
             let lo = nb.start(i);
             for (q, &j) in nb.of(i).iter().enumerate() {
-                if let Some(v) = available(j) {
+                if let Some(v) = available(j as usize) {
                     num += w[lo + q] * v;
                     den += w[lo + q];
                 }
