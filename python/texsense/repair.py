@@ -38,7 +38,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -141,8 +141,10 @@ class Repair(Stage):
             return out, valid.copy()
         out = np.empty_like(values)
         outcome = np.empty(values.shape, np.uint8)
-        rows = range(values.shape[0])
-        for k in progress(rows, total=len(rows), desc="repair", unit="frame"):
+        rows: Iterable[int] = range(values.shape[0])
+        if values.shape[0] > 100:  # a bar for long recordings, nothing per live frame
+            rows = progress(rows, total=values.shape[0], desc="repair", unit="frame")
+        for k in rows:
             out[k], outcome[k] = self._fill(values[k], valid[k])
         self.outcome_ = outcome
         return out, valid.copy()
