@@ -25,28 +25,24 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from texsense.calibration import MatCalibration
+from pipeline_speed import mat_chain
 from texsense.io.hdf5 import RecordingWriter
 from texsense.layout import Layout
+from texsense.stages import StageChain
 from texsense.workflows import seat_calibration
 
 PY = sys.executable
 
 
-def big_calibration(n: int, path: Path) -> MatCalibration:
+def big_calibration(n: int, path: Path) -> StageChain:
     """The seat's spacer model and material curve with per-element offsets and gains for a
     mat of n elements."""
-    seat = seat_calibration(mat_seed=5)
-    rng = np.random.default_rng(0)
-    cal = MatCalibration.from_parts(
-        seat.curve_compression_mm, seat.curve_capacitance_pF, rng.normal(0, 0.05, n),
-        rng.normal(1, 0.03, n), seat.model, 3.0,
-    )  # fmt: skip
+    cal = mat_chain(seat_calibration(mat_seed=5), n, np.random.default_rng(0))
     cal.save(path)
     return cal
 
 
-def write_recording(cal: MatCalibration, layout: Layout, frames: int, path: Path, seed: int):
+def write_recording(cal: StageChain, layout: Layout, frames: int, path: Path, seed: int):
     """A capacitance recording written block by block (moving loads, 2 % failed readings)."""
     rng = np.random.default_rng(seed)
     n = layout.n_elements
@@ -55,8 +51,9 @@ def write_recording(cal: MatCalibration, layout: Layout, frames: int, path: Path
             t = np.arange(a, min(frames, a + 2000)) * 0.1
             e = 1.2 + 0.8 * np.sin(t[:, None] / 3 + np.arange(n)[None, :] / 50)
             e += rng.normal(0, 0.01, e.shape)
-            ref = np.interp(e, cal.curve_compression_mm, cal.curve_capacitance_pF)
-            cap = cal.offset_pF + cal.gain * ref
+            conv = cal["convert"]
+            ref = np.interp(e, conv.curve_compression_mm_, conv.curve_capacitance_pF_)
+            cap = conv.offset_pF_ + conv.gain_ * ref
             cap[rng.random(cap.shape) < 0.02] = 0.0
             w.append(cap, t)
 
@@ -71,11 +68,11 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 
 WHOLE = """
 import resource, sys
-from texsense.calibration import load_calibration
 from texsense.io import load, save
 from texsense.pipeline import Pipeline
+from texsense.stages import load_chain
 rec = load(sys.argv[1])
-out = Pipeline(load_calibration(sys.argv[2]), rec.layout, repair="neighbour-mean").run(rec)
+out = Pipeline(load_chain(sys.argv[2]), rec.layout, repair="neighbour-mean").run(rec)
 save(out, sys.argv[3])
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """

@@ -16,7 +16,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense import Layout, Recording
-from texsense.repair import NeighbourMeanRepair
+from texsense.repair import Repair
 
 
 def numpy_repair(frames: np.ndarray, valid: np.ndarray, layout: Layout) -> np.ndarray:
@@ -49,10 +49,10 @@ def main() -> None:
         valid = rng.random(frames.shape) > 0.25
         rec = Recording(frames, np.arange(n_frames, dtype=float), lay, valid=valid)
         expected = numpy_repair(frames, valid, lay)
-        got = NeighbourMeanRepair(lay).run(rec).frames
+        got = Repair(lay, "neighbour-mean").fit().run(rec).frames
         np.testing.assert_allclose(got, expected, rtol=1e-6)  # same algorithm, same answer
         t_np, _ = best_of(numpy_repair, frames, valid, lay)
-        t_rs, _ = best_of(lambda r, lay=lay: NeighbourMeanRepair(lay).run(r), rec)
+        t_rs, _ = best_of(lambda r, lay=lay: Repair(lay, "neighbour-mean").fit().run(r), rec)
         n = frames.size / 1e6
         print(
             f"| {lay.n_elements} | {n_frames} | 25 % | {n / t_np:.1f} | {n / t_rs:.1f} "

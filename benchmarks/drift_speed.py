@@ -14,15 +14,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
+from texsense._core import Compensation
 from texsense.drift import DriftModel, drift_exact, log_kernel
 from texsense.hysteresis import HysteresisModel
 from texsense.sim.protocols import run_protocol
+from texsense.stage import time_steps
 
 
 def main() -> None:
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     model = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
-    model.with_drift(DriftModel(-0.025, log_kernel()))
+    drift = DriftModel(-0.025, log_kernel())
     rng = np.random.default_rng(0)
     n_t, n = 4 * 3600 * 10, 240
     t = np.arange(n_t) / 10.0
@@ -32,9 +34,10 @@ def main() -> None:
     )
 
     t_h, h = best_of(lambda: model.state(n).run(u))
-    t_d, separate = best_of(lambda: model.drift_.apply(h, t))
-    t_c, combined = best_of(lambda: model.predict(u, times_s=t))
-    np.testing.assert_allclose(combined, separate, rtol=1e-12, atol=1e-12)
+    t_d, separate = best_of(lambda: drift.apply(h, t))
+    ok, dt = np.ones(u.shape, bool), time_steps(t)
+    t_c, combined = best_of(lambda: Compensation(model.bank(n), drift.state(n)).run(dt, u, ok))
+    np.testing.assert_array_equal(combined, separate)
     print("| what | time (best of 3) |")
     print("|---|---:|")
     print(

@@ -93,14 +93,14 @@ def main(frames: int = 300, seed: int = 0) -> None:
             for _ in pick
         ]
         for method in METHODS:
-            rep = Repair(lay, method)
+            rep = Repair(lay, method).fit()
             rmse, le, pe, ce = [], [], [], []
             for k, bad in zip(pick, masks, strict=True):
                 truth = rec.frames[k].astype(np.float64)
                 rep.reset()
                 before = other[int(k)] if kind == "stale" else k - LAG
-                rep.step(rec.frames[before], np.ones(lay.n_elements, bool))
-                out, _ = rep.step(np.where(bad, 0.0, truth), ~bad)
+                rep.step(rec.frames[before], np.ones(lay.n_elements, bool), t=0.0)
+                out, _ = rep.step(np.where(bad, 0.0, truth), ~bad, t=float(LAG))
                 out = np.nan_to_num(out)
                 rmse.append(np.sqrt(np.mean((out - truth) ** 2)))
                 le.append(abs(out.sum() - truth.sum()) / truth.sum())
@@ -122,10 +122,10 @@ def main(frames: int = 300, seed: int = 0) -> None:
             )
     truth, bad, out = example
     # the same frame repaired with eq. 6.14, for the figure
-    nm = Repair(lay, "neighbour-mean")
+    nm = Repair(lay, "neighbour-mean").fit()
     k0 = int(pick[0])
-    nm.step(rec.frames[k0 - LAG], np.ones(lay.n_elements, bool))
-    out_nm = np.nan_to_num(nm.step(np.where(bad, 0.0, truth), ~bad)[0])
+    nm.step(rec.frames[k0 - LAG], np.ones(lay.n_elements, bool), t=0.0)
+    out_nm = np.nan_to_num(nm.step(np.where(bad, 0.0, truth), ~bad, t=float(LAG))[0])
     fig, axes = plt.subplots(1, 4, figsize=(11, 4.6), layout="constrained")
     vmax = float(np.percentile(truth, 99.5))
     panels = (

@@ -26,8 +26,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense import Layout, Recording
-from texsense.calibration import MatCalibration
 from texsense.pipeline import Pipeline
+from texsense.stages import Convert, StageChain
 from texsense.workflows import seat_calibration
 
 
@@ -45,22 +45,33 @@ def random_walk(model: object, frames: int, n: int, seed: int = 0) -> np.ndarray
     return lo + np.where(w > hi - lo, 2 * (hi - lo) - w, w)
 
 
-def mat_case(cal: MatCalibration, rows: int, cols: int, frames: int, seed: int = 1):
+def mat_chain(cal: StageChain, n: int, rng: np.random.Generator) -> StageChain:
+    """A mat of n elements with the seat's material curve and spacer stages and its own
+    offsets and gains (no detect stage: the pipeline's detector is the conversion's expected
+    range)."""
+    seat = cal["convert"]
+    convert = Convert(3.0).set_fitted(
+        curve_compression_mm=seat.curve_compression_mm_,
+        curve_capacitance_pF=seat.curve_capacitance_pF_,
+        offset_pF=rng.normal(0, 0.05, n),
+        gain=rng.normal(1, 0.03, n),
+    )
+    return StageChain([convert, *cal.without("detect", "convert").stages])
+
+
+def mat_case(cal: StageChain, rows: int, cols: int, frames: int, seed: int = 1):
+    """:func:`mat_chain` of rows x cols elements and a recording of it with 2 % of the
+    readings failed."""
     rng = np.random.default_rng(seed)
     n = rows * cols
     lay = Layout.grid(rows, cols, pitch_cm=1.0)
-    c = MatCalibration.from_parts(
-        cal.curve_compression_mm,
-        cal.curve_capacitance_pF,
-        rng.normal(0, 0.05, n),
-        rng.normal(1, 0.03, n),
-        cal.model,
-        3.0,
-    )
+    c = mat_chain(cal, n, rng)
+    convert = c["convert"]
     t = np.arange(frames) * 0.1
     e = 1.2 + 0.8 * np.sin(t[:, None] / 3 + np.arange(n)[None, :] / 50)
     e += rng.normal(0, 0.01, e.shape)
-    cap = c.offset_pF + c.gain * np.interp(e, c.curve_compression_mm, c.curve_capacitance_pF)
+    curve = np.interp(e, convert.curve_compression_mm_, convert.curve_capacitance_pF_)
+    cap = convert.offset_pF_ + convert.gain_ * curve
     valid = rng.random((frames, n)) > 0.02
     cap = np.where(valid, cap, 0.0)  # a failed reading reads ~0 pF (short/break)
     return c, lay, Recording(cap, t, lay, "capacitance", "pF")
@@ -76,14 +87,14 @@ def main() -> None:
     args = ap.parse_args()
     frames = 400 if args.quick else 4000
     cal = seat_calibration(mat_seed=5)
-    model = cal.model
+    model = cal["hysteresis"].model_
     walk = random_walk(model, frames, 4096)
     copy = copy_rate(walk.shape)
     print(f"copy rate of a ({frames}, 4096) float64 array: {copy / 1e6:.0f} M element-samples/s")
     print()
     print("| path | rate | share of the copy rate |")
     print("|---|---:|---:|")
-    bank = model.state(walk.shape[1])._bank  # the Rust PreisachBank behind predict
+    bank = model.bank(walk.shape[1])  # the Rust PreisachBank behind predict
     ok = np.ones(walk.shape, bool)
     for label, schedule in (
         ("one thread, frame after frame", "frames"),
@@ -111,7 +122,7 @@ def main() -> None:
     lat = np.empty(rec.n_frames)
     for k in range(rec.n_frames):
         s = time.perf_counter()
-        pipe.step(cap[k], float(rec.times[k]))
+        pipe.step(cap[k], None, float(rec.times[k]))
         lat[k] = time.perf_counter() - s
     lat = lat[100:]
     print("| `Pipeline.step`, 1024 elements, changing frames | median | p99 |")

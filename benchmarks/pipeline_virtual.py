@@ -16,34 +16,32 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from pipeline_speed import mat_case
 from texsense import Recording
-from texsense.calibration import MatCalibration
 from texsense.drift import DriftModel
 from texsense.pipeline import Pipeline
 from texsense.repair import Repair
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
+from texsense.stages import Drift, StageChain
 from texsense.workflows import seat_calibration
 
 
-def calibrate(seed: int = 5) -> MatCalibration:
+def calibrate(seed: int = 5) -> StageChain:
     """Zeroing + equilibration (1 N/cm²) of the seat, spacer model from a test-machine record
     of another specimen, drift γ from its steps."""
     return seat_calibration(mat_seed=seed)
 
 
-def cycling_drift(cal: MatCalibration, seed: int = 11) -> MatCalibration:
+def cycling_drift(cal: StageChain, seed: int = 11) -> StageChain:
     """The same calibration with γ fitted on one hour of the §4.5 validation cycles of the
     calibration specimen (DriftModel.fit_history): γ identified on cyclic load instead of
     held steps (docs/drift.md)."""
     rec = protocols.run_protocol("validation", "textile-3mm", seed=seed, sample_hz=10, cycles=240)
     keep = rec.times < 3600
     t = rec.times[keep]
-    h = cal.model.predict(rec.labels["compression_mm"][keep])
+    h = cal["hysteresis"].model_.predict(rec.labels["compression_mm"][keep])
     cyc, _ = DriftModel.fit_history(h, rec.labels["pressure_ncm2"][keep], t)
-    other = copy.deepcopy(cal)
-    other.model.with_drift(cyc)
-    return other
+    return StageChain([*copy.deepcopy(cal).without("drift").stages, Drift.of(cyc)])
 
 
 def sitting_session(mat: VirtualMat, minutes: float, seed: int = 0) -> np.ndarray:
@@ -94,7 +92,7 @@ def accuracy(minutes: float = 30.0) -> None:
          dict(hysteresis=False, drift=False, repair=None)),
         ("+ hysteresis (Preisach)", dict(drift=False, repair=None)),
         ("+ drift (eq. 5.8, γ from steps)", dict(repair=None)),
-        (f"+ drift (eq. 5.8, γ {cal_cyc.model.drift_.gamma:.4f} from 1 h of cycling)",
+        (f"+ drift (eq. 5.8, γ {cal_cyc['drift'].model_.gamma:.4f} from 1 h of cycling)",
          dict(repair=None, calibration=cal_cyc)),
         ("+ hysteresis + repair, eq. 6.14 neighbour mean",
          dict(drift=False, repair="neighbour-mean")),
@@ -146,24 +144,27 @@ def speed() -> None:
         c, lay, rec = mat_case(cal, rows, cols, frames)  # the cases of pipeline_speed.py
         t = rec.times
         valid = rec.frames > 0
+        conv = c["convert"]
         e = np.interp(
-            (rec.frames - c.offset_pF) / c.gain, c.curve_capacitance_pF, c.curve_compression_mm
+            (rec.frames - conv.offset_pF_) / conv.gain_,
+            conv.curve_capacitance_pF_,
+            conv.curve_compression_mm_,
         )
         cap = rec.frames
         pipe = Pipeline(c, lay, repair="neighbour-mean")
         batch = best_of(lambda: pipe.reset().run(rec))[0]  # noqa: B023
         pipe.reset()
-        step = best_of(lambda: pipe.step(cap[5], 0.5), repeat=20)[0]  # noqa: B023
-        rep = Repair(lay, "neighbour-mean")
+        step = best_of(lambda: pipe.step(cap[5], None, 0.5), repeat=20)[0]  # noqa: B023
+        rep = Repair(lay, "neighbour-mean").fit()
         pres = Recording(np.where(valid, e, np.nan), t, lay, "pressure", "N/cm2", valid=valid)
         rep_t = best_of(lambda: rep.reset().run(pres))[0]  # noqa: B023
-        harm = Repair(lay, "harmonic")
+        harm = Repair(lay, "harmonic").fit()
         k = int(np.argmax((~valid).sum(axis=1) >= 2))  # a frame with failures to fill
-        hk = best_of(lambda: harm.step(np.where(valid[k], e[k], 0), valid[k]), repeat=5)[0]  # noqa: B023
+        hk = best_of(lambda: harm.step(np.where(valid[k], e[k], 0), valid[k], 0.0), repeat=5)[0]  # noqa: B023
 
         def fresh(harm: Repair = harm) -> None:
-            harm._cache.clear()  # a new failure pattern: factorise again
-            harm.step(np.where(valid[k], e[k], 0), valid[k])  # noqa: B023
+            harm._harmonic._cache.clear()  # a new failure pattern: factorise again
+            harm.step(np.where(valid[k], e[k], 0), valid[k], 0.0)  # noqa: B023
 
         hf = best_of(fresh, repeat=3)[0]
         print(

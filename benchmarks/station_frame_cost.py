@@ -36,8 +36,9 @@ def payloads(cal, n: int, frames: int) -> list[bytes]:
     out = []
     for k in range(frames):
         x = 1.0 + 0.8 * np.sin(k / 3 + np.arange(n) / 50) + rng.normal(0, 0.01, n)
-        cap = cal.offset_pF + cal.gain * np.interp(
-            x, cal.curve_compression_mm, cal.curve_capacitance_pF
+        conv = cal["convert"]
+        cap = conv.offset_pF_ + conv.gain_ * np.interp(
+            x, conv.curve_compression_mm_, conv.curve_capacitance_pF_
         )
         values = [round(float(v), 5) for v in cap]
         out.append(json.dumps({"seq": k, "t": float(k), "values": values, "unit": "pF"}).encode())

@@ -233,8 +233,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d, Broker() as broker:
         tmp = Path(d)
         cal = big_calibration(1024, tmp / "cal.json")
-        np.savez(tmp / "cal.npz", offset=cal.offset_pF, gain=cal.gain,
-                 curve_e=cal.curve_compression_mm, curve_c=cal.curve_capacitance_pF)  # fmt: skip
+        c = cal["convert"]
+        np.savez(tmp / "cal.npz", offset=c.offset_pF_, gain=c.gain_,
+                 curve_e=c.curve_compression_mm_, curve_c=c.curve_capacitance_pF_)  # fmt: skip
         if viewers == [0]:
             print("| mats (1024 elements) | rate | frames published | processed | lost | "
                   "frame-to-viewer p50 | p99 | holds (p99 < 100 ms, none lost) |")  # fmt: skip

@@ -48,7 +48,7 @@ def main() -> None:
         step, chain = [], []
         for k in range(rec.n_frames):
             t0 = time.perf_counter()
-            pipe.step(cap[k], float(rec.times[k]))
+            pipe.step(cap[k], None, float(rec.times[k]))
             step.append(time.perf_counter() - t0)
         pipe.reset()
         for k in range(rec.n_frames):

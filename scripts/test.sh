@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Every test and check: lint and format (Python and Rust), clippy, Rust unit tests, pytest.
+# Every test and check: lint and format (Python and Rust), types (mypy on the package, stubtest
+# on the binding's stubs), clippy, Rust unit tests, pytest.
 source "$(dirname "${BASH_SOURCE[0]}")/_bootstrap.sh"
 export TEXSENSE_NO_PROGRESS=1
 say "ruff check";            ruff check python tests benchmarks examples
 say "ruff format --check";   ruff format --check python tests benchmarks examples
+say "mypy";                  mypy
+say "stubtest";              MYPYPATH=python python -m mypy.stubtest texsense._core
 say "cargo fmt --check";     cargo fmt --all --check
 say "cargo clippy";          cargo clippy --quiet --all-targets -- -D warnings
 say "cargo test";            cargo test --quiet -p texsense-core

@@ -11,6 +11,9 @@ import pytest
 from texsense import Recording
 
 ROOT = Path(__file__).resolve().parents[1]
+
+#: the script that made the model fixtures runs on the code of its time only (its docstring)
+collect_ignore = ["fixtures/models/make_fixtures.py"]
 SHARED_DATA = Path(os.environ.get("TEXSENSE_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
 

@@ -1,9 +1,10 @@
-"""The pipeline as it was before it moved into one compiled pass (commit 99671fd), kept as
-the oracle of the equality tests: a numpy failure detector (neighbour median from a padded
-table), `MatCalibration.to_compression`, the Rust `Compensation` kernel and `Repair` per frame.
+"""The pipeline as it was before it moved into one compiled pass (commit 99671fd), kept in
+the tests only, as the oracle of the equality tests: a numpy failure detector (neighbour
+median from a padded table), the conversion by ``np.interp``, the Rust ``Compensation`` kernel,
+the local repairs in numpy and the harmonic ones by the repair stage, frame by frame.
 
 One deliberate difference: eq. 6.14 is evaluated here in float64 (numpy), where the old path
-went through the float32 repair kernel and rounded every value of the frame to float32 on the
+went through a float32 repair kernel and rounded every value of the frame to float32 on the
 way; the compiled chain computes in float64, and a 1e-9 comparison needs an oracle that does
 too.
 """
@@ -12,9 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from texsense.calibration import MatCalibration
+from texsense._core import Compensation
 from texsense.layout import Layout
-from texsense.repair import Repair
+from texsense.repair import Repair, idw_weights
+from texsense.stages import StageChain
 
 
 class ReferenceDetector:
@@ -94,7 +96,7 @@ class ReferencePipeline:
 
     def __init__(
         self,
-        cal: MatCalibration,
+        chain: StageChain,
         layout: Layout,
         *,
         detect: bool = True,
@@ -102,28 +104,44 @@ class ReferencePipeline:
         drift: bool = True,
         repair: str | None = "harmonic",
     ) -> None:
-        model = cal.model
-        self.cal, self.layout, self.detect = cal, layout, detect
-        lo, hi = cal.expected_range_pF()
-        self.detector = ReferenceDetector(layout, lo, hi)
+        conv = chain["convert"]
+        model = chain["hysteresis"].model_
+        self.layout, self.detect = layout, detect
+        self.curve = (conv.curve_capacitance_pF_, conv.curve_compression_mm_)
+        self.offset, self.gain = conv.offset_pF_, conv.gain_
+        self.detector = ReferenceDetector(layout, *conv.expected_range_pF())
         self.repair = repair
-        self._repair = Repair(layout, repair) if repair not in (None, "neighbour-mean") else None
-        self._last_nm = np.full(layout.n_elements, np.nan)
-        drift = drift and getattr(model, "drift_", None) is not None
-        self._stage = model.compensation(layout.n_elements, drift=drift) if hysteresis else None
+        global_repair = repair in ("harmonic", "harmonic-temporal")
+        self._repair = Repair(layout, repair).fit() if global_repair else None
+        self._weights = idw_weights(layout) if repair == "idw8" else None
+        self._last = np.full(layout.n_elements, np.nan)
+        n = layout.n_elements
+        d = chain["drift"].model_.state(n) if drift and "drift" in chain else None
+        self._stage = Compensation(model.bank(n), d) if hysteresis else None
         e = np.linspace(model.u_min_, model.u_max_, 400)
         self._loading = (e, np.maximum.accumulate(model.predict(e)))
         self._last_t = None
 
-    def _neighbour_mean(self, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
-        """Eq. 6.14 in float64: mean of the measured 4-neighbours, else the last value."""
-        indptr, indices = self.layout.neighbours
+    def _local(self, x: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """The local repairs in float64 numpy: eq. 6.14 (the mean of the measured
+        4-neighbours), idw8, zero, last value; else the last value."""
         out = np.where(ok, x, np.nan)
-        for i in np.flatnonzero(~ok):
-            nb = indices[indptr[i] : indptr[i + 1]]
-            nb = nb[ok[nb]]
-            out[i] = x[nb].mean() if nb.size else self._last_nm[i]
-        self._last_nm = np.where(np.isfinite(out), out, self._last_nm)
+        if self.repair == "neighbour-mean":
+            indptr, indices = self.layout.neighbours
+            for i in np.flatnonzero(~ok):
+                nb = indices[indptr[i] : indptr[i + 1]]
+                nb = nb[ok[nb]]
+                out[i] = x[nb].mean() if nb.size else np.nan
+        elif self.repair == "idw8":
+            num = self._weights @ np.where(ok, x, 0.0)
+            den = self._weights @ ok.astype(np.float64)
+            have = ~ok & (den > 0)
+            out[have] = num[have] / den[have]
+        elif self.repair == "zero":
+            out[~ok] = 0.0
+        left = ~ok & ~np.isfinite(out)
+        out[left] = self._last[left]
+        self._last = np.where(np.isfinite(out), out, self._last)
         return out
 
     def run(self, cap: np.ndarray, valid: np.ndarray, times: np.ndarray):
@@ -133,7 +151,7 @@ class ReferencePipeline:
         else:
             codes = np.where(valid & np.isfinite(cap), 0, 2).astype(np.uint8)
         ok = codes == 0
-        comp = self.cal.to_compression(cap)
+        comp = np.interp((cap - self.offset) / self.gain, *self.curve)
         if self._stage is not None:
             t0 = times[0] if self._last_t is None else self._last_t
             dt = np.diff(times, prepend=t0)
@@ -145,8 +163,8 @@ class ReferencePipeline:
             pressure = np.where(ok, np.interp(comp, e, p), np.nan)
         self._last_t = float(times[-1])
         for k in range(n_t):
-            if self.repair == "neighbour-mean":
-                pressure[k] = self._neighbour_mean(pressure[k], ok[k])
-            elif self._repair is not None:
-                pressure[k], _ = self._repair.step(pressure[k], ok[k])
+            if self._repair is not None:
+                pressure[k], _ = self._repair.step(pressure[k], ok[k], float(times[k]))
+            elif self.repair is not None:
+                pressure[k] = self._local(pressure[k], ok[k])
         return pressure, ok, codes

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from texsense.archive import ProcessOptions, archive_jobs, process_archive, process_file
-from texsense.calibration import LinearCalibration
 from texsense.cli import main
 from texsense.io import load, save
 from texsense.pipeline import Pipeline
 from texsense.sim.seated import Subject, simulate_session
+from texsense.stages import Linear, StageChain
 from texsense.workflows import seat_calibration
 
 PMD = "pmd/experiment-i"
@@ -61,7 +61,7 @@ def test_a_second_run_skips_what_is_done_and_redoes_what_changed(sessions, tmp_p
     assert process_file(src, cal, dst).status == "skipped"
     assert dst.stat().st_mtime_ns == stamp
     # another calibration: redone
-    other = LinearCalibration.identity(96, "capacitance", "pF")
+    other = StageChain([Linear("capacitance", "pF").fit(np.zeros(96), np.ones(96))])
     assert process_file(src, other, dst).status == "done"
     assert load(dst).meta["calibration_id"] == other.id
     # another input: redone
@@ -154,7 +154,7 @@ def test_cli_single_file_and_errors(sessions, tmp_path, capsys):
                  str(root / "calibration.json"), "-o", str(tmp_path / "o")]) == 1  # fmt: skip
     assert "no recordings found" in capsys.readouterr().err
     assert main(["process", str(src), "--calibration", str(src), "-o", str(tmp_path / "z.h5")]) == 1
-    assert "not JSON" in capsys.readouterr().err
+    assert "a binary file, expected a JSON model file" in capsys.readouterr().err
 
 
 def test_cli_seat_sessions_write_capacitance_and_the_chain(tmp_path, capsys):

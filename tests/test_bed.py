@@ -227,7 +227,7 @@ def small_bed_model():
 
 def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_model):
     from texsense.monitor import Monitor
-    from texsense.monitor.sources import VirtualBedSource
+    from texsense.monitor.virtual import VirtualBedSource
     from texsense.pipeline import Pipeline
     from texsense.workflows import bed_calibration
 
@@ -260,7 +260,7 @@ def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_mo
 
 def test_monitor_refuses_a_bed_without_a_side_model():
     from texsense.monitor import Monitor
-    from texsense.monitor.sources import VirtualBedSource
+    from texsense.monitor.virtual import VirtualBedSource
     from texsense.pipeline import Pipeline
     from texsense.posture import FeatureSet, PostureModel
     from texsense.workflows import bed_calibration

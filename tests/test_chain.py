@@ -13,6 +13,7 @@ from texsense.health import FailureDetector
 from texsense.pipeline import Pipeline
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
+from texsense.stages import Convert, StageChain
 from texsense.workflows import seat_calibration
 
 
@@ -53,11 +54,14 @@ def test_compiled_detector_equals_the_numpy_detector():
             ref = ReferenceDetector(lay, base_pf, max_pf, stuck_frames=5)
             expected = np.stack([ref.step(frames[k], valid[k]) for k in range(200)])
             assert set(np.unique(expected)) == {0, 1, 2, 3, 4} or max_pf is None
-            det = FailureDetector(lay, baseline_pF=base_pf, max_pF=max_pf, stuck_frames=5)
+            det = FailureDetector(lay, stuck_frames=5).fit(base_pf, max_pf)
             np.testing.assert_array_equal(det.detect(frames, valid), expected)
             det.reset()
-            stream = np.stack([det.step(frames[k], valid[k]) for k in range(200)])
-            np.testing.assert_array_equal(stream, expected)
+            stream = []
+            for k in range(200):
+                det.step(frames[k], valid[k], t=float(k))
+                stream.append(det.codes_)
+            np.testing.assert_array_equal(np.stack(stream), expected)
 
 
 STAGES = [
@@ -98,7 +102,7 @@ def test_streaming_chunked_and_batch_runs_agree(seat, repair):
     lay = rec.layout
     batch, *_ = Pipeline(cal, lay, repair=repair).process(rec.frames, rec.times, rec.valid)
     stream = Pipeline(cal, lay, repair=repair)
-    rows = [stream.step(rec.frames[k], rec.times[k], rec.valid[k])[0] for k in range(rec.n_frames)]
+    rows = [stream.step(rec.frames[k], rec.valid[k], rec.times[k])[0] for k in range(rec.n_frames)]
     np.testing.assert_array_equal(np.array(rows), batch)
     chunked = Pipeline(cal, lay, repair=repair)
     parts = [
@@ -112,23 +116,24 @@ def test_a_large_mat_runs_in_parallel_blocks_with_the_same_result(seat):
     """4096 elements x 40 frames crosses the parallel threshold of the core: the chain's
     blocks run on the thread pool, and frame-by-frame steps give the same numbers."""
     cal, _ = seat
-    from texsense.calibration import MatCalibration
-
+    conv = cal["convert"]
     rng = np.random.default_rng(0)
     lay = Layout.grid(64, 64, pitch_cm=1.0)
     n = lay.n_elements
-    big = MatCalibration.from_parts(
-        cal.curve_compression_mm, cal.curve_capacitance_pF, rng.normal(0, 0.05, n),
-        rng.normal(1, 0.03, n), cal.model, 3.0,
-    )  # fmt: skip
+    offset, gain = rng.normal(0, 0.05, n), rng.normal(1, 0.03, n)
+    big = StageChain([
+        Convert(3.0).set_fitted(
+            curve_compression_mm=conv.curve_compression_mm_,
+            curve_capacitance_pF=conv.curve_capacitance_pF_, offset_pF=offset, gain=gain,
+        ),
+        cal["hysteresis"],
+    ])  # fmt: skip
     t = np.arange(40) * 0.1
     e = 1.0 + 0.8 * np.sin(t[:, None] / 2 + np.arange(n)[None, :] / 40)
-    cap = big.offset_pF + big.gain * np.interp(
-        e, cal.curve_compression_mm, cal.curve_capacitance_pF
-    )
+    cap = offset + gain * np.interp(e, conv.curve_compression_mm_, conv.curve_capacitance_pF_)
     cap[rng.random(cap.shape) < 0.02] = 0.0
     batch, ok, _ = Pipeline(big, lay, repair="neighbour-mean").process(cap, t)
     stream = Pipeline(big, lay, repair="neighbour-mean")
-    rows = [stream.step(cap[k], t[k])[0] for k in range(t.size)]
+    rows = [stream.step(cap[k], None, t[k])[0] for k in range(t.size)]
     np.testing.assert_array_equal(np.array(rows), batch)
     assert (~ok).sum() > 1000 and np.isfinite(batch).all()

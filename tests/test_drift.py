@@ -120,9 +120,11 @@ def test_split_steps_and_cli_and_model_file(tmp_path, capsys):
 
     from texsense.cli import main
     from texsense.drift import DriftModel, split_steps
+    from texsense.exceptions import FormatError
     from texsense.hysteresis import HysteresisModel
     from texsense.io.columns_csv import read_columns_csv
     from texsense.sim.protocols import run_protocol
+    from texsense.stages import load_chain
 
     rec = run_protocol("steps", "textile-6mm", seed=1, levels=(2.5, 5.0), hold_s=600)
     steps = split_steps(rec.times, rec.labels["pressure_ncm2"], rec.labels["compression_mm"])
@@ -137,11 +139,15 @@ def test_split_steps_and_cli_and_model_file(tmp_path, capsys):
     assert main(["simulate", "calibration", "--csv", str(cal)]) == 0
     model = tmp_path / "m.json"
     assert main(["hysteresis", "fit", str(cal), "--drift", str(csv), "-o", str(model)]) == 0
-    loaded = HysteresisModel.load(model)
-    assert isinstance(loaded.drift_, DriftModel)
+    chain = load_chain(model)  # hysteresis followed by drift
+    assert chain.names == ["hysteresis", "drift"]
+    assert isinstance(chain["drift"].model_, DriftModel)
+    with pytest.raises(FormatError, match="holds a stage chain"):
+        HysteresisModel.load(model)
     cols = read_columns_csv(csv)
-    with_drift = loaded.predict(cols["compression_mm"], times_s=cols["time_s"])
-    without = loaded.predict(cols["compression_mm"])
+    u = cols["compression_mm"][:, None]
+    with_drift = chain.reset()._arrays(u, None, cols["time_s"])[0][:, 0]
+    without = chain["hysteresis"].model_.predict(cols["compression_mm"])
     # during the holds the drift stage lowers the pressure like the specimen relaxes
     hold_end = np.nonzero(np.diff(cols["time_s"]) > 5)[0][0]
     assert with_drift[hold_end] < without[hold_end]
@@ -172,19 +178,27 @@ def test_exact_windowed_model_against_the_recursive_form():
 
 @pytest.mark.parametrize("rest_rate", [0.0, 0.02])
 def test_combined_stage_equals_the_stages_in_turn(rest_rate):
+    """Preisach then drift in one pass (the compiled Compensation) equals the hysteresis and
+    drift stages run one after the other, to the bit."""
+    from texsense._core import Compensation
     from texsense.drift import DriftModel
     from texsense.hysteresis import HysteresisModel
     from texsense.sim.protocols import run_protocol
+    from texsense.stage import time_steps
+    from texsense.stages import Drift, Hysteresis, StageChain
 
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     m = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
-    m.with_drift(DriftModel(-0.025, log_kernel(), rest_rate=rest_rate))
+    d = DriftModel(-0.025, log_kernel(), rest_rate=rest_rate)
     rng = np.random.default_rng(2)
     u = rng.uniform(0, m.u_max_, (500, 4))
     t = np.cumsum(rng.exponential(0.5, 500))
-    combined = m.predict(u, times_s=t)
-    separate = m.drift_.apply(m.state(4).run(u), t)
-    np.testing.assert_allclose(combined, separate, rtol=1e-12, atol=1e-12)
+    ok = np.ones(u.shape, bool)
+    combined = Compensation(m.bank(4), d.state(4)).run(time_steps(t), u, ok)
+    separate = d.apply(m.state(4).run(u), t)
+    np.testing.assert_array_equal(combined, separate)
+    chain = StageChain([Hysteresis.of(m), Drift.of(d)])
+    np.testing.assert_array_equal(chain._arrays(u, ok, t)[0], combined)
 
 
 def test_time_stamps_are_checked():
@@ -218,7 +232,7 @@ def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     import json
 
     from texsense.cli import main
-    from texsense.hysteresis import HysteresisModel
+    from texsense.stages import load_chain
 
     cal, cyc = tmp_path / "cal.csv", tmp_path / "cyc.csv"
     assert main(["simulate", "calibration", "--csv", str(cal)]) == 0
@@ -230,7 +244,7 @@ def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     fit = json.loads(capsys.readouterr().out)
     # cycling relaxes the virtual spacer far less than held steps do (docs/drift.md)
     assert -0.02 < fit["gamma"] < 0
-    assert HysteresisModel.load(out).drift_.gamma == pytest.approx(fit["gamma"])
+    assert load_chain(out)["drift"].model_.gamma == pytest.approx(fit["gamma"])
     assert main(["drift", "fit", str(cyc), "-o", str(out)]) == 1
     assert "needs --history" in capsys.readouterr().err
 
@@ -261,6 +275,7 @@ def test_rest_clock_is_time_on_holds_and_nearly_stops_on_cycles():
 
 def test_rest_clock_round_trip_and_old_files(tmp_path):
     from texsense.drift import DriftModel
+    from texsense.exceptions import FormatError
 
     m = DriftModel(-0.02, log_kernel(), rest_rate=0.03, rest_window=0.7)
     back = DriftModel.from_dict(m.to_dict())
@@ -269,8 +284,10 @@ def test_rest_clock_round_trip_and_old_files(tmp_path):
     del old["rest_rate"], old["rest_window_s"]
     assert DriftModel.from_dict(old).clock == "time"  # files before the rest clock
     bad = m.to_dict() | {"rest_rate": -1.0}
-    with pytest.raises(ParameterError, match="rest_rate"):
+    with pytest.raises(FormatError, match="rest_rate"):
         DriftModel.from_dict(bad)
+    path = m.save(tmp_path / "drift.json")  # the drift model file
+    assert DriftModel.load(path).to_dict() == m.to_dict()
 
 
 def test_cli_clock_choice_and_bad_rest_rate(tmp_path, capsys):
@@ -320,7 +337,7 @@ def test_joint_fit_recovers_both_clocks_and_the_cli_names_its_limits(tmp_path, c
 def test_cli_workflow_for_mats_in_use_held_loads_plus_cycles(tmp_path, capsys):
     """docs/drift.md: a mat in use is load-controlled; two clocks from held loads plus cycles."""
     from texsense.cli import main
-    from texsense.hysteresis import HysteresisModel
+    from texsense.stages import load_chain
 
     cal, loads, cycles = (tmp_path / f"{n}.csv" for n in ("cal", "loads", "cycles"))
     run = [
@@ -348,8 +365,7 @@ def test_cli_workflow_for_mats_in_use_held_loads_plus_cycles(tmp_path, capsys):
     out = capsys.readouterr().out
     summary = json.loads(out[out.index("{") :])
     assert summary["clock"] == "rest+time" and summary["gamma_time"] != 0
-    m = HysteresisModel.load(model)
-    assert m.drift_.clock == "rest+time"
+    assert load_chain(model)["drift"].model_.clock == "rest+time"
     assert (
         main(["hysteresis", "apply", str(model), str(cycles), "-o", str(tmp_path / "o.csv")]) == 0
     )
@@ -380,7 +396,7 @@ def test_batch_shapes_are_checked_in_one_place_for_every_stage():
     stages = [
         lambda v, m: PreisachBank(0.0, 1.0, table, 3, 32).run(v, m),
         lambda v, m: DriftBank(np.ones(2), np.array([1.0, 10.0]), -0.02, 3).run(np.zeros(4), v, m),
-        lambda v, m: Compensation(0.0, 1.0, table, 3, 32, 0.0, 1.0, 0.0).run(np.zeros(4), v, m),
+        lambda v, m: Compensation(PreisachBank(0.0, 1.0, table, 3, 32)).run(np.zeros(4), v, m),
     ]
     for run in stages:
         assert run(np.zeros((4, 3)), ok_valid).shape == (4, 3)

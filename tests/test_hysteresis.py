@@ -7,6 +7,7 @@ from texsense._core import PreisachBank
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
 from texsense.hysteresis import HysteresisModel, scale_hysteresis
 from texsense.hysteresis._identify import everett_design, make_monotone
+from texsense.modelfile import envelope
 from texsense.sim.protocols import run_protocol
 
 K = 51
@@ -160,16 +161,19 @@ def test_model_file_round_trip_and_errors(tmp_path):
     d = json.loads(path.read_text())
     d["version"] = 7
     (tmp_path / "v.json").write_text(json.dumps(d))
-    with pytest.raises(FormatError, match="unknown hysteresis model version 7"):
+    with pytest.raises(FormatError, match=r"texsense\.hysteresis version 7; this texsense reads"):
         HysteresisModel.load(tmp_path / "v.json")
     d = json.loads(path.read_text())
-    d["input"]["unit"] = "parsec"
-    (tmp_path / "u.json").write_text(json.dumps(d))
+    d["content"]["input"]["unit"] = "parsec"
+    (tmp_path / "u.json").write_text(json.dumps(envelope("texsense.hysteresis", d["content"])))
     with pytest.raises(FormatError, match="unknown unit 'parsec'"):
         HysteresisModel.load(tmp_path / "u.json")
     (tmp_path / "bad.json").write_text("{not json")
     with pytest.raises(FormatError, match="not JSON"):
         HysteresisModel.load(tmp_path / "bad.json")
+    (tmp_path / "list.json").write_text("[]")
+    with pytest.raises(FormatError, match="holds a JSON list, expected a hysteresis model"):
+        HysteresisModel.load(tmp_path / "list.json")
     with pytest.raises(UnitError, match="takes compression_mm in mm"):
         back.check_units("kPa")
     with pytest.raises(NotFittedError):

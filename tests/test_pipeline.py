@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from texsense import Layout
-from texsense.calibration import MatCalibration
 from texsense.exceptions import FormatError, ParameterError
 from texsense.health import FailureDetector, health_report
 from texsense.pipeline import Pipeline
@@ -14,6 +13,7 @@ from texsense.repair import METHODS, Repair
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
+from texsense.stages import Convert, StageChain, load_chain
 from texsense.workflows import calibrate_mat, material_record
 
 
@@ -37,11 +37,16 @@ def mat_setup():
 
 def test_zeroing_and_equilibration_make_the_pressure_right(mat_setup):
     cal, _, _, _, scan = mat_setup
-    assert cal.gain.std() > 0.01  # the elements do differ (electrode area, stray, stiffness)
-    n = cal.n_elements
-    plain = MatCalibration.from_parts(
-        cal.curve_compression_mm, cal.curve_capacitance_pF, np.zeros(n), np.ones(n), cal.model, 3.0
+    conv = cal["convert"]
+    assert conv.gain_.std() > 0.01  # the elements do differ (electrode area, stray, stiffness)
+    n = conv.n_elements
+    one_curve = Convert(3.0).set_fitted(
+        curve_compression_mm=conv.curve_compression_mm_,
+        curve_capacitance_pF=conv.curve_capacitance_pF_,
+        offset_pF=np.zeros(n),
+        gain=np.ones(n),
     )
+    plain = StageChain([one_curve, cal["hysteresis"]])
     truth = scan.pressure.frames
     ok = ~scan.failed & (truth > 0.5)
     lay = scan.capacitance.layout
@@ -54,49 +59,58 @@ def test_zeroing_and_equilibration_make_the_pressure_right(mat_setup):
 
 
 def test_calibration_file_round_trip_and_bad_files(mat_setup, tmp_path):
+    from texsense.modelfile import envelope
+
     cal = mat_setup[0]
     path = cal.save(tmp_path / "cal.json")
-    back = MatCalibration.load(path)
-    assert back.id == cal.id
-    np.testing.assert_array_equal(back.gain, cal.gain)
-    np.testing.assert_array_equal(back.model.everett_, cal.model.everett_)
-    frames = mat_setup[4].capacitance.frames
-    np.testing.assert_array_equal(back.to_compression(frames), cal.to_compression(frames))
+    back = load_chain(path)
+    assert back.id == cal.id and back.to_dict() == cal.to_dict()
+    np.testing.assert_array_equal(back["convert"].gain_, cal["convert"].gain_)
+    rec = mat_setup[4].capacitance
+    np.testing.assert_array_equal(back.reset().run(rec).frames, cal.reset().run(rec).frames)
     d = json.loads(path.read_text())
+    content = d["content"]
+    convert = next(s for s in content["stages"] if s["stage"] == "convert")
+    gains = convert["fitted"]["elements"]["gain"]
+    no_elements = json.loads(json.dumps(content))
+    next(s for s in no_elements["stages"] if s["stage"] == "convert")["fitted"].pop("elements")
+    negative = json.loads(json.dumps(content))
+    next(s for s in negative["stages"] if s["stage"] == "convert")["fitted"]["elements"]["gain"] = [
+        -1.0
+    ] * 16
+    gains[0] = 2.0
     cases = {
         "not JSON": "{",
-        "not a texsense.calibration": json.dumps({"format": "other"}),
-        "version 7": json.dumps({**d, "version": 7}),
-        "missing field 'elements'": json.dumps({k: v for k, v in d.items() if k != "elements"}),
-        "does not match the content": json.dumps(
-            {**d, "elements": {**d["elements"], "gain": [2.0] * 16}}
+        "format 'other'": json.dumps({"format": "other"}),
+        "texsense.chain version 7": json.dumps({**d, "version": 7}),
+        "missing field 'fitted.elements.offset_pF'": json.dumps(
+            envelope("texsense.chain", no_elements)
         ),
-        "gains > 0": json.dumps(
-            {**d, "id": None, "elements": {**d["elements"], "gain": [-1.0] * 16}}
-        ),
+        "was edited after texsense wrote it": json.dumps(d),
+        "gains finite and > 0": json.dumps(envelope("texsense.chain", negative)),
     }
     for why, text in cases.items():
         bad = tmp_path / "bad.json"
         bad.write_text(text)
         with pytest.raises(FormatError, match=why) as e:
-            MatCalibration.load(bad)
+            load_chain(bad)
         assert "bad.json" in str(e.value)
 
 
 def test_calibration_input_errors(mat_setup):
     _, material, base, uni, _ = mat_setup
     with pytest.raises(ParameterError, match="never reaches"):
-        MatCalibration.fit(material, base, uni, 50.0, 3.0)
+        Convert(3.0, 50.0).fit(material, base, uni)
     with pytest.raises(ParameterError, match="no column"):
-        MatCalibration.fit({"compression_mm": material["compression_mm"]}, base, uni, 1.0, 3.0)
+        Convert(3.0).fit({"compression_mm": material["compression_mm"]}, base, uni)
     with pytest.raises(ParameterError, match="do not respond"):
-        MatCalibration.fit(material, base, base, 1.0, 3.0)
+        Convert(3.0).fit(material, base, base)
 
 
 def test_detector_finds_each_failure_kind():
     lay = Layout.grid(3, 3)
     base = np.full(9, 2.0)
-    det = FailureDetector(lay, baseline_pF=base, max_pF=np.full(9, 6.0), stuck_frames=5)
+    det = FailureDetector(lay, stuck_frames=5).fit(base, np.full(9, 6.0))
     rng = np.random.default_rng(0)
     codes = []
     for k in range(30):
@@ -109,7 +123,9 @@ def test_detector_finds_each_failure_kind():
         frame[4] = 3.3  # stuck while its neighbours move
         if k == 20:
             frame[8] += 3.0  # implausible jump (and back at 21)
-        codes.append(det.step(frame, valid))
+        _, measured = det.step(frame, valid, t=float(k))
+        assert np.array_equal(measured, valid & (det.codes_ == 0))
+        codes.append(det.codes_)
     c = np.array(codes)
     assert np.all(c[:, 0] == 1) and np.all(c[:, 1] == 2)
     assert c[10, 2] == 2 and np.sum(c[:, 2] > 0) == 1
@@ -125,10 +141,10 @@ def test_detector_finds_each_failure_kind():
 
 def test_detector_on_the_virtual_mat_matches_the_failures(mat_setup):
     cal, *_, scan = mat_setup
-    lo, hi = cal.expected_range_pF()
-    codes = FailureDetector(scan.capacitance.layout, baseline_pF=lo, max_pF=hi).run(
-        scan.capacitance
-    )
+    lo, hi = cal["convert"].expected_range_pF()
+    det = FailureDetector(scan.capacitance.layout).fit(lo, hi)
+    det.run(scan.capacitance)
+    codes = det.codes_
     assert scan.failed.any()
     assert np.all(codes[scan.failed] > 0)  # every failure found
     assert np.mean(codes[~scan.failed] > 0) < 0.01  # few false alarms
@@ -137,19 +153,19 @@ def test_detector_on_the_virtual_mat_matches_the_failures(mat_setup):
 @pytest.mark.parametrize("method", METHODS)
 def test_each_repair_method(method):
     lay = Layout.grid(4, 4)
-    rep = Repair(lay, method)
+    rep = Repair(lay, method).fit()
     first = np.full(16, 3.0)
-    rep.step(first, np.ones(16, bool))
+    rep.step(first, np.ones(16, bool), t=0.0)
     frame = np.full(16, 5.0)
     valid = np.ones(16, bool)
     valid[5] = False
-    out, repaired = rep.step(frame, valid)
-    assert repaired.tolist() == (~valid).tolist()
+    out, measured = rep.step(frame, valid, t=1.0)
+    assert measured.tolist() == valid.tolist()
     expected = {"zero": 0.0, "last-value": 3.0}.get(method, 5.0)
     assert out[5] == pytest.approx(expected)
     assert np.all(out[valid] == 5.0)
     # all of an element's neighbours (and every element) failed -> its last value
-    out, _ = rep.step(np.zeros(16), np.zeros(16, bool))
+    out, _ = rep.step(np.zeros(16), np.zeros(16, bool), t=2.0)
     if method == "zero":
         assert np.all(out == 0)
     else:
@@ -163,10 +179,10 @@ def test_harmonic_fills_a_cluster_from_its_border_and_neighbour_mean_cannot():
     valid = np.ones(25, bool)
     cluster = [6, 7, 8, 11, 12, 13, 16, 17, 18]  # the 3 x 3 centre
     valid[cluster] = False
-    nm = Repair(lay, "neighbour-mean")
-    nm.step(np.zeros(25), np.ones(25, bool))
-    out_nm, _ = nm.step(x, valid)
-    out_h, _ = Repair(lay, "harmonic").step(x, valid)
+    nm = Repair(lay, "neighbour-mean").fit()
+    nm.step(np.zeros(25), np.ones(25, bool), t=0.0)
+    out_nm, _ = nm.step(x, valid, t=1.0)
+    out_h, _ = Repair(lay, "harmonic").fit().step(x, valid, t=0.0)
     # the ramp is harmonic: the inpainting reproduces it; eq. 6.14 holds 0 at the centre
     np.testing.assert_allclose(out_h, x, atol=1e-12)
     assert out_nm[12] == 0.0
@@ -174,7 +190,7 @@ def test_harmonic_fills_a_cluster_from_its_border_and_neighbour_mean_cannot():
 
 def test_unknown_repair_method():
     with pytest.raises(ParameterError, match="unknown repair method"):
-        Repair(Layout.grid(2, 2), "magic")
+        Repair(Layout.grid(2, 2), "magic").fit()
 
 
 def test_pipeline_streaming_equals_batch_and_repairs_failures(mat_setup):
@@ -183,7 +199,7 @@ def test_pipeline_streaming_equals_batch_and_repairs_failures(mat_setup):
     batch = Pipeline(cal, lay, repair="neighbour-mean").run(scan.capacitance)
     stream = Pipeline(cal, lay, repair="neighbour-mean")
     rows = [
-        stream.step(scan.capacitance.frames[k], scan.capacitance.times[k])[0]
+        stream.step(scan.capacitance.frames[k], None, scan.capacitance.times[k])[0]
         for k in range(scan.capacitance.n_frames)
     ]
     np.testing.assert_allclose(np.array(rows), batch.frames, rtol=1e-6)  # float32 storage
@@ -245,11 +261,9 @@ def test_cli_calibrate_process_repair_health(mat_setup, tmp_path, capsys):
     args = ["calibrate", "mat", "--material", str(tmp_path / "material.csv"), "--baseline"]
     args += [str(tmp_path / "base.h5"), "--uniform", str(tmp_path / "uni.h5"), "--pressure", "1"]
     assert main([*args, "--thickness-mm", "3", "-o", str(calf)]) == 0
-    from texsense.stages import load_chain
-
     chain = load_chain(calf)  # the calibration file is the mat's chain of stages
-    assert [s.name for s in chain.stages] == ["detect", "convert", "hysteresis"]
-    assert chain.calibration().id == cal.id
+    assert chain.names == ["detect", "convert", "hysteresis"]
+    assert chain.id == cal.id
     out = tmp_path / "p.h5"
     assert (
         main(["process", str(tmp_path / "raw.h5"), "--calibration", str(calf), "-o", str(out)]) == 0
@@ -294,3 +308,25 @@ def test_reference_detector_median_equals_a_brute_force_median():
                 ]
             )
             np.testing.assert_allclose(det.neighbour_median(x), expected, rtol=0, atol=1e-15)
+
+
+def test_the_pipeline_follows_the_streaming_contract(mat_setup):
+    """step(values, valid, t) with t required, run, reset, parameters from the constructor."""
+    import inspect
+
+    cal, *_, scan = mat_setup
+    rec = scan.capacitance
+    pipe = Pipeline(cal, rec.layout, repair="idw8", drift=False)
+    params = pipe.get_params()
+    assert list(params) == ["chain", "layout", "detect", "hysteresis", "drift", "repair"]
+    assert params["repair"] == "idw8" and params["drift"] is False
+    step = inspect.signature(Pipeline.step).parameters
+    assert list(step)[1:] == ["values", "valid", "t"]
+    assert step["t"].default is inspect.Parameter.empty
+    batch = pipe.run(rec)
+    pipe.reset()
+    rows = [pipe.step(rec.frames[k], rec.valid[k], rec.times[k]) for k in range(rec.n_frames)]
+    np.testing.assert_array_equal(np.array([r[0] for r in rows], np.float32), batch.frames)
+    np.testing.assert_array_equal(np.array([r[1] for r in rows]), batch.valid)
+    with pytest.raises(ParameterError, match="must not decrease"):
+        pipe.step(rec.frames[0], None, rec.times[0])

@@ -182,3 +182,19 @@ def test_not_a_texsense_hdf5(tmp_path):
     broken.write_bytes(b"\x89HDF\r\n\x1a\n" + b"garbage" * 10)
     with pytest.raises(FormatError, match="not a readable HDF5"):
         texsense.load(broken)
+
+
+def test_save_writes_the_format_of_the_extension(tmp_path):
+    """Recording.save goes through texsense.io by extension: .csv is a wide CSV, .asf Tekscan
+    ASCII, .h5 HDF5; an unknown extension is refused, naming it."""
+    from texsense import load
+    from texsense.exceptions import ParameterError
+    from texsense.io import sniff_format
+
+    rec = Recording(np.arange(12.0).reshape(3, 4), [0.0, 0.1, 0.2], Layout.grid(2, 2))
+    for name, fmt in (("x.csv", "wide-csv"), ("x.asf", "tekscan"), ("x.h5", "hdf5")):
+        path = rec.save(tmp_path / name)
+        assert sniff_format(path) == fmt
+        np.testing.assert_allclose(load(path).frames, rec.frames)
+    with pytest.raises(ParameterError, match=r"x\.bin"):
+        rec.save(tmp_path / "x.bin")

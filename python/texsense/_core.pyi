@@ -1,146 +1,225 @@
-"""Type stubs of the compiled core ``texsense._core`` (crates/python)."""
+"""Type stubs of the compiled core ``texsense._core`` (crates/python), checked against the
+module by ``stubtest`` in scripts/test.sh."""
+
+from typing import Self, final
 
 import numpy as np
 import numpy.typing as npt
 
+_F64 = npt.NDArray[np.float64]
+_Bools = npt.NDArray[np.bool_]
+_U8 = npt.NDArray[np.uint8]
+_U64 = npt.NDArray[np.uint64]
+_I64 = npt.NDArray[np.int64]
+
+__all__ = [
+    "Chain",
+    "Compensation",
+    "Converter",
+    "Curve",
+    "DriftBank",
+    "FailureDetector",
+    "LocalRepair",
+    "NeighbourIndexError",
+    "ParameterError",
+    "PreisachBank",
+    "ShapeError",
+    "SpacerBank",
+    "__version__",
+    "everett_terms",
+]
+
 __version__: str
 
-class ShapeError(ValueError): ...
-class NeighbourIndexError(IndexError): ...
-class ParameterError(ValueError): ...
+class ShapeError(ValueError):
+    """An array has the wrong shape or length."""
 
-class NeighbourMeanRepair:
-    """Streaming eq. 6.14 repair over a CSR neighbour graph."""
+class NeighbourIndexError(IndexError):
+    """A neighbour index points outside the layout."""
 
-    def __init__(self, indptr: npt.NDArray[np.int64], indices: npt.NDArray[np.int64]) -> None: ...
-    @property
-    def n_elements(self) -> int: ...
-    def last_values(self) -> npt.NDArray[np.float32]: ...
-    def reset(self) -> None: ...
-    def run(
-        self, frames: npt.NDArray[np.float32], valid: npt.NDArray[np.bool_]
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]: ...
+class ParameterError(ValueError):
+    """A parameter is outside its domain."""
 
+@final
 class SpacerBank:
-    """Spacer mechanics of N specimens (crates/core/src/spacer.rs)."""
+    """Spacer mechanics of N specimens (crates/core/src/spacer.rs, bouc_wen.rs)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         backbone_a: float,
         backbone_m: float,
         densification: float,
         linear: float,
-        friction: npt.NDArray[np.float64],
+        friction: _F64,
         creep_a: float,
         creep_tc: float,
         rest_rate: float,
         clutch_w: float,
         clutch_a: float,
-        viscous: npt.NDArray[np.float64],
-        kelvin: npt.NDArray[np.float64],
+        viscous: _F64,
+        kelvin: _F64,
         recovery_factor: float,
         creep_p_ref: float,
-        softening: npt.NDArray[np.float64],
+        softening: _F64,
         softening_recovery_s: float,
-        scale: npt.NDArray[np.float64],
-    ) -> None: ...
+        scale: _F64,
+    ) -> Self: ...
+    @staticmethod
+    def bouc_wen(
+        stiffness: float,
+        exponent: float,
+        densification: float,
+        friction: float,
+        slip: float,
+        bw_n: float,
+        bw_beta: float,
+        creep_share: float,
+        creep_rate: float,
+        creep_exponent: float,
+        scale: _F64,
+    ) -> SpacerBank: ...
     @property
     def n_elements(self) -> int: ...
-    def backbone(self, e: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
-    def creep_strain(self) -> npt.NDArray[np.float64]: ...
-    def run_displacement(
-        self, dt: npt.NDArray[np.float64], compression: npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
-    def run_pressure(
-        self, dt: npt.NDArray[np.float64], pressure: npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    def backbone(self, e: _F64) -> _F64: ...
+    def creep_strain(self) -> _F64: ...
+    def run_displacement(self, dt: _F64, compression: _F64) -> tuple[_F64, _F64]: ...
+    def run_pressure(self, dt: _F64, pressure: _F64) -> tuple[_F64, _F64]: ...
     def ramp_until(
         self, dt: float, rate: float, target: float, max_steps: int
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], bool]: ...
+    ) -> tuple[_F64, _F64, _F64, bool]: ...
 
+@final
 class PreisachBank:
-    """Preisach stacks of N elements (crates/core/src/preisach.rs)."""
+    """Preisach stacks of N elements (crates/core/src/preisach.rs); output sign (h + offset)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         u_min: float,
         u_max: float,
-        table: npt.NDArray[np.float64],
+        table: _F64,
         n_elements: int,
         capacity: int,
-    ) -> None: ...
+        offset: float = 0.0,
+        sign: float = 1.0,
+    ) -> Self: ...
     @property
     def n_elements(self) -> int: ...
     def reset(self) -> None: ...
-    def everett(
-        self, alpha: npt.NDArray[np.float64], beta: npt.NDArray[np.float64]
-    ) -> npt.NDArray[np.float64]: ...
-    def run(
-        self, inputs: npt.NDArray[np.float64], valid: npt.NDArray[np.bool_]
-    ) -> npt.NDArray[np.float64]: ...
-    def set_state(
-        self, inputs: npt.NDArray[np.float64], outputs: npt.NDArray[np.float64]
-    ) -> npt.NDArray[np.float64]: ...
-    def clamped(self) -> npt.NDArray[np.uint64]: ...
-    def forgotten(self) -> npt.NDArray[np.uint64]: ...
-    def depth(self) -> npt.NDArray[np.uint64]: ...
-    def outputs(self) -> npt.NDArray[np.float64]: ...
+    def everett(self, alpha: _F64, beta: _F64) -> _F64: ...
+    def run(self, inputs: _F64, valid: _Bools, schedule: str = "parallel") -> _F64: ...
+    def state_bytes(self) -> int: ...
+    def set_state(self, inputs: _F64, outputs: _F64) -> _F64: ...
+    def clamped(self) -> _U64: ...
+    def forgotten(self) -> _U64: ...
+    def depth(self) -> _U64: ...
+    def outputs(self) -> _F64: ...
 
+@final
 class DriftBank:
     """Recursive drift superposition of N elements (crates/core/src/drift.rs)."""
 
-    def __init__(
-        self,
-        weights: npt.NDArray[np.float64],
-        taus: npt.NDArray[np.float64],
+    def __new__(
+        cls,
+        weights: _F64,
+        taus: _F64,
         gamma: float,
         n_elements: int,
         rest_rate: float = 0.0,
         rest_window: float = 0.5,
         gamma_time: float = 0.0,
-    ) -> None: ...
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
     def reset(self) -> None: ...
-    def run(
-        self,
-        dt: npt.NDArray[np.float64],
-        h: npt.NDArray[np.float64],
-        valid: npt.NDArray[np.bool_],
-    ) -> npt.NDArray[np.float64]: ...
+    def run(self, dt: _F64, h: _F64, valid: _Bools) -> _F64: ...
 
+@final
 class Compensation:
     """Preisach then drift in one pass (crates/core/src/compensation.rs)."""
 
-    def __init__(
-        self,
-        u_min: float,
-        u_max: float,
-        table: npt.NDArray[np.float64],
-        n_elements: int,
-        capacity: int,
-        offset: float,
-        sign: float,
-        gamma: float,
-        weights: npt.NDArray[np.float64] | None = None,
-        taus: npt.NDArray[np.float64] | None = None,
-        rest_rate: float = 0.0,
-        rest_window: float = 0.5,
-        gamma_time: float = 0.0,
-    ) -> None: ...
+    def __new__(cls, preisach: PreisachBank, drift: DriftBank | None = None) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
     def reset(self) -> None: ...
-    def clamped(self) -> npt.NDArray[np.uint64]: ...
-    def run(
-        self,
-        dt: npt.NDArray[np.float64],
-        inputs: npt.NDArray[np.float64],
-        valid: npt.NDArray[np.bool_],
-    ) -> npt.NDArray[np.float64]: ...
+    def clamped(self) -> _U64: ...
+    def run(self, dt: _F64, inputs: _F64, valid: _Bools) -> _F64: ...
 
-def everett_terms(
-    inputs: npt.NDArray[np.float64], u_min: float, u_max: float
-) -> tuple[
-    npt.NDArray[np.uint64],
-    npt.NDArray[np.float64],
-    npt.NDArray[np.float64],
-    npt.NDArray[np.float64],
-]:
+@final
+class FailureDetector:
+    """Failure codes of raw capacitance (crates/core/src/detect.rs)."""
+
+    def __new__(
+        cls,
+        indptr: _I64,
+        indices: _I64,
+        jump_pf: _F64,
+        baseline_pf: _F64 | None,
+        max_pf: _F64 | None,
+        min_pf: float,
+        low_share: float,
+        high_share: float,
+        stuck_frames: int,
+        stuck_pf: float,
+        neighbour_change_pf: float,
+        stuck_floor_pf: float = ...,
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, readings: _F64, valid: _Bools) -> _U8: ...
+
+@final
+class Curve:
+    """A piecewise-linear curve held at its ends (crates/core/src/convert.rs)."""
+
+    def __new__(cls, x: _F64, y: _F64) -> Self: ...
+    def at(self, values: _F64) -> _F64: ...
+
+@final
+class Converter:
+    """Capacitance -> compression per element, eq. 2.1 (crates/core/src/convert.rs)."""
+
+    def __new__(cls, offset: _F64, gain: _F64, curve: Curve | None = None) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def run(self, readings: _F64, valid: _Bools) -> _F64: ...
+
+@final
+class LocalRepair:
+    """zero, last-value, eq. 6.14 neighbour mean, weighted mean (crates/core/src/repair.rs)."""
+
+    def __new__(
+        cls,
+        method: str,
+        n_elements: int,
+        indptr: _I64 | None = None,
+        indices: _I64 | None = None,
+        weights: _F64 | None = None,
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def last_values(self) -> _F64: ...
+    def reset(self) -> None: ...
+    def run(self, values: _F64, valid: _Bools) -> tuple[_F64, _U8]: ...
+
+@final
+class Chain:
+    """detect -> convert -> compensation -> repair in one pass (crates/core/src/chain.rs)."""
+
+    def __new__(
+        cls,
+        converter: Converter,
+        *,
+        detector: FailureDetector | None = None,
+        compensation: Compensation | None = None,
+        loading: Curve | None = None,
+        repair: LocalRepair | None = None,
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def state_bytes_per_element(self) -> int: ...
+    def run(self, dt: _F64, readings: _F64, valid: _Bools) -> tuple[_F64, _U8]: ...
+
+def everett_terms(inputs: _F64, u_min: float, u_max: float) -> tuple[_U64, _F64, _F64, _F64]:
     """The Everett terms (indptr, alpha, beta, coef) of every sample of an input history."""

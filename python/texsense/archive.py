@@ -31,15 +31,13 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration import (
-    LinearCalibration,
-    MatCalibration,
-    calibration_from_dict,
-    load_calibration,
-)
+from texsense._progress import progress
 from texsense.exceptions import FormatError, ParameterError
 from texsense.files import atomic_path, check_not_input
-from texsense.stages import StageChain
+from texsense.layout import Layout
+from texsense.modelfile import content_hash
+from texsense.pipeline import Pipeline
+from texsense.stages import StageChain, load_chain
 
 __all__ = [
     "FileReport",
@@ -63,6 +61,12 @@ class ProcessOptions:
     #: Read an input cut short up to its last complete frame (with a warning) instead of
     #: refusing it (``--accept-truncated``).
     accept_truncated: bool = False
+
+    def pipeline(self, chain: StageChain, layout: Layout) -> Pipeline:
+        """The compiled pipeline of ``chain`` for ``layout`` with these settings."""
+        return Pipeline(
+            chain, layout, hysteresis=self.hysteresis, drift=self.drift, repair=self.repair
+        )
 
     def frames_per_block(self, n_elements: int) -> int:
         """The block length for a mat of ``n_elements``."""
@@ -114,7 +118,7 @@ def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
 
 def process_file(
     src: str | Path,
-    calibration: MatCalibration | LinearCalibration | StageChain | str | Path,
+    calibration: StageChain | str | Path,
     dst: str | Path,
     options: ProcessOptions | None = None,
 ) -> FileReport:
@@ -131,20 +135,17 @@ def process_file(
     """
     from texsense.io import open_reader
     from texsense.io.hdf5 import RecordingWriter
-    from texsense.pipeline import Pipeline
 
     opts = options or ProcessOptions()
     src, dst = Path(src), Path(dst)
     check_not_input(dst, [src])
-    cal = load_calibration(calibration) if isinstance(calibration, str | Path) else calibration
+    cal = load_chain(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
     if _output_matches(dst, cal.id, digest):
         return FileReport(str(src), str(dst), "skipped")
     with open_reader(src, accept_truncated=opts.accept_truncated) as reader:
         head = reader.header
-        pipe = Pipeline(
-            cal, head.layout, hysteresis=opts.hysteresis, drift=opts.drift, repair=opts.repair
-        )
+        pipe = opts.pipeline(cal, head.layout)
         quantity, unit = pipe.input_quantity
         if head.quantity != quantity:
             raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
@@ -232,16 +233,16 @@ def archive_jobs(
 
 
 #: Calibrations parsed on this worker, by their id (a task gets the JSON description).
-_CALIBRATIONS: dict[str, MatCalibration | LinearCalibration | StageChain] = {}
+_CALIBRATIONS: dict[str, StageChain] = {}
 
 
 def _task(src: str, calibration: dict[str, Any], dst: str, options: dict[str, Any]) -> dict:
     """One file on a worker: the report as a dict; an expected failure (a bad file or
     parameter) is a ``failed`` report, anything else propagates to the driver."""
-    key = str(calibration.get("id"))
+    key = content_hash(calibration)
     cal = _CALIBRATIONS.get(key)
     if cal is None:
-        cal = _CALIBRATIONS[key] = calibration_from_dict(calibration, "<calibration>")
+        cal = _CALIBRATIONS[key] = StageChain.from_dict(calibration, "<calibration>")
     try:
         return asdict(process_file(src, cal, dst, ProcessOptions(**options)))
     except (OSError, ValueError) as e:  # FormatError, ParameterError, ShapeError among them
@@ -275,11 +276,8 @@ def process_archive(
     """
     from dask.distributed import Client, LocalCluster, as_completed
 
-    from texsense._progress import progress
-
-    cal_path = Path(calibration)
-    load_calibration(cal_path)  # a bad file fails here, once, not in every task
-    cal_dict = json.loads(cal_path.read_text(encoding="utf-8"))
+    # a bad file fails here, once, not in every task; the workers get the chain's content
+    cal_dict = load_chain(calibration).to_dict()
     opts = asdict(options or ProcessOptions())
     cluster = None
     if scheduler is None:

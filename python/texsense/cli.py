@@ -1,4 +1,7 @@
-"""The ``texsense`` command line: one sub-command per module in :mod:`texsense.commands`.
+"""The ``texsense`` command line: one sub-command per entry of :data:`texsense.commands.COMMANDS`.
+
+Only the module of the command that runs is imported (``texsense --version`` and ``--help``
+import none of them, nor numpy's heavier neighbours: benchmarks/cli_start.py measures it).
 
 Exit codes: 0 ok, 1 failed (bad file, bad data), 2 bad usage.
 """
@@ -6,19 +9,29 @@ Exit codes: 0 ok, 1 failed (bad file, bad data), 2 bad usage.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
-from texsense import __version__
+from texsense._core import __version__
 from texsense.commands import COMMANDS
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every sub-command registered."""
+def _command_of(argv: Sequence[str]) -> str | None:
+    """The command named in ``argv`` (its first word that is not an option), if any."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
+
+
+def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
+    """The argument parser: every command listed, with the options of ``commands`` (their
+    modules imported; ``build_parser(COMMANDS)`` loads them all)."""
     parser = argparse.ArgumentParser(
         prog="texsense",
         description=(
@@ -29,14 +42,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"texsense {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for module in COMMANDS:
-        module.register(sub)
+    wanted = {COMMANDS[c][0] for c in commands}
+    registered: set[str] = set()
+    for name, (module, text) in COMMANDS.items():
+        if module not in wanted:
+            sub.add_parser(name, help=text, add_help=False)  # listed, options not loaded
+        elif module not in registered:
+            importlib.import_module(f"texsense.commands.{module}").register(sub)
+            registered.add(module)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = _command_of(argv)
+    parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)

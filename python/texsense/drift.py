@@ -9,9 +9,9 @@ non-negative sum of exponentials (:func:`log_kernel`), so each element keeps K s
 sample costs O(K) whatever the length of the history. The same machinery runs any fitted
 non-negative Prony kernel (:func:`prony_kernel`) where the logarithm does not hold.
 
-:class:`DriftModel` is the drift stage: fitted from step responses (:func:`split_steps` cuts
-a step-and-hold record), stored in the hysteresis model file, applied after the Preisach
-model by ``HysteresisModel.predict(inputs, times_s=...)``.
+:class:`DriftModel` is what the drift stage (:class:`texsense.stages.Drift`) runs after the
+Preisach model: fitted from step responses (:func:`split_steps` cuts a step-and-hold record)
+or over a load history, saved in the ``texsense.drift`` model file (or in a chain).
 """
 
 from __future__ import annotations
@@ -19,13 +19,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import nnls
 
+from texsense import modelfile
 from texsense._core import DriftBank
-from texsense.exceptions import ParameterError
+from texsense.exceptions import FormatError, ParameterError
+from texsense.modelfile import Fields
+from texsense.stage import time_steps as _time_steps
 
 __all__ = [
     "DriftKernel",
@@ -243,10 +247,7 @@ def time_steps(times_s: npt.ArrayLike, n_frames: int) -> np.ndarray:
     t = np.asarray(times_s, dtype=np.float64)
     if t.shape != (n_frames,):
         raise ParameterError(f"times_s must have {n_frames} entries, got {t.shape}")
-    dt = np.diff(t, prepend=t[0]) if t.size else t
-    if not np.all(dt >= 0):
-        raise ParameterError("times_s must be finite and must not decrease")
-    return np.ascontiguousarray(dt)
+    return _time_steps(t)
 
 
 def _kernel_or_log(kernel: DriftKernel | None) -> tuple[DriftKernel, str]:
@@ -408,7 +409,7 @@ class DriftModel:
         return cls(float(g_rest), k, kind, rest_rate, 0.5, float(g_time)), rms
 
     def to_dict(self) -> dict:
-        """JSON-able description (stored in the hysteresis model file)."""
+        """The content of the model file (JSON-able)."""
         return {
             "kind": self.kind,
             "gamma": self.gamma,
@@ -426,31 +427,51 @@ class DriftModel:
     @classmethod
     def from_dict(cls, d: dict) -> DriftModel:
         """Inverse of :meth:`to_dict`."""
-        k = d["kernel"]
+        return cls.from_content(Fields(d, "<dict>"))
+
+    @classmethod
+    def from_content(cls, f: Fields) -> DriftModel:
+        """A model from the content of its file; every problem raises
+        :class:`~texsense.exceptions.FormatError` naming the file and the field."""
+        span = f.array("kernel.span_s", ndim=1)
+        if span.shape != (2,):
+            raise f.error("kernel.span_s", "expected two numbers")
         kernel = DriftKernel(
-            np.asarray(k["weights"], float),
-            np.asarray(k["taus_s"], float),
-            float(k["max_error"]),
-            tuple(k["span_s"]),
-        )  # type: ignore[arg-type]
+            f.array("kernel.weights", ndim=1),
+            f.array("kernel.taus_s", ndim=1),
+            f.number("kernel.max_error"),
+            (float(span[0]), float(span[1])),
+        )
         if (
             kernel.weights.shape != kernel.taus.shape
             or np.any(kernel.weights < 0)
             or np.any(kernel.taus <= 0)
         ):
-            raise ParameterError("drift kernel: weights must be >= 0 and time constants > 0")
-        rest_rate = float(d.get("rest_rate", 0.0))  # files before the rest clock: time
-        if not (np.isfinite(rest_rate) and rest_rate >= 0):
-            raise ParameterError(f"drift: rest_rate must be finite and >= 0, got {rest_rate}")
-        window = float(d.get("rest_window_s", 0.5))
-        if not (np.isfinite(window) and window > 0):
-            raise ParameterError(f"drift: rest_window_s must be > 0, got {window}")
-        gamma_time = float(d.get("gamma_time", 0.0))
+            raise f.error("kernel", "weights must be >= 0 and time constants > 0")
+        rest_rate = f.number("rest_rate", 0.0)  # files before the rest clock: time
+        if rest_rate < 0:
+            raise f.error("rest_rate", f"must be >= 0, got {rest_rate}")
+        window = f.number("rest_window_s", 0.5)
+        if not window > 0:
+            raise f.error("rest_window_s", f"must be > 0, got {window}")
+        gamma_time = f.number("gamma_time", 0.0)
         if gamma_time and rest_rate <= 0:
-            raise ParameterError("drift: gamma_time needs the rest clock (rest_rate > 0)")
-        return cls(
-            float(d["gamma"]), kernel, str(d.get("kind", "log")), rest_rate, window, gamma_time
-        )
+            raise f.error("gamma_time", "needs the rest clock (rest_rate > 0)")
+        kind = f.text("kind", "log")
+        return cls(f.number("gamma"), kernel, kind, rest_rate, window, gamma_time)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the drift model file (``texsense.drift``), atomically."""
+        return modelfile.write(path, "texsense.drift", self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | Path) -> DriftModel:
+        """Read a drift model file."""
+        _, content = modelfile.load(path, ("texsense.drift",))
+        try:
+            return cls.from_content(Fields(content, path))
+        except ParameterError as e:
+            raise FormatError(path, str(e)) from None
 
 
 def drift_exact(

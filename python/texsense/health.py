@@ -23,7 +23,9 @@ parallel for a batch.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -31,104 +33,172 @@ import numpy.typing as npt
 from texsense._core import FailureDetector as _CoreDetector
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
+from texsense.modelfile import Fields
 from texsense.recording import Recording
+from texsense.stage import Stage
 
-__all__ = ["FAILURE_KINDS", "ElementHealth", "FailureDetector", "health_report"]
+__all__ = ["FAILURE_KINDS", "ElementHealth", "FailureDetector", "health_report", "mean_reading"]
 
 #: Codes of the failure kinds (0 = healthy).
 FAILURE_KINDS = {0: "ok", 1: "short/break", 2: "out of range", 3: "stuck", 4: "jump"}
 
 
-@dataclass
-class FailureDetector:
-    """Streaming failure detector for one mat.
+def mean_reading(rec: Recording, name: str) -> np.ndarray:
+    """Mean of every element over the recording's valid readings (the unloaded level of a
+    zeroing recording); an element without any valid reading is an error naming it."""
+    f = np.where(rec.valid, rec.frames.astype(np.float64), np.nan)
+    with np.errstate(invalid="ignore"):
+        n = np.sum(np.isfinite(f), axis=0)
+        m = np.nansum(f, axis=0) / np.maximum(n, 1)
+    if np.any(n == 0):
+        raise ParameterError(
+            f"elements {np.flatnonzero(n == 0).tolist()[:20]} have no valid reading in the "
+            f"{name} recording"
+        )
+    return m
+
+
+class FailureDetector(Stage):
+    """The ``detect`` stage: failure codes of raw capacitance, streaming or batch.
+
+    A reading that fails is marked invalid (its value passes unchanged); the codes of the
+    last frames (see :data:`FAILURE_KINDS`) are in ``codes_`` after each call.
 
     Parameters
     ----------
     layout : Layout
         For the neighbours of the stuck test.
-    baseline_pF, max_pF : array_like (N,), optional
-        Unloaded and largest expected capacitance per element (from a
-        :class:`~texsense.calibration.MatCalibration`); without them only the absolute
-        tests run (short/break by ``min_pF``, saturation, stuck, jumps by ``jump_pF``).
+    min_pF, low_share, high_share, stuck_frames, stuck_pF, neighbour_change_pF,
+    stuck_floor_pF, jump_share, jump_pF : float
+        The thresholds of the module documentation.
+
+    :meth:`fit` learns each element's unloaded level and the largest reading to expect;
+    without them only the absolute tests run (short/break by ``min_pF``, saturation, stuck,
+    jumps by ``jump_pF``).
+
+    Examples
+    --------
+    >>> det = FailureDetector(Layout.grid(1, 3)).fit(baseline=[2.0, 2.0, 2.0])
+    >>> values, valid = det.step([2.1, 0.0, 2.2], None, t=0.0)
+    >>> valid.tolist(), det.codes_.tolist()
+    ([True, False, True], [0, 1, 0])
     """
 
-    layout: Layout
-    baseline_pF: npt.ArrayLike | None = None
-    max_pF: npt.ArrayLike | None = None
-    min_pF: float = 0.05
-    low_share: float = 0.5
-    high_share: float = 1.2
-    stuck_frames: int = 20
-    stuck_pF: float = 1e-4
-    neighbour_change_pF: float = 0.05
-    stuck_floor_pF: float = -np.inf
-    jump_share: float = 0.6
-    jump_pF: float = 2.0
+    name = "detect"
+    _reads = ("capacitance", "pF")
+    _gives = ("capacitance", "pF")
 
-    def __post_init__(self) -> None:
+    #: learned: each element's unloaded level and largest expected reading (pF), or None
+    baseline_pF_: np.ndarray | None
+    max_pF_: np.ndarray | None
+    #: the failure codes of the last frames (see FAILURE_KINDS)
+    codes_: np.ndarray
+
+    def __init__(
+        self,
+        layout: Layout,
+        min_pF: float = 0.05,
+        low_share: float = 0.5,
+        high_share: float = 1.2,
+        stuck_frames: int = 20,
+        stuck_pF: float = 1e-4,
+        neighbour_change_pF: float = 0.05,
+        stuck_floor_pF: float = -np.inf,
+        jump_share: float = 0.6,
+        jump_pF: float = 2.0,
+    ) -> None:
+        self.layout = layout
+        self.min_pF = min_pF
+        self.low_share = low_share
+        self.high_share = high_share
+        self.stuck_frames = stuck_frames
+        self.stuck_pF = stuck_pF
+        self.neighbour_change_pF = neighbour_change_pF
+        self.stuck_floor_pF = stuck_floor_pF
+        self.jump_share = jump_share
+        self.jump_pF = jump_pF
+
+    def fit(
+        self,
+        baseline: Recording | npt.ArrayLike | None = None,
+        max_pF: npt.ArrayLike | None = None,
+    ) -> FailureDetector:
+        """Learn each element's unloaded level (an unloaded recording: the mean of its valid
+        readings; or the levels themselves) and the largest reading to expect (e.g.
+        :meth:`texsense.stages.Convert.expected_range_pF`)."""
+        if isinstance(baseline, Recording):
+            baseline = mean_reading(baseline, "baseline")
+        as_array = lambda a: None if a is None else np.asarray(a, np.float64)  # noqa: E731
+        return self.set_fitted(baseline_pF=as_array(baseline), max_pF=as_array(max_pF))
+
+    def _prepare(self) -> None:
         n = self.layout.n_elements
-        self._base = None if self.baseline_pF is None else np.asarray(self.baseline_pF, float)
-        self._max = None if self.max_pF is None else np.asarray(self.max_pF, float)
-        for name, v in (("baseline_pF", self._base), ("max_pF", self._max)):
+        base, top = self.baseline_pF_, self.max_pF_
+        for name, v in (("baseline_pF", base), ("max_pF", top)):
             if v is not None and v.shape != (n,):
                 raise ParameterError(f"{name} needs {n} entries, got shape {v.shape}")
         if self.stuck_frames < 2 or not (self.jump_share > 0 and 0 < self.low_share < 1):
             raise ParameterError("stuck_frames >= 2, jump_share > 0 and 0 < low_share < 1 needed")
-        if self._base is not None and self._max is not None:
-            jump = self.jump_share * np.maximum(self._max - self._base, 1e-6)
+        if base is not None and top is not None:
+            jump = self.jump_share * np.maximum(top - base, 1e-6)
         else:
-            jump = np.full(n, self.jump_pF)
+            jump = np.full(n, float(self.jump_pF))
         indptr, indices = self.layout.neighbours
-        contiguous = np.ascontiguousarray
+        c = np.ascontiguousarray
         self._core = _CoreDetector(
-            contiguous(indptr, dtype=np.int64),
-            contiguous(indices, dtype=np.int64),
-            contiguous(jump, dtype=np.float64),
-            None if self._base is None else contiguous(self._base),
-            None if self._max is None else contiguous(self._max),
-            self.min_pF,
-            self.low_share,
-            self.high_share,
-            int(self.stuck_frames),
-            self.stuck_pF,
-            self.neighbour_change_pF,
+            c(indptr, dtype=np.int64), c(indices, dtype=np.int64), c(jump, dtype=np.float64),
+            None if base is None else c(base), None if top is None else c(top),
+            float(self.min_pF), float(self.low_share), float(self.high_share),
+            int(self.stuck_frames), float(self.stuck_pF), float(self.neighbour_change_pF),
             float(self.stuck_floor_pF),
-        )
-
-    def reset(self) -> FailureDetector:
-        """Forget the history (the start of a new recording)."""
-        self._core.reset()
-        return self
+        )  # fmt: skip
 
     @property
     def core(self) -> _CoreDetector:
         """The compiled detector (the pipeline's chain runs a copy of it)."""
+        self._check_fitted()
         return self._core
 
+    def _reset_stream(self) -> None:
+        self._core.reset()
+
+    def _block(
+        self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        codes = self._core.run(values, valid)
+        self.codes_ = codes
+        return values, valid & (codes == 0)
+
+    def step(
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One frame (see :meth:`Stage.step`); its failure codes (N,) in ``codes_``."""
+        out = super().step(values, valid, t)
+        self.codes_ = self.codes_[0]
+        return out
+
     def detect(self, frames_pF: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
-        """Failure codes (T, N) uint8 of frames (T, N), continuing from the present state."""
+        """Failure codes (T, N) uint8 of frames (T, N), continuing from the present state
+        (the array form of :meth:`run`, without frame times)."""
+        self._check_fitted()
         c = np.ascontiguousarray(frames_pF, dtype=np.float64)
         n = self.layout.n_elements
         if c.ndim != 2 or c.shape[1] != n:
             raise ParameterError(f"expected frames of {n} elements, got shape {c.shape}")
         v = np.ones(c.shape, bool) if valid is None else np.ascontiguousarray(valid, dtype=bool)
-        return self._core.run(c, v)
+        self.codes_ = self._core.run(c, v)
+        return self.codes_
 
-    def step(self, frame_pF: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
-        """Failure codes (N,) uint8 of one frame (see :data:`FAILURE_KINDS`)."""
-        c = np.asarray(frame_pF, dtype=np.float64)
-        n = self.layout.n_elements
-        if c.shape != (n,):
-            raise ParameterError(f"expected a frame of {n} elements, got shape {c.shape}")
-        return self.detect(c[None, :], None if valid is None else np.asarray(valid)[None, :])[0]
+    def _fitted_json(self) -> dict[str, Any]:
+        as_list = lambda a: None if a is None else a.tolist()  # noqa: E731
+        return {"baseline_pF": as_list(self.baseline_pF_), "max_pF": as_list(self.max_pF_)}
 
-    def run(self, rec: Recording) -> np.ndarray:
-        """Failure codes (T, N) of a capacitance recording (from the detector's present state)."""
-        if rec.quantity != "capacitance":
-            raise ParameterError(f"failure detection reads capacitance, not {rec.quantity}")
-        cap = rec.to_unit("pF").frames if rec.unit != "pF" else rec.frames
-        return self.detect(cap, rec.valid)
+    @classmethod
+    def _fitted_from_json(cls, fields: Fields, params: Mapping[str, Any]) -> dict[str, Any]:
+        return {
+            k: None if fields.get(k, None) is None else fields.array(k, ndim=1)
+            for k in ("baseline_pF", "max_pF")
+        }
 
 
 @dataclass(frozen=True)

@@ -160,48 +160,8 @@ class Layout:
         self._size = _readonly(size)
         self._area = _readonly(area)
 
-        if (shape is None) != (cells is None):
-            raise ParameterError("shape and cells must be given together")
-        if shape is not None:
-            rows, cols = (int(shape[0]), int(shape[1]))
-            if rows < 1 or cols < 1:
-                raise ParameterError(f"shape: rows and cols must be >= 1, got {shape}")
-            c = np.asarray(cells, dtype=np.int64)
-            if c.shape != (n,):
-                raise ParameterError(f"cells: expected shape ({n},), got {c.shape}")
-            if n and (c.min() < 0 or c.max() >= rows * cols):
-                raise ParameterError(f"cells: indices must lie in 0..{rows * cols - 1}")
-            if len(np.unique(c)) != n:
-                raise ParameterError("cells: two elements share one grid cell")
-            self._shape: tuple[int, int] | None = (rows, cols)
-            self._cells: _IntArray | None = _readonly(c)
-        else:
-            self._shape = None
-            self._cells = None
-        if pitch_cm is not None:
-            if shape is None:
-                raise ParameterError("pitch_cm is only meaningful for a grid layout")
-            pitch = (float(pitch_cm[0]), float(pitch_cm[1]))
-            if not (pitch[0] > 0 and pitch[1] > 0):
-                raise ParameterError(f"pitch_cm must be positive, got {pitch_cm}")
-            self._pitch: tuple[float, float] | None = pitch
-        else:
-            self._pitch = None
-
-        if neighbours is None:
-            indptr = np.zeros(n + 1, dtype=np.int64)
-            indices = np.zeros(0, dtype=np.int64)
-        else:
-            indptr = np.asarray(neighbours[0], dtype=np.int64)
-            indices = np.asarray(neighbours[1], dtype=np.int64)
-            if indptr.shape != (n + 1,) or indptr[0] != 0 or np.any(np.diff(indptr) < 0):
-                raise ParameterError(
-                    f"neighbours: indptr must be non-decreasing, start at 0, have {n + 1} entries"
-                )
-            if indices.shape != (indptr[-1],):
-                raise ParameterError(f"neighbours: expected {indptr[-1]} indices")
-            if indices.size and (indices.min() < 0 or indices.max() >= n):
-                raise ParameterError(f"neighbours: indices must lie in 0..{n - 1}")
+        self._shape, self._cells, self._pitch = _grid_of(n, shape, cells, pitch_cm)
+        indptr, indices = _neighbours_of(n, neighbours)
         self._indptr = _readonly(indptr)
         self._indices = _readonly(indices)
 
@@ -255,16 +215,15 @@ class Layout:
         rows, cols = int(rows), int(cols)
         if rows < 1 or cols < 1:
             raise ParameterError(f"grid: rows and cols must be >= 1, got {rows} x {cols}")
-        py, px = (pitch_cm, pitch_cm) if np.isscalar(pitch_cm) else pitch_cm  # type: ignore[misc]
-        py, px = float(py), float(px)
+        pitch = np.broadcast_to(np.asarray(pitch_cm, dtype=np.float64), (2,))
+        py, px = float(pitch[0]), float(pitch[1])
         if not (py > 0 and px > 0):
             raise ParameterError(f"pitch_cm must be positive, got {pitch_cm}")
         if element_size_cm is None:
             sy, sx = py, px
-        elif np.isscalar(element_size_cm):
-            sy = sx = float(element_size_cm)  # type: ignore[arg-type]
         else:
-            sy, sx = (float(v) for v in element_size_cm)  # type: ignore[union-attr]
+            size = np.broadcast_to(np.asarray(element_size_cm, dtype=np.float64), (2,))
+            sy, sx = float(size[0]), float(size[1])
         if active is None:
             mask = np.ones((rows, cols), dtype=bool)
         else:
@@ -534,9 +493,9 @@ class Layout:
                 d["xy_cm"],
                 d["size_cm"],
                 area_cm2=d.get("area_cm2"),
-                shape=None if d.get("shape") is None else tuple(d["shape"]),  # type: ignore[arg-type]
+                shape=None if d.get("shape") is None else tuple(d["shape"]),
                 cells=d.get("cells"),
-                pitch_cm=None if d.get("pitch_cm") is None else tuple(d["pitch_cm"]),  # type: ignore[arg-type]
+                pitch_cm=None if d.get("pitch_cm") is None else tuple(d["pitch_cm"]),
                 neighbours=(d["neighbours_indptr"], d["neighbours_indices"]),
                 names=d.get("names"),
                 regions=d.get("regions") or {},
@@ -580,3 +539,53 @@ class Layout:
                 f"{self.n_elements} elements, {len(self._regions)} regions)"
             )
         return f"Layout.points({self.n_elements} elements, {len(self._regions)} regions)"
+
+
+def _grid_of(
+    n: int,
+    shape: tuple[int, int] | None,
+    cells: npt.ArrayLike | None,
+    pitch_cm: tuple[float, float] | None,
+) -> tuple[tuple[int, int] | None, _IntArray | None, tuple[float, float] | None]:
+    """The checked grid of a layout: its shape, the cell of every element, the pitch."""
+    if (shape is None) != (cells is None):
+        raise ParameterError("shape and cells must be given together")
+    if pitch_cm is not None and shape is None:
+        raise ParameterError("pitch_cm is only meaningful for a grid layout")
+    if shape is None:
+        return None, None, None
+    rows, cols = (int(shape[0]), int(shape[1]))
+    if rows < 1 or cols < 1:
+        raise ParameterError(f"shape: rows and cols must be >= 1, got {shape}")
+    c = np.asarray(cells, dtype=np.int64)
+    if c.shape != (n,):
+        raise ParameterError(f"cells: expected shape ({n},), got {c.shape}")
+    if n and (c.min() < 0 or c.max() >= rows * cols):
+        raise ParameterError(f"cells: indices must lie in 0..{rows * cols - 1}")
+    if len(np.unique(c)) != n:
+        raise ParameterError("cells: two elements share one grid cell")
+    pitch = None
+    if pitch_cm is not None:
+        pitch = (float(pitch_cm[0]), float(pitch_cm[1]))
+        if not (pitch[0] > 0 and pitch[1] > 0):
+            raise ParameterError(f"pitch_cm must be positive, got {pitch_cm}")
+    return (rows, cols), _readonly(c), pitch
+
+
+def _neighbours_of(
+    n: int, neighbours: tuple[npt.ArrayLike, npt.ArrayLike] | None
+) -> tuple[_IntArray, _IntArray]:
+    """The checked neighbour graph (CSR: indptr, indices) of n elements (none by default)."""
+    if neighbours is None:
+        return np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    indptr = np.asarray(neighbours[0], dtype=np.int64)
+    indices = np.asarray(neighbours[1], dtype=np.int64)
+    if indptr.shape != (n + 1,) or indptr[0] != 0 or np.any(np.diff(indptr) < 0):
+        raise ParameterError(
+            f"neighbours: indptr must be non-decreasing, start at 0, have {n + 1} entries"
+        )
+    if indices.shape != (indptr[-1],):
+        raise ParameterError(f"neighbours: expected {indptr[-1]} indices")
+    if indices.size and (indices.min() < 0 or indices.max() >= n):
+        raise ParameterError(f"neighbours: indices must lie in 0..{n - 1}")
+    return indptr, indices

@@ -1,174 +1,145 @@
-"""From raw capacitance frames to pressure maps: detect -> convert -> hysteresis -> drift ->
-repair, streaming frame by frame or in batch over a recording.
+"""From raw capacitance frames to pressure maps: a mat's chain of stages
+(:class:`~texsense.stages.StageChain`) compiled into one pass of the Rust core, streaming
+frame by frame or in batch over a recording.
 
-- **detect** (:class:`~texsense.health.FailureDetector`): failure codes per reading, from
-  the raw capacitance and the calibration's expected range;
-- **convert** (:class:`~texsense.calibration.MatCalibration`): capacitance -> compression
-  per element (eq. 2.1, zeroed and equilibrated);
-- **hysteresis + drift**: the calibration's Preisach model and drift stage in one pass of the
-  Rust core (eq. 4.15-4.22, eq. 5.8). A failed reading is skipped: the element's Preisach and
-  drift states stay frozen until it reads again. Without the hysteresis stage the
-  compression is converted with the first-loading curve (what an uncompensated system does);
+- **detect** (:class:`~texsense.health.FailureDetector`): the chain's detect stage, or the
+  detector its conversion implies (the expected capacitance range of every element);
+- **convert** (:class:`~texsense.stages.Convert`): capacitance -> compression per element
+  (eq. 2.1, zeroed and equilibrated), or a linear calibration
+  (:class:`~texsense.stages.Linear`);
+- **hysteresis + drift** (:class:`~texsense.stages.Hysteresis`,
+  :class:`~texsense.stages.Drift`) in one pass (eq. 4.15-4.22, eq. 5.8). A failed reading is
+  skipped: the element's Preisach and drift states stay frozen until it reads again. Without
+  the hysteresis stage the compression is converted with the first-loading curve (what an
+  uncompensated system does);
 - **repair** (:class:`~texsense.repair.Repair`): failed elements are filled (eq. 6.14 or a
   better method) and stay marked False in the output's ``valid`` mask.
 
-Detection, conversion, hysteresis + drift and the local repair methods (``zero``,
-``last-value``, ``neighbour-mean``, ``idw8``) run as one compiled pass of the Rust core
-(``crates/core/src/chain.rs``) over the whole block of frames, in parallel over blocks of
-elements; the harmonic repairs solve a sparse system per frame in scipy afterwards. Batch and
-streaming give the same numbers (tested); ``step`` is the same code with one frame.
+The compiled chain (``crates/core/src/chain.rs``) runs the stages' own kernels one after the
+other over the whole block of frames, in parallel over blocks of elements; the harmonic
+repairs solve a sparse system per frame in scipy afterwards. ``chain.run(rec)`` (the stages
+in Python, float64 between them) gives the same numbers (tested, to the bit), and so do
+batch and streaming: ``step`` is the same code with one frame.
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from texsense._core import Chain
-from texsense.calibration import LinearCalibration, MatCalibration
+from texsense._core import Chain, Compensation, __version__
 from texsense.exceptions import ParameterError
 from texsense.health import FailureDetector
 from texsense.layout import Layout
 from texsense.recording import Recording
-from texsense.repair import METHODS, Repair, idw_weights
-from texsense.stages import StageChain
+from texsense.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
+from texsense.stage import time_steps
+from texsense.stages import Convert, Drift, Hysteresis, Linear, StageChain
 
 __all__ = ["Pipeline"]
 
-#: Repair methods that solve for all failed elements of a frame together (scipy, per frame).
-_GLOBAL_REPAIRS = ("harmonic", "harmonic-temporal")
-
 
 class Pipeline:
-    """The capacitance-to-pressure chain of one mat.
+    """The capacitance-to-pressure chain of one mat, compiled.
 
     Parameters
     ----------
-    calibration : MatCalibration
-        Conversion and spacer model (with its drift stage, if any).
+    chain : StageChain
+        The mat's calibration: a conversion stage (convert or linear), the spacer's stages
+        (hysteresis, optionally drift) and optionally a detect stage.
     layout : Layout
         The mat's elements (neighbours for detection and repair).
     detect, hysteresis, drift : bool
-        Switch stages off to see what each contributes.
+        Switch stages off to see what each contributes (``hysteresis=False``: the
+        first-loading curve).
     repair : str or None
         A method of :data:`texsense.repair.METHODS`, or None to leave failed elements NaN
         (an unknown name raises :class:`ParameterError`).
-    detector : FailureDetector, optional
-        Default: one with the calibration's expected capacitance range.
     """
 
     def __init__(
         self,
-        calibration: MatCalibration | LinearCalibration | StageChain,
+        chain: StageChain,
         layout: Layout,
         *,
         detect: bool = True,
         hysteresis: bool = True,
         drift: bool = True,
         repair: str | None = "harmonic",
-        detector: FailureDetector | None = None,
     ) -> None:
-        if calibration.n_elements != layout.n_elements:
+        if not isinstance(chain, StageChain):
+            raise ParameterError(f"a Pipeline compiles a StageChain, not {type(chain).__name__}")
+        conversion = chain.conversion
+        if conversion is None:
+            raise ParameterError(f"the chain {chain.names} has no convert or linear stage")
+        if chain.n_elements != layout.n_elements:
             raise ParameterError(
-                f"the calibration is for {calibration.n_elements} elements, the layout has "
+                f"the calibration is for {chain.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
             )
-        self.calibration_id = calibration.id
-        if isinstance(calibration, StageChain):
-            # the chain's stages, compiled: its detect stage's thresholds, its numbers
-            detector = detector or calibration.detector()
-            calibration = calibration.calibration()
-        linear = isinstance(calibration, LinearCalibration)
-        model = None if linear else calibration.model
-        if not linear and model is None:
-            raise ParameterError("the calibration has no spacer model (compression -> pressure)")
         if repair is not None and repair not in METHODS:
             raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
-        if linear:
-            hysteresis = drift = False  # a linear calibration has no spacer model
-        if drift and hysteresis and getattr(model, "drift_", None) is None:
-            drift = False  # nothing to apply: recorded in the provenance
-        self.calibration = calibration
+        if isinstance(conversion, Convert) and "hysteresis" not in chain:
+            raise ParameterError("the calibration has no spacer model (compression -> pressure)")
+        self.chain = chain
         self.layout = layout
-        self.stages = {"detect": detect, "hysteresis": hysteresis, "drift": drift}
-        self.repair_method = repair
-        if detector is None:
-            detector = _default_detector(calibration, layout)
-        self.detector = detector
-        # the harmonic methods solve a sparse system per frame (scipy); the others run in
-        # the compiled chain
-        self._repair = Repair(layout, repair) if repair in _GLOBAL_REPAIRS else None
-        self._chain = self._build_chain()
+        self.detect, self.hysteresis, self.drift, self.repair = detect, hysteresis, drift, repair
+        self.calibration_id = chain.id
+        linear = isinstance(conversion, Linear)
+        self.stages = {
+            "detect": detect,
+            "hysteresis": hysteresis and not linear,
+            "drift": drift and hysteresis and "drift" in chain,
+        }
+        self.detector: FailureDetector = chain.find(FailureDetector) or conversion.detector(layout)
+        self._repair = None
+        if repair is not None and repair in GLOBAL_METHODS:
+            self._repair = Repair(layout, repair).fit()
+        self._chain = self._compile(conversion)
+        self._chain.reset()  # the kernels' copies start a stream of their own
         self._last_t: float | None = None
         self._dt1 = np.zeros(1)
         self._all_valid = np.ones(layout.n_elements, bool)
-        self.codes_: np.ndarray | None = None
+        #: the failure codes of the last frames (0: measured)
+        self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
+
+    def get_params(self) -> dict[str, Any]:
+        """The constructor's arguments, by name (as every stage has them)."""
+        names = [p for p in inspect.signature(type(self).__init__).parameters if p != "self"]
+        return {name: getattr(self, name) for name in names}
 
     @property
     def input_quantity(self) -> tuple[str, str]:
         """(quantity, unit) of the readings the pipeline takes."""
-        cal = self.calibration
-        if isinstance(cal, LinearCalibration):
-            return cal.input_quantity, cal.input_unit
-        return "capacitance", "pF"
+        return self.chain.reads
 
     @property
     def output_quantity(self) -> tuple[str, str]:
         """(quantity, unit) of the values the pipeline gives."""
-        cal = self.calibration
-        if isinstance(cal, LinearCalibration):
-            return cal.output_quantity, cal.output_unit
-        return "pressure", "N/cm2"
+        return self.chain.gives
 
-    def _build_chain(self) -> Chain:
-        cal = self.calibration
-        c = np.ascontiguousarray
-        detector = self.detector.core if self.stages["detect"] else None
-        if isinstance(cal, LinearCalibration):
-            conversion: dict[str, Any] = {}
-            response: dict[str, Any] = {}
-            offset, gain = cal.offset, cal.gain
-        else:
-            model = cal.model
-            conversion = {
-                "curve_capacitance_pf": c(cal.curve_capacitance_pF, dtype=np.float64),
-                "curve_compression_mm": c(cal.curve_compression_mm, dtype=np.float64),
-            }
-            offset, gain = cal.offset_pF, cal.gain
+    def _compile(self, conversion: Convert | Linear) -> Chain:
+        """The compiled chain: the stages' own kernels, one after the other."""
+        n = self.layout.n_elements
+        response: dict[str, Any] = {}
+        hyst = self.chain.find(Hysteresis)
+        if hyst is not None and isinstance(conversion, Convert):
             if self.stages["hysteresis"]:
-                response = {
-                    "compensation": model.compensation(
-                        self.layout.n_elements, drift=self.stages["drift"]
-                    )
-                }
+                drift = self.chain.find(Drift) if self.stages["drift"] else None
+                bank = None if drift is None else drift.bank(n)
+                response["compensation"] = Compensation(hyst.bank(n), bank)
             else:
-                e = np.linspace(model.u_min_, model.u_max_, 400)
-                p = np.maximum.accumulate(model.predict(e))
-                response = {"loading": (c(e), c(p, dtype=np.float64))}
-        method = self.repair_method
-        graph: dict[str, Any] = {}
-        if method == "neighbour-mean":
-            indptr, indices = self.layout.neighbours
-            graph = {"indptr": c(indptr, dtype=np.int64), "indices": c(indices, dtype=np.int64)}
-        elif method == "idw8":
-            w = idw_weights(self.layout)
-            graph = {
-                "indptr": c(w.indptr, dtype=np.int64),
-                "indices": c(w.indices, dtype=np.int64),
-                "weights": c(w.data, dtype=np.float64),
-            }
-            method = "weighted"
-        local = "none" if method is None or method in _GLOBAL_REPAIRS else method
+                response["loading"] = hyst.loading_curve()
+        method = self.repair
+        local = method is not None and method not in GLOBAL_METHODS
         return Chain(
-            c(offset, dtype=np.float64),
-            c(gain, dtype=np.float64),
-            **conversion,
-            detector=detector,
-            repair=local,
+            conversion.kernel(),
+            detector=self.detector.core if self.stages["detect"] else None,
+            repair=local_repair(self.layout, method) if local and method else None,
             **response,
-            **graph,
         )
 
     def reset(self) -> Pipeline:
@@ -186,22 +157,21 @@ class Pipeline:
 
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
-        from texsense import __version__
-
+        convert = "convert:linear" if "linear" in self.chain else "convert"
         return {
             "calibration_id": self.calibration_id,
             "software": f"texsense {__version__}",
             "stages": [k for k, v in self.stages.items() if v]
-            + ["convert" if isinstance(self.calibration, MatCalibration) else "convert:linear"]
-            + ([f"repair:{self.repair_method}"] if self.repair_method else []),
+            + [convert]
+            + ([f"repair:{self.repair}"] if self.repair else []),
         }
 
     def process(
         self, frames_pF: npt.ArrayLike, times_s: npt.ArrayLike, valid: npt.ArrayLike | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Frames of capacitance (T, N) in pF at ``times_s`` (T,) -> pressure (T, N) float64
-        in N/cm², the mask of measured (not repaired) readings and the failure codes, both
-        (T, N); continues from the present state (so a long recording can go in chunks)."""
+        """Frames of readings (T, N) at ``times_s`` (T,) -> values (T, N) float64, the mask of
+        measured (not repaired) readings and the failure codes, both (T, N); continues from
+        the present state (so a long recording can go in chunks)."""
         cap = np.ascontiguousarray(frames_pF, dtype=np.float64)
         n = self.layout.n_elements
         if cap.ndim != 2 or cap.shape[1] != n:
@@ -216,56 +186,48 @@ class Pipeline:
         )
         if cap.shape[0] == 0:
             return np.empty(cap.shape), np.zeros(cap.shape, bool), np.zeros(cap.shape, np.uint8)
-        return self._process(cap, v, t)
+        return self._pass(time_steps(t, self._last_t), cap, v, float(t[-1]))
 
-    def _process(
-        self, cap: np.ndarray, valid: np.ndarray, times: np.ndarray
+    def _pass(
+        self, dt: np.ndarray, cap: np.ndarray, valid: np.ndarray, last_t: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t0 = times[0] if self._last_t is None else self._last_t
-        dt = np.diff(times, prepend=t0)
-        if np.any(dt < 0):
-            raise ParameterError("frame times must not decrease")
-        pressure, codes = self._chain.run(dt, cap, valid)
-        self._last_t = float(times[-1])
+        """The compiled chain (and a harmonic repair) over checked arrays: what ``process``
+        and ``step`` share."""
+        values, codes = self._chain.run(dt, cap, valid)
+        self._last_t = last_t
         ok = codes == 0
         if self._repair is not None:
-            for k in range(cap.shape[0]):
-                pressure[k], _ = self._repair.step(pressure[k], ok[k])
-        return pressure, ok, codes
+            values, _ = self._repair._block(values, ok & np.isfinite(values), dt)
+        self.codes_ = codes
+        return values, ok, codes
 
     def step(
-        self, frame_pF: npt.ArrayLike, time_s: float, valid: npt.ArrayLike | None = None
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
     ) -> tuple[np.ndarray, np.ndarray]:
-        """One frame of capacitance (N,) at ``time_s`` -> pressure (N,) and the mask of
-        measured (not repaired) elements."""
+        """One frame of readings (N,) with their validity (None: all valid) at ``t`` (s) ->
+        values (N,) and the mask of measured (not repaired) elements; the failure codes in
+        ``codes_``."""
         n = self.layout.n_elements
-        c = np.ascontiguousarray(frame_pF, dtype=np.float64)
-        if c.shape != (n,):
-            raise ParameterError(f"expected a frame of {n} elements, got shape {c.shape}")
-        if valid is None:
-            v = self._all_valid
-        else:
-            v = np.ascontiguousarray(valid, dtype=bool)
-            if v.shape != (n,):
-                raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
-        t = float(time_s)
+        x = np.ascontiguousarray(values, dtype=np.float64)
+        if x.shape != (n,):
+            raise ParameterError(f"expected a frame of {n} elements, got shape {x.shape}")
+        v = self._all_valid if valid is None else np.ascontiguousarray(valid, dtype=bool)
+        if v.shape != (n,):
+            raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
+        t = float(t)
         dt = 0.0 if self._last_t is None else t - self._last_t
-        if not dt >= 0:
-            raise ParameterError("frame times must not decrease")
+        if not (dt >= 0 and np.isfinite(t)):
+            raise ParameterError("frame times must be numbers and must not decrease")
         self._dt1[0] = dt
         # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
-        p, codes = self._chain.run(self._dt1, c.reshape(1, n), v.reshape(1, n))
-        self._last_t = t
+        out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
         self.codes_ = codes[0]
-        ok = self.codes_ == 0
-        if self._repair is not None:
-            p[0], _ = self._repair.step(p[0], ok)
-        return p[0], ok
+        return out[0], ok[0]
 
     def run(self, rec: Recording) -> Recording:
-        """A capacitance recording -> a pressure recording (N/cm²) with the validity mask
-        (False where a value was repaired or is missing), the failure codes in ``codes_``
-        and the provenance in ``meta``."""
+        """A recording of readings -> a recording of values (pressure in N/cm² for a mat
+        calibration) with the validity mask (False where a value was repaired or is
+        missing), the failure codes in ``codes_`` and the provenance in ``meta``."""
         quantity, unit = self.input_quantity
         if rec.quantity != quantity:
             raise ParameterError(f"the pipeline reads {quantity}, not {rec.quantity}")
@@ -275,37 +237,7 @@ class Pipeline:
                 f"{self.layout.n_elements}"
             )
         values = rec.to_unit(unit).frames if rec.unit != unit else rec.frames
-        p, ok, codes = self._process(
-            np.ascontiguousarray(values, dtype=np.float64),
-            np.ascontiguousarray(rec.valid, dtype=bool),
-            np.asarray(rec.times, np.float64),
-        )
-        self.codes_ = codes
+        p, ok, _ = self.process(values, rec.times, rec.valid)
         meta = {**rec.meta, **self.provenance()}
         out_quantity, out_unit = self.output_quantity
         return rec._with(frames=p, valid=ok, quantity=out_quantity, unit=out_unit, meta=meta)
-
-
-def _default_detector(
-    calibration: MatCalibration | LinearCalibration, layout: Layout
-) -> FailureDetector:
-    """The detector a calibration implies: with a mat calibration, the expected capacitance
-    range per element; with a linear one, only the tests that need no unloaded level (a 0
-    reading is an unloaded mat there, not a short), the jump test off, and readings within
-    1 % of full scale of the offset never stuck (low readings of an integer-count mat hold
-    still at rest)."""
-    if isinstance(calibration, LinearCalibration):
-        top, floor = None, float(np.max(calibration.offset))
-        if calibration.full_scale is not None:
-            top = np.full(layout.n_elements, float(calibration.full_scale))
-            floor += 0.01 * float(calibration.full_scale)
-        return FailureDetector(
-            layout,
-            max_pF=top,
-            high_share=1.0,
-            min_pF=-np.inf,
-            jump_pF=np.inf,
-            stuck_floor_pF=floor,
-        )
-    lo, hi = calibration.expected_range_pF()
-    return FailureDetector(layout, baseline_pF=lo, max_pF=hi)

@@ -19,6 +19,7 @@ from texsense.recording import Recording
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.cm import ScalarMappable
     from matplotlib.figure import Figure
 
 __all__ = ["draw_map", "overview_figure", "peak_frame", "save_figure"]
@@ -74,7 +75,7 @@ def peak_frame(rec: Recording) -> int:
     return int(np.argmax(totals))
 
 
-def draw_map(ax: Axes, rec: Recording, frame: int, *, vmax: float | None = None) -> object:
+def draw_map(ax: Axes, rec: Recording, frame: int, *, vmax: float | None = None) -> ScalarMappable:
     """Draw frame ``frame`` of ``rec`` on ``ax``: cells for grids, squares for points.
 
     Empty grid cells are left blank, invalid readings are hatched grey. Returns the mappable
@@ -87,7 +88,7 @@ def draw_map(ax: Axes, rec: Recording, frame: int, *, vmax: float | None = None)
     x0, x1, y0, y1 = lay.extent_cm
     if lay.shape is not None:
         grid = lay.to_grid(values)
-        img = ax.imshow(
+        img: ScalarMappable = ax.imshow(
             np.ma.masked_invalid(grid),
             cmap="viridis",
             vmin=0,

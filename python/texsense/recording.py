@@ -18,6 +18,7 @@ Examples
 
 from __future__ import annotations
 
+import importlib
 import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -246,7 +247,7 @@ class Recording:
                 raise ParameterError("concatenate: element_times present in only some parts")
         et = None
         if first.element_times is not None:
-            et = np.concatenate([r.element_times for r in recordings])  # type: ignore[misc]
+            et = np.concatenate([r.element_times for r in recordings])
         return cls(
             np.concatenate([r.frames for r in recordings]),
             np.concatenate([r.times for r in recordings]),
@@ -284,11 +285,15 @@ class Recording:
             and self.meta == other.meta
         )
 
-    def save(self, path: str | Path) -> Path:
-        """Write the recording to an HDF5 file (schema in ``docs/data-model.md``)."""
-        from texsense.io.hdf5 import write_hdf5
-
-        return write_hdf5(self, path)
+    def save(self, path: str | Path, *, format: str | None = None) -> Path:
+        """Write the recording by the path's extension through :func:`texsense.io.save`:
+        HDF5 (``.h5``, schema in ``docs/data-model.md``), wide CSV (``.csv``) or Tekscan ASCII
+        (``.asf``); ``format`` names a writer explicitly."""
+        # texsense.io reads files into recordings, so it depends on this module; the façade
+        # reaches it at call time (the one late-bound import of the package, allowed by
+        # tests/test_imports.py)
+        io = importlib.import_module("texsense.io")
+        return io.save(self, path, format=format)
 
     def __repr__(self) -> str:
         return (

@@ -1,16 +1,11 @@
-"""Repair of failed elements (thesis §6.5.2.5).
+"""Repair of failed elements (thesis §6.5.2.5): the ``repair`` stage, :class:`Repair`.
 
-:class:`NeighbourMeanRepair` implements eq. 6.14: a failed element gets the mean of its
-available 4-neighbours, ``p_i = (p_l + p_r + p_t + p_b) / n_a``; when none of them is
-available, the last value of the element (real or repaired) is held. The kernel runs in the
-Rust core (``texsense._core``), streaming (:meth:`~NeighbourMeanRepair.step`) or batch
-(:meth:`~NeighbourMeanRepair.run`); both give identical results.
-
-:class:`Repair` offers every method behind one interface (``METHODS``):
+Every method of :data:`METHODS` behind one stage:
 
 - ``zero``: failed elements read 0 (what an unrepaired mat shows);
 - ``last-value``: hold the last value seen (real or repaired);
-- ``neighbour-mean``: eq. 6.14 (the Rust kernel above);
+- ``neighbour-mean``: eq. 6.14, ``p_i = (p_l + p_r + p_t + p_b) / n_a``, the mean of the
+  available 4-neighbours;
 - ``idw8``: inverse-distance-weighted mean (1/d²) of the valid elements within 1.5 pitches —
   the 8-neighbourhood on a grid, so diagonals help where the 4-neighbours failed too;
 - ``harmonic``: Laplace inpainting — the failed elements jointly take the values that make
@@ -23,104 +18,73 @@ Rust core (``texsense._core``), streaming (:meth:`~NeighbourMeanRepair.step`) or
   know); a moving one moves it like its surroundings.
 
 All fall back to the last value where nothing valid is connected, and start with NaN
-("missing") where there is none yet.
+("missing") where there is none yet. The four local methods run in the compiled kernel that
+the pipeline's chain runs too (``crates/core/src/repair.rs``); the harmonic ones solve their
+sparse systems in scipy. A repaired reading stays marked invalid in the output, so it is
+never mistaken for a measured one; what happened to each reading is in ``outcome_``
+(:data:`OUTCOME`).
 
 Examples
 --------
 >>> import numpy as np
->>> from texsense import Layout, Recording
->>> from texsense.repair import NeighbourMeanRepair
->>> lay = Layout.grid(3, 3)
->>> frame = np.array([[0, 1, 0, 2, 99, 4, 0, 5, 0]], dtype=float)
->>> valid = np.ones((1, 9), bool); valid[0, 4] = False
->>> rec = Recording(frame, [0.0], lay, valid=valid)
->>> NeighbourMeanRepair(lay).run(rec).frames[0, 4]
-np.float32(3.0)
+>>> from texsense import Layout
+>>> rep = Repair(Layout.grid(3, 3), "neighbour-mean").fit()
+>>> frame = np.array([0, 1, 0, 2, 99, 4, 0, 5, 0], dtype=float)
+>>> valid = np.ones(9, bool); valid[4] = False
+>>> values, measured = rep.step(frame, valid, t=0.0)
+>>> float(values[4]), bool(measured[4])
+(3.0, False)
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from texsense._core import NeighbourMeanRepair as _CoreRepair
+from texsense._core import LocalRepair
+from texsense._progress import progress
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
-from texsense.recording import Recording
+from texsense.modelfile import Fields
+from texsense.stage import Stage
 
-__all__ = ["METHODS", "OUTCOME", "NeighbourMeanRepair", "Repair"]
+__all__ = ["METHODS", "OUTCOME", "Repair", "idw_weights", "local_repair"]
 
 #: The repair methods of :class:`Repair`.
 METHODS = ("zero", "last-value", "neighbour-mean", "idw8", "harmonic", "harmonic-temporal")
 
-#: Outcome codes returned per element and frame by the kernel.
+#: Methods that solve for all failed elements of a frame together (scipy, per frame).
+GLOBAL_METHODS = ("harmonic", "harmonic-temporal")
+
+#: Outcome codes per element and frame.
 OUTCOME = {0: "measured", 1: "interpolated", 2: "last value", 3: "missing"}
 
 
-class NeighbourMeanRepair:
-    """Eq. 6.14 repair with state (the last value of every element).
-
-    Parameters
-    ----------
-    layout : Layout
-        Supplies the 4-neighbour graph.
-    """
-
-    def __init__(self, layout: Layout) -> None:
-        self.layout = layout
+def local_repair(layout: Layout, method: str) -> LocalRepair:
+    """The compiled kernel of a local method (``zero``, ``last-value``, ``neighbour-mean``,
+    ``idw8``) for ``layout``."""
+    c = np.ascontiguousarray
+    n = layout.n_elements
+    if method == "neighbour-mean":
         indptr, indices = layout.neighbours
-        self._core = _CoreRepair(
-            np.ascontiguousarray(indptr, dtype=np.int64),
-            np.ascontiguousarray(indices, dtype=np.int64),
-        )
-        self.outcome_: npt.NDArray[np.uint8] | None = None
-
-    def reset(self) -> NeighbourMeanRepair:
-        """Forget the last values."""
-        self._core.reset()
-        return self
-
-    @property
-    def last_values(self) -> npt.NDArray[np.float32]:
-        """Last value (real or repaired) of each element; NaN where none was seen yet."""
-        return self._core.last_values()
-
-    def _repair(
-        self, frames: npt.ArrayLike, valid: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
-        f = np.ascontiguousarray(frames, dtype=np.float32)
-        v = np.ascontiguousarray(valid, dtype=bool)
-        if f.ndim != 2 or f.shape[1] != self.layout.n_elements:
-            raise ParameterError(
-                f"expected frames of {self.layout.n_elements} elements, got shape {f.shape}"
-            )
-        return self._core.run(f, v)
-
-    def step(
-        self, frame: npt.ArrayLike, valid: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
-        """Repair one frame (N,); returns the repaired frame and a mask of repaired elements."""
-        out, outcome = self._repair(np.asarray(frame)[None, :], np.asarray(valid)[None, :])
-        self.outcome_ = outcome[0]
-        return out[0], outcome[0] != 0
-
-    def run(self, rec: Recording) -> Recording:
-        """Repair every frame of ``rec`` in order (continuing from the current state).
-
-        Returns a recording whose ``valid`` mask is True only for measured readings, so that
-        repaired values stay marked; the outcome codes (see :data:`OUTCOME`) are kept in
-        ``outcome_``.
-        """
-        out, outcome = self._repair(rec.frames, rec.valid)
-        self.outcome_ = outcome
-        meta = {**rec.meta, "repair": "neighbour-mean (eq. 6.14)"}
-        return rec._with(frames=out, valid=outcome == 0, meta=meta)
+        return LocalRepair(method, n, c(indptr, dtype=np.int64), c(indices, dtype=np.int64))
+    if method == "idw8":
+        w = idw_weights(layout)
+        return LocalRepair(
+            "weighted", n, c(w.indptr, dtype=np.int64), c(w.indices, dtype=np.int64),
+            c(w.data, dtype=np.float64),
+        )  # fmt: skip
+    if method in ("zero", "last-value"):
+        return LocalRepair(method, n)
+    raise ParameterError(f"{method!r} is not a local repair method")
 
 
-class Repair:
-    """Any repair method of :data:`METHODS` with state (the last value of every element).
+class Repair(Stage):
+    """The ``repair`` stage: failed readings filled by one of :data:`METHODS`, marked invalid
+    in the output. Nothing to learn: :meth:`fit` prepares the method for the layout.
 
     Examples
     --------
@@ -129,143 +93,135 @@ class Repair:
     >>> lay = Layout.grid(3, 3)
     >>> frame = np.full(9, 2.0); frame[[1, 4]] = 0.0   # two neighbouring elements failed
     >>> valid = frame > 0
-    >>> out, repaired = Repair(lay, "harmonic").step(frame, valid)
-    >>> out.tolist(), repaired.nonzero()[0].tolist()
+    >>> out, measured = Repair(lay, "harmonic").fit().step(frame, valid, t=0.0)
+    >>> out.tolist(), np.flatnonzero(~measured).tolist()
     ([2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0], [1, 4])
     """
 
+    name = "repair"
+
+    #: learned: the number of elements the method was prepared for
+    n_elements_: int
+    #: what happened to each reading of the last frames (see OUTCOME)
+    outcome_: np.ndarray
+
     def __init__(self, layout: Layout, method: str = "harmonic") -> None:
-        if method not in METHODS:
-            raise ParameterError(f"unknown repair method {method!r}; known: {', '.join(METHODS)}")
         self.layout = layout
         self.method = method
-        n = layout.n_elements
+
+    def fit(self) -> Repair:
+        """Nothing to learn: prepares the method for the layout."""
+        return self.set_fitted(n_elements=self.layout.n_elements)
+
+    def _prepare(self) -> None:
+        if self.method not in METHODS:
+            raise ParameterError(
+                f"unknown repair method {self.method!r}; known: {', '.join(METHODS)}"
+            )
+        if self.n_elements_ != self.layout.n_elements:
+            raise ParameterError(f"the layout has {self.layout.n_elements} elements")
+        self._kernel = (
+            None if self.method in GLOBAL_METHODS else local_repair(self.layout, self.method)
+        )
+        if self.method in GLOBAL_METHODS:
+            self._harmonic = _Harmonic(self.layout)
+
+    def _reset_stream(self) -> None:
+        n = self.layout.n_elements
         self._last = np.full(n, np.nan)
         self._prev = np.full(n, np.nan)  # the previous output frame
-        self._core = NeighbourMeanRepair(layout) if method == "neighbour-mean" else None
-        if method == "idw8":
-            self._weights = idw_weights(layout)
-        if method in ("harmonic", "harmonic-temporal"):
-            import scipy.sparse as sp
+        if self._kernel is not None:
+            self._kernel.reset()
 
-            indptr, indices = layout.neighbours
-            adj = sp.csr_matrix((np.ones(indices.size), indices, indptr), shape=(n, n))
-            self._adj = ((adj + adj.T) > 0).astype(np.float64).tocsr()
-            self._deg = np.asarray(self._adj.sum(axis=1)).ravel()
-            self._cache: dict[bytes, tuple] = {}
-        self.outcome_: npt.NDArray[np.uint8] | None = None
-
-    def reset(self) -> Repair:
-        """Forget the last values."""
-        self._last[:] = np.nan
-        self._prev[:] = np.nan
-        if self._core is not None:
-            self._core.reset()
-        return self
-
-    def step(
-        self, frame: npt.ArrayLike, valid: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
-        """Repair one frame (N,); returns the repaired frame and a mask of repaired elements.
-        Non-finite readings count as failed too."""
-        x = np.asarray(frame, dtype=np.float64)
-        n = self.layout.n_elements
-        if x.shape != (n,):
-            raise ParameterError(f"expected a frame of {n} elements, got shape {x.shape}")
-        ok = np.asarray(valid, dtype=bool) & np.isfinite(x)
-        if self._core is not None:
-            out32, _ = self._core.step(np.where(ok, x, 0.0), ok)
-            out = out32.astype(np.float64)
-            outcome = self._core.outcome_
-        else:
-            out, outcome = self._fill(x, ok)
-        self._last = np.where(np.isfinite(out), out, self._last)
-        self._prev = out.copy()
+    def _block(
+        self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        if self._kernel is not None:
+            out, self.outcome_ = self._kernel.run(values, valid)
+            return out, valid.copy()
+        out = np.empty_like(values)
+        outcome = np.empty(values.shape, np.uint8)
+        rows: Iterable[int] = range(values.shape[0])
+        if values.shape[0] > 100:  # a bar for long recordings, nothing per live frame
+            rows = progress(rows, total=values.shape[0], desc="repair", unit="frame")
+        for k in rows:
+            out[k], outcome[k] = self._fill(values[k], valid[k])
         self.outcome_ = outcome
-        return out, ~ok
+        return out, valid.copy()
 
     def _fill(self, x: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One frame of a harmonic method."""
         out = np.where(ok, x, np.nan)
         outcome = np.where(ok, 0, 1).astype(np.uint8)
         bad = ~ok
-        if not bad.any():
-            return out, outcome
-        if self.method == "zero":
-            out[bad] = 0.0
-            return out, outcome
-        if self.method == "idw8":
-            v = np.where(ok, x, 0.0)
-            num = self._weights @ v
-            den = self._weights @ ok.astype(np.float64)
-            have = bad & (den > 0)
-            out[have] = num[have] / den[have]
-        elif self.method == "harmonic":
-            self._harmonic(out, ok)
-        elif self.method == "harmonic-temporal":
-            self._harmonic(out, ok)
-            prev = np.where(ok, self._prev, np.nan)
-            if np.all(np.isfinite(self._prev)):
-                self._harmonic(prev, ok)
+        if bad.any():
+            self._harmonic.solve(out, ok)
+            if self.method == "harmonic-temporal" and np.all(np.isfinite(self._prev)):
+                prev = np.where(ok, self._prev, np.nan)
+                self._harmonic.solve(prev, ok)
                 step = bad & np.isfinite(out) & np.isfinite(prev)
                 out[step] = self._prev[step] + (out[step] - prev[step])
                 if np.all(x[ok] >= 0):
                     out[step] = np.maximum(out[step], 0.0)
-        left = bad & ~np.isfinite(out)
-        out[left] = self._last[left]
-        outcome[left] = 2
-        outcome[left & ~np.isfinite(out)] = 3
+            left = bad & ~np.isfinite(out)
+            out[left] = self._last[left]
+            outcome[left] = 2
+            outcome[left & ~np.isfinite(out)] = 3
+        self._last = np.where(np.isfinite(out), out, self._last)
+        self._prev = out.copy()
         return out, outcome
 
-    def _harmonic(self, out: np.ndarray, ok: np.ndarray) -> None:
-        """Solve L_FF x_F = A_FV v_V for the failed elements connected to a valid one."""
-        import scipy.sparse as sp
-        import scipy.sparse.linalg as spla
-        from scipy.sparse.csgraph import connected_components
+    def _fitted_json(self) -> dict[str, Any]:
+        return {"n_elements": int(self.n_elements_)}
 
+    @classmethod
+    def _fitted_from_json(cls, fields: Fields, params: Mapping[str, Any]) -> dict[str, Any]:
+        layout = params["layout"]
+        return {"n_elements": int(fields.number("n_elements", layout.n_elements))}
+
+
+class _Harmonic:
+    """Laplace inpainting of the failed elements of a frame: solve ``L_FF x_F = A_FV v_V``
+    for the failed elements connected to a valid one (a factorisation per failure pattern,
+    reused while the pattern stays)."""
+
+    def __init__(self, layout: Layout) -> None:
+        import scipy.sparse as sp
+
+        n = layout.n_elements
+        indptr, indices = layout.neighbours
+        adj = sp.csr_matrix((np.ones(indices.size), indices, indptr), shape=(n, n))
+        self._adj = ((adj + adj.T) > 0).astype(np.float64).tocsr()
+        self._deg = np.asarray(self._adj.sum(axis=1)).ravel()
+        self._cache: dict[bytes, tuple[Any, Any, Any]] = {}
+
+    def solve(self, out: np.ndarray, ok: npt.NDArray[np.bool_]) -> None:
+        """Fill ``out`` where not ``ok`` (in place), from its values where ``ok``."""
         key = np.packbits(ok).tobytes()
         if key not in self._cache:
-            bad = np.flatnonzero(~ok)
-            sub = self._adj[bad][:, bad]
-            ncomp, comp = connected_components(sub, directed=False)
-            touches = np.asarray(self._adj[bad][:, np.flatnonzero(ok)].sum(axis=1)).ravel() > 0
-            reach = np.zeros(ncomp, bool)
-            reach[comp[touches]] = True
-            solvable = bad[reach[comp]]
-            if solvable.size:
-                lap = sp.diags(self._deg[solvable]) - self._adj[solvable][:, solvable]
-                solver = spla.factorized(lap.tocsc())
-                rhs_op = self._adj[solvable][:, np.flatnonzero(ok)]
-            else:
-                solver, rhs_op = None, None
             if len(self._cache) > 64:
                 self._cache.clear()
-            self._cache[key] = (solvable, solver, rhs_op)
+            self._cache[key] = self._factorise(ok)
         solvable, solver, rhs_op = self._cache[key]
         if solver is not None:
             out[solvable] = solver(rhs_op @ out[ok])
 
-    def run(self, rec: Recording) -> Recording:
-        """Repair every frame of ``rec`` whose ``valid`` is False (continuing from the state).
+    def _factorise(self, ok: np.ndarray) -> tuple[Any, Any, Any]:
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+        from scipy.sparse.csgraph import connected_components
 
-        The result keeps ``valid`` False where values were repaired (marked), and the outcome
-        codes (see :data:`OUTCOME`) in ``outcome_`` (T, N).
-        """
-        from texsense._progress import progress
-
-        frames = np.empty(rec.frames.shape, dtype=np.float32)
-        outcome = np.empty(rec.frames.shape, dtype=np.uint8)
-        if self._core is not None:
-            out = self._core.run(rec)
-            self._last = np.where(np.isfinite(out.frames[-1]), out.frames[-1], self._last)
-            self.outcome_ = self._core.outcome_
-            return out._with(meta={**rec.meta, "repair": self.method})
-        for k in progress(range(rec.n_frames), total=rec.n_frames, desc="repair", unit="frame"):
-            frames[k], _ = self.step(rec.frames[k], rec.valid[k])
-            outcome[k] = self.outcome_
-        self.outcome_ = outcome
-        return rec._with(
-            frames=frames, valid=outcome == 0, meta={**rec.meta, "repair": self.method}
-        )
+        bad = np.flatnonzero(~ok)
+        sub = self._adj[bad][:, bad]
+        ncomp, comp = connected_components(sub, directed=False)
+        touches = np.asarray(self._adj[bad][:, np.flatnonzero(ok)].sum(axis=1)).ravel() > 0
+        reach = np.zeros(ncomp, bool)
+        reach[comp[touches]] = True
+        solvable = bad[reach[comp]]
+        if not solvable.size:
+            return solvable, None, None
+        lap = sp.diags(self._deg[solvable]) - self._adj[solvable][:, solvable]
+        return solvable, spla.factorized(lap.tocsc()), self._adj[solvable][:, np.flatnonzero(ok)]
 
 
 def idw_weights(layout: Layout, reach: float = 1.5) -> Any:

@@ -26,32 +26,21 @@ import numpy.typing as npt
 from texsense import stats, units
 from texsense.exceptions import ParameterError
 from texsense.recording import Recording
-from texsense.views import MODES, Mode, guess_mode, orientation_of, started_at
+from texsense.review_events import (
+    BLOCK,
+    EVENT_TEXT,
+    element_health,
+    recompute_events,
+    side_labels,
+)
+from texsense.views import MODES, Mode, guess_mode, orientation_of, recording_scale, started_at
 
 __all__ = ["EVENT_TEXT", "Review", "open_review", "side_labels"]
 
-#: Frames per block of the statistics (bounds memory).
-BLOCK = 2048
 #: A cell is in contact above this pressure (N/cm², 3.75 mmHg: the monitor's) or, for other
 #: quantities, above this share of the colour scale's top.
 CONTACT_NCM2 = 0.05
 CONTACT_SHARE = 0.02
-
-#: What the events are called on the pages and in the report.
-EVENT_TEXT = {
-    "seated": "sat down",
-    "left": "got up",
-    "in-bed": "in bed",
-    "out-of-bed": "out of bed",
-    "loaded": "load on the mat",
-    "unloaded": "mat unloaded",
-    "reposition": "reposition alert",
-    "acknowledged": "alert acknowledged",
-    "cleared": "alert cleared (skin offloaded)",
-    "turn": "turned",
-    "turn-due": "turn due",
-    "turn-done": "turn alert closed",
-}
 
 
 @dataclass
@@ -135,7 +124,8 @@ def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
         "offload_min": 1.0,
         "turn_every_min": 120.0,
     }
-    declared = meta.get("alerts") if isinstance(meta.get("alerts"), dict) else {}
+    found = meta.get("alerts")
+    declared: dict[str, Any] = found if isinstance(found, dict) else {}
     out = {}
     for k, v in defaults.items():
         chosen = given.get(k)
@@ -178,30 +168,6 @@ def _series(review: Review) -> dict[str, np.ndarray]:
         if k != "t":
             v[~review.use] = np.nan
     return out
-
-
-def side_labels(rec: Recording, model: Any = None) -> tuple[np.ndarray | None, str]:
-    """The side a person lies on in every frame of a bed recording (``None`` for an empty
-    bed) and where it came from: a posture model of sides (``model``), else the recording's
-    label ``side`` (the virtual bed) or ``posture_class`` (PhysioNet PMD); (None, "") if
-    none of them is there."""
-    from texsense.bed import BANDS
-
-    if model is not None:
-        if model.layout != rec.layout:
-            raise ParameterError("the posture model was trained on another layout")
-        frames = np.nan_to_num(rec.masked_frames())
-        sides = np.asarray(model.predict(frames)).astype(object)
-        if rec.quantity == "pressure":
-            sides[stats.total_load(rec) < 50.0] = None  # under 5 kg: nobody
-        return sides, "the posture model"
-    for name in ("side", "posture_class"):
-        if name in rec.labels:
-            raw = np.asarray(rec.labels[name]).astype(str).astype(object)
-            known = np.isin(raw, [*BANDS, "transition"])
-            raw[~known] = None  # out, empty, unknown labels: nobody on a side
-            return raw, f"the recording's label {name!r}"
-    return None, ""
 
 
 def open_review(
@@ -256,8 +222,6 @@ def open_review(
         turn_every_min=turn_every_min,
     )
     if scale is None:
-        from texsense.views import recording_scale
-
         keep = rec.labels.get("reliable")  # PMD: the first and last 3 frames of a file
         pick = (
             np.flatnonzero(keep) if keep is not None and keep.dtype == bool and keep.any() else None
@@ -284,7 +248,6 @@ def open_review(
     )
     review.use = _usable(rec)
     review.series = _series(review)
-    from texsense.review_events import element_health, recompute_events
 
     review.events, review.sides = recompute_events(review, model)
     review.health = element_health(original)

@@ -20,7 +20,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from texsense import units
+from texsense import stats, units
+from texsense.bed import BANDS, TurningSchedule, find_regions
+from texsense.exceptions import ParameterError
 from texsense.monitor.alerts import REPOSITION_RANGE_MIN, Event, ExposureTracker
 from texsense.recording import Recording
 from texsense.views import format_duration, place_names, seat_zones
@@ -28,12 +30,60 @@ from texsense.views import format_duration, place_names, seat_zones
 if TYPE_CHECKING:
     from texsense.review import Review
 
-__all__ = ["element_health", "event_text", "recompute_events"]
+__all__ = [
+    "BLOCK",
+    "EVENT_TEXT",
+    "element_health",
+    "event_text",
+    "recompute_events",
+    "side_labels",
+]
+
+#: Frames per block of the statistics (bounds memory).
+BLOCK = 2048
+
+#: What the events are called on the pages and in the report.
+EVENT_TEXT = {
+    "seated": "sat down",
+    "left": "got up",
+    "in-bed": "in bed",
+    "out-of-bed": "out of bed",
+    "loaded": "load on the mat",
+    "unloaded": "mat unloaded",
+    "reposition": "reposition alert",
+    "acknowledged": "alert acknowledged",
+    "cleared": "alert cleared (skin offloaded)",
+    "turn": "turned",
+    "turn-due": "turn due",
+    "turn-done": "turn alert closed",
+}
+
+
+def side_labels(rec: Recording, model: Any = None) -> tuple[np.ndarray | None, str]:
+    """The side a person lies on in every frame of a bed recording (``None`` for an empty
+    bed) and where it came from: a posture model of sides (``model``), else the recording's
+    label ``side`` (the virtual bed) or ``posture_class`` (PhysioNet PMD); (None, "") if
+    none of them is there."""
+
+    if model is not None:
+        if model.layout != rec.layout:
+            raise ParameterError("the posture model was trained on another layout")
+        frames = np.nan_to_num(rec.masked_frames())
+        sides = np.asarray(model.predict(frames)).astype(object)
+        if rec.quantity == "pressure":
+            sides[stats.total_load(rec) < 50.0] = None  # under 5 kg: nobody
+        return sides, "the posture model"
+    for name in ("side", "posture_class"):
+        if name in rec.labels:
+            raw = np.asarray(rec.labels[name]).astype(str).astype(object)
+            known = np.isin(raw, [*BANDS, "transition"])
+            raw[~known] = None  # out, empty, unknown labels: nobody on a side
+            return raw, f"the recording's label {name!r}"
+    return None, ""
 
 
 def event_text(kind: str, detail: dict[str, Any]) -> str:
     """One line for an event, in the words of the pages."""
-    from texsense.review import EVENT_TEXT
 
     text = EVENT_TEXT.get(kind, kind)
     if kind == "turn":
@@ -50,7 +100,6 @@ def event_text(kind: str, detail: dict[str, Any]) -> str:
 
 
 def _where(review: Review, elements: list[int], row: np.ndarray, side: Any) -> list[str]:
-    from texsense.bed import BANDS, find_regions
 
     lay = review.rec.layout
     regions: dict[str, Any] = {}
@@ -67,8 +116,6 @@ def recompute_events(
 ) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
     """The events of ``review``'s frames (see the module) and, for a bed with sides, the
     time per side and the turns."""
-    from texsense.bed import TurningSchedule
-    from texsense.review import BLOCK, side_labels
 
     rec, mode, s = review.rec, review.mode, review.settings
     sides, origin = side_labels(rec, model) if mode.name == "bed" else (None, "")
@@ -135,7 +182,6 @@ def element_health(rec: Recording) -> dict[str, np.ndarray]:
     highest valid reading stays under 2 % of the mat's high values (the 99th percentile of
     the elements' highest readings) while each of its 3 or 4 neighbours reached a tenth of
     them — a dead element inside a loaded area, not one at its edge or in noise."""
-    from texsense.review import BLOCK
 
     n = rec.n_elements
     invalid = np.zeros(n)
@@ -149,7 +195,7 @@ def element_health(rec: Recording) -> dict[str, np.ndarray]:
     finite = top[np.isfinite(top)]
     ref = float(np.percentile(finite, 99)) if finite.size else 0.0
     # never valid: already counted as invalid, not silent
-    quiet = np.flatnonzero(np.isfinite(top) & (top <= 0.02 * ref)) if ref > 0 else []
+    quiet: Any = np.flatnonzero(np.isfinite(top) & (top <= 0.02 * ref)) if ref > 0 else []
     silent = np.zeros(n, bool)
     for i in quiet:  # neighbours that carried real load (a tenth of the mat's high values)
         nb = indices[indptr[i] : indptr[i + 1]]

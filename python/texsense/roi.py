@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.exceptions import ParameterError
+from texsense.files import write_text
 from texsense.layout import Layout
 
 __all__ = [
@@ -146,7 +147,6 @@ def load_rois(recording: str | Path) -> list[dict[str, Any]]:
 
 def save_rois(recording: str | Path, rois: list[dict[str, Any]]) -> Path:
     """Write the regions of a recording to its sidecar (atomically; :mod:`texsense.files`)."""
-    from texsense.files import write_text
 
     doc = {"format": "texsense.rois", "version": 1, "recording": Path(recording).name}
     doc["regions"] = parse_rois(rois)

@@ -28,6 +28,7 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -227,13 +228,13 @@ def region_stats(
         region name -> {"load_N" (pressure only), "mean", "peak", "contact_area_cm2"}, each an
         array of length T. ``mean`` is the mean over the region's valid elements.
     """
-    regions = rec.layout.regions if regions is None else regions
-    if not regions:
+    named: Mapping[str, npt.ArrayLike] = rec.layout.regions if regions is None else regions
+    if not named:
         raise ParameterError("no regions: the layout has none and none were given")
     v = _values(rec)
     area = rec.layout.area_cm2
     out: dict[str, dict[str, _Array]] = {}
-    for name, members in regions.items():
+    for name, members in named.items():
         idx = np.asarray(members, dtype=np.int64)
         if idx.size == 0:
             raise ParameterError(f"region {name!r} has no elements")

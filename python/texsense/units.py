@@ -18,7 +18,7 @@ Examples
 
 from __future__ import annotations
 
-from typing import Final
+from typing import Any, Final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -220,6 +220,14 @@ def factor(from_unit: str, to_unit: str) -> float:
     return f_from / f_to
 
 
+@overload
+def convert(value: float, from_unit: str, to_unit: str) -> float: ...
+@overload
+def convert(value: npt.NDArray[Any], from_unit: str, to_unit: str) -> npt.NDArray[np.float64]: ...
+@overload
+def convert(
+    value: float | npt.ArrayLike, from_unit: str, to_unit: str
+) -> float | npt.NDArray[np.float64]: ...
 def convert(
     value: float | npt.ArrayLike, from_unit: str, to_unit: str
 ) -> float | npt.NDArray[np.float64]:
@@ -245,6 +253,6 @@ def convert(
     1.4504
     """
     f = factor(from_unit, to_unit)
-    if np.isscalar(value):
-        return float(value) * f  # type: ignore[arg-type]
+    if isinstance(value, int | float | np.number):
+        return float(value) * f
     return np.asarray(value, dtype=np.float64) * f

@@ -1,4 +1,5 @@
-"""Workflows that build a mat calibration, in one place (docs/pipeline.md):
+"""Workflows that build a mat calibration — a :class:`~texsense.stages.StageChain` — in one
+place (docs/pipeline.md):
 
 - :func:`calibrate_mat`: a mat from its recordings, as ``texsense calibrate mat`` does —
   the material curve and spacer model from a test-machine record, zeroing and equilibration
@@ -14,17 +15,17 @@ ground truth that these workflows and the compensation are graded against.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
-
 import numpy as np
 
-from texsense.calibration import MatCalibration
+from texsense.drift import split_steps
+from texsense.pipeline import Pipeline
 from texsense.recording import Recording
-
-if TYPE_CHECKING:
-    from texsense.drift import Step
-    from texsense.sim.mat import VirtualMat
+from texsense.sim import protocols
+from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
+from texsense.sim.mat import VirtualMat
+from texsense.sim.muscle import HIGH_RATE_CDC, sleeve_layout
+from texsense.sim.stocking import strip_layout
+from texsense.stages import StageChain
 
 __all__ = [
     "bed_calibration",
@@ -38,26 +39,11 @@ __all__ = [
 ]
 
 
-def calibrate_mat(
-    material: Mapping[str, np.ndarray],
-    baseline: Recording,
-    uniform: Recording,
-    uniform_pressure_ncm2: float,
-    thickness_mm: float,
-    *,
-    steps: Sequence[Step] | None = None,
-    provenance: Mapping[str, Any] | None = None,
-) -> MatCalibration:
-    """Calibrate a mat: :meth:`MatCalibration.fit` (eq. 2.1 per element, spacer model from
-    ``material``), then the drift stage of eq. 5.8 identified on held ``steps`` if given."""
-    cal = MatCalibration.fit(dict(material), baseline, uniform, uniform_pressure_ncm2, thickness_mm)
-    if steps is not None:
-        from texsense.drift import DriftModel
-
-        drift, _ = DriftModel.fit(list(steps))
-        cal.model.with_drift(drift)
-    cal.provenance.update(provenance or {})
-    return cal
+#: Calibrate a mat from its recordings (what ``texsense calibrate mat`` runs): detect, convert
+#: (eq. 2.1 per element: zeroing and equilibration), hysteresis (the spacer model from the
+#: material record, eq. 4.15-4.22) and, with held ``steps``, drift (eq. 5.8); see
+#: :meth:`texsense.stages.StageChain.fit_mat`.
+calibrate_mat = StageChain.fit_mat
 
 
 def material_record(rec: Recording) -> dict[str, np.ndarray]:
@@ -70,14 +56,11 @@ def material_record(rec: Recording) -> dict[str, np.ndarray]:
     }
 
 
-def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> MatCalibration:
+def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChain:
     """Calibrate a virtual mat (textile-3mm spacer) as a user would: zeroing and 1 N/cm²
     equilibration scanned on ``mat`` (pass a fresh mat with the same seed as the one to be
     used: the scans load it), the spacer model from a test-machine record of another
     specimen (``material_seed``) with γ from its held steps."""
-    from texsense.drift import split_steps
-    from texsense.sim import protocols
-
     n = mat.layout.n_elements
     ft = mat.cdc.frame_time_s(n)
     base = mat.scan(np.arange(10) * ft, np.zeros((10, n))).capacitance
@@ -85,52 +68,34 @@ def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> MatCalibr
     m = protocols.run_protocol("calibration", "textile-3mm", seed=material_seed, sample_hz=None)
     st = protocols.run_protocol("steps", "textile-3mm", seed=material_seed, sample_hz=10)
     steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
-    return calibrate_mat(
-        material_record(m),
-        base,
-        uni,
-        1.0,
-        3.0,
-        steps=steps,
-        provenance={"virtual_mat": mat.layout.n_elements, "material_seed": material_seed},
-    )
+    return calibrate_mat(material_record(m), base, uni, 1.0, 3.0, steps=steps)
 
 
-def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> MatCalibration:
+def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> StageChain:
     """Calibrate the virtual seat as a user would (docs/pipeline.md): zeroing + 1 N/cm²
     equilibration of a mat with the same ``mat_seed`` (the same elements), the spacer model
     from a test-machine record of another specimen (``material_seed``) with γ from its held
     steps."""
-    from texsense.sim.mat import VirtualMat
-
     return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
 
 
-def bed_calibration(material_seed: int = 11) -> MatCalibration:
-    """Calibrate the virtual 64 x 32 bed mat (:class:`texsense.monitor.sources.VirtualBedSource`
+def bed_calibration(material_seed: int = 11) -> StageChain:
+    """Calibrate the virtual 64 x 32 bed mat (:class:`texsense.monitor.virtual.VirtualBedSource`
     and the station's virtual beds: the same physical mat) as a user would."""
-    from texsense.sim.bed import bed_mat
-
     return calibrate_virtual_mat(bed_mat(failures=False), material_seed)
 
 
-def strip_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration:
+def strip_calibration(seed: int = 0, material_seed: int = 11) -> StageChain:
     """Calibrate the stocking sensor strip (:func:`texsense.sim.stocking.strip_layout`, the
     same physical strip as ``wear(..., seed=seed)``) as a user would."""
-    from texsense.sim.mat import VirtualMat
-    from texsense.sim.stocking import strip_layout
-
     return calibrate_virtual_mat(
         VirtualMat(strip_layout(), "textile-3mm", seed=seed), material_seed
     )
 
 
-def sleeve_calibration(seed: int = 0, material_seed: int = 11) -> MatCalibration:
+def sleeve_calibration(seed: int = 0, material_seed: int = 11) -> StageChain:
     """Calibrate the muscle sleeve (:func:`texsense.sim.muscle.sleeve_layout`, high-rate
     readout, the same physical sleeve as ``session(..., seed=seed)``) as a user would."""
-    from texsense.sim.mat import VirtualMat
-    from texsense.sim.muscle import HIGH_RATE_CDC, sleeve_layout
-
     mat = VirtualMat(sleeve_layout(), "textile-3mm", cdc=HIGH_RATE_CDC, seed=seed)
     return calibrate_virtual_mat(mat, material_seed)
 
@@ -144,8 +109,6 @@ def processed_bed_night(
     compensated by the pipeline with :func:`bed_calibration`: pressure in N/cm², ``valid``
     False where an element was repaired, the true ``side`` of every frame as a label, and the
     settings a bed monitor would declare (``meta``: mode, orientation, alerts)."""
-    from texsense.pipeline import Pipeline
-    from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
 
     rng = np.random.default_rng([seed, 7])
     plan: list[tuple[str, float]] = []

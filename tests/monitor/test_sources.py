@@ -259,7 +259,7 @@ def test_cli_iio_source_with_a_multiplexer_from_a_file(tmp_path):
         "def select(i):\n"
         "    RAW.write_text(str(1_000_000 * (i + 1)))\n"
     )
-    args = build_parser().parse_args(
+    args = build_parser(["monitor"]).parse_args(
         ["monitor", f"--source=iio:{dev}", "--grid", "1x2", "--multiplexer", f"{mux}:select"]
     )
     src, _ = make_source(args)

@@ -3,24 +3,21 @@
 
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, each_block, parallel, Columns};
+use crate::par::{run_frames, FrameBlock};
 use crate::preisach::{PreisachBank, PreisachBlock};
 
-/// Preisach output `sign (h + offset)`, followed by an optional drift stage.
+/// The Preisach model's output (its offset and sign included), followed by an optional drift
+/// stage.
 #[derive(Debug, Clone)]
 pub struct Compensation {
     preisach: PreisachBank,
     drift: Option<DriftBank>,
-    offset: f64,
-    sign: f64,
 }
 
 /// One block of elements of a [`Compensation`], for a parallel batch.
 pub struct CompensationBlock<'a> {
     preisach: PreisachBlock<'a>,
     drift: Option<DriftBlock<'a>>,
-    offset: f64,
-    sign: f64,
 }
 
 impl CompensationBlock<'_> {
@@ -46,7 +43,6 @@ impl CompensationBlock<'_> {
     #[inline]
     pub fn step(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> f64 {
         let h = self.preisach.step(i, u, valid);
-        let h = self.sign * (h + self.offset);
         match &mut self.drift {
             Some(d) => d.step(i, dt, h, valid),
             None => h,
@@ -54,23 +50,25 @@ impl CompensationBlock<'_> {
     }
 }
 
+impl FrameBlock for CompensationBlock<'_> {
+    #[inline]
+    fn frame(&mut self, dt: f64) {
+        CompensationBlock::frame(self, dt);
+    }
+
+    #[inline]
+    fn step(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> f64 {
+        CompensationBlock::step(self, i, dt, u, valid)
+    }
+}
+
 impl Compensation {
     /// Combine the stages; both must have the same number of elements.
-    pub fn new(
-        preisach: PreisachBank,
-        drift: Option<DriftBank>,
-        offset: f64,
-        sign: f64,
-    ) -> Result<Self, CoreError> {
+    pub fn new(preisach: PreisachBank, drift: Option<DriftBank>) -> Result<Self, CoreError> {
         if let Some(d) = &drift {
             check_len("drift elements", d.len(), preisach.len())?;
         }
-        Ok(Self {
-            preisach,
-            drift,
-            offset,
-            sign,
-        })
+        Ok(Self { preisach, drift })
     }
 
     /// Number of elements.
@@ -106,9 +104,8 @@ impl Compensation {
                 .map_or(0, DriftBank::state_bytes_per_element)
     }
 
-    /// Both stages split into blocks of [`block_size`] elements.
+    /// Both stages split into blocks of [`crate::par::block_size`] elements.
     pub fn blocks(&mut self) -> Vec<CompensationBlock<'_>> {
-        let (offset, sign) = (self.offset, self.sign);
         let mut drift = self.drift.as_mut().map(|d| d.blocks().into_iter());
         self.preisach
             .blocks()
@@ -116,8 +113,6 @@ impl Compensation {
             .map(|preisach| CompensationBlock {
                 preisach,
                 drift: drift.as_mut().and_then(Iterator::next),
-                offset,
-                sign,
             })
             .collect()
     }
@@ -136,23 +131,9 @@ impl Compensation {
         check_len("inputs", inputs.len(), dt.len() * n)?;
         check_len("valid", valid.len(), dt.len() * n)?;
         check_len("out", out.len(), dt.len() * n)?;
-        let cols = Columns::new(out);
-        let size = block_size(n);
-        let work = |(b, mut block): (usize, CompensationBlock<'_>)| {
-            let start = b * size;
-            let width = block.preisach.len();
-            for (r, &d) in dt.iter().enumerate() {
-                block.frame(d);
-                let row = r * n + start;
-                for li in 0..width {
-                    let v = block.step(li, d, inputs[row + li], valid[row + li]);
-                    // SAFETY: this block owns columns start .. start + width
-                    unsafe { cols.write(row + li, v) };
-                }
-            }
-        };
-        let par = parallel(dt.len(), n);
-        each_block(self.blocks(), par, work);
+        run_frames(out, n, self.blocks(), dt, |idx, _| {
+            valid[idx].then_some(inputs[idx])
+        });
         Ok(())
     }
 }
@@ -161,19 +142,10 @@ impl Compensation {
 mod tests {
     use super::*;
     use crate::drift::Kernel;
-    use crate::preisach::Everett;
 
     #[test]
     fn equals_the_stages_run_one_after_the_other() {
-        let k = 21;
-        let mut table = vec![0.0; k * k];
-        for i in 0..k {
-            for j in 0..i {
-                let d = (i - j) as f64 / 20.0;
-                table[i * k + j] = 0.5 * d * d;
-            }
-        }
-        let e = Everett::new(k, 0.0, 1.0, table).unwrap();
+        let e = crate::everett::quadratic(21, 1.0);
         let kernel = Kernel::new(vec![0.5, 0.5], vec![1.0, 100.0]).unwrap();
         let inputs: Vec<f64> = (0..40)
             .map(|t| 0.5 + 0.4 * (t as f64 * 0.7).sin())
@@ -181,10 +153,10 @@ mod tests {
         let dt = vec![0.5; 40];
         let valid = vec![true; 40];
         let mut combined = Compensation::new(
-            PreisachBank::new(e.clone(), 1, 32).unwrap(),
+            PreisachBank::new(e.clone(), 1, 32)
+                .and_then(|p| p.with_output(0.2, 1.0))
+                .unwrap(),
             Some(DriftBank::new(kernel.clone(), -0.025, 1).unwrap()),
-            0.2,
-            1.0,
         )
         .unwrap();
         let mut out = vec![0.0; 40];

@@ -15,7 +15,7 @@
 //! changes of the same frame). Same results as frame after frame (tested).
 
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, each_chunk, parallel, Columns};
+use crate::par::{block_size, for_blocks, parallel};
 use crate::topology::Neighbours;
 
 /// Failure codes.
@@ -81,11 +81,11 @@ pub struct FailureDetector {
     elements: Vec<DetectorElement>,
 }
 
-/// Scratch of one batch: the change of every reading, and whether it was an element's first.
+/// Scratch of one batch: the change of every reading since the element's last finite one
+/// (NaN for an element's first reading, or a reading that is not a number).
 #[derive(Debug, Clone, Default)]
 pub struct Changes {
     delta: Vec<f64>,
-    first: Vec<bool>,
 }
 
 impl FailureDetector {
@@ -159,62 +159,80 @@ impl FailureDetector {
         check_len("valid", valid.len(), t * n)?;
         check_len("codes", codes.len(), t * n)?;
         scratch.delta.resize(t * n, 0.0);
-        scratch.first.resize(t * n, false);
         let par = parallel(t, n);
-        let size = block_size(n);
-        // pass 1: the change of every reading since the element's last finite one
-        {
-            let delta = Columns::new(&mut scratch.delta);
-            let first = Columns::new(&mut scratch.first);
-            let work = |(b, block): (usize, &mut [DetectorElement])| {
-                let start = b * size;
-                for r in 0..t {
-                    let row = r * n + start;
-                    for (li, el) in block.iter_mut().enumerate() {
-                        let c = readings[row + li];
-                        let d = (c - el.last).abs();
-                        let is_first = d.is_nan();
-                        // SAFETY: this block owns columns start .. start + block.len()
-                        unsafe {
-                            delta.write(row + li, if is_first { 0.0 } else { d });
-                            first.write(row + li, is_first);
-                        }
-                        if c.is_finite() {
-                            el.last = c;
-                        }
+        self.changes(readings, &mut scratch.delta, par);
+        self.codes(readings, valid, &scratch.delta, codes, par);
+        Ok(())
+    }
+
+    /// Pass 1: the change of every reading since the element's last finite one (NaN for an
+    /// element's first reading or one that is not a number).
+    fn changes(&mut self, readings: &[f64], delta: &mut [f64], par: bool) {
+        let n = self.len();
+        let t = readings.len() / n;
+        let chunks: Vec<_> = self.elements.chunks_mut(block_size(n)).collect();
+        for_blocks(delta, n, chunks, par, |block, o| {
+            let start = o.start();
+            for r in 0..t {
+                let row = r * n + start;
+                let out = o.row(r);
+                for (li, el) in block.iter_mut().enumerate() {
+                    let c = readings[row + li];
+                    out[li] = (c - el.last).abs();
+                    if c.is_finite() {
+                        el.last = c;
                     }
                 }
-            };
-            each_chunk(&mut self.elements, size, par, work);
-        }
-        // pass 2: the codes, with the neighbours' median change of the same frame
-        let (delta, first) = (&scratch.delta[..], &scratch.first[..]);
-        let out = Columns::new(codes);
+            }
+        });
+    }
+
+    /// Pass 2: the codes, with the neighbours' median change of the same frame.
+    fn codes(
+        &mut self,
+        readings: &[f64],
+        valid: &[bool],
+        delta: &[f64],
+        codes: &mut [u8],
+        par: bool,
+    ) {
+        let n = self.len();
+        let t = readings.len() / n;
+        let moved = |idx: usize| {
+            let d = delta[idx];
+            if d.is_nan() {
+                0.0
+            } else {
+                d
+            }
+        };
         // the elements' states leave `self` for the pass, which reads the rest of it
         let mut elements = std::mem::take(&mut self.elements);
         let this = &*self;
         let p = &this.params;
-        let work = |(b, block): (usize, &mut [DetectorElement])| {
-            let start = b * size;
+        let chunks: Vec<_> = elements.chunks_mut(block_size(n)).collect();
+        for_blocks(codes, n, chunks, par, |block, o| {
+            let start = o.start();
             let mut wide = Vec::new();
             let mut few = [0.0; 8];
             for r in 0..t {
                 let row = r * n;
+                let out = o.row(r);
                 for (li, el) in block.iter_mut().enumerate() {
                     let i = start + li;
                     let nbs = this.neighbours.of(i);
                     let nb_move = if nbs.len() <= few.len() {
                         for (f, &j) in few.iter_mut().zip(nbs) {
-                            *f = delta[row + j as usize];
+                            *f = moved(row + j as usize);
                         }
                         median(&mut few[..nbs.len()])
                     } else {
                         wide.clear();
-                        wide.extend(nbs.iter().map(|&j| delta[row + j as usize]));
+                        wide.extend(nbs.iter().map(|&j| moved(row + j as usize)));
                         median(&mut wide)
                     };
-                    let d = delta[row + i];
-                    let is_first = first[row + i];
+                    let is_first = delta[row + i].is_nan();
+                    let d = moved(row + i);
                     let c = readings[row + i];
                     let still = d <= p.stuck_pf && !is_first && c > p.stuck_floor_pf;
                     if still {
@@ -248,14 +266,11 @@ impl FailureDetector {
                     if low {
                         k = code::SHORT_OR_BREAK;
                     }
-                    // SAFETY: this block owns columns start .. start + block.len()
-                    unsafe { out.write(row + i, k) };
+                    out[li] = k;
                 }
             }
-        };
-        each_chunk(&mut elements, size, par, work);
+        });
         self.elements = elements;
-        Ok(())
     }
 }
 

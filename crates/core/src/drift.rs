@@ -14,7 +14,7 @@
 //! not hold).
 
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, each_block, parallel, Columns};
+use crate::par::{block_size, run_frames, FrameBlock};
 
 /// A kernel `k(t) = Σ_j c_j (1 - exp(-t / τ_j))` (c_j >= 0, τ_j > 0).
 #[derive(Debug, Clone, PartialEq)]
@@ -163,6 +163,18 @@ impl DriftBlock<'_> {
     }
 }
 
+impl FrameBlock for DriftBlock<'_> {
+    #[inline]
+    fn frame(&mut self, dt: f64) {
+        DriftBlock::frame(self, dt);
+    }
+
+    #[inline]
+    fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
+        DriftBlock::step(self, i, dt, h, valid)
+    }
+}
+
 impl DriftBank {
     /// N elements with drift factor `gamma` (thesis: -0.025 for the textile spacer).
     pub fn new(kernel: Kernel, gamma: f64, n: usize) -> Result<Self, CoreError> {
@@ -305,22 +317,9 @@ impl DriftBank {
         check_len("h", h.len(), dt.len() * n)?;
         check_len("valid", valid.len(), dt.len() * n)?;
         check_len("out", out.len(), dt.len() * n)?;
-        let cols = Columns::new(out);
-        let size = block_size(n);
-        let work = |(b, mut block): (usize, DriftBlock<'_>)| {
-            let start = b * size;
-            for (r, &d) in dt.iter().enumerate() {
-                block.frame(d);
-                let row = r * n + start;
-                for li in 0..block.elements.len() {
-                    let v = block.step(li, d, h[row + li], valid[row + li]);
-                    // SAFETY: this block owns columns start .. start + its length
-                    unsafe { cols.write(row + li, v) };
-                }
-            }
-        };
-        let par = parallel(dt.len(), n);
-        each_block(self.blocks(), par, work);
+        run_frames(out, n, self.blocks(), dt, |idx, _| {
+            valid[idx].then_some(h[idx])
+        });
         Ok(())
     }
 }

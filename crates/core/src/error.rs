@@ -64,3 +64,15 @@ pub(crate) fn check_len(what: &'static str, len: usize, expected: usize) -> Resu
         })
     }
 }
+
+/// Frames in a row-major batch of `len` values of `n` elements each.
+pub(crate) fn frames_of(what: &'static str, len: usize, n: usize) -> Result<usize, CoreError> {
+    if n == 0 || !len.is_multiple_of(n) {
+        return Err(CoreError::Shape {
+            what,
+            expected: format!("a multiple of {n} elements"),
+            got: format!("length {len}"),
+        });
+    }
+    Ok(len / n)
+}

@@ -37,53 +37,147 @@ pub fn parallel(t: usize, n: usize) -> bool {
 
 /// A `T x N` row-major output that blocks of columns fill from several threads at once.
 ///
-/// Each block writes only its own columns, so no element is written by two threads; that is
-/// the invariant every user of [`Columns::write`] keeps.
+/// Private to this module: the only way to write through it is a [`BlockOut`] handed out by
+/// [`for_blocks`], which gives each block its own columns, so no element is written by two
+/// threads.
 #[derive(Clone, Copy)]
-pub struct Columns<T> {
+struct Columns<T> {
     ptr: *mut T,
     len: usize,
 }
 
 // SAFETY: `Columns` is a raw view of a slice that outlives the parallel section (it is built
-// from `&mut [T]` and used only inside a scope that holds that borrow); threads write disjoint
-// indices (one block of columns each), so sharing the pointer is sound for `T: Send`.
+// from `&mut [T]` inside `for_blocks`, which holds that borrow until every block is done);
+// threads write disjoint indices (one block of columns each), so sharing the pointer is sound
+// for `T: Send`.
 unsafe impl<T: Send> Send for Columns<T> {}
 // SAFETY: see above; `&Columns` only allows writes to disjoint indices per thread.
 unsafe impl<T: Send> Sync for Columns<T> {}
 
-impl<T: Copy> Columns<T> {
-    /// View `out` for writing from several threads.
-    pub fn new(out: &mut [T]) -> Self {
-        Self {
-            ptr: out.as_mut_ptr(),
-            len: out.len(),
+/// What one block of the parallel loop may write: its own columns
+/// `start .. start + width` of every frame of the `T x N` output.
+pub struct BlockOut<'a, T> {
+    cols: &'a Columns<T>,
+    n: usize,
+    start: usize,
+    width: usize,
+    frames: usize,
+}
+
+impl<T: Copy> BlockOut<'_, T> {
+    /// The first element (column) of the block.
+    #[inline]
+    pub fn start(&self) -> usize {
+        self.start
+    }
+
+    /// Number of elements in the block.
+    #[inline]
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Number of frames (rows) of the output.
+    #[inline]
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// The block's columns of frame `r` (`width` values, element `start + li` at `li`).
+    ///
+    /// # Panics
+    /// When `r` is not a frame of the output.
+    #[inline]
+    pub fn row(&mut self, r: usize) -> &mut [T] {
+        assert!(r < self.frames, "frame {r} of {}", self.frames);
+        // SAFETY: r < frames puts the `width` values from r * n + start inside the output
+        // (start + width <= n), and they are this block's columns, which no other block
+        // reads or writes (for_blocks gives each block its own columns); the slice borrows
+        // `self`, so a block holds one row at a time; the output stays borrowed by
+        // for_blocks until every block is done.
+        unsafe {
+            std::slice::from_raw_parts_mut(self.cols.ptr.add(r * self.n + self.start), self.width)
         }
     }
+}
 
-    /// Write `v` at `idx`.
-    ///
-    /// # Safety
-    /// No other thread may read or write `idx` during the parallel section (each block owns
-    /// its columns), and the slice this view was made from must still be borrowed.
-    #[inline]
-    pub unsafe fn write(&self, idx: usize, v: T) {
-        debug_assert!(idx < self.len);
-        // SAFETY: idx < len (checked in debug builds; callers index rows of length N inside
-        // a slice checked to be T x N) and the caller guarantees exclusive access to idx.
-        unsafe { self.ptr.add(idx).write(v) }
+/// The one parallel block loop of the crate: `work(block, out)` for every block of elements
+/// of a bank of `n` (block `b` covers elements `b * size .. (b + 1) * size`, `size =`
+/// [`block_size`]`(n)`), each through all frames on its own, on the thread pool when `par`.
+/// A block writes its elements' values of every frame through `out` (its own columns of the
+/// row-major `T x N` output); the per-block states (`blocks`, one per block, e.g. the
+/// [`Vec`] of a bank's block views or element chunks) go to the block that owns them.
+///
+/// # Panics
+/// When `out` is not `T x n` or `blocks` does not hold one entry per block.
+pub fn for_blocks<B, T, F>(out: &mut [T], n: usize, blocks: Vec<B>, par: bool, work: F)
+where
+    B: Send,
+    T: Copy + Send,
+    F: Fn(B, &mut BlockOut<'_, T>) + Sync + Send,
+{
+    if n == 0 {
+        return;
     }
+    assert!(out.len().is_multiple_of(n), "output is not T x {n}");
+    let size = block_size(n);
+    assert_eq!(
+        blocks.len(),
+        n.div_ceil(size),
+        "one state per block of {size}"
+    );
+    let frames = out.len() / n;
+    let cols = Columns {
+        ptr: out.as_mut_ptr(),
+        len: out.len(),
+    };
+    debug_assert_eq!(cols.len, frames * n);
+    let cols = &cols;
+    each_block(blocks, par, |(b, block)| {
+        let start = b * size;
+        let mut o = BlockOut {
+            cols,
+            n,
+            start,
+            width: size.min(n - start),
+            frames,
+        };
+        work(block, &mut o);
+    });
+}
 
-    /// Read the value at `idx`.
-    ///
-    /// # Safety
-    /// No thread may write `idx` during the parallel section.
-    #[inline]
-    pub unsafe fn read(&self, idx: usize) -> T {
-        debug_assert!(idx < self.len);
-        // SAFETY: as for `write`; nobody writes idx concurrently.
-        unsafe { self.ptr.add(idx).read() }
-    }
+/// A block of a bank whose elements step frame after frame: a frame starts `dt` seconds
+/// after the previous one, then each element reads its input (NaN out when it is invalid).
+pub trait FrameBlock: Send {
+    /// Start a frame `dt` seconds after the previous one (before any `step` of it).
+    fn frame(&mut self, _dt: f64) {}
+
+    /// Element `i` of the block reads `x` (`valid` false: skipped, NaN out, state kept).
+    fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64;
+}
+
+/// The frames `dt` (T,) of a batch through blocks of a bank ([`for_blocks`]): element `i`
+/// of frame `r` reads `input(r * n + i, i)` (None: an invalid reading) and its output goes to
+/// `out[r * n + i]`.
+pub fn run_frames<B, F>(out: &mut [f64], n: usize, blocks: Vec<B>, dt: &[f64], input: F)
+where
+    B: FrameBlock,
+    F: Fn(usize, usize) -> Option<f64> + Sync,
+{
+    let par = parallel(dt.len(), n);
+    for_blocks(out, n, blocks, par, |mut block, o| {
+        let start = o.start();
+        for (r, &d) in dt.iter().enumerate() {
+            block.frame(d);
+            let row = r * n + start;
+            for (li, slot) in o.row(r).iter_mut().enumerate() {
+                *slot = match input(row + li, start + li) {
+                    Some(x) => block.step(li, d, x, true),
+                    None => block.step(li, d, f64::NAN, false),
+                };
+            }
+        }
+    });
 }
 
 /// `work((b, chunk))` for every chunk of `size` items (chunk `b` starts at item `b * size`),

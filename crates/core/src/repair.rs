@@ -1,160 +1,201 @@
-//! Replacing failed elements by the mean of their available neighbours (thesis §6.5.2.5).
+//! The local repairs of failed readings (thesis §6.5.2.5), one kernel for the compiled chain
+//! and for the repair stage alike.
 //!
 //! Eq. 6.14: `p_i = (p_l + p_r + p_t + p_b) / n_a`, the sum running over the `n_a`
 //! neighbours that are available in the same frame. "If all four are unavailable, the last
-//! value available (real or reconstructed) of the sensor element is taken."
+//! value available (real or reconstructed) of the sensor element is taken." The other local
+//! methods: `zero` (a failed reading reads 0), `last-value` (the element's last value, real
+//! or repaired) and `weighted` (a weighted mean of the available neighbours with fixed
+//! weights, e.g. inverse squared distance over the 8-neighbourhood, `idw8`).
 //!
 //! A reading is *available* when it is flagged valid and is a finite number. Only available
-//! readings enter the mean: a neighbour that is itself being repaired in the same frame does
-//! not contribute. An element that has never had a value (no neighbours available and no
-//! earlier value) stays NaN and is reported as not repaired.
+//! readings enter a mean: a neighbour that is itself being repaired in the same frame does
+//! not contribute. Where no neighbour is available the element's last value is held; an
+//! element that has never had a value stays NaN (*missing*).
+//!
+//! A batch runs frame after frame over all elements, in place: the fills of a frame are
+//! computed from its readings as they came in and written after them, so no fill sees
+//! another.
 
-use crate::error::{check_len, CoreError};
+use crate::error::{check_len, frames_of, CoreError};
 use crate::topology::Neighbours;
 
-/// Streaming state of the eq. 6.14 repair: the last value (real or repaired) per element.
-#[derive(Debug, Clone)]
-pub struct NeighbourMeanRepair {
-    neighbours: Neighbours,
-    last: Vec<f32>,
-}
-
-/// What happened to one element in one frame.
+/// What happened to one reading.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
 pub enum RepairOutcome {
     /// The reading was available and passed through unchanged.
     Measured = 0,
-    /// Replaced by the mean of at least one available neighbour.
-    NeighbourMean = 1,
-    /// No neighbour available: the last value (real or repaired) was held.
+    /// Filled by the method (a neighbour mean, or 0).
+    Filled = 1,
+    /// Nothing to fill from: the last value (real or repaired) was held.
     LastValue = 2,
-    /// No neighbour and no earlier value: the output is NaN.
+    /// Nothing to fill from and no earlier value: the output is NaN.
     Missing = 3,
 }
 
-impl NeighbourMeanRepair {
-    /// A fresh repair stage for the given neighbour graph; no element has a last value yet.
-    pub fn new(neighbours: Neighbours) -> Self {
-        let n = neighbours.len();
-        Self {
-            neighbours,
-            last: vec![f32::NAN; n],
+/// The local repair methods.
+#[derive(Debug, Clone)]
+pub enum Method {
+    /// Failed readings read 0.
+    Zero,
+    /// Hold the last value (real or repaired).
+    LastValue,
+    /// Eq. 6.14: the mean of the available 4-neighbours.
+    NeighbourMean(Neighbours),
+    /// A weighted mean of the available neighbours (`weights` parallel to the neighbours'
+    /// indices).
+    Weighted(Neighbours, Vec<f64>),
+}
+
+/// A local repair with its state: the last value (real or repaired) of every element.
+#[derive(Debug, Clone)]
+pub struct LocalRepair {
+    method: Method,
+    last: Vec<f64>,
+}
+
+impl LocalRepair {
+    /// A repair of `n` elements; the graph of a neighbour method must have `n` elements and
+    /// the weights one entry per neighbour.
+    pub fn new(method: Method, n: usize) -> Result<Self, CoreError> {
+        match &method {
+            Method::NeighbourMean(nb) => check_len("repair neighbours", nb.len(), n)?,
+            Method::Weighted(nb, w) => {
+                check_len("repair neighbours", nb.len(), n)?;
+                check_len("repair weights", w.len(), nb.nnz())?;
+                if w.iter().any(|v| !v.is_finite() || *v < 0.0) {
+                    return Err(CoreError::Parameter {
+                        what: "repair weights",
+                        why: "must be finite and >= 0".into(),
+                    });
+                }
+            }
+            Method::Zero | Method::LastValue => {}
         }
+        Ok(Self {
+            method,
+            last: vec![f64::NAN; n],
+        })
     }
 
     /// Number of elements.
     pub fn len(&self) -> usize {
-        self.neighbours.len()
+        self.last.len()
     }
 
-    /// True when there are no elements.
+    /// True without elements.
     pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.last.is_empty()
     }
 
     /// The last value (real or repaired) of every element; NaN where none was seen yet.
-    pub fn last_values(&self) -> &[f32] {
+    pub fn last_values(&self) -> &[f64] {
         &self.last
     }
 
     /// Forget all last values.
     pub fn reset(&mut self) {
-        self.last.iter_mut().for_each(|v| *v = f32::NAN);
+        self.last.fill(f64::NAN);
     }
 
-    /// Repair one frame. `frame` and `valid` have one entry per element; the repaired frame
-    /// goes to `out` and the outcome per element to `outcome`.
-    pub fn step(
-        &mut self,
-        frame: &[f32],
-        valid: &[bool],
-        out: &mut [f32],
-        outcome: &mut [RepairOutcome],
-    ) -> Result<(), CoreError> {
-        let n = self.len();
-        check_len("frame", frame.len(), n)?;
-        check_len("valid", valid.len(), n)?;
-        check_len("out", out.len(), n)?;
-        check_len("outcome", outcome.len(), n)?;
-        self.step_unchecked(frame, valid, out, outcome);
-        Ok(())
+    /// Bytes of state per element.
+    pub fn state_bytes_per_element(&self) -> usize {
+        std::mem::size_of::<f64>()
     }
 
-    /// Repair a batch of frames stored row-major (`frames.len() == n_frames * n`), exactly as
-    /// if `step` had been called for each frame in turn.
-    pub fn run(
+    /// Repair a batch (T x N, row-major) in place: a reading is available when `ok(index)`
+    /// and it is a number; the others are filled. `outcome` (T x N), when given, gets a
+    /// [`RepairOutcome`] per reading.
+    ///
+    /// Frame after frame over all elements; the fills of a frame are written once all of them
+    /// are known, so a fill reads only the readings as they came in.
+    pub fn run<F>(
         &mut self,
-        frames: &[f32],
-        valid: &[bool],
-        out: &mut [f32],
-        outcome: &mut [RepairOutcome],
-    ) -> Result<(), CoreError> {
+        values: &mut [f64],
+        ok: F,
+        mut outcome: Option<&mut [u8]>,
+    ) -> Result<(), CoreError>
+    where
+        F: Fn(usize) -> bool,
+    {
         let n = self.len();
         if n == 0 {
             return Ok(());
         }
-        if !frames.len().is_multiple_of(n) {
-            return Err(CoreError::Shape {
-                what: "frames",
-                expected: format!("a multiple of {n} elements"),
-                got: format!("length {}", frames.len()),
-            });
+        let t = frames_of("values", values.len(), n)?;
+        if let Some(o) = outcome.as_deref_mut() {
+            check_len("outcome", o.len(), values.len())?;
+            o.fill(RepairOutcome::Measured as u8);
         }
-        let total = frames.len();
-        check_len("valid", valid.len(), total)?;
-        check_len("out", out.len(), total)?;
-        check_len("outcome", outcome.len(), total)?;
-        for (((f, v), o), k) in frames
-            .chunks_exact(n)
-            .zip(valid.chunks_exact(n))
-            .zip(out.chunks_exact_mut(n))
-            .zip(outcome.chunks_exact_mut(n))
-        {
-            self.step_unchecked(f, v, o, k);
+        let mut fills: Vec<(usize, f64, RepairOutcome)> = Vec::new();
+        for r in 0..t {
+            let row = r * n;
+            let frame = &values[row..row + n];
+            let available = |j: usize| {
+                let v = frame[j];
+                (ok(row + j) && v.is_finite()).then_some(v)
+            };
+            // the fills of the frame, from its readings as they came in
+            fills.clear();
+            for (i, last) in self.last.iter_mut().enumerate() {
+                if let Some(v) = available(i) {
+                    *last = v;
+                    continue;
+                }
+                let (v, how) = fill(&self.method, i, *last, &available);
+                if v.is_finite() {
+                    *last = v;
+                }
+                fills.push((i, v, how));
+            }
+            for &(i, v, how) in &fills {
+                values[row + i] = v;
+                if let Some(o) = outcome.as_deref_mut() {
+                    o[row + i] = how as u8;
+                }
+            }
         }
         Ok(())
     }
+}
 
-    #[inline]
-    fn step_unchecked(
-        &mut self,
-        frame: &[f32],
-        valid: &[bool],
-        out: &mut [f32],
-        outcome: &mut [RepairOutcome],
-    ) {
-        let available = |j: usize| valid[j] && frame[j].is_finite();
-        for i in 0..frame.len() {
-            if available(i) {
-                out[i] = frame[i];
-                outcome[i] = RepairOutcome::Measured;
-                self.last[i] = frame[i];
-                continue;
+/// The fill of element `i` of a frame, with its last value `last`: the method's value from the
+/// readings of the frame that are `available` (their value, or None), else the last value.
+#[inline]
+fn fill(
+    method: &Method,
+    i: usize,
+    last: f64,
+    available: &impl Fn(usize) -> Option<f64>,
+) -> (f64, RepairOutcome) {
+    let mean = match method {
+        Method::Zero => Some(0.0),
+        Method::LastValue => None,
+        Method::NeighbourMean(nb) => {
+            let (mut sum, mut count) = (0.0, 0u32);
+            for v in nb.of(i).iter().filter_map(|&j| available(j as usize)) {
+                sum += v;
+                count += 1;
             }
-            // eq. 6.14: the mean of the available neighbours, accumulated in f64.
-            let mut sum = 0.0f64;
-            let mut count = 0u32;
-            for &j in self.neighbours.of(i) {
-                let j = j as usize;
-                if available(j) {
-                    sum += f64::from(frame[j]);
-                    count += 1;
+            (count > 0).then(|| sum / f64::from(count))
+        }
+        Method::Weighted(nb, w) => {
+            let (mut num, mut den) = (0.0, 0.0);
+            let lo = nb.start(i);
+            for (q, &j) in nb.of(i).iter().enumerate() {
+                if let Some(v) = available(j as usize) {
+                    num += w[lo + q] * v;
+                    den += w[lo + q];
                 }
             }
-            if count > 0 {
-                let v = (sum / f64::from(count)) as f32;
-                out[i] = v;
-                outcome[i] = RepairOutcome::NeighbourMean;
-                self.last[i] = v;
-            } else if self.last[i].is_finite() {
-                out[i] = self.last[i];
-                outcome[i] = RepairOutcome::LastValue;
-            } else {
-                out[i] = f32::NAN;
-                outcome[i] = RepairOutcome::Missing;
-            }
+            (den > 0.0).then(|| num / den)
         }
+    };
+    match mean {
+        Some(v) => (v, RepairOutcome::Filled),
+        None if last.is_finite() => (last, RepairOutcome::LastValue),
+        None => (f64::NAN, RepairOutcome::Missing),
     }
 }
 
@@ -163,33 +204,35 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    fn run_all(
-        rep: &mut NeighbourMeanRepair,
-        frames: &[f32],
-        valid: &[bool],
-    ) -> (Vec<f32>, Vec<RepairOutcome>) {
-        let mut out = vec![0.0; frames.len()];
-        let mut oc = vec![RepairOutcome::Measured; frames.len()];
-        rep.run(frames, valid, &mut out, &mut oc).unwrap();
+    fn run_all(rep: &mut LocalRepair, frames: &[f64], valid: &[bool]) -> (Vec<f64>, Vec<u8>) {
+        let mut out = frames.to_vec();
+        let mut oc = vec![9; frames.len()];
+        rep.run(&mut out, |i| valid[i], Some(&mut oc)).unwrap();
         (out, oc)
+    }
+
+    fn mean4(rows: usize, cols: usize) -> LocalRepair {
+        let g = Neighbours::grid4(rows, cols);
+        LocalRepair::new(Method::NeighbourMean(g), rows * cols).unwrap()
     }
 
     #[test]
     fn centre_of_3x3_is_mean_of_its_four_neighbours() {
-        let mut rep = NeighbourMeanRepair::new(Neighbours::grid4(3, 3));
+        let mut rep = mean4(3, 3);
         let frame = [9.0, 1.0, 9.0, 2.0, 0.0, 4.0, 9.0, 5.0, 9.0];
         let mut valid = [true; 9];
         valid[4] = false;
         let (out, oc) = run_all(&mut rep, &frame, &valid);
         assert_eq!(out[4], 3.0); // (1 + 2 + 4 + 5) / 4, corners ignored
-        assert_eq!(oc[4], RepairOutcome::NeighbourMean);
+        assert_eq!(oc[4], RepairOutcome::Filled as u8);
         assert_eq!(&out[..4], &frame[..4]);
+        assert_eq!(oc[0], RepairOutcome::Measured as u8);
     }
 
     #[test]
     fn only_available_neighbours_count() {
-        let mut rep = NeighbourMeanRepair::new(Neighbours::grid4(3, 3));
-        let frame = [0.0, 1.0, 0.0, f32::NAN, 0.0, 4.0, 0.0, 5.0, 0.0];
+        let mut rep = mean4(3, 3);
+        let frame = [0.0, 1.0, 0.0, f64::NAN, 0.0, 4.0, 0.0, 5.0, 0.0];
         let mut valid = [true; 9];
         valid[4] = false;
         valid[1] = false; // flagged although it has a value
@@ -199,7 +242,7 @@ mod tests {
 
     #[test]
     fn all_neighbours_failed_takes_last_value_real_or_repaired() {
-        let mut rep = NeighbourMeanRepair::new(Neighbours::grid4(1, 3));
+        let mut rep = mean4(1, 3);
         // frame 0: all measured; frame 1: everything failed -> last real values;
         // frame 2: element 1 repaired from 0 and 2; frame 3: all failed -> last repaired value.
         let frames = [
@@ -216,45 +259,91 @@ mod tests {
         ];
         let (out, oc) = run_all(&mut rep, &frames, &valid);
         assert_eq!(&out[3..6], &[1.0, 2.0, 3.0]);
-        assert_eq!(oc[4], RepairOutcome::LastValue);
+        assert_eq!(oc[4], RepairOutcome::LastValue as u8);
         assert_eq!(out[7], 15.0);
         assert_eq!(&out[9..12], &[10.0, 15.0, 20.0]);
     }
 
     #[test]
     fn never_seen_and_isolated_stays_missing() {
-        let mut rep = NeighbourMeanRepair::new(Neighbours::empty(2));
+        let mut rep = LocalRepair::new(Method::NeighbourMean(Neighbours::empty(2)), 2).unwrap();
         let (out, oc) = run_all(&mut rep, &[1.0, 0.0], &[true, false]);
         assert!(out[1].is_nan());
-        assert_eq!(oc[1], RepairOutcome::Missing);
+        assert_eq!(oc[1], RepairOutcome::Missing as u8);
         assert_eq!(out[0], 1.0);
     }
 
     #[test]
+    fn zero_last_value_and_weighted() {
+        let valid = [true, false, true, true, true, true, false, false, false];
+        let frames = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0];
+        let mut zero = LocalRepair::new(Method::Zero, 3).unwrap();
+        assert_eq!(run_all(&mut zero, &frames, &valid).0[1], 0.0);
+        let mut last = LocalRepair::new(Method::LastValue, 3).unwrap();
+        let (out, oc) = run_all(&mut last, &frames, &valid);
+        assert!(out[1].is_nan() && oc[1] == RepairOutcome::Missing as u8);
+        assert_eq!(&out[6..], &[4.0, 5.0, 6.0]);
+        // weights 1 to the left neighbour, 3 to the right one
+        let g = Neighbours::new(vec![0, 1, 3, 4], vec![1, 0, 2, 1]).unwrap();
+        let mut w = LocalRepair::new(Method::Weighted(g, vec![1.0, 1.0, 3.0, 1.0]), 3).unwrap();
+        assert_eq!(
+            run_all(&mut w, &frames, &valid).0[1],
+            (1.0 + 3.0 * 3.0) / 4.0
+        );
+    }
+
+    #[test]
     fn shape_errors_are_reported() {
-        let mut rep = NeighbourMeanRepair::new(Neighbours::grid4(2, 2));
-        let mut out = vec![0.0; 8];
-        let mut oc = vec![RepairOutcome::Measured; 8];
-        let e = rep.run(&[0.0; 7], &[true; 7], &mut out[..7], &mut oc[..7]);
-        assert!(matches!(e, Err(CoreError::Shape { what: "frames", .. })));
-        let e = rep.run(&[0.0; 8], &[true; 4], &mut out, &mut oc);
-        assert!(matches!(e, Err(CoreError::Shape { what: "valid", .. })));
+        let mut rep = mean4(2, 2);
+        let e = rep.run(&mut [0.0; 7], |_| true, None);
+        assert!(matches!(e, Err(CoreError::Shape { what: "values", .. })));
+        let e = rep.run(&mut [0.0; 8], |_| true, Some(&mut [0; 4]));
+        assert!(matches!(
+            e,
+            Err(CoreError::Shape {
+                what: "outcome",
+                ..
+            })
+        ));
+        let g = Neighbours::grid4(2, 2);
+        let e = LocalRepair::new(Method::Weighted(g, vec![1.0; 3]), 4);
+        assert!(matches!(e, Err(CoreError::Shape { .. })));
+    }
+
+    #[test]
+    fn a_large_batch_equals_frame_after_frame() {
+        let (rows, cols, t) = (64, 64, 12);
+        let n = rows * cols;
+        let vals: Vec<f64> = (0..n * t)
+            .map(|k| ((k * 7919) % 1000) as f64 / 100.0)
+            .collect();
+        let valid: Vec<bool> = (0..n * t).map(|k| (k * 104_729) % 9 != 0).collect();
+        let (batch, oc_b) = run_all(&mut mean4(rows, cols), &vals, &valid);
+        let mut stream = mean4(rows, cols);
+        for r in 0..t {
+            let (out, oc) = run_all(
+                &mut stream,
+                &vals[r * n..(r + 1) * n],
+                &valid[r * n..(r + 1) * n],
+            );
+            for i in 0..n {
+                assert_eq!(out[i].to_bits(), batch[r * n + i].to_bits());
+                assert_eq!(oc[i], oc_b[r * n + i]);
+            }
+        }
     }
 
     proptest! {
         #[test]
         fn streaming_equals_batch(
-            vals in proptest::collection::vec(-5.0f32..5.0, 4 * 12),
+            vals in proptest::collection::vec(-5.0f64..5.0, 4 * 12),
             mask in proptest::collection::vec(any::<bool>(), 4 * 12),
         ) {
             let n = 12;
-            let mut batch = NeighbourMeanRepair::new(Neighbours::grid4(3, 4));
-            let (out_b, oc_b) = run_all(&mut batch, &vals, &mask);
-            let mut stream = NeighbourMeanRepair::new(Neighbours::grid4(3, 4));
-            let mut out = vec![0.0f32; n];
-            let mut oc = vec![RepairOutcome::Measured; n];
+            let (out_b, oc_b) = run_all(&mut mean4(3, 4), &vals, &mask);
+            let mut stream = mean4(3, 4);
             for t in 0..4 {
-                stream.step(&vals[t * n..(t + 1) * n], &mask[t * n..(t + 1) * n], &mut out, &mut oc).unwrap();
+                let (out, oc) = run_all(&mut stream, &vals[t * n..(t + 1) * n], &mask[t * n..(t + 1) * n]);
                 for i in 0..n {
                     prop_assert_eq!(out[i].to_bits(), out_b[t * n + i].to_bits());
                     prop_assert_eq!(oc[i], oc_b[t * n + i]);
@@ -264,18 +353,17 @@ mod tests {
 
         #[test]
         fn repaired_value_lies_within_neighbour_range(
-            vals in proptest::collection::vec(0.0f32..10.0, 25),
+            vals in proptest::collection::vec(0.0f64..10.0, 25),
             mask in proptest::collection::vec(any::<bool>(), 25),
         ) {
             let g = Neighbours::grid4(5, 5);
-            let mut rep = NeighbourMeanRepair::new(g.clone());
-            let (out, oc) = run_all(&mut rep, &vals, &mask);
+            let (out, oc) = run_all(&mut mean4(5, 5), &vals, &mask);
             for i in 0..25 {
-                if oc[i] == RepairOutcome::NeighbourMean {
-                    let avail: Vec<f32> = g.of(i).iter().map(|&j| j as usize)
+                if oc[i] == RepairOutcome::Filled as u8 {
+                    let avail: Vec<f64> = g.of(i).iter().map(|&j| j as usize)
                         .filter(|&j| mask[j]).map(|j| vals[j]).collect();
-                    let lo = avail.iter().cloned().fold(f32::INFINITY, f32::min);
-                    let hi = avail.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+                    let lo = avail.iter().cloned().fold(f64::INFINITY, f64::min);
+                    let hi = avail.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
                     prop_assert!(out[i] >= lo && out[i] <= hi);
                 } else if mask[i] {
                     prop_assert_eq!(out[i], vals[i]);

@@ -5,16 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.files import check_not_input
 from texsense.io import WRITERS, format_for_output, load, save
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``convert`` command."""
     p = sub.add_parser(
         "convert",
-        help="convert a recording to HDF5 (.h5), wide CSV (.csv) or Tekscan ASCII (.asf)",
+        help=HELP["convert"],
         description="Read any supported recording and write it in another format. The output "
         "format follows the extension of OUT unless --format is given. OUT is written under a "
         "temporary name and renamed when complete (a failed write keeps the previous OUT); "

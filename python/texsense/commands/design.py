@@ -5,14 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 
+from texsense.commands import HELP
 from texsense.sensor.design import design_report
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``design`` command."""
     p = sub.add_parser(
         "design",
-        help="design rules: capacitance, smallest electrode, connections, routing, rates",
+        help=HELP["design"],
         description="Apply the thesis's design rules (§2.3.2, §7.2) to a sensor specification.",
     )
     p.add_argument("--thickness-mm", type=float, default=3.0, help="spacer thickness (3)")

@@ -5,19 +5,23 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from texsense.commands import HELP
 from texsense.drift import DriftModel, split_steps
-from texsense.exceptions import ParameterError
+from texsense.exceptions import FormatError, ParameterError
+from texsense.hysteresis import HysteresisModel
 from texsense.io.columns_csv import read_columns_csv
+from texsense.stages import Drift, Hysteresis, StageChain, load_chain
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``drift`` command group."""
     p = sub.add_parser(
         "drift",
-        help="identify drift from step-and-hold records",
+        help=HELP["drift"],
         description="Drift compensation (thesis chapter 5).",
     )
     ds = p.add_subparsers(dest="drift_command", metavar="ACTION")
@@ -53,7 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "-o",
         "--output",
         type=Path,
-        help="with --history: write the hysteresis model with the fitted drift stage here",
+        help="with --history: write the hysteresis model and the fitted drift stage here (a "
+        "chain of the two)",
     )
     add_clock_arguments(f)
     f.add_argument("--json", action="store_true", help="print JSON")
@@ -104,11 +109,19 @@ def _columns(path: Path) -> dict:
     return read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
 
 
+def load_model(path: Path) -> tuple[HysteresisModel, DriftModel | None]:
+    """The hysteresis model of a model file (a hysteresis model, or a chain of hysteresis
+    and drift) and its drift stage, if any."""
+    chain = load_chain(path)
+    hyst, drift = chain.find(Hysteresis), chain.find(Drift)
+    if hyst is None:
+        raise FormatError(path, f"holds the stages {', '.join(chain.names)}: no hysteresis model")
+    return hyst.model_, None if drift is None else drift.model_
+
+
 def run_fit_history(args: argparse.Namespace) -> int:
     """``texsense drift fit REC.csv --history MODEL.json``: γ over a whole load history."""
-    from texsense.hysteresis import HysteresisModel
-
-    model = HysteresisModel.load(args.history)
+    model, _ = load_model(args.history)
     records = []
     for path in args.steps:
         cols = _columns(path)
@@ -131,9 +144,8 @@ def run_fit_history(args: argparse.Namespace) -> int:
         "samples": int(h.size),
     }
     if args.output:
-        model.with_drift(drift)
-        model.provenance_["drift_history"] = [str(p) for p in args.steps]
-        summary["model"] = str(model.save(args.output))
+        chain = StageChain([Hysteresis.of(model), Drift.of(drift)])
+        summary["model"] = str(chain.save(args.output))
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
@@ -165,7 +177,7 @@ def run_fit(args: argparse.Namespace) -> int:
         )
     steps = load_steps(args.steps[0])
     model, fit = DriftModel.fit(steps, kind=args.kind, rest_rate=rest_rate_of(args))
-    summary = {
+    summary: dict[str, Any] = {
         "steps": [round(s, 6) for _, _, s in steps],
         "gamma_common": fit.gamma_common,
         "gamma_per_step": fit.gamma_single,

@@ -9,9 +9,15 @@ from typing import Any
 
 import numpy as np
 
+from texsense.commands import HELP
+from texsense.commands.drift import add_clock_arguments, load_model, load_steps, rest_rate_of
+from texsense.drift import DriftModel
 from texsense.exceptions import FormatError
 from texsense.hysteresis import HysteresisModel
+from texsense.hysteresis.plots import model_figure, validation_report_figure
+from texsense.hysteresis.validation import validate
 from texsense.io.columns_csv import read_columns_csv, write_columns_csv
+from texsense.stages import Drift, Hysteresis, StageChain
 
 #: Pressure bands of the error summary (thesis §4.5), in the output's unit.
 DEFAULT_BANDS = ((0.5, 3.5), (3.5, 10.0))
@@ -35,11 +41,11 @@ def _unit_of(name: str) -> str:
     return "1"
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``hysteresis`` command group."""
     p = sub.add_parser(
         "hysteresis",
-        help="identify and apply Preisach hysteresis models",
+        help=HELP["hysteresis"],
         description="Preisach hysteresis compensation (thesis chapter 4).",
     )
     hs = p.add_subparsers(dest="hysteresis_command", metavar="ACTION")
@@ -72,8 +78,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     f.add_argument("--folds", type=int, default=4, help="folds of held-out reversal curves (4)")
     f.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     f.add_argument("--drift-kind", choices=("log", "prony"), default="log")
-    from texsense.commands.drift import add_clock_arguments
-
     add_clock_arguments(f, "drift-")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
     f.set_defaults(run=run_fit)
@@ -157,15 +161,13 @@ def run_fit(args: argparse.Namespace) -> int:
     )
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
     if args.drift:
-        from texsense.commands.drift import load_steps, rest_rate_of
-        from texsense.drift import DriftModel
-
         drift, _ = DriftModel.fit(
             load_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
         )
-        model.with_drift(drift)
-        model.provenance_["drift_steps"] = str(args.drift)
-    model.save(args.output_model)
+        # hysteresis followed by drift: a chain of the two stages
+        StageChain([Hysteresis.of(model), Drift.of(drift)]).save(args.output_model)
+    else:
+        model.save(args.output_model)
     fitted = model.predict(u)
     summary = {
         "model": str(args.output_model),
@@ -201,27 +203,27 @@ def run_fit(args: argparse.Namespace) -> int:
 
 def _model_and_record(
     args: argparse.Namespace,
-) -> tuple[HysteresisModel, dict[str, np.ndarray], str, str, np.ndarray]:
-    """The model, the record's columns, the input and output names (the model's unless given)
-    and the input column, with its unit checked against the model's."""
-    model = HysteresisModel.load(args.model)
+) -> tuple[HysteresisModel, DriftModel | None, dict[str, np.ndarray], str, str, np.ndarray]:
+    """The model and its drift stage, the record's columns, the input and output names (the
+    model's unless given) and the input column, with its unit checked against the model's."""
+    model, drift = load_model(args.model)
     cols = read_columns_csv(args.data)
     in_name = args.input or model.input_name
     out_name = args.output or model.output_name
     u = _column(cols, in_name, args.data)
     if args.input and _unit_of(in_name) != "1":
         model.check_units(_unit_of(in_name))
-    return model, cols, in_name, out_name, u
+    return model, drift, cols, in_name, out_name, u
 
 
 def run_apply(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis apply``."""
-    model, cols, _, out_name, u = _model_and_record(args)
+    model, drift, cols, _, out_name, u = _model_and_record(args)
     st = model.state(1)
     modelled = st.run(u)
     clamped = int(st.clamped[0])
-    if getattr(model, "drift_", None) is not None:
-        modelled = model.drift_.apply(modelled, _column(cols, "time_s", args.data))
+    if drift is not None:
+        modelled = drift.apply(modelled, _column(cols, "time_s", args.data))
     cols[f"{out_name}_model"] = modelled
     write_columns_csv(args.out, cols)
     summary: dict[str, Any] = {
@@ -234,7 +236,7 @@ def run_apply(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
-    stages = "hysteresis + drift" if getattr(model, "drift_", None) else "hysteresis"
+    stages = "hysteresis + drift" if drift is not None else "hysteresis"
     print(
         f"wrote {args.out} ({stages}; {u.size} samples, {clamped} inputs clamped into "
         f"{model.u_min_:.4g}..{model.u_max_:.4g})"
@@ -255,15 +257,11 @@ def run_apply(args: argparse.Namespace) -> int:
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis validate``."""
-    from texsense.hysteresis.validation import validate
-
-    model, cols, in_name, out_name, u = _model_and_record(args)
+    model, drift, cols, in_name, out_name, u = _model_and_record(args)
     y = _column(cols, out_name, args.data)
     times = cols.get("time_s")
-    report = validate(model, u, y, times_s=times)
+    report = validate(model, u, y, times_s=times, drift=drift)
     if args.plot:
-        from texsense.hysteresis.plots import validation_report_figure
-
         validation_report_figure(
             report,
             u,
@@ -312,9 +310,7 @@ def run_validate(args: argparse.Namespace) -> int:
 
 def run_plot(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis plot``."""
-    from texsense.hysteresis.plots import model_figure
-
-    model = HysteresisModel.load(args.model)
+    model, _ = load_model(args.model)
     model_figure(model, args.out)
     print(f"wrote {args.out}")
     return 0

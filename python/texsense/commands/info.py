@@ -10,16 +10,17 @@ from typing import Any
 import numpy as np
 
 from texsense import stats
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.io import load, sniff_format
 from texsense.recording import Recording
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``info`` command."""
     p = sub.add_parser(
         "info",
-        help="summarise a recording (shape, timing, unit, labels, load and peak)",
+        help=HELP["info"],
         description="Summarise any readable recording: file or folder (PMD tree).",
     )
     p.add_argument("file", type=Path, help="recording file or folder")

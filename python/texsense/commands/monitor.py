@@ -3,18 +3,32 @@
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import logging
+import os
+import signal
+import socket
 from pathlib import Path
 from typing import Any
 
+from texsense.commands import HELP
 from texsense.exceptions import ParameterError
+from texsense.layout import Layout
+from texsense.monitor import ExposureTracker, Monitor, sources
+from texsense.monitor.store import open_store
+from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
+from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
+from texsense.pipeline import Pipeline
+from texsense.stages import load_chain
+from texsense.workflows import bed_calibration, seat_calibration
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``monitor`` command."""
     p = sub.add_parser(
         "monitor",
-        help="live pressure map, posture and pressure-injury alerts in the browser",
+        help=HELP["monitor"],
         description="Read a sensor live, compensate it, record it and show it in a web "
         "dashboard. Without --source: a simulated person on the virtual 96-element seat.",
     )
@@ -145,7 +159,6 @@ def add_web_options(p: argparse.ArgumentParser, port: int) -> None:
 def web_access(args: argparse.Namespace, what: str) -> Any:
     """The :class:`~texsense.monitor.web.Access` of the command's options; refuses binding
     beyond loopback without a token."""
-    from texsense.monitor.web import Access, is_loopback, resolve_token
 
     token = resolve_token(args.token, args.token_file)
     if not is_loopback(args.host) and not token:
@@ -164,7 +177,6 @@ def page_url(args: argparse.Namespace, token: str | None) -> str:
 
 
 def _grid(args: argparse.Namespace) -> Any:
-    from texsense.layout import Layout
 
     if not args.grid:
         raise ParameterError(f"--source {args.source.split(':')[0]} needs --grid ROWSxCOLS")
@@ -177,9 +189,6 @@ def _grid(args: argparse.Namespace) -> Any:
 
 def load_function(spec: str) -> Any:
     """``module:function`` or ``path/to/file.py:function`` -> the function."""
-    import importlib
-    import importlib.util
-
     where, _, name = spec.rpartition(":")
     if not where or not name:
         raise ParameterError(f"--multiplexer: expected MODULE:FUNCTION, got {spec!r}")
@@ -203,17 +212,11 @@ def load_function(spec: str) -> Any:
 def make_source(args: argparse.Namespace, *, loop: bool = True) -> tuple[Any, Any]:
     """The source named by ``--source`` and its default calibration (or None); a replay
     starts again at its end with ``loop``."""
-    from texsense.monitor import sources
-
     kind, _, rest = args.source.partition(":")
     if kind == "virtual":
-        from texsense.workflows import seat_calibration
-
-        return sources.VirtualSeatSource(speed=args.speed), seat_calibration()
+        return VirtualSeatSource(speed=args.speed), seat_calibration()
     if kind == "virtual-bed":
-        from texsense.workflows import bed_calibration
-
-        return sources.VirtualBedSource(speed=args.speed), bed_calibration()
+        return VirtualBedSource(speed=args.speed), bed_calibration()
     if kind == "replay":
         return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop), None
     if kind == "serial":
@@ -237,15 +240,11 @@ def make_source(args: argparse.Namespace, *, loop: bool = True) -> tuple[Any, An
 
 def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.calibration import load_calibration
-    from texsense.monitor import ExposureTracker, Monitor
-    from texsense.monitor.store import open_store
-    from texsense.pipeline import Pipeline
     from texsense.posture import PostureModel
 
     source, calibration = make_source(args)
     if args.calibration is not None:
-        calibration = load_calibration(args.calibration)
+        calibration = load_chain(args.calibration)
     pipeline = None
     if source.quantity == "capacitance" and calibration is not None:
         pipeline = Pipeline(calibration, source.layout)
@@ -318,8 +317,6 @@ def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
 def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
     when missing (a stale or broken cache is rebuilt, and said so)."""
-    import os
-
     from texsense.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
@@ -362,8 +359,6 @@ def virtual_bed_model() -> Any:
 
 def check_port_free(host: str, port: int) -> None:
     """Fail before the (slow) set-up when the port is taken."""
-    import socket
-
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
@@ -377,10 +372,8 @@ def check_port_free(host: str, port: int) -> None:
 
 def run_monitor(args: argparse.Namespace) -> int:
     """Run ``texsense monitor`` (until Ctrl-C or SIGTERM)."""
-    import signal
 
     from texsense.monitor.server import serve
-    from texsense.monitor.web import stop_on_sigterm
 
     access = web_access(args, "monitor")
     check_port_free(args.host, args.port)

@@ -6,15 +6,18 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.files import check_not_input, write_text
+from texsense.plotting import save_figure
+from texsense.sim.muscle import session
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``muscle`` command."""
     p = sub.add_parser(
         "muscle",
-        help="muscle activity from a sensor sleeve: onsets, count, relative intensity",
+        help=HELP["muscle"],
         description="Find contractions in a recording of a sensor sleeve (1-4 elements at a "
         "high rate): onsets, count and relative intensity, compensated (Preisach + drift: the "
         "sleeve sits preloaded), with a plot; or simulate a session on a virtual forearm.",
@@ -39,16 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense muscle simulate``: sleeve.h5, calibration.json and truth.json."""
     from texsense.io import save
-    from texsense.sim.muscle import session
-    from texsense.stages import StageChain
     from texsense.workflows import sleeve_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
     s = session(args.minutes, seed=args.seed)
-    save(s.scan.capacitance, args.output / "sleeve.h5")  # type: ignore[attr-defined]
-    chain = StageChain.from_calibration(sleeve_calibration(seed=args.seed),
-                                        layout=s.scan.capacitance.layout)  # type: ignore[attr-defined]  # fmt: skip
-    chain.save(args.output / "calibration.json")
+    save(s.scan.capacitance, args.output / "sleeve.h5")
+    sleeve_calibration(seed=args.seed).save(args.output / "calibration.json")
     truth = {"onsets_s": s.onsets_s.round(3).tolist(), "ends_s": s.ends_s.round(3).tolist(),
              "intensity": s.intensity.round(3).tolist(), "rest_s": s.rest}  # fmt: skip
     write_text(args.output / "truth.json", json.dumps(truth, indent=1))
@@ -89,8 +88,6 @@ def _plot(times, act, found, threshold, path) -> None:  # noqa: ANN001
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from texsense.plotting import save_figure
 
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.plot(times, act, lw=0.8, label="activation")

@@ -11,19 +11,34 @@ from typing import Any
 
 import numpy as np
 
-from texsense.archive import ProcessOptions
+from texsense.archive import ProcessOptions, archive_jobs, process_archive, process_file
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.commands.drift import load_steps
 from texsense.exceptions import FormatError, ParameterError
 from texsense.files import check_not_input
+from texsense.health import FailureDetector, health_report
 from texsense.io import load, save
-from texsense.repair import METHODS
+from texsense.io.columns_csv import read_columns_csv
+from texsense.pipeline import Pipeline
+from texsense.repair import METHODS, Repair
+from texsense.stages import Convert, Linear, StageChain, load_chain
+from texsense.tables import text_table
+from texsense.workflows import calibrate_mat
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``calibrate``, ``process``, ``repair`` and ``health`` commands."""
+    _register_calibrate(sub)
+    _register_process(sub)
+    _register_repair_and_health(sub)
+
+
+def _register_calibrate(sub: argparse._SubParsersAction) -> None:
+    """``calibrate mat`` and ``calibrate linear``."""
     c = sub.add_parser(
         "calibrate",
-        help="calibrate a whole mat (zeroing, equilibration, spacer model)",
+        help=HELP["calibrate"],
         description="Calibrate a mat from a test-machine record of its spacer and two mat "
         "recordings: unloaded and under a uniform known load.",
     )
@@ -67,15 +82,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
     add_accept_truncated(lin)
     lin.set_defaults(run=run_calibrate_linear)
-    _register_process(sub)
-    _register_repair_health(sub)
 
 
-def _register_process(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _register_process(sub: argparse._SubParsersAction) -> None:
+    """``process``."""
     p = sub.add_parser(
         "process",
-        help="raw capacitance -> pressure maps (detect, convert, hysteresis, drift, repair); "
-        "one file, or a whole archive on Dask",
+        help=HELP["process"],
         description="Run the whole pipeline over recordings. One file: processed block by "
         "block (any input format, and an HDF5 output, keep the memory flat in the recording's "
         "length; the output may not be the input). "
@@ -105,10 +118,11 @@ def _register_process(sub: argparse._SubParsersAction) -> None:  # type: ignore[
     p.set_defaults(run=run_process)
 
 
-def _register_repair_health(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _register_repair_and_health(sub: argparse._SubParsersAction) -> None:
+    """``repair`` and ``health``."""
     r = sub.add_parser(
         "repair",
-        help="fill elements marked invalid",
+        help=HELP["repair"],
         description="Repair every reading whose valid flag is False; repaired values stay "
         "marked invalid in the output.",
     )
@@ -120,7 +134,7 @@ def _register_repair_health(sub: argparse._SubParsersAction) -> None:  # type: i
 
     h = sub.add_parser(
         "health",
-        help="failure report per element of a capacitance recording",
+        help=HELP["health"],
         description="Detect shorts/breaks, out-of-range, stuck readings and jumps; report "
         "per element: failure episodes, share of time failed, first/last seen.",
     )
@@ -140,13 +154,11 @@ def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
         return rec
     if calibration is None:
         raise ParameterError("a capacitance recording needs --calibration")
-    from texsense.calibration import load_calibration
-    from texsense.pipeline import Pipeline
 
-    return Pipeline(load_calibration(calibration), rec.layout, repair=None, **stages).run(rec)
+    return Pipeline(load_chain(calibration), rec.layout, repair=None, **stages).run(rec)
 
 
-def _capacitance(path: Path, accept_truncated: bool = False):  # type: ignore[no-untyped-def]
+def _capacitance(path: Path, accept_truncated: bool = False) -> Any:
     rec = load(path, accept_truncated=accept_truncated)
     if rec.quantity != "capacitance":
         raise FormatError(path, f"holds {rec.quantity}, the command needs capacitance")
@@ -155,9 +167,6 @@ def _capacitance(path: Path, accept_truncated: bool = False):  # type: ignore[no
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate mat``."""
-    from texsense.io.columns_csv import read_columns_csv
-    from texsense.workflows import calibrate_mat
-
     inputs = [args.material, args.baseline, args.uniform] + ([args.drift] if args.drift else [])
     check_not_input(args.output, inputs)
     material = read_columns_csv(
@@ -165,39 +174,29 @@ def run_calibrate(args: argparse.Namespace) -> int:
     )
     steps = None
     if args.drift:
-        from texsense.commands.drift import load_steps
-
         steps = load_steps(args.drift)
-    cal = calibrate_mat(
+    chain = calibrate_mat(
         material,
         _capacitance(args.baseline, args.accept_truncated),
         _capacitance(args.uniform, args.accept_truncated),
         args.pressure,
         args.thickness_mm,
         steps=steps,
-        provenance={
-            "material": str(args.material),
-            "baseline": str(args.baseline),
-            "uniform": str(args.uniform),
-        },
     )
-    from texsense.stages import StageChain
-
-    layout = load(args.baseline, accept_truncated=args.accept_truncated).layout
-    chain = StageChain.from_calibration(cal, layout=layout)
     chain.save(args.output)
+    convert = chain.find(Convert)
+    assert convert is not None  # calibrate_mat always converts
+    gain, offset = convert.gain_, convert.offset_pF_
     print(
-        f"wrote {args.output}: stages {', '.join(s.name for s in chain.stages)} for "
-        f"{cal.n_elements} elements, id {chain.id}, gain {cal.gain.min():.3f}.."
-        f"{cal.gain.max():.3f}, offset {cal.offset_pF.min():+.3f}..{cal.offset_pF.max():+.3f} pF"
+        f"wrote {args.output}: stages {', '.join(chain.names)} for {convert.n_elements} "
+        f"elements, id {chain.id}, gain {gain.min():.3f}..{gain.max():.3f}, offset "
+        f"{offset.min():+.3f}..{offset.max():+.3f} pF"
     )
     return 0
 
 
 def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
-    from texsense.calibration import LinearCalibration
-
     check_not_input(args.output, [args.like])
     rec = load(args.like, accept_truncated=args.accept_truncated)
     quantity, unit = rec.quantity, rec.unit
@@ -206,15 +205,12 @@ def run_calibrate_linear(args: argparse.Namespace) -> int:
             raise ParameterError(f"--to wants QUANTITY:UNIT (e.g. pressure:N/cm2), got {args.to}")
         quantity, unit = args.to.split(":", 1)
     n = rec.n_elements
-    cal = LinearCalibration(
-        np.full(n, args.offset), np.full(n, args.gain), rec.quantity, rec.unit, quantity, unit,
-        args.full_scale, {"like": str(args.like)},
-    )  # fmt: skip
-    cal.check()
-    cal.save(args.output)
+    stage = Linear(rec.quantity, rec.unit, quantity, unit, args.full_scale)
+    chain = StageChain([stage.fit(np.full(n, args.offset), np.full(n, args.gain))])
+    chain.save(args.output)
     print(
         f"wrote {args.output}: linear calibration of {n} elements, {rec.quantity} "
-        f"[{rec.unit}] -> {quantity} [{unit}], id {cal.id}"
+        f"[{rec.unit}] -> {quantity} [{unit}], id {chain.id}"
     )
     return 0
 
@@ -233,9 +229,6 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
 
 def run_process(args: argparse.Namespace) -> int:
     """Run ``texsense process``: one file in blocks, or an archive on Dask."""
-    from texsense.archive import archive_jobs, process_archive, process_file
-    from texsense.calibration import load_calibration
-
     options = _options(args)
     single = (
         len(args.inputs) == 1
@@ -245,7 +238,7 @@ def run_process(args: argparse.Namespace) -> int:
     )
     if single:
         src = Path(args.inputs[0])
-        cal = load_calibration(args.calibration)
+        cal = load_chain(args.calibration)
         if args.output.suffix.lower() in (".h5", ".hdf5"):
             report = process_file(src, cal, args.output, options)
             if report.status == "skipped":
@@ -277,17 +270,9 @@ def run_process(args: argparse.Namespace) -> int:
 
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
-    from texsense.pipeline import Pipeline
-
     check_not_input(output, [src])
     raw = load(src, accept_truncated=options.accept_truncated)
-    pipe = Pipeline(
-        cal,
-        raw.layout,
-        hysteresis=options.hysteresis,
-        drift=options.drift,
-        repair=options.repair,
-    )
+    pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)
     save(out, output)
     failed = pipe.codes_ > 0
@@ -301,11 +286,9 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
 
 def run_repair(args: argparse.Namespace) -> int:
     """Run ``texsense repair``."""
-    from texsense.repair import Repair
-
     check_not_input(args.output, [args.input])
     rec = load(args.input, accept_truncated=args.accept_truncated)
-    out = Repair(rec.layout, args.method).run(rec)
+    out = Repair(rec.layout, args.method).fit().run(rec)
     save(out, args.output)
     print(f"wrote {args.output}: {int((~rec.valid).sum())} readings repaired with {args.method}")
     return 0
@@ -313,20 +296,16 @@ def run_repair(args: argparse.Namespace) -> int:
 
 def run_health(args: argparse.Namespace) -> int:
     """Run ``texsense health``."""
-    from texsense.health import FailureDetector, health_report
-
     raw = _capacitance(args.raw, args.accept_truncated)
-    detector = FailureDetector(raw.layout)
+    detector = FailureDetector(raw.layout).fit()
     if args.calibration:
-        from texsense.calibration import LinearCalibration, load_calibration
-        from texsense.pipeline import Pipeline
-
-        cal = load_calibration(args.calibration)
-        if isinstance(cal, LinearCalibration):
+        cal = load_chain(args.calibration)
+        if cal.reads[0] != "capacitance":
             raise ParameterError("health reads capacitance: give a mat calibration")
         # the detector the pipeline would run with this calibration
         detector = Pipeline(cal, raw.layout, repair=None).detector
-    codes = detector.run(raw)
+    frames = raw.frames if raw.unit == "pF" else raw.to_unit("pF").frames
+    codes = detector.detect(frames, raw.valid)
     report = health_report(codes, raw.times, raw.layout)
     if args.json:
         print(
@@ -353,7 +332,6 @@ def run_health(args: argparse.Namespace) -> int:
         f"{raw.n_elements} elements over {raw.duration_s:.0f} s: {np.sum(status == 'ok')} ok, "
         f"{np.sum(status == 'intermittent')} intermittent, {np.sum(status == 'dead')} dead"
     )
-    from texsense.tables import text_table
 
     lay = raw.layout
     rc = None if lay.cells is None or lay.shape is None else np.divmod(lay.cells, lay.shape[1])

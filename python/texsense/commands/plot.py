@@ -5,17 +5,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.files import check_not_input
 from texsense.io import load
 from texsense.plotting import peak_frame, save_overview
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``plot`` command."""
     p = sub.add_parser(
         "plot",
-        help="plot the map of a frame (default: the peak frame) and load / centre of force",
+        help=HELP["plot"],
         description="Render a PNG: the map of one frame beside the total load (sum for raw "
         "data) and the centre of force over time.",
     )

@@ -11,14 +11,20 @@ from typing import Any
 
 import numpy as np
 
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.exceptions import ParameterError
 from texsense.files import check_not_input, write_text
 from texsense.io import load
+from texsense.plotting import save_figure
 from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
-from texsense.posture.evaluate import CLASSIFIERS
-from texsense.posture.features import KINDS, FeatureSet, mirror_samples
+from texsense.posture.evaluate import CLASSIFIERS, loso, make_classifier
+from texsense.posture.features import KINDS, FeatureSet, mirror_samples, reduce_maps
+from texsense.posture.model import PostureModel
+from texsense.posture.smoothing import window_vote
+from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 from texsense.recording import Recording
+from texsense.tables import confusion_lines, natural_key, text_table
 
 #: The thesis's feature kinds (§6.3.2), used when feature options are given without --features.
 THESIS_KINDS = "elements,centre,areas4,areas16"
@@ -71,18 +77,16 @@ def describe_defaults() -> str:
 
 def _classifier(args: argparse.Namespace) -> tuple[str, Any]:
     """(name shown, unfitted estimator) of --classifier / --c or the defaults."""
-    from texsense.posture.evaluate import make_classifier
-
     name = args.classifier or DEFAULT_CLASSIFIER
     c = args.c if args.c is not None or args.classifier else DEFAULT_C
     return name + ("" if c is None else f" C={c:g}"), make_classifier(name, c)
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``posture`` and ``study`` commands."""
     p = sub.add_parser(
         "posture",
-        help="posture classification: leave-one-subject-out evaluation, training",
+        help=HELP["posture"],
         description="Classify frames of a labelled recording (thesis chapter 6).",
     )
     ps = p.add_subparsers(dest="posture_command", metavar="WHAT")
@@ -108,7 +112,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     s = sub.add_parser(
         "study",
-        help="error-modelling study (noise, hysteresis, drift, failures) with an HTML report",
+        help=HELP["study"],
         description="Thesis §6.4: one reference pattern per posture (the mean of its frames), "
         "test patterns with modelled errors, recognition rate and class distances.",
     )
@@ -150,7 +154,7 @@ def _feature_set(args: argparse.Namespace) -> FeatureSet:
     """The features of the options; when none is given, the default set (the thesis's
     with ``--classifier naive-bayes``: the thesis's classifier on the thesis's features)."""
     if args.features is None and not (args.align or args.rotate or args.log or args.pool):
-        return FeatureSet(THESIS_KINDS.split(",")) if args.classifier == "naive-bayes" else (
+        return FeatureSet(tuple(THESIS_KINDS.split(","))) if args.classifier == "naive-bayes" else (
             DEFAULT_FEATURES)  # fmt: skip
     kinds = tuple(k.strip() for k in (args.features or THESIS_KINDS).split(",") if k.strip())
     return FeatureSet(kinds, align=args.align, rotate=args.rotate, log=args.log,
@@ -198,8 +202,6 @@ def _back(args: argparse.Namespace, rec: Recording, fs: FeatureSet, idx: np.ndar
 
 def run_evaluate(args: argparse.Namespace) -> int:
     """Run ``texsense posture evaluate``."""
-    from texsense.posture.evaluate import loso
-
     rec, idx, y = _frames(args)
     if args.group not in rec.labels:
         raise ParameterError(f"{args.recording}: no label {args.group!r} naming the subjects")
@@ -236,7 +238,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"{window['accuracy']:.1%} (worst {window['minimum']['subject']}: "
             f"{window['minimum']['accuracy']:.1%}), per frame {report.accuracy:.1%}"
         )
-    from texsense.tables import confusion_lines, natural_key, text_table
 
     rows = [
         [s, f"{a:.1%}"]
@@ -255,8 +256,6 @@ def _window_accuracy(
     """Accuracy of the live vote over the last ``window_s`` s, per subject (mean) and worst.
     The vote restarts only at a new subject: posture changes within a subject's recording
     are voted across, as they would be live."""
-    from texsense.posture.smoothing import window_vote
-
     smoothed = window_vote(times, pred, window_s, sequences=groups)
     hit = smoothed == y
     per = {str(s): float(np.mean(hit[groups == s])) for s in np.unique(groups)}
@@ -271,7 +270,6 @@ def _window_accuracy(
 
 def run_train(args: argparse.Namespace) -> int:
     """Run ``texsense posture train``."""
-    from texsense.posture.model import PostureModel
 
     check_not_input(args.output, [args.recording])
     rec, idx, y = _frames(args)
@@ -283,8 +281,9 @@ def run_train(args: argparse.Namespace) -> int:
     model.fit(rec.frames[idx], y, _back(args, rec, fs, idx), groups=groups)
     model.save(args.output)
     chose = getattr(model.estimator, "choice_", None)
+    assert model.classes_ is not None  # fitted
     print(f"trained {name}{'' if chose is None else f' ({chose})'} on {fs.describe()} "
-          f"({idx.size} frames, {len(model.classes_)} classes) -> {args.output}")  # type: ignore[arg-type]  # fmt: skip
+          f"({idx.size} frames, {len(model.classes_)} classes) -> {args.output}")  # fmt: skip
     return 0
 
 
@@ -294,10 +293,6 @@ def run_study(args: argparse.Namespace) -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from texsense.plotting import save_figure
-    from texsense.posture.features import reduce_maps
-    from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 
     check_not_input(args.output, [args.recording])
     rec, idx, y = _frames(args)
@@ -310,7 +305,7 @@ def run_study(args: argparse.Namespace) -> int:
     scaled = rec.quantity != "pressure"
     if scaled:
         refs *= args.range / refs.max()
-    study = ErrorStudy(refs, layout, classes, hysteresis_model=sensor_hysteresis_model())
+    study = ErrorStudy(refs, layout, classes.tolist(), hysteresis_model=sensor_hysteresis_model())
     results = study.run()
     out = args.output
     out.mkdir(parents=True, exist_ok=True)

@@ -4,6 +4,7 @@ calibration (docs/calibration.md)."""
 from __future__ import annotations
 
 import argparse
+import asyncio
 import os
 import signal
 import sys
@@ -11,18 +12,20 @@ import time
 from pathlib import Path
 from typing import Any
 
+from texsense.commands import HELP
 from texsense.commands.monitor import add_source_options, make_source
 from texsense.exceptions import ParameterError
-from texsense.monitor.record import SILENT_S
+from texsense.files import check_not_input
+from texsense.monitor.record import SILENT_S, record
 
 __all__ = ["register"]
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``record`` command."""
     p = sub.add_parser(
         "record",
-        help="record raw frames from a mat (no calibration needed)",
+        help=HELP["record"],
         description="Record what a source sends, as it is (capacitance in pF for a mat), to a "
         "new HDF5 file that survives a crash (flushed every 0.5 s). Stops after --duration "
         "seconds of frames, after --frames frames, or at Ctrl-C. A progress line shows frames, "
@@ -62,10 +65,6 @@ class _Progress:
 
 def run_record(args: argparse.Namespace) -> int:
     """Run ``texsense record``."""
-    import asyncio
-
-    from texsense.files import check_not_input
-    from texsense.monitor.record import record
 
     kind, _, rest = args.source.partition(":")
     if kind == "replay":

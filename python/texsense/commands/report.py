@@ -3,16 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import json
+import time
 from pathlib import Path
 
+from texsense.commands import HELP
 from texsense.exceptions import ParameterError
+from texsense.report import write_report
+from texsense.roi import parse_rois
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``report`` command."""
     p = sub.add_parser(
         "report",
-        help="a PDF or HTML report of a recording (maps, charts, regions, events, health)",
+        help=HELP["report"],
         description="Write a report of any recording texsense reads: identity, peak and mean "
         "maps on a fixed scale with the threshold, load/peak/contact area/centre of force over "
         "time, statistics per region, events and alerts, sensor health and, for a bed, the "
@@ -45,17 +50,10 @@ def _scale(text: str | None) -> tuple[float, float] | None:
 
 def run_report(args: argparse.Namespace) -> int:
     """Run ``texsense report``."""
-    import time
-
-    from texsense.report import write_report
 
     start = time.perf_counter()
     rois = None
     if args.rois is not None:
-        import json
-
-        from texsense.roi import parse_rois
-
         try:
             data = json.loads(args.rois.read_text(encoding="utf-8"))
         except (OSError, ValueError) as e:

@@ -4,12 +4,19 @@
 from __future__ import annotations
 
 import argparse
+import signal
+import threading
 from pathlib import Path
 from typing import Any
 
+from texsense._progress import progress
+from texsense.commands import HELP
 from texsense.exceptions import ParameterError
+from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
+from texsense.sim.device import VirtualDevice
 from texsense.sim.protocols import PROTOCOLS, run_protocol
+from texsense.sim.seated import Subject, simulate_session
 from texsense.sim.spacer import PRESETS
 
 #: CLI option -> protocol keyword, for the protocols that take it.
@@ -35,11 +42,11 @@ _ACCEPTS = {
 }
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``simulate`` command."""
     p = sub.add_parser(
         "simulate",
-        help="run a test-machine protocol on the virtual textile sensor",
+        help=HELP["simulate"],
         description="Simulate a spacer specimen on a test machine and read it out through an "
         "electrode and an AD7745-class converter. The HDF5 output holds the measured "
         "capacitance with the true pressure and compression as labels; the CSV holds "
@@ -129,10 +136,6 @@ def run(args: argparse.Namespace) -> int:
 
 def run_device(args: argparse.Namespace) -> int:
     """Run ``texsense simulate device``: serve until Ctrl-C or SIGTERM."""
-    import signal
-    import threading
-
-    from texsense.sim.device import VirtualDevice
 
     if args.link is None:
         raise ParameterError("simulate device needs --link PATH (the serial port to create)")
@@ -164,11 +167,11 @@ def run_device(args: argparse.Namespace) -> int:
     return 0
 
 
-def register_sessions(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register_sessions(sub: argparse._SubParsersAction) -> None:
     """Add the ``seat-sessions`` command."""
     p = sub.add_parser(
         "seat-sessions",
-        help="write capacitance sessions of the virtual seat and its calibration",
+        help=HELP["seat-sessions"],
         description="Simulate subjects' sessions on the 96-element virtual seat (thesis §6.2: "
         "the 16 postures in rounds, with the thesis's failure rates) and write each as a "
         "capacitance recording (session-NNN.h5), with the seat's calibration "
@@ -186,19 +189,12 @@ def register_sessions(sub: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def run_sessions(args: argparse.Namespace) -> int:
     """Run ``texsense seat-sessions``."""
-    from texsense._progress import progress
-    from texsense.io import save
-    from texsense.sim.seated import Subject, simulate_session
     from texsense.workflows import seat_calibration
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")
-    from texsense.sim.mat import VirtualMat
-    from texsense.stages import StageChain
-
     args.output.mkdir(parents=True, exist_ok=True)
-    layout = VirtualMat.seat(seed=args.mat_seed).layout
-    cal = StageChain.from_calibration(seat_calibration(mat_seed=args.mat_seed), layout=layout)
+    cal = seat_calibration(mat_seed=args.mat_seed)
     cal.save(args.output / "calibration.json")
     frames = 0
     for k in progress(range(args.sessions), total=args.sessions, desc="sessions", unit="file"):

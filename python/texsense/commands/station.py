@@ -4,19 +4,40 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import signal
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from texsense.commands.monitor import add_web_options, check_port_free, page_url, web_access
+from texsense.commands import HELP
+from texsense.commands.monitor import (
+    add_web_options,
+    check_port_free,
+    page_url,
+    virtual_bed_model,
+    web_access,
+)
 from texsense.exceptions import FormatError, ParameterError
+from texsense.layout import Layout
+from texsense.monitor import sources
+from texsense.monitor.protocol import payload_limit
+from texsense.monitor.store import open_store
+from texsense.monitor.web import resolve_token, stop_on_sigterm
+from texsense.posture import PostureModel
+from texsense.stages import load_chain
+from texsense.station.broker import mat_topic, parse_broker_url, station_broker
+from texsense.station.virtual import VirtualMats
+from texsense.station.ward import MatConfig, Station
+from texsense.workflows import bed_calibration, seat_calibration
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``station`` command."""
     p = sub.add_parser(
         "station",
-        help="a ward station: many mats over MQTT, alerts, an overview page",
+        help=HELP["station"],
         description="Ingest many mats at once — each with its layout, calibration, pipeline "
         "state, exposure and reposition alerts — from an MQTT broker (a Mosquitto of its own "
         "on loopback unless --broker names one) and from serial, IIO or replay sources named "
@@ -67,7 +88,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _layout(spec: Any, where: str) -> Any:
     from texsense.io import load
-    from texsense.layout import Layout
 
     if isinstance(spec, str) and spec.startswith("grid:"):
         try:
@@ -94,17 +114,14 @@ def read_config(
     model = "sides.joblib"            # ... on the sides this posture model reports
     turn_every_min = 120              # default: --turn-every
     """
-    from texsense.calibration import load_calibration
-    from texsense.monitor import sources
-    from texsense.station.ward import MatConfig
-
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as e:
         raise FormatError(path, f"cannot read: {e.strerror}") from None
     except tomllib.TOMLDecodeError as e:
         raise FormatError(path, f"not TOML: {e}") from None
-    mats, local = [], {}
+    mats: list[Any] = []
+    local: dict[str, sources.Source] = {}
     calibrations: dict[str, Any] = {}  # a file named by many mats is read once
     for k, m in enumerate(doc.get("mat", [])):
         where = f"{path} [[mat]] #{k + 1}"
@@ -115,7 +132,7 @@ def read_config(
         if m.get("calibration"):
             key = str(m["calibration"])
             if key not in calibrations:
-                calibrations[key] = load_calibration(key)
+                calibrations[key] = load_chain(key)
             cal = calibrations[key]
         quantity = "capacitance" if cal is not None else "pressure"
         kind, _, rest = str(m.get("source", "mqtt")).partition(":")
@@ -135,7 +152,6 @@ def read_config(
             if not m.get("model"):
                 raise FormatError(path, f"[[mat]] #{k + 1}: a bed needs model = \"FILE\", a "
                                   "posture model of sides (texsense posture train)")  # fmt: skip
-            from texsense.posture import PostureModel
 
             model = PostureModel.load(str(m["model"]))
         every = float(m.get("turn_every_min", turn_every_min))
@@ -148,10 +164,6 @@ def read_config(
 def site_broker(args: argparse.Namespace) -> Any:
     """The ``--broker`` URL with the password from its file or the environment and the TLS
     files."""
-    import os
-
-    from texsense.monitor.web import resolve_token
-    from texsense.station.broker import parse_broker_url
 
     url = parse_broker_url(args.broker)
     password = url.password
@@ -167,7 +179,6 @@ def site_broker(args: argparse.Namespace) -> Any:
     for f in tls_files:
         if f is not None and not Path(f).is_file():
             raise ParameterError(f"no such file: {f}")
-    from dataclasses import replace
 
     return replace(url, password=password, ca_file=args.broker_ca, cert_file=args.broker_cert,
                    key_file=args.broker_key)  # fmt: skip
@@ -176,8 +187,6 @@ def site_broker(args: argparse.Namespace) -> Any:
 def own_broker(args: argparse.Namespace, mats: list[Any], local: dict[str, Any], vm: Any) -> Any:
     """Start the station's own broker: (broker, the station's login, the virtual mats'
     logins)."""
-    from texsense.monitor.protocol import payload_limit
-    from texsense.station.broker import mat_topic, station_broker
 
     mqtt_mats = {m.id: mat_topic(args.mats, m.id) for m in mats if m.id not in local}
     virtual = vm.topics() if vm is not None else {}
@@ -194,9 +203,6 @@ def own_broker(args: argparse.Namespace, mats: list[Any], local: dict[str, Any],
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense station`` (until Ctrl-C or SIGTERM; its own broker stops with it)."""
-    import signal
-
-    from texsense.monitor.web import stop_on_sigterm
 
     access = web_access(args, "ward")
     check_port_free(args.host, args.port)
@@ -216,10 +222,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | None:
-    from texsense.monitor.store import open_store
     from texsense.station.server import serve_ward
-    from texsense.station.virtual import VirtualMats
-    from texsense.station.ward import Station
 
     mats, local = (
         read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
@@ -238,13 +241,9 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
             vm.logins = logins
     background = []
     if vm is not None:
-        from texsense.workflows import bed_calibration, seat_calibration
-
         vm.broker = url
         beds, sides = None, None
         if args.virtual_mats > 1:
-            from texsense.commands.monitor import virtual_bed_model
-
             beds, sides = bed_calibration(), virtual_bed_model()
         mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
                            args.turn_every)  # fmt: skip
@@ -253,5 +252,6 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
                       record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]
     print(f"texsense station: {len(mats)} mats -> {page_url(args, access.token)}", flush=True)
-    return serve_ward(station, host=args.host, port=args.port, access=access,  # type: ignore[no-any-return]
-                      background=background)  # fmt: skip
+    stopped: int | None = serve_ward(station, host=args.host, port=args.port, access=access,
+                                     background=background)  # fmt: skip
+    return stopped

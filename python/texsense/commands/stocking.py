@@ -7,14 +7,17 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.sim.stocking import LEGS, wear
+from texsense.stocking import POINTS, report
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``stocking`` command."""
     p = sub.add_parser(
         "stocking",
-        help="compression stockings: pressure at B, B1, C, D, gradient, class, hours of wear",
+        help=HELP["stocking"],
         description="Read a sensor strip under a compression stocking (elements named B, B1, "
         "C, D): the pressure at each point in mmHg hour by hour, the gradient from the ankle "
         "up and the compression class of RAL-GZ 387, drift compensated with the uncompensated "
@@ -41,17 +44,14 @@ def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense stocking simulate``: strip.h5 (capacitance, true pressure as labels) and
     calibration.json (the strip's stage chain)."""
     from texsense.io import save
-    from texsense.sim.stocking import LEGS, POINTS, wear
-    from texsense.stages import StageChain
     from texsense.workflows import strip_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
     _, truth, scan = wear(args.cls, LEGS[args.leg], hours=args.hours)
     labels = {f"true_{p}_ncm2": truth[:, k] for k, p in enumerate(POINTS)}
-    rec = scan.capacitance.with_labels(labels)  # type: ignore[attr-defined]
+    rec = scan.capacitance.with_labels(labels)
     save(rec, args.output / "strip.h5")
-    chain = StageChain.from_calibration(strip_calibration(), layout=rec.layout)
-    chain.save(args.output / "calibration.json")
+    strip_calibration().save(args.output / "calibration.json")
     print(f"wrote {args.output}/strip.h5 ({rec.n_frames} frames, class {args.cls} stocking, "
           f"{args.leg} leg, {args.hours:g} h) and calibration.json")  # fmt: skip
     return 0
@@ -61,7 +61,6 @@ def run_report(args: argparse.Namespace) -> int:
     """Run ``texsense stocking report``."""
     from texsense.commands.pipeline import to_pressure
     from texsense.io import load
-    from texsense.stocking import POINTS, report
 
     rec = load(args.recording, accept_truncated=args.accept_truncated)
     pressure = to_pressure(rec, args.calibration)
@@ -82,7 +81,7 @@ def run_report(args: argparse.Namespace) -> int:
         vals = " | ".join(f"{v:.1f}" for v in rep.mmhg[k])
         grad = ", ".join(f"{v:.2f}" for v in rep.gradient[k])
         row = f"| {h:g} | {vals} | {grad} | {classes[k]}"
-        if unc_classes is not None:
-            row += f" | {rep.uncompensated_mmhg[k, 0]:.1f} | {unc_classes[k]}"  # type: ignore[index]
+        if unc_classes is not None and rep.uncompensated_mmhg is not None:
+            row += f" | {rep.uncompensated_mmhg[k, 0]:.1f} | {unc_classes[k]}"
         print(row + " |")
     return 0

@@ -1,15 +1,18 @@
-"""The Preisach hysteresis model: identification, evaluation in the Rust core, model files."""
+"""The Preisach hysteresis model: identification, evaluation in the Rust core, model files.
+
+A model file is the ``texsense.hysteresis`` envelope of :mod:`texsense.modelfile` (content
+hash checked on load); the files of the first round, with a drift stage attached, read as a
+chain of hysteresis and drift (:mod:`texsense.legacy`)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from texsense import units
+from texsense import modelfile, units
 from texsense._core import PreisachBank
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
 from texsense.hysteresis._identify import (
@@ -18,11 +21,12 @@ from texsense.hysteresis._identify import (
     identify_lsq,
     identify_thesis,
 )
+from texsense.modelfile import Fields
 
 __all__ = ["MODEL_FORMAT", "MODEL_VERSION", "HysteresisModel", "PreisachState", "scale_hysteresis"]
 
 MODEL_FORMAT = "texsense.hysteresis"
-MODEL_VERSION = 1
+MODEL_VERSION = modelfile.FORMATS[MODEL_FORMAT]
 DEFAULT_CAPACITY = 256
 
 
@@ -47,26 +51,12 @@ class PreisachState:
             raise ParameterError(f"n_elements must be >= 1, got {n_elements}")
         self.model = model
         self.n_elements = int(n_elements)
-        self._bank = PreisachBank(
-            model.u_min_,
-            model.u_max_,
-            np.ascontiguousarray(model.everett_, dtype=np.float64),
-            self.n_elements,
-            int(capacity),
-        )
+        self._bank = model.bank(self.n_elements, capacity)
 
     def reset(self) -> PreisachState:
         """Back to lower saturation (input u_min, output = the model's offset)."""
         self._bank.reset()
         return self
-
-    def _out(self, h: np.ndarray) -> np.ndarray:
-        # in place: batches of millions of samples should not be copied twice
-        if self.model.offset_:
-            h += self.model.offset_
-        if self.model.sign_ != 1.0:
-            np.negative(h, out=h)
-        return h
 
     def run(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
         """Outputs (T, N) for inputs (T, N) (or (T,) for one element), continuing the state.
@@ -75,7 +65,7 @@ class PreisachState:
         one = u.ndim == 1
         u2 = np.ascontiguousarray(u[:, None] if one else u)
         v = np.ones(u2.shape, bool) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
-        out = self._out(self._bank.run(u2, np.ascontiguousarray(v)))
+        out = self._bank.run(u2, np.ascontiguousarray(v))
         return out[:, 0] if one else out
 
     def step(self, frame: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
@@ -89,9 +79,7 @@ class PreisachState:
         model's major loop are clamped to it. Returns the outputs set."""
         u = np.broadcast_to(np.asarray(inputs, np.float64), (self.n_elements,))
         h = np.broadcast_to(np.asarray(outputs, np.float64), (self.n_elements,))
-        internal = self.model.sign_ * h - self.model.offset_
-        got = self._bank.set_state(np.ascontiguousarray(u), np.ascontiguousarray(internal))
-        return self._out(got)
+        return self._bank.set_state(np.ascontiguousarray(u), np.ascontiguousarray(h))
 
     @property
     def clamped(self) -> np.ndarray:
@@ -225,59 +213,25 @@ class HysteresisModel:
         """A streaming evaluator for ``n_elements`` starting at lower saturation."""
         return PreisachState(self, n_elements, capacity)
 
-    def predict(
-        self,
-        inputs: npt.ArrayLike,
-        valid: npt.ArrayLike | None = None,
-        times_s: npt.ArrayLike | None = None,
-    ) -> np.ndarray:
-        """Outputs for a whole input history (T,) or (T, N), from lower saturation. With a
-        drift stage (``self.drift_``) and ``times_s`` the drift of eq. 5.8 is added."""
+    def predict(self, inputs: npt.ArrayLike, valid: npt.ArrayLike | None = None) -> np.ndarray:
+        """Outputs for a whole input history (T,) or (T, N), from lower saturation (the drift
+        of eq. 5.8 is a stage of its own: :class:`texsense.stages.Drift`)."""
         u = np.asarray(inputs, dtype=np.float64)
-        n = 1 if u.ndim == 1 else u.shape[1]
-        drift = getattr(self, "drift_", None)
-        if drift is None or times_s is None:
-            return self.state(n).run(u, valid)
-        # both stages in one pass of the Rust core
-        from texsense.drift import time_steps
+        return self.state(1 if u.ndim == 1 else u.shape[1]).run(u, valid)
 
-        one = u.ndim == 1
-        u2 = np.ascontiguousarray(u[:, None] if one else u)
-        dt = time_steps(times_s, u2.shape[0])
-        v = np.isfinite(u2) if valid is None else np.asarray(valid, bool).reshape(u2.shape)
-        out = self.compensation(n).run(dt, u2, np.ascontiguousarray(v))
-        return out[:, 0] if one else out
-
-    def compensation(self, n_elements: int = 1, drift: bool = True) -> Any:
-        """The Preisach stage followed by the drift stage (``self.drift_``, when present and
-        ``drift``) for ``n_elements``, in one pass of the Rust core
-        (:class:`texsense._core.Compensation`, streaming: call ``run(dt, inputs, valid)``
-        frame after frame). Without a drift stage it is the Preisach model alone."""
+    def bank(self, n_elements: int = 1, capacity: int = DEFAULT_CAPACITY) -> PreisachBank:
+        """The compiled Preisach bank of ``n_elements`` at lower saturation, with the model's
+        output offset and sign (eq. 4.15-4.22)."""
         self._check_fitted()
-        from texsense._core import Compensation
-
-        d = getattr(self, "drift_", None) if drift else None
-        return Compensation(
+        return PreisachBank(
             self.u_min_,
             self.u_max_,
             np.ascontiguousarray(self.everett_, dtype=np.float64),
-            n_elements,
-            DEFAULT_CAPACITY,
+            int(n_elements),
+            int(capacity),
             self.offset_,
             self.sign_,
-            d.gamma if d is not None else 0.0,
-            np.ascontiguousarray(d.kernel.weights) if d is not None else None,
-            np.ascontiguousarray(d.kernel.taus) if d is not None else None,
-            d.rest_rate if d is not None else 0.0,
-            d.rest_window if d is not None else 0.5,
-            d.gamma_time if d is not None else 0.0,
         )
-
-    def with_drift(self, drift: Any) -> HysteresisModel:
-        """Attach a :class:`texsense.drift.DriftModel` (returns self)."""
-        self._check_fitted()
-        self.drift_ = drift
-        return self
 
     def everett(self, alpha: npt.ArrayLike, beta: npt.ArrayLike) -> np.ndarray:
         """The (interpolated) Everett function F(α, β) in the model's internal output units."""
@@ -287,15 +241,18 @@ class HysteresisModel:
         return st._bank.everett(a, b)
 
     # ------------------------------------------------------------------ files
-    def to_dict(self) -> dict[str, Any]:
-        """The versioned, JSON-able model description."""
+    def to_content(self) -> dict[str, Any]:
+        """The content of the model file (JSON-able)."""
         self._check_fitted()
-        from texsense import __version__
-
         return {
-            "format": MODEL_FORMAT,
-            "version": MODEL_VERSION,
             "method": self.method_,
+            "params": {
+                "method": self.method,
+                "grid": self.grid,
+                "cells": self.cells,
+                "smoothing": self.smoothing,
+                "folds": self.folds,
+            },
             "input": {
                 "name": self.input_name,
                 "unit": units.canonical(self.input_unit),
@@ -311,76 +268,58 @@ class HysteresisModel:
             "grid": int(self.everett_.shape[0]),
             "everett": self.everett_.tolist(),
             "details": self.details_,
-            "drift": None if getattr(self, "drift_", None) is None else self.drift_.to_dict(),
-            "provenance": {"software": f"texsense {__version__}", **self.provenance_},
+            "provenance": dict(self.provenance_),
         }
 
     def save(self, path: str | Path) -> Path:
-        """Write the model as JSON."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=1), encoding="utf-8")
-        return path
+        """Write the model file (atomically; a failed write keeps the previous file)."""
+        return modelfile.write(path, MODEL_FORMAT, self.to_content())
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], source: str | Path = "<dict>") -> HysteresisModel:
-        """Rebuild a model; rejects other formats, unknown versions and bad tables."""
-        if d.get("format") != MODEL_FORMAT:
-            raise FormatError(
-                source, f"not a texsense hysteresis model (format {d.get('format')!r})"
-            )
-        if d.get("version") != MODEL_VERSION:
-            raise FormatError(
-                source,
-                f"unknown hysteresis model version {d.get('version')!r}; this texsense "
-                f"reads version {MODEL_VERSION}",
-            )
+    def from_content(cls, f: Fields) -> HysteresisModel:
+        """A model from the content of its file; every problem raises :class:`FormatError`
+        naming the file and the field."""
+        method = f.text("method")
+        params = f.get("params", None)
+        if params is None:  # files of the first round: the fitted method only
+            params = {"method": method if method in ("lsq", "thesis") else "auto"}
+        if not isinstance(params, dict):
+            raise f.error("params", "expected an object")
         try:
-            inp, out = d["input"], d["output"]
             model = cls(
-                method=d["method"],
-                input_name=inp["name"],
-                output_name=out["name"],
-                input_unit=inp["unit"],
-                output_unit=out["unit"],
+                **params,
+                input_name=f.text("input.name"),
+                output_name=f.text("output.name"),
+                input_unit=units.canonical(f.text("input.unit")),
+                output_unit=units.canonical(f.text("output.unit")),
             )
-            units.canonical(inp["unit"])
-            units.canonical(out["unit"])
-            table = np.asarray(d["everett"], dtype=np.float64)
-            if table.ndim != 2 or table.shape[0] != table.shape[1] or table.shape[0] != d["grid"]:
-                raise FormatError(source, f"everett table must be grid x grid, got {table.shape}")
-            if not np.all(np.isfinite(table)):
-                raise FormatError(source, "everett table holds non-finite values")
-            model.everett_ = table
-            model.u_min_, model.u_max_ = float(inp["min"]), float(inp["max"])
-            model.offset_, model.sign_ = float(out["offset"]), float(out["sign"])
-            if not model.u_max_ > model.u_min_:
-                raise FormatError(source, "input range: max must exceed min")
-            model.method_ = d["method"]
-            model.details_ = dict(d.get("details", {}))
-            if d.get("drift") is not None:
-                from texsense.drift import DriftModel
-
-                model.drift_ = DriftModel.from_dict(d["drift"])
-            model.provenance_ = dict(d.get("provenance", {}))
-        except (KeyError, TypeError) as e:
-            raise FormatError(source, f"model file lacks or garbles the field {e}") from None
-        except ParameterError as e:
-            raise FormatError(source, str(e)) from None
+        except TypeError as e:
+            raise f.error("params", str(e)) from None
         except UnitError as e:
-            raise FormatError(source, str(e)) from None
+            raise FormatError(f.source, str(e)) from None
+        table = f.array("everett", ndim=2)
+        if table.shape[0] != table.shape[1] or table.shape[0] != f.number("grid"):
+            raise f.error("everett", f"must be grid x grid, got {table.shape}")
+        model.everett_ = table
+        model.u_min_, model.u_max_ = f.number("input.min"), f.number("input.max")
+        model.offset_, model.sign_ = f.number("output.offset"), f.number("output.sign")
+        if not model.u_max_ > model.u_min_:
+            raise f.error("input", "max must exceed min")
+        if model.sign_ not in (1.0, -1.0):
+            raise f.error("output.sign", f"must be 1 or -1, got {model.sign_}")
+        model.method_ = method
+        details, provenance = f.get("details", {}), f.get("provenance", {})
+        if not isinstance(details, dict) or not isinstance(provenance, dict):
+            raise FormatError(f.source, "fields 'details' and 'provenance' must be objects")
+        model.details_, model.provenance_ = dict(details), dict(provenance)
         return model
 
     @classmethod
     def load(cls, path: str | Path) -> HysteresisModel:
-        """Read a model file written by :meth:`save`."""
-        path = Path(path)
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise FormatError(path, "file not found") from None
-        except json.JSONDecodeError as e:
-            raise FormatError(path, f"not JSON ({e.msg})", e.lineno) from None
-        return cls.from_dict(d, path)
+        """Read a model file (of this or the first round's version). A file with a drift
+        stage is a chain: read it with :func:`texsense.stages.load_chain`."""
+        _, content = modelfile.load(path, (MODEL_FORMAT,))
+        return cls.from_content(Fields(content, path))
 
     def check_units(self, input_unit: str, output_unit: str | None = None) -> None:
         """Raise :class:`UnitError` if data come in other units than the model's."""

@@ -8,6 +8,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.hysteresis._model import HysteresisModel
+from texsense.hysteresis.validation import ValidationReport
 from texsense.plotting import save_figure
 
 __all__ = ["model_figure", "validation_figure", "validation_report_figure"]
@@ -86,7 +87,7 @@ def validation_figure(
 
 
 def validation_report_figure(
-    report: object,
+    report: ValidationReport,
     inputs: npt.ArrayLike,
     outputs: npt.ArrayLike,
     path: str | Path,
@@ -99,11 +100,11 @@ def validation_report_figure(
     plt = _plt()
     u = np.asarray(inputs, dtype=np.float64)
     y = np.asarray(outputs, dtype=np.float64)
-    m = report.modelled  # type: ignore[attr-defined]
+    m = report.modelled
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.6), layout="constrained")
     ax.plot(u, y, color="0.2", lw=1.0, label="measured")
     ax.plot(u, m, color="tab:orange", lw=1.0, label="model")
-    for n, p in enumerate(report.worst):  # type: ignore[attr-defined]
+    for n, p in enumerate(report.worst):
         ax.plot([p.input, p.input], [p.measured, p.model], color="tab:red", lw=2)
         ax.annotate(str(n + 1), (p.input, p.model), color="tab:red", fontsize=9)
     ax.set_xlabel(input_label)
@@ -112,13 +113,11 @@ def validation_report_figure(
     ax.set_title("measured and modelled (worst places in red)")
     ax2.plot(np.arange(u.size), m - y, color="tab:blue", lw=0.8)
     ax2.axhline(0, color="0.5", lw=0.6)
-    for n, p in enumerate(report.worst):  # type: ignore[attr-defined]
+    for n, p in enumerate(report.worst):
         ax2.annotate(str(n + 1), (p.index, p.model - p.measured), color="tab:red", fontsize=9)
     ax2.set_xlabel("sample")
-    ax2.set_ylabel(f"model - measured ({report.unit})")  # type: ignore[attr-defined]
-    ax2.set_title(
-        f"RMSE {report.rmse:.3g} {report.unit}, NRMSE {report.nrmse:.1%}"  # type: ignore[attr-defined]
-    )
+    ax2.set_ylabel(f"model - measured ({report.unit})")
+    ax2.set_title(f"RMSE {report.rmse:.3g} {report.unit}, NRMSE {report.nrmse:.1%}")
     if title:
         fig.suptitle(title)
     path = save_figure(fig, path, dpi=110)

@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+from texsense.drift import DriftModel
 from texsense.exceptions import ParameterError
 from texsense.hysteresis._model import HysteresisModel
 from texsense.hysteresis._segments import split_branches
@@ -86,6 +87,36 @@ def _errors(name: str, y: np.ndarray, m: np.ndarray, floor: float) -> BandError:
     )
 
 
+def _worst_places(
+    branches: list[Any],
+    index: np.ndarray,
+    times: np.ndarray | None,
+    u: np.ndarray,
+    y: np.ndarray,
+    m: np.ndarray,
+) -> list[Place]:
+    """The sample with the largest error of every branch (a turning sample belongs to the
+    branch it ends), at its index in the record."""
+    places = []
+    for n, b in enumerate(branches):
+        first = b.start + (1 if n else 0)
+        if first > b.stop:
+            continue
+        seg = slice(first, b.stop + 1)
+        k = first + int(np.argmax(np.abs(m[seg] - y[seg])))
+        places.append(
+            Place(
+                int(index[k]),
+                None if times is None else float(times[k]),
+                float(u[k]),
+                float(y[k]),
+                float(m[k]),
+                "rising" if b.rising else "falling",
+            )
+        )
+    return places
+
+
 def validate(
     model: HysteresisModel,
     inputs: npt.ArrayLike,
@@ -93,10 +124,12 @@ def validate(
     times_s: npt.ArrayLike | None = None,
     bands: tuple[tuple[float, float], ...] | None = None,
     worst: int = 5,
+    drift: DriftModel | None = None,
 ) -> ValidationReport:
-    """Run ``model`` through a record (with its drift stage when it has one and ``times_s``
-    is given) and measure where it fails. Relative errors count samples whose measured output
-    is at least 5 % of the output range (near zero a relative error means little)."""
+    """Run ``model`` through a record (followed by the ``drift`` stage of eq. 5.8 when one is
+    given with ``times_s``) and measure where it fails. Relative errors count samples whose
+    measured output is at least 5 % of the output range (near zero a relative error means
+    little)."""
     model._check_fitted()
     u = np.asarray(inputs, dtype=np.float64)
     y = np.asarray(outputs, dtype=np.float64)
@@ -111,8 +144,8 @@ def validate(
     m = np.full(u.shape, np.nan)
     m[ok] = st.run(u[ok])
     t = None if times_s is None else np.asarray(times_s, dtype=np.float64)
-    if getattr(model, "drift_", None) is not None and t is not None:
-        m[ok] = model.drift_.apply(m[ok], t[ok])
+    if drift is not None and t is not None:
+        m[ok] = drift.apply(m[ok], t[ok])
     uo, yo, mo = u[ok], y[ok], m[ok]
     floor = 0.05 * float(np.ptp(yo)) if np.ptp(yo) > 0 else np.inf
     if bands is None:
@@ -135,23 +168,8 @@ def validate(
         _errors("falling input", yo[~rising], mo[~rising], floor),
     ]
     index = np.nonzero(ok)[0]
-    places = []
-    for n, b in enumerate(branches):
-        first = b.start + (1 if n else 0)  # a turning sample belongs to the branch it ends
-        if first > b.stop:
-            continue
-        seg = slice(first, b.stop + 1)
-        k = first + int(np.argmax(np.abs(mo[seg] - yo[seg])))
-        places.append(
-            Place(
-                int(index[k]),
-                None if t is None else float(t[index[k]]),
-                float(uo[k]),
-                float(yo[k]),
-                float(mo[k]),
-                "rising" if b.rising else "falling",
-            )
-        )
+    times = None if t is None else t[index]
+    places = _worst_places(branches, index, times, uo, yo, mo)
     places.sort(key=lambda p: -abs(p.model - p.measured))
     rmse = float(np.sqrt(np.mean((mo - yo) ** 2)))
     return ValidationReport(

@@ -35,7 +35,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+from texsense._core import __version__
 from texsense._progress import logger
 from texsense.exceptions import FormatError, ParameterError
 from texsense.files import atomic_path
@@ -67,7 +68,6 @@ _STR = h5py.string_dtype("utf-8")
 
 
 def _software() -> str:
-    from texsense import __version__
 
     return f"texsense {__version__}"
 
@@ -242,7 +242,7 @@ class RecordingWriter:
         *,
         valid: npt.ArrayLike | None = None,
         element_times: npt.ArrayLike | None = None,
-        labels: dict[str, npt.ArrayLike] | None = None,
+        labels: Mapping[str, npt.ArrayLike] | None = None,
     ) -> None:
         """Append one frame (N,) or a block of frames (k, N) with their time stamps."""
         f = self._file

@@ -1,18 +1,47 @@
 """The live monitor (docs/monitor.md): sources, real-time processing, crash-safe recording,
 exposure alerts, the event store and the web dashboard."""
 
-from texsense.monitor.alerts import Alert, Event, ExposureTracker
-from texsense.monitor.live import Monitor, Recorder
-from texsense.monitor.protocol import Frame, ProtocolError
-from texsense.monitor.sources import (
-    IIOSource,
-    MQTTSource,
-    ReplaySource,
-    SerialSource,
-    Source,
-    VirtualSeatSource,
-)
-from texsense.monitor.store import EventStore
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from texsense.monitor.alerts import Alert, Event, ExposureTracker
+    from texsense.monitor.live import Monitor, Recorder
+    from texsense.monitor.protocol import Frame, ProtocolError
+    from texsense.monitor.sources import (
+        IIOSource,
+        MQTTSource,
+        ReplaySource,
+        SerialSource,
+        Source,
+    )
+    from texsense.monitor.store import EventStore
+    from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
+
+#: The package's names and the modules that define them, imported when first used (so that
+#: ``texsense.monitor.alerts``, which the bed mode and the station use, does not load the
+#: monitor's server and sources).
+_LAZY = {
+    **dict.fromkeys(("Alert", "Event", "ExposureTracker"), "alerts"),
+    **dict.fromkeys(("Monitor", "Recorder"), "live"),
+    **dict.fromkeys(("Frame", "ProtocolError"), "protocol"),
+    **dict.fromkeys(
+        ("IIOSource", "MQTTSource", "ReplaySource", "SerialSource", "Source"), "sources"
+    ),
+    **dict.fromkeys(("VirtualBedSource", "VirtualSeatSource"), "virtual"),
+    "EventStore": "store",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f"texsense.monitor.{_LAZY[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'texsense.monitor' has no attribute {name!r}")
+
 
 __all__ = [
     "Alert",
@@ -28,5 +57,6 @@ __all__ = [
     "ReplaySource",
     "SerialSource",
     "Source",
+    "VirtualBedSource",
     "VirtualSeatSource",
 ]

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from texsense import stats, units
+from texsense.bed import BANDS
 from texsense.exceptions import ParameterError
 from texsense.files import unused_name
 from texsense.monitor.alerts import Event, ExposureTracker
@@ -32,7 +33,9 @@ from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
+from texsense.posture.smoothing import WindowVote
 from texsense.recording import Recording
+from texsense.views import MODES, format_duration, orientation_of, place_names, seat_zones
 
 __all__ = ["Monitor", "Recorder"]
 
@@ -174,7 +177,6 @@ class Monitor:
         bed: Any = None,
         mode: str | None = None,
     ) -> None:
-        from texsense.views import MODES
 
         #: a capacitance source without a calibration: raw readings only
         self.raw_only = source.quantity == "capacitance" and pipeline is None
@@ -187,8 +189,6 @@ class Monitor:
         if posture_model is not None and posture_model.layout != source.layout:
             raise ParameterError("the posture model was trained on another layout")
         if bed is not None:
-            from texsense.bed import BANDS
-
             if posture_model is None:
                 raise ParameterError("bed monitoring needs a posture model that reports sides")
             unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
@@ -227,7 +227,6 @@ class Monitor:
         self.last_pressure: np.ndarray | None = None  # N/cm², NaN where unknown
         self.changes = 0  # grows with every frame, acknowledgement and recording start/stop
         self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
-        from texsense.posture.smoothing import WindowVote
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
 
@@ -266,7 +265,6 @@ class Monitor:
                 self.source.quantity,
                 not self.raw_only,
             )
-        from texsense.views import orientation_of
 
         meta = {
             "source": self.source.name,
@@ -305,7 +303,6 @@ class Monitor:
 
     # ------------------------------------------------------------------ processing
     def _events(self, events: list[Event]) -> None:
-        from texsense.views import format_duration
 
         for e in events:
             self.store.add_event(self.session_id, e)
@@ -320,7 +317,6 @@ class Monitor:
     def _where(self, elements: list[int]) -> list[str]:
         """Where elements lie, in words: the bed's at-risk regions or the seat's zones, else
         rows and columns (:func:`texsense.views.place_names`)."""
-        from texsense.views import place_names, seat_zones
 
         if self.tracker.by_region:
             return [self.tracker.names[i] for i in elements]
@@ -370,15 +366,13 @@ class Monitor:
         raw = frame.values
         if self.pipeline is not None and self.source.quantity == "capacitance":
             valid = np.isfinite(raw)
-            pressure, measured = self.pipeline.step(np.nan_to_num(raw), frame.t, valid)
+            pressure, measured = self.pipeline.step(np.nan_to_num(raw), valid, frame.t)
             codes = self.pipeline.codes_
         elif self.raw_only:
             pressure = np.full(raw.shape, np.nan)
             measured = np.zeros(raw.shape, dtype=bool)
             codes = np.zeros(raw.shape, dtype=np.int8)
         else:
-            from texsense import units
-
             pressure = units.convert(raw, frame.unit, "N/cm2")
             measured = np.isfinite(pressure)
             codes = np.where(measured, 0, 2)
@@ -416,9 +410,9 @@ class Monitor:
             bed = self.bed.status(frame.t)
         for e in exposure_events:  # name the places (the bed's regions are this frame's)
             if e.kind == "reposition" and e.alert_id is not None:
-                alert = next(a for a in self.tracker.alerts if a.id == e.alert_id)
-                alert.where = self._where(alert.elements)
-                e.detail = {"where": alert.where, "elements": alert.elements}
+                raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
+                raised.where = self._where(raised.elements)
+                e.detail = {"where": raised.where, "elements": raised.elements}
         self._events(exposure_events)
         alert = self.tracker.open_alert
         self.frames += 1
@@ -429,7 +423,7 @@ class Monitor:
             a = np.asarray(v, dtype=np.float64)
             out = np.round(a, nd).astype(object)
             out[~np.isfinite(a)] = None
-            return out.tolist()  # type: ignore[no-any-return]
+            return out.tolist()
 
         snap = {
             "seq": frame.seq,

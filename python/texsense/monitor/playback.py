@@ -37,8 +37,10 @@ import numpy as np
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 
-from texsense import units
+from texsense import stats, units
 from texsense.exceptions import FormatError, ParameterError, UnitError
+from texsense.report import write_report
+from texsense.roi import load_rois, parse_rois, roi_elements, save_rois
 
 if TYPE_CHECKING:
     from texsense.monitor.live import Monitor
@@ -75,7 +77,7 @@ def _rounded(v: np.ndarray, nd: int = 3) -> list[Any]:
     a = np.asarray(v, dtype=np.float64)
     out = np.round(a, nd).astype(object)
     out[~np.isfinite(a)] = None
-    return out.tolist()  # type: ignore[no-any-return]
+    return list(out.tolist())
 
 
 class _Reviews:
@@ -123,7 +125,6 @@ def _series(review: Review) -> dict[str, Any]:
 
 
 def _summary(review: Review, path: Path) -> dict[str, Any]:
-    from texsense.roi import load_rois
 
     rec, lay = review.rec, review.rec.layout
     return {
@@ -153,9 +154,7 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
 
 
 def _roi_stats(review: Review, rois: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    from texsense import stats
     from texsense.review import BLOCK, decimate
-    from texsense.roi import roi_elements
 
     rec = review.rec
     regions = {r["name"]: roi_elements(r, rec.layout) for r in rois}
@@ -169,8 +168,8 @@ def _roi_stats(review: Review, rois: list[dict[str, Any]]) -> list[dict[str, Any
                 block = rec.select(slice(start, start + BLOCK))
                 for k, v in stats.region_stats(block, {name: idx})[name].items():
                     parts.setdefault(k, []).append(v)
-            for k, v in parts.items():
-                series = np.concatenate(v) * (
+            for k, pieces in parts.items():
+                series = np.concatenate(pieces) * (
                     1.0 if k in ("load_N", "contact_area_cm2") else review.factor
                 )
                 entry[k] = _rounded(decimate(series, bins, "mean" if k == "mean" else "max"), 4)
@@ -244,7 +243,6 @@ def _frame(review: Review, i: int) -> dict[str, Any]:
 
 
 async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, Any]:
-    from texsense.roi import parse_rois, save_rois
 
     path, review = await folder.review_of(name)
     body = await request.body()
@@ -263,8 +261,6 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
 
 
 async def _report(folder: _Folder, name: str, format: str) -> Any:
-    from texsense.report import write_report
-    from texsense.roi import load_rois
 
     if format not in ("pdf", "html"):
         raise HTTPException(422, "format must be pdf or html")
@@ -313,7 +309,6 @@ def playback_router(monitor: Monitor) -> APIRouter:
     @router.get("/api/playback/{name}/rois")
     async def get_rois(name: str) -> list[dict[str, Any]]:
         """The regions of interest saved with the recording."""
-        from texsense.roi import load_rois
 
         try:
             return load_rois(folder.path_of(name))

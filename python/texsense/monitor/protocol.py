@@ -55,6 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+from texsense.layout import Layout
 
 if TYPE_CHECKING:
     from texsense.layout import Layout
@@ -272,7 +273,7 @@ def parse_mqtt_payload(
             raise ProtocolError("'dt' must be a number >= 0")
         if not _finite(dt):
             raise ProtocolError("'t' + 'dt' x elements is not a finite time")
-        times = float(t) + float(dt) * np.arange(n_elements)
+        times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
         if not np.isfinite(times[-1]):
             raise ProtocolError("'t' + 'dt' x elements is not a finite time")
     return Frame(seq, times, values, unit)
@@ -318,7 +319,6 @@ def layout_announcement(layout: Layout, **info: Any) -> str:
 def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | None:
     """(layout, the other keys) of a ``#layout`` line; None for any other line;
     :class:`ProtocolError` naming the field for a malformed announcement."""
-    from texsense.layout import Layout
 
     if isinstance(line, bytes):
         line = line.decode("ascii", errors="replace")

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense import units
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
 from texsense.monitor.protocol import (
@@ -44,8 +45,6 @@ __all__ = [
     "ReplaySource",
     "SerialSource",
     "Source",
-    "VirtualBedSource",
-    "VirtualSeatSource",
 ]
 
 log = logging.getLogger("texsense.monitor")
@@ -486,7 +485,6 @@ class MQTTSource(Source):
         except ProtocolError as e:
             self._bad(f"message {self.messages}", e)
             return None
-        from texsense import units
 
         if units.quantity_of(frame.unit) != self.quantity:
             self._bad(f"message {self.messages}", ProtocolError(f"unit {frame.unit!r}"))
@@ -548,4 +546,3 @@ class MQTTSource(Source):
 
 
 # the simulated people (texsense.monitor.virtual) are sources too
-from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource  # noqa: E402

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from texsense.exceptions import ParameterError
 from texsense.monitor.alerts import Event
 
 __all__ = ["EventStore", "PostgresEventStore", "open_store"]
@@ -116,7 +117,7 @@ class EventStore:
         self, session: int | None = None, kind: str | None = None, limit: int = 1000
     ) -> list[dict[str, Any]]:
         """Events, newest first, optionally of one session or kind."""
-        sql, args = "SELECT * FROM events WHERE 1=1", []
+        sql, args = "SELECT * FROM events WHERE 1=1", list[Any]()
         if session is not None:
             sql += " AND session = ?"
             args.append(session)
@@ -160,8 +161,6 @@ class PostgresEventStore(EventStore):
         try:
             return psycopg.connect(self.path, autocommit=True, row_factory=dict_row)
         except psycopg.OperationalError as e:
-            from texsense.exceptions import ParameterError
-
             where = self.path.split("@")[-1]  # never echo a password
             raise ParameterError(f"cannot connect to PostgreSQL at {where}: {e}") from None
 

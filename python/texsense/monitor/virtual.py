@@ -13,6 +13,9 @@ import numpy as np
 from texsense.exceptions import ParameterError
 from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source, _pace
+from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat, night_frames, night_plan
+from texsense.sim.mat import VirtualMat
+from texsense.sim.seated import POSTURES, SEAT_FAILURES, Subject, posture_pressure
 
 __all__ = ["VirtualBedSource", "VirtualSeatSource"]
 
@@ -37,8 +40,6 @@ class VirtualSeatSource(Source):
         postures_per_sitting: int = 20,
         away_s: float = 120.0,
     ) -> None:
-        from texsense.sim.mat import VirtualMat
-        from texsense.sim.seated import SEAT_FAILURES, Subject
 
         super().__init__()
         if speed < 0 or hold_s <= 0 or away_s < 0 or postures_per_sitting < 1:
@@ -61,7 +62,6 @@ class VirtualSeatSource(Source):
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-        from texsense.sim.seated import posture_pressure
 
         n = self.layout.n_elements
         start = time.monotonic()
@@ -80,6 +80,7 @@ class VirtualSeatSource(Source):
                     scan = self.mat.scan(np.array([t]), p[None, :])
                     self.failed = scan.failed[0]
                     cap = scan.capacitance
+                    assert cap.element_times is not None  # a scan times every element
                     await _pace(start, t, self.speed)
                     yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
                     seq += 1
@@ -87,7 +88,6 @@ class VirtualSeatSource(Source):
 
     def info(self) -> dict[str, Any]:
         """Status, with the simulated truth (the posture's name now, None when away)."""
-        from texsense.sim.seated import POSTURES
 
         truth = POSTURES[self.posture] if self.posture else None
         return {**super().info(), "speed": self.speed, "true_posture": truth}
@@ -113,7 +113,6 @@ class VirtualBedSource(Source):
         positions_per_stay: int = 8,
         away_s: float = 300.0,
     ) -> None:
-        from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat
 
         super().__init__()
         if speed < 0 or hold_s <= 0 or away_s < 0 or positions_per_stay < 1:
@@ -129,7 +128,6 @@ class VirtualBedSource(Source):
         self.side: str | None = None
 
     def _plan(self) -> Iterator[tuple[str, float]]:
-        from texsense.sim.bed import night_plan
 
         while True:
             yield from night_plan(
@@ -139,7 +137,6 @@ class VirtualBedSource(Source):
 
     async def frames(self) -> AsyncIterator[Frame]:
         """Endless frames, paced to ``speed``."""
-        from texsense.sim.bed import night_frames
 
         start = time.monotonic()
         turn_s = min(6.0, self.hold_s / 3)
@@ -149,6 +146,7 @@ class VirtualBedSource(Source):
             self.position = None if f.position == "out" else f.position
             self.side = None if f.side == "out" else f.side
             cap = self.mat.scan(np.array([f.t]), f.pressure[None, :]).capacitance
+            assert cap.element_times is not None  # a scan times every element
             await _pace(start, f.t, self.speed)
             yield Frame(seq, cap.element_times[0].copy(), cap.frames[0].astype(float))
 

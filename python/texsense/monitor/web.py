@@ -373,7 +373,7 @@ async def _until_disconnect(websocket: Any) -> None:
 def _server_class() -> Any:
     import uvicorn
 
-    class Server(uvicorn.Server):  # type: ignore[misc]
+    class Server(uvicorn.Server):
         """uvicorn's server, but a signal only stops it (uvicorn would re-raise SIGTERM
         after its shutdown, which ends the process before the caller can clean up: its
         broker, its temporary folder)."""
@@ -408,7 +408,7 @@ def serve_app(app: Any, host: str, port: int) -> int | None:
         host=host,
         port=port,
         log_level="warning",
-        timeout_graceful_shutdown=SHUTDOWN_S,
+        timeout_graceful_shutdown=SHUTDOWN_S,  # type: ignore[arg-type]  # a float works
         proxy_headers=False,
         server_header=False,
     )

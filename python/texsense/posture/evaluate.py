@@ -22,6 +22,7 @@ Examples
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -165,7 +166,7 @@ class SubjectSelect(ClassifierMixin, BaseEstimator):
 
     def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Labels of the chosen classifier."""
-        return self.estimator_.predict(X)  # type: ignore[no-any-return]
+        return self.estimator_.predict(X)
 
     def _has_proba(self) -> bool:
         est = getattr(self, "estimator_", None)
@@ -174,13 +175,11 @@ class SubjectSelect(ClassifierMixin, BaseEstimator):
     @available_if(_has_proba)
     def predict_proba(self, X: npt.ArrayLike) -> np.ndarray:
         """Probabilities of the chosen classifier (when it has them)."""
-        return self.estimator_.predict_proba(X)  # type: ignore[no-any-return]
+        return self.estimator_.predict_proba(X)
 
 
 def takes_groups(estimator: BaseEstimator) -> bool:
     """Whether ``estimator.fit`` takes the subjects (``groups=``)."""
-    import inspect
-
     return "groups" in inspect.signature(estimator.fit).parameters
 
 
@@ -351,7 +350,11 @@ def sequential_forward_selection(
     after each addition (the thesis picks the k where the accuracy peaks).
     """
     Xa, ya, ga = _check_xy(X, y, groups)
-    pool = list(range(Xa.shape[1])) if candidates is None else [int(c) for c in candidates]
+    pool = (
+        list(range(Xa.shape[1]))
+        if candidates is None
+        else [int(c) for c in np.asarray(candidates).ravel()]
+    )
     if not 1 <= k <= len(pool):
         raise ParameterError(f"k must lie in 1..{len(pool)}, got {k}")
     chosen: list[int] = []

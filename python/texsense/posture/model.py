@@ -32,7 +32,7 @@ from sklearn.base import BaseEstimator
 from texsense import __version__
 from texsense.exceptions import FormatError, ParameterError
 from texsense.layout import Layout
-from texsense.posture.evaluate import make_classifier
+from texsense.posture.evaluate import make_classifier, takes_groups
 from texsense.posture.features import FeatureSet, mirror_samples
 
 __all__ = ["FORMAT", "VERSION", "PostureModel"]
@@ -92,8 +92,6 @@ class PostureModel:
         """Train on frames (T, N) with one label per frame (and their mirror images when the
         model has a ``mirror`` map). ``groups`` (the subject of every frame) reach a
         classifier that chooses its set-up by subject (``auto``)."""
-        from texsense.posture.evaluate import takes_groups
-
         y = np.asarray(labels)
         X = self.features_of(frames, back)
         if y.shape != (X.shape[0],):

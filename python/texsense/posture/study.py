@@ -43,6 +43,7 @@ from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.posture.evaluate import class_distances, make_classifier
 from texsense.posture.features import FeatureSet
+from texsense.sim import protocols
 
 __all__ = ["DEFAULT_LEVELS", "ErrorStudy", "StudyPoint"]
 
@@ -232,7 +233,6 @@ def sensor_hysteresis_model(spacer: str = "textile-3mm", seed: int = 0) -> Any:
     (thesis method, §4.3) on the virtual spacer's calibration protocol (rising curve and
     falling curves)."""
     from texsense.hysteresis import HysteresisModel
-    from texsense.sim import protocols
 
     rec = protocols.run_protocol("calibration", spacer, seed=seed, sample_hz=None)
     e = rec.labels["compression_mm"]

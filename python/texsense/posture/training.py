@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
+from texsense.posture.evaluate import make_classifier
 from texsense.posture.features import FeatureSet
 from texsense.posture.model import PostureModel
+from texsense.sim.bed import bed_layout, every_position
+from texsense.sim.seated import POSTURES, Subject, simulate_session
 
 __all__ = ["BED_MIRROR", "train_virtual_bed_model", "train_virtual_seat_model"]
 
@@ -28,8 +32,6 @@ def train_virtual_seat_model(
     from sklearn.calibration import CalibratedClassifierCV
 
     from texsense.pipeline import Pipeline
-    from texsense.posture.evaluate import make_classifier
-    from texsense.sim.seated import POSTURES, Subject, simulate_session
     from texsense.workflows import seat_calibration
 
     cal = seat_calibration()
@@ -71,9 +73,6 @@ def train_virtual_bed_model(
     from sklearn.calibration import CalibratedClassifierCV
 
     from texsense.pipeline import Pipeline
-    from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
-    from texsense.posture.evaluate import make_classifier
-    from texsense.sim.bed import bed_layout, every_position
     from texsense.workflows import bed_calibration
 
     lay = bed_layout()
@@ -81,7 +80,8 @@ def train_virtual_bed_model(
     frames, labels, subjects = [], [], []
     for i in range(people):
         s = every_position(i, seed, hold_s, session_seed=seed + i)
-        out = pipeline.reset().run(s.capacitance).frames.astype(np.float64)  # type: ignore[arg-type]
+        assert s.capacitance is not None  # every_position reads the mat
+        out = pipeline.reset().run(s.capacitance).frames.astype(np.float64)
         hold = s.truth.labels["hold"]
         frames.append(np.nan_to_num(out[hold]))
         labels.append(s.truth.labels["side"][hold])

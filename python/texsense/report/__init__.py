@@ -28,7 +28,11 @@ from pathlib import Path
 from typing import Any
 
 from texsense.exceptions import ParameterError
+from texsense.files import check_not_input
 from texsense.recording import Recording
+from texsense.report._html import write_html
+from texsense.report._pdf import write_pdf
+from texsense.roi import load_rois
 
 __all__ = ["FORMATS", "write_report"]
 
@@ -51,7 +55,6 @@ def write_report(
     ``unit``, ``scale``, ``threshold_mmhg``, ``reposition_min``, ``turn_every_min``,
     ``model``, ``name``).
     """
-    from texsense.files import check_not_input
     from texsense.report._content import report_content
     from texsense.review import open_review
 
@@ -62,15 +65,10 @@ def write_report(
     if not isinstance(source, Recording):
         check_not_input(out, [source], what="report")
         if rois is None:
-            from texsense.roi import load_rois
-
             rois = load_rois(source)
     review = open_review(source, **options)
     content = report_content(review, rois or [])
     if fmt == "pdf":
-        from texsense.report._pdf import write_pdf
-
         return write_pdf(content, out)
-    from texsense.report._html import write_html
 
     return write_html(content, out)

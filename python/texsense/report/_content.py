@@ -9,7 +9,9 @@ from typing import Any
 import numpy as np
 
 from texsense import __version__, units
-from texsense.review import BLOCK, Review
+from texsense.bed import BANDS, find_regions
+from texsense.review import BLOCK, Review, side_labels
+from texsense.roi import roi_elements
 from texsense.views import format_clock, format_duration, place_names, seat_zones
 
 __all__ = ["ReportContent", "Table", "report_content"]
@@ -162,7 +164,6 @@ def _summary(review: Review) -> Table:
 
 def _regions(review: Review, rois: list[dict[str, Any]]) -> tuple[dict[str, Any], str]:
     """name -> (elements, frame mask or None); and a note on where they came from."""
-    from texsense.roi import roi_elements
 
     lay, out, notes = review.rec.layout, {}, []
     for r in rois:
@@ -182,8 +183,6 @@ def _regions(review: Review, rois: list[dict[str, Any]]) -> tuple[dict[str, Any]
 
 
 def _bed_regions(review: Review) -> dict[str, Any]:
-    from texsense.bed import BANDS, find_regions
-    from texsense.review import side_labels
 
     rec = review.rec
     sides, _ = side_labels(rec)

@@ -48,6 +48,7 @@ def draw_values(
     points layout; NaN blank), the ``threshold`` as a white contour, the orientation's labels
     outside the edges. Returns the mappable for a colour bar."""
     x0, x1, y0, y1 = layout.extent_cm
+    img: Any
     if layout.shape is not None:
         grid = layout.to_grid(values)
         img = ax.imshow(
@@ -73,10 +74,11 @@ def draw_values(
             Rectangle((x - w / 2, y - h / 2), w, h)
             for (x, y), (w, h) in zip(layout.xy_cm, layout.size_cm, strict=True)
         ]
-        img = PatchCollection(patches, cmap=cmap)
-        img.set_array(np.ma.masked_invalid(values))
-        img.set_clim(*scale)
-        ax.add_collection(img)
+        cells = PatchCollection(patches, cmap=cmap)
+        cells.set_array(np.ma.masked_invalid(values))
+        cells.set_clim(*scale)
+        ax.add_collection(cells)
+        img = cells
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
     ax.set_aspect("equal")
@@ -86,7 +88,7 @@ def draw_values(
 
 
 def _orientation(ax: Axes, o: dict[str, Any]) -> None:
-    style = {"fontsize": SMALL, "color": "#444", "transform": ax.transAxes}
+    style: dict[str, Any] = {"fontsize": SMALL, "color": "#444", "transform": ax.transAxes}
     mark = " (assumed)" if o.get("assumed") else ""
     if "top" in o:
         ax.text(0.5, 1.01, o["top"] + mark, ha="center", va="bottom", **style)

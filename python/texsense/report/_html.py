@@ -8,6 +8,7 @@ import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from texsense.files import write_text
 from texsense.report._figures import health_figure, maps_figure, pyplot, series_figure, sides_figure
 
 if TYPE_CHECKING:
@@ -63,7 +64,6 @@ def _png(fig: object) -> str:
 
 def write_html(c: ReportContent, out: Path) -> Path:
     """Write the report to ``out`` (atomically)."""
-    from texsense.files import write_text
 
     plt = pyplot()
     maps = plt.figure(figsize=(9.5, 5.5))

@@ -7,6 +7,7 @@ import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from texsense.files import atomic_path
 from texsense.report._figures import (
     NORMAL,
     SMALL,
@@ -105,8 +106,6 @@ def _first_page(pdf: Any, plt: Any, c: ReportContent) -> None:
 def write_pdf(c: ReportContent, out: Path) -> Path:
     """Write the report's pages to ``out`` (atomically)."""
     from matplotlib.backends.backend_pdf import PdfPages
-
-    from texsense.files import atomic_path
 
     plt = pyplot()
     header = f"{c.title}  ·  texsense"

@@ -51,6 +51,8 @@ from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
 from texsense.sim.mat import VirtualMat
+from texsense.sim.readout import CDC
+from texsense.sim.seated import SEAT_FAILURES
 
 __all__ = [
     "BED_COLS",
@@ -259,8 +261,6 @@ def bed_mat(seed: int = 7, failures: bool = True) -> VirtualMat:
     converters; with ``failures``, elements fail at the rates the thesis measured on its
     textile seat (§6.5.2.5, :data:`texsense.sim.seated.SEAT_FAILURES`: the only measured
     rates for this sensor). The same ``seed`` is the same physical mat."""
-    from texsense.sim.seated import SEAT_FAILURES
-
     return VirtualMat(
         bed_layout(),
         "textile-3mm",
@@ -486,8 +486,6 @@ def bed_session(
     :func:`night_plan`), a frame every ``frame_s`` (default the bed mat's frame time), turning
     for ``turn_s`` seconds between positions (:func:`night_frames`). With ``mat`` (e.g.
     :func:`bed_mat`) the session is also read by the textile sensor."""
-    from texsense.sim.readout import CDC
-
     rng = np.random.default_rng([seed, 91])
     plan = plan if plan is not None else night_plan(rng, 10, 300.0)
     lay = bed_layout()

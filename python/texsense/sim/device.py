@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import os
 import queue
+import select
 import threading
 import time
 from collections.abc import Iterator
@@ -46,7 +47,9 @@ import numpy as np
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.monitor.protocol import format_serial_line, layout_announcement
+from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat, night_frames, night_plan
 from texsense.sim.mat import VirtualMat
+from texsense.sim.seated import SEAT_FAILURES, Subject, posture_pressure
 
 __all__ = ["LOADS", "MATS", "VirtualDevice", "parse_load"]
 
@@ -101,7 +104,6 @@ class VirtualDevice:
         failures: bool = False,
         speed: float = 1.0,
     ) -> None:
-        from texsense.sim.seated import SEAT_FAILURES
 
         if mat not in MATS:
             raise ParameterError(f"--mat must be one of {', '.join(MATS)}, got {mat!r}")
@@ -114,8 +116,6 @@ class VirtualDevice:
             self.mat = VirtualMat.seat(seed=seed, failures=SEAT_FAILURES if failures else None)
             self.frame_s = self.mat.cdc.frame_time_s(self.mat.layout.n_elements)
         else:
-            from texsense.sim.bed import BED_CONVERTERS, bed_mat
-
             self.mat = bed_mat(seed=seed, failures=failures)
             self.frame_s = self.mat.cdc.frame_time_s(self.mat.layout.n_elements, BED_CONVERTERS)
         self.frames_sent = 0
@@ -155,7 +155,6 @@ class VirtualDevice:
             yield from self._lying(rng)
 
     def _seated(self, rng: np.random.Generator) -> Iterator[tuple[float, np.ndarray]]:
-        from texsense.sim.seated import Subject, posture_pressure
 
         subject = Subject.random(self.seed, seed=101)
         t = 0.0
@@ -169,7 +168,6 @@ class VirtualDevice:
                 t += self.frame_s
 
     def _lying(self, rng: np.random.Generator) -> Iterator[tuple[float, np.ndarray]]:
-        from texsense.sim.bed import Sleeper, night_frames, night_plan
 
         sleeper = Sleeper.random(self.seed, seed=202)
 
@@ -186,6 +184,7 @@ class VirtualDevice:
         for seq, (t, p) in enumerate(self._pressures(rng)):
             scan = self.mat.scan(np.array([t]), p[None, :])
             cap = scan.capacitance
+            assert cap.element_times is not None  # a scan times every element
             values = np.where(cap.valid[0], cap.frames[0], np.nan).astype(np.float64)
             t0_us = round(float(cap.element_times[0, 0]) * 1e6)
             offsets = cap.element_times[0] - cap.element_times[0, 0]
@@ -286,7 +285,6 @@ def _raw(fd: int) -> None:
 def _write_lines(master: int, lines: queue.Queue[str], stop: threading.Event) -> None:
     """Write queued lines to the pty's master side; a line is written whole or, if the
     reader does not drain the port within 2 s, abandoned at the next stop check."""
-    import select
 
     while not stop.is_set():
         try:

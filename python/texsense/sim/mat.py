@@ -23,6 +23,7 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -148,7 +149,7 @@ class VirtualMat:
         self._clock = 0.0
 
     @classmethod
-    def seat(cls, spacer: str = "textile-3mm", **kwargs: object) -> VirtualMat:
+    def seat(cls, spacer: str = "textile-3mm", **kwargs: Any) -> VirtualMat:
         """The thesis's seat sensor (§6.2.1): 96 active of 240 electrodes, 2 x 2 cm."""
         layout = Layout.grid(
             SEAT_ROWS,
@@ -157,12 +158,10 @@ class VirtualMat:
             active=seat_checkerboard(),
             element_size_cm=2.0,
         ).with_orientation("seat")  # row 0 is the front edge, the backrest is below
-        return cls(layout, spacer, **kwargs)  # type: ignore[arg-type]
+        return cls(layout, spacer, **kwargs)
 
     @classmethod
-    def prototype(
-        cls, n_elements: int, spacer: str = "textile-6mm", **kwargs: object
-    ) -> VirtualMat:
+    def prototype(cls, n_elements: int, spacer: str = "textile-6mm", **kwargs: Any) -> VirtualMat:
         """One of the thesis's single-electrode prototypes (§2.3.2.2): 1, 16 (4 x 4), 30
         (5 x 6) or 240 (15 x 16) electrodes of 2 x 2 cm on a 2.07 cm pitch (0.7 mm apart)."""
         shapes = {1: (1, 1), 16: (4, 4), 30: (5, 6), 240: (SEAT_ROWS, SEAT_COLS)}
@@ -170,11 +169,12 @@ class VirtualMat:
             raise ParameterError(f"prototypes have 1, 16, 30 or 240 elements, not {n_elements}")
         rows, cols = shapes[n_elements]
         layout = Layout.grid(rows, cols, pitch_cm=SEAT_PITCH_CM, element_size_cm=2.0)
-        return cls(layout, spacer, **kwargs)  # type: ignore[arg-type]
+        return cls(layout, spacer, **kwargs)
 
     def element_offsets_s(self) -> npt.NDArray[np.float64]:
         """When each element is read within a frame (s after the frame start)."""
-        return (np.arange(self.layout.n_elements) // self.converters) * self.cdc.element_time_s
+        slot = np.arange(self.layout.n_elements) // self.converters
+        return np.asarray(slot * self.cdc.element_time_s, dtype=np.float64)
 
     def _crosstalk(self, cap: np.ndarray, comp_fraction: np.ndarray) -> np.ndarray:
         indptr, indices = self.layout.neighbours
@@ -237,12 +237,12 @@ class VirtualMat:
             "cdc_rate_hz": self.cdc.rate_hz,
             "frame_time_s": self.cdc.frame_time_s(n, self.converters),
         }
-        common = {"element_times": element_times, "meta": meta}
+        common: dict[str, Any] = {"element_times": element_times, "meta": meta}
         return MatScan(
             capacitance=Recording(
                 measured, t, self.layout, "capacitance", "pF", valid=~saturated, **common
-            ),  # type: ignore[arg-type]
-            pressure=Recording(p_at, t, self.layout, "pressure", "N/cm2", **common),  # type: ignore[arg-type]
-            compression=Recording(comp, t, self.layout, "compression", "mm", **common),  # type: ignore[arg-type]
+            ),
+            pressure=Recording(p_at, t, self.layout, "pressure", "N/cm2", **common),
+            compression=Recording(comp, t, self.layout, "compression", "mm", **common),
             failed=failed,
         )

@@ -27,6 +27,7 @@ import numpy as np
 
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
+from texsense.sim.mat import MatScan, VirtualMat
 from texsense.sim.readout import CDC
 
 __all__ = ["HIGH_RATE_CDC", "MuscleSession", "session", "sleeve_layout"]
@@ -57,7 +58,7 @@ class MuscleSession:
     intensity: np.ndarray
     rest: list[tuple[float, float]]
     frame_s: float
-    scan: object
+    scan: MatScan
 
 
 def _envelope(t: np.ndarray, on: float, off: float) -> np.ndarray:
@@ -76,8 +77,6 @@ def session(
 ) -> MuscleSession:
     """``minutes`` of activity: contractions at random, a rest of ``rest_min`` every
     ``rest_every_min`` (the first minute is rest: the sleeve is put on)."""
-    from texsense.sim.mat import VirtualMat
-
     if minutes <= 0 or preload_ncm2 < 0:
         raise ParameterError("minutes must be > 0 and preload_ncm2 >= 0")
     rng = np.random.default_rng(seed)

@@ -234,11 +234,14 @@ def random_pressure(
     spectrum[freqs > cutoff_hz] = 0.0
     x = np.fft.irfft(spectrum, n)
     x = (x - x.min()) / (np.ptp(x) or 1.0) * max_ncm2
-    t = np.arange(n) * dt_s
+    t = np.asarray(np.arange(n) * dt_s, dtype=np.float64)
     r = spacer.drive_pressure(t, x)
     return [
         DriveResult(
-            t, r.compression_mm[:, 0], x, {"specimen_compression_mm": r.compression_mm[:, 0]}
+            t,
+            r.compression_mm[:, 0],
+            np.asarray(x, dtype=np.float64),
+            {"specimen_compression_mm": r.compression_mm[:, 0]},
         )
     ]
 

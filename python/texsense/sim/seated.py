@@ -36,6 +36,7 @@ from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.recording import Recording
 from texsense.sim.failures import FailureModel
+from texsense.sim.mat import SEAT_COLS, SEAT_PITCH_CM, SEAT_ROWS, VirtualMat
 
 if TYPE_CHECKING:
     pass
@@ -191,7 +192,6 @@ class ReferenceMat:
     reading. Not a textile sensor: no hysteresis, drift or failures."""
 
     def __init__(self, size: int = 32, error: float = 0.10, seed: int = 0) -> None:
-        from texsense.sim.mat import SEAT_COLS, SEAT_PITCH_CM, SEAT_ROWS
 
         # over the same seat area as the textile sensor's 15 x 16 grid
         pitch = (SEAT_ROWS * SEAT_PITCH_CM / size, SEAT_COLS * SEAT_PITCH_CM / size)
@@ -238,7 +238,7 @@ def _timeline(
 def simulate_session(
     subject: Subject,
     *,
-    mat: object | None = None,
+    mat: VirtualMat | None = None,
     mat_seed: int = 5,
     posture_s: float = 30.0,
     home_s: float = 5.0,
@@ -257,12 +257,10 @@ def simulate_session(
     the full rate). Frame labels: ``posture`` (1-16, 0 home, -1 unloaded), ``round`` and
     ``hold`` (True from ``settle_s`` after a posture was taken until it ends), ``subject``.
     """
-    from texsense.sim.mat import VirtualMat
-
     rng = np.random.default_rng([seed, zlib.crc32(subject.name.encode())])
     vmat = mat if mat is not None else VirtualMat.seat(seed=mat_seed, failures=SEAT_FAILURES)
-    layout = vmat.layout  # type: ignore[attr-defined]
-    ft = vmat.cdc.frame_time_s(layout.n_elements)  # type: ignore[attr-defined]
+    layout = vmat.layout
+    ft = vmat.cdc.frame_time_s(layout.n_elements)
     segs = _timeline(posture_s, home_s, rest_s, rounds)
     total = segs[-1][1]
     ref = ReferenceMat(seed=mat_seed)
@@ -295,7 +293,7 @@ def simulate_session(
 
     t_tex = np.arange(0.0, total, ft)
     truth, labels, back = run(t_tex, layout)
-    scan = vmat.scan(t_tex, truth)  # type: ignore[attr-defined]
+    scan = vmat.scan(t_tex, truth)
     names = np.full(t_tex.size, subject.name)
     lab = {**labels, "subject": names}
     t_ref = np.arange(0.0, total, 1.0 / reference_hz)

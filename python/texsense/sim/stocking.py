@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
+from texsense.sim.mat import MatScan, VirtualMat
 from texsense.units import convert
 
 __all__ = [
@@ -102,12 +103,10 @@ def strip_layout() -> Layout:
 
 def wear(
     cls: str, leg: Leg, *, hours: float = 8.0, frame_s: float = 10.0, seed: int = 0
-) -> tuple[np.ndarray, np.ndarray, object]:
+) -> tuple[np.ndarray, np.ndarray, MatScan]:
     """Put the stocking on (a 10 s ramp from nothing) and wear it for ``hours``: frame times
     (s), the true pressure (T, 4) in N/cm² and the strip's scan (a :class:`MatScan`: the
     capacitance the strip reads)."""
-    from texsense.sim.mat import VirtualMat
-
     if hours <= 0 or frame_s <= 0:
         raise ParameterError("hours and frame_s must be > 0")
     times = np.arange(0.0, hours * 3600.0 + frame_s / 2, frame_s)

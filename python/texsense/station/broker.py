@@ -25,21 +25,27 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import ctypes
 import hashlib
+import json
 import os
+import pwd
 import re
 import secrets
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
 import time
+import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
 from texsense.exceptions import FormatError, ParameterError
+from texsense.files import atomic_path
 
 __all__ = [
     "STATION_USER",
@@ -128,8 +134,6 @@ def _die_with_parent() -> None:
     """In the child before exec (Linux): end with the parent, even one that is killed. (As
     root, Mosquitto drops to its own user at start, which clears this: a station killed with
     SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
-    import ctypes
-    import signal
 
     with contextlib.suppress(OSError):  # not Linux: the parent's stop() is the only way
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
@@ -214,7 +218,6 @@ class Broker:
         opens its log: hand it the folder (still closed to everybody else)."""
         if os.geteuid() != 0:
             return
-        import pwd
 
         try:
             user = pwd.getpwnam("mosquitto")
@@ -318,7 +321,6 @@ def check_mat_id(mat_id: str) -> str:
 def read_mat_credentials(path: Path) -> dict[str, str]:
     """The mats' passwords in ``path`` (TOML: ``[mats]`` ``id = "password"``); empty when the
     file does not exist yet."""
-    import tomllib
 
     if not path.exists():
         return {}
@@ -333,9 +335,6 @@ def read_mat_credentials(path: Path) -> dict[str, str]:
 
 
 def _write_mat_credentials(path: Path, creds: dict[str, str]) -> None:
-    import json
-
-    from texsense.files import atomic_path
 
     text = (
         "# MQTT credentials of the mats for the broker of `texsense station` (keep private):\n"

@@ -8,9 +8,11 @@ import json
 import math
 from typing import Any
 
+from texsense.exceptions import ParameterError
 from texsense.monitor.protocol import Frame
-from texsense.monitor.sources import Source, VirtualBedSource, VirtualSeatSource
-from texsense.station.broker import BrokerURL
+from texsense.monitor.sources import Source
+from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
+from texsense.station.broker import BrokerURL, mqtt_client
 from texsense.station.ward import MatConfig
 
 __all__ = ["VirtualMats", "frame_payload"]
@@ -36,9 +38,9 @@ def frame_payload(frame: Frame) -> bytes:
 class VirtualMats:
     """``n`` simulated people publishing to ``<prefix>/vmat-NN/frames``: the odd-numbered
     ones sit on a virtual 96-element textile seat (postures, standing up, failing elements:
-    :class:`~texsense.monitor.sources.VirtualSeatSource`), the even-numbered ones lie on a
+    :class:`~texsense.monitor.virtual.VirtualSeatSource`), the even-numbered ones lie on a
     virtual 64 x 32 bed mat (every side and its variants, turning, sitting up, out of bed:
-    :class:`~texsense.monitor.sources.VirtualBedSource`).
+    :class:`~texsense.monitor.virtual.VirtualBedSource`).
 
     Parameters
     ----------
@@ -109,9 +111,10 @@ class VirtualMats:
 
     async def run(self) -> None:
         """Publish until cancelled (paho reconnects by itself if the broker restarts)."""
-        from texsense.station.broker import mqtt_client
 
         if self.logins is None:
+            if self.broker is None:
+                raise ParameterError("the virtual mats need a broker to publish to")
             shared = mqtt_client(self.broker, f"texsense-vmats-{id(self)}")
             clients = dict.fromkeys(self.ids, shared)
         else:

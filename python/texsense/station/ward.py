@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import time
 from collections import OrderedDict
@@ -42,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from texsense import units
+from texsense.bed import BedWatch
 from texsense.exceptions import ParameterError
 from texsense.layout import Layout
 from texsense.monitor.alerts import Event, ExposureTracker
@@ -57,7 +60,7 @@ from texsense.monitor.protocol import (
 )
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.station.broker import BrokerURL, check_mat_id
+from texsense.station.broker import BrokerURL, check_mat_id, mqtt_client
 from texsense.station.tiles import BlockMap
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
@@ -129,8 +132,6 @@ def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: P
     tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
     bed = None
     if config.bed:
-        from texsense.bed import BedWatch
-
         if config.posture_model is None:
             raise ParameterError(f"mat {config.id}: a bed needs a side model (model = ...)")
         bed = BedWatch(config.layout, interval_min=config.turn_every_min)
@@ -240,8 +241,6 @@ class MatEntry:
 
     def feed(self, frame: Frame, now: float) -> bool:
         """One frame (from MQTT or a local source); True when it was processed."""
-        from texsense import units
-
         if frame.values.size != self.config.layout.n_elements:
             self._malformed("count", f"a frame of {frame.values.size} values")
             return False
@@ -387,7 +386,6 @@ class MatEntry:
         revision = self.revision
         if self._tile is not None and self._tile[0] == revision:
             return self._tile[1]
-        import json
 
         pressure = self.monitor.last_pressure
         body = {**self.status(), "map": None if pressure is None else self.blocks.encode(pressure)}
@@ -509,8 +507,6 @@ class Station:
 
     def start(self) -> None:
         """Connect (in paho's network thread) from within the running event loop."""
-        from texsense.station.broker import mqtt_client
-
         if self.broker is None:
             return
         self._loop = asyncio.get_running_loop()

@@ -1,0 +1,224 @@
+//! The Everett function of the Preisach model (thesis eq. 4.12) on a uniform `K x K` grid, and
+//! the Everett terms of an input history (what identification fits the table to).
+//!
+//! `F(α, β) = (h_α - h_αβ) / 2` is tabulated over the identified input range
+//! `[u_min, u_max]` (row = α, column = β, defined for β <= α). Between grid points it is
+//! interpolated bilinearly; in the cells on the diagonal, whose upper half lies outside the
+//! Preisach triangle, linearly on the lower triangle, so that `F(u, u) = 0` holds exactly.
+
+use crate::error::{check_len, CoreError};
+
+/// An Everett function on a uniform grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Everett {
+    pub(crate) k: usize,
+    pub(crate) u_min: f64,
+    pub(crate) u_max: f64,
+    pub(crate) inv_step: f64,
+    pub(crate) table: Vec<f64>,
+}
+
+impl Everett {
+    /// Build from a row-major `k x k` table (row α, column β; entries above the diagonal are
+    /// ignored and the diagonal must be 0) over `[u_min, u_max]`.
+    pub fn new(k: usize, u_min: f64, u_max: f64, table: Vec<f64>) -> Result<Self, CoreError> {
+        if !(2..=1 << 20).contains(&k) {
+            return Err(CoreError::Parameter {
+                what: "everett",
+                why: format!("the grid needs 2 ..= 2^20 points, got {k}"),
+            });
+        }
+        check_len("everett table", table.len(), k * k)?;
+        if !(u_min.is_finite() && u_max.is_finite() && u_max > u_min) {
+            return Err(CoreError::Parameter {
+                what: "input range",
+                why: format!("need finite u_min < u_max, got {u_min} .. {u_max}"),
+            });
+        }
+        let mut table = table;
+        for i in 0..k {
+            for j in 0..k {
+                let v = table[i * k + j];
+                if j > i || i == j {
+                    table[i * k + j] = 0.0;
+                } else if !v.is_finite() {
+                    return Err(CoreError::Parameter {
+                        what: "everett table",
+                        why: format!("entry ({i}, {j}) is not finite"),
+                    });
+                }
+            }
+        }
+        Ok(Self {
+            k,
+            u_min,
+            u_max,
+            inv_step: (k - 1) as f64 / (u_max - u_min),
+            table,
+        })
+    }
+
+    /// Grid size K.
+    pub fn size(&self) -> usize {
+        self.k
+    }
+
+    /// Lower end of the input range (the saturation input `m_0`).
+    pub fn u_min(&self) -> f64 {
+        self.u_min
+    }
+
+    /// Upper end of the input range.
+    pub fn u_max(&self) -> f64 {
+        self.u_max
+    }
+
+    /// `F(α, β)` for `u_min <= β <= α <= u_max` (interpolated).
+    ///
+    /// Branch-free: both the bilinear and the diagonal-cell formula are computed and the
+    /// right one selected, since on a real input which cell is hit is unpredictable (a
+    /// mispredicted branch costs more than the few extra multiplications).
+    #[inline]
+    pub fn value(&self, alpha: f64, beta: f64) -> f64 {
+        if alpha.is_nan() || beta.is_nan() {
+            return f64::NAN;
+        }
+        self.value_of_numbers(alpha, beta)
+    }
+
+    /// [`Everett::value`] for inputs that are numbers (not NaN; infinities are clamped).
+    #[inline(always)]
+    pub(crate) fn value_of_numbers(&self, alpha: f64, beta: f64) -> f64 {
+        let last = (self.k - 1) as f64;
+        let a = ((alpha - self.u_min) * self.inv_step).clamp(0.0, last);
+        let b = ((beta - self.u_min) * self.inv_step).clamp(0.0, last);
+        // SAFETY: a and b are in [0, k - 1] (clamped, not NaN), so the truncation is a floor
+        // that fits in u32 (k is at most the table's side)
+        let (ia, ib) = unsafe { (a.to_int_unchecked::<u32>(), b.to_int_unchecked::<u32>()) };
+        let top = (self.k - 2) as u32;
+        let (i0, j0) = (ia.min(top) as usize, ib.min(top) as usize);
+        let wa = a - i0 as f64;
+        let wb = b - j0 as f64;
+        let q = i0 * self.k + j0;
+        // SAFETY: i0, j0 <= k - 2, so q + 1 and q + k + 1 are below k * k = table.len()
+        let (f00, f01, f10, f11) = unsafe {
+            let t = self.table.as_ptr().add(q);
+            (*t, *t.add(1), *t.add(self.k), *t.add(self.k + 1))
+        };
+        let bilinear =
+            (1.0 - wa) * ((1.0 - wb) * f00 + wb * f01) + wa * ((1.0 - wb) * f10 + wb * f11);
+        // diagonal cell: linear on the lower triangle, F = 0 on the diagonal
+        let diagonal = (wa - wb) * f10;
+        let v = if i0 == j0 { diagonal } else { bilinear };
+        if b >= a {
+            0.0
+        } else {
+            v
+        }
+    }
+}
+
+/// The Everett terms behind the model's output along one input history, for identification.
+///
+/// The output of the numerical model is linear in the Everett function: with the extremum
+/// stack `m_0, M_1, m_1, ...` (which depends on the input alone, eq. 4.18-4.22),
+/// `h(t) = h(u_min) + 2 Σ_k [F(M_k, m_{k-1}) - F(M_k, m_k)] ± 2 F(branch now traced)`
+/// (eq. 4.15/4.16). Sample `t` owns the terms `indptr[t] .. indptr[t + 1]`, each a point
+/// `(alpha, beta)` with `alpha > beta` and a coefficient of ±2; a table on any grid turns
+/// them into a design matrix by its interpolation weights. The stack is the evaluator's
+/// (same turning and wiping-out rules, no capacity limit); inputs are clamped into
+/// `[u_min, u_max]` and must not be NaN.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EverettTerms {
+    /// Row pointer: sample `t` owns terms `indptr[t] .. indptr[t + 1]`.
+    pub indptr: Vec<usize>,
+    /// α of each term.
+    pub alpha: Vec<f64>,
+    /// β of each term.
+    pub beta: Vec<f64>,
+    /// Coefficient of each term (±2).
+    pub coef: Vec<f64>,
+}
+
+impl EverettTerms {
+    fn push(&mut self, alpha: f64, beta: f64, coef: f64) {
+        if alpha > beta {
+            self.alpha.push(alpha);
+            self.beta.push(beta);
+            self.coef.push(coef);
+        }
+    }
+}
+
+/// The Everett terms of every sample of `inputs` (see [`EverettTerms`]).
+pub fn everett_terms(inputs: &[f64], u_min: f64, u_max: f64) -> Result<EverettTerms, CoreError> {
+    if !(u_min.is_finite() && u_max.is_finite() && u_max > u_min) {
+        return Err(CoreError::Parameter {
+            what: "input range",
+            why: format!("need finite u_min < u_max, got {u_min} .. {u_max}"),
+        });
+    }
+    if let Some(t) = inputs.iter().position(|u| u.is_nan()) {
+        return Err(CoreError::Parameter {
+            what: "inputs",
+            why: format!("sample {t} is NaN"),
+        });
+    }
+    let mut out = EverettTerms {
+        indptr: Vec::with_capacity(inputs.len() + 1),
+        ..Default::default()
+    };
+    out.indptr.push(0);
+    let mut stack = vec![u_min];
+    let mut prev = u_min;
+    for &u_in in inputs {
+        let u = u_in.clamp(u_min, u_max);
+        if u != prev {
+            let rising = u > prev;
+            if rising != (stack.len() % 2 == 1) {
+                stack.push(prev);
+            }
+            if rising {
+                while stack.len() >= 3 && u >= stack[stack.len() - 2] {
+                    stack.truncate(stack.len() - 2);
+                }
+            } else {
+                while stack.len() >= 3 && u <= stack[stack.len() - 2] {
+                    stack.truncate(stack.len() - 2);
+                }
+                if stack.len() == 2 && u <= stack[0] {
+                    stack.truncate(1);
+                }
+            }
+            prev = u;
+        }
+        let len = stack.len();
+        for q in (1..len).step_by(2) {
+            out.push(stack[q], stack[q - 1], 2.0);
+            if q + 1 < len {
+                out.push(stack[q], stack[q + 1], -2.0);
+            }
+        }
+        if len % 2 == 1 {
+            out.push(u, stack[len - 1], 2.0);
+        } else {
+            out.push(stack[len - 1], u, -2.0);
+        }
+        out.indptr.push(out.alpha.len());
+    }
+    Ok(out)
+}
+
+/// A test table: `F(α, β) = (α - β)² / 2` on a `k x k` grid over `[0, u_max]` (scaled so that
+/// `k = 21` over `[0, 1]` has steps of 1/20).
+#[cfg(test)]
+pub(crate) fn quadratic(k: usize, u_max: f64) -> Everett {
+    let mut table = vec![0.0; k * k];
+    for i in 0..k {
+        for j in 0..i {
+            let d = (i - j) as f64 / (k - 1) as f64;
+            table[i * k + j] = 0.5 * d * d;
+        }
+    }
+    Everett::new(k, 0.0, u_max, table).unwrap()
+}

@@ -1,0 +1,256 @@
+//! Tests of the preisach module.
+
+use super::*;
+use proptest::prelude::*;
+
+/// The Everett function of a uniform (non-negative) Preisach density: F = (α - β)² / 2.
+fn uniform(k: usize) -> Everett {
+    let mut t = vec![0.0; k * k];
+    let h = 1.0 / (k - 1) as f64;
+    for i in 0..k {
+        for j in 0..i {
+            let d = (i - j) as f64 * h;
+            t[i * k + j] = 0.5 * d * d;
+        }
+    }
+    Everett::new(k, 0.0, 1.0, t).unwrap()
+}
+
+fn run1(bank: &mut PreisachBank, path: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; path.len()];
+    bank.run(path, &vec![true; path.len()], &mut out).unwrap();
+    out
+}
+
+#[test]
+fn major_loop_of_a_uniform_density() {
+    let mut bank = PreisachBank::new(uniform(101), 1, 64).unwrap();
+    let out = run1(&mut bank, &[0.5, 1.0, 0.5, 0.0]);
+    // rising from saturation: 2 F(u, 0) = u²
+    assert!((out[0] - 0.25).abs() < 1e-12);
+    assert!((out[1] - 1.0).abs() < 1e-12);
+    // falling from 1: 1 - 2 F(1, u) = 1 - (1 - u)²
+    assert!((out[2] - 0.75).abs() < 1e-12);
+    assert!(out[3].abs() < 1e-12);
+    assert_eq!(bank.depth()[0], 1);
+}
+
+#[test]
+fn clamping_nan_and_invalid() {
+    let mut bank = PreisachBank::new(uniform(11), 2, 8).unwrap();
+    let mut out = [0.0; 2];
+    bank.step(&[2.0, 0.5], &[true, true], &mut out).unwrap();
+    assert_eq!(bank.clamped(), &[1, 0]);
+    assert!((out[0] - 1.0).abs() < 1e-12);
+    bank.step(&[f64::NAN, 0.2], &[true, false], &mut out)
+        .unwrap();
+    assert!(out[0].is_nan() && out[1].is_nan());
+    // state untouched: continuing gives the same as if the NaN frame had not happened
+    bank.step(&[0.5, 0.5], &[true, true], &mut out).unwrap();
+    assert!((out[1] - 0.25).abs() < 1e-12);
+}
+
+#[test]
+fn set_state_hits_the_target_between_the_branches() {
+    let mut bank = PreisachBank::new(uniform(201), 1, 16).unwrap();
+    // at u = 0.5 the rising branch gives 0.25 and the falling major branch 0.75
+    for target in [0.3, 0.5, 0.74] {
+        let got = bank.set_state(0, 0.5, target);
+        assert!((got - target).abs() < 1e-9, "{got} vs {target}");
+    }
+    assert!((bank.set_state(0, 0.5, 0.1) - 0.25).abs() < 1e-12); // below: clamped
+    assert!((bank.set_state(0, 0.5, 0.9) - 0.75).abs() < 1e-9); // above: clamped
+}
+
+#[test]
+fn capacity_policy_forgets_the_innermost_loop() {
+    let mut bank = PreisachBank::new(uniform(101), 1, 4).unwrap();
+    // ever-shrinking oscillation: 1, 0, 0.9, 0.1, 0.8, 0.2, ...
+    let path: Vec<f64> = (0..12)
+        .map(|k| {
+            let a = 0.05 * (k / 2) as f64;
+            if k % 2 == 0 {
+                1.0 - a
+            } else {
+                a
+            }
+        })
+        .collect();
+    let out = run1(&mut bank, &path);
+    assert!(bank.forgotten()[0] > 0);
+    assert!(bank.depth()[0] <= 4);
+    assert!(out.iter().all(|v| v.is_finite()));
+}
+
+fn arb_path() -> impl Strategy<Value = Vec<f64>> {
+    proptest::collection::vec(0.0f64..1.0, 1..60)
+}
+
+proptest! {
+    #[test]
+    fn streaming_equals_batch(path in arb_path()) {
+        let mut a = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        let batch = run1(&mut a, &path);
+        let mut b = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        let mut o = [0.0];
+        for (k, &u) in path.iter().enumerate() {
+            b.step(&[u], &[true], &mut o).unwrap();
+            prop_assert_eq!(o[0].to_bits(), batch[k].to_bits());
+        }
+    }
+
+    #[test]
+    fn return_point_memory(path in arb_path(), lo in 0.0f64..0.5, span in 0.05f64..0.5) {
+        // after any history, go to an extremum M, make a minor excursion inside
+        // [m, M] and come back to M: the output at M is the same as before
+        let mut bank = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        let mut hist = path.clone();
+        let m = lo;
+        let big = (lo + span).min(1.0);
+        hist.push(0.0); // the extremum before `big`
+        hist.push(big);
+        let before = run1(&mut bank, &hist);
+        let at_m = *before.last().unwrap();
+        let after = run1(&mut bank, &[m, (m + big) / 2.0, m + 0.01 * span, big]);
+        prop_assert!((after[3] - at_m).abs() < 1e-9);
+    }
+
+    #[test]
+    fn wiping_out(path in arb_path()) {
+        // any history inside [0, 1] is erased by going to 1 and back to a value:
+        // the output equals that of a fresh model doing the same
+        let mut bank = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        run1(&mut bank, &path);
+        let a = run1(&mut bank, &[1.0, 0.3]);
+        let mut fresh = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        let b = run1(&mut fresh, &[1.0, 0.3]);
+        prop_assert!((a[1] - b[1]).abs() < 1e-12);
+        prop_assert!(bank.depth()[0] == fresh.depth()[0]);
+    }
+
+    #[test]
+    fn congruent_minor_loops(
+        p1 in arb_path(), p2 in arb_path(), lo in 0.2f64..0.5, span in 0.05f64..0.3,
+    ) {
+        // minor loops between the same extrema, after different histories that stay
+        // above lo + span, differ only by a constant
+        let hi = lo + span;
+        let lift = |p: &Vec<f64>| -> Vec<f64> { p.iter().map(|v| hi + v * (1.0 - hi)).collect() };
+        let loop_path: Vec<f64> = (0..=20).map(|k| lo + span * (k as f64 / 20.0))
+            .chain((0..=20).map(|k| hi - span * (k as f64 / 20.0))).collect();
+        let mut a = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        let mut b = PreisachBank::new(uniform(51), 1, 256).unwrap();
+        let mut ha = lift(&p1); ha.push(lo);
+        let mut hb = lift(&p2); hb.push(lo);
+        run1(&mut a, &ha);
+        run1(&mut b, &hb);
+        let la = run1(&mut a, &loop_path);
+        let lb = run1(&mut b, &loop_path);
+        let shift = la[0] - lb[0];
+        for (x, y) in la.iter().zip(lb.iter()) {
+            prop_assert!((x - y - shift).abs() < 1e-9);
+        }
+    }
+}
+
+proptest! {
+    #[test]
+    fn everett_terms_reproduce_the_bank(path in arb_path()) {
+        let e = uniform(41);
+        let mut bank = PreisachBank::new(e.clone(), 1, 256).unwrap();
+        let out = run1(&mut bank, &path);
+        let terms = everett_terms(&path, 0.0, 1.0).unwrap();
+        prop_assert_eq!(terms.indptr.len(), path.len() + 1);
+        for (t, h) in out.iter().enumerate() {
+            let r = terms.indptr[t]..terms.indptr[t + 1];
+            let sum: f64 = r
+                .map(|q| terms.coef[q] * e.value(terms.alpha[q], terms.beta[q]))
+                .sum();
+            prop_assert!((sum - h).abs() < 1e-9, "sample {}: {} vs {}", t, sum, h);
+        }
+    }
+}
+
+/// A decaying oscillation nests `2 * turns` extrema: deeper than the in-place stack.
+fn nested(turns: usize, wobble: f64) -> Vec<f64> {
+    let mut path = Vec::new();
+    for k in 0..turns {
+        let a = 0.45 * (1.0 - k as f64 / turns as f64);
+        path.push(0.5 + a + wobble * (k % 3) as f64);
+        path.push(0.5 - a + 0.5 * wobble * (k % 2) as f64);
+    }
+    // and unwind them again, wiping out level after level
+    path.extend([0.97, 0.02, 0.6, 0.4, 0.55]);
+    path
+}
+
+#[test]
+fn deep_stacks_move_to_the_heap_and_back_without_changing_the_output() {
+    let e = uniform(41);
+    let path = nested(30, 1e-3);
+    let mut bank = PreisachBank::new(e.clone(), 1, 256).unwrap();
+    let before = bank.state_bytes();
+    let mut deepest = 0;
+    let mut out = Vec::new();
+    for &u in &path {
+        let mut o = [0.0];
+        bank.step(&[u], &[true], &mut o).unwrap();
+        out.push(o[0]);
+        deepest = deepest.max(bank.depth()[0]);
+        if bank.depth()[0] > INLINE_EXTREMA {
+            assert!(
+                bank.state_bytes() > before,
+                "a deep stack lives on the heap"
+            );
+        }
+    }
+    assert!(
+        deepest > INLINE_EXTREMA + 20,
+        "the path nests {deepest} extrema"
+    );
+    assert_eq!(bank.state_bytes(), before, "back in place once shallow");
+    assert_eq!(bank.forgotten()[0], 0);
+    let terms = everett_terms(&path, 0.0, 1.0).unwrap();
+    for (t, h) in out.iter().enumerate() {
+        let sum: f64 = (terms.indptr[t]..terms.indptr[t + 1])
+            .map(|q| terms.coef[q] * e.value(terms.alpha[q], terms.beta[q]))
+            .sum();
+        assert!((sum - h).abs() < 1e-9, "sample {t}: {sum} vs {h}");
+    }
+}
+
+#[test]
+fn every_schedule_gives_the_same_outputs() {
+    let e = uniform(41);
+    let (n, t) = (3 * crate::par::MAX_BLOCK + 7, 120);
+    let mut inputs = Vec::with_capacity(n * t);
+    let mut valid = Vec::with_capacity(n * t);
+    for r in 0..t {
+        for i in 0..n {
+            let x = (r as f64 * 0.37 + i as f64 * 0.11).sin() * (1.0 + (i % 5) as f64 * 0.1);
+            inputs.push(0.5 + 0.45 * x * ((r * 7 + i) % 11) as f64 / 10.0);
+            valid.push((r * 13 + i * 7) % 17 != 0);
+        }
+    }
+    let mut reference = None;
+    for schedule in [Schedule::FrameOrder, Schedule::Blocks, Schedule::Parallel] {
+        let mut bank = PreisachBank::new(e.clone(), n, 16).unwrap();
+        let mut out = vec![0.0; n * t];
+        bank.run_scheduled(&inputs, &valid, &mut out, schedule)
+            .unwrap();
+        let bits: Vec<u64> = out.iter().map(|v| v.to_bits()).collect();
+        match &reference {
+            None => reference = Some((bits, bank.depth())),
+            Some((r, d)) => {
+                assert!(r == &bits, "{schedule:?} differs");
+                assert_eq!(d, &bank.depth());
+            }
+        }
+    }
+}
+
+#[test]
+fn everett_terms_reject_nan_and_bad_ranges() {
+    assert!(everett_terms(&[0.1, f64::NAN], 0.0, 1.0).is_err());
+    assert!(everett_terms(&[0.1], 1.0, 1.0).is_err());
+}

@@ -1,0 +1,61 @@
+//! `DriftBank`: the recursive drift superposition (thesis eq. 5.4/5.8).
+
+use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use texsense_core::{DriftBank, Kernel};
+
+use crate::arrays::{run_detached, Batch};
+use crate::errors::to_py;
+
+/// Recursive drift superposition for N elements (thesis eq. 5.4/5.8).
+#[pyclass(name = "DriftBank", module = "texsense._core")]
+pub(crate) struct PyDriftBank {
+    pub(crate) inner: DriftBank,
+}
+
+#[pymethods]
+impl PyDriftBank {
+    #[new]
+    #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5, gamma_time=0.0))]
+    fn new(
+        weights: PyReadonlyArray1<'_, f64>,
+        taus: PyReadonlyArray1<'_, f64>,
+        gamma: f64,
+        n_elements: usize,
+        rest_rate: f64,
+        rest_window: f64,
+        gamma_time: f64,
+    ) -> PyResult<Self> {
+        let kernel =
+            Kernel::new(weights.as_slice()?.to_vec(), taus.as_slice()?.to_vec()).map_err(to_py)?;
+        let inner = DriftBank::new(kernel, gamma, n_elements)
+            .and_then(|b| b.with_rest_rate(rest_rate, rest_window))
+            .and_then(|b| b.with_time_component(gamma_time))
+            .map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// Number of elements.
+    #[getter]
+    fn n_elements(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// Forget the history.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Batch: time steps dt (T,), hysteresis outputs h (T, N), valid (T, N) -> (T, N).
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        dt: PyReadonlyArray1<'py, f64>,
+        h: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let b = Batch::new("drift run", self.inner.len(), Some(&dt), &h, &valid)?;
+        let inner = &mut self.inner;
+        run_detached(py, b.t, b.n, |out| inner.run(b.dt, b.values, b.valid, out))
+    }
+}

@@ -1,0 +1,256 @@
+"""The import structure of python/texsense (issue 24, item 4): no cycles, counting the imports
+inside functions too; an import inside a function only where it is justified (it brings a
+heavy optional library that the module does not otherwise need, or it is the one late-bound
+façade); the command line imports only what the command that runs needs."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "python" / "texsense"
+
+#: Libraries that take long to import or are needed by one feature only: a module imports
+#: them inside the function that needs them (or imports a texsense module that does).
+HEAVY = {
+    "sklearn", "scipy", "matplotlib", "h5py", "dask", "distributed", "fastapi", "uvicorn",
+    "starlette", "websockets", "paho", "serial", "psycopg", "joblib", "playwright",
+}  # fmt: skip
+
+#: Standard modules that exist on some platforms only (POSIX terminals and resources).
+PLATFORM = {"resource", "fcntl", "termios", "pty", "tty"}
+
+#: Imports inside functions that close what would be a cycle, each with its reason.
+LATE_BOUND = {
+    ("texsense.recording", "texsense.io"): "Recording.save is a façade over texsense.io, whose "
+    "readers build recordings (so texsense.io depends on texsense.recording)",
+}
+
+
+@dataclass
+class Module:
+    name: str
+    path: Path
+    top: set[str] = field(default_factory=set)  # modules imported at module level
+    inside: list[tuple[str, int]] = field(default_factory=list)  # (module, line) in functions
+
+
+def _names() -> dict[str, Path]:
+    mods = {"texsense._core": PACKAGE / "_core.pyi"}  # the compiled core: a leaf
+    for p in PACKAGE.rglob("*.py"):
+        parts = list(p.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = p
+    return mods
+
+
+@cache
+def modules() -> dict[str, Module]:
+    """Every module with what it imports at module level and inside functions (imports
+    under ``if TYPE_CHECKING:`` are for the type checker only and do not run)."""
+    names = _names()
+    out = {}
+    for name, path in names.items():
+        if path.suffix == ".pyi":
+            out[name] = Module(name, path)
+            continue
+        mod = Module(name, path)
+        is_pkg = path.name == "__init__.py"
+
+        def target(node: ast.AST, module: str, alias: str | None) -> str:
+            level = getattr(node, "level", 0)
+            if level:
+                base = name.split(".") if is_pkg else name.split(".")[:-1]  # noqa: B023
+                module = ".".join(base[: len(base) - level + 1] + ([module] if module else []))
+            full = f"{module}.{alias}" if alias else module
+            return full if full in names else module
+
+        def visit(node: ast.AST, depth: int) -> None:
+            if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+                return
+            found: list[str] = []
+            if isinstance(node, ast.Import):
+                found = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                found = [target(node, node.module or "", a.name) for a in node.names]
+            elif (
+                isinstance(node, ast.Call)
+                and ast.unparse(node.func) == "importlib.import_module"
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+            ):
+                found = [node.args[0].value]  # a late-bound import by a literal name
+            for t in found:
+                if depth:
+                    mod.inside.append((t, node.lineno))  # noqa: B023
+                else:
+                    mod.top.add(t)  # noqa: B023
+            inner = depth + isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+            for child in ast.iter_child_nodes(node):
+                visit(child, inner)
+
+        visit(ast.parse(path.read_text(encoding="utf-8")), 0)
+        out[name] = mod
+    return out
+
+
+def _internal(target: str) -> str | None:
+    """The texsense module an import names (its longest known prefix)."""
+    names = modules()
+    parts = target.split(".")
+    while parts and ".".join(parts) not in names:
+        parts.pop()
+    return ".".join(parts) if parts and parts[0] == "texsense" else None
+
+
+def _runs(importer: str, target: str) -> list[str]:
+    """What importing ``target`` from ``importer`` runs: the module and its packages' inits
+    (those the importer is not inside of already)."""
+    parts = target.split(".")
+    chain = [".".join(parts[: k + 1]) for k in range(1, len(parts))]
+    return [m for m in chain if m == target or not importer.startswith(m + ".")]
+
+
+@cache
+def heavy(name: str) -> frozenset[str]:
+    """The modules of heavy libraries that importing module ``name`` loads (module level,
+    transitively), e.g. ``scipy.sparse``."""
+    seen: set[str] = set()
+    found: set[str] = set()
+    todo = [name]
+    while todo:
+        m = todo.pop()
+        if m in seen:
+            continue
+        seen.add(m)
+        for t in modules()[m].top:
+            inner = _internal(t)
+            if inner is None:
+                if t.split(".")[0] in HEAVY:
+                    found.add(t)
+            else:
+                todo.extend(_runs(m, inner))
+    return frozenset(found)
+
+
+def graph() -> dict[str, set[str]]:
+    """Module -> the modules it imports, at module level or inside functions."""
+    g: dict[str, set[str]] = {name: set() for name in modules()}
+    for name, mod in modules().items():
+        for t in [*mod.top, *(t for t, _ in mod.inside)]:
+            inner = _internal(t)
+            if inner is not None and (name, inner) not in LATE_BOUND:
+                g[name].update(m for m in _runs(name, inner) if m != name)
+    return g
+
+
+def cycles(g: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in g[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(g)))
+    for v in g:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def unjustified() -> list[str]:
+    """The imports inside functions that have no reason to be there."""
+    bad = []
+    for name, mod in modules().items():
+        own = heavy(name)
+        for t, line in mod.inside:
+            inner = _internal(t)
+            where = f"{mod.path.relative_to(PACKAGE.parent)}:{line} imports {t}"
+            if inner is None:
+                top = t.split(".")[0]
+                if not ((top in HEAVY and t not in own) or top in PLATFORM):
+                    bad.append(where)
+            elif (name, inner) not in LATE_BOUND and not (heavy(inner) - own):
+                bad.append(where)
+    return bad
+
+
+def test_the_analysis_sees_what_it_should():
+    mods = modules()
+    assert "texsense.stages.chain" in mods and "texsense.io" in mods
+    assert ("texsense.io", 0) != ("", 0)
+    assert any(t == "texsense.io" for t, _ in mods["texsense.recording"].inside)
+    assert "h5py" in heavy("texsense.io") and not heavy("texsense.units")
+    assert not heavy("texsense.repair")  # scipy only where the harmonic repair solves
+    g = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert cycles(g) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles_counting_the_imports_inside_functions():
+    assert cycles(graph()) == []
+
+
+def test_the_late_bound_imports_are_inside_functions():
+    for importer, target in LATE_BOUND:
+        mod = modules()[importer]
+        assert target in {t for t, _ in mod.inside}, f"{importer} no longer imports {target}"
+        assert target not in mod.top, f"{importer} imports {target} at module level"
+
+
+def test_imports_inside_functions_are_justified():
+    """An import inside a function brings a heavy optional library (HEAVY) the module does
+    not load otherwise, is a platform's module, or is a late-bound façade (LATE_BOUND)."""
+    assert unjustified() == []
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["--version"], ["info", "--help"]])
+def test_the_command_line_loads_only_what_the_command_needs(argv):
+    code = (
+        "import json, sys\n"
+        "from texsense.cli import main\n"
+        "try:\n"
+        f"    main({argv!r})\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "heavy = sorted(m for m in {'sklearn', 'scipy', 'h5py', 'matplotlib', 'dask'} "
+        "if m in sys.modules)\n"
+        "cmds = sorted(m for m in sys.modules if m.startswith('texsense.commands.') "
+        "and not m.startswith('texsense.commands._'))\n"  # shared option helpers are fine
+        "print('LOADED', json.dumps([heavy, cmds, 'numpy' in sys.modules]))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120
+    ).stdout
+    line = next(x for x in out.splitlines() if x.startswith("LOADED"))
+    heavy_loaded, commands, numpy_loaded = json.loads(line[len("LOADED ") :])
+    if argv[0] == "info":  # the info command's module (and the readers it needs) only
+        assert commands == ["texsense.commands.info"] and "sklearn" not in heavy_loaded, line
+    else:
+        assert heavy_loaded == [] and commands == [] and not numpy_loaded, line
