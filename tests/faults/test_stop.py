@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from conftest import ChildServer, free_port
-from texsense.calibration import LinearCalibration
+from texsense.stages import Linear, StageChain
 
 
 @contextlib.contextmanager
@@ -51,7 +51,9 @@ def silent_device():
 
 def calibration(tmp_path: Path) -> Path:
     """pF -> N/cm² for a 2 x 3 mat (no spacer model: starts at once)."""
-    cal = LinearCalibration(np.zeros(6), np.ones(6), "capacitance", "pF", "pressure", "N/cm2")
+    cal = StageChain(
+        [Linear("capacitance", "pF", "pressure", "N/cm2").fit(np.zeros(6), np.ones(6))]
+    )
     return cal.save(tmp_path / "mat.json")
 
 

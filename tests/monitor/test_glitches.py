@@ -15,15 +15,21 @@ import pytest
 from test_sources import FakeSerial
 
 from texsense import Layout, Recording
-from texsense.calibration import LinearCalibration
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource, SerialSource
 from texsense.monitor.protocol import Frame, format_serial_line
 from texsense.pipeline import Pipeline
+from texsense.stages import Linear, StageChain
 from texsense.station.ward import MatConfig, Station
 
 LAY = Layout.grid(2, 3)
 #: pF -> N/cm², unchanged values (a mat calibration without a spacer model)
-LINEAR = (np.zeros(6), np.ones(6), "capacitance", "pF", "pressure", "N/cm2")
+
+
+def linear_chain() -> StageChain:
+    """pF read as N/cm² one to one: a calibration that keeps the glitch tests simple."""
+    return StageChain(
+        [Linear("capacitance", "pF", "pressure", "N/cm2").fit(np.zeros(6), np.ones(6))]
+    )
 
 
 def pressure_monitor(reposition_min: float = 5.0) -> Monitor:
@@ -85,7 +91,7 @@ def test_a_frame_from_the_future_keeps_the_alert_and_the_mat_live():
 
 def test_a_capacitance_mat_survives_times_that_go_backwards():
     rec = Recording(np.ones((2, 6)), [0.0, 1.0], LAY, "capacitance", "pF")
-    m = Monitor(ReplaySource(rec, speed=0), pipeline=Pipeline(LinearCalibration(*LINEAR), LAY))
+    m = Monitor(ReplaySource(rec, speed=0), pipeline=Pipeline(linear_chain(), LAY))
     cap = [Frame(k, np.full(6, t), np.full(6, 2.0)) for k, t in enumerate([0, 1, 2, -50, 3, 4])]
     snaps = [m.process(f) for f in cap]  # the pipeline would refuse -50 ("must not decrease")
     assert [s is None for s in snaps] == [False, False, False, True, False, False]
@@ -109,7 +115,7 @@ def test_a_serial_frame_with_a_bad_time_does_not_blind_the_monitor():
     lines.append(format_serial_line(10, 9 * 10**15, 0, [0.0] * 6).encode())  # a glitch
     lines += [format_serial_line(k, k * 1_000_000, 0, [1.0] * 6).encode() for k in range(11, 21)]
     src = SerialSource("fake", LAY, opener=lambda *a, **k: FakeSerial(lines))
-    m = Monitor(src, pipeline=Pipeline(LinearCalibration(*LINEAR), LAY))
+    m = Monitor(src, pipeline=Pipeline(linear_chain(), LAY))
     with pytest.raises(EOFError):  # the fake line ends; the monitor never stopped before
         asyncio.run(m.run())
     assert m.frames == 20 and m.clock.skipped == 1
