@@ -399,6 +399,16 @@ class Layout:
         hit = np.nonzero(self._cells == row * cols + col)[0]
         return int(hit[0]) if hit.size else -1
 
+    def element_name(self, element: int) -> str:
+        """How people name an element: its own name if the layout has names, else
+        ``e17 (r2c5)`` on a grid (index, row and column from 0), else ``e17``."""
+        if self._names is not None:
+            return self._names[element]
+        if self._shape is None or self._cells is None:
+            return f"e{element}"
+        row, col = divmod(int(self._cells[element]), self._shape[1])
+        return f"e{element} (r{row}c{col})"
+
     def to_grid(self, values: npt.ArrayLike, fill: float = np.nan) -> np.ndarray:
         """Arrange per-element values (..., N) as maps (..., rows, cols); empty cells = ``fill``."""
         if self._shape is None or self._cells is None:

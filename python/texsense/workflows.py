@@ -18,12 +18,14 @@ from __future__ import annotations
 import numpy as np
 
 from texsense.drift import split_steps
+from texsense.exceptions import ParameterError
 from texsense.pipeline import Pipeline
 from texsense.recording import Recording
 from texsense.sim import protocols
 from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
 from texsense.sim.mat import VirtualMat
 from texsense.sim.muscle import HIGH_RATE_CDC, sleeve_layout
+from texsense.sim.spacer import PRESETS
 from texsense.sim.stocking import strip_layout
 from texsense.stages import StageChain
 
@@ -31,6 +33,7 @@ __all__ = [
     "bed_calibration",
     "calibrate_mat",
     "calibrate_virtual_mat",
+    "material_preset",
     "material_record",
     "processed_bed_night",
     "seat_calibration",
@@ -54,6 +57,26 @@ def material_record(rec: Recording) -> dict[str, np.ndarray]:
         "capacitance_pF": rec.frames[:, 0].astype(np.float64),
         "pressure_ncm2": np.asarray(rec.labels["pressure_ncm2"], dtype=np.float64),
     }
+
+
+#: The seed of the reference specimen whose test-machine records a material preset holds.
+PRESET_SPECIMEN = 11
+
+
+def material_preset(
+    name: str,
+) -> tuple[dict[str, np.ndarray], float, list[tuple[np.ndarray, np.ndarray, float]]]:
+    """A spacer preset's material: (material record, thickness mm, held steps for the drift
+    stage), what ``texsense calibrate mat --material NAME`` uses in place of a test-machine
+    record. The records are those of the simulator's reference specimen of that spacer
+    (:data:`texsense.sim.spacer.PRESETS`, seed :data:`PRESET_SPECIMEN`): the virtual sensor's
+    materials. A real mat of another spacer needs its own record (docs/calibration.md)."""
+    if name not in PRESETS:
+        raise ParameterError(f"unknown spacer preset {name!r}; known: {', '.join(PRESETS)}")
+    m = protocols.run_protocol("calibration", name, seed=PRESET_SPECIMEN, sample_hz=None)
+    st = protocols.run_protocol("steps", name, seed=PRESET_SPECIMEN, sample_hz=10)
+    steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
+    return material_record(m), float(PRESETS[name].thickness_mm), steps
 
 
 def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChain:

@@ -63,6 +63,7 @@ class WardStation:
                 stdout=out, stderr=subprocess.STDOUT, cwd=folder, env=env,
             )  # fmt: skip
         self.seq: dict[str, int] = {}
+        self.t: dict[str, float] = {}
         self.clients: dict[str, object] = {}
         self.client_answers: dict[str, list] = {}
         if connected:
@@ -147,11 +148,12 @@ class WardStation:
             info.wait_for_publish(5)
 
     def frame(self, mat: str, value: float = 0.5, n: int | None = None, step: float = 1.0):
-        """The mat's next frame (its own seq and time)."""
+        """The mat's next frame (its own seq, and a time ``step`` s after its last)."""
         k = self.seq.get(mat, 0)
         self.seq[mat] = k + 1
+        t = self.t[mat] = self.t.get(mat, -step) + step
         cells = n if n is not None else 96 if MATS.get(mat) == "8x12" else 16
-        body = {"seq": k, "t": k * step, "values": [value] * cells, "unit": "N/cm2"}
+        body = {"seq": k, "t": t, "values": [value] * cells, "unit": "N/cm2"}
         self.raw(mat, json.dumps(body).encode())
 
     def live_after_glitch(self, mat: str, frames: int = 1) -> dict:
@@ -315,7 +317,7 @@ def test_a_wrong_element_count_once_and_sustained(ward, fault_row):
     deadline = time.monotonic() + 20
     while st.mat("refuse")["state"] != "refused":  # the station refuses after 1 s (and 10)
         assert time.monotonic() < deadline, st.log()[-3000:]
-        st.frame("refuse", n=95)
+        st.frame("refuse", n=95, step=0.1)  # in step with the wall clock, however long
         time.sleep(0.1)
     m = st.mat("refuse")
     assert m["malformed"] >= 10 and m["frames"] == 3

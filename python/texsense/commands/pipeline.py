@@ -12,19 +12,17 @@ from typing import Any
 import numpy as np
 
 from texsense.archive import ProcessOptions, archive_jobs, process_archive, process_file
+from texsense.calibration_session import CalibrationSession
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.commands.drift import load_steps
 from texsense.exceptions import FormatError, ParameterError
 from texsense.files import check_not_input
 from texsense.health import FailureDetector, health_report
 from texsense.io import load, save
-from texsense.io.columns_csv import read_columns_csv
 from texsense.pipeline import Pipeline
 from texsense.repair import METHODS, Repair
 from texsense.stages import Convert, Linear, StageChain, load_chain
 from texsense.tables import text_table
-from texsense.workflows import calibrate_mat
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,15 +45,21 @@ def _register_calibrate(sub: argparse._SubParsersAction) -> None:
     m = cs.add_parser("mat", help="write a mat calibration file")
     m.add_argument(
         "--material",
-        type=Path,
         required=True,
-        help="CSV with compression_mm, capacitance_pF, pressure_ncm2 (e.g. 'texsense simulate "
-        "calibration --csv')",
+        metavar="PRESET|RECORD.csv",
+        help="the spacer: a preset name (textile-3mm, textile-6mm, foam-7mm, ...: the virtual "
+        "sensor's materials, with their thickness and drift) or a test-machine record CSV with "
+        "compression_mm, capacitance_pF, pressure_ncm2 (e.g. 'texsense simulate calibration "
+        "--csv')",
     )
     m.add_argument("--baseline", type=Path, required=True, help="unloaded mat (capacitance)")
     m.add_argument("--uniform", type=Path, required=True, help="mat under a uniform load")
-    m.add_argument("--pressure", type=float, required=True, help="the uniform load, N/cm²")
-    m.add_argument("--thickness-mm", type=float, required=True, help="spacer thickness")
+    m.add_argument(
+        "--pressure",
+        required=True,
+        help="the uniform load: N/cm², or with a unit (10kPa, 75mmHg)",
+    )
+    m.add_argument("--thickness-mm", type=float, help="spacer thickness (a preset knows its own)")
     m.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     m.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
     add_accept_truncated(m)
@@ -166,31 +170,29 @@ def _capacitance(path: Path, accept_truncated: bool = False) -> Any:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    """Run ``texsense calibrate mat``."""
-    inputs = [args.material, args.baseline, args.uniform] + ([args.drift] if args.drift else [])
+    """Run ``texsense calibrate mat``: check the inputs (:mod:`texsense.calibration_checks`),
+    refuse with every reason or warn, then fit and write the chain."""
+    inputs = [args.baseline, args.uniform] + ([args.drift] if args.drift else [])
+    if Path(args.material).exists():
+        inputs.append(Path(args.material))
     check_not_input(args.output, inputs)
-    material = read_columns_csv(
-        args.material, required=("compression_mm", "capacitance_pF", "pressure_ncm2")
-    )
-    steps = None
-    if args.drift:
-        steps = load_steps(args.drift)
-    chain = calibrate_mat(
-        material,
+    session = CalibrationSession(args.material, args.pressure, args.thickness_mm, args.drift)
+    chain = session.fit(
         _capacitance(args.baseline, args.accept_truncated),
         _capacitance(args.uniform, args.accept_truncated),
-        args.pressure,
-        args.thickness_mm,
-        steps=steps,
+        (str(args.baseline), str(args.uniform)),
     )
+    for f in session.findings:
+        print(f, file=sys.stderr)
     chain.save(args.output)
     convert = chain.find(Convert)
     assert convert is not None  # calibrate_mat always converts
     gain, offset = convert.gain_, convert.offset_pF_
     print(
         f"wrote {args.output}: stages {', '.join(chain.names)} for {convert.n_elements} "
-        f"elements, id {chain.id}, gain {gain.min():.3f}..{gain.max():.3f}, offset "
-        f"{offset.min():+.3f}..{offset.max():+.3f} pF"
+        f"elements, {session.material_name} ({session.thickness_mm:g} mm) at "
+        f"{session.pressure_ncm2:g} N/cm², id {chain.id}, gain {gain.min():.3f}..{gain.max():.3f}, "
+        f"offset {offset.min():+.3f}..{offset.max():+.3f} pF"
     )
     return 0
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import sys
 import threading
 from pathlib import Path
 from typing import Any
@@ -152,9 +153,11 @@ def run_device(args: argparse.Namespace) -> int:
     print(
         f"texsense simulate device: virtual {info['mat']} ({info['elements']} elements, "
         f"{info['grid']} grid, spacer {info['spacer']}, a frame every {info['frame_s']:.3g} s, "
-        f"load {info['load']}) on {args.link}; Ctrl-C stops",
+        f"load {info['load']}) on {args.link}; type a load (empty, uniform:P, person) and "
+        "Enter to change it; Ctrl-C stops",
         flush=True,
     )
+    threading.Thread(target=_loads_from_stdin, args=(device,), daemon=True).start()
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -165,6 +168,20 @@ def run_device(args: argparse.Namespace) -> int:
         flush=True,
     )
     return 0
+
+
+def _loads_from_stdin(device: VirtualDevice) -> None:
+    """Change the device's load for every line typed on standard input (ends at its end)."""
+    for line in sys.stdin:
+        text = line.strip()
+        if not text:
+            continue
+        try:
+            device.set_load(text)
+        except ParameterError as e:
+            print(f"texsense simulate device: {e}", file=sys.stderr, flush=True)
+            continue
+        print(f"texsense simulate device: load {text} from frame {device.frames_sent}", flush=True)
 
 
 def register_sessions(sub: argparse._SubParsersAction) -> None:

@@ -120,6 +120,8 @@ class VirtualDevice:
             self.frame_s = self.mat.cdc.frame_time_s(self.mat.layout.n_elements, BED_CONVERTERS)
         self.frames_sent = 0
         self.dropped = 0
+        self._lock = threading.Lock()
+        self._load_version = 0
 
     @property
     def layout(self) -> Layout:
@@ -141,23 +143,37 @@ class VirtualDevice:
             load=self.load if self.load != "uniform" else f"uniform:{self.pressure:g}",
         )
 
+    def set_load(self, text: str) -> None:
+        """Change what lies on the mat from the next frame on (``empty``, ``uniform:P``,
+        ``person``; thread-safe: ``texsense simulate device`` calls it for each line typed on
+        its standard input). A bad load is a :class:`ParameterError`; the load stays."""
+        kind, pressure = parse_load(text)
+        with self._lock:
+            self.load, self.pressure = kind, pressure
+            self._load_version += 1
+
     def _pressures(self, rng: np.random.Generator) -> Iterator[tuple[float, np.ndarray]]:
-        """(time, true pressure) of every frame, endless."""
+        """(time, true pressure) of every frame, endless; the load may change between two
+        frames (:meth:`set_load`), time goes on."""
         n = self.layout.n_elements
-        if self.load in ("empty", "uniform"):
-            k = 0
-            while True:
-                yield k * self.frame_s, np.full(n, self.pressure)
-                k += 1
-        elif self.mat_name == "seat":
-            yield from self._seated(rng)
-        else:
-            yield from self._lying(rng)
+        t, version, person = 0.0, -1, None
+        while True:
+            with self._lock:
+                kind, pressure, changed = self.load, self.pressure, version != self._load_version
+                version = self._load_version
+            if kind != "person":
+                person = None
+                yield t, np.full(n, pressure)
+            else:
+                if person is None or changed:
+                    walk = self._seated if self.mat_name == "seat" else self._lying
+                    person = walk(rng, t)
+                _, p = next(person)
+                yield t, p
+            t += self.frame_s
 
-    def _seated(self, rng: np.random.Generator) -> Iterator[tuple[float, np.ndarray]]:
-
+    def _seated(self, rng: np.random.Generator, t: float) -> Iterator[tuple[float, np.ndarray]]:
         subject = Subject.random(self.seed, seed=101)
-        t = 0.0
         while True:
             posture = int(rng.integers(1, 17))
             take = rng.normal(0.0, 0.5, 2)
@@ -167,15 +183,14 @@ class VirtualDevice:
                 yield t, posture_pressure(self.layout, posture, subject, jitter)
                 t += self.frame_s
 
-    def _lying(self, rng: np.random.Generator) -> Iterator[tuple[float, np.ndarray]]:
-
+    def _lying(self, rng: np.random.Generator, t: float) -> Iterator[tuple[float, np.ndarray]]:
         sleeper = Sleeper.random(self.seed, seed=202)
 
         def plan() -> Iterator[tuple[str, float]]:
             while True:
                 yield from night_plan(rng, 8, 1800.0, out_every=0)
 
-        for f in night_frames(sleeper, plan(), rng, frame_s=self.frame_s):
+        for f in night_frames(sleeper, plan(), rng, frame_s=self.frame_s, t0=t):
             yield f.t, f.pressure
 
     def frames(self) -> Iterator[tuple[float, np.ndarray, str]]:

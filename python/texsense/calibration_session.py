@@ -1,0 +1,233 @@
+"""Calibrating a new mat step by step (docs/calibration.md): what ``texsense calibrate mat``,
+``texsense calibrate wizard`` and the monitor page's calibration panel share.
+
+The steps are the thesis's (§3.4.1, §6.1): zeroing (nothing on the mat), equilibration (a
+uniform known load on every element: eq. 2.1's offset and gain per element), the spacer's
+material (a test-machine record, or a preset: the curve, the hysteresis model, eq. 4.15-4.22,
+and the drift, eq. 5.8), then a check with another known load, reported per element.
+:class:`CalibrationSession` holds the recordings of the steps and makes the one calibration
+object of texsense, a :class:`~texsense.stages.StageChain`; every input is checked first
+(:mod:`texsense.calibration_checks`).
+
+Examples
+--------
+>>> s = CalibrationSession("textile-3mm", pressure="1 N/cm2")
+>>> s.thickness_mm, round(s.expected_change_pF(1.0), 2) > 0
+(3.0, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from texsense.calibration import material_curve, rising_compression
+from texsense.calibration_checks import (
+    Finding,
+    check_declared_spacer,
+    check_gains,
+    check_material,
+    check_recordings,
+    parse_pressure,
+    raise_if_refused,
+    record_thickness_mm,
+)
+from texsense.exceptions import ParameterError
+from texsense.io.columns_csv import read_columns_csv
+from texsense.pipeline import Pipeline
+from texsense.recording import Recording
+from texsense.sim.spacer import PRESETS as SPACER_PRESETS
+from texsense.stages import Convert, StageChain
+from texsense.workflows import calibrate_mat, material_preset
+
+__all__ = ["CalibrationSession", "CheckReport", "load_material", "steps_csv"]
+
+#: A check passes for an element within this share of the known load.
+CHECK_TOLERANCE = 0.10
+
+
+def steps_csv(path: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Held steps of a step-and-hold CSV (time_s, compression_mm, pressure_ncm2)."""
+    from texsense.drift import split_steps
+
+    cols = read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
+    return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
+
+
+def load_material(
+    material: str, thickness_mm: float | None = None, drift: Path | None = None
+) -> tuple[dict[str, np.ndarray], float, list[Any] | None, str]:
+    """What ``--material`` names: (record, thickness mm, held steps or None, a name for it).
+
+    A spacer preset (``textile-3mm``, ...; :func:`texsense.workflows.material_preset`) brings
+    its thickness and its held steps; a test-machine record CSV needs ``thickness_mm`` (the
+    error says what the record's capacitance implies) and takes its steps from ``drift``."""
+    path = Path(material)
+    if material in SPACER_PRESETS and not path.exists():
+        record, thickness, steps = material_preset(material)
+        if thickness_mm is not None and thickness_mm != thickness:
+            raise ParameterError(
+                f"--thickness-mm {thickness_mm:g}: the preset {material} is {thickness:g} mm "
+                "thick (leave --thickness-mm out with a preset)"
+            )
+        if drift is not None:
+            steps = steps_csv(drift)
+        return record, thickness, steps, f"the preset {material}"
+    if not path.exists():
+        raise ParameterError(
+            f"--material {material}: no such file, and not a spacer preset (presets: "
+            f"{', '.join(SPACER_PRESETS)})"
+        )
+    record = read_columns_csv(path, required=("compression_mm", "capacitance_pF", "pressure_ncm2"))
+    if thickness_mm is None:
+        raise ParameterError(
+            f"--material {path} is a record: give the spacer's --thickness-mm (its capacitance "
+            f"says about {record_thickness_mm(record):.1f} mm)"
+        )
+    return record, thickness_mm, None if drift is None else steps_csv(drift), str(path)
+
+
+@dataclass
+class CheckReport:
+    """A known load read through a new calibration, per element."""
+
+    pressure_ncm2: float
+    median_ncm2: np.ndarray  # (N,) each element's median over the check, NaN if failed
+    names: list[str]
+
+    @property
+    def working(self) -> np.ndarray:
+        """Elements that read during the check."""
+        return np.isfinite(self.median_ncm2)
+
+    @property
+    def error(self) -> np.ndarray:
+        """Relative error of every element (NaN where it failed)."""
+        return self.median_ncm2 / self.pressure_ncm2 - 1.0
+
+    @property
+    def off(self) -> np.ndarray:
+        """Indices of working elements off by more than :data:`CHECK_TOLERANCE`, worst first."""
+        err = np.abs(self.error)
+        bad = np.flatnonzero(self.working & (err > CHECK_TOLERANCE))
+        return bad[np.argsort(-err[bad])]
+
+    @property
+    def passed(self) -> bool:
+        """Every working element within the tolerance, and the mat's median too."""
+        return self.off.size == 0 and self.working.any()
+
+    def lines(self, worst: int = 8) -> list[str]:
+        """The report as lines for a terminal."""
+        w = self.working
+        med = float(np.median(self.median_ncm2[w])) if w.any() else float("nan")
+        out = [
+            f"check at {self.pressure_ncm2:g} N/cm²: median of {int(w.sum())} working elements "
+            f"{med:.3g} N/cm² ({100 * (med / self.pressure_ncm2 - 1):+.1f} %), "
+            f"{w.size - int(w.sum())} failed, {self.off.size} off by more than "
+            f"{100 * CHECK_TOLERANCE:.0f} %"
+        ]
+        for k in self.off[:worst]:
+            out.append(
+                f"  {self.names[k]:>14}: {self.median_ncm2[k]:.3g} N/cm² "
+                f"({100 * self.error[k]:+.0f} %)"
+            )
+        if self.off.size > worst:
+            out.append(f"  ... and {self.off.size - worst} more")
+        for k in np.flatnonzero(~w)[:worst]:
+            out.append(f"  {self.names[k]:>14}: failed (no valid reading)")
+        return out
+
+
+class CalibrationSession:
+    """The recordings and choices of one mat's calibration.
+
+    Parameters
+    ----------
+    material : str
+        A spacer preset name or a test-machine record CSV (:func:`load_material`).
+    pressure : str or float
+        The uniform load of equilibration: N/cm², or a string with a unit (``10kPa``).
+    thickness_mm : float, optional
+        The spacer's thickness (a preset knows its own).
+    drift : Path, optional
+        A step-and-hold CSV for the drift stage (a preset brings its own).
+    """
+
+    def __init__(
+        self,
+        material: str,
+        pressure: str | float = 1.0,
+        thickness_mm: float | None = None,
+        drift: Path | None = None,
+    ) -> None:
+        self.pressure_ncm2 = parse_pressure(pressure)
+        self.material, self.thickness_mm, self.steps, self.material_name = load_material(
+            material, thickness_mm, drift
+        )
+        is_preset = material in SPACER_PRESETS and not Path(material).exists()
+        self.preset = material if is_preset else None
+        self.zero: Recording | None = None
+        self.uniform: Recording | None = None
+        self.chain: StageChain | None = None
+        self.findings: list[Finding] = check_material(
+            self.material, self.thickness_mm, self.pressure_ncm2, self.material_name
+        )
+        raise_if_refused(self.findings)
+
+    def expected_change_pF(self, pressure_ncm2: float) -> float:
+        """How much the material record's element gains under ``pressure_ncm2`` loaded from
+        rest (eq. 2.1 on the first-loading curve): what a mat's elements roughly gain too,
+        times their gain."""
+        e, c = material_curve(self.material["compression_mm"], self.material["capacitance_pF"])
+        squeeze = rising_compression(
+            self.material["compression_mm"], self.material["pressure_ncm2"], pressure_ncm2
+        )
+        return float(np.interp(squeeze, e, c) - np.interp(0.0, e, c))
+
+    def fit(
+        self, zero: Recording, uniform: Recording, names: tuple[str, str] = ("zero", "uniform")
+    ) -> StageChain:
+        """Check the two recordings (refused with every reason, or warnings kept in
+        :attr:`findings`) and fit the chain (detect, convert, hysteresis, drift)."""
+        found = check_recordings(zero, uniform, names)
+        if self.preset is not None:
+            for rec, name in zip((zero, uniform), names, strict=True):
+                if not any("declares the spacer" in f.text for f in found):
+                    found += check_declared_spacer(rec, self.preset, name)
+        self.findings = [f for f in self.findings if f.level == "warn"] + found
+        raise_if_refused(found)
+        self.zero, self.uniform = zero, uniform
+        self.chain = calibrate_mat(
+            self.material, zero, uniform, self.pressure_ncm2, self.thickness_mm, steps=self.steps
+        )
+        convert = self.chain.find(Convert)
+        assert convert is not None  # calibrate_mat always converts
+        self.findings += check_gains(convert.gain_, self.material_name)
+        return self.chain
+
+    def check(
+        self, recording: Recording, pressure: str | float, before: Recording | None = None
+    ) -> CheckReport:
+        """Read ``recording`` (the mat under another known load) through the new calibration;
+        ``before`` (e.g. the uniform recording, if it came just before on the same clock)
+        gives the hysteresis and drift stages the history of the load."""
+        if self.chain is None:
+            raise ParameterError("the check comes after the calibration (fit first)")
+        p = parse_pressure(pressure)
+        pipe = Pipeline(self.chain, recording.layout)
+        run = recording
+        ok_before = before is not None and before.times[-1] < recording.times[0]
+        if ok_before and before is not None:
+            run = Recording.concatenate([before, recording])
+        out = pipe.run(run)
+        tail = out.select(slice(run.n_frames - recording.n_frames, None))
+        x = np.where(tail.valid, tail.frames.astype(np.float64), np.nan)
+        median = np.full(x.shape[1], np.nan)
+        seen = np.isfinite(x).any(axis=0)
+        median[seen] = np.nanmedian(x[:, seen], axis=0)
+        names = [recording.layout.element_name(k) for k in range(recording.n_elements)]
+        return CheckReport(p, median, names)
