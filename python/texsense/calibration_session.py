@@ -40,7 +40,7 @@ from texsense.io.columns_csv import read_columns_csv
 from texsense.pipeline import Pipeline
 from texsense.recording import Recording
 from texsense.sim.spacer import PRESETS as SPACER_PRESETS
-from texsense.stages import Convert, StageChain
+from texsense.stages import Convert, Drift, StageChain
 from texsense.workflows import calibrate_mat, material_preset
 
 __all__ = ["CalibrationSession", "CheckReport", "load_material", "steps_csv"]
@@ -59,23 +59,24 @@ def steps_csv(path: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
 
 def load_material(
     material: str, thickness_mm: float | None = None, drift: Path | None = None
-) -> tuple[dict[str, np.ndarray], float, list[Any] | None, str]:
-    """What ``--material`` names: (record, thickness mm, held steps or None, a name for it).
+) -> tuple[dict[str, np.ndarray], float, list[Any] | Drift | None, str]:
+    """What ``--material`` names: (record, thickness mm, the drift: held steps, a fitted
+    stage or None, a name for it).
 
     A spacer preset (``textile-3mm``, ...; :func:`texsense.workflows.material_preset`) brings
-    its thickness and its held steps; a test-machine record CSV needs ``thickness_mm`` (the
-    error says what the record's capacitance implies) and takes its steps from ``drift``."""
+    its thickness and its drift stage (γ from cycles); a test-machine record CSV needs
+    ``thickness_mm`` (the error says what the record's capacitance implies) and takes held
+    steps from ``drift``."""
     path = Path(material)
     if material in SPACER_PRESETS and not path.exists():
-        record, thickness, steps = material_preset(material)
+        record, thickness, preset_drift = material_preset(material)
         if thickness_mm is not None and thickness_mm != thickness:
             raise ParameterError(
                 f"--thickness-mm {thickness_mm:g}: the preset {material} is {thickness:g} mm "
                 "thick (leave --thickness-mm out with a preset)"
             )
-        if drift is not None:
-            steps = steps_csv(drift)
-        return record, thickness, steps, f"the preset {material}"
+        found: list[Any] | Drift = preset_drift if drift is None else steps_csv(drift)
+        return record, thickness, found, f"the preset {material}"
     if not path.exists():
         raise ParameterError(
             f"--material {material}: no such file, and not a spacer preset (presets: "
@@ -165,7 +166,7 @@ class CalibrationSession:
         drift: Path | None = None,
     ) -> None:
         self.pressure_ncm2 = parse_pressure(pressure)
-        self.material, self.thickness_mm, self.steps, self.material_name = load_material(
+        self.material, self.thickness_mm, self.drift, self.material_name = load_material(
             material, thickness_mm, drift
         )
         is_preset = material in SPACER_PRESETS and not Path(material).exists()
@@ -201,8 +202,16 @@ class CalibrationSession:
         self.findings = [f for f in self.findings if f.level == "warn"] + found
         raise_if_refused(found)
         self.zero, self.uniform = zero, uniform
+        fitted = self.drift if isinstance(self.drift, Drift) else None
+        steps = None if fitted is not None else self.drift
         self.chain = calibrate_mat(
-            self.material, zero, uniform, self.pressure_ncm2, self.thickness_mm, steps=self.steps
+            self.material,
+            zero,
+            uniform,
+            self.pressure_ncm2,
+            self.thickness_mm,
+            steps=steps,
+            drift=fitted,
         )
         convert = self.chain.find(Convert)
         assert convert is not None  # calibrate_mat always converts

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from texsense.drift import split_steps
+from texsense.drift import DriftModel, split_steps
 from texsense.exceptions import ParameterError
 from texsense.pipeline import Pipeline
 from texsense.recording import Recording
@@ -27,7 +27,7 @@ from texsense.sim.mat import VirtualMat
 from texsense.sim.muscle import HIGH_RATE_CDC, sleeve_layout
 from texsense.sim.spacer import PRESETS
 from texsense.sim.stocking import strip_layout
-from texsense.stages import StageChain
+from texsense.stages import Drift, Hysteresis, StageChain
 
 __all__ = [
     "bed_calibration",
@@ -63,20 +63,32 @@ def material_record(rec: Recording) -> dict[str, np.ndarray]:
 PRESET_SPECIMEN = 11
 
 
-def material_preset(
-    name: str,
-) -> tuple[dict[str, np.ndarray], float, list[tuple[np.ndarray, np.ndarray, float]]]:
-    """A spacer preset's material: (material record, thickness mm, held steps for the drift
-    stage), what ``texsense calibrate mat --material NAME`` uses in place of a test-machine
-    record. The records are those of the simulator's reference specimen of that spacer
+def material_preset(name: str) -> tuple[dict[str, np.ndarray], float, Drift]:
+    """A spacer preset's material: (material record, thickness mm, drift stage), what
+    ``texsense calibrate mat --material NAME`` uses in place of a test-machine record.
+
+    The records are those of the simulator's reference specimen of that spacer
     (:data:`texsense.sim.spacer.PRESETS`, seed :data:`PRESET_SPECIMEN`): the virtual sensor's
-    materials. A real mat of another spacer needs its own record (docs/calibration.md)."""
+    materials. The drift stage's γ is fitted on an hour of the §4.5 validation cycles of that
+    specimen (:meth:`DriftModel.fit_history` on the Preisach model's output): γ from held
+    steps over-corrects the cyclic loads of a mat in use by 11 % on the virtual seat
+    (docs/pipeline.md, docs/drift.md). A real mat of another spacer needs its own record
+    (docs/calibration.md)."""
     if name not in PRESETS:
         raise ParameterError(f"unknown spacer preset {name!r}; known: {', '.join(PRESETS)}")
-    m = protocols.run_protocol("calibration", name, seed=PRESET_SPECIMEN, sample_hz=None)
-    st = protocols.run_protocol("steps", name, seed=PRESET_SPECIMEN, sample_hz=10)
-    steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
-    return material_record(m), float(PRESETS[name].thickness_mm), steps
+    m = material_record(
+        protocols.run_protocol("calibration", name, seed=PRESET_SPECIMEN, sample_hz=None)
+    )
+    hyst = Hysteresis().fit(m["compression_mm"], m["pressure_ncm2"])
+    cycles = protocols.run_protocol(
+        "validation", name, seed=PRESET_SPECIMEN, sample_hz=10, cycles=240
+    )
+    hour = cycles.times < 3600
+    predicted = hyst.model_.predict(cycles.labels["compression_mm"][hour])
+    drift, _ = DriftModel.fit_history(
+        predicted, cycles.labels["pressure_ncm2"][hour], cycles.times[hour]
+    )
+    return m, float(PRESETS[name].thickness_mm), Drift.of(drift)
 
 
 def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChain:

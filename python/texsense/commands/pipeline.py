@@ -15,6 +15,7 @@ from texsense.archive import ProcessOptions, archive_jobs, process_archive, proc
 from texsense.calibration_session import CalibrationSession
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.commands.wizard import register_wizard
 from texsense.exceptions import FormatError, ParameterError
 from texsense.files import check_not_input
 from texsense.health import FailureDetector, health_report
@@ -86,6 +87,7 @@ def _register_calibrate(sub: argparse._SubParsersAction) -> None:
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
     add_accept_truncated(lin)
     lin.set_defaults(run=run_calibrate_linear)
+    register_wizard(cs)
 
 
 def _register_process(sub: argparse._SubParsersAction) -> None:
