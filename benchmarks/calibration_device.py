@@ -120,7 +120,8 @@ def run(seed: int, speed: float, folder: Path) -> dict[str, float]:
     finally:
         dev.stop()
     cli("calibrate", "mat", "--material", "textile-3mm", "--baseline", str(folder / "zero.h5"),
-        "--uniform", str(folder / "one.h5"), "--pressure", "1.0", "-o", str(folder / "mat.json"))  # fmt: skip
+        "--uniform", str(folder / "one.h5"), "--pressure", "1.0",
+        "-o", str(folder / "mat.json"))  # fmt: skip
     row: dict[str, float] = {"seed": seed, "wall_s": time.monotonic() - t0}
     for name in ("two", "person"):
         cli("process", str(folder / f"{name}.h5"), "--calibration", str(folder / "mat.json"),
@@ -145,8 +146,10 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             rows.append(run(seed, args.speed, Path(tmp)))
         print(f"seed {seed} done", file=sys.stderr, flush=True)
-    print("| mat seed | uniform 2.0 N/cm², median (chain) | (linear, no model) | person's load "
-          "error, median (chain) | p95 |abs| (chain) | median (linear) | p95 (linear) | wall s |")
+    print(
+        "| mat seed | uniform 2.0 N/cm², median (chain) | (linear, no model) | person's load "
+        "error, median (chain) | p95 |abs| (chain) | median (linear) | p95 (linear) | wall s |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['seed']:.0f} | {r['two']:.3f} | {r['two_lin']:.3f} | "
@@ -155,8 +158,10 @@ def main() -> None:
               f"{r['wall_s']:.0f} |")  # fmt: skip
     ok2 = all(abs(r["two"] - 2.0) <= 0.2 for r in rows)
     okp = all(abs(r["person"]) <= 0.10 for r in rows)
-    print(f"\ntargets: uniform 2.0 ± 0.2 N/cm² {'met' if ok2 else 'MISSED'}; person's load "
-          f"within 10 % (median over frames) {'met' if okp else 'MISSED'}")
+    print(
+        f"\ntargets: uniform 2.0 ± 0.2 N/cm² {'met' if ok2 else 'MISSED'}; person's load "
+        f"within 10 % (median over frames) {'met' if okp else 'MISSED'}"
+    )
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ Examples
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -36,6 +37,7 @@ from scipy.optimize import minimize_scalar
 
 from texsense.exceptions import ParameterError
 from texsense.recording import Recording
+from texsense.units import UnitError, convert, quantity_of
 
 __all__ = [
     "Finding",
@@ -80,20 +82,13 @@ def parse_pressure(text: str | float) -> float:
     >>> parse_pressure("10kPa"), round(parse_pressure("75mmHg"), 3), parse_pressure(2)
     (1.0, 1.0, 2.0)
     """
-    from texsense.units import UnitError, convert, quantity_of
-
     if isinstance(text, int | float):
         value, unit = float(text), "N/cm2"
     else:
-        s = text.strip()
-        k = len(s)
-        while k > 0 and not (s[k - 1].isdigit() or s[k - 1] == "."):
-            k -= 1
-        number, unit = s[:k].strip(), s[k:].strip() or "N/cm2"
-        try:
-            value = float(number)
-        except ValueError:
-            raise ParameterError(f"a pressure must be a number with a unit, got {text!r}") from None
+        found = re.fullmatch(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*", text)
+        if found is None:
+            raise ParameterError(f"a pressure must be a number with a unit, got {text!r}")
+        value, unit = float(found.group(1)), found.group(2) or "N/cm2"
         try:
             if quantity_of(unit) != "pressure":
                 raise ParameterError(f"{unit!r} in {text!r} is not a pressure unit")

@@ -35,6 +35,7 @@ from texsense.calibration_checks import (
     raise_if_refused,
     record_thickness_mm,
 )
+from texsense.drift import split_steps
 from texsense.exceptions import ParameterError
 from texsense.io.columns_csv import read_columns_csv
 from texsense.pipeline import Pipeline
@@ -51,8 +52,6 @@ CHECK_TOLERANCE = 0.10
 
 def steps_csv(path: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Held steps of a step-and-hold CSV (time_s, compression_mm, pressure_ncm2)."""
-    from texsense.drift import split_steps
-
     cols = read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
     return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
 
@@ -119,7 +118,7 @@ class CheckReport:
     @property
     def passed(self) -> bool:
         """Every working element within the tolerance, and the mat's median too."""
-        return self.off.size == 0 and self.working.any()
+        return bool(self.off.size == 0 and self.working.any())
 
     def lines(self, worst: int = 8) -> list[str]:
         """The report as lines for a terminal."""
@@ -203,7 +202,7 @@ class CalibrationSession:
         raise_if_refused(found)
         self.zero, self.uniform = zero, uniform
         fitted = self.drift if isinstance(self.drift, Drift) else None
-        steps = None if fitted is not None else self.drift
+        steps = self.drift if isinstance(self.drift, list) else None
         self.chain = calibrate_mat(
             self.material,
             zero,

@@ -22,9 +22,8 @@ def device(tmp_path):
     def start(*args, link="ttyTEX0"):
         path = tmp_path / link
         cmd = [sys.executable, "-m", "texsense.cli", "simulate", "device", "--link", link, *args]
-        proc = subprocess.Popen(
-            cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-        )
+        proc = subprocess.Popen(cmd, cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)  # fmt: skip
         procs.append(proc)
         deadline = time.monotonic() + 30
         while not path.is_symlink():
@@ -96,3 +95,66 @@ def test_monitor_without_calibration_shows_and_records_raw_pf(device, tmp_path):
     assert len(files) == 1 and files[0].endswith("-raw.h5"), files  # no pressure file
     rec = load(tmp_path / "rec" / files[0])
     assert rec.unit == "pF" and rec.n_frames >= 3
+
+
+def _type_load(proc, text):
+    proc.stdin.write(text + "\n")
+    proc.stdin.flush()
+
+
+def test_device_record_calibrate_process_through_the_serial_line(device, tmp_path):
+    """The whole hardware path: device -> serial -> record -> calibrate (a preset) -> process."""
+    link, proc = device("--speed", "20", "--seed", "2")
+    port = f"serial:{link}"
+    for name, load_text in (("zero", None), ("one", "uniform:1.0"), ("two", "uniform:2.0")):
+        if load_text:
+            _type_load(proc, load_text)
+            time.sleep(0.5)
+        rc, _, err = run_cli("record", "--source", port, "-o", f"{name}.h5", "--frames", "6",
+                             cwd=tmp_path)  # fmt: skip
+        assert rc == 0, err
+    rc, out, err = run_cli("calibrate", "mat", "--material", "textile-3mm", "--baseline",
+                           "zero.h5", "--uniform", "one.h5", "--pressure", "10kPa", "-o",
+                           "mat.json", cwd=tmp_path)  # fmt: skip
+    assert rc == 0, err
+    assert "the preset textile-3mm (3 mm) at 1 N/cm²" in out and "drift" in out
+    rc, _, err = run_cli("process", "two.h5", "--calibration", "mat.json", "-o", "p.h5",
+                         cwd=tmp_path)  # fmt: skip
+    assert rc == 0, err
+    p = load(tmp_path / "p.h5")
+    median = float(np.median(np.where(p.valid, p.frames, np.nan)))
+    assert abs(median - 2.0) < 0.2, median
+    # the same recordings against a spacer the device did not announce: refused, with why
+    rc, _, err = run_cli("calibrate", "mat", "--material", "textile-6mm", "--baseline",
+                         "zero.h5", "--uniform", "one.h5", "--pressure", "1", "-o", "x.json",
+                         cwd=tmp_path)  # fmt: skip
+    assert (
+        rc == 1 and "declares the spacer textile-3mm" in err and not (tmp_path / "x.json").exists()
+    )
+
+
+def test_calibrate_wizard_with_yes_waits_for_each_load(device, tmp_path):
+    link, proc = device("--speed", "20", "--seed", "4")
+    wizard = subprocess.Popen(
+        [sys.executable, "-m", "texsense.cli", "calibrate", "wizard", "--source", f"serial:{link}",
+         "-o", "mat.json", "--yes", "--frames", "5", "--wait-s", "60"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    lines = []
+    for line in wizard.stdout:
+        lines.append(line)
+        if line.startswith("step 2/4"):
+            _type_load(proc, "uniform:1.0")
+        elif line.startswith("step 4/4"):
+            _type_load(proc, "uniform:2.0")
+    wizard.stdout.close()
+    assert wizard.wait(timeout=30) == 0, "".join(lines)
+    text = "".join(lines)
+    assert "material: textile-3mm (announced by the device)" in text
+    assert "check at 2 N/cm²: median of 96 working elements" in text
+    median = float(text.split("working elements ")[1].split(" N/cm²")[0])
+    assert abs(median - 2.0) < 0.2, text
+    for step in ("zero", "uniform", "check"):
+        rec = load(tmp_path / f"mat-{step}.h5")
+        assert rec.n_frames == 5 and rec.meta["spacer"] == "textile-3mm"
+    assert (tmp_path / "mat.json").exists()

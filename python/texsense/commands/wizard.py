@@ -175,7 +175,7 @@ async def _steady_frames(
                 f"no steady load within --wait-s {wait_s:g} s (median change {level:+.3g} pF, "
                 f"{expected_pF:+.3g} pF expected)"
             )
-    frames = []
+    frames: list[Frame] = []
     while len(frames) < n:
         frames.append(await feed.next_frame(deadline + 60))
     return frames
@@ -183,8 +183,10 @@ async def _steady_frames(
 
 def _typical(rec: Recording) -> np.ndarray:
     x = np.where(rec.valid, rec.frames.astype(np.float64), np.nan)
-    with np.errstate(all="ignore"), contextlib.suppress(RuntimeWarning):
-        return np.asarray(np.nanmedian(x, axis=0))
+    out = np.full(x.shape[1], np.nan)
+    seen = np.isfinite(x).any(axis=0)
+    out[seen] = np.nanmedian(x[:, seen], axis=0)
+    return out
 
 
 async def _ask(question: str, yes: bool) -> str:
