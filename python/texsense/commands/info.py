@@ -14,6 +14,7 @@ from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.io import load, sniff_format
 from texsense.recording import Recording
+from texsense.stages import load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -106,8 +107,33 @@ def _text(info: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def describe_model(path: Path) -> dict[str, Any]:
+    """A calibration or model file: its stages, what it reads and gives, elements, id."""
+    chain = load_chain(path)
+    return {
+        "file": str(path),
+        "format": "texsense calibration (stage chain)",
+        "stages": list(chain.names),
+        "reads": "{} [{}]".format(*chain.reads),
+        "gives": "{} [{}]".format(*chain.gives),
+        "elements": chain.n_elements,
+        "id": chain.id,
+    }
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run ``texsense info``."""
+    """Run ``texsense info``: a recording, or a calibration/model file (JSON)."""
+    if args.file.suffix.lower() == ".json" and args.file.is_file():
+        info = describe_model(args.file)
+        if args.json:
+            print(json.dumps(info, indent=2))
+        else:
+            print(f"{info['file']}: {info['format']}")
+            for key in ("stages", "reads", "gives", "elements", "id"):
+                value = info[key]
+                shown = ", ".join(value) if isinstance(value, list) else value
+                print(f"  {key:<11} {shown}")
+        return 0
     fmt = sniff_format(args.file)
     rec = load(args.file, format=fmt, accept_truncated=args.accept_truncated)
     info = describe(rec, args.file, fmt)

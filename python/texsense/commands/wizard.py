@@ -158,7 +158,7 @@ async def _steady_frames(
         level = _median(frame, base)
         if not risen and np.isfinite(level) and level / expected_pF >= RISEN_SHARE:
             risen = True
-            say(f"  the load is on ({level:+.3g} pF); waiting until the readings are steady")
+            say(f"  the load is on ({level:+.3f} pF); waiting until the readings are steady")
         history.append(level)
         moves = np.abs(np.diff(np.array(history)))
         steady = len(history) > STEADY_FRAMES and bool(
@@ -168,11 +168,11 @@ async def _steady_frames(
             break
         if time.monotonic() - last_said > 5:
             last_said = time.monotonic()
-            what = "steady readings" if risen else f"the load ({expected_pF:+.3g} pF expected)"
-            say(f"  waiting for {what}: median change {level:+.3g} pF")
+            what = "steady readings" if risen else f"the load ({expected_pF:+.3f} pF expected)"
+            say(f"  waiting for {what}: median change {level:+.3f} pF")
         if time.monotonic() > deadline:
             raise ParameterError(
-                f"no steady load within --wait-s {wait_s:g} s (median change {level:+.3g} pF, "
+                f"no steady load within --wait-s {wait_s:g} s (median change {level:+.3f} pF, "
                 f"{expected_pF:+.3g} pF expected)"
             )
     frames: list[Frame] = []
