@@ -68,7 +68,8 @@ def test_record_ctrl_c_keeps_what_was_recorded(tmp_path):
          "-o", "c.h5"],
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
-    time.sleep(6)
+    assert "Ctrl-C stops" in proc.stderr.readline()  # recording (however slow the start)
+    time.sleep(3)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=15)
     assert proc.returncode == 0, err

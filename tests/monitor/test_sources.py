@@ -245,7 +245,7 @@ def test_replay_source_refuses_what_it_cannot_monitor():
 
 def test_cli_iio_source_with_a_multiplexer_from_a_file(tmp_path):
     from texsense.cli import build_parser
-    from texsense.commands.monitor import make_source
+    from texsense.commands.monitor import open_source
 
     dev = tmp_path / "iio:device0"
     dev.mkdir()
@@ -262,7 +262,7 @@ def test_cli_iio_source_with_a_multiplexer_from_a_file(tmp_path):
     args = build_parser(["monitor"]).parse_args(
         ["monitor", f"--source=iio:{dev}", "--grid", "1x2", "--multiplexer", f"{mux}:select"]
     )
-    src, _ = make_source(args)
+    src = open_source(args)
     _times, values = src.read_frame()
     np.testing.assert_allclose(values, [0.488, 0.976])
     for bad, what in [
@@ -273,4 +273,4 @@ def test_cli_iio_source_with_a_multiplexer_from_a_file(tmp_path):
     ]:
         args.multiplexer = bad
         with pytest.raises(ParameterError, match=what):
-            make_source(args)
+            open_source(args)

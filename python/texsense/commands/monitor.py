@@ -209,18 +209,28 @@ def load_function(spec: str) -> Any:
     return fn
 
 
-def make_source(args: argparse.Namespace, *, loop: bool = True) -> tuple[Any, Any]:
-    """The source named by ``--source`` and its default calibration (or None); a replay
-    starts again at its end with ``loop``."""
+def default_calibration(source: str) -> Any:
+    """The calibration a source brings (the virtual mats'), or None."""
+    kind = source.partition(":")[0]
+    if kind == "virtual":
+        return seat_calibration()
+    if kind == "virtual-bed":
+        return bed_calibration()
+    return None
+
+
+def open_source(args: argparse.Namespace, *, loop: bool = True) -> Any:
+    """The source named by ``--source`` (no calibration: what ``record`` and the wizard
+    need); a replay starts again at its end with ``loop``."""
     kind, _, rest = args.source.partition(":")
     if kind == "virtual":
-        return VirtualSeatSource(speed=args.speed), seat_calibration()
+        return VirtualSeatSource(speed=args.speed)
     if kind == "virtual-bed":
-        return VirtualBedSource(speed=args.speed), bed_calibration()
+        return VirtualBedSource(speed=args.speed)
     if kind == "replay":
-        return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop), None
+        return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop)
     if kind == "serial":
-        return sources.SerialSource(rest, _grid(args) if args.grid else None), None
+        return sources.SerialSource(rest, _grid(args) if args.grid else None)
     if kind == "iio":
         iio = sources.IIOSource(
             rest,
@@ -229,10 +239,10 @@ def make_source(args: argparse.Namespace, *, loop: bool = True) -> tuple[Any, An
             capdac_pF=args.capdac_pf,
             multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
         )
-        return iio, None
+        return iio
     if kind == "mqtt":
         host, _, port = rest.partition(":")
-        return sources.MQTTSource(host, _grid(args), port=int(port or 1883)), None
+        return sources.MQTTSource(host, _grid(args), port=int(port or 1883))
     raise ParameterError(
         f"unknown source {args.source!r} (virtual, virtual-bed, replay:, serial:, iio:, mqtt:)"
     )
@@ -242,9 +252,11 @@ def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
     from texsense.posture import PostureModel
 
-    source, calibration = make_source(args)
+    source = open_source(args)
     if args.calibration is not None:
         calibration = load_chain(args.calibration)
+    else:
+        calibration = default_calibration(args.source)
     pipeline = None
     if source.quantity == "capacitance" and calibration is not None:
         pipeline = Pipeline(calibration, source.layout)

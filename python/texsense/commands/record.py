@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.commands import HELP
-from texsense.commands.monitor import add_source_options, make_source
+from texsense.commands.monitor import add_source_options, open_source
 from texsense.exceptions import ParameterError
 from texsense.files import check_not_input
 from texsense.monitor.record import SILENT_S, record
@@ -75,7 +75,7 @@ def run_record(args: argparse.Namespace) -> int:
         )
     if not args.output.parent.is_dir():
         raise ParameterError(f"the folder {args.output.parent} does not exist")
-    source, _calibration = make_source(args, loop=False)
+    source = open_source(args, loop=False)
     print(
         f"texsense record: {source.name} ({source.layout.n_elements} elements, "
         f"{source.quantity} in {source.unit}) -> {args.output}; Ctrl-C stops",

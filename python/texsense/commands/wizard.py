@@ -30,7 +30,7 @@ import numpy as np
 
 from texsense.calibration_checks import parse_pressure
 from texsense.calibration_session import CalibrationSession
-from texsense.commands.monitor import add_source_options, make_source
+from texsense.commands.monitor import add_source_options, open_source
 from texsense.exceptions import ParameterError
 from texsense.files import unused_name
 from texsense.io import save
@@ -283,7 +283,7 @@ def run_wizard(args: argparse.Namespace) -> int:
     if not args.output.parent.is_dir():
         raise ParameterError(f"the folder {args.output.parent} does not exist")
     parse_pressure(args.pressure)
-    source, _calibration = make_source(args, loop=False)
+    source = open_source(args, loop=False)
     if source.quantity != "capacitance":
         source.close()
         raise ParameterError(f"{source.name} sends {source.quantity}: a calibration needs pF")
