@@ -103,6 +103,21 @@ def test_the_monitor_stops_within_2_s_after_a_tab_closed_with_no_data(tmp_path, 
               "stopped", f"{took:.1f} s")  # fmt: skip
 
 
+def test_a_second_ctrl_c_stops_at_once_in_one_line(tmp_path, fault_row):
+    m = ChildServer(tmp_path, "monitor", "--source", "virtual", "--speed", "10")
+    try:
+        m.until(lambda: status(m)["frames"], lambda n: n > 0)  # it serves, data flowing
+        m.proc.send_signal(signal.SIGINT)
+        time.sleep(0.05)
+        took = stop(m.proc, signal.SIGINT)
+    finally:
+        m.stop()
+    log = m.log()
+    assert took < 2.0 and m.proc.returncode == 0, log
+    assert "Traceback" not in log and "stopping now (second signal)" in log, log
+    fault_row("stop", "monitor: Ctrl-C twice (data flowing)", "stopped", f"{took:.1f} s, one line")
+
+
 def broker_processes(folder: Path) -> list[int]:
     """Ids of processes whose command line names something in ``folder``."""
     found = []

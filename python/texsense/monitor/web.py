@@ -49,6 +49,7 @@ import logging
 import os
 import signal
 import socket
+import sys
 import time
 from collections.abc import Awaitable, Callable, Iterable, Iterator
 from pathlib import Path
@@ -385,7 +386,11 @@ def _server_class() -> Any:
             def stop(sig: int, _frame: Any) -> None:
                 self.signal_received = sig
                 if self.should_exit:
-                    self.force_exit = True  # a second Ctrl-C: stop waiting for anything
+                    # a second Ctrl-C: stop waiting for anything, and say so in one line
+                    # instead of the tracebacks of the tasks uvicorn then cancels
+                    self.force_exit = True
+                    logging.getLogger("uvicorn.error").setLevel(logging.CRITICAL)
+                    print("texsense: stopping now (second signal)", file=sys.stderr, flush=True)
                 self.should_exit = True
 
             previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
