@@ -28,6 +28,7 @@ Examples
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -61,6 +62,10 @@ STEADY_SHARE = 0.05
 THICKNESS_TOLERANCE = 0.35
 
 
+#: A number (sign, decimals, exponent) and what follows it (the unit).
+_NUMBER = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)(.*)$", re.DOTALL)
+
+
 @dataclass(frozen=True)
 class Finding:
     """One result of a check: ``level`` is ``"refuse"`` or ``"warn"``, ``text`` says what was
@@ -79,21 +84,19 @@ def parse_pressure(text: str | float) -> float:
 
     >>> parse_pressure("10kPa"), round(parse_pressure("75mmHg"), 3), parse_pressure(2)
     (1.0, 1.0, 2.0)
+    >>> parse_pressure("1 N/cm2"), parse_pressure("0.5 N/cm²"), parse_pressure("1.5")
+    (1.0, 0.5, 1.5)
     """
     from texsense.units import UnitError, convert, quantity_of
 
     if isinstance(text, int | float):
         value, unit = float(text), "N/cm2"
     else:
-        s = text.strip()
-        k = len(s)
-        while k > 0 and not (s[k - 1].isdigit() or s[k - 1] == "."):
-            k -= 1
-        number, unit = s[:k].strip(), s[k:].strip() or "N/cm2"
-        try:
-            value = float(number)
-        except ValueError:
-            raise ParameterError(f"a pressure must be a number with a unit, got {text!r}") from None
+        # the leading number, then the unit (which may end in a digit: N/cm2)
+        found = _NUMBER.match(text)
+        if found is None:
+            raise ParameterError(f"a pressure must be a number with a unit, got {text!r}")
+        value, unit = float(found.group(1)), found.group(2).strip() or "N/cm2"
         try:
             if quantity_of(unit) != "pressure":
                 raise ParameterError(f"{unit!r} in {text!r} is not a pressure unit")

@@ -118,7 +118,7 @@ class CheckReport:
     @property
     def passed(self) -> bool:
         """Every working element within the tolerance, and the mat's median too."""
-        return self.off.size == 0 and self.working.any()
+        return bool(self.off.size == 0 and self.working.any())
 
     def lines(self, worst: int = 8) -> list[str]:
         """The report as lines for a terminal."""
