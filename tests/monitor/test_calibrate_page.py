@@ -6,6 +6,8 @@ the test puts the loads on the mat by writing them to the device's standard inpu
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -16,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_browser import open_page
 
 from conftest import MonitorProcess
 from texsense import load
@@ -165,3 +168,77 @@ def test_a_second_calibration_takes_a_new_name(page, tmp_path):
         names.append(Path(s["saved"]["calibration"]).name)
     assert names[0] != names[1] and all((tmp_path / "rec" / n).is_file() for n in names)
     assert len(list((tmp_path / "rec").glob("calibration-*.h5"))) == 4
+
+
+@pytest.mark.slow
+def test_the_panel_in_headless_chromium(page, tmp_path):
+    """The panel as a user meets it: shown by itself (no calibration), step 1 recorded with
+    the load still on, so the fit is refused and the reason shown; step 1 again, then the
+    load, the fit, the check map and "save and use": the map shows pressure. A screenshot of
+    the panel is saved (TEXSENSE_SCREENSHOT_CALIBRATION=docs/img/monitor_calibration.png
+    refreshes the one in docs/monitor.md)."""
+    from playwright.sync_api import expect
+
+    page.put("uniform:1.0")
+    with open_page(page.mon.url, 1400, 900) as (web, errors):
+        panel = web.locator("#calibration")
+        expect(panel).to_be_visible(timeout=20_000)  # no calibration: the panel comes up
+        expect(web.locator("#uncalibrated")).to_be_visible()
+        expect(web.locator("#cal-material")).to_have_value("textile-3mm")
+        expect(web.locator("#cal-uniform")).to_be_disabled()
+        web.fill("#cal-frames", "8")
+
+        web.click("#cal-zero")  # the load is still on: a wrong "empty" mat
+        expect(web.locator("#cal-zero-status")).to_contain_text("8 frames", timeout=30_000)
+        page.put("empty")
+        web.click("#cal-uniform")
+        expect(web.locator("#cal-uniform-status")).to_contain_text("8 frames", timeout=30_000)
+        web.click("#cal-fit")
+        message = web.locator("#cal-message")
+        expect(message).to_be_visible(timeout=30_000)
+        expect(message).to_contain_text("calibration refused")
+        expect(message).to_contain_text("swapped")
+        expect(web.locator("#cal-findings")).to_contain_text("swapped")
+        expect(web.locator("#cal-check")).to_be_disabled()
+
+        web.click("#cal-zero")  # again, empty this time
+        expect(message).to_be_hidden()
+        expect(web.locator("#cal-step-uniform")).not_to_have_class("cal-step done")
+        expect(web.locator("#cal-zero-status")).to_contain_text("8 frames", timeout=30_000)
+        page.put("uniform:1.0")
+        web.fill("#cal-pressure", "10 kPa")
+        web.click("#cal-uniform")
+        expect(web.locator("#cal-uniform-status")).to_contain_text("at 1.000 N/cm²", timeout=30_000)
+        web.click("#cal-fit")
+        expect(web.locator("#cal-findings")).to_contain_text("fitted textile-3mm", timeout=30_000)
+        page.put("uniform:1.5")
+        web.fill("#cal-check-pressure", "15 kPa")
+        web.click("#cal-check")
+        report = web.locator("#cal-report")
+        expect(report).to_contain_text("for 1.500 (median", timeout=30_000)
+        expect(report).to_contain_text("Worst: e")
+        expect(web.locator("#cal-map")).to_be_visible()
+        expect(web.locator("#cal-step-check")).to_have_class("cal-step done")
+        expect(web.locator("#map-title")).to_have_text("raw readings")
+        web.wait_for_timeout(300)
+        panel.screenshot(path=str(tmp_path / "panel.png"))
+        assert (tmp_path / "panel.png").stat().st_size > 10_000
+        shot = tmp_path / "calibration.png"  # the page: header, notice, panel, raw map
+        web.screenshot(path=str(shot), clip={"x": 0, "y": 0, "width": 1400, "height": 720})
+        if os.environ.get("TEXSENSE_SCREENSHOT_CALIBRATION"):
+            shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_CALIBRATION"])
+
+        web.click("#cal-save")
+        expect(web.locator("#cal-saved")).to_contain_text("in use: ", timeout=30_000)
+        expect(web.locator("#map-title")).to_have_text("pressure (compensated)", timeout=20_000)
+        expect(web.locator("#uncalibrated")).to_be_hidden()
+        expect(web.locator("#show-pressure")).to_be_enabled()
+        expect(web.locator("#cal-save")).to_be_disabled()
+        expect(web.locator("#events")).to_contain_text("calibration in use", timeout=10_000)
+        web.click("#cal-close")
+        expect(panel).to_be_hidden()
+        web.click("#calibrate")  # reachable again from the header
+        expect(panel).to_be_visible()
+        assert errors == [], errors
+    saved = page.state()["saved"]
+    assert Path(saved["calibration"]).is_file()

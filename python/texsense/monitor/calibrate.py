@@ -52,6 +52,8 @@ RECORDED = ("zero", "uniform", "check")
 DEFAULT_FRAMES = 10
 #: Most frames one step may record.
 MAX_FRAMES = 2000
+#: The check names this many elements of the largest error.
+WORST = 5
 #: The words of each step, for messages.
 STEP_TEXT = {
     "zero": "the empty mat (step 1)",
@@ -393,6 +395,8 @@ def _report_dict(report: CheckReport) -> dict[str, Any]:
 
     working = report.working
     med = float(np.median(report.median_ncm2[working])) if working.any() else float("nan")
+    size = np.where(working, np.abs(np.nan_to_num(report.error)), -1.0)
+    worst = [int(k) for k in np.argsort(-size)[:WORST] if working[k]]
     return {
         "pressure_ncm2": report.pressure_ncm2,
         "median_ncm2": listed(report.median_ncm2, 4),
@@ -400,6 +404,10 @@ def _report_dict(report: CheckReport) -> dict[str, Any]:
         "off": [
             {"element": int(k), "name": report.names[k], "error": round(float(report.error[k]), 4)}
             for k in report.off
+        ],
+        "worst": [
+            {"element": k, "name": report.names[k], "error": round(float(report.error[k]), 4)}
+            for k in worst
         ],
         "failed": [int(k) for k in np.flatnonzero(~working)],
         "working": int(working.sum()),

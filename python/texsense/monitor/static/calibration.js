@@ -81,7 +81,7 @@ const CAL = {
   report(c) {
     const canvas = $("cal-map");
     canvas.hidden = $("cal-map-legend").hidden = !c;
-    if (!c) { $("cal-report").textContent = ""; return; }
+    if (!c) { $("cal-report").textContent = ""; $("cal-report").classList.remove("fail"); return; }
     if (!this.map) { this.map = new MapView(canvas); this.map.setLayout(status.layout, view ? view.orientation : {}); drawErrorScale($("cal-scale"), c.tolerance); }
     const ctx = canvas.getContext("2d"), off = new Set(c.off.map((o) => o.element));
     ctx.clearRect(0, 0, canvas.width, canvas.height);
@@ -92,10 +92,14 @@ const CAL = {
       ctx.fillRect(x, y, w, h);
       if (off.has(i)) { ctx.strokeStyle = "#111"; ctx.lineWidth = 1.5; ctx.strokeRect(x + 0.75, y + 0.75, w - 1.5, h - 1.5); }
     });
-    const worst = c.off.slice(0, 4).map((o) => `${o.name} ${o.error > 0 ? "+" : ""}${fmt(100 * o.error, 0)} %`).join(", ");
-    $("cal-report").textContent = `${c.passed ? "✓ passed" : "✗ not passed"}: median ${fmt(c.mat_median_ncm2, 3)} of ${fmt(c.pressure_ncm2, 3)} N/cm², `
-      + `${c.off.length} of ${c.working} off by more than ${fmt(100 * c.tolerance, 0)} %${worst ? ` (worst: ${worst})` : ""}`
-      + (c.failed.length ? `, ${c.failed.length} failed` : "");
+    const pct = (e) => `${e > 0 ? "+" : "−"}${fmt(Math.abs(100 * e), 1)} %`;
+    const median = c.mat_median_ncm2 === null ? null : c.mat_median_ncm2 / c.pressure_ncm2 - 1;
+    $("cal-report").classList.toggle("fail", !c.passed);
+    $("cal-report").textContent = `${c.passed ? "✓ passed" : "✗ not passed"}: the mat reads ${fmt(c.mat_median_ncm2, 3)} N/cm² `
+      + `for ${fmt(c.pressure_ncm2, 3)} (median, ${median === null ? "–" : pct(median)}); `
+      + `${c.off.length} of ${c.working} elements off by more than ${fmt(100 * c.tolerance, 0)} %`
+      + (c.failed.length ? `, ${c.failed.length} failed` : "")
+      + (c.worst.length ? `. Worst: ${c.worst.map((o) => `${o.name.trim()} ${pct(o.error)}`).join(", ")}` : "");
   },
 
   wire() {
