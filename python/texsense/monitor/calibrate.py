@@ -154,10 +154,10 @@ class PageCalibration:
         cap = self.capture
         findings = [] if self.session is None else self.session.findings
         return {
-            "available": self.available,
-            "calibrated": not self.monitor.raw_only,
-            "steps": list(STEPS),
             "done": self.done(),
+            "calibrated": not self.monitor.raw_only,
+            "available": self.available,
+            "steps": list(STEPS),
             "recording": None
             if cap is None
             else {"step": cap.step, "frames": len(cap.values), "of": cap.target},

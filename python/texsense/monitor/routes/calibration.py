@@ -1,8 +1,8 @@
 """Calibrating the mat from the page (:mod:`texsense.monitor.calibrate`):
 ``GET /api/calibration`` (the steps' state), ``POST /api/calibration/record/{step}`` (``zero``,
-``uniform``, ``check``: keep the next frames), ``POST /api/calibration/fit`` (the material),
-``POST /api/calibration/save`` (write and use), ``POST /api/calibration/cancel`` and
-``POST /api/calibration/reset``.
+``uniform``, ``check``: keep the next frames; ``?wait=true``: answer when they are kept),
+``POST /api/calibration/fit`` (the material), ``POST /api/calibration/save`` (write and use),
+``POST /api/calibration/cancel`` and ``POST /api/calibration/reset``.
 
 Like every state-changing route they pass :class:`texsense.monitor.web.Guard` first: a page of
 another origin or site cannot run them. Errors: 409 for a step out of order or while another
@@ -12,6 +12,8 @@ cannot be written.
 
 from __future__ import annotations
 
+import asyncio
+import time
 from typing import Any
 
 from fastapi import APIRouter, HTTPException
@@ -21,7 +23,10 @@ from texsense.exceptions import ParameterError, WriteError
 from texsense.monitor.calibrate import DEFAULT_FRAMES, PageCalibration, StepError
 from texsense.monitor.live import Monitor
 
-__all__ = ["router"]
+__all__ = ["WAIT_S", "router"]
+
+#: Longest a ``?wait=true`` recording keeps its request open, s, besides 5 s a frame.
+WAIT_S = 30.0
 
 
 class RecordBody(BaseModel):
@@ -52,14 +57,20 @@ def router(monitor: Monitor) -> APIRouter:
         return cal.state()
 
     @r.post("/api/calibration/record/{step}")
-    async def record(step: str, body: RecordBody | None = None) -> dict[str, Any]:
+    async def record(
+        step: str, body: RecordBody | None = None, wait: bool = False
+    ) -> dict[str, Any]:
         """Keep the next ``frames`` frames of the live stream for ``step``; poll
-        ``GET /api/calibration`` until it is among ``done``."""
+        ``GET /api/calibration`` until it is among ``done``, or ask with ``?wait=true`` to
+        be answered once it is (at most :data:`WAIT_S` plus 5 s a frame)."""
         body = body or RecordBody()
         try:
             cal.record(step, body.frames, body.pressure)
         except ParameterError as e:
             raise _http(e) from None
+        deadline = time.monotonic() + WAIT_S + 5.0 * body.frames
+        while wait and (cal.capture or cal.busy) and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
         return cal.state()
 
     @r.post("/api/calibration/fit")
