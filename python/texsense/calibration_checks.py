@@ -37,6 +37,7 @@ from scipy.optimize import minimize_scalar
 
 from texsense.exceptions import ParameterError
 from texsense.recording import Recording
+from texsense.units import UnitError, convert, quantity_of
 
 __all__ = [
     "Finding",
@@ -87,8 +88,6 @@ def parse_pressure(text: str | float) -> float:
     >>> parse_pressure("1 N/cm2"), parse_pressure("0.5 N/cm²"), parse_pressure("1.5")
     (1.0, 0.5, 1.5)
     """
-    from texsense.units import UnitError, convert, quantity_of
-
     if isinstance(text, int | float):
         value, unit = float(text), "N/cm2"
     else:

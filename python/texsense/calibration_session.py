@@ -35,6 +35,7 @@ from texsense.calibration_checks import (
     raise_if_refused,
     record_thickness_mm,
 )
+from texsense.drift import split_steps
 from texsense.exceptions import ParameterError
 from texsense.io.columns_csv import read_columns_csv
 from texsense.pipeline import Pipeline
@@ -51,8 +52,6 @@ CHECK_TOLERANCE = 0.10
 
 def steps_csv(path: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Held steps of a step-and-hold CSV (time_s, compression_mm, pressure_ncm2)."""
-    from texsense.drift import split_steps
-
     cols = read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
     return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
 
