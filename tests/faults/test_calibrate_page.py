@@ -176,3 +176,18 @@ def test_a_saved_calibration_never_takes_an_existing_name(tmp_path):
     assert _unused_stem(tmp_path, "calibration-x", {}) == "calibration-x-2"
     (tmp_path / "calibration-x-2-zero.h5").write_text("")
     assert _unused_stem(tmp_path, "calibration-x", {"zero": None}) == "calibration-x-3"
+
+
+def test_a_folder_that_cannot_be_written_leaves_the_monitor_as_it_was(tmp_path, fault_row):
+    rig = Rig(tmp_path)
+    rig.monitor.record_dir = tmp_path / "not-a-folder"
+    rig.monitor.record_dir.write_text("a file where the folder should be")
+    rig.step("zero", 0.0)
+    rig.step("uniform", CHANGE_PF, "1 N/cm2")
+    assert rig.post("fit", {"material": "textile-3mm"}).status_code == 200
+    r = rig.post("save")
+    assert r.status_code == 507 and r.json()["detail"].startswith("cannot write the calibration")
+    assert rig.monitor.raw_only and rig.state()["saved"] is None and rig.state()["busy"] is None
+    assert rig.monitor.record_dir.read_text() == "a file where the folder should be"
+    fault_row("calibration page", "save and use into a folder that cannot be written",
+              "data kept")  # fmt: skip

@@ -298,15 +298,23 @@ class PageCalibration:
         self._need("material")
         self._discard_after("material")
         zero, uniform = self.recordings["zero"], self.recordings["uniform"]
-        self.busy = "material"
-        try:
+        names = ("the empty-mat recording (step 1)", "the uniform-load recording (step 2)")
+
+        def make() -> None:  # in the worker thread: the preset's record and the fit take s
             session = CalibrationSession(material, self.pressures["uniform"])
-            self.session, self.material = session, material
-            names = ("the empty-mat recording (step 1)", "the uniform-load recording (step 2)")
-            await asyncio.to_thread(session.fit, zero, uniform, names)
+            self.session = session  # its findings are shown even when the fit is refused
+            session.fit(zero, uniform, names)
+
+        self.busy, self.material = "material", material
+        try:
+            await asyncio.to_thread(make)
         except ParameterError as e:
             self.refused = str(e)
             raise
+        except Exception as e:  # a fit that fails otherwise: said in one line, no traceback
+            self.refused = f"the fit failed: {e}"
+            log.warning("calibration: %s", self.refused)
+            raise ParameterError(self.refused) from None
         finally:
             self.busy = None
 
@@ -318,8 +326,9 @@ class PageCalibration:
             self.report = self.session.check(
                 self.recordings["check"], self.pressures["check"], self.recordings["uniform"]
             )
-        except ParameterError as e:
-            self.refused = str(e)
+        except Exception as e:  # said on the page, never a traceback in the server
+            self.refused = f"the check failed: {e}"
+            log.warning("calibration: %s", self.refused)
         finally:
             self.busy = None
 
