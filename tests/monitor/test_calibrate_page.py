@@ -200,7 +200,7 @@ def test_the_panel_in_headless_chromium(page, tmp_path):
         expect(message).to_be_visible(timeout=30_000)
         expect(message).to_contain_text("calibration refused")
         expect(message).to_contain_text("swapped")
-        expect(web.locator("#cal-findings")).to_contain_text("swapped")
+        expect(web.locator("#cal-findings")).to_contain_text("refused: the reasons above")
         expect(web.locator("#cal-check")).to_be_disabled()
 
         web.click("#cal-zero")  # again, empty this time

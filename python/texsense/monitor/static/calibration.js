@@ -71,8 +71,8 @@ const CAL = {
   },
 
   findings(s) {
-    const items = [];
-    if (s.refused) items.push(["refuse", s.refused]);
+    const items = [], bar = $("cal-message");
+    if (s.refused) items.push(["refuse", !bar.hidden && bar.textContent === s.refused ? "✗ refused: the reasons above" : s.refused]);
     for (const f of s.findings) if (!s.refused || f.level !== "refuse") items.push([f.level, `${f.level === "warn" ? "warning" : "refused"}: ${f.text}`]);
     if (s.fit) items.push(["ok", `✓ fitted ${s.fit.material}: ${s.fit.stages.join(", ")}; gains ${fmt(s.fit.gain[0], 2)}–${fmt(s.fit.gain[1], 2)}`]);
     $("cal-findings").replaceChildren(...items.map(([level, text]) => { const li = document.createElement("li"); li.className = level; li.textContent = text; return li; }));
@@ -90,7 +90,7 @@ const CAL = {
       if (e === null) { ctx.fillStyle = "#9ca3af"; ctx.fillRect(x, y, w, h); return; }
       ctx.fillStyle = errorColour(e / (2 * c.tolerance));
       ctx.fillRect(x, y, w, h);
-      if (off.has(i)) { ctx.strokeStyle = "#111"; ctx.lineWidth = 1.5; ctx.strokeRect(x + 0.75, y + 0.75, w - 1.5, h - 1.5); }
+      if (off.has(i)) { const lw = w >= 10 ? 1.5 : 1; ctx.strokeStyle = "#111"; ctx.lineWidth = lw; ctx.strokeRect(x + lw / 2, y + lw / 2, w - lw, h - lw); }
     });
     const pct = (e) => `${e > 0 ? "+" : "−"}${fmt(Math.abs(100 * e), 1)} %`;
     const median = c.mat_median_ncm2 === null ? null : c.mat_median_ncm2 / c.pressure_ncm2 - 1;
