@@ -128,7 +128,9 @@ def test_the_steps_calibrate_the_running_monitor(page, tmp_path):
     assert check["pressure_ncm2"] == pytest.approx(1.5)
     assert check["working"] == 96 and len(check["error"]) == 96
     assert abs(check["mat_median_ncm2"] / 1.5 - 1) < 0.15, check["lines"]
-    assert len(check["off"]) == sum(abs(e) > 0.10 for e in check["error"] if e is not None)
+    off = {o["element"] for o in check["off"]}  # the errors are rounded to 4 decimals
+    assert all(abs(e) >= 0.0999 for k, e in enumerate(check["error"]) if k in off)
+    assert all(abs(e) <= 0.1001 for k, e in enumerate(check["error"]) if k not in off)
     print("\n".join(check["lines"]))
 
     status, s = page.post("api/calibration/save")

@@ -31,14 +31,15 @@ const CAL = {
     try { this.show(await this.call("/api/calibration")); } catch (err) { /* the feed line says when the monitor is away */ }
   },
 
-  open() { $("calibration").hidden = false; this.dismissed = false; this.refresh(); },
-  close() { $("calibration").hidden = true; this.dismissed = true; },
+  open() { $("calibration").hidden = false; $("calibrate").classList.add("on"); this.dismissed = false; this.refresh(); },
+  close() { $("calibration").hidden = true; $("calibrate").classList.remove("on"); this.dismissed = true; },
 
   show(s) {
     this.state = s;
     $("calibrate").hidden = !s.available;
     if (!s.available) { $("calibration").hidden = true; return; }
     if (!s.calibrated && !this.dismissed) $("calibration").hidden = false;
+    $("calibrate").classList.toggle("on", !$("calibration").hidden);
     const done = new Set(s.done), rec = s.recording, waiting = rec !== null || s.busy !== null;
     const sel = $("cal-material");
     if (!sel.options.length) {
