@@ -12,8 +12,10 @@ Rules (also in docs/development.md):
 - Servers (``texsense monitor``, ``texsense station``, ``texsense simulate device``, ``bash
   scripts/run.sh``) start in the background; the runner waits until they answer (their
   page, or the device's link) and stops them with Ctrl-C (SIGINT) at the end of the
-  block, or before the next server of the block starts. The one thing the runner adds to a
-  command: a free ``--port`` to a monitor or station that names none (tests run side by side).
+  block, or (a monitor, station or run.sh) before the next one of the block starts; a
+  virtual device runs on to the end of its block, for the monitors that read it. The one
+  thing the runner adds to a command: a free ``--port`` to a monitor or station that names
+  none (tests run side by side).
 - A command with a trailing comment ``# needs: ...`` (outside hardware, a site broker, a
   cluster) is skipped and listed with its reason.
 """
@@ -171,6 +173,12 @@ class _Server:
     def output(self) -> str:
         return self.log.read_text(errors="replace")
 
+    @property
+    def is_device(self) -> bool:
+        """A virtual device: what a monitor of the same block reads, so it stays when the
+        next monitor starts."""
+        return re.search(r"simulate\s+device", self.cmd.text) is not None
+
 
 def _strip_comment(text: str) -> str:
     """The command without a trailing ``# comment`` (a ``#`` after a space, outside quotes)."""
@@ -194,12 +202,14 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
     servers: list[_Server] = []
     block = -1
 
-    def stop_servers() -> None:
-        for s in servers:
+    def stop_servers(keep_devices: bool = False) -> None:
+        for s in list(servers):
+            if keep_devices and s.is_device:
+                continue
             why = s.stop()
             if why:
                 outcome.failures.append(f"{s.cmd.text}\n  {why}\n{s.output()[-2000:]}")
-        servers.clear()
+            servers.remove(s)
 
     for cmd in commands(page):
         if cmd.block != block:
@@ -210,7 +220,7 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
             continue
         if cmd.is_server:
             if not re.search(r"simulate\s+device", cmd.text):
-                stop_servers()  # alternatives of one block: one at a time
+                stop_servers(keep_devices=True)  # alternatives of one block: one at a time
             server = _Server(cmd, work, env)
             servers.append(server)
             why = server.ready()

@@ -63,6 +63,9 @@ STEADY_SHARE = 0.05
 THICKNESS_TOLERANCE = 0.35
 
 
+#: A number (sign, decimals, exponent) and what follows it (the unit).
+
+
 @dataclass(frozen=True)
 class Finding:
     """One result of a check: ``level`` is ``"refuse"`` or ``"warn"``, ``text`` says what was
@@ -81,6 +84,8 @@ def parse_pressure(text: str | float) -> float:
 
     >>> parse_pressure("10kPa"), round(parse_pressure("75mmHg"), 3), parse_pressure(2)
     (1.0, 1.0, 2.0)
+    >>> parse_pressure("1 N/cm2"), parse_pressure("0.5 N/cm²"), parse_pressure("1.5")
+    (1.0, 0.5, 1.5)
     """
     if isinstance(text, int | float):
         value, unit = float(text), "N/cm2"

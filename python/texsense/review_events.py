@@ -56,6 +56,7 @@ EVENT_TEXT = {
     "turn": "turned",
     "turn-due": "turn due",
     "turn-done": "turn alert closed",
+    "calibrated": "calibration in use",
 }
 
 

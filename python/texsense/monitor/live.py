@@ -19,6 +19,7 @@ import asyncio
 import json
 import logging
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -229,6 +230,9 @@ class Monitor:
         self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
+        #: called with every frame on the mat's clock, before it is processed (the page's
+        #: calibration steps record the live stream this way)
+        self.taps: list[Callable[[Frame], None]] = []
 
     # ------------------------------------------------------------------ viewers
     def subscribe(self) -> asyncio.Queue[str]:
@@ -301,6 +305,27 @@ class Monitor:
         self.changes += 1
         return n
 
+    def use_calibration(self, pipeline: Any, path: Path | str | None = None) -> None:
+        """Show pressure through ``pipeline`` from the next frame on (a calibration just made
+        on the page, :mod:`texsense.monitor.calibrate`); an event ``calibrated`` says when.
+        A recording in progress goes on (its raw file is complete; a pressure file starts
+        with the next recording)."""
+        if self.source.quantity != "capacitance":
+            raise ParameterError(f"{self.source.name} reads pressure: it needs no calibration")
+        if pipeline.layout.n_elements != self.layout.n_elements:
+            raise ParameterError("the pipeline and the source have different element counts")
+        self.pipeline = pipeline
+        self.raw_only = False
+        self.changes += 1
+        t = self._latest["t"] if self._latest else 0.0
+        detail = {
+            "calibration_id": pipeline.calibration_id,
+            "file": None if path is None else str(path),
+        }
+        self._events([Event("calibrated", t, None, detail)])
+        log.warning("%s: now showing pressure through the calibration %s", self.source.name,
+                    path or pipeline.calibration_id)  # fmt: skip
+
     # ------------------------------------------------------------------ processing
     def _events(self, events: list[Event]) -> None:
 
@@ -363,6 +388,8 @@ class Monitor:
         if not self._in_step(frame, received_at):
             return None
         self.last_wall = received_at
+        for tap in self.taps:
+            tap(frame)
         raw = frame.values
         if self.pipeline is not None and self.source.quantity == "capacitance":
             valid = np.isfinite(raw)

@@ -11,7 +11,7 @@ The access rules (Host, Origin, token) and the security headers are not the rout
 from __future__ import annotations
 
 from texsense.monitor.playback import playback_router
-from texsense.monitor.routes import events, frames, recordings, static
+from texsense.monitor.routes import calibration, events, frames, recordings, static
 
 __all__ = ["ROUTERS"]
 
@@ -20,6 +20,7 @@ ROUTERS = (
     frames.router,
     events.router,
     recordings.router,
+    calibration.router,  # the page's calibration panel (texsense.monitor.calibrate)
     playback_router,  # playback, regions, reports (texsense.monitor.playback)
     static.router,
 )

@@ -37,6 +37,8 @@ def router(monitor: Monitor) -> APIRouter:
                 "ncm2": monitor.tracker.threshold_ncm2,
             },
             "reposition_min": monitor.tracker.reposition_s / 60,
+            "calibrated": not monitor.raw_only,
+            "calibration_id": None if monitor.pipeline is None else monitor.pipeline.calibration_id,
             "posture_model": monitor.posture_model is not None,
             "bed": monitor.bed is not None,
             "layout": {

@@ -6,6 +6,7 @@ const EVENT_TEXT = {  // as texsense.review.EVENT_TEXT
   loaded: "load on the mat", unloaded: "mat unloaded", reposition: "reposition alert",
   acknowledged: "alert acknowledged", cleared: "alert cleared (skin offloaded)",
   turn: "turned", "turn-due": "turn due", "turn-done": "turn alert closed",
+  calibrated: "calibration in use",
 };
 const SIDE_COLOUR = { supine: "#2764c5", prone: "#7c3aed", left: "#059669", right: "#d97706", sitting: "#db2777" };
 
@@ -119,6 +120,7 @@ function onSnapshot(snap) {
     $("uncalibrated").hidden = !uncalibrated;
     $("show-pressure").disabled = uncalibrated;
     if (uncalibrated && mode !== "raw") $("show-raw").onclick();
+    if (!uncalibrated && mode === "raw") $("show-pressure").onclick();  // calibrated just now (the panel)
   }
   const st = snap.stats, t0 = live.length ? live[0].t0 : snap.t;
   live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null });
