@@ -63,9 +63,6 @@ STEADY_SHARE = 0.05
 THICKNESS_TOLERANCE = 0.35
 
 
-#: A number (sign, decimals, exponent) and what follows it (the unit).
-
-
 @dataclass(frozen=True)
 class Finding:
     """One result of a check: ``level`` is ``"refuse"`` or ``"warn"``, ``text`` says what was
