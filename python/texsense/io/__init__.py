@@ -22,9 +22,12 @@ format          what                                   read      write
 from __future__ import annotations
 
 import inspect
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
@@ -46,6 +49,7 @@ __all__ = [
     "RecordingWriter",
     "load",
     "open_reader",
+    "read_folder",
     "read_hdf5",
     "read_pliance",
     "read_pmd",
@@ -205,8 +209,68 @@ def load(
     >>> rec.layout.shape, rec.n_frames
     ((28, 28), 309)
     """
+    if format is None and Path(path).is_dir() and not is_pmd_path(Path(path)):
+        return read_folder(path, accept_truncated=accept_truncated, **options)
     with open_reader(path, format=format, accept_truncated=accept_truncated, **options) as r:
         return r.read()
+
+
+def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: Any) -> Recording:
+    """Every recording in a folder (and its subfolders, in natural order of their paths)
+    as one recording, e.g. the folder ``texsense process`` or ``texsense seat-sessions``
+    writes: files that are not recordings (``calibration.json``, a report) are passed over;
+    a label ``file`` names the file each frame comes from (unless the files have one).
+
+    Raises
+    ------
+    FormatError
+        If the folder holds no recording, or its recordings differ in layout, quantity, unit
+        or label names (the first that differs is named).
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise FormatError(folder, "no such folder")
+    files = []
+    for p in sorted((q for q in folder.rglob("*") if q.is_file()), key=_natural):
+        try:
+            sniff_format(p)
+        except FormatError:
+            continue
+        files.append(p)
+    if not files:
+        raise FormatError(
+            folder,
+            "holds no recording texsense reads (and is not a PMD tree: no S1, S2, ... or "
+            "1.txt .. 17.txt)",
+        )
+    parts = []
+    for p in files:
+        rec = load(p, accept_truncated=accept_truncated, **options)
+        if "file" not in rec.labels:
+            name = str(p.relative_to(folder))
+            rec = rec.with_labels({**rec.labels, "file": np.full(rec.n_frames, name)})
+        first = parts[0] if parts else rec
+        why = _differs(first, rec)
+        if why:
+            raise FormatError(p, f"{why} than {files[0].name}: a folder is read as one recording")
+        parts.append(rec)
+    return Recording.concatenate(parts)
+
+
+def _natural(p: Path) -> list[Any]:
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", str(p))]
+
+
+def _differs(a: Recording, b: Recording) -> str | None:
+    if a.layout != b.layout:
+        return f"another layout ({b.layout.n_elements} elements)"
+    if (a.quantity, a.unit) != (b.quantity, b.unit):
+        return f"another quantity ({b.quantity} in {b.unit})"
+    if a.labels.keys() != b.labels.keys():
+        return f"other labels ({', '.join(sorted(b.labels))})"
+    if (a.element_times is None) != (b.element_times is None):
+        return "element time stamps present in only some files"
+    return None
 
 
 def format_for_output(path: str | Path) -> str:
