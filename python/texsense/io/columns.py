@@ -123,7 +123,12 @@ def _from_recording(rec: Recording, path: Path) -> dict[str, npt.NDArray[np.floa
         )
     values = rec.frames[:, 0].astype(np.float64)
     values[~rec.valid[:, 0]] = np.nan
-    cols = {"time_s": rec.times.astype(np.float64), column_name(rec.quantity, rec.unit): values}
+    written = rec.meta.get("columns")  # by write_columns: the values column's own name
+    name = written[0] if isinstance(written, list) and written else None
+    cols = {
+        "time_s": rec.times.astype(np.float64),
+        name or column_name(rec.quantity, rec.unit): values,
+    }
     for name, label in rec.labels.items():
         if name not in cols and np.issubdtype(np.asarray(label).dtype, np.number):
             cols[name] = np.asarray(label, dtype=np.float64)
