@@ -23,7 +23,9 @@ def main() -> None:
         u, y = cal.labels["compression_mm"], cal.labels["pressure_ncm2"]
         models[hz] = (HysteresisModel().fit(u, y), coarse_turns(u, cal.times))
     print("textile-6mm, seed 1; validation: 50 cycles 0-10-1.3-10-0-1.3-0 N/cm² at 50 mm/min\n")
-    print("| calibration | validation | RMSE (N/cm²) | turning points between samples | warning names |")
+    print(
+        "| calibration | validation | RMSE (N/cm²) | turning points between samples | warning names |"
+    )
     print("|---:|---:|---:|---:|---:|")
     for cal_hz, (model, cal_turns) in models.items():
         assert cal_turns.unresolved == 0, cal_turns  # the calibration curves turn slowly
