@@ -24,7 +24,8 @@ def main() -> None:
         models[hz] = (HysteresisModel().fit(u, y), coarse_turns(u, cal.times))
     print("textile-6mm, seed 1; validation: 50 cycles 0-10-1.3-10-0-1.3-0 N/cm² at 50 mm/min\n")
     print(
-        "| calibration | validation | RMSE (N/cm²) | turning points between samples | warning names |"
+        "| calibration | validation | RMSE (N/cm²) | turning points between samples "
+        "| warning names |"
     )
     print("|---:|---:|---:|---:|---:|")
     for cal_hz, (model, cal_turns) in models.items():
