@@ -159,11 +159,11 @@ class _Server:
             return f"had exited with {self.proc.returncode}"
         os.killpg(self.proc.pid, signal.SIGINT)
         try:
-            self.proc.wait(timeout=10)
+            self.proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
             os.killpg(self.proc.pid, signal.SIGKILL)
             self.proc.wait()
-            return "did not stop within 10 s of Ctrl-C"
+            return "did not stop within 30 s of Ctrl-C"
         if "Traceback" in self.output():
             return "printed a traceback"
         return None
