@@ -133,3 +133,13 @@ def test_a_folder_of_recordings_reads_as_one(tmp_path):
     assert rec.labels["subject"].tolist() == ["A"] * 6 + ["B"] * 6  # natural order
     assert set(rec.labels["file"]) == {"session-9.h5", "session-10.h5"}
     assert load(tmp_path).equals(rec)
+
+
+def test_a_column_table_reads_as_a_one_element_recording(steps, tmp_path):
+    h5, csv = steps
+    rec = load(csv)  # the reverse: what the column tools read, the recording commands read
+    assert (rec.n_elements, rec.quantity, rec.unit) == (1, "capacitance", "pF")
+    np.testing.assert_allclose(rec.frames[:, 0], load(h5).frames[:, 0], rtol=1e-6)
+    assert set(rec.labels) == {"compression_mm", "pressure_ncm2"}
+    assert main(["convert", str(csv), str(tmp_path / "back.h5")]) == 0
+    assert load(tmp_path / "back.h5").n_frames == rec.n_frames

@@ -7,16 +7,17 @@ process`` uses); :func:`save` writes HDF5, wide CSV or Tekscan ASCII by extensio
 ``format``, always under a temporary name that is renamed when complete. One module per
 format, one reader class each over :class:`texsense.io._base.RecordingReader`:
 
-==============  =====================================  ========  ===========
-format          what                                   read      write
-==============  =====================================  ========  ===========
-``hdf5``        texsense recording (``.h5``)           yes       yes
-``pmd``         PhysioNet PMD text files (folders)     yes       no
-``tekscan``     Tekscan ASCII ``.csv`` / ``.asf``      yes       yes
-``xsensor``     XSENSOR CSV export                     yes       no
-``pliance``     novel pliance ``.asc``                 yes       no
-``wide-csv``    ``time_s,e0,e1,...``                   yes       yes
-==============  =====================================  ========  ===========
+===============  =====================================  ========  ===========
+format           what                                   read      write
+===============  =====================================  ========  ===========
+``hdf5``         texsense recording (``.h5``)           yes       yes
+``pmd``          PhysioNet PMD text files (folders)     yes       no
+``tekscan``      Tekscan ASCII ``.csv`` / ``.asf``      yes       yes
+``xsensor``      XSENSOR CSV export                     yes       no
+``pliance``      novel pliance ``.asc``                 yes       no
+``wide-csv``     ``time_s,e0,e1,...``                   yes       yes
+``columns-csv``  a column table (one element)           yes       no (``io.columns``)
+===============  =====================================  ========  ===========
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
 from texsense.io._text import decode_head, open_binary
+from texsense.io.columns_csv import TableReader, is_columns_csv, read_table
 from texsense.io.hdf5 import HDF5Reader, RecordingWriter, read_hdf5, write_hdf5
 from texsense.io.pliance import PlianceReader, read_pliance
 from texsense.io.pmd import PMDReader, is_pmd_path, read_pmd
@@ -70,6 +72,7 @@ READERS: dict[str, Callable[..., Recording]] = {
     "xsensor": read_xsensor,
     "pliance": read_pliance,
     "wide-csv": read_wide_csv,
+    "columns-csv": read_table,
 }
 
 READER_CLASSES: dict[str, type[RecordingReader]] = {
@@ -79,6 +82,7 @@ READER_CLASSES: dict[str, type[RecordingReader]] = {
     "xsensor": XSensorReader,
     "pliance": PlianceReader,
     "wide-csv": WideCSVReader,
+    "columns-csv": TableReader,
 }
 
 WRITERS: dict[str, Callable[..., Path]] = {
@@ -128,6 +132,8 @@ def sniff_format(path: str | Path) -> str:
         return "xsensor"
     if first.startswith("file name:") and "mat type" in text[:300]:
         return "pliance"
+    if is_columns_csv(path):
+        return "columns-csv"
     if first.startswith(_WIDE_MAGIC) or first.startswith("time_s,") or first.startswith("# "):
         return "wide-csv"
     tokens = [t for t in first.strip().split("\t") if t.strip()]

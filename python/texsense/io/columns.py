@@ -39,80 +39,24 @@ import numpy.typing as npt
 from texsense import units
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io import load, sniff_format
-from texsense.io._text import decode_head, is_number, open_binary
-from texsense.io.columns_csv import read_columns_csv, write_columns_csv
+from texsense.io.columns_csv import (
+    column_name,
+    is_columns_csv,
+    read_columns_csv,
+    unit_of_column,
+    write_columns_csv,
+)
 from texsense.io.hdf5 import write_hdf5
 from texsense.layout import Layout
 from texsense.recording import QUANTITIES, Recording
 
 __all__ = ["column_name", "is_columns_csv", "read_columns", "unit_of_column", "write_columns"]
 
-#: Column-name suffix of each unit (``compression_mm``, ``pressure_ncm2``, ``capacitance_pF``).
-SUFFIXES: dict[str, str] = {
-    "mm": "mm",
-    "N/cm2": "ncm2",
-    "kPa": "kpa",
-    "N": "n",
-    "pF": "pF",
-    "s": "s",
-    "mmHg": "mmhg",
-}
-
 #: What a column table is, for the error line on a file that is none.
 WHAT = (
     "a column CSV (a header such as time_s,compression_mm,pressure_ncm2) or a one-element "
     "texsense recording (e.g. 'texsense simulate steps -o steps.h5')"
 )
-
-
-def column_name(quantity: str, unit: str) -> str:
-    """The column of a recording's values: ``capacitance`` in ``pF`` -> ``capacitance_pF``."""
-    suffix = SUFFIXES.get(unit, "".join(c for c in unit if c.isalnum()).lower())
-    return f"{quantity}_{suffix}" if suffix else quantity
-
-
-def unit_of_column(name: str) -> str | None:
-    """The unit a column's suffix names (``pressure_ncm2`` -> ``N/cm2``), or None."""
-    low = name.lower()
-    for unit, suffix in SUFFIXES.items():
-        if low.endswith("_" + suffix.lower()):
-            return unit
-    return None
-
-
-def _header(path: Path) -> tuple[list[str], list[str]]:
-    """The ``#`` lines and the names of the first other line of a text file."""
-    with open_binary(path) as fh:
-        head = fh.read(1 << 14)
-    if b"\0" in head:
-        return [], []
-    comments, names = [], []
-    for line in decode_head(head).splitlines():
-        if line.startswith("#"):
-            comments.append(line)
-        elif line.strip():
-            names = [s.strip() for s in line.split(",")]
-            break
-    return comments, names
-
-
-def is_columns_csv(path: str | Path) -> bool:
-    """Whether ``path`` is a column table rather than a recording: texsense's ``# rows:``
-    line, or a header of names that does not start with ``time_s`` followed by element
-    columns (a wide CSV), or whose every other column names a unit (``force_n``)."""
-    path = Path(path)
-    if not path.is_file():
-        return False
-    comments, names = _header(path)
-    if any(c.startswith("# rows:") for c in comments):
-        return True
-    if any(c.startswith("# texsense wide-csv") for c in comments) or len(names) < 2:
-        return False
-    if any(is_number(n) for n in names):
-        return False  # numbers, not names: a PMD or other data line
-    if names[0] != "time_s":
-        return True
-    return all(unit_of_column(n) is not None for n in names[1:])
 
 
 def _from_recording(rec: Recording, path: Path) -> dict[str, npt.NDArray[np.float64]]:
