@@ -1,7 +1,5 @@
 """Every console line of the README and of docs/*.md runs as written (tests/tour.py)."""
 
-import os
-
 import pytest
 
 from conftest import ROOT
@@ -9,9 +7,6 @@ from tour import commands, run_page
 
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 PAGES = [p for p in PAGES if commands(p)]
-
-# TODO(issue 25): on by default once every page runs as written
-pytestmark = pytest.mark.skipif(not os.environ.get("TEXSENSE_TOUR"), reason="TEXSENSE_TOUR unset")
 
 
 @pytest.mark.slow

@@ -20,12 +20,14 @@ Rules (also in docs/development.md):
 
 from __future__ import annotations
 
+import argparse
 import doctest
 import os
 import re
 import signal
 import socket
 import subprocess
+import tempfile
 import time
 import urllib.request
 from dataclasses import dataclass, field
@@ -240,3 +242,37 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
             )
     stop_servers()
     return outcome
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python tests/tour.py [PAGE.md ...]``: run the pages (default: the README and every
+    docs page), print per page what ran, was skipped and failed, and the time taken."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("pages", nargs="*", type=Path, help="pages (default: all)")
+    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared", help="data root")
+    args = parser.parse_args(argv)
+    pages = args.pages or [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    failed = 0
+    start = time.monotonic()
+    print("| page | commands run | passed | skipped (needs) | time |")
+    print("|---|---:|---:|---:|---:|")
+    for page in (p for p in pages if commands(p)):
+        t0 = time.monotonic()
+        with tempfile.TemporaryDirectory() as folder:
+            o = run_page(page, Path(folder), args.shared)
+        failed += len(o.failures)
+        print(
+            f"| {page.name} | {len(o.ran)} | {len(o.ran) - len(o.failures)} | "
+            f"{len(o.skipped)} | {time.monotonic() - t0:.1f} s |",
+            flush=True,
+        )
+        for text, why in o.skipped:
+            print(f"  skipped (needs {why}): {text}")
+        for text in o.failures:
+            print("  FAILED: " + text.replace("\n", "\n    "))
+    print(f"\ntotal {time.monotonic() - start:.1f} s, {failed} failure(s)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
