@@ -143,3 +143,11 @@ def test_a_column_table_reads_as_a_one_element_recording(steps, tmp_path):
     assert set(rec.labels) == {"compression_mm", "pressure_ncm2"}
     assert main(["convert", str(csv), str(tmp_path / "back.h5")]) == 0
     assert load(tmp_path / "back.h5").n_frames == rec.n_frames
+
+
+def test_a_folder_of_files_that_each_start_at_zero_runs_on_in_time(tmp_path):
+    _session(tmp_path, "a.h5", "A")
+    _session(tmp_path, "b.h5", "B")
+    rec = read_folder(tmp_path)
+    assert np.all(np.diff(rec.times) > 0)
+    assert rec.times[6] == pytest.approx(rec.times[5] + 0.5)  # one frame period later

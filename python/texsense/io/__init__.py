@@ -112,9 +112,7 @@ def sniff_format(path: str | Path) -> str:
     if not path.exists():
         raise FormatError(path, "no such file or folder")
     if path.is_dir():
-        if is_pmd_path(path):
-            return "pmd"
-        raise FormatError(path, "folder is not a PMD tree (no S1, S2, ... or 1.txt .. 17.txt)")
+        return "pmd" if is_pmd_path(path) else "folder"  # a folder of recordings: read_folder
     with open_binary(path) as fh:
         head = fh.read(1 << 16)
     if head.startswith(_HDF5_SIGNATURE):
@@ -177,6 +175,12 @@ def open_reader(
     82
     """
     fmt = format or sniff_format(path)
+    if fmt == "folder":
+        raise FormatError(
+            path,
+            "a folder that is not a PMD tree: this reads one recording at a time (a folder "
+            "of recordings: texsense.load, or 'texsense process' as an archive)",
+        )
     if fmt not in READER_CLASSES:
         raise ParameterError(f"unknown format {fmt!r}; known: {', '.join(READER_CLASSES)}")
     cls = READER_CLASSES[fmt]
@@ -215,7 +219,7 @@ def load(
     >>> rec.layout.shape, rec.n_frames
     ((28, 28), 309)
     """
-    if format is None and Path(path).is_dir() and not is_pmd_path(Path(path)):
+    if (format or sniff_format(path)) == "folder":
         return read_folder(path, accept_truncated=accept_truncated, **options)
     with open_reader(path, format=format, accept_truncated=accept_truncated, **options) as r:
         return r.read()
@@ -225,7 +229,9 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
     """Every recording in a folder (and its subfolders, in natural order of their paths)
     as one recording, e.g. the folder ``texsense process`` or ``texsense seat-sessions``
     writes: files that are not recordings (``calibration.json``, a report) are passed over;
-    a label ``file`` names the file each frame comes from (unless the files have one).
+    a label ``file`` names the file each frame comes from (unless the files have one). Times
+    run on: a file whose times would go back (each file starting at 0 s) is shifted to start
+    one frame period after the previous one ends.
 
     Raises
     ------
@@ -259,8 +265,33 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
         why = _differs(first, rec)
         if why:
             raise FormatError(p, f"{why} than {files[0].name}: a folder is read as one recording")
+        if parts and rec.n_frames and parts[-1].n_frames:
+            rec = _after(parts[-1], rec)
         parts.append(rec)
     return Recording.concatenate(parts)
+
+
+def _after(previous: Recording, rec: Recording) -> Recording:
+    """``rec`` with its times shifted to start one frame period after ``previous`` ends when
+    they would go back (files that each start at 0 s); as they are otherwise."""
+    end = float(previous.times[-1])
+    if rec.times[0] > end:
+        return rec
+    steps = np.diff(rec.times)
+    period = float(np.median(steps)) if steps.size else 1.0
+    shift = end + period - float(rec.times[0])
+    et = None if rec.element_times is None else rec.element_times + shift
+    return Recording(
+        rec.frames,
+        rec.times + shift,
+        rec.layout,
+        rec.quantity,
+        rec.unit,
+        valid=rec.valid,
+        element_times=et,
+        labels=rec.labels,
+        meta=rec.meta,
+    )
 
 
 def _natural(p: Path) -> list[Any]:
