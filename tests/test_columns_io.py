@@ -143,6 +143,9 @@ def test_a_column_table_reads_as_a_one_element_recording(steps, tmp_path):
     assert set(rec.labels) == {"compression_mm", "pressure_ncm2"}
     assert main(["convert", str(csv), str(tmp_path / "back.h5")]) == 0
     assert load(tmp_path / "back.h5").n_frames == rec.n_frames
+    again = read_columns(tmp_path / "back.h5")  # and back to the same columns
+    for name, column in read_columns(csv).items():
+        np.testing.assert_allclose(again[name], column, rtol=1e-6, err_msg=name)
 
 
 def test_a_folder_of_files_that_each_start_at_zero_runs_on_in_time(tmp_path):

@@ -286,7 +286,12 @@ class TableReader(RecordingReader):
             )
         self._values, (quantity, unit) = found[-1]
         labels = [n for n in names if n not in ("time_s", self._values)]
-        meta = {"format": "columns-csv", "source": str(self.path), "columns": list(names)}
+        # the values column first, as write_columns (texsense.io.columns) writes it
+        meta = {
+            "format": "columns-csv",
+            "source": str(self.path),
+            "columns": [self._values, *labels],
+        }
         return Header(
             Layout.grid(1, 1, pitch_cm=1.0),
             quantity,
