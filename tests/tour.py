@@ -12,8 +12,9 @@ Rules (also in docs/development.md):
 - Servers (``texsense monitor``, ``texsense station``, ``texsense simulate device``, ``bash
   scripts/run.sh``) start in the background; the runner waits until they answer (their
   page, or the device's link) and stops them with Ctrl-C (SIGINT) at the end of the
-  block, or before the next server of the block starts. The one thing the runner adds to a
-  command: a free ``--port`` to a monitor or station that names none (tests run side by side).
+  block, or before the next server of the block starts. The one thing the runner changes in a
+  command: a monitor or station gets a free ``--port`` (in place of one the page names: tests
+  and people run side by side).
 - A command with a trailing comment ``# needs: ...`` (outside hardware, a site broker, a
   cluster) is skipped and listed with its reason.
 """
@@ -114,12 +115,9 @@ class _Server:
         text = cmd.text
         self.port: int | None = None
         if re.search(r"texsense\s+(monitor|station)|scripts/run\.sh", text):
-            m = re.search(r"--port[ =](\d+)", text)
-            if m:
-                self.port = int(m.group(1))
-            else:
-                self.port = _free_port()
-                text = _strip_comment(text) + f" --port {self.port}"
+            # a free port, in place of the one the page names (tests and people run side by side)
+            self.port = _free_port()
+            text = re.sub(r"\s--port[ =]\d+", "", _strip_comment(text)) + f" --port {self.port}"
         self.link = None
         m = re.search(r"--link[ =](\S+)", text)
         if m:
