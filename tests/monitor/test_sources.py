@@ -198,7 +198,7 @@ def test_virtual_seat_source_gives_capacitance_with_failures():
 
 
 def test_virtual_bed_source_turns_and_leaves_the_bed():
-    from texsense.monitor.sources import VirtualBedSource
+    from texsense.monitor.virtual import VirtualBedSource
 
     src = VirtualBedSource(speed=0, hold_s=3, positions_per_stay=3, away_s=3, seed=1)
     seen = []
