@@ -316,3 +316,16 @@ def test_auto_chooses_by_subject_and_says_what_it_chose():
     assert report.accuracy > 0.85
     with pytest.raises(ParameterError, match="auto has no regularisation C"):
         make_classifier("auto", c=1.0)
+
+
+def test_alignment_ignores_readings_below_zero():
+    # compensated maps hold small negative readings; they carry no force (and np.cov refuses
+    # negative weights)
+    m = np.zeros((1, 9, 9))
+    m[0, 2:4, 5:7] = 1.0
+    noisy = m.copy()
+    noisy[0, 8, 0] = -0.05
+    for rotate in (False, True):
+        a, b = align_maps(m, rotate=rotate), align_maps(noisy, rotate=rotate)
+        assert np.isfinite(b).all()
+        np.testing.assert_allclose(np.maximum(a, 0).sum(), np.maximum(b, 0).sum(), rtol=1e-6)

@@ -14,20 +14,23 @@ Rules (also in docs/development.md):
   page, or the device's link) and stops them with Ctrl-C (SIGINT) at the end of the
   block, or (a monitor, station or run.sh) before the next one of the block starts; a
   virtual device runs on to the end of its block, for the monitors that read it. The one
-  thing the runner adds to a command: a free ``--port`` to a monitor or station that names
-  none (tests run side by side).
+  thing the runner changes in a command: a monitor or station gets a free ``--port`` (in
+  place of one the page names: tests and people run side by side).
 - A command with a trailing comment ``# needs: ...`` (outside hardware, a site broker, a
   cluster) is skipped and listed with its reason.
 """
 
 from __future__ import annotations
 
+import argparse
+import concurrent.futures
 import doctest
 import os
 import re
 import signal
 import socket
 import subprocess
+import tempfile
 import time
 import urllib.request
 from dataclasses import dataclass, field
@@ -73,6 +76,7 @@ class Outcome:
     ran: list[str] = field(default_factory=list)
     skipped: list[tuple[str, str]] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
+    seconds: float = 0.0
 
 
 def commands(page: Path) -> list[Command]:
@@ -114,12 +118,9 @@ class _Server:
         text = cmd.text
         self.port: int | None = None
         if re.search(r"texsense\s+(monitor|station)|scripts/run\.sh", text):
-            m = re.search(r"--port[ =](\d+)", text)
-            if m:
-                self.port = int(m.group(1))
-            else:
-                self.port = _free_port()
-                text = _strip_comment(text) + f" --port {self.port}"
+            # a free port, in place of the one the page names (tests and people run side by side)
+            self.port = _free_port()
+            text = re.sub(r"\s--port[ =]\d+", "", _strip_comment(text)) + f" --port {self.port}"
         self.link = None
         m = re.search(r"--link[ =](\S+)", text)
         if m:
@@ -161,11 +162,11 @@ class _Server:
             return f"had exited with {self.proc.returncode}"
         os.killpg(self.proc.pid, signal.SIGINT)
         try:
-            self.proc.wait(timeout=10)
+            self.proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
             os.killpg(self.proc.pid, signal.SIGKILL)
             self.proc.wait()
-            return "did not stop within 10 s of Ctrl-C"
+            return "did not stop within 30 s of Ctrl-C"
         if "Traceback" in self.output():
             return "printed a traceback"
         return None
@@ -195,6 +196,7 @@ def _strip_comment(text: str) -> str:
 
 def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) -> Outcome:
     """Run every command of ``page`` in a fresh folder under ``folder``."""
+    started = time.monotonic()
     work = _prepare(folder, shared)
     env = dict(os.environ, TEXSENSE_NO_PROGRESS="1", COLUMNS="100")
     env.pop("PYTEST_CURRENT_TEST", None)
@@ -249,4 +251,54 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
                 f"--- got\n{proc.stdout}{proc.stderr}"
             )
     stop_servers()
+    outcome.seconds = time.monotonic() - started
     return outcome
+
+
+def run_pages(
+    pages: list[Path], folder: Path, shared: Path, *, jobs: int = 2
+) -> dict[Path, Outcome]:
+    """Run ``pages`` (each in a folder of its own under ``folder``), ``jobs`` at a time: a
+    page waits mostly on servers starting and child processes, and the pages share nothing
+    (every monitor and station gets a free port), so two lanes halve the tour's wall time.
+    The pages start in the order given (put the longest first)."""
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        futures = {
+            page: pool.submit(run_page, page, folder / f"{k:02d}-{page.stem}", shared)
+            for k, page in enumerate(pages)
+        }
+        return {page: f.result() for page, f in futures.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python tests/tour.py [PAGE.md ...]``: run the pages (default: the README and every
+    docs page), print per page what ran, was skipped and failed, and the time taken."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("pages", nargs="*", type=Path, help="pages (default: all)")
+    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared", help="data root")
+    parser.add_argument("--jobs", type=int, default=2, help="pages run at a time (2)")
+    args = parser.parse_args(argv)
+    pages = args.pages or [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    start = time.monotonic()
+    with tempfile.TemporaryDirectory() as folder:
+        outcomes = run_pages(
+            [p for p in pages if commands(p)], Path(folder), args.shared, jobs=args.jobs
+        )
+    print("| page | commands run | passed | skipped (needs) | time |")
+    print("|---|---:|---:|---:|---:|")
+    for page, o in outcomes.items():
+        passed = sum(1 for text in o.ran if not any(f.startswith(text) for f in o.failures))
+        print(f"| {page.name} | {len(o.ran)} | {passed} | {len(o.skipped)} | {o.seconds:.1f} s |")
+    failed = 0
+    for page, o in outcomes.items():
+        for text, why in o.skipped:
+            print(f"{page.name}: skipped (needs {why}): {text}")
+        for text in o.failures:
+            failed += 1
+            print(f"{page.name}: FAILED: " + text.replace("\n", "\n    "))
+    print(f"\ntotal {time.monotonic() - start:.1f} s ({args.jobs} at a time), {failed} failure(s)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

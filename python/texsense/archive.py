@@ -23,6 +23,7 @@ from __future__ import annotations
 import glob
 import hashlib
 import json
+import logging
 import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -291,6 +292,10 @@ def process_archive(
             processes=True,
             dashboard_address=None,
             env=one_thread,
+            # a worker's heartbeat to a scheduler closing at the end is logged as an error
+            # with a traceback on a loaded machine; a task's own failure comes back through
+            # its future (a FileReport), so the cluster's logs stay quiet
+            silence_logs=logging.CRITICAL,
         )
         client = Client(cluster)
     else:

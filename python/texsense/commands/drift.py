@@ -13,7 +13,7 @@ from texsense.commands import HELP
 from texsense.drift import DriftModel, split_steps
 from texsense.exceptions import FormatError, ParameterError
 from texsense.hysteresis import HysteresisModel
-from texsense.io.columns_csv import read_columns_csv
+from texsense.io.columns import read_columns
 from texsense.stages import Drift, Hysteresis, StageChain, load_chain
 
 
@@ -106,7 +106,7 @@ def load_steps(path: Path) -> list:
 
 
 def _columns(path: Path) -> dict:
-    return read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
+    return read_columns(path, required=("time_s", "compression_mm", "pressure_ncm2"))
 
 
 def load_model(path: Path) -> tuple[HysteresisModel, DriftModel | None]:

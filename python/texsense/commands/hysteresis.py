@@ -15,8 +15,9 @@ from texsense.drift import DriftModel
 from texsense.exceptions import FormatError
 from texsense.hysteresis import HysteresisModel
 from texsense.hysteresis.plots import model_figure, validation_report_figure
+from texsense.hysteresis.sampling import check_sampling
 from texsense.hysteresis.validation import validate
-from texsense.io.columns_csv import read_columns_csv, write_columns_csv
+from texsense.io.columns import read_columns, write_columns
 from texsense.stages import Drift, Hysteresis, StageChain
 
 #: Pressure bands of the error summary (thesis §4.5), in the output's unit.
@@ -145,7 +146,7 @@ def error_summary(
 
 def run_fit(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis fit``."""
-    cols = read_columns_csv(args.calibration)
+    cols = read_columns(args.calibration)
     u = _column(cols, args.input, args.calibration)
     y = _column(cols, args.output, args.calibration)
     model = HysteresisModel(
@@ -207,12 +208,13 @@ def _model_and_record(
     """The model and its drift stage, the record's columns, the input and output names (the
     model's unless given) and the input column, with its unit checked against the model's."""
     model, drift = load_model(args.model)
-    cols = read_columns_csv(args.data)
+    cols = read_columns(args.data)
     in_name = args.input or model.input_name
     out_name = args.output or model.output_name
     u = _column(cols, in_name, args.data)
     if args.input and _unit_of(in_name) != "1":
         model.check_units(_unit_of(in_name))
+    check_sampling(model, u, cols.get("time_s"), in_name)
     return model, drift, cols, in_name, out_name, u
 
 
@@ -225,7 +227,7 @@ def run_apply(args: argparse.Namespace) -> int:
     if drift is not None:
         modelled = drift.apply(modelled, _column(cols, "time_s", args.data))
     cols[f"{out_name}_model"] = modelled
-    write_columns_csv(args.out, cols)
+    write_columns(args.out, cols, values=f"{out_name}_model", unit=model.output_unit)
     summary: dict[str, Any] = {
         "out": str(args.out),
         "samples": int(u.size),

@@ -7,28 +7,33 @@ process`` uses); :func:`save` writes HDF5, wide CSV or Tekscan ASCII by extensio
 ``format``, always under a temporary name that is renamed when complete. One module per
 format, one reader class each over :class:`texsense.io._base.RecordingReader`:
 
-==============  =====================================  ========  ===========
-format          what                                   read      write
-==============  =====================================  ========  ===========
-``hdf5``        texsense recording (``.h5``)           yes       yes
-``pmd``         PhysioNet PMD text files (folders)     yes       no
-``tekscan``     Tekscan ASCII ``.csv`` / ``.asf``      yes       yes
-``xsensor``     XSENSOR CSV export                     yes       no
-``pliance``     novel pliance ``.asc``                 yes       no
-``wide-csv``    ``time_s,e0,e1,...``                   yes       yes
-==============  =====================================  ========  ===========
+===============  =====================================  ========  ===========
+format           what                                   read      write
+===============  =====================================  ========  ===========
+``hdf5``         texsense recording (``.h5``)           yes       yes
+``pmd``          PhysioNet PMD text files (folders)     yes       no
+``tekscan``      Tekscan ASCII ``.csv`` / ``.asf``      yes       yes
+``xsensor``      XSENSOR CSV export                     yes       no
+``pliance``      novel pliance ``.asc``                 yes       no
+``wide-csv``     ``time_s,e0,e1,...``                   yes       yes
+``columns-csv``  a column table (one element)           yes       no (``io.columns``)
+===============  =====================================  ========  ===========
 """
 
 from __future__ import annotations
 
 import inspect
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
 from texsense.io._text import decode_head, open_binary
+from texsense.io.columns_csv import TableReader, is_columns_csv, read_table
 from texsense.io.hdf5 import HDF5Reader, RecordingWriter, read_hdf5, write_hdf5
 from texsense.io.pliance import PlianceReader, read_pliance
 from texsense.io.pmd import PMDReader, is_pmd_path, read_pmd
@@ -46,6 +51,7 @@ __all__ = [
     "RecordingWriter",
     "load",
     "open_reader",
+    "read_folder",
     "read_hdf5",
     "read_pliance",
     "read_pmd",
@@ -66,6 +72,7 @@ READERS: dict[str, Callable[..., Recording]] = {
     "xsensor": read_xsensor,
     "pliance": read_pliance,
     "wide-csv": read_wide_csv,
+    "columns-csv": read_table,
 }
 
 READER_CLASSES: dict[str, type[RecordingReader]] = {
@@ -75,6 +82,7 @@ READER_CLASSES: dict[str, type[RecordingReader]] = {
     "xsensor": XSensorReader,
     "pliance": PlianceReader,
     "wide-csv": WideCSVReader,
+    "columns-csv": TableReader,
 }
 
 WRITERS: dict[str, Callable[..., Path]] = {
@@ -104,9 +112,7 @@ def sniff_format(path: str | Path) -> str:
     if not path.exists():
         raise FormatError(path, "no such file or folder")
     if path.is_dir():
-        if is_pmd_path(path):
-            return "pmd"
-        raise FormatError(path, "folder is not a PMD tree (no S1, S2, ... or 1.txt .. 17.txt)")
+        return "pmd" if is_pmd_path(path) else "folder"  # a folder of recordings: read_folder
     with open_binary(path) as fh:
         head = fh.read(1 << 16)
     if head.startswith(_HDF5_SIGNATURE):
@@ -124,6 +130,8 @@ def sniff_format(path: str | Path) -> str:
         return "xsensor"
     if first.startswith("file name:") and "mat type" in text[:300]:
         return "pliance"
+    if is_columns_csv(path):
+        return "columns-csv"
     if first.startswith(_WIDE_MAGIC) or first.startswith("time_s,") or first.startswith("# "):
         return "wide-csv"
     tokens = [t for t in first.strip().split("\t") if t.strip()]
@@ -167,6 +175,12 @@ def open_reader(
     82
     """
     fmt = format or sniff_format(path)
+    if fmt == "folder":
+        raise FormatError(
+            path,
+            "a folder that is not a PMD tree: this reads one recording at a time (a folder "
+            "of recordings: texsense.load, or 'texsense process' as an archive)",
+        )
     if fmt not in READER_CLASSES:
         raise ParameterError(f"unknown format {fmt!r}; known: {', '.join(READER_CLASSES)}")
     cls = READER_CLASSES[fmt]
@@ -205,8 +219,95 @@ def load(
     >>> rec.layout.shape, rec.n_frames
     ((28, 28), 309)
     """
+    if (format or sniff_format(path)) == "folder":
+        return read_folder(path, accept_truncated=accept_truncated, **options)
     with open_reader(path, format=format, accept_truncated=accept_truncated, **options) as r:
         return r.read()
+
+
+def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: Any) -> Recording:
+    """Every recording in a folder (and its subfolders, in natural order of their paths)
+    as one recording, e.g. the folder ``texsense process`` or ``texsense seat-sessions``
+    writes: files that are not recordings (``calibration.json``, a report) are passed over;
+    a label ``file`` names the file each frame comes from (unless the files have one). Times
+    run on: a file whose times would go back (each file starting at 0 s) is shifted to start
+    one frame period after the previous one ends.
+
+    Raises
+    ------
+    FormatError
+        If the folder holds no recording, or its recordings differ in layout, quantity, unit
+        or label names (the first that differs is named).
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise FormatError(folder, "no such folder")
+    files = []
+    for p in sorted((q for q in folder.rglob("*") if q.is_file()), key=_natural):
+        try:
+            sniff_format(p)
+        except FormatError:
+            continue
+        files.append(p)
+    if not files:
+        raise FormatError(
+            folder,
+            "holds no recording texsense reads (and is not a PMD tree: no S1, S2, ... or "
+            "1.txt .. 17.txt)",
+        )
+    parts = []
+    for p in files:
+        rec = load(p, accept_truncated=accept_truncated, **options)
+        if "file" not in rec.labels:
+            name = str(p.relative_to(folder))
+            rec = rec.with_labels({**rec.labels, "file": np.full(rec.n_frames, name)})
+        first = parts[0] if parts else rec
+        why = _differs(first, rec)
+        if why:
+            raise FormatError(p, f"{why} than {files[0].name}: a folder is read as one recording")
+        if parts and rec.n_frames and parts[-1].n_frames:
+            rec = _after(parts[-1], rec)
+        parts.append(rec)
+    return Recording.concatenate(parts)
+
+
+def _after(previous: Recording, rec: Recording) -> Recording:
+    """``rec`` with its times shifted to start one frame period after ``previous`` ends when
+    they would go back (files that each start at 0 s); as they are otherwise."""
+    end = float(previous.times[-1])
+    if rec.times[0] > end:
+        return rec
+    steps = np.diff(rec.times)
+    period = float(np.median(steps)) if steps.size else 1.0
+    shift = end + period - float(rec.times[0])
+    et = None if rec.element_times is None else rec.element_times + shift
+    return Recording(
+        rec.frames,
+        rec.times + shift,
+        rec.layout,
+        rec.quantity,
+        rec.unit,
+        valid=rec.valid,
+        element_times=et,
+        labels=rec.labels,
+        meta=rec.meta,
+    )
+
+
+def _natural(p: Path) -> list[Any]:
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", str(p))]
+
+
+def _differs(a: Recording, b: Recording) -> str | None:
+    if a.layout != b.layout:
+        return f"another layout ({b.layout.n_elements} elements)"
+    if (a.quantity, a.unit) != (b.quantity, b.unit):
+        return f"another quantity ({b.quantity} in {b.unit})"
+    if a.labels.keys() != b.labels.keys():
+        return f"other labels ({', '.join(sorted(b.labels))})"
+    if (a.element_times is None) != (b.element_times is None):
+        return "element time stamps present in only some files"
+    return None
 
 
 def format_for_output(path: str | Path) -> str:

@@ -23,13 +23,87 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from texsense import units
 from texsense._progress import logger
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.files import atomic_open
-from texsense.io._base import BlockReader
-from texsense.io._text import TextLines, is_number, parse_csv_row
+from texsense.io._base import BlockReader, Header, Piece, RecordingReader
+from texsense.io._text import TextLines, decode_head, is_number, open_binary, parse_csv_row
+from texsense.layout import Layout
+from texsense.recording import QUANTITIES, Recording
 
-__all__ = ["ColumnsReader", "read_columns_csv", "write_columns_csv"]
+__all__ = [
+    "ColumnsReader",
+    "TableReader",
+    "column_name",
+    "is_columns_csv",
+    "read_columns_csv",
+    "read_table",
+    "unit_of_column",
+    "write_columns_csv",
+]
+
+
+#: Column-name suffix of each unit (``compression_mm``, ``pressure_ncm2``, ``capacitance_pF``).
+SUFFIXES: dict[str, str] = {
+    "mm": "mm",
+    "N/cm2": "ncm2",
+    "kPa": "kpa",
+    "N": "n",
+    "pF": "pF",
+    "s": "s",
+    "mmHg": "mmhg",
+}
+
+
+def column_name(quantity: str, unit: str) -> str:
+    """The column of a recording's values: ``capacitance`` in ``pF`` -> ``capacitance_pF``."""
+    suffix = SUFFIXES.get(unit, "".join(c for c in unit if c.isalnum()).lower())
+    return f"{quantity}_{suffix}" if suffix else quantity
+
+
+def unit_of_column(name: str) -> str | None:
+    """The unit a column's suffix names (``pressure_ncm2`` -> ``N/cm2``), or None."""
+    low = name.lower()
+    for unit, suffix in SUFFIXES.items():
+        if low.endswith("_" + suffix.lower()):
+            return unit
+    return None
+
+
+def _header(path: Path) -> tuple[list[str], list[str]]:
+    """The ``#`` lines and the names of the first other line of a text file."""
+    with open_binary(path) as fh:
+        head = fh.read(1 << 14)
+    if b"\0" in head:
+        return [], []
+    comments, names = [], []
+    for line in decode_head(head).splitlines():
+        if line.startswith("#"):
+            comments.append(line)
+        elif line.strip():
+            names = [s.strip() for s in line.split(",")]
+            break
+    return comments, names
+
+
+def is_columns_csv(path: str | Path) -> bool:
+    """Whether ``path`` is a column table rather than a recording: texsense's ``# rows:``
+    line, or a header of names that does not start with ``time_s`` followed by element
+    columns (a wide CSV), or whose every other column names a unit (``force_n``)."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    comments, names = _header(path)
+    if any(c.startswith("# rows:") for c in comments):
+        return True
+    if any(c.startswith("# texsense wide-csv") for c in comments) or len(names) < 2:
+        return False
+    if any(is_number(n) for n in names):
+        return False  # numbers, not names: a PMD or other data line
+    if names[0] != "time_s":
+        return True
+    return all(unit_of_column(n) is not None for n in names[1:])
 
 
 def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) -> Path:
@@ -175,4 +249,75 @@ def read_columns_csv(
     naming the first of the ``required`` columns that is missing, or (unless
     ``accept_truncated``) a table cut short."""
     with ColumnsReader(path, required, accept_truncated=accept_truncated) as reader:
+        return reader.read()
+
+
+def _quantity_of_column(name: str) -> tuple[str, str] | None:
+    """(quantity, unit) of a column whose suffix names a unit (``_model`` aside), or None."""
+    unit = unit_of_column(name.removesuffix("_model"))
+    if unit is None or unit == "s":
+        return None
+    try:
+        kind = units.quantity_of(unit)
+    except UnitError:
+        return None
+    quantity = name.split("_", 1)[0]
+    if QUANTITIES.get(quantity) != kind:
+        quantity = next((q for q, k in QUANTITIES.items() if k == kind), "")
+    return (quantity, unit) if quantity else None
+
+
+class TableReader(RecordingReader):
+    """A column table read as a one-element recording (``texsense info calib.csv``): its
+    values are the last column that names a unit (``capacitance_pF`` of the simulator's
+    tables, ``<output>_model`` of ``hysteresis apply``), ``time_s`` the times (else one per
+    row), every other column a label."""
+
+    format = "columns-csv"
+
+    def _read_header(self) -> Header:
+        self._table = ColumnsReader(self.path, accept_truncated=self.accept_truncated)
+        names = self._table.names
+        found = [(n, q) for n in names if n != "time_s" and (q := _quantity_of_column(n))]
+        if not found:
+            raise FormatError(
+                self.path,
+                f"no column names a unit (e.g. pressure_ncm2, capacitance_pF): {', '.join(names)}",
+            )
+        self._values, (quantity, unit) = found[-1]
+        labels = [n for n in names if n not in ("time_s", self._values)]
+        # the values column first, as write_columns (texsense.io.columns) writes it
+        meta = {
+            "format": "columns-csv",
+            "source": str(self.path),
+            "columns": [self._values, *labels],
+        }
+        return Header(
+            Layout.grid(1, 1, pitch_cm=1.0),
+            quantity,
+            unit,
+            meta,
+            declared_frames=self._table.declared_rows,
+            label_dtypes=dict.fromkeys(labels, np.float64),
+        )
+
+    def _pieces(self) -> Iterator[Piece]:
+        row = 0
+        for block in self._table.blocks(self._block if self._block < 1 << 30 else 65536):
+            n = block[self._values].size
+            times = block.get("time_s", np.arange(row, row + n, dtype=np.float64))
+            row += n
+            labels = {k: block[k] for k in self.header.label_dtypes}
+            yield Piece(block[self._values][:, None], times, labels)
+
+    def close(self) -> None:
+        """Release the table."""
+        table = getattr(self, "_table", None)
+        if table is not None:
+            table.close()
+
+
+def read_table(path: str | Path, *, accept_truncated: bool = False) -> Recording:
+    """A column table as a one-element recording (see :class:`TableReader`)."""
+    with TableReader(path, accept_truncated=accept_truncated) as reader:
         return reader.read()

@@ -88,14 +88,16 @@ def align_maps(maps: npt.ArrayLike, rotate: bool = False) -> np.ndarray:
     r, c = np.mgrid[:rows, :cols]
     out = np.empty_like(m)
     for k, a in enumerate(m):
-        w = a.sum()
+        force = np.maximum(a, 0.0)  # a compensated reading a little below zero carries no force
+        w = force.sum()
         if w <= 0:
             out[k] = a
             continue
-        cr, cc = (a * r).sum() / w, (a * c).sum() / w
+        cr, cc = (force * r).sum() / w, (force * c).sum() / w
         shifted = ndimage.shift(a, ((rows - 1) / 2 - cr, (cols - 1) / 2 - cc), order=1)
         if rotate:
-            cov = np.cov(np.vstack([(r - cr).ravel(), (c - cc).ravel()]), aweights=a.ravel())
+            coords = np.vstack([(r - cr).ravel(), (c - cc).ravel()])
+            cov = np.cov(coords, aweights=force.ravel())
             axis = np.linalg.eigh(cov)[1][:, 1]  # the longer principal axis (row, col)
             angle = (np.degrees(np.arctan2(axis[1], axis[0])) + 90.0) % 180.0 - 90.0
             shifted = ndimage.rotate(shifted, -angle, reshape=False, order=1)

@@ -58,7 +58,7 @@ MATS = ("seat", "bed")
 #: What can lie on it (``uniform:P`` with P in N/cm²).
 LOADS = ("empty", "uniform:P", "person")
 #: Seconds between two announcements of the layout.
-ANNOUNCE_EVERY_S = 5.0
+ANNOUNCE_EVERY_S = 1.0
 
 
 def parse_load(text: str) -> tuple[str, float]:
