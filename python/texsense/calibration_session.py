@@ -37,7 +37,7 @@ from texsense.calibration_checks import (
 )
 from texsense.drift import split_steps
 from texsense.exceptions import ParameterError
-from texsense.io.columns_csv import read_columns_csv
+from texsense.io.columns import read_columns
 from texsense.pipeline import Pipeline
 from texsense.recording import Recording
 from texsense.sim.spacer import PRESETS as SPACER_PRESETS
@@ -52,7 +52,7 @@ CHECK_TOLERANCE = 0.10
 
 def steps_csv(path: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Held steps of a step-and-hold CSV (time_s, compression_mm, pressure_ncm2)."""
-    cols = read_columns_csv(path, required=("time_s", "compression_mm", "pressure_ncm2"))
+    cols = read_columns(path, required=("time_s", "compression_mm", "pressure_ncm2"))
     return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
 
 
@@ -81,7 +81,7 @@ def load_material(
             f"--material {material}: no such file, and not a spacer preset (presets: "
             f"{', '.join(SPACER_PRESETS)})"
         )
-    record = read_columns_csv(path, required=("compression_mm", "capacitance_pF", "pressure_ncm2"))
+    record = read_columns(path, required=("compression_mm", "capacitance_pF", "pressure_ncm2"))
     if thickness_mm is None:
         raise ParameterError(
             f"--material {path} is a record: give the spacer's --thickness-mm (its capacitance "
