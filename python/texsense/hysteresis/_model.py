@@ -161,9 +161,7 @@ class HysteresisModel:
     ) -> HysteresisModel:
         """Identify the Everett function from a record of inputs and outputs (T,)."""
         if self.method not in ("auto", "thesis", "lsq", "relay"):
-            raise ParameterError(
-                f"method must be auto, lsq, relay or thesis, got {self.method!r}"
-            )
+            raise ParameterError(f"method must be auto, lsq, relay or thesis, got {self.method!r}")
         units.canonical(self.input_unit)
         units.canonical(self.output_unit)
         u = np.asarray(inputs, dtype=np.float64).ravel()
@@ -232,9 +230,7 @@ class HysteresisModel:
                     return None
                 return t.everett, t.offset
 
-            thesis_err = (
-                fold_errors_of_table(u, p, fold, thesis_fold) if fold.max() >= 1 else None
-            )
+            thesis_err = fold_errors_of_table(u, p, fold, thesis_fold) if fold.max() >= 1 else None
             comparison = {
                 "thesis_fold_mse": None if thesis_err is None else thesis_err.tolist(),
                 "lsq_fold_mse": lsq_err,
@@ -249,9 +245,7 @@ class HysteresisModel:
             return lsq
         if lsq_err is None:
             return lsq
-        relay = identify_relay(
-            u, p, self.grid, nodes=self.cells, folds=self.folds, signed=None
-        )
+        relay = identify_relay(u, p, self.grid, nodes=self.cells, folds=self.folds, signed=None)
         plain = next(
             (c for c in relay.details["cv"] if not c["signed"]), None
         )  # the non-negative grid's best fold errors
@@ -268,6 +262,32 @@ class HysteresisModel:
         thesis method, or when the record has too few reversal curves to hold any out)."""
         self._check_fitted()
         return self.details_.get("validation_rmse")
+
+    def fit_diagnosis(self, inputs: npt.ArrayLike, outputs: npt.ArrayLike) -> dict[str, Any]:
+        """Training error, held-out validation error and the record's noise side by side.
+
+        The noise is estimated from the output's second differences along the record
+        (median absolute value / 0.6745 / √6: white noise, robust to the branches' curvature
+        and to turning points). ``underfit`` is True when the training RMSE is more than
+        three times the noise and above 1 % of the output range: the model cannot follow
+        the record it was identified on (more nodes, another method), which no amount of
+        cross-validation will reveal from the validation error alone."""
+        self._check_fitted()
+        u = np.asarray(inputs, dtype=np.float64).ravel()
+        y = np.asarray(outputs, dtype=np.float64).ravel()
+        ok = np.isfinite(u) & np.isfinite(y)
+        u, y = u[ok], y[ok]
+        train = float(np.sqrt(np.mean((self.predict(u) - y) ** 2)))
+        d2 = np.diff(y, 2)
+        noise = float(np.median(np.abs(d2)) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
+        span = float(np.ptp(y)) if y.size else 0.0
+        return {
+            "training_rmse": train,
+            "validation_rmse": self.details_.get("validation_rmse"),
+            "noise_rmse": noise,
+            "output_range": span,
+            "underfit": bool(train > 3.0 * noise and train > 0.01 * span),
+        }
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "everett_"):

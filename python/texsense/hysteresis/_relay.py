@@ -114,7 +114,8 @@ def nonuniform_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]
     indptr, alpha, beta, coef = everett_terms(
         np.ascontiguousarray(u, dtype=np.float64), float(nodes[0]), float(nodes[-1])
     )
-    row = np.repeat(np.arange(u.size), np.diff(indptr.astype(np.int64)))
+    counts: np.ndarray = np.diff(np.asarray(indptr, dtype=np.int64))
+    row = np.repeat(np.arange(u.size), counts)
     i0 = np.clip(np.searchsorted(nodes, alpha, side="right") - 1, 0, m - 2)
     j0 = np.clip(np.searchsorted(nodes, beta, side="right") - 1, 0, m - 2)
     wa = np.clip((alpha - nodes[i0]) / (nodes[i0 + 1] - nodes[i0]), 0.0, 1.0)

@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from texsense._core import SpacerBank
 from texsense.exceptions import ParameterError
-from texsense.sim.iwan import IwanMaterial
+from texsense.sim.iwan import IwanBank, IwanMaterial
 
 __all__ = ["PRESETS", "BoucWenMaterial", "DriveResult", "Spacer", "SpacerMaterial"]
 
@@ -319,7 +319,7 @@ class Spacer:
             raise ParameterError(f"unknown spacer preset {name!r}; known: {', '.join(PRESETS)}")
         return cls(PRESETS[name], n_specimens, seed)
 
-    def _new_bank(self) -> SpacerBank:
+    def _new_bank(self) -> SpacerBank | IwanBank:
         return self._effective.bank(self.scale)
 
     @property
