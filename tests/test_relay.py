@@ -77,7 +77,11 @@ def test_relay_model_obeys_wiping_out_return_point_memory_and_congruency(sharp_f
     ident = identify_relay(u, y, signed=False)  # a non-negative density (the signed one
     m = HysteresisModel(input_unit="1", output_unit="1")  # has no such guarantees)
     m.everett_, m.u_min_, m.u_max_, m.offset_, m.sign_ = (
-        ident.everett, ident.u_min, ident.u_max, ident.offset, 1.0
+        ident.everett,
+        ident.u_min,
+        ident.u_max,
+        ident.offset,
+        1.0,
     )
     f = m.everett_
     low = np.tril(np.ones_like(f, bool), -1)
