@@ -204,6 +204,20 @@ def run_fit(args: argparse.Namespace) -> int:
                 f"  chosen by {d['validation_folds']}-fold cross-validation on held-out reversal "
                 f"curves: {setting}; validation RMSE {model.validation_rmse_:.4g}"
             )
+        elif "members" in model.details_:
+            d = model.details_
+            folds = [d.get("thesis_fold_mse"), d.get("lsq_fold_mse")]
+            cv = ", ".join(
+                f"{name} {np.sqrt(np.mean(f)):.4g}"
+                for name, f in zip(("thesis", "least squares"), folds, strict=True)
+                if f is not None
+            )
+            print(
+                "  the mean of the thesis table and least squares: neither is clearly better "
+                f"on held-out reversal curves (validation RMSE {cv})"
+            )
+        elif model.method_ == "thesis" and model.method == "auto":
+            print("  the thesis method: too few reversal curves for least squares to show a gain")
         elif model.method_ != "thesis":
             print("  too few reversal curves to hold any out: settings not cross-validated")
         diag = summary["diagnosis"]

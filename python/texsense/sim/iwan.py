@@ -191,16 +191,45 @@ class IwanBank:
         if self.n_elements != 1:
             raise ParameterError("ramp_until drives one specimen")
         rising = rate > 0
-        es, ps = [], []
+        # one specimen, step by step: plain floats (numpy's per-call cost would dominate)
+        m = self.m
+        k = [float(x) for x in self.k]
+        tau = [float(x) for x in self.tau]
+        sig = [float(x) for x in self.sigma[0]]
+        scale = float(self.scale[0])
+        e = float(self.e[0])
+        e_max = m.densification * (1 - 1e-6)
+        base = m.base_load * m.p50_ncm2
+        decay = dt / m.relax_s
+        n_exp = m.relax_exponent
+        E, cubic, dens, es2 = self.E, m.cubic, m.densification, m.stiffening_strain
+        es_out: list[float] = []
+        ps_out: list[float] = []
         done = False
         for _ in range(max_steps):
-            self._relax(dt)
-            e_new = np.clip(self.e + rate * dt, 0.0, self.m.densification * (1 - 1e-6))
-            p = self._move(e_new)
-            es.append(float(self.e[0]))
-            ps.append(float(p[0]))
-            if (rising and p[0] >= target) or (not rising and (p[0] <= target or e_new[0] <= 0)):
+            load0 = base + E * e * (1 + cubic * e * e) / (1 - e / dens)
+            for i in range(len(sig)):  # viscoplastic relaxation over dt
+                ratio = abs(sig[i]) / (tau[i] * load0)
+                sig[i] *= float(np.exp(-decay * ratio**n_exp)) if ratio > 1e-12 else 1.0
+            e_new = min(max(e + rate * dt, 0.0), e_max)
+            mid = 0.5 * (e + e_new)
+            stiff = 1 + (mid / es2) ** 2
+            bb = E * e_new * (1 + cubic * e_new * e_new) / (1 - e_new / dens)
+            load = base + bb
+            total = bb
+            for i in range(len(sig)):
+                lim = tau[i] * load
+                v = sig[i] + k[i] * stiff * (e_new - e)
+                sig[i] = lim if v > lim else (-lim if v < -lim else v)
+                total += sig[i]
+            e = e_new
+            p = max(scale * total, 0.0)
+            es_out.append(e)
+            ps_out.append(p)
+            if (rising and p >= target) or (not rising and (p <= target or e <= 0.0)):
                 done = True
                 break
-        e = np.asarray(es)
-        return e, np.asarray(ps), e.copy(), done
+        self.e[0] = e
+        self.sigma[0] = sig
+        out = np.asarray(es_out)
+        return out, np.asarray(ps_out), out.copy(), done
