@@ -36,8 +36,10 @@ def test_minor_loops_are_not_congruent():
 
     def loop_rise(centre):
         sp = Spacer.preset("iwan-6mm")
-        e = np.concatenate([np.linspace(0, centre + 0.2, 200), np.linspace(centre + 0.2, centre, 50),
-                            np.linspace(centre, centre + 0.2, 50)])  # fmt: skip
+        top = centre + 0.2
+        e = np.concatenate(
+            [np.linspace(0, top, 200), np.linspace(top, centre, 50), np.linspace(centre, top, 50)]
+        )
         p = sp.drive_displacement(np.linspace(0, 60, e.size), e).pressure_ncm2[:, 0]
         return p[-1] - p[-50]
 
