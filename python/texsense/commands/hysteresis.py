@@ -224,7 +224,11 @@ def run_fit(args: argparse.Namespace) -> int:
         held = diag["validation_rmse"]
         print(
             f"  training RMSE {diag['training_rmse']:.4g} | validation RMSE "
-            + ("—" if held is None else f"{held:.4g}")
+            + (
+                f"{held:.4g}"
+                if held is not None
+                else ("of each member above" if "members" in model.details_ else "—")
+            )
             + f" | noise {diag['noise_rmse']:.2g}"
         )
         if diag["underfit"]:
