@@ -288,11 +288,12 @@ RELAY_RIDGES: tuple[float, ...] = (1e-7, 1e-5, 1e-3)
 
 def _relay_nodes(u: np.ndarray, requested: int | None, tol: float) -> int:
     """Nodes of the relay grid: 60, fewer for a record with few turning points (about two
-    nodes per reversal, at least 12)."""
+    nodes per reversal) or few samples (about √T nodes: no more cells than half the
+    samples), at least 12."""
     if requested is not None:
         return max(int(requested), 3)
     turns = len(split_branches(u, tol))
-    return int(np.clip(2 * turns, 12, 60))
+    return int(np.clip(min(2 * turns, np.sqrt(u.size)), 12, 60))
 
 
 def identify_relay(
