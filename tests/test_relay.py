@@ -51,8 +51,8 @@ def test_nodes_follow_the_record():
 
 @pytest.fixture(scope="module")
 def sharp_forcs():
-    """A narrow switching-field distribution with interactions, measured as 80 FORCs."""
-    return forc_protocol(80, 0.02, noise=1e-3, coercivity_spread=0.03, interaction=-0.1)
+    """A narrow switching-field distribution with interactions, measured as 100 FORCs."""
+    return forc_protocol(100, 0.01, noise=1e-3, coercivity_spread=0.03, interaction=-0.1)
 
 
 def test_sharp_switching_forcs_even_to_odd_within_one_percent(sharp_forcs):
