@@ -62,3 +62,46 @@ def pmd_reliable() -> tuple:
     main = np.array([POSTURE_CLASS[int(p)] for p in posture])
     return (rec.layout, rec.frames[keep].astype(np.float64), posture, main,
             rec.labels["subject"][keep], rec.labels["file_frame"][keep])  # fmt: skip
+
+
+FORC = DATA / "forc"
+
+
+def forc_record(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A MicroMag FORC file (``../shared/data/forc``) as one record in measurement order:
+    field, moment and the index of the curve of every sample (-1 for the calibration points).
+
+    The file holds blocks separated by blank lines after a header (two format series) that
+    ends before the first numeric line: a one-point block is the calibration measurement near
+    positive saturation (taken before every curve; it wipes the history out), a longer block
+    is one first-order reversal curve, from its reversal field upwards.
+    """
+    text = (FORC / name).read_bytes().decode("latin-1")
+    blocks: list[list[tuple[float, float]]] = [[]]
+    for line in text.splitlines():
+        fields = line.split(",")
+        values = None
+        if len(fields) >= 2:
+            try:
+                values = (float(fields[0]), float(fields[1]))
+            except ValueError:
+                values = None
+        if values is None:
+            if blocks[-1]:
+                blocks.append([])
+            continue
+        blocks[-1].append(values)
+    u, y, c = [], [], []
+    curve = 0
+    for b in blocks:
+        if not b:
+            continue
+        a = np.asarray(b)
+        u.append(a[:, 0])
+        y.append(a[:, 1])
+        if len(b) == 1:
+            c.append(np.array([-1]))
+        else:
+            c.append(np.full(len(b), curve))
+            curve += 1
+    return np.concatenate(u), np.concatenate(y), np.concatenate(c)

@@ -98,17 +98,13 @@ def virtual(name: str = "textile-6mm", seeds=(0, 1, 2, 3), figure: bool = True) 
                     )
                 ).predict(u),
             ),
-            (
-                "Preisach, default (CV least squares + thesis prior)",
-                "calibration (3 falling curves)",
-                HysteresisModel().fit(uc, pc).predict(u),
-            ),
-            (
-                "Preisach, default (CV least squares)",
-                "65 s random sawtooth",
-                HysteresisModel().fit(us, ps).predict(u),
-            ),
         ]
+        for source, (ui, pi) in (
+            ("calibration (3 falling curves)", (uc, pc)),
+            ("65 s random sawtooth", (us, ps)),
+        ):
+            m = HysteresisModel().fit(ui, pi)
+            rows.append((f"Preisach, default ({m.method_})", source, m.predict(u)))
         for label, source, pm in rows:
             print(f"| {seed} | {label} | {source} | " + " | ".join(band_errors(p, pm)) + " |")
         if figure and seed == 0:

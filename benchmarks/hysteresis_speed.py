@@ -18,6 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense.hysteresis import HysteresisModel
 from texsense.hysteresis._identify import update_extrema
+from texsense.sim.magnetic import forc_protocol
 from texsense.sim.protocols import run_protocol
 
 
@@ -67,6 +68,10 @@ def main() -> None:
     saw = run_protocol("sawtooth", "textile-6mm", seed=100, sample_hz=None)
     us, ps = saw.labels["compression_mm"][:20_000], saw.labels["pressure_ncm2"][:20_000]
     t_saw, _ = best_of(lambda: HysteresisModel().fit(us, ps), repeat=1)
+    # the relay grid on 20,400 samples of sharp-switching FORCs (60 nodes, cross-validated)
+    uf, mf, _ = forc_protocol(100, 0.005, noise=1e-3)
+    kw = {"input_unit": "1", "output_unit": "1"}
+    t_relay, relay = best_of(lambda: HysteresisModel("relay", **kw).fit(uf, mf), repeat=1)
     rng = np.random.default_rng(0)
     lo, hi = model.u_min_, model.u_max_
     # 1 element x 10^6 samples, every sample a reversal
@@ -81,6 +86,9 @@ def main() -> None:
     walk = lo + np.where(walk > hi - lo, 2 * (hi - lo) - walk, walk)
     t_many, _ = best_of(lambda: model.predict(walk))
     t_many_default, _ = best_of(lambda: default.predict(walk))
+    span = relay.u_max_ - relay.u_min_
+    walk_f = relay.u_min_ + span * (walk - lo) / (hi - lo)
+    t_many_relay, _ = best_of(lambda: relay.predict(walk_f))
     # plain Python on a slice of the noisy input, checked against the core
     n_py = 20_000
     t_py, out_py = best_of(lambda: python_everett_sum(model, noisy[:n_py]), repeat=1)
@@ -102,6 +110,11 @@ def main() -> None:
         f"{walk.size / t_many_default / 1e6:.1f} M element-samples/s |"
     )
     print(
+        f"| Rust, same, a relay-grid model ({relay.everett_.shape[0]} x "
+        f"{relay.everett_.shape[0]} table) | {t_many_relay:.3f} s | "
+        f"{walk.size / t_many_relay / 1e6:.1f} M element-samples/s |"
+    )
+    print(
         f"| plain-Python Everett sum, 1 element x {n_py:,} samples | {t_py:.2f} s | "
         f"{py_rate / 1e3:.1f} k samples/s |"
     )
@@ -117,6 +130,10 @@ def main() -> None:
     print(
         f"| identification, default, cross-validated ({us.size} samples, random sawtooth) | "
         f"{t_saw:.2f} s | |"
+    )
+    print(
+        f"| identification, relay grid, 60 nodes, cross-validated ({uf.size} samples, "
+        f"sharp-switching FORCs) | {t_relay:.2f} s | |"
     )
 
 

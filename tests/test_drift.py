@@ -240,7 +240,8 @@ def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     model, out = tmp_path / "m.json", tmp_path / "md.json"
     assert main(["hysteresis", "fit", str(cal), "-o", str(model)]) == 0
     capsys.readouterr()
-    assert main(["drift", "fit", str(cyc), "--history", str(model), "-o", str(out), "--json"]) == 0
+    args = ["drift", "fit", str(cyc), "--history", str(model), "-o", str(out), "--json"]
+    assert main([*args, "--clock", "rest"]) == 0
     fit = json.loads(capsys.readouterr().out)
     # cycling relaxes the virtual spacer far less than held steps do (docs/drift.md)
     assert -0.02 < fit["gamma"] < 0
@@ -408,3 +409,52 @@ def test_batch_shapes_are_checked_in_one_place_for_every_stage():
         DriftBank(np.ones(2), np.array([1.0, 10.0]), -0.02, 3).run(
             np.zeros(5), np.zeros((4, 3)), ok_valid
         )
+
+
+def test_structure_is_chosen_by_held_out_error_and_refused_without_drift():
+    """Records made by a time-clock drift: a structure on time wins on the held-out later
+    halves and every candidate's held-out error is reported; records without drift get no
+    structure (none beats hysteresis only)."""
+    from texsense.drift import DriftModel, choose_structure
+
+    truth = DriftModel(-0.02, log_kernel())
+    t = np.arange(0, 3600.0, 1.0)
+    hold = np.where(t < 2.0, 1.0 + t, 3.0)
+    cycles = 1.0 + 2.0 * np.abs(((t / 20.0) % 2.0) - 1.0)
+    recs = [(h, 0.9 * h, truth.apply(h, t), t) for h in (hold, cycles)]
+    choice = choose_structure(recs)
+    assert set(choice.held_out_rmse) == {"time", "rest", "rest+time", "prony", "qlv"}
+    assert choice.chosen in ("time", "rest+time", "prony")
+    assert choice.held_out_rmse[choice.chosen] < 0.1 * choice.baseline_rmse
+    assert not choice.deployable["qlv"]
+    np.testing.assert_allclose(choice.model.apply(cycles, t), truth.apply(cycles, t), atol=2e-3)
+    rng = np.random.default_rng(0)
+    flat = [(h, 0.9 * h, h + 0.01 * rng.standard_normal(t.size), t) for h in (hold, cycles)]
+    none = choose_structure(flat)
+    assert none.chosen is None and none.model is None
+    assert min(none.held_out_rmse.values()) >= 0.95 * none.baseline_rmse
+
+
+def test_cli_chooses_the_drift_structure_and_refuses_with_the_numbers(tmp_path, capsys):
+    from texsense.cli import main
+    from texsense.hysteresis import HysteresisModel
+    from texsense.io.columns_csv import read_columns_csv, write_columns_csv
+
+    cal, cyc = tmp_path / "cal.csv", tmp_path / "cyc.csv"
+    assert main(["simulate", "calibration", "--csv", str(cal)]) == 0
+    assert main(["simulate", "validation", "--cycles", "60", "--csv", str(cyc)]) == 0
+    model = tmp_path / "m.json"
+    assert main(["hysteresis", "fit", str(cal), "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["drift", "fit", str(cyc), "--history", str(model)]) == 0
+    out = capsys.readouterr().out
+    assert "hysteresis only" in out and "qlv" in out and "chose " in out
+    # a record that the hysteresis model explains exactly has no drift to fit
+    cols = read_columns_csv(cyc)
+    cols["pressure_ncm2"] = HysteresisModel.load(model).predict(cols["compression_mm"])
+    flat = tmp_path / "flat.csv"
+    write_columns_csv(flat, cols)
+    assert main(["drift", "fit", str(flat), "--history", str(model)]) == 1
+    captured = capsys.readouterr()
+    assert "no drift structure beats hysteresis only" in captured.err
+    assert "hysteresis only" in captured.out  # the numbers came first

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
-from texsense.drift import DriftModel, split_steps
+from texsense.drift import DriftModel, choose_structure, split_steps
 from texsense.exceptions import FormatError, ParameterError
 from texsense.hysteresis import HysteresisModel
 from texsense.io.columns import read_columns
@@ -74,10 +74,15 @@ def add_clock_arguments(parser: argparse.ArgumentParser, prefix: str = "") -> No
     parser.add_argument(
         f"--{prefix}clock",
         choices=("rest", "thesis", "time") if prefix else ("rest", "thesis", "time", "rest+time"),
-        default="rest",
+        default="rest" if prefix else None,
         help="rest (default): the kernel's clock runs while the element's reading holds "
         "still, so γ from held steps also serves cycles; thesis (or time): eq. 5.8 as printed"
-        + ("" if prefix else "; rest+time (with --history): both, fitted together")
+        + (
+            ""
+            if prefix
+            else "; rest+time (with --history): both, fitted together; not given with "
+            "--history: chosen by validation on the records' held-out later halves"
+        )
         + " (docs/drift.md)",
     )
     parser.add_argument(
@@ -91,7 +96,7 @@ def add_clock_arguments(parser: argparse.ArgumentParser, prefix: str = "") -> No
 def rest_rate_of(args: argparse.Namespace, prefix: str = "") -> float:
     """The rest rate the arguments ask for (0 for the time clock)."""
     key = prefix.replace("-", "_")
-    if getattr(args, f"{key}clock") in ("thesis", "time"):
+    if getattr(args, f"{key}clock") in ("thesis", "time"):  # None (not given): rest
         return 0.0
     rate = float(getattr(args, f"{key}rest_rate"))
     if not rate > 0:
@@ -123,11 +128,15 @@ def run_fit_history(args: argparse.Namespace) -> int:
     """``texsense drift fit REC.csv --history MODEL.json``: γ over a whole load history."""
     model, _ = load_model(args.history)
     records = []
+    backbones = []
     for path in args.steps:
         cols = _columns(path)
         records.append(
             (model.predict(cols["compression_mm"]), cols["pressure_ncm2"], cols["time_s"])
         )
+        backbones.append(model.backbone(cols["compression_mm"]))
+    if args.clock is None:
+        return _choose_and_report(args, model, records, backbones)
     if args.clock == "rest+time":
         drift, rms = DriftModel.fit_joint(records, rest_rate=rest_rate_of(args))
     elif len(records) == 1:
@@ -159,6 +168,51 @@ def run_fit_history(args: argparse.Namespace) -> int:
     )
     if args.output:
         print(f"wrote {args.output}")
+    return 0
+
+
+def _choose_and_report(
+    args: argparse.Namespace,
+    model: HysteresisModel,
+    records: list,
+    backbones: list,
+) -> int:
+    """``drift fit RECORD... --history MODEL`` without ``--clock``: the structure chosen by
+    validation on the held-out later half of every record (:func:`choose_structure`)."""
+    choice = choose_structure(
+        [(h, e, p, t) for (h, p, t), e in zip(records, backbones, strict=True)],
+        rest_rate=rest_rate_of(args),
+    )
+    summary: dict[str, Any] = {
+        "chosen": choice.chosen,
+        "held_out_rmse_ncm2": choice.held_out_rmse,
+        "hysteresis_only_rmse_ncm2": choice.baseline_rmse,
+        "deployable": choice.deployable,
+    }
+    if choice.model is not None:
+        summary.update(gamma=choice.model.gamma, clock=choice.model.clock)
+        if args.output:
+            chain = StageChain([Hysteresis.of(model), Drift.of(choice.model)])
+            summary["model"] = str(chain.save(args.output))
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print("held-out RMSE (later half of every record, 0.5-3.5 N/cm²):")
+        print(f"  {'hysteresis only':>16}: {choice.baseline_rmse:.4g} N/cm²")
+        for name, rmse in choice.held_out_rmse.items():
+            note = "" if choice.deployable[name] else " (not a drift stage yet: reported only)"
+            print(f"  {name:>16}: {rmse:.4g} N/cm²{note}")
+    if choice.model is None:
+        best = min(choice.held_out_rmse.values())
+        raise ParameterError(
+            f"no drift structure beats hysteresis only on the held-out halves (best "
+            f"{best:.4g} vs {choice.baseline_rmse:.4g} N/cm²): keep the hysteresis model alone, "
+            "or name a structure with --clock"
+        )
+    if not args.json:
+        print(f"chose {choice.chosen} (γ {choice.model.gamma:.5g}, refitted on all samples)")
+        if args.output:
+            print(f"wrote {args.output}")
     return 0
 
 

@@ -63,9 +63,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument(
         "--method",
         default="auto",
-        choices=("auto", "lsq", "thesis"),
-        help="auto (default): least squares, with the thesis table as a weak prior when the "
-        "record holds the thesis's curves; lsq; thesis (§4.4.2)",
+        choices=("auto", "lsq", "thesis", "relay"),
+        help="auto (default): the thesis method on a thesis record, least squares or the "
+        "relay grid otherwise, a more flexible one only when cross-validation gains more than "
+        "one standard error; lsq; thesis (§4.4.2); relay (non-negative density on nodes "
+        "placed by the record)",
     )
     f.add_argument("--grid", type=int, default=100, help="evaluated Everett table K x K (100)")
     f.add_argument(
@@ -177,6 +179,7 @@ def run_fit(args: argparse.Namespace) -> int:
         "grid": model.everett_.shape[0],
         "fit": error_summary(y, fitted),
         "validation_rmse": model.validation_rmse_,
+        "diagnosis": model.fit_diagnosis(u, y),
         "chosen": {
             k: model.details_.get(k) for k in ("alpha_cells", "d_cells", "spacing", "smoothing")
         },
@@ -192,13 +195,48 @@ def run_fit(args: argparse.Namespace) -> int:
         )
         if model.validation_rmse_ is not None:
             d = model.details_
+            if "alpha_cells" in d:
+                setting = f"{d['alpha_cells']} x {d['d_cells']} cells, smoothing {d['smoothing']:g}"
+            elif "nodes" in d:
+                setting = f"{len(d['nodes'])} nodes placed by the record, ridge {d['ridge']:g}"
+            else:
+                setting = "the thesis's interpolation (no gain of least squares beyond one SE)"
             print(
                 f"  chosen by {d['validation_folds']}-fold cross-validation on held-out reversal "
-                f"curves: {d['alpha_cells']} x {d['d_cells']} cells, smoothing "
-                f"{d['smoothing']:g}; validation RMSE {model.validation_rmse_:.4g}"
+                f"curves: {setting}; validation RMSE {model.validation_rmse_:.4g}"
             )
+        elif "members" in model.details_:
+            d = model.details_
+            folds = [d.get("thesis_fold_mse"), d.get("lsq_fold_mse")]
+            cv = ", ".join(
+                f"{name} {np.sqrt(np.mean(f)):.4g}"
+                for name, f in zip(("thesis", "least squares"), folds, strict=True)
+                if f is not None
+            )
+            print(
+                "  the mean of the thesis table and least squares: neither is clearly better "
+                f"on held-out reversal curves (validation RMSE {cv})"
+            )
+        elif model.method_ == "thesis" and model.method == "auto":
+            print("  the thesis method: too few reversal curves for least squares to show a gain")
         elif model.method_ != "thesis":
             print("  too few reversal curves to hold any out: settings not cross-validated")
+        diag = summary["diagnosis"]
+        held = diag["validation_rmse"]
+        print(
+            f"  training RMSE {diag['training_rmse']:.4g} | validation RMSE "
+            + (
+                f"{held:.4g}"
+                if held is not None
+                else ("of each member above" if "members" in model.details_ else "—")
+            )
+            + f" | noise {diag['noise_rmse']:.2g}"
+        )
+        if diag["underfit"]:
+            print(
+                "  underfit: the training error is far above the record's noise; the model "
+                "cannot follow this record (try --method relay, or more --cells)"
+            )
     return 0
 
 

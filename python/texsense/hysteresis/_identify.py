@@ -30,17 +30,34 @@ branch, which a non-negative density cannot produce).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import csr_matrix
 
+from texsense._core import PreisachBank
 from texsense.exceptions import ParameterError
-from texsense.hysteresis._lsq import design_entries, fit_everett_lsq
+from texsense.hysteresis._lsq import branch_folds, design_entries, fit_everett_lsq
+from texsense.hysteresis._relay import (
+    RelayFit,
+    RelayProblem,
+    cells_to_nodes,
+    record_nodes,
+    resample_table,
+)
 from texsense.hysteresis._segments import Branch, split_branches
 
-__all__ = ["Identified", "find_thesis_curves", "identify_lsq", "identify_thesis", "make_monotone"]
+__all__ = [
+    "Identified",
+    "find_thesis_curves",
+    "fold_errors_of_table",
+    "identify_lsq",
+    "identify_relay",
+    "identify_thesis",
+    "make_monotone",
+]
 
 
 @dataclass
@@ -258,8 +275,121 @@ def identify_lsq(
             "validation_rmse": res.validation_rmse,
             "validation_folds": res.folds,
             "fit_rmse": res.fit_rmse,
+            "fold_mse": res.fold_mse,
             "samples_used": int(u.size),
             "prior": "thesis" if weight else None,
             "cv": [{**c.as_dict(), "rmse": r} for c, r in res.scores],
         },
     )
+
+
+RELAY_RIDGES: tuple[float, ...] = (1e-7, 1e-5, 1e-3)
+
+
+def _relay_nodes(u: np.ndarray, requested: int | None, tol: float) -> int:
+    """Nodes of the relay grid: 60, fewer for a record with few turning points (about two
+    nodes per reversal) or few samples (about √T nodes: no more cells than half the
+    samples), at least 12."""
+    if requested is not None:
+        return max(int(requested), 3)
+    turns = len(split_branches(u, tol))
+    return int(np.clip(min(2 * turns, np.sqrt(u.size)), 12, 60))
+
+
+def identify_relay(
+    u: npt.ArrayLike,
+    p: npt.ArrayLike,
+    grid: int = 100,
+    nodes: int | None = None,
+    ridge: float | None = None,
+    folds: int = 4,
+    signed: bool | None = False,
+) -> Identified:
+    """Non-negative relay-grid identification on nodes placed by the record
+    (:mod:`texsense.hysteresis._relay`). The ridge is chosen by cross-validation on
+    held-out reversal curves unless given. ``signed=None`` lets the cross-validation also
+    try a signed density, which replaces the non-negative one only when it is better by
+    more than one standard error over the folds; ``True`` forces it. The evaluated table is
+    at least 200 x 200 so that narrow cells keep their resolution."""
+    u = np.asarray(u, dtype=np.float64)
+    p = np.asarray(p, dtype=np.float64)
+    tol = 0.01 * float(np.ptp(u))
+    node_x = record_nodes(u, p, _relay_nodes(u, nodes, tol), tolerance=tol)
+    fold = branch_folds(u, folds, tol)
+    problem = RelayProblem(u, p, node_x, fold)
+    kinds = [True] if signed is True else ([False, True] if signed is None else [False])
+    ridges = RELAY_RIDGES if ridge is None else (ridge,)
+    cv: list[dict] = []
+    chosen = (kinds[0], ridges[0])
+    plain: np.ndarray | None = None
+    errors: np.ndarray | None = None
+    if problem.n_folds >= 2:
+        best: dict[bool, tuple[float, np.ndarray]] = {}
+        for kind in kinds:
+            for r in ridges:
+                e = problem.fold_errors(r, kind)
+                cv.append({"signed": kind, "ridge": r, "rmse": float(np.sqrt(e.mean()))})
+                if kind not in best or e.mean() < best[kind][1].mean():
+                    best[kind] = (r, e)
+        chosen = (kinds[0], best[kinds[0]][0])
+        errors = best[kinds[0]][1]
+        plain = best[False][1] if False in best else None
+        if len(kinds) == 2 and _beats(best[True][1], best[False][1]):
+            chosen, errors = (True, best[True][0]), best[True][1]
+    x = problem.solve(chosen[1], chosen[0])
+    fit = RelayFit(node_x, x[:-1], float(x[-1]), chosen[0])
+    u_min, u_max = float(u.min()), float(u.max())
+    k = max(grid, 200)
+    pred = problem.design @ cells_to_nodes(x[:-1], node_x.size) + x[-1]
+    return Identified(
+        resample_table(fit, k, u_min, u_max),
+        u_min,
+        u_max,
+        fit.offset,
+        "relay-signed" if chosen[0] else "relay",
+        {
+            "grid": k,
+            "nodes": node_x.tolist(),
+            "ridge": chosen[1],
+            "signed": chosen[0],
+            "validation_rmse": None if errors is None else float(np.sqrt(errors.mean())),
+            "validation_folds": problem.n_folds,
+            "fold_mse": None if errors is None else errors.tolist(),
+            "plain_fold_mse": None if plain is None else plain.tolist(),
+            "fit_rmse": float(np.sqrt(np.mean((pred - p) ** 2))),
+            "cv": cv,
+        },
+    )
+
+
+def _beats(challenger: np.ndarray, incumbent: np.ndarray) -> bool:
+    """The one-standard-error rule over folds: the challenger replaces the incumbent only
+    when its mean held-out error is lower by more than the standard error of the per-fold
+    differences (and lower at all when there is no spread)."""
+    d = np.asarray(challenger) - np.asarray(incumbent)
+    se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0
+    return bool(d.mean() < -se) and bool(d.mean() < 0)
+
+
+def fold_errors_of_table(
+    u: np.ndarray,
+    p: np.ndarray,
+    fold: np.ndarray,
+    table_of: Callable[[np.ndarray], tuple[np.ndarray, float] | None],
+) -> np.ndarray | None:
+    """Held-out mean squared error of every fold for an identification given as
+    ``table_of(held_out_mask) -> (Everett table, offset)`` (None if it cannot), the table
+    evaluated by the Rust core over the whole input history."""
+    n_folds = int(fold.max()) + 1
+    u_min, u_max = float(u.min()), float(u.max())
+    out = []
+    for f in range(n_folds):
+        held = fold == f
+        got = table_of(held)
+        if got is None:
+            return None
+        table, offset = got
+        bank = PreisachBank(u_min, u_max, np.ascontiguousarray(table), 1, 256, offset, 1.0)
+        pred = bank.run(np.ascontiguousarray(u[:, None]), np.ones((u.size, 1), bool))[:, 0]
+        out.append(float(np.mean((pred[held] - p[held]) ** 2)))
+    return np.asarray(out)

@@ -85,6 +85,7 @@ class LsqResult:
     scores: list[tuple[Candidate, float]]
     fit_rmse: float
     folds: int
+    fold_mse: list[float] | None = None  # held-out MSE of every fold, chosen setting
 
 
 def _lower_index(k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -320,6 +321,7 @@ class _Problem:
                 table = prior(None if f is None else fold == f)
                 self.priors[f] = None if table is None else table[i, j]
         self._cache: dict[tuple, tuple] = {}
+        self.fold_mse: dict[Candidate, list[float]] = {}
 
     def system(self, alpha_cells: int, d_cells: int, spacing: float) -> _System:
         key = (alpha_cells, d_cells, spacing)
@@ -387,12 +389,14 @@ class _Problem:
     def cv_rmse(self, c: Candidate) -> float:
         A = self.system(c.alpha_cells, c.d_cells, c.spacing).design
 
-        def one(f: int) -> float:
+        def one(f: int) -> tuple[float, int]:
             x = self.solve(c, f, tol=1e-6)
             rows = np.nonzero(self.fold == f)[0]
-            return float(np.sum((A[rows] @ x - self.p[rows]) ** 2))
+            return float(np.sum((A[rows] @ x - self.p[rows]) ** 2)), rows.size
 
-        sse = sum(one(f) for f in range(self.n_folds))
+        parts = [one(f) for f in range(self.n_folds)]
+        self.fold_mse[c] = [s / max(n, 1) for s, n in parts]
+        sse = sum(s for s, _ in parts)
         return float(np.sqrt(sse / np.count_nonzero(self.fold >= 0)))
 
 
@@ -480,5 +484,12 @@ def fit_everett_lsq(
     table[i, j] = P @ x[:-1]
     fit_rmse = float(np.sqrt(np.mean((A @ x - p) ** 2)))
     return LsqResult(
-        table, float(x[-1]), chosen, validation, scores, fit_rmse, max(problem.n_folds, 0)
+        table,
+        float(x[-1]),
+        chosen,
+        validation,
+        scores,
+        fit_rmse,
+        max(problem.n_folds, 0),
+        problem.fold_mse.get(chosen),
     )

@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from texsense._core import SpacerBank
 from texsense.exceptions import ParameterError
+from texsense.sim.iwan import IwanBank, IwanMaterial
 
 __all__ = ["PRESETS", "BoucWenMaterial", "DriveResult", "Spacer", "SpacerMaterial"]
 
@@ -200,7 +201,7 @@ class BoucWenMaterial:
             raise ParameterError(f"{self.name}: {e}") from None
 
 
-PRESETS: dict[str, SpacerMaterial | BoucWenMaterial] = {
+PRESETS: dict[str, SpacerMaterial | BoucWenMaterial | IwanMaterial] = {
     m.name: m
     for m in (
         SpacerMaterial(
@@ -251,6 +252,14 @@ PRESETS: dict[str, SpacerMaterial | BoucWenMaterial] = {
             description="second law (Bouc–Wen friction, Norton creep on time), 6 mm, 50 % at "
             "2.3 N/cm²: a spacer of another family for generalisation checks",
         ),
+        IwanMaterial(
+            "iwan-6mm",
+            6.0,
+            2.3,
+            description="third law (Iwan bank of Jenkins elements with stiffening springs on a "
+            "stiffening backbone, viscoplastic relaxation), 6 mm, 50 % at 2.3 N/cm²: a spacer "
+            "of neither the textile nor the Bouc–Wen family, for generalisation checks",
+        ),
     )
 }
 
@@ -281,7 +290,7 @@ class Spacer:
 
     def __init__(
         self,
-        material: SpacerMaterial | BoucWenMaterial,
+        material: SpacerMaterial | BoucWenMaterial | IwanMaterial,
         n_specimens: int = 1,
         seed: int | None = None,
     ):
@@ -310,7 +319,7 @@ class Spacer:
             raise ParameterError(f"unknown spacer preset {name!r}; known: {', '.join(PRESETS)}")
         return cls(PRESETS[name], n_specimens, seed)
 
-    def _new_bank(self) -> SpacerBank:
+    def _new_bank(self) -> SpacerBank | IwanBank:
         return self._effective.bank(self.scale)
 
     @property
