@@ -84,7 +84,8 @@ async def receive(url: str, stop: float, each) -> None:
     """Call ``each(text)`` for every message of a WebSocket until ``stop`` (wall time)."""
     import websockets
 
-    async with websockets.connect(url, max_size=None) as ws:
+    # a busy station (600 mats) may take longer than the default 10 s to answer a handshake
+    async with websockets.connect(url, max_size=None, open_timeout=60) as ws:
         while time.time() < stop:
             try:
                 text = await asyncio.wait_for(ws.recv(), timeout=max(0.1, stop - time.time()))
