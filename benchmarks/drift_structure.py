@@ -7,7 +7,7 @@ For each law (textile-6mm, bouc-wen-6mm, iwan-6mm), specimen 0:
   (4 x 25 min at 2 N/cm², 10 min off) and the first hour of cycles 0 <-> 5 N/cm² at 10 mm/min;
 - drift candidates fitted on them: the documented workflow (``--clock rest+time``, both clocks
   fitted together), and the structure chosen by held-out validation
-  (:func:`texsense.drift.choose_structure`, ``drift fit LOADS CYCLES --history MODEL``
+  (:func:`texsense.drift_structure.choose_structure`, ``drift fit LOADS CYCLES --history MODEL``
   without a clock);
 - scored on hours 1-4 of the four-hour cycling record (mean relative error in 0.5-3.5 N/cm²),
   against hysteresis only.
@@ -21,7 +21,8 @@ import sys
 
 import numpy as np
 
-from texsense.drift import DriftModel, choose_structure
+from texsense.drift import DriftModel
+from texsense.drift_structure import choose_structure
 from texsense.hysteresis import HysteresisModel
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer

@@ -415,7 +415,8 @@ def test_structure_is_chosen_by_held_out_error_and_refused_without_drift():
     """Records made by a time-clock drift: a structure on time wins on the held-out later
     halves and every candidate's held-out error is reported; records without drift get no
     structure (none beats hysteresis only)."""
-    from texsense.drift import DriftModel, choose_structure
+    from texsense.drift import DriftModel
+    from texsense.drift_structure import choose_structure
 
     truth = DriftModel(-0.02, log_kernel())
     t = np.arange(0, 3600.0, 1.0)

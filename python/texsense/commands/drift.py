@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
-from texsense.drift import DriftModel, choose_structure, split_steps
+from texsense.drift import DriftModel, split_steps
+from texsense.drift_structure import choose_structure
 from texsense.exceptions import FormatError, ParameterError
 from texsense.hysteresis import HysteresisModel
 from texsense.io.columns import read_columns

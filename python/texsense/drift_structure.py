@@ -1,0 +1,160 @@
+"""Choosing the drift structure from the user's own records (``texsense drift fit RECORD...
+--history MODEL`` without ``--clock``; docs/drift.md, "Which structure?"): every candidate —
+the time clock (eq. 5.8 as printed), the rest clock, both, a Prony series and a quasi-linear
+viscoelastic one acting on the backbone — is fitted on the first half of every record and
+scored on the second; the best one that beats hysteresis only is refitted on everything.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import nnls
+
+from texsense.drift import DriftKernel, DriftModel, _kernel_or_log, log_kernel
+from texsense.exceptions import ParameterError
+
+__all__ = ["PRONY_TAUS_S", "StructureChoice", "choose_structure"]
+
+
+#: Time constants of the Prony candidate of :func:`choose_structure` (s).
+PRONY_TAUS_S = (1.0, 10.0, 100.0, 1000.0, 1e4, 1e5)
+
+
+@dataclass
+class StructureChoice:
+    """What :func:`choose_structure` found: the chosen candidate (None: none beats
+    hysteresis only), its model refitted on the whole records (None for a candidate that
+    the drift stage cannot run, see ``deployable``), and every candidate's held-out RMSE."""
+
+    chosen: str | None
+    model: DriftModel | None
+    held_out_rmse: dict[str, float]
+    baseline_rmse: float
+    deployable: dict[str, bool]
+
+
+def _unit_responses(
+    h: np.ndarray, t: np.ndarray, rest_rate: float, kernel: DriftKernel | None = None
+) -> np.ndarray:
+    k, kind = _kernel_or_log(kernel)
+    return DriftModel(1.0, k, kind, rest_rate).apply(h, t) - h
+
+
+def choose_structure(
+    records: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]],
+    rest_rate: float = 0.02,
+    band: tuple[float, float] = (0.5, 3.5),
+    train_share: float = 0.5,
+    margin: float = 0.05,
+) -> StructureChoice:
+    """Choose the drift structure from the user's records by validation on held-out parts.
+
+    ``records`` are ``(h, backbone, pressure, times_s)``: the Preisach output, the elastic
+    (single-valued backbone) response of the same input, the measured pressure and the
+    times. Every candidate is fitted on the first ``train_share`` of every record and scored
+    on the rest (a forecast: drift is about what comes later), every record weighted equally,
+    over the samples whose measured pressure lies in ``band``:
+
+    - ``time``: eq. 5.8 as printed (logarithmic kernel on time);
+    - ``rest``: the same kernel on the rest clock;
+    - ``rest+time``: both clocks (:meth:`DriftModel.fit_joint`);
+    - ``prony``: a non-negative Prony series (time constants 1 s .. 1 day, one sign) on time;
+    - ``qlv``: quasi-linear viscoelasticity — the logarithmic relaxation acts on the elastic
+      (backbone) response instead of the Preisach output (the standard model of soft
+      tissue and elastomers, Fung). The drift stage runs on the Preisach output, so this
+      candidate is reported but not deployable (``deployable``).
+
+    The chosen candidate is the deployable one with the lowest held-out RMSE, provided it
+    beats hysteresis only (γ = 0) by more than ``margin`` (relative: a drift fitted to noise
+    wins by chance by a little); otherwise ``chosen`` is None.
+    """
+    if not records:
+        raise ParameterError("choose_structure needs at least one record")
+    prony_k = [DriftKernel(np.ones(1), np.array([tau]), 0.0, (0.0, 1e6)) for tau in PRONY_TAUS_S]
+    designs: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {
+        "time": [],
+        "rest": [],
+        "rest+time": [],
+        "prony": [],
+        "qlv": [],
+    }
+    for n, (h, e, p, t) in enumerate(records):
+        x = np.asarray(h, dtype=np.float64)
+        el = np.asarray(e, dtype=np.float64)
+        y = np.asarray(p, dtype=np.float64)
+        tt = np.asarray(t, dtype=np.float64)
+        if not (x.shape == el.shape == y.shape == tt.shape) or x.ndim != 1:
+            raise ParameterError(f"record {n}: h, backbone, pressure and times differ in shape")
+        sel = np.isfinite(x) & np.isfinite(y) & (y >= band[0]) & (y < band[1])
+        if sel.sum() < 4:
+            raise ParameterError(f"record {n} has fewer than 4 samples in {band[0]}-{band[1]}")
+        d_time = _unit_responses(x, tt, 0.0)
+        d_rest = _unit_responses(x, tt, rest_rate)
+        d_qlv = DriftModel(1.0, log_kernel(), "log").apply(el, tt) - el
+        prony = np.column_stack([_unit_responses(x, tt, 0.0, k) for k in prony_k])
+        target = (y - x)[sel]
+        idx = np.nonzero(sel)[0]
+        train = idx < idx[int(train_share * idx.size)]
+        for name, cols in (
+            ("time", d_time[sel, None]),
+            ("rest", d_rest[sel, None]),
+            ("rest+time", np.column_stack([d_rest, d_time])[sel]),
+            ("prony", prony[sel]),
+            ("qlv", d_qlv[sel, None]),
+        ):
+            designs[name].append((cols, target, train))
+
+    def fit_coef(name: str, parts: list, use: str) -> np.ndarray:
+        rows, rhs = [], []
+        for cols, target, train in parts:
+            m = train if use == "train" else np.ones(train.size, bool)
+            w = 1.0 / np.sqrt(max(int(m.sum()), 1))
+            rows.append(w * cols[m])
+            rhs.append(w * target[m])
+        A, b = np.vstack(rows), np.concatenate(rhs)
+        if name == "prony":  # one sign, non-negative weights: the better of the two
+            best = None
+            for s in (1.0, -1.0):
+                c, r = nnls(s * A, b, maxiter=50 * A.shape[1])
+                if best is None or r < best[1]:
+                    best = (s * c, r)
+            assert best is not None
+            return best[0]
+        coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+        return coef
+
+    def held_out(coef: np.ndarray | None, parts: list) -> float:
+        per = []
+        for cols, target, train in parts:
+            r = target[~train] - (0.0 if coef is None else cols[~train] @ coef)
+            per.append(float(np.mean(r**2)) if r.size else 0.0)
+        return float(np.sqrt(np.mean(per)))
+
+    scores = {
+        name: held_out(fit_coef(name, parts, "train"), parts) for name, parts in designs.items()
+    }
+    baseline = held_out(None, designs["time"])
+    deployable = {name: name != "qlv" for name in designs}
+    candidates = [n for n in scores if deployable[n] and scores[n] < (1 - margin) * baseline]
+    if not candidates:
+        return StructureChoice(None, None, scores, baseline, deployable)
+    chosen = min(candidates, key=lambda n: scores[n])
+    coef = fit_coef(chosen, designs[chosen], "all")
+    log_k = log_kernel()
+    if chosen == "time":
+        model = DriftModel(float(coef[0]), log_k, "log")
+    elif chosen == "rest":
+        model = DriftModel(float(coef[0]), log_k, "log", rest_rate)
+    elif chosen == "rest+time":
+        model = DriftModel(float(coef[0]), log_k, "log", rest_rate, 0.5, float(coef[1]))
+    else:  # prony: one sign, the weights as the kernel
+        sign = -1.0 if coef.sum() < 0 else 1.0
+        w = np.abs(coef)
+        keep = w > 0
+        kernel = DriftKernel(w[keep], np.asarray(PRONY_TAUS_S)[keep], 0.0, (0.0, 1e6))
+        model = DriftModel(sign, kernel, "prony")
+    return StructureChoice(chosen, model, scores, baseline, deployable)
