@@ -114,6 +114,22 @@ def design_entries(
     i0 = np.minimum(a.astype(np.int64), k - 2)
     j0 = np.minimum(b.astype(np.int64), k - 2)
     wa, wb = a - i0, b - j0
+    return spread_bilinear(row, i0, j0, wa, wb, coef)
+
+
+def spread_bilinear(
+    row: np.ndarray,
+    i0: np.ndarray,
+    j0: np.ndarray,
+    wa: np.ndarray,
+    wb: np.ndarray,
+    coef: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each term ``coef`` at the point (α, β) in the cell (i0, j0) of a node grid, with
+    fractions ``wa``, ``wb`` across the cell, spread bilinearly over the cell's corners:
+    (row, node i, node j, weight) for the corners strictly inside the Preisach triangle
+    (i > j). A point in a diagonal cell (i0 == j0) lies on the triangle's edge, where the
+    Everett function is 0: it falls on the corner (i0 + 1, j0) with weight wa - wb."""
     on_diag = i0 == j0
     off = ~on_diag
     parts = [(row[on_diag], i0[on_diag] + 1, j0[on_diag], coef[on_diag] * (wa - wb)[on_diag])]

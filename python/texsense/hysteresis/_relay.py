@@ -43,6 +43,7 @@ from scipy.sparse import csr_matrix
 from threadpoolctl import threadpool_limits
 
 from texsense._core import everett_terms
+from texsense.hysteresis._lsq import spread_bilinear
 from texsense.hysteresis._segments import reversal_indices
 
 __all__ = [
@@ -120,19 +121,7 @@ def nonuniform_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]
     j0 = np.clip(np.searchsorted(nodes, beta, side="right") - 1, 0, m - 2)
     wa = np.clip((alpha - nodes[i0]) / (nodes[i0 + 1] - nodes[i0]), 0.0, 1.0)
     wb = np.clip((beta - nodes[j0]) / (nodes[j0 + 1] - nodes[j0]), 0.0, 1.0)
-    on_diag = i0 == j0
-    off = ~on_diag
-    parts = [(row[on_diag], i0[on_diag] + 1, j0[on_diag], coef[on_diag] * (wa - wb)[on_diag])]
-    for di, dj, w in (
-        (0, 0, (1 - wa) * (1 - wb)),
-        (0, 1, (1 - wa) * wb),
-        (1, 0, wa * (1 - wb)),
-        (1, 1, wa * wb),
-    ):
-        parts.append((row[off], i0[off] + di, j0[off] + dj, coef[off] * w[off]))
-    r, ii, jj, ww = (np.concatenate(x) for x in zip(*parts, strict=True))
-    keep = (ii > jj) & (ww != 0)
-    r, ii, jj, ww = r[keep], ii[keep], jj[keep], ww[keep]
+    r, ii, jj, ww = spread_bilinear(row, i0, j0, wa, wb, coef)
     return csr_matrix((ww, (r, ii * (ii - 1) // 2 + jj)), shape=(u.size, m * (m - 1) // 2))
 
 
