@@ -15,7 +15,8 @@ Rules (also in docs/development.md):
   block, or (a monitor, station or run.sh) before the next one of the block starts; a
   virtual device runs on to the end of its block, for the monitors that read it. The one
   thing the runner changes in a command: a monitor or station gets a free ``--port`` (in
-  place of one the page names: tests and people run side by side).
+  place of one the page names: tests and people run side by side), and the later commands
+  of its block that name the page's port (``localhost:8790``) get the free one.
 - A command with a trailing comment ``# needs: ...`` (outside hardware, a site broker, a
   cluster) is skipped and listed with its reason.
 """
@@ -117,8 +118,11 @@ class _Server:
     def __init__(self, cmd: Command, work: Path, env: dict[str, str]) -> None:
         text = cmd.text
         self.port: int | None = None
+        self.named_port: str | None = None
         if re.search(r"texsense\s+(monitor|station)|scripts/run\.sh", text):
             # a free port, in place of the one the page names (tests and people run side by side)
+            named = re.search(r"\s--port[ =](\d+)", text)
+            self.named_port = named.group(1) if named else None
             self.port = _free_port()
             text = re.sub(r"\s--port[ =]\d+", "", _strip_comment(text)) + f" --port {self.port}"
         self.link = None
@@ -213,10 +217,14 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
                 outcome.failures.append(f"{s.cmd.text}\n  {why}\n{s.output()[-2000:]}")
             servers.remove(s)
 
+    moved: dict[str, int] = {}  # the ports a page names -> the free ones its servers got
     for cmd in commands(page):
         if cmd.block != block:
             stop_servers()
             block = cmd.block
+            moved = {}
+        for named, port in moved.items():  # later commands reach the server where it runs
+            cmd.text = re.sub(rf"(localhost|127\.0\.0\.1):{named}\b", rf"\g<1>:{port}", cmd.text)
         if cmd.needs:
             outcome.skipped.append((cmd.text, cmd.needs))
             continue
@@ -225,6 +233,8 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
                 stop_servers(keep_devices=True)  # alternatives of one block: one at a time
             server = _Server(cmd, work, env)
             servers.append(server)
+            if server.named_port is not None and server.port is not None:
+                moved[server.named_port] = server.port
             why = server.ready()
             outcome.ran.append(cmd.text)
             if why:
