@@ -48,6 +48,7 @@ __all__ = [
     "parse_pressure",
     "raise_if_refused",
     "record_thickness_mm",
+    "typical_reading",
 ]
 
 #: Least frames of a zeroing or an equilibration recording.
@@ -158,7 +159,7 @@ def check_material(
     return found
 
 
-def _typical(rec: Recording) -> np.ndarray:
+def typical_reading(rec: Recording) -> np.ndarray:
     """Every element's median over the frames where it read (NaN if it never did)."""
     x = np.where(rec.valid, rec.frames.astype(np.float64), np.nan)
     out = np.full(rec.n_elements, np.nan)
@@ -198,7 +199,7 @@ def check_recordings(
                 "'texsense record ... --frames 10')")))  # fmt: skip
     if found:
         return found
-    zero, loaded = _typical(baseline), _typical(uniform)
+    zero, loaded = typical_reading(baseline), typical_reading(uniform)
     response = loaded - zero
     working = np.isfinite(response)
     if not working.any() or np.nanmedian(response) <= 0:

@@ -34,26 +34,20 @@ from texsense.calibration_checks import (
     parse_pressure,
     raise_if_refused,
     record_thickness_mm,
+    typical_reading,
 )
-from texsense.drift import split_steps
 from texsense.exceptions import ParameterError
-from texsense.io.columns import read_columns
+from texsense.io.columns import read_columns, read_steps
 from texsense.pipeline import Pipeline
 from texsense.recording import Recording
 from texsense.sim.spacer import PRESETS as SPACER_PRESETS
 from texsense.stages import Convert, Drift, StageChain
 from texsense.workflows import calibrate_mat, material_preset
 
-__all__ = ["CalibrationSession", "CheckReport", "load_material", "steps_csv"]
+__all__ = ["CalibrationSession", "CheckReport", "load_material"]
 
 #: A check passes for an element within this share of the known load.
 CHECK_TOLERANCE = 0.10
-
-
-def steps_csv(path: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """Held steps of a step-and-hold CSV (time_s, compression_mm, pressure_ncm2)."""
-    cols = read_columns(path, required=("time_s", "compression_mm", "pressure_ncm2"))
-    return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
 
 
 def load_material(
@@ -74,7 +68,7 @@ def load_material(
                 f"--thickness-mm {thickness_mm:g}: the preset {material} is {thickness:g} mm "
                 "thick (leave --thickness-mm out with a preset)"
             )
-        found: list[Any] | Drift = preset_drift if drift is None else steps_csv(drift)
+        found: list[Any] | Drift = preset_drift if drift is None else read_steps(drift)
         return record, thickness, found, f"the preset {material}"
     if not path.exists():
         raise ParameterError(
@@ -87,7 +81,7 @@ def load_material(
             f"--material {path} is a record: give the spacer's --thickness-mm (its capacitance "
             f"says about {record_thickness_mm(record):.1f} mm)"
         )
-    return record, thickness_mm, None if drift is None else steps_csv(drift), str(path)
+    return record, thickness_mm, None if drift is None else read_steps(drift), str(path)
 
 
 @dataclass
@@ -233,9 +227,6 @@ class CalibrationSession:
             run = Recording.concatenate([before, recording])
         out = pipe.run(run)
         tail = out.select(slice(run.n_frames - recording.n_frames, None))
-        x = np.where(tail.valid, tail.frames.astype(np.float64), np.nan)
-        median = np.full(x.shape[1], np.nan)
-        seen = np.isfinite(x).any(axis=0)
-        median[seen] = np.nanmedian(x[:, seen], axis=0)
+        median = typical_reading(tail)
         names = [recording.layout.element_name(k) for k in range(recording.n_elements)]
         return CheckReport(p, median, names)

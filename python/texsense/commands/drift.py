@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
-from texsense.drift import DriftModel, split_steps
+from texsense.drift import DriftModel
 from texsense.drift_structure import choose_structure
 from texsense.exceptions import FormatError, ParameterError
 from texsense.hysteresis import HysteresisModel
-from texsense.io.columns import read_columns
+from texsense.io.columns import read_columns, read_steps
 from texsense.stages import Drift, Hysteresis, StageChain, load_chain
 
 
@@ -103,12 +103,6 @@ def rest_rate_of(args: argparse.Namespace, prefix: str = "") -> float:
     if not rate > 0:
         raise ParameterError(f"--{prefix}rest-rate must be > 0 N/cm² per s, got {rate}")
     return rate
-
-
-def load_steps(path: Path) -> list:
-    """Steps of a CSV with time_s, compression_mm and pressure_ncm2 columns."""
-    cols = _columns(path)
-    return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
 
 
 def _columns(path: Path) -> dict:
@@ -230,7 +224,7 @@ def run_fit(args: argparse.Namespace) -> int:
             "drift fit: --clock rest+time needs --history MODEL.json and records with cycles "
             "(held steps alone cannot tell the two clocks apart)"
         )
-    steps = load_steps(args.steps[0])
+    steps = read_steps(args.steps[0])
     model, fit = DriftModel.fit(steps, kind=args.kind, rest_rate=rest_rate_of(args))
     summary: dict[str, Any] = {
         "steps": [round(s, 6) for _, _, s in steps],

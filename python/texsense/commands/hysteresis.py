@@ -10,14 +10,14 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
-from texsense.commands.drift import add_clock_arguments, load_model, load_steps, rest_rate_of
+from texsense.commands.drift import add_clock_arguments, load_model, rest_rate_of
 from texsense.drift import DriftModel
 from texsense.exceptions import FormatError
 from texsense.hysteresis import HysteresisModel
 from texsense.hysteresis.plots import model_figure, validation_report_figure
 from texsense.hysteresis.sampling import check_sampling
 from texsense.hysteresis.validation import validate
-from texsense.io.columns import read_columns, write_columns
+from texsense.io.columns import read_columns, read_steps, write_columns
 from texsense.stages import Drift, Hysteresis, StageChain
 
 #: Pressure bands of the error summary (thesis §4.5), in the output's unit.
@@ -165,7 +165,7 @@ def run_fit(args: argparse.Namespace) -> int:
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
     if args.drift:
         drift, _ = DriftModel.fit(
-            load_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
+            read_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
         )
         # hysteresis followed by drift: a chain of the two stages
         StageChain([Hysteresis.of(model), Drift.of(drift)]).save(args.output_model)

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration_checks import parse_pressure
+from texsense.calibration_checks import parse_pressure, typical_reading
 from texsense.calibration_session import CalibrationSession
 from texsense.commands.monitor import add_source_options, open_source
 from texsense.exceptions import ParameterError
@@ -181,14 +181,6 @@ async def _steady_frames(
     return frames
 
 
-def _typical(rec: Recording) -> np.ndarray:
-    x = np.where(rec.valid, rec.frames.astype(np.float64), np.nan)
-    out = np.full(x.shape[1], np.nan)
-    seen = np.isfinite(x).any(axis=0)
-    out[seen] = np.nanmedian(x[:, seen], axis=0)
-    return out
-
-
 async def _ask(question: str, yes: bool) -> str:
     if yes:
         print(question.replace("press Enter", "going on (--yes)"), flush=True)
@@ -243,7 +235,9 @@ async def _wizard(args: argparse.Namespace, source: Any) -> int:
             "or a plate), then press Enter",
             args.yes,
         )
-        frames = await _steady_frames(feed, args.frames, args.wait_s, _typical(zero), expected, say)
+        frames = await _steady_frames(
+            feed, args.frames, args.wait_s, typical_reading(zero), expected, say
+        )
         uniform = keep(_as_recording(frames, source, "uniform"), "uniform")
         say(f"  recorded {uniform.n_frames} frames -> {kept[-1]}")
         say(f"step 3/4: calibrating with {session.material_name}")
@@ -260,7 +254,7 @@ async def _wizard(args: argparse.Namespace, source: Any) -> int:
         )
         change = session.expected_change_pF(check_p) - expected
         frames = await _steady_frames(
-            feed, args.frames, args.wait_s, _typical(uniform), change, say
+            feed, args.frames, args.wait_s, typical_reading(uniform), change, say
         )
         check = keep(_as_recording(frames, source, "check"), "check")
         report = session.check(check, check_p, before=uniform)

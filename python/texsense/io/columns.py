@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense import units
+from texsense.drift import split_steps
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io import load, sniff_format
 from texsense.io.columns_csv import (
@@ -50,7 +51,14 @@ from texsense.io.hdf5 import write_hdf5
 from texsense.layout import Layout
 from texsense.recording import QUANTITIES, Recording
 
-__all__ = ["column_name", "is_columns_csv", "read_columns", "unit_of_column", "write_columns"]
+__all__ = [
+    "column_name",
+    "is_columns_csv",
+    "read_columns",
+    "read_steps",
+    "unit_of_column",
+    "write_columns",
+]
 
 #: What a column table is, for the error line on a file that is none.
 WHAT = (
@@ -115,6 +123,14 @@ def read_columns(
         if name not in cols:
             raise FormatError(path, f"no column {name!r}; columns are {', '.join(cols)}")
     return cols
+
+
+def read_steps(path: str | Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The held steps of a step-and-hold record (``time_s``, ``compression_mm``,
+    ``pressure_ncm2``; a column CSV or a one-element recording), cut by
+    :func:`texsense.drift.split_steps`."""
+    cols = read_columns(path, required=("time_s", "compression_mm", "pressure_ncm2"))
+    return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
 
 
 def write_columns(
