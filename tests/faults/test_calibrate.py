@@ -101,3 +101,21 @@ def test_wizard_parameters_and_a_missing_port(tmp_path, fault_row):
     assert_clear_error(rc, err, "ten")
     fault_row("calibrate wizard", "--pressure that is not a number", "clear error")
     assert not list(tmp_path.iterdir())
+
+
+def test_a_failed_write_keeps_the_previous_calibration(mat_files, fault_row):
+    """The disk fills (a file-size limit of 4 KiB) while the chain is written: the previous
+    mat.json stays as it was, no temporary file is left, one line says why."""
+    import resource
+
+    previous = mat_files / "mat.json"
+    previous.write_text('{"the": "previous calibration"}')
+    limit = lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))  # noqa: E731
+    rc, _, err = run_cli("calibrate", "mat", "--baseline", "zero.h5", "--uniform", "one.h5",
+                         "--material", "textile-3mm", "--pressure", "1", "-o", "mat.json",
+                         cwd=mat_files, preexec=limit)  # fmt: skip
+    assert_clear_error(rc, err, "mat.json", "File too large")
+    assert previous.read_text() == '{"the": "previous calibration"}'
+    assert sorted(p.name for p in mat_files.iterdir() if p.name.startswith(".")) == []
+    previous.unlink()
+    fault_row("calibrate", "calibrate mat with a file-size limit of 4 KiB", "data kept")
