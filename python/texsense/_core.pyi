@@ -127,6 +127,7 @@ class DriftBank:
         rest_rate: float = 0.0,
         rest_window: float = 0.5,
         gamma_time: float = 0.0,
+        exponent: float = 1.0,
     ) -> Self: ...
     @property
     def n_elements(self) -> int: ...

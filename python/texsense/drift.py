@@ -65,9 +65,11 @@ class DriftKernel:
         rest_rate: float = 0.0,
         rest_window: float = 0.5,
         gamma_time: float = 0.0,
+        exponent: float = 1.0,
     ) -> DriftBank:
         """A recursive evaluator for ``n_elements`` (on the rest clock when ``rest_rate`` >
-        0, plus a time-clock part ``gamma_time``; see :class:`DriftModel`)."""
+        0, plus a time-clock part ``gamma_time``, superposing the steps of ``h**exponent``;
+        see :class:`DriftModel`)."""
         return DriftBank(
             np.ascontiguousarray(self.weights),
             np.ascontiguousarray(self.taus),
@@ -76,6 +78,7 @@ class DriftKernel:
             float(rest_rate),
             float(rest_window),
             float(gamma_time),
+            float(exponent),
         )
 
 
@@ -266,6 +269,11 @@ class DriftModel:
     unchanged; while the load changes fast (cycles) the clock nearly stops. Why this transfers
     γ between held steps and cycles, and where it does not (load-controlled sitting):
     docs/drift.md. ``rest_rate = 0`` is eq. 5.8 as printed (``kind="thesis"`` in the CLI).
+
+    ``exponent`` q ≠ 1 superposes the steps of ``max(h, 0)**q`` instead of ``h`` (Schapery's
+    nonlinear superposition: a step's drift grows as the q-th power of its level, not in
+    proportion; the drift is still added to ``h``). Eq. 5.8 is q = 1; a larger q is chosen
+    only from the user's records (:func:`texsense.drift_structure.choose_structure`).
     """
 
     gamma: float
@@ -274,6 +282,7 @@ class DriftModel:
     rest_rate: float = 0.0
     rest_window: float = 0.5
     gamma_time: float = 0.0
+    exponent: float = 1.0
 
     @property
     def clock(self) -> str:
@@ -286,7 +295,12 @@ class DriftModel:
     def state(self, n_elements: int = 1) -> DriftBank:
         """A recursive evaluator for ``n_elements``."""
         return self.kernel.bank(
-            self.gamma, n_elements, self.rest_rate, self.rest_window, self.gamma_time
+            self.gamma,
+            n_elements,
+            self.rest_rate,
+            self.rest_window,
+            self.gamma_time,
+            self.exponent,
         )
 
     def apply(self, h: npt.ArrayLike, times_s: npt.ArrayLike) -> np.ndarray:
@@ -416,6 +430,7 @@ class DriftModel:
             "rest_rate": self.rest_rate,
             "rest_window_s": self.rest_window,
             "gamma_time": self.gamma_time,
+            "exponent": self.exponent,
             "kernel": {
                 "weights": self.kernel.weights.tolist(),
                 "taus_s": self.kernel.taus.tolist(),
@@ -458,7 +473,10 @@ class DriftModel:
         if gamma_time and rest_rate <= 0:
             raise f.error("gamma_time", "needs the rest clock (rest_rate > 0)")
         kind = f.text("kind", "log")
-        return cls(f.number("gamma"), kernel, kind, rest_rate, window, gamma_time)
+        exponent = f.number("exponent", 1.0)  # files before the level power: eq. 5.8
+        if not 0.25 <= exponent <= 8.0:
+            raise f.error("exponent", f"must lie in [0.25, 8], got {exponent}")
+        return cls(f.number("gamma"), kernel, kind, rest_rate, window, gamma_time, exponent)
 
     def save(self, path: str | Path) -> Path:
         """Write the drift model file (``texsense.drift``), atomically."""

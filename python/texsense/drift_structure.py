@@ -17,11 +17,24 @@ from scipy.optimize import nnls
 from texsense.drift import DriftKernel, DriftModel, _kernel_or_log, log_kernel
 from texsense.exceptions import ParameterError
 
-__all__ = ["PRONY_TAUS_S", "StructureChoice", "choose_structure"]
+__all__ = [
+    "LEVEL_EXPONENTS",
+    "LINEAR_STRUCTURES",
+    "PRONY_TAUS_S",
+    "StructureChoice",
+    "candidate_name",
+    "choose_structure",
+]
 
 
 #: Time constants of the Prony candidate of :func:`choose_structure` (s).
 PRONY_TAUS_S = (1.0, 10.0, 100.0, 1000.0, 1e4, 1e5)
+
+#: Powers q of the level whose steps the nonlinear candidates superpose (1: eq. 5.8).
+LEVEL_EXPONENTS = (1.0, 2.0, 3.0)
+
+#: The structures tried on the Preisach output, each with every level power.
+LINEAR_STRUCTURES = ("time", "rest", "rest+time", "prony")
 
 
 @dataclass
@@ -38,10 +51,19 @@ class StructureChoice:
 
 
 def _unit_responses(
-    h: np.ndarray, t: np.ndarray, rest_rate: float, kernel: DriftKernel | None = None
+    h: np.ndarray,
+    t: np.ndarray,
+    rest_rate: float,
+    kernel: DriftKernel | None = None,
+    exponent: float = 1.0,
 ) -> np.ndarray:
     k, kind = _kernel_or_log(kernel)
-    return DriftModel(1.0, k, kind, rest_rate).apply(h, t) - h
+    return DriftModel(1.0, k, kind, rest_rate, exponent=exponent).apply(h, t) - h
+
+
+def candidate_name(structure: str, exponent: float) -> str:
+    """``prony`` for eq. 5.8's linear superposition, ``prony h^2`` for the level's square."""
+    return structure if exponent == 1.0 else f"{structure} h^{exponent:g}"
 
 
 def choose_structure(
@@ -50,6 +72,8 @@ def choose_structure(
     band: tuple[float, float] = (0.5, 3.5),
     train_share: float = 0.5,
     margin: float = 0.05,
+    exponents: Sequence[float] = LEVEL_EXPONENTS,
+    nonlinear_margin: float = 0.10,
 ) -> StructureChoice:
     """Choose the drift structure from the user's records by validation on held-out parts.
 
@@ -63,25 +87,27 @@ def choose_structure(
     - ``rest``: the same kernel on the rest clock;
     - ``rest+time``: both clocks (:meth:`DriftModel.fit_joint`);
     - ``prony``: a non-negative Prony series (time constants 1 s .. 1 day, one sign) on time;
+    - each of them also on the steps of ``h^q`` for every q in ``exponents`` (named e.g.
+      ``prony h^2``): Schapery's nonlinear superposition, where a step's drift grows as a
+      power of its level (Schapery 1969, the standard extension of linear viscoelasticity
+      to soft polymers; a spacer whose creep is faster under larger loads);
     - ``qlv``: quasi-linear viscoelasticity — the logarithmic relaxation acts on the elastic
       (backbone) response instead of the Preisach output (the standard model of soft
       tissue and elastomers, Fung). The drift stage runs on the Preisach output, so this
       candidate is reported but not deployable (``deployable``).
 
-    The chosen candidate is the deployable one with the lowest held-out RMSE, provided it
-    beats hysteresis only (γ = 0) by more than ``margin`` (relative: a drift fitted to noise
-    wins by chance by a little); otherwise ``chosen`` is None.
+    The choice: the linear superposition (eq. 5.8's) is the prior. The best linear
+    deployable candidate is chosen if it beats hysteresis only (γ = 0) by more than
+    ``margin`` (relative: a drift fitted to noise wins by chance by a little); a nonlinear
+    one replaces it only if it beats both the best linear candidate and hysteresis only by
+    more than ``nonlinear_margin``. None beats hysteresis only: ``chosen`` is None.
     """
     if not records:
         raise ParameterError("choose_structure needs at least one record")
     prony_k = [DriftKernel(np.ones(1), np.array([tau]), 0.0, (0.0, 1e6)) for tau in PRONY_TAUS_S]
-    designs: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {
-        "time": [],
-        "rest": [],
-        "rest+time": [],
-        "prony": [],
-        "qlv": [],
-    }
+    powers = [1.0] + [float(q) for q in exponents if float(q) != 1.0]
+    names = [candidate_name(s, q) for q in powers for s in LINEAR_STRUCTURES] + ["qlv"]
+    designs: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {n: [] for n in names}
     for n, (h, e, p, t) in enumerate(records):
         x = np.asarray(h, dtype=np.float64)
         el = np.asarray(e, dtype=np.float64)
@@ -92,21 +118,22 @@ def choose_structure(
         sel = np.isfinite(x) & np.isfinite(y) & (y >= band[0]) & (y < band[1])
         if sel.sum() < 4:
             raise ParameterError(f"record {n} has fewer than 4 samples in {band[0]}-{band[1]}")
-        d_time = _unit_responses(x, tt, 0.0)
-        d_rest = _unit_responses(x, tt, rest_rate)
-        d_qlv = DriftModel(1.0, log_kernel(), "log").apply(el, tt) - el
-        prony = np.column_stack([_unit_responses(x, tt, 0.0, k) for k in prony_k])
         target = (y - x)[sel]
         idx = np.nonzero(sel)[0]
         train = idx < idx[int(train_share * idx.size)]
-        for name, cols in (
-            ("time", d_time[sel, None]),
-            ("rest", d_rest[sel, None]),
-            ("rest+time", np.column_stack([d_rest, d_time])[sel]),
-            ("prony", prony[sel]),
-            ("qlv", d_qlv[sel, None]),
-        ):
-            designs[name].append((cols, target, train))
+        for q in powers:
+            d_time = _unit_responses(x, tt, 0.0, exponent=q)
+            d_rest = _unit_responses(x, tt, rest_rate, exponent=q)
+            prony = np.column_stack([_unit_responses(x, tt, 0.0, k, q) for k in prony_k])
+            for structure, cols in (
+                ("time", d_time[sel, None]),
+                ("rest", d_rest[sel, None]),
+                ("rest+time", np.column_stack([d_rest, d_time])[sel]),
+                ("prony", prony[sel]),
+            ):
+                designs[candidate_name(structure, q)].append((cols, target, train))
+        d_qlv = DriftModel(1.0, log_kernel(), "log").apply(el, tt) - el
+        designs["qlv"].append((d_qlv[sel, None], target, train))
 
     def fit_coef(name: str, parts: list, use: str) -> np.ndarray:
         rows, rhs = [], []
@@ -116,7 +143,7 @@ def choose_structure(
             rows.append(w * cols[m])
             rhs.append(w * target[m])
         A, b = np.vstack(rows), np.concatenate(rhs)
-        if name == "prony":  # one sign, non-negative weights: the better of the two
+        if name.startswith("prony"):  # one sign, non-negative weights: the better of the two
             best = None
             for s in (1.0, -1.0):
                 c, r = nnls(s * A, b, maxiter=50 * A.shape[1])
@@ -139,22 +166,29 @@ def choose_structure(
     }
     baseline = held_out(None, designs["time"])
     deployable = {name: name != "qlv" for name in designs}
-    candidates = [n for n in scores if deployable[n] and scores[n] < (1 - margin) * baseline]
-    if not candidates:
+    exponent_of = {candidate_name(s, q): q for q in powers for s in LINEAR_STRUCTURES}
+    linear = [
+        n for n in exponent_of if exponent_of[n] == 1.0 and scores[n] < (1 - margin) * baseline
+    ]
+    best_linear = min(linear, key=lambda n: scores[n]) if linear else None
+    bar = (1 - nonlinear_margin) * min(baseline, scores[best_linear] if best_linear else np.inf)
+    nonlinear = [n for n in exponent_of if exponent_of[n] != 1.0 and scores[n] < bar]
+    chosen = min(nonlinear, key=lambda n: scores[n]) if nonlinear else best_linear
+    if chosen is None:
         return StructureChoice(None, None, scores, baseline, deployable)
-    chosen = min(candidates, key=lambda n: scores[n])
     coef = fit_coef(chosen, designs[chosen], "all")
     log_k = log_kernel()
-    if chosen == "time":
-        model = DriftModel(float(coef[0]), log_k, "log")
-    elif chosen == "rest":
-        model = DriftModel(float(coef[0]), log_k, "log", rest_rate)
-    elif chosen == "rest+time":
-        model = DriftModel(float(coef[0]), log_k, "log", rest_rate, 0.5, float(coef[1]))
+    structure, q = chosen.split(" ")[0], exponent_of[chosen]
+    if structure == "time":
+        model = DriftModel(float(coef[0]), log_k, "log", exponent=q)
+    elif structure == "rest":
+        model = DriftModel(float(coef[0]), log_k, "log", rest_rate, exponent=q)
+    elif structure == "rest+time":
+        model = DriftModel(float(coef[0]), log_k, "log", rest_rate, 0.5, float(coef[1]), q)
     else:  # prony: one sign, the weights as the kernel
         sign = -1.0 if coef.sum() < 0 else 1.0
         w = np.abs(coef)
         keep = w > 0
         kernel = DriftKernel(w[keep], np.asarray(PRONY_TAUS_S)[keep], 0.0, (0.0, 1e6))
-        model = DriftModel(sign, kernel, "prony")
+        model = DriftModel(sign, kernel, "prony", exponent=q)
     return StructureChoice(chosen, model, scores, baseline, deployable)

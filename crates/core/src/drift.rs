@@ -82,6 +82,22 @@ struct DriftSettings {
     rest_rate: f64,
     rest_window: f64,
     gamma_time: f64,
+    /// Power `q` of the level the kernel superposes (1: the thesis's linear superposition).
+    exponent: f64,
+}
+
+impl DriftSettings {
+    /// The level whose steps the kernel superposes: the hysteresis output itself (`q = 1`,
+    /// eq. 5.8), or its `q`-th power (Schapery's nonlinear superposition, the step
+    /// responses scaling as `h^q`; below zero the level is 0).
+    #[inline]
+    fn level(&self, h: f64) -> f64 {
+        if self.exponent == 1.0 {
+            h
+        } else {
+            h.max(0.0).powf(self.exponent)
+        }
+    }
 }
 
 /// Drift states of N elements.
@@ -136,9 +152,10 @@ impl DriftBlock<'_> {
             return f64::NAN;
         }
         let el = &mut self.elements[i];
-        let change = if el.started { h - el.last_h } else { h };
+        let x = s.level(h);
+        let change = if el.started { x - el.last_h } else { x };
         el.started = true;
-        el.last_h = h;
+        el.last_h = x;
         el.total += change;
         // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
         let weighted = if s.rest_rate > 0.0 && dt > 0.0 {
@@ -193,6 +210,7 @@ impl DriftBank {
                 rest_rate: 0.0,
                 rest_window: 0.5,
                 gamma_time: 0.0,
+                exponent: 1.0,
             },
             elements: vec![DriftElement::default(); n],
             z: vec![0.0; n * k],
@@ -243,6 +261,21 @@ impl DriftBank {
         } else {
             Vec::new()
         };
+        Ok(self)
+    }
+
+    /// Superpose the steps of `h^exponent` instead of `h` (Schapery's nonlinear
+    /// superposition: a step's drift grows as the `exponent`-th power of its level; below
+    /// zero the level is 0). `1` (the default) is eq. 5.8; the rest clock then runs on the
+    /// rate of change of the powered level.
+    pub fn with_exponent(mut self, exponent: f64) -> Result<Self, CoreError> {
+        if !(exponent.is_finite() && (0.25..=8.0).contains(&exponent)) {
+            return Err(CoreError::Parameter {
+                what: "exponent",
+                why: format!("must lie in [0.25, 8], got {exponent}"),
+            });
+        }
+        self.settings.exponent = exponent;
         Ok(self)
     }
 
@@ -410,6 +443,38 @@ mod tests {
         assert!(Kernel::new(vec![-1.0], vec![1.0]).is_err());
         assert!(DriftBank::new(log_kernel(), f64::NAN, 1).is_err());
         assert!(a.step(-1.0, &[1.0, 1.0], &[true, true], &mut out).is_err());
+    }
+
+    #[test]
+    fn exponent_superposes_the_powered_level() {
+        // q = 2: the drift of a held level h is that of a held level h² with q = 1
+        let (h, q) = (1.5_f64, 2.0);
+        let mut powered = DriftBank::new(log_kernel(), -0.025, 1)
+            .unwrap()
+            .with_exponent(q)
+            .unwrap();
+        let mut linear = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
+        let (mut a, mut b) = ([0.0], [0.0]);
+        for dt in [0.0, 1.0, 10.0, 100.0] {
+            powered.step(dt, &[h], &[true], &mut a).unwrap();
+            linear.step(dt, &[h.powf(q)], &[true], &mut b).unwrap();
+            assert!(((a[0] - h) - (b[0] - h.powf(q))).abs() < 1e-12);
+        }
+        assert!((a[0] - h).abs() > 1e-3, "a held level drifts");
+        // below zero the level is 0: no drift from a negative reading
+        let mut neg = DriftBank::new(log_kernel(), -0.025, 1)
+            .unwrap()
+            .with_exponent(q)
+            .unwrap();
+        neg.step(0.0, &[-0.3], &[true], &mut a).unwrap();
+        neg.step(100.0, &[-0.3], &[true], &mut a).unwrap();
+        assert_eq!(a[0], -0.3);
+        for bad in [0.0, -1.0, f64::NAN, 9.0] {
+            assert!(DriftBank::new(log_kernel(), -0.025, 1)
+                .unwrap()
+                .with_exponent(bad)
+                .is_err());
+        }
     }
 
     /// The drift (output - input) at the end of `path` ((dt, h) pairs) for one element.

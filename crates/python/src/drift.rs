@@ -16,7 +16,8 @@ pub(crate) struct PyDriftBank {
 #[pymethods]
 impl PyDriftBank {
     #[new]
-    #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5, gamma_time=0.0))]
+    #[allow(clippy::too_many_arguments)] // the Python constructor's keyword arguments
+    #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5, gamma_time=0.0, exponent=1.0))]
     fn new(
         weights: PyReadonlyArray1<'_, f64>,
         taus: PyReadonlyArray1<'_, f64>,
@@ -25,12 +26,14 @@ impl PyDriftBank {
         rest_rate: f64,
         rest_window: f64,
         gamma_time: f64,
+        exponent: f64,
     ) -> PyResult<Self> {
         let kernel =
             Kernel::new(weights.as_slice()?.to_vec(), taus.as_slice()?.to_vec()).map_err(to_py)?;
         let inner = DriftBank::new(kernel, gamma, n_elements)
             .and_then(|b| b.with_rest_rate(rest_rate, rest_window))
             .and_then(|b| b.with_time_component(gamma_time))
+            .and_then(|b| b.with_exponent(exponent))
             .map_err(to_py)?;
         Ok(Self { inner })
     }

@@ -11,7 +11,13 @@ import numpy as np
 
 from texsense.commands import HELP
 from texsense.drift import DriftModel
-from texsense.drift_structure import choose_structure
+from texsense.drift_structure import (
+    LEVEL_EXPONENTS,
+    LINEAR_STRUCTURES,
+    StructureChoice,
+    candidate_name,
+    choose_structure,
+)
 from texsense.exceptions import FormatError, ParameterError
 from texsense.hysteresis import HysteresisModel
 from texsense.io.columns import read_columns, read_steps
@@ -185,18 +191,16 @@ def _choose_and_report(
         "deployable": choice.deployable,
     }
     if choice.model is not None:
-        summary.update(gamma=choice.model.gamma, clock=choice.model.clock)
+        summary.update(
+            gamma=choice.model.gamma, clock=choice.model.clock, exponent=choice.model.exponent
+        )
         if args.output:
             chain = StageChain([Hysteresis.of(model), Drift.of(choice.model)])
             summary["model"] = str(chain.save(args.output))
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
-        print("held-out RMSE (later half of every record, 0.5-3.5 N/cm²):")
-        print(f"  {'hysteresis only':>16}: {choice.baseline_rmse:.4g} N/cm²")
-        for name, rmse in choice.held_out_rmse.items():
-            note = "" if choice.deployable[name] else " (not a drift stage yet: reported only)"
-            print(f"  {name:>16}: {rmse:.4g} N/cm²{note}")
+        print_held_out(choice)
     if choice.model is None:
         best = min(choice.held_out_rmse.values())
         raise ParameterError(
@@ -205,10 +209,39 @@ def _choose_and_report(
             "or name a structure with --clock"
         )
     if not args.json:
-        print(f"chose {choice.chosen} (γ {choice.model.gamma:.5g}, refitted on all samples)")
+        print(f"chose {choice.chosen} ({describe_drift(choice.model)}, refitted on all samples)")
         if args.output:
             print(f"wrote {args.output}")
     return 0
+
+
+def print_held_out(choice: StructureChoice) -> None:
+    """The held-out RMSE of every candidate as a table: structures by level power."""
+    print("held-out RMSE (later half of every record, 0.5-3.5 N/cm²), N/cm²:")
+    print(f"  {'hysteresis only':<16}{choice.baseline_rmse:.4g}")
+    powers = sorted({1.0, *LEVEL_EXPONENTS})
+    head = "".join(f"{'h' if q == 1 else f'h^{q:g}':<10}" for q in powers)
+    print(f"  {'':<16}{head}".rstrip())
+    for structure in LINEAR_STRUCTURES:
+        cells = [choice.held_out_rmse.get(candidate_name(structure, q)) for q in powers]
+        row = "".join(f"{c:<10.4g}" for c in cells if c is not None)
+        print(f"  {structure:<16}{row}".rstrip())
+    if "qlv" in choice.held_out_rmse:
+        qlv = choice.held_out_rmse["qlv"]
+        print(f"  {'qlv (backbone)':<16}{qlv:<10.4g}(reported only: not a drift stage yet)")
+
+
+def describe_drift(model: DriftModel) -> str:
+    """γ (or the Prony weights), the clock and the level power, in a few words."""
+    if model.kind == "prony":
+        what = f"Prony weights sum {model.gamma * model.kernel.weights.sum():.4g}"
+    else:
+        what = f"γ {model.gamma:.5g}"
+        if model.gamma_time:
+            what += f", time γ {model.gamma_time:.5g}"
+    if model.exponent != 1.0:
+        what += f", steps of h^{model.exponent:g} (Schapery)"
+    return what
 
 
 def run_fit(args: argparse.Namespace) -> int:
