@@ -75,11 +75,12 @@ def run(law: str) -> list[str]:
 
     recs = [record_of(model, loads), record_of(model, cyc, first)]
     joint, _ = DriftModel.fit_joint([(a, c, d) for a, _, c, d in recs], rest_rate=0.02)
-    choice = choose_structure(recs)
+    choice = choose_structure(recs, backbone=model.backbone_curve())
     rows = []
     candidates = {"hysteresis only": h, "documented workflow (rest+time)": joint.apply(h, t)}
     if choice.model is not None:
-        candidates[f"chosen by held-out validation: {choice.chosen}"] = choice.model.apply(h, t)
+        chosen = f"chosen by held-out validation: {choice.chosen}"
+        candidates[chosen] = choice.model.apply(h, t, inputs=u)
     for name, pm in candidates.items():
         hours = hour_errors(p, pm, t)
         rows.append(
@@ -116,13 +117,14 @@ def alternate(law: str, rounds: int = 4) -> list[str]:
     for k in range(rounds):
         model = HysteresisModel().fit(uc, target)
 
-        choice = choose_structure([record_of(model, loads), record_of(model, cyc, first)])
+        recs = [record_of(model, loads), record_of(model, cyc, first)]
+        choice = choose_structure(recs, backbone=model.backbone_curve())
         if choice.model is None:
             rows.append(f"| {law} | {k} | {model.method_} | none beats hysteresis only | | | | | |")
             break
-        hours = hour_errors(p, choice.model.apply(model.predict(u), t), t)
+        hours = hour_errors(p, choice.model.apply(model.predict(u), t, inputs=u), t)
         hc = model.predict(uc)
-        removed = choice.model.apply(hc, tc) - hc
+        removed = choice.model.apply(hc, tc, inputs=uc) - hc
         rows.append(
             f"| {law} | {k} | {model.method_} | {choice.chosen} | "
             + " | ".join(f"{e:.1%}" for e in hours)

@@ -139,6 +139,30 @@ def test_the_chain_the_pipeline_and_the_stages_give_the_same_numbers(world, tmp_
     np.testing.assert_array_equal(np.array(rows, np.float32), by_stages.frames[:20])
 
 
+def test_a_qlv_drift_runs_the_same_in_the_pipeline_and_stage_by_stage(world):
+    """A drift that relaxes the elastic response of the input (QLV, level 'backbone'):
+    the compiled pipeline (Compensation with a level curve) equals the chain run stage
+    after stage, batch and streaming."""
+    from texsense.drift import DriftModel, log_kernel
+    from texsense.stages import Drift
+
+    chain = world["chain"]
+    hyst = chain["hysteresis"].model_
+    qlv = DriftModel(-0.02, log_kernel(), level="backbone", backbone=hyst.backbone_curve())
+    qlv_chain = StageChain([*chain.without("drift").stages, Drift.of(qlv)])
+    rec = world["session"]
+    by_stages = qlv_chain.reset().run(rec)
+    compiled = Pipeline(qlv_chain, rec.layout, repair=None).run(rec)
+    np.testing.assert_array_equal(compiled.valid, by_stages.valid)
+    np.testing.assert_array_equal(compiled.frames, by_stages.frames)
+    plain = chain.reset().run(rec)
+    ok = by_stages.valid & plain.valid
+    assert np.nanmax(np.abs(by_stages.frames[ok] - plain.frames[ok])) > 1e-4
+    qlv_chain.reset()
+    rows = [qlv_chain.step(rec.frames[k], rec.valid[k], rec.times[k])[0] for k in range(20)]
+    np.testing.assert_array_equal(np.array(rows, np.float32), by_stages.frames[:20])
+
+
 def test_a_chain_checks_what_flows_from_stage_to_stage(world):
     chain = world["chain"]
     with pytest.raises(ValueError, match="the hysteresis stage reads compression"):

@@ -26,12 +26,13 @@ import numpy.typing as npt
 from scipy.optimize import nnls
 
 from texsense import modelfile
-from texsense._core import DriftBank
+from texsense._core import Curve, DriftBank
 from texsense.exceptions import FormatError, ParameterError
 from texsense.modelfile import Fields
 from texsense.stage import time_steps as _time_steps
 
 __all__ = [
+    "LEVELS",
     "DriftKernel",
     "DriftModel",
     "StepFit",
@@ -43,6 +44,11 @@ __all__ = [
     "split_steps",
     "time_steps",
 ]
+
+
+#: What the drift superposes: the Preisach output (eq. 5.8) or the elastic response of the
+#: input (``backbone``: quasi-linear viscoelasticity).
+LEVELS = ("output", "backbone")
 
 
 @dataclass(frozen=True)
@@ -274,6 +280,13 @@ class DriftModel:
     nonlinear superposition: a step's drift grows as the q-th power of its level, not in
     proportion; the drift is still added to ``h``). Eq. 5.8 is q = 1; a larger q is chosen
     only from the user's records (:func:`texsense.drift_structure.choose_structure`).
+
+    ``level="backbone"`` is quasi-linear viscoelasticity (Fung): the kernel superposes the
+    steps of the elastic response ``backbone(u)`` of the hysteresis stage's *input* (the
+    curve ``backbone = (inputs, responses)``, the mean of the Preisach model's major-loop
+    branches) instead of the Preisach output, and its drift is added to the Preisach output.
+    It needs the inputs (:meth:`apply` ``inputs=``; in a chain it follows the hysteresis
+    stage).
     """
 
     gamma: float
@@ -283,6 +296,21 @@ class DriftModel:
     rest_window: float = 0.5
     gamma_time: float = 0.0
     exponent: float = 1.0
+    level: str = "output"
+    backbone: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+
+    def __post_init__(self) -> None:
+        if self.level not in LEVELS:
+            raise ParameterError(f"level must be one of {', '.join(LEVELS)}, got {self.level!r}")
+        if (self.level == "backbone") != (self.backbone is not None):
+            raise ParameterError("level 'backbone' (QLV) needs the backbone curve, and only it")
+
+    def level_curve(self) -> Curve | None:
+        """The elastic response of the input as the core's curve (QLV), else None."""
+        if self.backbone is None:
+            return None
+        x, y = self.backbone
+        return Curve(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64))
 
     @property
     def clock(self) -> str:
@@ -303,14 +331,38 @@ class DriftModel:
             self.exponent,
         )
 
-    def apply(self, h: npt.ArrayLike, times_s: npt.ArrayLike) -> np.ndarray:
-        """Add the drift to a history of hysteresis outputs (T,) or (T, N) at ``times_s``."""
+    def apply(
+        self, h: npt.ArrayLike, times_s: npt.ArrayLike, inputs: npt.ArrayLike | None = None
+    ) -> np.ndarray:
+        """Add the drift to a history of hysteresis outputs (T,) or (T, N) at ``times_s``
+        (``inputs``: the hysteresis stage's inputs, for ``level="backbone"``)."""
         x = np.asarray(h, dtype=np.float64)
         one = x.ndim == 1
         x2 = np.ascontiguousarray(x[:, None] if one else x)
         dt = time_steps(times_s, x2.shape[0])
-        out = self.state(x2.shape[1]).run(dt, x2, np.ascontiguousarray(np.isfinite(x2)))
+        if self.level == "backbone":
+            if inputs is None:
+                raise ParameterError(
+                    "a QLV drift (level 'backbone') needs the hysteresis stage's inputs"
+                )
+            u = np.asarray(inputs, dtype=np.float64).reshape(x2.shape)
+            out = self.add_backbone_drift(self.state(x2.shape[1]), dt, x2, np.isfinite(x2), u)
+        else:
+            out = self.state(x2.shape[1]).run(dt, x2, np.ascontiguousarray(np.isfinite(x2)))
         return out[:, 0] if one else out
+
+    def add_backbone_drift(
+        self, bank: DriftBank, dt: np.ndarray, h: np.ndarray, valid: np.ndarray, u: np.ndarray
+    ) -> np.ndarray:
+        """QLV on a batch: ``h`` plus the drift of the elastic response of the inputs ``u``
+        (what the compiled ``Compensation`` with a level curve computes, to the bit)."""
+        curve = self.level_curve()
+        assert curve is not None
+        ok_u = np.isfinite(u)
+        b = np.full(u.shape, np.nan)
+        b[ok_u] = curve.at(np.ascontiguousarray(u[ok_u]))
+        ok = np.ascontiguousarray(valid & np.isfinite(h))
+        return h + (bank.run(dt, np.ascontiguousarray(b), ok) - b)
 
     @classmethod
     def fit(
@@ -431,6 +483,17 @@ class DriftModel:
             "rest_window_s": self.rest_window,
             "gamma_time": self.gamma_time,
             "exponent": self.exponent,
+            "level": self.level,
+            **(
+                {}
+                if self.backbone is None
+                else {
+                    "backbone": {
+                        "inputs": np.asarray(self.backbone[0]).tolist(),
+                        "responses": np.asarray(self.backbone[1]).tolist(),
+                    }
+                }
+            ),
             "kernel": {
                 "weights": self.kernel.weights.tolist(),
                 "taus_s": self.kernel.taus.tolist(),
@@ -476,7 +539,27 @@ class DriftModel:
         exponent = f.number("exponent", 1.0)  # files before the level power: eq. 5.8
         if not 0.25 <= exponent <= 8.0:
             raise f.error("exponent", f"must lie in [0.25, 8], got {exponent}")
-        return cls(f.number("gamma"), kernel, kind, rest_rate, window, gamma_time, exponent)
+        level = f.text("level", "output")  # files before QLV: the Preisach output
+        if level not in LEVELS:
+            raise f.error("level", f"must be one of {', '.join(LEVELS)}, got {level!r}")
+        backbone = None
+        if level == "backbone":
+            x = f.array("backbone.inputs", ndim=1)
+            y = f.array("backbone.responses", ndim=1)
+            if x.shape != y.shape or x.size < 2 or np.any(np.diff(x) <= 0):
+                raise f.error("backbone", "needs >= 2 points with strictly increasing inputs")
+            backbone = (x, y)
+        return cls(
+            f.number("gamma"),
+            kernel,
+            kind,
+            rest_rate,
+            window,
+            gamma_time,
+            exponent,
+            level,
+            backbone,
+        )
 
     def save(self, path: str | Path) -> Path:
         """Write the drift model file (``texsense.drift``), atomically."""

@@ -19,8 +19,8 @@ from texsense.exceptions import ParameterError
 
 __all__ = [
     "LEVEL_EXPONENTS",
-    "LINEAR_STRUCTURES",
     "PRONY_TAUS_S",
+    "STRUCTURES",
     "StructureChoice",
     "candidate_name",
     "choose_structure",
@@ -33,8 +33,9 @@ PRONY_TAUS_S = (1.0, 10.0, 100.0, 1000.0, 1e4, 1e5)
 #: Powers q of the level whose steps the nonlinear candidates superpose (1: eq. 5.8).
 LEVEL_EXPONENTS = (1.0, 2.0, 3.0)
 
-#: The structures tried on the Preisach output, each with every level power.
-LINEAR_STRUCTURES = ("time", "rest", "rest+time", "prony")
+#: The structures tried, each with every level power: four on the Preisach output, and
+#: quasi-linear viscoelasticity (``qlv``: the time clock on the elastic response).
+STRUCTURES = ("time", "rest", "rest+time", "prony", "qlv")
 
 
 @dataclass
@@ -74,6 +75,7 @@ def choose_structure(
     margin: float = 0.05,
     exponents: Sequence[float] = LEVEL_EXPONENTS,
     nonlinear_margin: float = 0.10,
+    backbone: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> StructureChoice:
     """Choose the drift structure from the user's records by validation on held-out parts.
 
@@ -92,9 +94,11 @@ def choose_structure(
       power of its level (Schapery 1969, the standard extension of linear viscoelasticity
       to soft polymers; a spacer whose creep is faster under larger loads);
     - ``qlv``: quasi-linear viscoelasticity — the logarithmic relaxation acts on the elastic
-      (backbone) response instead of the Preisach output (the standard model of soft
-      tissue and elastomers, Fung). The drift stage runs on the Preisach output, so this
-      candidate is reported but not deployable (``deployable``).
+      (backbone) response of the input instead of the Preisach output (the standard model
+      of soft tissue and elastomers, Fung), its drift added to the Preisach output. It is
+      deployable (``level="backbone"`` of :class:`DriftModel`) when ``backbone``, the
+      curve of the elastic response (:meth:`HysteresisModel.backbone_curve`), is given;
+      otherwise reported only (``deployable``).
 
     The choice: the linear superposition (eq. 5.8's) is the prior. The best linear
     deployable candidate is chosen if it beats hysteresis only (γ = 0) by more than
@@ -106,7 +110,7 @@ def choose_structure(
         raise ParameterError("choose_structure needs at least one record")
     prony_k = [DriftKernel(np.ones(1), np.array([tau]), 0.0, (0.0, 1e6)) for tau in PRONY_TAUS_S]
     powers = [1.0] + [float(q) for q in exponents if float(q) != 1.0]
-    names = [candidate_name(s, q) for q in powers for s in LINEAR_STRUCTURES] + ["qlv"]
+    names = [candidate_name(s, q) for q in powers for s in STRUCTURES]
     designs: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {n: [] for n in names}
     for n, (h, e, p, t) in enumerate(records):
         x = np.asarray(h, dtype=np.float64)
@@ -125,15 +129,15 @@ def choose_structure(
             d_time = _unit_responses(x, tt, 0.0, exponent=q)
             d_rest = _unit_responses(x, tt, rest_rate, exponent=q)
             prony = np.column_stack([_unit_responses(x, tt, 0.0, k, q) for k in prony_k])
+            d_qlv = _unit_responses(el, tt, 0.0, exponent=q)
             for structure, cols in (
                 ("time", d_time[sel, None]),
                 ("rest", d_rest[sel, None]),
                 ("rest+time", np.column_stack([d_rest, d_time])[sel]),
                 ("prony", prony[sel]),
+                ("qlv", d_qlv[sel, None]),
             ):
                 designs[candidate_name(structure, q)].append((cols, target, train))
-        d_qlv = DriftModel(1.0, log_kernel(), "log").apply(el, tt) - el
-        designs["qlv"].append((d_qlv[sel, None], target, train))
 
     def fit_coef(name: str, parts: list, use: str) -> np.ndarray:
         rows, rhs = [], []
@@ -165,14 +169,13 @@ def choose_structure(
         name: held_out(fit_coef(name, parts, "train"), parts) for name, parts in designs.items()
     }
     baseline = held_out(None, designs["time"])
-    deployable = {name: name != "qlv" for name in designs}
-    exponent_of = {candidate_name(s, q): q for q in powers for s in LINEAR_STRUCTURES}
-    linear = [
-        n for n in exponent_of if exponent_of[n] == 1.0 and scores[n] < (1 - margin) * baseline
-    ]
+    deployable = {name: backbone is not None or not name.startswith("qlv") for name in designs}
+    exponent_of = {candidate_name(s, q): q for q in powers for s in STRUCTURES}
+    usable = [n for n in exponent_of if deployable[n] and scores[n] < (1 - margin) * baseline]
+    linear = [n for n in usable if exponent_of[n] == 1.0]
     best_linear = min(linear, key=lambda n: scores[n]) if linear else None
     bar = (1 - nonlinear_margin) * min(baseline, scores[best_linear] if best_linear else np.inf)
-    nonlinear = [n for n in exponent_of if exponent_of[n] != 1.0 and scores[n] < bar]
+    nonlinear = [n for n in usable if exponent_of[n] != 1.0 and scores[n] < bar]
     chosen = min(nonlinear, key=lambda n: scores[n]) if nonlinear else best_linear
     if chosen is None:
         return StructureChoice(None, None, scores, baseline, deployable)
@@ -185,6 +188,9 @@ def choose_structure(
         model = DriftModel(float(coef[0]), log_k, "log", rest_rate, exponent=q)
     elif structure == "rest+time":
         model = DriftModel(float(coef[0]), log_k, "log", rest_rate, 0.5, float(coef[1]), q)
+    elif structure == "qlv":
+        model = DriftModel(float(coef[0]), log_k, "log", exponent=q, level="backbone",
+                           backbone=backbone)  # fmt: skip
     else:  # prony: one sign, the weights as the kernel
         sign = -1.0 if coef.sum() < 0 else 1.0
         w = np.abs(coef)

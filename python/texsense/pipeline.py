@@ -130,7 +130,8 @@ class Pipeline:
             if self.stages["hysteresis"]:
                 drift = self.chain.find(Drift) if self.stages["drift"] else None
                 bank = None if drift is None else drift.bank(n)
-                response["compensation"] = Compensation(hyst.bank(n), bank)
+                level = None if drift is None else drift.model_.level_curve()
+                response["compensation"] = Compensation(hyst.bank(n), bank, level)
             else:
                 response["loading"] = hyst.loading_curve()
         method = self.repair

@@ -1,23 +1,28 @@
 //! The combined compensation stage: Preisach model, then drift (thesis eq. 5.8), frame by
 //! frame in one pass, so a batch needs no intermediate array.
 
+use crate::convert::Curve;
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
 use crate::par::{run_frames, FrameBlock};
 use crate::preisach::{PreisachBank, PreisachBlock};
 
 /// The Preisach model's output (its offset and sign included), followed by an optional drift
-/// stage.
+/// stage. With a `level` curve (quasi-linear viscoelasticity, Fung) the drift superposes the
+/// steps of the elastic response `level(u)` of the input instead of the Preisach output,
+/// and its drift (its output minus its input) is added to the Preisach output.
 #[derive(Debug, Clone)]
 pub struct Compensation {
     preisach: PreisachBank,
     drift: Option<DriftBank>,
+    level: Option<Box<Curve>>,
 }
 
 /// One block of elements of a [`Compensation`], for a parallel batch.
 pub struct CompensationBlock<'a> {
     preisach: PreisachBlock<'a>,
     drift: Option<DriftBlock<'a>>,
+    level: Option<&'a Curve>,
 }
 
 impl CompensationBlock<'_> {
@@ -43,9 +48,14 @@ impl CompensationBlock<'_> {
     #[inline]
     pub fn step(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> f64 {
         let h = self.preisach.step(i, u, valid);
-        match &mut self.drift {
-            Some(d) => d.step(i, dt, h, valid),
-            None => h,
+        match (&mut self.drift, self.level) {
+            (Some(d), Some(curve)) => {
+                // the drift of the elastic response, added to the Preisach output
+                let b = if u.is_finite() { curve.at(u) } else { f64::NAN };
+                h + (d.step(i, dt, b, valid && h.is_finite()) - b)
+            }
+            (Some(d), None) => d.step(i, dt, h, valid),
+            (None, _) => h,
         }
     }
 }
@@ -68,7 +78,24 @@ impl Compensation {
         if let Some(d) = &drift {
             check_len("drift elements", d.len(), preisach.len())?;
         }
-        Ok(Self { preisach, drift })
+        Ok(Self {
+            preisach,
+            drift,
+            level: None,
+        })
+    }
+
+    /// Let the drift superpose the steps of `level(u)` (the elastic response of the input)
+    /// instead of the Preisach output (quasi-linear viscoelasticity); needs a drift stage.
+    pub fn with_level(mut self, level: Curve) -> Result<Self, CoreError> {
+        if self.drift.is_none() {
+            return Err(CoreError::Parameter {
+                what: "level",
+                why: "a level curve needs a drift stage".into(),
+            });
+        }
+        self.level = Some(Box::new(level));
+        Ok(self)
     }
 
     /// Number of elements.
@@ -107,12 +134,14 @@ impl Compensation {
     /// Both stages split into blocks of [`crate::par::block_size`] elements.
     pub fn blocks(&mut self) -> Vec<CompensationBlock<'_>> {
         let mut drift = self.drift.as_mut().map(|d| d.blocks().into_iter());
+        let level = self.level.as_deref();
         self.preisach
             .blocks()
             .into_iter()
             .map(|preisach| CompensationBlock {
                 preisach,
                 drift: drift.as_mut().and_then(Iterator::next),
+                level,
             })
             .collect()
     }
@@ -171,5 +200,36 @@ mod tests {
         for (a, b) in out.iter().zip(&expected) {
             assert_eq!(a.to_bits(), b.to_bits());
         }
+    }
+
+    #[test]
+    fn a_level_curve_drifts_the_elastic_response() {
+        let e = crate::everett::quadratic(21, 1.0);
+        let kernel = Kernel::new(vec![0.5, 0.5], vec![1.0, 100.0]).unwrap();
+        let curve = Curve::new(vec![0.0, 1.0], vec![0.0, 3.0]).unwrap();
+        let inputs: Vec<f64> = (0..40)
+            .map(|t| 0.5 + 0.4 * (t as f64 * 0.7).sin())
+            .collect();
+        let (dt, valid) = (vec![0.5; 40], vec![true; 40]);
+        let preisach = PreisachBank::new(e, 1, 32).unwrap();
+        let drift = DriftBank::new(kernel, -0.025, 1).unwrap();
+        let mut qlv = Compensation::new(preisach.clone(), Some(drift.clone()))
+            .and_then(|c| c.with_level(curve.clone()))
+            .unwrap();
+        let mut out = vec![0.0; 40];
+        qlv.run(&dt, &inputs, &valid, &mut out).unwrap();
+        // expected: Preisach output + (drift bank on the level - the level)
+        let (mut p, mut d) = (preisach.clone(), drift);
+        let mut h = vec![0.0; 40];
+        p.run(&inputs, &valid, &mut h).unwrap();
+        let b: Vec<f64> = inputs.iter().map(|&u| curve.at(u)).collect();
+        let mut db = vec![0.0; 40];
+        d.run(&dt, &b, &valid, &mut db).unwrap();
+        for k in 0..40 {
+            assert_eq!(out[k].to_bits(), (h[k] + (db[k] - b[k])).to_bits());
+        }
+        assert!(Compensation::new(preisach, None)
+            .and_then(|c| c.with_level(curve))
+            .is_err());
     }
 }

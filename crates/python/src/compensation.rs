@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 use texsense_core::Compensation;
 
 use crate::arrays::{run_detached, Batch};
+use crate::convert::PyCurve;
 use crate::drift::PyDriftBank;
 use crate::errors::to_py;
 use crate::preisach::PyPreisachBank;
@@ -20,13 +21,17 @@ pub(crate) struct PyCompensation {
 #[pymethods]
 impl PyCompensation {
     #[new]
-    #[pyo3(signature = (preisach, drift=None))]
+    #[pyo3(signature = (preisach, drift=None, level=None))]
     fn new(
         preisach: PyRef<'_, PyPreisachBank>,
         drift: Option<PyRef<'_, PyDriftBank>>,
+        level: Option<PyRef<'_, PyCurve>>,
     ) -> PyResult<Self> {
-        let inner = Compensation::new(preisach.inner.clone(), drift.map(|d| d.inner.clone()))
+        let mut inner = Compensation::new(preisach.inner.clone(), drift.map(|d| d.inner.clone()))
             .map_err(to_py)?;
+        if let Some(curve) = level {
+            inner = inner.with_level(curve.inner.clone()).map_err(to_py)?;
+        }
         Ok(Self { inner })
     }
 

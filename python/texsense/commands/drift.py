@@ -13,7 +13,7 @@ from texsense.commands import HELP
 from texsense.drift import DriftModel
 from texsense.drift_structure import (
     LEVEL_EXPONENTS,
-    LINEAR_STRUCTURES,
+    STRUCTURES,
     StructureChoice,
     candidate_name,
     choose_structure,
@@ -183,6 +183,7 @@ def _choose_and_report(
     choice = choose_structure(
         [(h, e, p, t) for (h, p, t), e in zip(records, backbones, strict=True)],
         rest_rate=rest_rate_of(args),
+        backbone=model.backbone_curve(),
     )
     summary: dict[str, Any] = {
         "chosen": choice.chosen,
@@ -222,13 +223,11 @@ def print_held_out(choice: StructureChoice) -> None:
     powers = sorted({1.0, *LEVEL_EXPONENTS})
     head = "".join(f"{'h' if q == 1 else f'h^{q:g}':<10}" for q in powers)
     print(f"  {'':<16}{head}".rstrip())
-    for structure in LINEAR_STRUCTURES:
+    for structure in STRUCTURES:
         cells = [choice.held_out_rmse.get(candidate_name(structure, q)) for q in powers]
         row = "".join(f"{c:<10.4g}" for c in cells if c is not None)
-        print(f"  {structure:<16}{row}".rstrip())
-    if "qlv" in choice.held_out_rmse:
-        qlv = choice.held_out_rmse["qlv"]
-        print(f"  {'qlv (backbone)':<16}{qlv:<10.4g}(reported only: not a drift stage yet)")
+        label = "qlv (backbone)" if structure == "qlv" else structure
+        print(f"  {label:<16}{row}".rstrip())
 
 
 def describe_drift(model: DriftModel) -> str:
@@ -241,6 +240,8 @@ def describe_drift(model: DriftModel) -> str:
             what += f", time γ {model.gamma_time:.5g}"
     if model.exponent != 1.0:
         what += f", steps of h^{model.exponent:g} (Schapery)"
+    if model.level == "backbone":
+        what += ", on the elastic response (QLV)"
     return what
 
 

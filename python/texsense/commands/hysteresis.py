@@ -263,7 +263,7 @@ def run_apply(args: argparse.Namespace) -> int:
     modelled = st.run(u)
     clamped = int(st.clamped[0])
     if drift is not None:
-        modelled = drift.apply(modelled, _column(cols, "time_s", args.data))
+        modelled = drift.apply(modelled, _column(cols, "time_s", args.data), inputs=u)
     cols[f"{out_name}_model"] = modelled
     write_columns(args.out, cols, values=f"{out_name}_model", unit=model.output_unit)
     summary: dict[str, Any] = {

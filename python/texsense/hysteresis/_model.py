@@ -383,12 +383,16 @@ class HysteresisModel:
     def backbone(self, inputs: npt.ArrayLike) -> np.ndarray:
         """The elastic (single-valued) response: the mean of the major loop's rising and
         falling branches at each input (what quasi-linear viscoelasticity relaxes)."""
+        grid, response = self.backbone_curve()
+        return np.interp(np.asarray(inputs, dtype=np.float64), grid, response)
+
+    def backbone_curve(self, points: int = 401) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`backbone` as (inputs, responses) on ``points`` inputs over the range."""
         self._check_fitted()
-        grid = np.linspace(self.u_min_, self.u_max_, 401)
+        grid = np.linspace(self.u_min_, self.u_max_, points)
         rising = self.predict(grid)
         falling = self.predict(np.concatenate([grid, grid[::-1]]))[grid.size :][::-1]
-        u = np.asarray(inputs, dtype=np.float64)
-        return np.interp(u, grid, 0.5 * (rising + falling))
+        return grid, 0.5 * (rising + falling)
 
     def everett(self, alpha: npt.ArrayLike, beta: npt.ArrayLike) -> np.ndarray:
         """The (interpolated) Everett function F(α, β) in the model's internal output units."""

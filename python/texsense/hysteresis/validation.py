@@ -145,7 +145,7 @@ def validate(
     m[ok] = st.run(u[ok])
     t = None if times_s is None else np.asarray(times_s, dtype=np.float64)
     if drift is not None and t is not None:
-        m[ok] = drift.apply(m[ok], t[ok])
+        m[ok] = drift.apply(m[ok], t[ok], inputs=u[ok])
     uo, yo, mo = u[ok], y[ok], m[ok]
     floor = 0.05 * float(np.ptp(yo)) if np.ptp(yo) > 0 else np.inf
     if bands is None:

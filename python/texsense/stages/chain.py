@@ -71,6 +71,12 @@ class StageChain(Stream):
                     f"(chain {names})"
                 )
             flowing = (s.gives[0] or flowing[0], s.gives[1] or flowing[1])
+        for before, s in zip([None, *stages], stages, strict=False):
+            if isinstance(s, Drift) and s.needs_inputs and not isinstance(before, Hysteresis):
+                raise ParameterError(
+                    "a drift stage that relaxes the elastic response (QLV) must follow the "
+                    f"hysteresis stage directly (chain {[x.name for x in stages]})"
+                )
         self.stages = stages
         self._last_t: float | None = None
 
@@ -196,9 +202,14 @@ class StageChain(Stream):
         if x.shape[0] == 0:
             return x, ok
         dt = time_steps(t, self._last_t)
+        stage_inputs = x
         for s in self.stages:
             s._check_fitted()
-            x, ok = s._block(x, ok, dt)
+            if isinstance(s, Drift) and s.needs_inputs:  # QLV: the hysteresis stage's inputs
+                x, ok = s.block_on(x, ok, dt, stage_inputs)
+            else:
+                stage_inputs = x
+                x, ok = s._block(x, ok, dt)
             s._last_t = float(t[-1])
         self._last_t = float(t[-1])
         return x, ok

@@ -155,12 +155,34 @@ class Drift(Stage):
         self._check_fitted()
         return self.model_.state(n_elements)
 
+    @property
+    def needs_inputs(self) -> bool:
+        """True for QLV (``level="backbone"``): the stage needs the hysteresis stage's inputs
+        (:meth:`block_on`), which a chain gives it."""
+        return self.model_.level == "backbone"
+
     def _block(
         self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
+        if self.needs_inputs:
+            raise ParameterError(
+                "this drift stage relaxes the elastic response of the input (QLV): run it in "
+                "a chain right after its hysteresis stage"
+            )
         if self._bank is None or self._bank.n_elements != values.shape[1]:
             self._bank = self.bank(values.shape[1])
         out = self._bank.run(dt, values, valid)
+        return out, valid & np.isfinite(out)
+
+    def block_on(
+        self, values: np.ndarray, valid: np.ndarray, dt: np.ndarray, inputs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_block` given also the hysteresis stage's inputs (QLV)."""
+        if not self.needs_inputs:
+            return self._block(values, valid, dt)
+        if self._bank is None or self._bank.n_elements != values.shape[1]:
+            self._bank = self.bank(values.shape[1])
+        out = self.model_.add_backbone_drift(self._bank, dt, values, valid, inputs)
         return out, valid & np.isfinite(out)
 
     def _fitted_json(self) -> dict[str, Any]:
