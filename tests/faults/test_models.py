@@ -228,3 +228,56 @@ def test_a_hand_edited_calibration_is_refused_until_accepted(written, tmp_path, 
     rc, _, err = run_cli("process", written / "raw.h5", "--calibration", edited, "-o", out)
     assert rc == 0, err
     fault_row("model files", "hand-edited chain calibration (one offset 1e308)", "clear error")
+
+
+def _drift_stage(content: dict) -> dict:
+    (drift,) = [s for s in content["stages"] if s["stage"] == "drift"]
+    return drift["fitted"]["model"]
+
+
+@pytest.mark.parametrize(
+    ("case", "field"),
+    [
+        ("a level power of 20", "exponent"),
+        ("a level that is neither output nor backbone", "level"),
+        ("a QLV backbone curve that is not increasing", "backbone"),
+        ("a QLV drift stage without its hysteresis stage", "follow the hysteresis stage"),
+    ],
+)
+def test_a_broken_drift_stage_is_one_line(written, tmp_path, case, field, fault_row):
+    """A hysteresis + drift model file (as ``drift fit --history -o`` writes it) with its
+    drift stage broken by hand (and re-hashed): one line naming the file and the field; the
+    good file applies."""
+    from texsense.drift import DriftModel, log_kernel
+    from texsense.hysteresis import HysteresisModel
+    from texsense.stages import Drift, Hysteresis, StageChain
+
+    model = HysteresisModel.load(written / "model.json")
+    drift_model = DriftModel(-0.02, log_kernel(), rest_rate=0.02)
+    good = StageChain([Hysteresis.of(model), Drift.of(drift_model)]).save(tmp_path / "md.json")
+    rec = protocols.run_protocol("calibration", "textile-3mm", seed=9, sample_hz=None)
+    cols = {"time_s": rec.times, **{k: rec.labels[k] for k in ("compression_mm", "pressure_ncm2")}}
+    write_columns_csv(tmp_path / "rec.csv", cols)
+    d = json.loads(good.read_text(encoding="utf-8"))
+    drift = _drift_stage(_content(d))
+    curve = {"inputs": [0.0, 1.0, 2.0], "responses": [0.0, 0.5, 1.5]}
+    if case.startswith("a level power"):
+        drift["exponent"] = 20.0
+    elif case.startswith("a level that"):
+        drift["level"] = "sideways"
+    elif case.startswith("a QLV backbone"):
+        drift.update(level="backbone", backbone=curve | {"inputs": [0.0, 2.0, 1.0]})
+    else:
+        drift.update(level="backbone", backbone=curve)
+        _content(d)["stages"] = [s for s in _content(d)["stages"] if s["stage"] == "drift"]
+    rc, _, err = run_cli("hysteresis", "apply", good, tmp_path / "rec.csv", "-o",
+                         tmp_path / "good.csv")  # fmt: skip
+    assert rc == 0, err
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(_rehashed(d)), encoding="utf-8")
+    rc, _, err = run_cli("hysteresis", "apply", bad, tmp_path / "rec.csv", "-o",
+                         tmp_path / "o.csv")  # fmt: skip
+    line = assert_clear_error(rc, err, "bad.json")
+    assert field in line, line
+    assert not (tmp_path / "o.csv").exists()
+    fault_row("model files", f"drift stage with {case}", "clear error")
