@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -89,9 +93,6 @@ class ChildServer:
     output in ``tmp_path/COMMAND.log``."""
 
     def __init__(self, tmp_path: Path, command: str, *args: str) -> None:
-        import subprocess
-        import sys
-
         self.name = command
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}/"
@@ -117,8 +118,6 @@ class ChildServer:
 
     def until(self, what, cond, timeout: float = 30.0):
         """Poll ``what()`` until ``cond`` holds; fail with the server's log otherwise."""
-        import time
-
         deadline = time.monotonic() + timeout
         while True:
             if self.proc.poll() is not None:
@@ -167,3 +166,30 @@ def monitor_process(tmp_path: Path):
     yield start
     for m in started:
         m.stop()
+
+
+@pytest.fixture
+def device(tmp_path: Path):
+    """``texsense simulate device`` as a child process on a pseudo-terminal (its link in
+    ``tmp_path``); yields a starter ``start(*args, link=...) -> (link path, process)`` whose
+    stdin takes load lines (``uniform:1.0``). Stopped with Ctrl-C at the end of the test."""
+    procs: list[subprocess.Popen] = []
+
+    def start(*args: str, link: str = "ttyTEX0"):
+        path = tmp_path / link
+        cmd = [sys.executable, "-m", "texsense.cli", "simulate", "device", "--link", link, *args]
+        proc = subprocess.Popen(cmd, cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)  # fmt: skip
+        procs.append(proc)
+        deadline = time.monotonic() + 30
+        while not path.is_symlink():
+            assert proc.poll() is None, proc.stdout.read() if proc.stdout else ""
+            assert time.monotonic() < deadline, "the device did not come up"
+            time.sleep(0.05)
+        return path, proc
+
+    yield start
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+        p.communicate(timeout=10)

@@ -1,9 +1,11 @@
 """texsense record (raw frames from any source) and a monitor with no calibration, through
 the virtual device on a real pseudo-terminal."""
 
+import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -12,31 +14,6 @@ import pytest
 from conftest import MonitorProcess
 from faults.conftest import run_cli
 from texsense import load
-
-
-@pytest.fixture
-def device(tmp_path):
-    """``texsense simulate device`` as a child process; yields a starter."""
-    procs = []
-
-    def start(*args, link="ttyTEX0"):
-        path = tmp_path / link
-        cmd = [sys.executable, "-m", "texsense.cli", "simulate", "device", "--link", link, *args]
-        proc = subprocess.Popen(cmd, cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True)  # fmt: skip
-        procs.append(proc)
-        deadline = time.monotonic() + 30
-        while not path.is_symlink():
-            assert proc.poll() is None, proc.stdout.read()
-            assert time.monotonic() < deadline, "the device did not come up"
-            time.sleep(0.05)
-        return path, proc
-
-    yield start
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-        p.communicate(timeout=10)
 
 
 def test_record_through_the_serial_line_needs_no_grid(device, tmp_path):
@@ -159,3 +136,105 @@ def test_calibrate_wizard_with_yes_waits_for_each_load(device, tmp_path):
         rec = load(tmp_path / f"mat-{step}.h5")
         assert rec.n_frames == 5 and rec.meta["spacer"] == "textile-3mm"
     assert (tmp_path / "mat.json").exists()
+
+
+class _Output:
+    """A child's output read in the background, prompts without a newline included."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.text = ""
+        self._proc = proc
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while chunk := os.read(self._proc.stdout.fileno(), 4096):
+            self.text += chunk.decode("utf-8", "replace")
+
+    def close(self) -> None:
+        """After the child has ended: the rest of its output, and the pipe closed."""
+        self._thread.join(timeout=10)
+        self._proc.stdout.close()
+
+    def wait_for(self, needle: str, timeout: float = 90.0) -> None:
+        deadline = time.monotonic() + timeout
+        while needle not in self.text:
+            assert self._proc.poll() is None or needle in self.text, self.text
+            assert time.monotonic() < deadline, f"no {needle!r} in:\n{self.text}"
+            time.sleep(0.05)
+
+
+@pytest.fixture
+def wizard(tmp_path):
+    """``texsense calibrate wizard`` on a device's link as a child process, its output read in
+    the background; stopped and its pipes closed at the end of the test."""
+    started: list[tuple[subprocess.Popen, _Output]] = []
+
+    def start(link, *extra: str) -> tuple[subprocess.Popen, _Output]:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "texsense.cli", "calibrate", "wizard", "--source",
+             f"serial:{link}", "-o", "mat.json", "--frames", "5", "--wait-s", "60", *extra],
+            cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        started.append((proc, _Output(proc)))
+        return started[-1]
+
+    yield start
+    for proc, out in started:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(timeout=30)
+        proc.stdin.close()
+        out.close()
+
+
+def test_calibrate_wizard_asks_and_a_person_answers_with_enter(device, wizard, tmp_path):
+    """The interactive path: every step waits for Enter, the person puts the load on first."""
+    link, dev = device("--speed", "20", "--seed", "5")
+    proc, out = wizard(link)
+    out.wait_for("step 1/4: take everything off the mat, then press Enter")
+    time.sleep(1.0)
+    assert not (tmp_path / "mat-zero.h5").exists()  # nothing recorded before Enter
+    proc.stdin.write(b"\n")
+    proc.stdin.flush()
+    out.wait_for("step 2/4")  # the zero frames were recorded after Enter
+    _type_load(dev, "uniform:1.0")
+    time.sleep(0.5)
+    proc.stdin.write(b"\n")
+    proc.stdin.flush()
+    out.wait_for("step 4/4")
+    _type_load(dev, "uniform:2.0")
+    time.sleep(0.5)
+    proc.stdin.write(b"\n")
+    proc.stdin.flush()
+    assert proc.wait(timeout=90) == 0, out.text
+    assert "check at 2 N/cm²: median of 96 working elements" in out.text
+    assert (tmp_path / "mat.json").exists() and (tmp_path / "mat-check.h5").exists()
+
+
+@pytest.mark.parametrize("how", ["Ctrl-C", "SIGKILL"])
+def test_a_wizard_stopped_mid_way_keeps_what_it_recorded_and_writes_no_calibration(
+    device, wizard, tmp_path, how
+):
+    """Stopped while it waits for the uniform load: the zero recording already written stays
+    whole and readable, no calibration and no half-written file is left; Ctrl-C says one
+    line, no traceback."""
+    link, _ = device("--speed", "20", "--seed", "6")
+    proc, out = wizard(link, "--yes")
+    out.wait_for("step 2/4")
+    time.sleep(1.0)  # waiting for a load that does not come
+    proc.send_signal(signal.SIGINT if how == "Ctrl-C" else signal.SIGKILL)
+    rc = proc.wait(timeout=30)
+    out.close()  # all of its output
+    if how == "Ctrl-C":
+        assert rc == 130, out.text
+        assert "Traceback" not in out.text
+        assert out.text.strip().splitlines()[-1] == "texsense calibrate wizard: stopped"
+    else:
+        assert rc == -signal.SIGKILL
+    zero = load(tmp_path / "mat-zero.h5")
+    assert zero.n_frames == 5 and zero.meta["spacer"] == "textile-3mm"
+    assert not (tmp_path / "mat.json").exists()
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("mat"))
+    assert left == ["mat-zero.h5"], left
