@@ -14,6 +14,7 @@ import pytest
 from conftest import MonitorProcess
 from faults.conftest import run_cli
 from texsense import load
+from texsense.monitor.live import raw_rise
 
 
 def test_record_through_the_serial_line_needs_no_grid(device, tmp_path):
@@ -63,6 +64,11 @@ def test_monitor_without_calibration_shows_and_records_raw_pf(device, tmp_path):
         mon.wait_for_frames(3)
         snap = mon.get("api/frame/latest")
         assert snap["calibrated"] is False and snap["raw_unit"] == "pF"
+        assert set(snap["stats"].values()) == {None}  # no pressure statistics without pressure
+        raw = snap["raw_stats"]
+        assert raw["unit"] == "pF" and raw["working"] >= 90 and raw["peak_rise"] >= 0
+        assert 0 <= raw["responding"] <= raw["working"] and raw["respond_above"] > 0
+        assert mon.status()["raw_unit"] == "pF" and mon.status()["calibrated"] is False
         assert all(v is None for v in snap["pressure"]) and snap["alert"] is None
         assert sum(v is not None for v in snap["raw"]) >= 90
         assert "no calibration" in mon.log()
@@ -238,3 +244,11 @@ def test_a_wizard_stopped_mid_way_keeps_what_it_recorded_and_writes_no_calibrati
     assert not (tmp_path / "mat.json").exists()
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("mat"))
     assert left == ["mat-zero.h5"], left
+
+
+def test_the_raw_rise_of_a_mat_without_calibration():
+    floor = np.array([3.0, 4.0, 3.5, np.nan, 3.5])
+    raw = np.array([3.0, 4.5, 3.51, 3.8, np.nan])  # threshold: 0.5 % of 3.5 pF = 0.0175 pF
+    r = raw_rise(raw, floor)
+    assert r == {"peak_rise": 0.5, "responding": 1, "working": 3, "respond_above": 0.0175}
+    assert raw_rise(np.full(5, np.nan), floor)["peak_rise"] is None

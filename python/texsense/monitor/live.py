@@ -49,6 +49,30 @@ FLUSH_S = 0.5
 POSTURE_WINDOW_S = 5.0
 #: A source that has sent nothing for this long is said to be silent (console and page).
 SILENT_S = 10.0
+#: Without a calibration an element "responds" when it reads above its lowest reading so far
+#: by more than this fraction of the mat's typical (median) lowest reading (unit-free). On the
+#: virtual seat behind a serial line (`texsense simulate device`, 3.3-4.0 pF empty): 1 N/cm²
+#: on every element -> 96 of 96 respond (threshold 0.0125 pF, highest rise 2.5 pF); the mat
+#: emptied again -> 0 of 96 (highest rise 0.003 pF, what the spacer's hysteresis leaves).
+RESPOND_FRACTION = 0.005
+
+
+def raw_rise(raw: np.ndarray, floor: np.ndarray) -> dict[str, Any]:
+    """What a mat without a calibration can honestly say of a frame, in its raw unit: each
+    element's rise above its lowest reading so far (``floor``), the highest rise and how
+    many elements respond (rise above :data:`RESPOND_FRACTION` of the median floor)."""
+    rise = raw - floor
+    finite = np.isfinite(rise)
+    if not finite.any():
+        return {"peak_rise": None, "responding": 0, "working": 0, "respond_above": None}
+    typical = float(np.median(np.abs(floor[np.isfinite(floor)])))
+    above = RESPOND_FRACTION * typical
+    return {
+        "peak_rise": round(float(np.max(rise[finite])), 4),
+        "responding": int(np.count_nonzero(rise[finite] > above)),
+        "working": int(np.count_nonzero(finite)),
+        "respond_above": round(above, 4),
+    }
 
 
 def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = True) -> list[Path]:
@@ -226,6 +250,7 @@ class Monitor:
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
         self.last_pressure: np.ndarray | None = None  # N/cm², NaN where unknown
+        self._raw_floor: np.ndarray | None = None  # each element's lowest raw reading so far
         self.changes = 0  # grows with every frame, acknowledgement and recording start/stop
         self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
 
@@ -445,6 +470,11 @@ class Monitor:
         self.frames += 1
         self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
+        floor = self._raw_floor
+        self._raw_floor = np.array(raw, dtype=np.float64) if floor is None else np.fmin(floor, raw)
+        raw_stats = None
+        if self.raw_only:  # no pressure: no load, area, peak pressure or PPI, but the rise
+            raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
 
         def r(v: np.ndarray, nd: int = 3) -> list[Any]:  # rounded, NaN -> None (JSON null)
             a = np.asarray(v, dtype=np.float64)
@@ -462,15 +492,18 @@ class Monitor:
             "pressure": r(pressure),
             "failed": np.flatnonzero(codes != 0).tolist(),
             "repaired": np.flatnonzero((codes != 0) & np.isfinite(pressure)).tolist(),
-            "stats": {
-                "load_N": round(load, 2),
-                "contact_area_cm2": round(float(np.nan_to_num(fs.contact_area_cm2[0])), 1),
-                "peak_ncm2": round(float(np.nan_to_num(fs.peak[0])), 3),
-                "ppi_ncm2": round(float(np.nan_to_num(fs.ppi[0])), 3),
+            "stats": {  # pressure statistics; null for a mat with no calibration
+                "load_N": None if self.raw_only else round(load, 2),
+                "contact_area_cm2": None
+                if self.raw_only
+                else round(float(np.nan_to_num(fs.contact_area_cm2[0])), 1),
+                "peak_ncm2": None if self.raw_only else round(float(np.nan_to_num(fs.peak[0])), 3),
+                "ppi_ncm2": None if self.raw_only else round(float(np.nan_to_num(fs.ppi[0])), 3),
                 "cof_cm": None
-                if not np.all(np.isfinite(fs.cof_cm[0]))
+                if self.raw_only or not np.all(np.isfinite(fs.cof_cm[0]))
                 else [round(float(v), 2) for v in fs.cof_cm[0]],
             },
+            "raw_stats": raw_stats,  # no calibration: the rise above each element's lowest
             "cof_trace": self._cof_trace,  # grid cells (row, col)
             "posture": posture,
             "bed": bed,

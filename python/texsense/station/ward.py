@@ -358,7 +358,7 @@ class MatEntry:
             "period_s": None if self.period_s is None else round(self.period_s, 3),
             "state": state,
             "refused": self.refused,
-            "occupied": bool(stats and stats["load_N"] > 5.0),
+            "occupied": bool(stats and (stats["load_N"] or 0.0) > 5.0),  # null: no calibration
             "minutes_since_reposition": round(float(np.max(exposure, initial=0.0)) / 60.0, 1),
             "alert": alert.to_dict() if alert is not None else None,
             "urgency": urgency,

@@ -38,6 +38,7 @@ def router(monitor: Monitor) -> APIRouter:
             },
             "reposition_min": monitor.tracker.reposition_s / 60,
             "calibrated": not monitor.raw_only,
+            "raw_unit": monitor.source.unit,  # what the page shows without a calibration
             "calibration_id": None if monitor.pipeline is None else monitor.pipeline.calibration_id,
             "posture_model": monitor.posture_model is not None,
             "bed": monitor.bed is not None,

@@ -12,7 +12,7 @@ const saved = {  // what the page remembers (unit, scale, colours), per mode
   get(k, d) { try { const v = localStorage.getItem("texsense." + k); return v === null ? d : JSON.parse(v); } catch (e) { return d; } },
   set(k, v) { try { localStorage.setItem("texsense." + k, JSON.stringify(v)); } catch (e) { /* private mode */ } },
 };
-let status = null, view = null, last = null, mode = "pressure", unit = "N/cm2", rawTop = null, autoTop = 0;
+let status = null, view = null, last = null, mode = "pressure", unit = "N/cm2", autoTop = 0;
 const live = [];  // the live statistics over time (the charts)
 const map = new MapView($("heatmap")), exposure = new MapView($("exposure"));
 const charts = new Charts($("charts"), (t) => { if (PB.active) { PB.pause(); PB.seekTime(t); } });
@@ -28,12 +28,23 @@ const PRESETS = {  // fixed scales, N/cm²: the seat and bed 0-100 mmHg, the foo
 const modeName = () => (PB.active ? PB.info.mode.name : view ? view.mode.name : "seat");
 const pressureShown = () => (PB.active ? PB.info.quantity === "pressure" : mode !== "raw");
 const digits = () => (unit === "mmHg" || unit === "kPa" ? 0 : 2);
+// live from a mat with no calibration: raw readings only (no pressure, no pressure unit)
+const rawOnly = () => !PB.active && (last ? last.calibrated === false : !!status && status.calibrated === false);
+// what the page shows carries no pressure at all: no unit choice, no threshold, no load
+const noPressure = () => (PB.active ? PB.info.quantity !== "pressure" : rawOnly());
+const rawDigits = (v) => { const a = Math.abs(v); return a >= 100 ? 0 : a >= 10 ? 1 : a >= 1 ? 2 : 3; };
+// a live frame's raw readings above its lowest one (the map of a mat in its raw unit)
+function rawAboveLowest(raw) {
+  const finite = raw.filter((v) => v !== null), lo = finite.length ? Math.min(...finite) : 0;
+  return { lo, values: raw.map((v) => (v === null ? null : v - lo)) };
+}
 
 function fillPresets() {
   const sel = $("scale-preset"), pressure = pressureShown();
-  const keys = pressure ? ["seat", "bed", "foot", "auto", "custom"] : ["recording", "auto", "custom"];
+  // raw readings: no pressure presets; "this recording" only for a recording played back
+  const keys = pressure ? ["seat", "bed", "foot", "auto", "custom"] : PB.active ? ["recording", "auto", "custom"] : ["auto", "custom"];
   sel.replaceChildren(...keys.map((k) => { const o = document.createElement("option"); o.value = k; o.textContent = k === "recording" ? "this recording" : PRESETS[k].label; return o; }));
-  const fallback = pressure ? (PRESETS[modeName()] ? modeName() : "auto") : "recording";
+  const fallback = pressure ? (PRESETS[modeName()] ? modeName() : "auto") : PB.active ? "recording" : "auto";
   const chosen = saved.get(`scale.${modeName()}.${pressure ? "p" : "v"}`, fallback);
   sel.value = keys.includes(chosen) ? chosen : fallback;
 }
@@ -71,36 +82,50 @@ function render() {
     title = `${PB.name} · frame ${PB.i}`;
     st = pressure ? frameStats(ncm2) : null;
   } else if (mode === "raw") {
-    const finite = last.raw.filter((v) => v !== null), lo = Math.min(...finite);
-    rawTop = Math.max(rawTop === null ? -Infinity : rawTop, ...finite.map((v) => v - lo));
-    values = last.raw.map((v) => (v === null ? null : v - lo));
-    shownUnit = `${last.raw_unit} above ${fmt(lo)}`; title = "raw readings"; st = last.stats;
+    const shown = rawAboveLowest(last.raw);
+    values = shown.values;
+    shownUnit = `${last.raw_unit} above ${fmt(shown.lo, rawDigits(shown.lo))}`; title = "raw readings"; st = last.stats;
   } else {
     ncm2 = last.pressure; values = ncm2.map((v) => (v === null ? null : v * f));
     shownUnit = LABEL[unit]; title = "pressure (compensated)"; st = last.stats;
     thr = view && view.threshold_ncm2 !== null ? view.threshold_ncm2 * f : null;
   }
-  const sc = !pb && mode === "raw" ? [0, rawTop || 1] : scale(values);
+  const sc = scale(values), vd = pressure ? digits() : rawDigits(sc[1] - sc[0]);
+  $("unit-label").hidden = noPressure();  // nothing in a pressure unit to choose
+  $("pressure-marks").hidden = noPressure();
   $("map-title").textContent = title;
   map.draw(values, { scale: sc, cmap: $("cmap").value, threshold: thr,
     repaired: pb ? PB.frame.repaired || [] : mode !== "raw" ? last.repaired : [], trace: pb ? [] : last.cof_trace,
     bedRegions: !pb && last.bed ? last.bed.regions : null, rois: ROI.list, draft: ROI.draft });
   $("heatmap").dataset.frame = pb ? PB.i : last.frames;
   drawLegend($("scale"), $("cmap").value, sc[0], sc[1], thr);
-  $("scale-lo").textContent = fmt(sc[0], pressure ? digits() : 0);
-  $("scale-text").textContent = `${fmt(sc[1], pressure ? digits() : 0)} ${shownUnit}`;
+  $("scale-lo").textContent = fmt(sc[0], vd);
+  $("scale-text").textContent = `${fmt(sc[1], vd)} ${shownUnit}`;
+  const typing = [$("scale-min"), $("scale-max")].includes(document.activeElement);
+  if ($("scale-preset").value !== "custom" && !typing) { $("scale-min").value = fmt(sc[0], vd); $("scale-max").value = fmt(sc[1], vd); }
   $("threshold-note").textContent = thr === null ? "" : `threshold ${fmt(thr, digits())} ${shownUnit}: the outlined cells are above it`;
-  ROI.render(PB.active ? PB.info.layout : status.layout, values, areas(), ncm2, shownUnit, pressure ? digits() : 0);
+  ROI.render(PB.active ? PB.info.layout : status.layout, values, areas(), ncm2, shownUnit, vd);
   renderCards(st, f, pb);
   renderCharts(f);
   if (pb) { PB.renderEvents(); $("status").textContent = ""; } else renderLive(f);
 }
 
 function renderCards(st, f, pb) {
-  const d = digits();
+  const d = digits(), raw = !pb && last.raw_stats ? last.raw_stats : null;
   $("frames").textContent = pb ? `${PB.i} / ${PB.info.frames - 1}` : last.frames;
-  $("load").textContent = st ? `${fmt(st.load_N, 0)} N` : "–";
-  $("area").textContent = st ? `${fmt(st.contact_area_cm2, 0)} cm²` : "–";
+  $("raw-cards-note").hidden = !raw;
+  $("peak-label").textContent = raw ? "peak rise" : "peak";
+  $("area-label").textContent = raw ? "elements responding" : "contact area";
+  for (const id of ["load", "ppi"]) $(id).title = raw ? "calibrate to see pressure" : "";
+  if (raw) {  // no calibration: what the raw readings say, in their unit; no pressure
+    $("load").textContent = "–"; $("ppi").textContent = "–";
+    $("peak").textContent = raw.peak_rise === null ? "–" : `${fmt(raw.peak_rise, rawDigits(raw.peak_rise))} ${raw.unit}`;
+    $("area").textContent = `${raw.responding} of ${raw.working}`;
+    $("respond-above").textContent = raw.respond_above === null ? "–" : `${fmt(raw.respond_above, rawDigits(raw.respond_above))} ${raw.unit}`;
+    return;
+  }
+  $("load").textContent = st && st.load_N !== null ? `${fmt(st.load_N, 0)} N` : "–";
+  $("area").textContent = st && st.contact_area_cm2 !== null ? `${fmt(st.contact_area_cm2, 0)} cm²` : "–";
   $("peak").textContent = st && st.peak_ncm2 !== null ? `${fmt(st.peak_ncm2 * f, d)} ${LABEL[unit]}` : "–";
   $("ppi").textContent = st && st.ppi_ncm2 !== null ? `${fmt(st.ppi_ncm2 * f, d)} ${LABEL[unit]}` : "–";
   if (pb) { $("posture").textContent = "–"; $("posture-truth").textContent = ""; }
@@ -119,11 +144,19 @@ function renderCharts(f) {
     rows.push({ label: "centre of force cm (x, y)", lines: [{ values: s.cof_x, colour: "#0891b2" }, { values: s.cof_y, colour: "#d97706" }] });
     marks = PB.info.events.filter((e) => e.kind === "reposition" || e.kind === "turn-due").map((e) => ({ t: e.t, colour: "#c2410c" }));
     $("chart-note").textContent = "click to go to that time";
+  } else if (rawOnly()) {  // no calibration: the raw rise, no pressure
+    const u = last && last.raw_stats ? last.raw_stats.unit : status.raw_unit;
+    t = live.map((p) => p.t);
+    rows = [
+      { label: `peak rise ${u}`, lines: [{ values: live.map((p) => p.rise), colour: "#2764c5" }], zero: true },
+      { label: "elements responding", lines: [{ values: live.map((p) => p.responding), colour: "#2764c5" }], zero: true },
+    ];
+    $("chart-note").textContent = `the last ${live.length} frames`;
   } else {
     t = live.map((p) => p.t);
     rows = [
       { label: "load N", lines: [{ values: live.map((p) => p.load), colour: "#2764c5" }], zero: true },
-      { label: `peak ${LABEL[unit]}`, lines: [{ values: live.map((p) => p.peak * f), colour: "#2764c5" }], threshold: view && view.threshold_ncm2 ? view.threshold_ncm2 * f : null, zero: true },
+      { label: `peak ${LABEL[unit]}`, lines: [{ values: live.map((p) => (p.peak === null ? null : p.peak * f)), colour: "#2764c5" }], threshold: view && view.threshold_ncm2 ? view.threshold_ncm2 * f : null, zero: true },
       { label: "contact area cm²", lines: [{ values: live.map((p) => p.area), colour: "#2764c5" }], zero: true },
       { label: "centre of force cm (x, y)", lines: [{ values: live.map((p) => p.x), colour: "#0891b2" }, { values: live.map((p) => p.y), colour: "#d97706" }] },
     ];

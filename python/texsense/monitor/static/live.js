@@ -116,16 +116,22 @@ let drawing = false;  // one render per animation frame, however many snapshots 
 function onSnapshot(snap) {
   last = snap;
   const uncalibrated = snap.calibrated === false;
-  if ($("uncalibrated").hidden === uncalibrated) {  // a mat with no calibration: raw only
-    $("uncalibrated").hidden = !uncalibrated;
-    $("show-pressure").disabled = uncalibrated;
-    if (uncalibrated && mode !== "raw") $("show-raw").onclick();
-    if (!uncalibrated && mode === "raw") $("show-pressure").onclick();  // calibrated just now (the panel)
-  }
-  const st = snap.stats, t0 = live.length ? live[0].t0 : snap.t;
-  live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null });
+  if ($("uncalibrated").hidden === uncalibrated) applyCalibrated(!uncalibrated, snap.raw_unit);
+  const st = snap.stats, rs = snap.raw_stats, t0 = live.length ? live[0].t0 : snap.t;
+  live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null,
+    rise: rs ? rs.peak_rise : null, responding: rs ? rs.responding : null });
   if (live.length > 1200) { const t00 = live[0].t0; live.shift(); live.forEach((p) => { p.t0 = t00; }); }
   if (!PB.active && !drawing) { drawing = true; requestAnimationFrame(() => { drawing = false; render(); }); }
+}
+// a mat with no calibration shows its raw readings only; a calibration saved on the page turns
+// the pressure on (the compensated map, the unit, the pressure presets, the exposure)
+function applyCalibrated(calibrated, rawUnit) {
+  $("uncalibrated").hidden = calibrated;
+  $("raw-unit").textContent = rawUnit || "pF";
+  $("show-pressure").disabled = !calibrated;
+  if (!calibrated && mode !== "raw") $("show-raw").onclick();
+  if (calibrated && mode === "raw") $("show-pressure").onclick();  // calibrated just now (the panel)
+  if (!PB.active) $("exposure-panel").hidden = !calibrated || !view.mode.alerts;
 }
 function connect() {
   const proto = location.protocol === "https:" ? "wss" : "ws";
@@ -138,15 +144,20 @@ function layoutMaps() {  // the map of the live mat or of the recording open
   const lay = PB.active ? PB.info.layout : status.layout;
   map.setLayout(lay, PB.active ? PB.info.orientation : view.orientation);
   exposure.setLayout(status.layout, view.orientation, true);
-  $("exposure-panel").hidden = !view.mode.alerts || PB.active;
+  $("exposure-panel").hidden = !view.mode.alerts || PB.active || rawOnly();
   fillPresets();
   autoTop = 0;
   syncRange();
 }
 
 function wire() {
-  $("show-pressure").onclick = () => { mode = "pressure"; $("show-pressure").classList.add("on"); $("show-raw").classList.remove("on"); fillPresets(); render(); };
-  $("show-raw").onclick = () => { mode = "raw"; rawTop = null; $("show-raw").classList.add("on"); $("show-pressure").classList.remove("on"); render(); };
+  const show = (m) => {  // the compensated pressure or the raw readings: their own presets
+    mode = m; $("show-pressure").classList.toggle("on", m !== "raw"); $("show-raw").classList.toggle("on", m === "raw");
+    fillPresets(); autoTop = 0; syncRange(); render();
+  };
+  $("show-pressure").onclick = () => show("pressure");
+  $("show-raw").onclick = () => show("raw");
+  $("calibrate-hint").onclick = (e) => { e.preventDefault(); CAL.open(); $("calibration").scrollIntoView(); };
   $("unit").onchange = (e) => { unit = e.target.value; saved.set("unit", unit); updateThreshold(); syncRange(); render(); };
   $("cmap").onchange = (e) => { saved.set("cmap", e.target.value); render(); };
   $("scale-preset").onchange = (e) => { saved.set(`scale.${modeName()}.${pressureShown() ? "p" : "v"}`, e.target.value); autoTop = 0; syncRange(); render(); };
@@ -165,9 +176,10 @@ function wire() {
 }
 function syncRange() {  // the range boxes show the scale in use
   const f = pressureShown() ? FACTOR[unit] : 1;
-  const raw = PB.active && PB.frame ? PB.frame.values : last ? last.pressure : [];
-  const values = (raw || []).map((v) => (v === null ? null : v * f));
-  const sc = scale(values), d = pressureShown() ? digits() : 0;
+  let values;
+  if (!PB.active && mode === "raw") values = last ? rawAboveLowest(last.raw).values : [];
+  else values = ((PB.active && PB.frame ? PB.frame.values : last ? last.pressure : []) || []).map((v) => (v === null ? null : v * f));
+  const sc = scale(values), d = pressureShown() ? digits() : rawDigits(sc[1] - sc[0]);
   $("scale-min").value = fmt(sc[0], d); $("scale-max").value = fmt(sc[1], d);
 }
 function updateThreshold() {
