@@ -108,10 +108,41 @@ def choose_structure(
     """
     if not records:
         raise ParameterError("choose_structure needs at least one record")
-    prony_k = [DriftKernel(np.ones(1), np.array([tau]), 0.0, (0.0, 1e6)) for tau in PRONY_TAUS_S]
     powers = [1.0] + [float(q) for q in exponents if float(q) != 1.0]
-    names = [candidate_name(s, q) for q in powers for s in STRUCTURES]
-    designs: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {n: [] for n in names}
+    designs = _designs(records, powers, rest_rate, band, train_share)
+    scores = {name: _held_out(_fit(name, parts, "train"), parts) for name, parts in designs.items()}
+    baseline = _held_out(None, designs["time"])
+    deployable = {name: backbone is not None or not name.startswith("qlv") for name in designs}
+    exponent_of = {candidate_name(s, q): q for q in powers for s in STRUCTURES}
+    usable = [n for n in exponent_of if deployable[n] and scores[n] < (1 - margin) * baseline]
+    linear = [n for n in usable if exponent_of[n] == 1.0]
+    best_linear = min(linear, key=lambda n: scores[n]) if linear else None
+    bar = (1 - nonlinear_margin) * min(baseline, scores[best_linear] if best_linear else np.inf)
+    nonlinear = [n for n in usable if exponent_of[n] != 1.0 and scores[n] < bar]
+    chosen = min(nonlinear, key=lambda n: scores[n]) if nonlinear else best_linear
+    if chosen is None:
+        return StructureChoice(None, None, scores, baseline, deployable)
+    coef = _fit(chosen, designs[chosen], "all")
+    model = _model_of(chosen.split(" ")[0], coef, exponent_of[chosen], rest_rate, backbone)
+    return StructureChoice(chosen, model, scores, baseline, deployable)
+
+
+#: One record's part of a candidate's least-squares problem: its design columns, the target
+#: (measured - Preisach output) and which samples are the training share.
+_Part = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def _designs(
+    records: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]],
+    powers: Sequence[float],
+    rest_rate: float,
+    band: tuple[float, float],
+    train_share: float,
+) -> dict[str, list[_Part]]:
+    """Every candidate's design, built from the unit responses of every record (the drift of
+    γ = 1) over the samples in ``band``, by candidate name."""
+    prony_k = [DriftKernel(np.ones(1), np.array([tau]), 0.0, (0.0, 1e6)) for tau in PRONY_TAUS_S]
+    designs: dict[str, list[_Part]] = {candidate_name(s, q): [] for q in powers for s in STRUCTURES}
     for n, (h, e, p, t) in enumerate(records):
         x = np.asarray(h, dtype=np.float64)
         el = np.asarray(e, dtype=np.float64)
@@ -138,63 +169,60 @@ def choose_structure(
                 ("qlv", d_qlv[sel, None]),
             ):
                 designs[candidate_name(structure, q)].append((cols, target, train))
+    return designs
 
-    def fit_coef(name: str, parts: list, use: str) -> np.ndarray:
-        rows, rhs = [], []
-        for cols, target, train in parts:
-            m = train if use == "train" else np.ones(train.size, bool)
-            w = 1.0 / np.sqrt(max(int(m.sum()), 1))
-            rows.append(w * cols[m])
-            rhs.append(w * target[m])
-        A, b = np.vstack(rows), np.concatenate(rhs)
-        if name.startswith("prony"):  # one sign, non-negative weights: the better of the two
-            best = None
-            for s in (1.0, -1.0):
-                c, r = nnls(s * A, b, maxiter=50 * A.shape[1])
-                if best is None or r < best[1]:
-                    best = (s * c, r)
-            assert best is not None
-            return best[0]
-        coef, *_ = np.linalg.lstsq(A, b, rcond=None)
-        return coef
 
-    def held_out(coef: np.ndarray | None, parts: list) -> float:
-        per = []
-        for cols, target, train in parts:
-            r = target[~train] - (0.0 if coef is None else cols[~train] @ coef)
-            per.append(float(np.mean(r**2)) if r.size else 0.0)
-        return float(np.sqrt(np.mean(per)))
+def _fit(name: str, parts: list[_Part], use: str) -> np.ndarray:
+    """A candidate's coefficients on the training shares (``use="train"``) or on all samples,
+    every record weighted equally; a Prony series is non-negative of one sign."""
+    rows, rhs = [], []
+    for cols, target, train in parts:
+        m = train if use == "train" else np.ones(train.size, bool)
+        w = 1.0 / np.sqrt(max(int(m.sum()), 1))
+        rows.append(w * cols[m])
+        rhs.append(w * target[m])
+    A, b = np.vstack(rows), np.concatenate(rhs)
+    if name.startswith("prony"):  # one sign, non-negative weights: the better of the two
+        best = None
+        for sign in (1.0, -1.0):
+            c, r = nnls(sign * A, b, maxiter=50 * A.shape[1])
+            if best is None or r < best[1]:
+                best = (sign * c, r)
+        assert best is not None
+        return best[0]
+    coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return coef
 
-    scores = {
-        name: held_out(fit_coef(name, parts, "train"), parts) for name, parts in designs.items()
-    }
-    baseline = held_out(None, designs["time"])
-    deployable = {name: backbone is not None or not name.startswith("qlv") for name in designs}
-    exponent_of = {candidate_name(s, q): q for q in powers for s in STRUCTURES}
-    usable = [n for n in exponent_of if deployable[n] and scores[n] < (1 - margin) * baseline]
-    linear = [n for n in usable if exponent_of[n] == 1.0]
-    best_linear = min(linear, key=lambda n: scores[n]) if linear else None
-    bar = (1 - nonlinear_margin) * min(baseline, scores[best_linear] if best_linear else np.inf)
-    nonlinear = [n for n in usable if exponent_of[n] != 1.0 and scores[n] < bar]
-    chosen = min(nonlinear, key=lambda n: scores[n]) if nonlinear else best_linear
-    if chosen is None:
-        return StructureChoice(None, None, scores, baseline, deployable)
-    coef = fit_coef(chosen, designs[chosen], "all")
+
+def _held_out(coef: np.ndarray | None, parts: list[_Part]) -> float:
+    """RMSE over the held-out shares (records weighted equally); None: hysteresis only."""
+    per = []
+    for cols, target, train in parts:
+        r = target[~train] - (0.0 if coef is None else cols[~train] @ coef)
+        per.append(float(np.mean(r**2)) if r.size else 0.0)
+    return float(np.sqrt(np.mean(per)))
+
+
+def _model_of(
+    structure: str,
+    coef: np.ndarray,
+    q: float,
+    rest_rate: float,
+    backbone: tuple[np.ndarray, np.ndarray] | None,
+) -> DriftModel:
+    """The drift stage of a chosen candidate from its coefficients."""
     log_k = log_kernel()
-    structure, q = chosen.split(" ")[0], exponent_of[chosen]
     if structure == "time":
-        model = DriftModel(float(coef[0]), log_k, "log", exponent=q)
-    elif structure == "rest":
-        model = DriftModel(float(coef[0]), log_k, "log", rest_rate, exponent=q)
-    elif structure == "rest+time":
-        model = DriftModel(float(coef[0]), log_k, "log", rest_rate, 0.5, float(coef[1]), q)
-    elif structure == "qlv":
-        model = DriftModel(float(coef[0]), log_k, "log", exponent=q, level="backbone",
-                           backbone=backbone)  # fmt: skip
-    else:  # prony: one sign, the weights as the kernel
-        sign = -1.0 if coef.sum() < 0 else 1.0
-        w = np.abs(coef)
-        keep = w > 0
-        kernel = DriftKernel(w[keep], np.asarray(PRONY_TAUS_S)[keep], 0.0, (0.0, 1e6))
-        model = DriftModel(sign, kernel, "prony", exponent=q)
-    return StructureChoice(chosen, model, scores, baseline, deployable)
+        return DriftModel(float(coef[0]), log_k, "log", exponent=q)
+    if structure == "rest":
+        return DriftModel(float(coef[0]), log_k, "log", rest_rate, exponent=q)
+    if structure == "rest+time":
+        return DriftModel(float(coef[0]), log_k, "log", rest_rate, 0.5, float(coef[1]), q)
+    if structure == "qlv":
+        return DriftModel(float(coef[0]), log_k, "log", exponent=q, level="backbone",
+                          backbone=backbone)  # fmt: skip
+    sign = -1.0 if coef.sum() < 0 else 1.0  # prony: one sign, the weights as the kernel
+    w = np.abs(coef)
+    keep = w > 0
+    kernel = DriftKernel(w[keep], np.asarray(PRONY_TAUS_S)[keep], 0.0, (0.0, 1e6))
+    return DriftModel(sign, kernel, "prony", exponent=q)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from texsense import stats, units
 from texsense.bed import BANDS
@@ -73,6 +74,14 @@ def raw_rise(raw: np.ndarray, floor: np.ndarray) -> dict[str, Any]:
         "working": int(np.count_nonzero(finite)),
         "respond_above": round(above, 4),
     }
+
+
+def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
+    """Values rounded to ``nd`` decimals for JSON, NaN as None (null)."""
+    a = np.asarray(v, dtype=np.float64)
+    out = np.round(a, nd).astype(object)
+    out[~np.isfinite(a)] = None
+    return out.tolist()
 
 
 def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = True) -> list[Path]:
@@ -415,45 +424,15 @@ class Monitor:
         self.last_wall = received_at
         for tap in self.taps:
             tap(frame)
-        raw = frame.values
-        if self.pipeline is not None and self.source.quantity == "capacitance":
-            valid = np.isfinite(raw)
-            pressure, measured = self.pipeline.step(np.nan_to_num(raw), valid, frame.t)
-            codes = self.pipeline.codes_
-        elif self.raw_only:
-            pressure = np.full(raw.shape, np.nan)
-            measured = np.zeros(raw.shape, dtype=bool)
-            codes = np.zeros(raw.shape, dtype=np.int8)
-        else:
-            pressure = units.convert(raw, frame.unit, "N/cm2")
-            measured = np.isfinite(pressure)
-            codes = np.where(measured, 0, 2)
+        pressure, measured, codes = self._pressure_of(frame)
         if self._t_first is None:
             self._t_first = frame.t
         alerts = self.mode.alerts and not self.raw_only
         exposure_events = self.tracker.step(frame.t, pressure) if alerts else []
         if self.recorder is not None:
             self.recorder.append(frame, pressure, measured)
-        rec = Recording(
-            np.nan_to_num(pressure)[None, :], [frame.t], self.layout, "pressure", "N/cm2"
-        )
-        fs = stats.frame_stats(rec, threshold=0.05)
-        cof = self._cof_cell(pressure)
-        load = float(np.nan_to_num(fs.load_N[0])) if fs.load_N is not None else 0.0
-        if np.all(np.isfinite(cof)):
-            self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
-        posture = None
-        if self.posture_model is not None and load > 0:
-            label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
-            conf = float(confidence[0])
-            posture = {
-                "label": str(self._vote.step(frame.t, str(label[0]), conf)),
-                "frame_label": str(label[0]),
-                "confidence": conf,
-                "window_s": POSTURE_WINDOW_S,
-            }
-        else:
-            self._vote.reset()  # nobody there: the next person starts a new vote
+        frame_stats, load = self._stats_of(frame.t, pressure)
+        posture = self._posture_of(frame.t, pressure, load)
         bed = None
         if self.bed is not None:
             exposure_events += self.bed.step(
@@ -466,48 +445,32 @@ class Monitor:
                 raised.where = self._where(raised.elements)
                 e.detail = {"where": raised.where, "elements": raised.elements}
         self._events(exposure_events)
-        alert = self.tracker.open_alert
         self.frames += 1
         self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
+        raw = frame.values
         floor = self._raw_floor
         self._raw_floor = np.array(raw, dtype=np.float64) if floor is None else np.fmin(floor, raw)
         raw_stats = None
         if self.raw_only:  # no pressure: no load, area, peak pressure or PPI, but the rise
             raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
-
-        def r(v: np.ndarray, nd: int = 3) -> list[Any]:  # rounded, NaN -> None (JSON null)
-            a = np.asarray(v, dtype=np.float64)
-            out = np.round(a, nd).astype(object)
-            out[~np.isfinite(a)] = None
-            return out.tolist()
-
+        alert = self.tracker.open_alert
         snap = {
             "seq": frame.seq,
             "frames": self.frames,
             "t": frame.t,
-            "raw": r(raw),
+            "raw": _rounded(raw),
             "raw_unit": frame.unit,
             "calibrated": not self.raw_only,
-            "pressure": r(pressure),
+            "pressure": _rounded(pressure),
             "failed": np.flatnonzero(codes != 0).tolist(),
             "repaired": np.flatnonzero((codes != 0) & np.isfinite(pressure)).tolist(),
-            "stats": {  # pressure statistics; null for a mat with no calibration
-                "load_N": None if self.raw_only else round(load, 2),
-                "contact_area_cm2": None
-                if self.raw_only
-                else round(float(np.nan_to_num(fs.contact_area_cm2[0])), 1),
-                "peak_ncm2": None if self.raw_only else round(float(np.nan_to_num(fs.peak[0])), 3),
-                "ppi_ncm2": None if self.raw_only else round(float(np.nan_to_num(fs.ppi[0])), 3),
-                "cof_cm": None
-                if self.raw_only or not np.all(np.isfinite(fs.cof_cm[0]))
-                else [round(float(v), 2) for v in fs.cof_cm[0]],
-            },
+            "stats": frame_stats,  # pressure statistics; null for a mat with no calibration
             "raw_stats": raw_stats,  # no calibration: the rise above each element's lowest
             "cof_trace": self._cof_trace,  # grid cells (row, col)
             "posture": posture,
             "bed": bed,
-            "exposure_s": r(self.tracker.exposure_map(), 1),
+            "exposure_s": _rounded(self.tracker.exposure_map(), 1),
             "alert": alert.to_dict() if alert is not None else None,
             "recording": self.recorder is not None,
             "source": self.source.info(),
@@ -519,6 +482,58 @@ class Monitor:
         if self._subscribers:
             self._publish(self.latest_text)
         return snap
+
+    def _pressure_of(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A frame's pressure (N/cm², NaN where unknown), which elements were measured, and
+        the pipeline's codes: the calibration's pipeline, nothing (raw only), or the
+        source's own pressure in N/cm²."""
+        raw = frame.values
+        if self.pipeline is not None and self.source.quantity == "capacitance":
+            valid = np.isfinite(raw)
+            pressure, measured = self.pipeline.step(np.nan_to_num(raw), valid, frame.t)
+            return pressure, measured, self.pipeline.codes_
+        if self.raw_only:
+            none = np.full(raw.shape, np.nan)
+            return none, np.zeros(raw.shape, dtype=bool), np.zeros(raw.shape, dtype=np.int8)
+        pressure = units.convert(raw, frame.unit, "N/cm2")
+        measured = np.isfinite(pressure)
+        return pressure, measured, np.where(measured, 0, 2)
+
+    def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
+        """The frame's statistics for the snapshot (null for a mat with no calibration) and
+        its load (N); the centre-of-force trace grows by this frame."""
+        rec = Recording(np.nan_to_num(pressure)[None, :], [t], self.layout, "pressure", "N/cm2")
+        fs = stats.frame_stats(rec, threshold=0.05)
+        cof = self._cof_cell(pressure)
+        load = float(np.nan_to_num(fs.load_N[0])) if fs.load_N is not None else 0.0
+        if np.all(np.isfinite(cof)):
+            self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
+        if self.raw_only:
+            none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
+            return none, load
+        cof_cm = fs.cof_cm[0]
+        return {
+            "load_N": round(load, 2),
+            "contact_area_cm2": round(float(np.nan_to_num(fs.contact_area_cm2[0])), 1),
+            "peak_ncm2": round(float(np.nan_to_num(fs.peak[0])), 3),
+            "ppi_ncm2": round(float(np.nan_to_num(fs.ppi[0])), 3),
+            "cof_cm": [round(float(v), 2) for v in cof_cm] if np.all(np.isfinite(cof_cm)) else None,
+        }, load
+
+    def _posture_of(self, t: float, pressure: np.ndarray, load: float) -> dict[str, Any] | None:
+        """The posture of the live vote (thesis §6.2 classifier, a 5 s vote), or None when
+        there is no model or nobody on the mat (the vote starts again)."""
+        if self.posture_model is None or load <= 0:
+            self._vote.reset()  # nobody there: the next person starts a new vote
+            return None
+        label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
+        conf = float(confidence[0])
+        return {
+            "label": str(self._vote.step(t, str(label[0]), conf)),
+            "frame_label": str(label[0]),
+            "confidence": conf,
+            "window_s": POSTURE_WINDOW_S,
+        }
 
     def _cof_cell(self, pressure: np.ndarray) -> np.ndarray:
         """Centre of force in grid cells (row, col) — what the dashboard draws — or in the
