@@ -25,4 +25,4 @@ if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
 fi
 # the report tests read the PDFs back as text with poppler's pdftotext (docs/report.md)
 need_debian pdftotext poppler-utils "the report tests"
-say "pytest";                python -m pytest -q "$@"
+say "pytest";                python -m pytest -q --durations=25 "$@"
