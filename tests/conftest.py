@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextlib
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -19,6 +22,43 @@ ROOT = Path(__file__).resolve().parents[1]
 #: the script that made the model fixtures runs on the code of its time only (its docstring)
 collect_ignore = ["fixtures/models/make_fixtures.py"]
 SHARED_DATA = Path(os.environ.get("TEXSENSE_SHARED_DATA", ROOT.parent / "shared" / "data"))
+
+#: The tour of the docs (tests/test_tour.py), started in the background when collected.
+TOUR = pytest.StashKey[concurrent.futures.Future]()
+_TOUR_FOLDER = pytest.StashKey[tempfile.TemporaryDirectory]()
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Start the selected pages of the tour (every console block of the docs, about 2 min
+    of child processes) now, in the background: the other tests run meanwhile. The
+    environment is this moment's (tests that change os.environ do not reach the tour)."""
+    from tour import start_pages
+
+    pages = [
+        item.callspec.params["page"]
+        for item in session.items
+        if getattr(item, "originalname", None) == "test_page_runs_as_written"
+    ]
+    if not pages or session.config.option.collectonly or not SHARED_DATA.is_dir():
+        return
+    folder = tempfile.TemporaryDirectory(prefix="texsense-tour-")
+    session.config.stash[_TOUR_FOLDER] = folder
+    alone = len(pages) == len(session.items)
+    session.config.stash[TOUR] = start_pages(
+        pages, Path(folder.name), SHARED_DATA.parent, jobs=2 if alone else 1,
+        base_env=dict(os.environ, TEXSENSE_NO_PROGRESS="1"),
+    )  # fmt: skip
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Wait for the tour (its servers stop with it) and remove its folder."""
+    tour = session.config.stash.get(TOUR, None)
+    if tour is not None:
+        with contextlib.suppress(Exception):
+            tour.result(timeout=1800)
+    folder = session.config.stash.get(_TOUR_FOLDER, None)
+    if folder is not None:
+        folder.cleanup()
 
 
 @pytest.fixture(scope="session")

@@ -1,26 +1,25 @@
 """Every console line of the README and of docs/*.md runs as written (tests/tour.py).
 
-The pages run two at a time, once per session (the selected pages only); each test reports
+The pages run once per session (the selected pages only), in the background from the start
+of the session (tests/conftest.py, ``pytest_collection_finish``) while the other tests run:
+one page at a time when other tests are selected, two at a time otherwise. Each test reports
 its page.
 """
 
 import pytest
 
-from conftest import ROOT
-from tour import commands, run_pages
+from conftest import ROOT, TOUR
+from tour import commands
 
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 PAGES = [p for p in PAGES if commands(p)]  # the README first: the longest
 
 
 @pytest.fixture(scope="session")
-def outcomes(request, shared_data, tmp_path_factory):
-    selected = [
-        item.callspec.params["page"]
-        for item in request.session.items
-        if getattr(item, "originalname", None) == "test_page_runs_as_written"
-    ]
-    return run_pages(selected, tmp_path_factory.mktemp("tour"), shared_data.parent, jobs=2)
+def outcomes(request, shared_data):
+    tour = request.config.stash.get(TOUR, None)
+    assert tour is not None, "the tour did not start (tests/conftest.py)"
+    return tour.result(timeout=1800)
 
 
 @pytest.mark.slow

@@ -32,8 +32,10 @@ import signal
 import socket
 import subprocess
 import tempfile
+import threading
 import time
 import urllib.request
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,6 +80,7 @@ class Outcome:
     skipped: list[tuple[str, str]] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    timed: list[tuple[float, str]] = field(default_factory=list)  # (s, command) of each
 
 
 def commands(page: Path) -> list[Command]:
@@ -198,11 +201,20 @@ def _strip_comment(text: str) -> str:
     return text
 
 
-def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) -> Outcome:
-    """Run every command of ``page`` in a fresh folder under ``folder``."""
+def run_page(
+    page: Path,
+    folder: Path,
+    shared: Path,
+    *,
+    timeout: float = 900.0,
+    base_env: Mapping[str, str] | None = None,
+) -> Outcome:
+    """Run every command of ``page`` in a fresh folder under ``folder``, with the environment
+    ``base_env`` (default: this process's, as it is when the page starts)."""
     started = time.monotonic()
     work = _prepare(folder, shared)
-    env = dict(os.environ, TEXSENSE_NO_PROGRESS="1", COLUMNS="100")
+    env = dict(os.environ if base_env is None else base_env)
+    env.update(TEXSENSE_NO_PROGRESS="1", COLUMNS="100")
     env.pop("PYTEST_CURRENT_TEST", None)
     outcome = Outcome()
     servers: list[_Server] = []
@@ -228,6 +240,7 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
         if cmd.needs:
             outcome.skipped.append((cmd.text, cmd.needs))
             continue
+        began = time.monotonic()
         if cmd.is_server:
             if not re.search(r"simulate\s+device", cmd.text):
                 stop_servers(keep_devices=True)  # alternatives of one block: one at a time
@@ -237,6 +250,7 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
                 moved[server.named_port] = server.port
             why = server.ready()
             outcome.ran.append(cmd.text)
+            outcome.timed.append((time.monotonic() - began, cmd.text))
             if why:
                 outcome.failures.append(f"{cmd.text}\n  {why}\n{server.output()[-3000:]}")
             continue
@@ -249,6 +263,7 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
             timeout=timeout,
         )
         outcome.ran.append(cmd.text)
+        outcome.timed.append((time.monotonic() - began, cmd.text))
         if proc.returncode != 0:
             outcome.failures.append(
                 f"{cmd.text}\n  exit {proc.returncode}\n{proc.stderr[-3000:]}{proc.stdout[-1000:]}"
@@ -266,18 +281,47 @@ def run_page(page: Path, folder: Path, shared: Path, *, timeout: float = 900.0) 
 
 
 def run_pages(
-    pages: list[Path], folder: Path, shared: Path, *, jobs: int = 2
+    pages: list[Path],
+    folder: Path,
+    shared: Path,
+    *,
+    jobs: int = 2,
+    base_env: Mapping[str, str] | None = None,
 ) -> dict[Path, Outcome]:
     """Run ``pages`` (each in a folder of its own under ``folder``), ``jobs`` at a time: a
     page waits mostly on servers starting and child processes, and the pages share nothing
     (every monitor and station gets a free port), so two lanes halve the tour's wall time.
     The pages start in the order given (put the longest first)."""
-    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {
-            page: pool.submit(run_page, page, folder / f"{k:02d}-{page.stem}", shared)
-            for k, page in enumerate(pages)
-        }
-        return {page: f.result() for page, f in futures.items()}
+    return start_pages(pages, folder, shared, jobs=jobs, base_env=base_env).result()
+
+
+def start_pages(
+    pages: list[Path],
+    folder: Path,
+    shared: Path,
+    *,
+    jobs: int = 2,
+    base_env: Mapping[str, str] | None = None,
+) -> concurrent.futures.Future:
+    """:func:`run_pages` in the background: a future of its result (the test suite starts
+    the tour first and runs its other tests meanwhile)."""
+    done: concurrent.futures.Future = concurrent.futures.Future()
+
+    def tour() -> None:
+        try:
+            with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+                futures = {
+                    page: pool.submit(
+                        run_page, page, folder / f"{k:02d}-{page.stem}", shared, base_env=base_env
+                    )
+                    for k, page in enumerate(pages)
+                }
+                done.set_result({page: f.result() for page, f in futures.items()})
+        except BaseException as e:  # the test that waits for it reports it
+            done.set_exception(e)
+
+    threading.Thread(target=tour, name="tour", daemon=True).start()
+    return done
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -306,6 +350,10 @@ def main(argv: list[str] | None = None) -> int:
         for text in o.failures:
             failed += 1
             print(f"{page.name}: FAILED: " + text.replace("\n", "\n    "))
+    slowest = sorted((t, p.name, c) for p, o in outcomes.items() for t, c in o.timed)[-10:]
+    print("\nslowest commands (to the server's first answer):")
+    for t, name, text in reversed(slowest):
+        print(f"  {t:6.1f} s  {name}: {text[:90]}")
     print(f"\ntotal {time.monotonic() - start:.1f} s ({args.jobs} at a time), {failed} failure(s)")
     return 1 if failed else 0
 

@@ -278,7 +278,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
     if raw_only and (model is not None or args.bed):
         raise ParameterError("--model and --bed need pressure: give the mat's --calibration")
     if model is None and args.source == "virtual" and not args.no_posture:
-        model = virtual_seat_model()
+        model = virtual_seat_model(_virtual_calibration(args, calibration).id)
     bed = None
     if args.bed and args.no_posture:
         raise ParameterError("--bed needs the side model: drop --no-posture")
@@ -286,7 +286,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
         from texsense.bed import BedWatch
 
         if model is None and args.source == "virtual-bed":
-            model = virtual_bed_model()
+            model = virtual_bed_model(_virtual_calibration(args, calibration).id)
         if model is None:
             raise ParameterError("--bed needs --model: a posture model of sides")
         bed = BedWatch(
@@ -326,9 +326,17 @@ def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
     return "seat"
 
 
+def _virtual_calibration(args: argparse.Namespace, calibration: Any) -> Any:
+    """The calibration a virtual mat's posture model is trained with: the mat's own one (the
+    one in use, unless ``--calibration`` names another)."""
+    return calibration if args.calibration is None else default_calibration(args.source)
+
+
 def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
-    when missing (a stale or broken cache is rebuilt, and said so)."""
+    when missing (a broken cache is rebuilt, and said so). The name carries the id of the
+    virtual mat's calibration the model is trained on, so a texsense whose compensation
+    changed trains a new one instead of reading an old one."""
     from texsense.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
@@ -349,23 +357,31 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     return model
 
 
-def virtual_seat_model() -> Any:
+def virtual_seat_model(calibration_id: str) -> Any:
     """A posture model for the virtual seat, trained on simulated sessions of other people
-    (compensated pressure, §6.5.2), cached under ~/.cache/texsense."""
+    (compensated pressure, §6.5.2) with the calibration ``calibration_id``
+    (:func:`texsense.workflows.seat_calibration`), cached under ~/.cache/texsense."""
     from texsense.posture.training import train_virtual_seat_model
 
     return _cached_model(
-        "virtual-seat-posture-v3", "the virtual seat's posture model", 15, train_virtual_seat_model
+        f"virtual-seat-posture-v3-{calibration_id}",
+        "the virtual seat's posture model",
+        15,
+        train_virtual_seat_model,
     )
 
 
-def virtual_bed_model() -> Any:
+def virtual_bed_model(calibration_id: str) -> Any:
     """A model of the side a person lies on for the virtual bed, trained on other simulated
-    people (compensated pressure), cached under ~/.cache/texsense."""
+    people (compensated pressure) with the calibration ``calibration_id``
+    (:func:`texsense.workflows.bed_calibration`), cached under ~/.cache/texsense."""
     from texsense.posture.training import train_virtual_bed_model
 
     return _cached_model(
-        "virtual-bed-sides-v1", "the virtual bed's side model", 40, train_virtual_bed_model
+        f"virtual-bed-sides-v1-{calibration_id}",
+        "the virtual bed's side model",
+        40,
+        train_virtual_bed_model,
     )
 
 

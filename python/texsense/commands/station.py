@@ -244,7 +244,8 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
         vm.broker = url
         beds, sides = None, None
         if args.virtual_mats > 1:
-            beds, sides = bed_calibration(), virtual_bed_model()
+            beds = bed_calibration()
+            sides = virtual_bed_model(beds.id)
         mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
                            args.turn_every)  # fmt: skip
         background.append(vm.run())
