@@ -589,3 +589,28 @@ def test_cli_chooses_the_drift_structure_and_refuses_with_the_numbers(tmp_path, 
     captured = capsys.readouterr()
     assert "no drift structure beats hysteresis only" in captured.err
     assert "hysteresis only" in captured.out  # the numbers came first
+
+
+def test_a_drift_model_says_what_it_is_and_info_shows_it(tmp_path, capsys):
+    """DriftModel.describe names kernel, clock, γ, level power and level; ``texsense info``
+    of a chain with a drift stage prints it."""
+    from texsense.cli import main
+    from texsense.drift import DriftModel
+    from texsense.hysteresis import HysteresisModel
+    from texsense.sim.protocols import run_protocol
+    from texsense.stages import Drift, Hysteresis, StageChain
+
+    assert DriftModel(-0.02, log_kernel()).describe() == "log kernel, γ -0.02, time clock"
+    two = DriftModel(-0.02, log_kernel(), rest_rate=0.02, gamma_time=0.001, exponent=2.0)
+    assert two.describe() == (
+        "log kernel, γ -0.02, rest+time clock (time γ 0.001), on the steps of h^2 (Schapery)"
+    )
+    cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
+    m = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
+    qlv = DriftModel(-0.02, log_kernel(), level="backbone", backbone=m.backbone_curve())
+    path = StageChain([Hysteresis.of(m), Drift.of(qlv)]).save(tmp_path / "qlv.json")
+    capsys.readouterr()
+    assert main(["info", str(path)]) == 0
+    assert "drift       log kernel, γ -0.02, time clock, on the elastic response (QLV)" in (
+        capsys.readouterr().out
+    )

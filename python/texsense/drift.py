@@ -305,6 +305,24 @@ class DriftModel:
         if (self.level == "backbone") != (self.backbone is not None):
             raise ParameterError("level 'backbone' (QLV) needs the backbone curve, and only it")
 
+    def describe(self) -> str:
+        """In a few words: kernel, clock, γ (or the Prony weights), level power and level."""
+        if self.kind == "prony":
+            what = (
+                f"Prony kernel ({self.kernel.weights.size} terms), weights sum "
+                f"{self.gamma * self.kernel.weights.sum():.4g}"
+            )
+        else:
+            what = f"log kernel, γ {self.gamma:.5g}"
+        what += f", {self.clock} clock"
+        if self.gamma_time:
+            what += f" (time γ {self.gamma_time:.5g})"
+        if self.exponent != 1.0:
+            what += f", on the steps of h^{self.exponent:g} (Schapery)"
+        if self.level == "backbone":
+            what += ", on the elastic response (QLV)"
+        return what
+
     def level_curve(self) -> Curve | None:
         """The elastic response of the input as the core's curve (QLV), else None."""
         if self.backbone is None:

@@ -210,7 +210,7 @@ def _choose_and_report(
             "or name a structure with --clock"
         )
     if not args.json:
-        print(f"chose {choice.chosen} ({describe_drift(choice.model)}, refitted on all samples)")
+        print(f"chose {choice.chosen} ({choice.model.describe()}; refitted on all samples)")
         if args.output:
             print(f"wrote {args.output}")
     return 0
@@ -228,21 +228,6 @@ def print_held_out(choice: StructureChoice) -> None:
         row = "".join(f"{c:<10.4g}" for c in cells if c is not None)
         label = "qlv (backbone)" if structure == "qlv" else structure
         print(f"  {label:<16}{row}".rstrip())
-
-
-def describe_drift(model: DriftModel) -> str:
-    """γ (or the Prony weights), the clock and the level power, in a few words."""
-    if model.kind == "prony":
-        what = f"Prony weights sum {model.gamma * model.kernel.weights.sum():.4g}"
-    else:
-        what = f"γ {model.gamma:.5g}"
-        if model.gamma_time:
-            what += f", time γ {model.gamma_time:.5g}"
-    if model.exponent != 1.0:
-        what += f", steps of h^{model.exponent:g} (Schapery)"
-    if model.level == "backbone":
-        what += ", on the elastic response (QLV)"
-    return what
 
 
 def run_fit(args: argparse.Namespace) -> int:

@@ -14,7 +14,7 @@ from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.io import load, sniff_format
 from texsense.recording import Recording
-from texsense.stages import load_chain
+from texsense.stages import Drift, load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -110,6 +110,7 @@ def _text(info: dict[str, Any]) -> str:
 def describe_model(path: Path) -> dict[str, Any]:
     """A calibration or model file: its stages, what it reads and gives, elements, id."""
     chain = load_chain(path)
+    drift = chain.find(Drift)
     return {
         "file": str(path),
         "format": "texsense calibration (stage chain)",
@@ -118,6 +119,7 @@ def describe_model(path: Path) -> dict[str, Any]:
         "gives": "{} [{}]".format(*chain.gives),
         "elements": chain.n_elements,
         "id": chain.id,
+        **({} if drift is None else {"drift": drift.model_.describe()}),
     }
 
 
@@ -129,7 +131,9 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(info, indent=2))
         else:
             print(f"{info['file']}: {info['format']}")
-            for key in ("stages", "reads", "gives", "elements", "id"):
+            for key in ("stages", "reads", "gives", "elements", "drift", "id"):
+                if key not in info:
+                    continue
                 value = info[key]
                 shown = ", ".join(value) if isinstance(value, list) else value
                 print(f"  {key:<11} {shown}")
