@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -26,6 +27,7 @@ SHARED_DATA = Path(os.environ.get("TEXSENSE_SHARED_DATA", ROOT.parent / "shared"
 #: The tour of the docs (tests/test_tour.py), started in the background when collected.
 TOUR = pytest.StashKey[concurrent.futures.Future]()
 _TOUR_FOLDER = pytest.StashKey[tempfile.TemporaryDirectory]()
+_TOUR_CANCEL = pytest.StashKey[threading.Event]()
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
@@ -44,18 +46,21 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     folder = tempfile.TemporaryDirectory(prefix="texsense-tour-")
     session.config.stash[_TOUR_FOLDER] = folder
     alone = len(pages) == len(session.items)
+    cancel = session.config.stash[_TOUR_CANCEL] = threading.Event()
     session.config.stash[TOUR] = start_pages(
         pages, Path(folder.name), SHARED_DATA.parent, jobs=2 if alone else 1,
-        base_env=dict(os.environ, TEXSENSE_NO_PROGRESS="1"),
+        base_env=dict(os.environ, TEXSENSE_NO_PROGRESS="1"), cancel=cancel,
     )  # fmt: skip
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
-    """Wait for the tour (its servers stop with it) and remove its folder."""
+    """Stop the tour if it is still running (an interrupted or failed-fast session: its
+    current command ends, its servers stop) and remove its folder."""
     tour = session.config.stash.get(TOUR, None)
     if tour is not None:
+        session.config.stash[_TOUR_CANCEL].set()
         with contextlib.suppress(Exception):
-            tour.result(timeout=1800)
+            tour.result(timeout=300)
     folder = session.config.stash.get(_TOUR_FOLDER, None)
     if folder is not None:
         folder.cleanup()

@@ -208,9 +208,11 @@ def run_page(
     *,
     timeout: float = 900.0,
     base_env: Mapping[str, str] | None = None,
+    cancel: threading.Event | None = None,
 ) -> Outcome:
     """Run every command of ``page`` in a fresh folder under ``folder``, with the environment
-    ``base_env`` (default: this process's, as it is when the page starts)."""
+    ``base_env`` (default: this process's, as it is when the page starts); ``cancel`` set:
+    no further command starts, the servers stop."""
     started = time.monotonic()
     work = _prepare(folder, shared)
     env = dict(os.environ if base_env is None else base_env)
@@ -231,6 +233,9 @@ def run_page(
 
     moved: dict[str, int] = {}  # the ports a page names -> the free ones its servers got
     for cmd in commands(page):
+        if cancel is not None and cancel.is_set():
+            outcome.failures.append("cancelled before: " + cmd.text)
+            break
         if cmd.block != block:
             stop_servers()
             block = cmd.block
@@ -302,9 +307,10 @@ def start_pages(
     *,
     jobs: int = 2,
     base_env: Mapping[str, str] | None = None,
+    cancel: threading.Event | None = None,
 ) -> concurrent.futures.Future:
     """:func:`run_pages` in the background: a future of its result (the test suite starts
-    the tour first and runs its other tests meanwhile)."""
+    the tour first and runs its other tests meanwhile); ``cancel`` stops it early."""
     done: concurrent.futures.Future = concurrent.futures.Future()
 
     def tour() -> None:
@@ -312,7 +318,12 @@ def start_pages(
             with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
                 futures = {
                     page: pool.submit(
-                        run_page, page, folder / f"{k:02d}-{page.stem}", shared, base_env=base_env
+                        run_page,
+                        page,
+                        folder / f"{k:02d}-{page.stem}",
+                        shared,
+                        base_env=base_env,
+                        cancel=cancel,
                     )
                     for k, page in enumerate(pages)
                 }
