@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import os
 import sys
 from collections.abc import Collection, Sequence
@@ -56,6 +57,9 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    # matplotlib's own housekeeping (a font cache it cannot save, e.g. on a full disk) is
+    # not the user's concern: the command's one line says what went wrong
+    logging.getLogger("matplotlib").setLevel(logging.ERROR)
     command = _command_of(argv)
     parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)

@@ -191,7 +191,9 @@ def test_process_and_plot_with_the_disk_full(tmp_path, previous, linear_calibrat
         if what == "process"
         else ("plot", raw, "-o", target)
     )
-    rc, _, err = run_cli(*args, cwd=tmp_path, preexec=_limit(4096))
+    # a matplotlib without its font cache tries to save one too, under the same limit
+    fresh = dict(os.environ, MPLCONFIGDIR=str(tmp_path / "mpl"))
+    rc, _, err = run_cli(*args, cwd=tmp_path, preexec=_limit(4096), env=fresh)
     assert_clear_error(rc, err, target.name, "File too large")
     assert _digest(target) == before and _leftovers(tmp_path) == []
     fault_row("writes", f"{what} with a file-size limit of 4 KiB", "data kept")
