@@ -43,6 +43,7 @@ __all__ = [
     "prony_kernel",
     "split_steps",
     "time_steps",
+    "unit_drift",
 ]
 
 
@@ -264,6 +265,22 @@ def _kernel_or_log(kernel: DriftKernel | None) -> tuple[DriftKernel, str]:
     return (log_kernel(), "log") if kernel is None else (kernel, "prony")
 
 
+def unit_drift(
+    h: npt.ArrayLike,
+    times_s: npt.ArrayLike,
+    rest_rate: float = 0.0,
+    kernel: DriftKernel | None = None,
+    exponent: float = 1.0,
+) -> np.ndarray:
+    """The drift of γ = 1 over a history of hysteresis outputs: ``D`` in ``p = h + γ D``
+    (eq. 5.8 is linear in γ), with the logarithmic kernel unless a Prony ``kernel`` is given,
+    on the rest clock when ``rest_rate`` > 0, over the steps of ``h**exponent``. What every
+    least-squares fit of γ over a load history is built from."""
+    x = np.asarray(h, dtype=np.float64)
+    k, kind = _kernel_or_log(kernel)
+    return DriftModel(1.0, k, kind, rest_rate, exponent=exponent).apply(x, times_s) - x
+
+
 @dataclass(frozen=True)
 class DriftModel:
     """γ and a kernel: the drift stage that follows the Preisach model (eq. 5.8).
@@ -439,7 +456,7 @@ class DriftModel:
                 f"h and pressure must be 1-D and of equal length, got {x.shape} and {p.shape}"
             )
         k, kind = _kernel_or_log(kernel)
-        unit = cls(1.0, k, kind, rest_rate).apply(x, times_s) - x
+        unit = unit_drift(x, times_s, rest_rate, kernel)
         sel = np.isfinite(unit) & np.isfinite(p) & (p >= band[0]) & (p < band[1])
         denom = float(unit[sel] @ unit[sel])
         if sel.sum() < 2 or denom <= 0:
@@ -477,8 +494,8 @@ class DriftModel:
             y = np.asarray(p, dtype=np.float64)
             if x.ndim != 1 or y.shape != x.shape:
                 raise ParameterError(f"record {n}: h and pressure must be equal-length 1-D")
-            d_rest = cls(1.0, k, kind, rest_rate).apply(x, t) - x
-            d_time = cls(1.0, k, kind).apply(x, t) - x
+            d_rest = unit_drift(x, t, rest_rate, kernel)
+            d_time = unit_drift(x, t, 0.0, kernel)
             sel = np.isfinite(y) & np.isfinite(x) & (y >= band[0]) & (y < band[1])
             if sel.sum() < 2:
                 raise ParameterError(f"record {n} has no samples in {band[0]}-{band[1]}")

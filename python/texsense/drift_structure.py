@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import nnls
 
-from texsense.drift import DriftKernel, DriftModel, _kernel_or_log, log_kernel
+from texsense.drift import DriftKernel, DriftModel, log_kernel, unit_drift
 from texsense.exceptions import ParameterError
 
 __all__ = [
@@ -49,17 +49,6 @@ class StructureChoice:
     held_out_rmse: dict[str, float]
     baseline_rmse: float
     deployable: dict[str, bool]
-
-
-def _unit_responses(
-    h: np.ndarray,
-    t: np.ndarray,
-    rest_rate: float,
-    kernel: DriftKernel | None = None,
-    exponent: float = 1.0,
-) -> np.ndarray:
-    k, kind = _kernel_or_log(kernel)
-    return DriftModel(1.0, k, kind, rest_rate, exponent=exponent).apply(h, t) - h
 
 
 def candidate_name(structure: str, exponent: float) -> str:
@@ -157,10 +146,10 @@ def _designs(
         idx = np.nonzero(sel)[0]
         train = idx < idx[int(train_share * idx.size)]
         for q in powers:
-            d_time = _unit_responses(x, tt, 0.0, exponent=q)
-            d_rest = _unit_responses(x, tt, rest_rate, exponent=q)
-            prony = np.column_stack([_unit_responses(x, tt, 0.0, k, q) for k in prony_k])
-            d_qlv = _unit_responses(el, tt, 0.0, exponent=q)
+            d_time = unit_drift(x, tt, 0.0, exponent=q)
+            d_rest = unit_drift(x, tt, rest_rate, exponent=q)
+            prony = np.column_stack([unit_drift(x, tt, 0.0, k, q) for k in prony_k])
+            d_qlv = unit_drift(el, tt, 0.0, exponent=q)
             for structure, cols in (
                 ("time", d_time[sel, None]),
                 ("rest", d_rest[sel, None]),

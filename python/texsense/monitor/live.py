@@ -449,10 +449,10 @@ class Monitor:
         self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
         raw = frame.values
-        floor = self._raw_floor
-        self._raw_floor = np.array(raw, dtype=np.float64) if floor is None else np.fmin(floor, raw)
         raw_stats = None
         if self.raw_only:  # no pressure: no load, area, peak pressure or PPI, but the rise
+            floor = self._raw_floor
+            self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
             raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
         alert = self.tracker.open_alert
         snap = {
@@ -502,15 +502,15 @@ class Monitor:
     def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
         """The frame's statistics for the snapshot (null for a mat with no calibration) and
         its load (N); the centre-of-force trace grows by this frame."""
+        if self.raw_only:  # no pressure: nothing to say (and no centre of force)
+            none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
+            return none, 0.0
         rec = Recording(np.nan_to_num(pressure)[None, :], [t], self.layout, "pressure", "N/cm2")
         fs = stats.frame_stats(rec, threshold=0.05)
         cof = self._cof_cell(pressure)
         load = float(np.nan_to_num(fs.load_N[0])) if fs.load_N is not None else 0.0
         if np.all(np.isfinite(cof)):
             self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
-        if self.raw_only:
-            none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
-            return none, load
         cof_cm = fs.cof_cm[0]
         return {
             "load_N": round(load, 2),
