@@ -76,6 +76,11 @@ class Publisher:
         self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
         self.client.connect("127.0.0.1", broker.port)
         self.client.loop_start()
+        # a QoS 0 message published before the broker's CONNACK is dropped: wait for it
+        deadline = time.monotonic() + 15
+        while not self.client.is_connected():
+            assert time.monotonic() < deadline, "the test publisher did not connect"
+            time.sleep(0.02)
 
     def frame(self, mat: str, seq: int, values, prefix: str = "texsense") -> None:
         payload = json.dumps({"seq": seq, "t": seq * 0.1, "values": values, "unit": "N/cm2"})

@@ -452,9 +452,17 @@ class Station:
                 log.warning("the broker %s refused the station: %s", self.broker, reason)
             self.refusal = str(reason)
             return
-        self.connected, self.refusal = True, None
+        self.refusal = None
         self.connects += 1
         client.subscribe(self.topic, qos=0)
+
+    def _on_subscribe(self, _client: Any, _u: Any, _mid: Any, reasons: Any, _p: Any = None) -> None:
+        """The broker acknowledged the subscription: from now on frames reach the station
+        (before it, a frame sent at QoS 0 would be lost), so only now is it connected."""
+        if any(getattr(r, "is_failure", False) for r in reasons or ()):
+            log.warning("the broker %s refused the subscription to %s", self.broker, self.topic)
+            return
+        self.connected = True
         log.info("connected to %s, subscribed to %s", self.broker, self.topic)
 
     def _on_disconnect(self, *_args: Any) -> None:
@@ -512,6 +520,7 @@ class Station:
         self._loop = asyncio.get_running_loop()
         client = mqtt_client(self.broker, f"texsense-station-{id(self)}")
         client.on_connect = self._on_connect
+        client.on_subscribe = self._on_subscribe
         client.on_disconnect = self._on_disconnect
         client.on_message = self._on_message
         client.loop_start()
