@@ -7,7 +7,7 @@ from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
-from texsense import stats
+from texsense.apps import stats
 from texsense.exceptions import FormatError
 from texsense.io import read_pliance, read_xsensor
 

@@ -12,16 +12,16 @@ import socket
 from pathlib import Path
 from typing import Any
 
+from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import load_chain
+from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
 from texsense.monitor import ExposureTracker, Monitor, sources
 from texsense.monitor.store import open_store
 from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
-from texsense.pipeline import Pipeline
-from texsense.stages import load_chain
-from texsense.workflows import bed_calibration, seat_calibration
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -250,7 +250,7 @@ def open_source(args: argparse.Namespace, *, loop: bool = True) -> Any:
 
 def build_monitor(args: argparse.Namespace) -> Any:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.posture import PostureModel
+    from texsense.apps.posture import PostureModel
 
     source = open_source(args)
     if args.calibration is not None:
@@ -283,7 +283,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
     if args.bed and args.no_posture:
         raise ParameterError("--bed needs the side model: drop --no-posture")
     if args.bed or (args.source == "virtual-bed" and not args.no_posture):
-        from texsense.bed import BedWatch
+        from texsense.apps.bed import BedWatch
 
         if model is None and args.source == "virtual-bed":
             model = virtual_bed_model(_virtual_calibration(args, calibration).id)
@@ -320,7 +320,7 @@ def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
         return "bed"
     rec = getattr(source, "rec", None)
     if rec is not None:
-        from texsense.views import guess_mode
+        from texsense.apps.views import guess_mode
 
         return guess_mode(rec.layout, rec.meta)
     return "seat"
@@ -337,7 +337,7 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     when missing (a broken cache is rebuilt, and said so). The name carries the id of the
     virtual mat's calibration the model is trained on, so a texsense whose compensation
     changed trains a new one instead of reading an old one."""
-    from texsense.posture import PostureModel
+    from texsense.apps.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
     path = cache / f"{name}.joblib"
@@ -360,8 +360,8 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
 def virtual_seat_model(calibration_id: str) -> Any:
     """A posture model for the virtual seat, trained on simulated sessions of other people
     (compensated pressure, §6.5.2) with the calibration ``calibration_id``
-    (:func:`texsense.workflows.seat_calibration`), cached under ~/.cache/texsense."""
-    from texsense.posture.training import train_virtual_seat_model
+    (:func:`texsense.calibration.workflows.seat_calibration`), cached under ~/.cache/texsense."""
+    from texsense.apps.posture.training import train_virtual_seat_model
 
     return _cached_model(
         f"virtual-seat-posture-v3-{calibration_id}",
@@ -374,8 +374,8 @@ def virtual_seat_model(calibration_id: str) -> Any:
 def virtual_bed_model(calibration_id: str) -> Any:
     """A model of the side a person lies on for the virtual bed, trained on other simulated
     people (compensated pressure) with the calibration ``calibration_id``
-    (:func:`texsense.workflows.bed_calibration`), cached under ~/.cache/texsense."""
-    from texsense.posture.training import train_virtual_bed_model
+    (:func:`texsense.calibration.workflows.bed_calibration`), cached under ~/.cache/texsense."""
+    from texsense.apps.posture.training import train_virtual_bed_model
 
     return _cached_model(
         f"virtual-bed-sides-v1-{calibration_id}",

@@ -8,8 +8,7 @@ from pathlib import Path
 
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.files import check_not_input, write_text
-from texsense.plotting import save_figure
+from texsense.data.files import check_not_input, save_figure, write_text
 from texsense.sim.muscle import session
 
 
@@ -41,8 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense muscle simulate``: sleeve.h5, calibration.json and truth.json."""
+    from texsense.calibration.workflows import sleeve_calibration
     from texsense.io import save
-    from texsense.workflows import sleeve_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
     s = session(args.minutes, seed=args.seed)
@@ -59,9 +58,9 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_detect(args: argparse.Namespace) -> int:
     """Run ``texsense muscle detect``."""
+    from texsense.apps.muscle import activation, detect
     from texsense.commands.pipeline import to_pressure
     from texsense.io import load
-    from texsense.muscle import activation, detect
 
     if args.plot:
         check_not_input(args.plot, [args.recording])

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
 from texsense.io._text import decode_head, open_binary
@@ -41,7 +42,6 @@ from texsense.io.tekscan import TekscanReader, read_tekscan, write_tekscan
 from texsense.io.wide_csv import MAGIC as _WIDE_MAGIC
 from texsense.io.wide_csv import WideCSVReader, read_wide_csv, write_wide_csv
 from texsense.io.xsensor import XSensorReader, read_xsensor
-from texsense.recording import Recording
 
 __all__ = [
     "READERS",

@@ -40,12 +40,12 @@ from typing import Any, ClassVar, NamedTuple, Self
 import numpy as np
 import numpy.typing as npt
 
-from texsense import units
 from texsense._progress import logger
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
 from texsense.io._text import Line, TextLines
-from texsense.layout import Layout
-from texsense.recording import Recording
 
 __all__ = [
     "NON_NEGATIVE",

@@ -23,14 +23,14 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from texsense import units
 from texsense._progress import logger
+from texsense.data import units
+from texsense.data.files import atomic_open
+from texsense.data.layout import Layout
+from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.files import atomic_open
 from texsense.io._base import BlockReader, Header, Piece, RecordingReader
 from texsense.io._text import TextLines, decode_head, is_number, open_binary, parse_csv_row
-from texsense.layout import Layout
-from texsense.recording import QUANTITIES, Recording
 
 __all__ = [
     "ColumnsReader",
@@ -110,7 +110,7 @@ def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) ->
     """Write equal-length columns; floats with the shortest text that reads back exactly.
 
     The first line declares the row count (``# rows: N``); the file is written to a temporary
-    name and renamed (:mod:`texsense.files`).
+    name and renamed (:mod:`texsense.data.files`).
     """
     path = Path(path)
     if not columns:

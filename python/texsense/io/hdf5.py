@@ -43,15 +43,15 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
-from texsense import units
 from texsense._core import __version__
 from texsense._progress import logger
+from texsense.data import units
+from texsense.data.files import atomic_path
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
-from texsense.files import atomic_path
 from texsense.io._base import Header, Piece, RecordingReader
 from texsense.io._guarded import GuardedFile
-from texsense.layout import Layout
-from texsense.recording import Recording
 
 __all__ = [
     "FORMAT_NAME",
@@ -325,7 +325,7 @@ def write_hdf5(rec: Recording, path: str | Path) -> Path:
     """Write ``rec`` to ``path`` (HDF5, schema version 1) and return the path.
 
     The file is written under a temporary name in the same folder and renamed when complete
-    (:func:`texsense.files.atomic_path`): a write that fails or is killed leaves the previous
+    (:func:`texsense.data.files.atomic_path`): a write that fails or is killed leaves the previous
     file, and a failure raises :class:`~texsense.exceptions.WriteError`.
     """
     path = Path(path)

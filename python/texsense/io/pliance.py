@@ -28,12 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from texsense import units
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader
 from texsense.io._text import Line, TextLines, parse_float, parse_floats
-from texsense.layout import Layout
-from texsense.recording import Recording
 
 __all__ = ["PlianceReader", "read_pliance"]
 

@@ -28,11 +28,11 @@ from typing import Any
 import numpy as np
 
 from texsense._progress import progress
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError
 from texsense.io._base import FrameRow, Header, RecordingReader
 from texsense.io._text import TextLines, is_number
-from texsense.layout import Layout
-from texsense.recording import Recording
 
 __all__ = [
     "MIRROR_CLASS",
@@ -79,7 +79,7 @@ POSTURE_CLASS: dict[int, str] = {
 }
 
 #: The mirror image (left and right swapped) of every posture file, for training on mirrored
-#: maps (:func:`texsense.posture.features.mirror_samples`). 11 and 12 are the two sides'
+#: maps (:func:`texsense.apps.posture.features.mirror_samples`). 11 and 12 are the two sides'
 #: knee-up variants. Checked on the data (benchmarks/posture_pmd.py prints it): a classifier
 #: trained on the original maps of the other subjects labels the mirrored maps of 15 of the 17
 #: files mostly as the file named here; the mirrored 60° wedges (5, 7) go about equally to the

@@ -17,14 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from texsense import units
 from texsense._progress import progress
+from texsense.data import units
+from texsense.data.files import atomic_open
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.files import atomic_open
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
 from texsense.io._text import Line, TextLines, format_float
-from texsense.layout import Layout
-from texsense.recording import Recording
 
 __all__ = ["TekscanReader", "read_tekscan", "write_tekscan"]
 

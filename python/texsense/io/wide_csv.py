@@ -32,13 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from texsense import units
+from texsense.data import units
+from texsense.data.files import atomic_open
+from texsense.data.layout import Layout
+from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.files import atomic_open
 from texsense.io._base import FrameRow, Header, RecordingReader
 from texsense.io._text import Line, TextLines, format_float, is_number
-from texsense.layout import Layout
-from texsense.recording import QUANTITIES, Recording
 
 __all__ = ["MAGIC", "WideCSVReader", "read_wide_csv", "write_wide_csv"]
 
@@ -269,7 +269,7 @@ def write_wide_csv(rec: Recording, path: str | Path) -> Path:
 
     Written exactly: frames (shortest float32 text), times (shortest float64 text), the
     validity mask, quantity, unit, layout and meta. Not written: labels, per-element times.
-    The file is written to a temporary name and renamed (:mod:`texsense.files`).
+    The file is written to a temporary name and renamed (:mod:`texsense.data.files`).
     """
     path = Path(path)
     names = [f"e{k}" for k in range(rec.n_elements)]

@@ -11,7 +11,7 @@ with two empty columns between them, and one named region per sensor. The vendor
 statistics ``Est. Load (N)``, ``Contact Area (cm²)``, ``Peak Pressure`` and
 ``Average Pressure`` are kept as labels ``vendor_load_N_s<i>``, ``vendor_contact_area_cm2_s<i>``,
 ``vendor_peak_ncm2_s<i>`` and ``vendor_mean_ncm2_s<i>`` (i = sensor number from 1), useful
-to cross-check :mod:`texsense.stats`. GROUP blocks are skipped (their cell membership is not
+to cross-check :mod:`texsense.apps.stats`. GROUP blocks are skipped (their cell membership is not
 exported), but their ``Cells`` count is checked against their ``SENSELS`` values.
 
 The export says nothing of its length, but every frame repeats the first frame's blocks: a
@@ -28,12 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
-from texsense import units
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
 from texsense.io._text import Line, TextLines, is_number, parse_float
-from texsense.layout import Layout
-from texsense.recording import Recording
 
 __all__ = ["XSensorReader", "read_xsensor"]
 

@@ -26,18 +26,19 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from texsense import stats, units
-from texsense.bed import BANDS
+from texsense.apps import stats
+from texsense.apps.alerts import Event, ExposureTracker
+from texsense.apps.bed import BANDS
+from texsense.apps.posture.smoothing import WindowVote
+from texsense.apps.views import MODES, format_duration, orientation_of, place_names, seat_zones
+from texsense.data import units
+from texsense.data.files import unused_name
+from texsense.data.protocol import Frame
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.files import unused_name
-from texsense.monitor.alerts import Event, ExposureTracker
 from texsense.monitor.clock import FrameClock, Quiet
-from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.posture.smoothing import WindowVote
-from texsense.recording import Recording
-from texsense.views import MODES, format_duration, orientation_of, place_names, seat_zones
 
 __all__ = ["Monitor", "Recorder"]
 
@@ -95,7 +96,7 @@ def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = T
 
 def unused_recording_name(folder: Path, name: str, quantity: str, calibrated: bool = True) -> str:
     """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
-    (:func:`texsense.files.unused_name` on each file of the recording)."""
+    (:func:`texsense.data.files.unused_name` on each file of the recording)."""
     k = 1
     while True:
         candidate = name if k == 1 else f"{name}-{k}"
@@ -192,9 +193,9 @@ class Monitor:
     bed : BedWatch, optional
         For a bed mat: the turning schedule on the side the posture model reports (its
         labels must be sides: supine, prone, left, right, sitting) and the at-risk regions
-        (:mod:`texsense.bed`).
+        (:mod:`texsense.apps.bed`).
     mode : str, optional
-        ``seat``, ``bed``, ``foot`` or ``generic`` (:data:`texsense.views.MODES`): the words
+        ``seat``, ``bed``, ``foot`` or ``generic`` (:data:`texsense.apps.views.MODES`): the words
         of the events and alerts, whether there are any, the page's unit and colour scale.
         Default: ``bed`` with ``bed``, else ``seat``.
     """
@@ -375,7 +376,7 @@ class Monitor:
 
     def _where(self, elements: list[int]) -> list[str]:
         """Where elements lie, in words: the bed's at-risk regions or the seat's zones, else
-        rows and columns (:func:`texsense.views.place_names`)."""
+        rows and columns (:func:`texsense.apps.views.place_names`)."""
 
         if self.tracker.by_region:
             return [self.tracker.names[i] for i in elements]

@@ -2,7 +2,7 @@
 line, Linux IIO capacitance converters and MQTT (docs/monitor.md).
 
 Every source has a ``layout``, a ``quantity`` (``capacitance`` or ``pressure``) and an async
-iterator :meth:`Source.frames` yielding :class:`~texsense.monitor.protocol.Frame` objects with
+iterator :meth:`Source.frames` yielding :class:`~texsense.data.protocol.Frame` objects with
 per-element time stamps. Sources that parse bytes from outside count malformed input in
 ``errors`` (and log it) and skip it; they never stop on bad input.
 
@@ -27,17 +27,17 @@ from typing import Any
 
 import numpy as np
 
-from texsense import units
-from texsense.exceptions import FormatError, ParameterError
-from texsense.layout import Layout
-from texsense.monitor.protocol import (
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.protocol import (
     Frame,
     ProtocolError,
     parse_announcement,
     parse_mqtt_payload,
     parse_serial_line,
 )
-from texsense.recording import Recording
+from texsense.data.recording import Recording
+from texsense.exceptions import FormatError, ParameterError
 
 __all__ = [
     "IIOSource",
@@ -205,12 +205,12 @@ class ReplaySource(Source):
 
 class SerialSource(Source):
     """Frames from a serial line in the texsense line protocol
-    (:mod:`texsense.monitor.protocol`). ``port`` is a device (``/dev/ttyACM0``) or any pySerial
+    (:mod:`texsense.data.protocol`). ``port`` is a device (``/dev/ttyACM0``) or any pySerial
     URL (``socket://host:port``, ``loop://``). A port that is missing or refuses is tried
     again every :data:`RETRY_S` s (and said once); so is one that goes away while reading.
 
     Without a ``layout`` the device must announce its own (a ``#layout`` line, see
-    :func:`~texsense.monitor.protocol.parse_announcement`): the source waits up to
+    :func:`~texsense.data.protocol.parse_announcement`): the source waits up to
     ``announce_timeout_s`` for it and keeps what else it says (its spacer, ...) in
     ``announced``."""
 
@@ -454,7 +454,7 @@ class IIOSource(Source):
 
 class MQTTSource(Source):
     """Frames from an MQTT broker (paho-mqtt), topic ``texsense/<mat>/frames`` by default, JSON
-    payloads as in :mod:`texsense.monitor.protocol`."""
+    payloads as in :mod:`texsense.data.protocol`."""
 
     name = "mqtt"
 

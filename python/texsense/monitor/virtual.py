@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
-from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source, _pace
 from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat, night_frames, night_plan
 from texsense.sim.mat import VirtualMat

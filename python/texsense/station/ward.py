@@ -2,7 +2,7 @@
 calibration, pipeline state, exposure and reposition alerts (docs/station.md).
 
 A mat publishes its frames to ``<prefix>/<mat id>/frames`` with the payload of
-:mod:`texsense.monitor.protocol`. The station subscribes to one topic filter (default
+:mod:`texsense.data.protocol`. The station subscribes to one topic filter (default
 ``texsense/+/frames``; ``--mats 'ward3/+/frames'`` lets several stations split a site without
 any coordination of their own: the broker routes). Every mat is a
 :class:`~texsense.monitor.live.Monitor` fed by the station; what the station adds per mat:
@@ -43,14 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from texsense import units
-from texsense.bed import BedWatch
-from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.monitor.alerts import Event, ExposureTracker
-from texsense.monitor.clock import Quiet
-from texsense.monitor.live import SILENT_S, Monitor
-from texsense.monitor.protocol import (
+from texsense.apps.alerts import Event, ExposureTracker
+from texsense.apps.bed import BedWatch
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.protocol import (
     CountError,
     Frame,
     PayloadSizeError,
@@ -58,6 +55,9 @@ from texsense.monitor.protocol import (
     parse_mqtt_payload,
     payload_limit,
 )
+from texsense.exceptions import ParameterError
+from texsense.monitor.clock import Quiet
+from texsense.monitor.live import SILENT_S, Monitor
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 from texsense.station.broker import BrokerURL, check_mat_id, mqtt_client
@@ -100,7 +100,7 @@ class MatConfig:
     reposition_min: float = 20.0
     extra: dict[str, Any] = field(default_factory=dict)
     #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
-    #: regions (:class:`texsense.bed.BedWatch`); the model's labels must be sides.
+    #: regions (:class:`texsense.apps.bed.BedWatch`); the model's labels must be sides.
     bed: bool = False
     posture_model: Any = None
     turn_every_min: float = 120.0
@@ -122,7 +122,7 @@ class _FedSource(Source):
 
 def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: Path) -> Monitor:
     """The single-mat monitor of a mat of the ward."""
-    from texsense.pipeline import Pipeline
+    from texsense.compensation.pipeline import Pipeline
 
     pipeline = None
     if config.quantity == "capacitance":
