@@ -12,15 +12,14 @@ import socket
 from pathlib import Path
 from typing import Any
 
-from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
-from texsense.compensation.stages import load_chain
+from texsense.compensation.stages import StageChain, load_chain
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
+from texsense.monitor.sources import Source
 from texsense.monitor.store import open_store
-from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
 
 
@@ -90,12 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def add_source_options(p: argparse.ArgumentParser) -> None:
     """``--source`` and what a source needs (speed, grid, the IIO converter's settings):
     shared by ``monitor`` and ``record``."""
-    p.add_argument(
-        "--source",
-        default="virtual",
-        help="virtual | virtual-bed | replay:FILE | serial:PORT | iio:DEVICE_DIR | "
-        "mqtt:HOST[:PORT]",
-    )
+    p.add_argument("--source", default="virtual", help=sources.source_help())
     p.add_argument(
         "--speed",
         type=float,
@@ -176,10 +170,10 @@ def page_url(args: argparse.Namespace, token: str | None) -> str:
     return f"http://{host}:{args.port}/" + (f"?token={token}" if token else "")
 
 
-def _grid(args: argparse.Namespace) -> Any:
-
+def _grid(args: argparse.Namespace) -> Layout | None:
+    """``--grid ROWSxCOLS``, or None."""
     if not args.grid:
-        raise ParameterError(f"--source {args.source.split(':')[0]} needs --grid ROWSxCOLS")
+        return None
     try:
         rows, cols = (int(v) for v in args.grid.lower().split("x"))
     except ValueError:
@@ -209,50 +203,33 @@ def load_function(spec: str) -> Any:
     return fn
 
 
-def default_calibration(source: str) -> Any:
-    """The calibration a source brings (the virtual mats'), or None."""
-    kind = source.partition(":")[0]
-    if kind == "virtual":
-        return seat_calibration()
-    if kind == "virtual-bed":
-        return bed_calibration()
-    return None
+def default_calibration(source: str) -> StageChain | None:
+    """The calibration a source brings (the virtual mats' own), or None."""
+    cls = sources.available_sources().get(source.partition(":")[0])
+    return None if cls is None else cls.default_calibration()
 
 
-def open_source(args: argparse.Namespace, *, loop: bool = True) -> Any:
+def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
     """The source named by ``--source`` (no calibration: what ``record`` and the wizard
-    need); a replay starts again at its end with ``loop``."""
-    kind, _, rest = args.source.partition(":")
-    if kind == "virtual":
-        return VirtualSeatSource(speed=args.speed)
-    if kind == "virtual-bed":
-        return VirtualBedSource(speed=args.speed)
-    if kind == "replay":
-        return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop)
-    if kind == "serial":
-        return sources.SerialSource(rest, _grid(args) if args.grid else None)
-    if kind == "iio":
-        iio = sources.IIOSource(
-            rest,
-            _grid(args),
-            sampling_frequency=args.sampling_frequency,
-            capdac_pF=args.capdac_pf,
-            multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
-        )
-        return iio
-    if kind == "mqtt":
-        host, _, port = rest.partition(":")
-        return sources.MQTTSource(host, _grid(args), port=int(port or 1883))
-    raise ParameterError(
-        f"unknown source {args.source!r} (virtual, virtual-bed, replay:, serial:, iio:, mqtt:)"
+    need); a replay starts again at its end with ``loop``. The sources are those of the
+    registry (:func:`texsense.monitor.sources.open_source`)."""
+    options = sources.SourceOptions(
+        speed=args.speed,
+        grid=_grid(args),
+        sampling_frequency=args.sampling_frequency,
+        multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
+        capdac_pF=args.capdac_pf,
+        loop=loop,
     )
+    return sources.open_source(args.source, options)
 
 
-def build_monitor(args: argparse.Namespace) -> Any:
+def build_monitor(args: argparse.Namespace) -> Monitor:
     """Source, pipeline, tracker, model, store -> a Monitor."""
     from texsense.apps.posture import PostureModel
 
     source = open_source(args)
+    calibration: StageChain | None
     if args.calibration is not None:
         calibration = load_chain(args.calibration)
     else:
