@@ -34,8 +34,9 @@ import numpy as np
 from texsense.compensation.drift import DriftModel
 from texsense.compensation.drift_structure import choose_structure
 from texsense.compensation.hysteresis import HysteresisModel
+from texsense.sensor.materials import PRESETS
 from texsense.sim import protocols
-from texsense.sim.spacer import PRESETS, Spacer
+from texsense.sim.spacer import Spacer
 
 #: name -> material: the three spacer laws and variants with other creep
 LAWS = {

@@ -38,7 +38,7 @@ from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
-from texsense.sim.spacer import PRESETS as SPACER_PRESETS
+from texsense.sensor.materials import PRESETS as SPACER_PRESETS
 
 __all__ = ["DEFAULT_FRAMES", "MAX_FRAMES", "STEPS", "PageCalibration", "StepError"]
 
