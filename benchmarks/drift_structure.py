@@ -75,7 +75,7 @@ def run(law: str) -> list[str]:
     first = t < 3600.0
 
     recs = [record_of(model, loads), record_of(model, cyc, first)]
-    joint, _ = DriftModel.fit_joint([(a, c, d) for a, _, c, d in recs], rest_rate=0.02)
+    joint = DriftModel.fit_joint([(a, c, d) for a, _, c, d in recs], rest_rate=0.02)
     choice = choose_structure(recs, backbone=model.backbone_curve())
     rows = []
     candidates = {"hysteresis only": h, "documented workflow (rest+time)": joint.apply(h, t)}

@@ -85,7 +85,7 @@ def material_preset(name: str) -> tuple[dict[str, np.ndarray], float, Drift]:
     )
     hour = cycles.times < 3600
     predicted = hyst.model_.predict(cycles.labels["compression_mm"][hour])
-    drift, _ = DriftModel.fit_history(
+    drift = DriftModel.fit_history(
         predicted, cycles.labels["pressure_ncm2"][hour], cycles.times[hour]
     )
     return m, float(PRESETS[name].thickness_mm), Drift.of(drift)
