@@ -4,55 +4,24 @@ station writing its events there."""
 
 from __future__ import annotations
 
-import glob
-import os
-import shutil
-import subprocess
-import tempfile
 import time
-from pathlib import Path
 
 import pytest
 
 from conftest import free_port
+from postgres_server import PostgresServer
 from texsense.apps.alerts import Event
 from texsense.monitor.store import PostgresEventStore, open_store
 
 
-def _pg_bin(name: str) -> str:
-    """A server program of the newest PostgreSQL installed (Debian's layout first)."""
-    for path in [*sorted(glob.glob(f"/usr/lib/postgresql/*/bin/{name}"), reverse=True),
-                 shutil.which(name)]:  # fmt: skip
-        if path and os.access(path, os.X_OK):
-            return path
-    pytest.fail(f"no PostgreSQL {name}: install Debian's postgresql (scripts/test.sh does)")
-
-
 @pytest.fixture(scope="module")
 def postgres():
-    """A PostgreSQL server on loopback on a free port; yields its URL (database texsense).
-    Its folder is outside pytest's (which only root may enter) so that the postgres user can
-    own it."""
-    root = Path(tempfile.mkdtemp(prefix="texsense-pg-"))
-    root.chmod(0o755)
-    data, sock = root / "data", root / "sock"
-    sock.mkdir()
-    as_user: list[str] = []
-    if os.geteuid() == 0:  # PostgreSQL refuses to run as root
-        shutil.chown(root, "postgres")
-        shutil.chown(sock, "postgres")
-        as_user = ["runuser", "-u", "postgres", "--"]
-    port = free_port()
-    run = lambda *cmd: subprocess.run([*as_user, *cmd], check=True, capture_output=True)  # noqa: E731
-    run(_pg_bin("initdb"), "-D", str(data), "-U", "texsense", "--auth=trust", "-E", "UTF8")
-    run(_pg_bin("pg_ctl"), "-D", str(data), "-l", str(root / "pg.log"), "-w", "-o",
-        f"-p {port} -k {sock} -c listen_addresses=127.0.0.1", "start")  # fmt: skip
+    """A PostgreSQL server on loopback on a free port; yields its URL (database texsense)."""
+    server = PostgresServer()
     try:
-        run(_pg_bin("createdb"), "-h", "127.0.0.1", "-p", str(port), "-U", "texsense", "texsense")
-        yield f"postgresql://texsense@127.0.0.1:{port}/texsense"
+        yield server.url
     finally:
-        run(_pg_bin("pg_ctl"), "-D", str(data), "-m", "fast", "-w", "stop")
-        shutil.rmtree(root, ignore_errors=True)
+        server.close()
 
 
 def test_the_store_round_trips_sessions_and_events(postgres):

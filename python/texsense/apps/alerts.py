@@ -9,6 +9,11 @@ any element reaches ``reposition_s``, a *reposition* alert opens. It stays open 
 exposed element has been offloaded (then it is *cleared*); acknowledging it silences it but
 does not clear it, and no second reposition alert opens while one is open.
 
+A tracker's state (:meth:`ExposureTracker.state`: the exposure and relief of every exposed
+element, whether the mat is loaded, the open alert) is JSON-ready and small; another tracker
+of the same layout goes on from it (:meth:`ExposureTracker.restore`): what a station of a
+group hands over when it takes over a mat (docs/station.md, "A group of stations").
+
 Examples
 --------
 >>> import numpy as np
@@ -99,6 +104,22 @@ class Alert:
             "active": self.active,
             "where": self.where,
         }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Alert:
+        """The alert of :meth:`to_dict` (a stored state)."""
+        try:
+            return cls(
+                int(d["id"]),
+                float(d["opened_t"]),
+                [int(i) for i in d["elements"]],
+                float(d["peak_exposure_s"]),
+                None if d.get("acknowledged_t") is None else float(d["acknowledged_t"]),
+                None if d.get("cleared_t") is None else float(d["cleared_t"]),
+                [str(w) for w in d.get("where") or []],
+            )
+        except (KeyError, TypeError, ValueError) as e:
+            raise ParameterError(f"a stored alert lacks or mangles {e}") from None
 
 
 class ExposureTracker:
@@ -236,6 +257,53 @@ class ExposureTracker:
                 alert.cleared_t = t
                 events.append(Event("cleared", t, alert.id))
         return events
+
+    def state(self) -> dict[str, Any]:
+        """What the tracker knows now, JSON-ready and compact: the time of the last frame,
+        per exposed element (or region) ``[index, exposure s, relief s]``, whether the mat
+        is loaded, and the open alert (see :meth:`restore`)."""
+        exposed = np.flatnonzero(self.exposure_s > 0)
+        relief = np.minimum(self._relief_s, self.offload_s)
+        alert = self.open_alert
+        return {
+            "t": self._last_t,
+            "by": "region" if self._groups is not None else "element",
+            "size": len(self.names),
+            "exposed": [
+                [int(i), round(float(self.exposure_s[i]), 3), round(float(relief[i]), 3)]
+                for i in exposed
+            ],
+            "loaded": self.seated,
+            "alert": None if alert is None else alert.to_dict(),
+            "next_id": max((a.id for a in self.alerts), default=0) + 1,
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Go on from a :meth:`state` (of a tracker of the same layout and regions); a state
+        that does not fit raises :class:`ParameterError` naming what."""
+        try:
+            size = int(state["size"])
+            exposed = [(int(i), float(e), float(r)) for i, e, r in state["exposed"]]
+            t = None if state.get("t") is None else float(state["t"])
+            next_id = int(state.get("next_id", 1))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ParameterError(f"the stored exposure state lacks or mangles {e}") from None
+        if size != len(self.names) or any(not 0 <= i < size for i, _, _ in exposed):
+            raise ParameterError(
+                f"the stored exposure state is of {size} places, the tracker has {len(self.names)}"
+            )
+        self.exposure_s[:] = 0.0
+        self._relief_s[:] = self.offload_s
+        for i, exposure, relief in exposed:
+            self.exposure_s[i], self._relief_s[i] = exposure, relief
+        self._last_t = t
+        self.seated = bool(state.get("loaded", False))
+        self._occupancy_since = None
+        self.alerts = []
+        if isinstance(state.get("alert"), dict):
+            self.alerts.append(Alert.from_dict(state["alert"]))
+            next_id = max(next_id, self.alerts[0].id + 1)
+        self._ids = itertools.count(next_id)
 
     def _occupancy(self, t: float, any_load: bool) -> list[Event]:
         """The load appearing or disappearing, once the change has held ``occupancy_hold_s``."""

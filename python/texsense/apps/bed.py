@@ -312,6 +312,39 @@ class TurningSchedule:
                 "side": self.side, "since_s": round(t - self.since_t, 1)}))  # fmt: skip
         return events
 
+    def state(self) -> dict[str, Any]:
+        """What the schedule knows now, JSON-ready (see :meth:`restore`)."""
+        return {
+            "side": self.side,
+            "since_t": self.since_t,
+            "time_per_side_s": {k: round(v, 3) for k, v in self.time_per_side.items()},
+            "turns": self.turns,
+            "due_since": self.due_since,
+            "candidate": self._candidate,
+            "candidate_t": self._candidate_t,
+            "t": self._last_t,
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Go on from a :meth:`state`; one that does not fit raises :class:`ParameterError`."""
+
+        def opt(key: str) -> float | None:
+            v = state.get(key)
+            return None if v is None else float(v)
+
+        try:
+            side, candidate = state.get("side"), state.get("candidate")
+            self.side = None if side is None else str(side)
+            self._candidate = None if candidate is None else str(candidate)
+            self.since_t, self.due_since, self._last_t = opt("since_t"), opt("due_since"), opt("t")
+            self._candidate_t = float(state.get("candidate_t") or 0.0)
+            self.time_per_side = {
+                str(k): float(v) for k, v in dict(state.get("time_per_side_s") or {}).items()
+            }
+            self.turns = int(state.get("turns", 0))
+        except (TypeError, ValueError) as e:
+            raise ParameterError(f"the stored turning schedule is not readable: {e}") from None
+
     def _close(self, t: float, why: str) -> list[Event]:
         if self.due_since is None:
             return []

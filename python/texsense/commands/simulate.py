@@ -4,6 +4,9 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
+import contextlib
+import os
 import signal
 import sys
 import threading
@@ -19,6 +22,8 @@ from texsense.sensor.materials import PRESETS
 from texsense.sim.device import VirtualDevice
 from texsense.sim.protocols import PROTOCOLS, run_protocol
 from texsense.sim.seated import Subject, simulate_session
+from texsense.station.broker import parse_broker_url
+from texsense.station.virtual import VirtualMats
 
 #: CLI option -> protocol keyword, for the protocols that take it.
 _OPTIONS = {
@@ -55,8 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "protocol",
-        choices=[*sorted(PROTOCOLS), "device"],
-        help="protocol to run; 'device': a virtual mat behind a serial line (--mat, --link)",
+        choices=[*sorted(PROTOCOLS), "device", "mats"],
+        help="protocol to run; 'device': a virtual mat behind a serial line (--mat, --link); "
+        "'mats': virtual mats publishing to a broker (--count, --broker)",
     )
     p.add_argument("--spacer", default="textile-6mm", choices=sorted(PRESETS), help="spacer preset")
     p.add_argument("--seed", type=int, default=0, help="specimen and noise seed (default 0)")
@@ -89,6 +95,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     device.add_argument(
         "--truth", type=Path, help="device: record the true pressure of every frame (HDF5)"
     )
+    mats = p.add_argument_group("mats (texsense simulate mats --count N --broker URL): the "
+                                "virtual mats of `texsense station --virtual-mats N`")  # fmt: skip
+    mats.add_argument("--count", type=int, default=10, help="mats: how many (default 10)")
+    mats.add_argument("--broker", help="mats: mqtt://[user[:password]@]host[:port] (or the "
+                      "password in $TEXSENSE_BROKER_PASSWORD)")  # fmt: skip
+    mats.add_argument("--prefix", default="texsense", help="mats: topic prefix (default texsense)")
+    mats.add_argument("--beds", type=int, metavar="K", help="mats: only the first K "
+                      "even-numbered mats are beds (default: every second one)")  # fmt: skip
     p.set_defaults(run=run)
     register_sessions(sub)
 
@@ -97,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
     """Run ``texsense simulate``."""
     if args.protocol == "device":
         return run_device(args)
+    if args.protocol == "mats":
+        return run_mats(args)
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
     if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
@@ -167,6 +183,33 @@ def run_device(args: argparse.Namespace) -> int:
         f"({device.dropped} dropped: no reader)",
         flush=True,
     )
+    return 0
+
+
+def run_mats(args: argparse.Namespace) -> int:
+    """Run ``texsense simulate mats``: publish until Ctrl-C or SIGTERM."""
+    if not args.broker:
+        raise ParameterError("simulate mats needs --broker mqtt://host[:port]")
+    if args.count < 1:
+        raise ParameterError(f"--count must be >= 1, got {args.count}")
+    broker = parse_broker_url(args.broker)
+    if broker.password is None and os.environ.get("TEXSENSE_BROKER_PASSWORD"):
+        broker = broker.login(broker.username or "", os.environ["TEXSENSE_BROKER_PASSWORD"])
+    speed = 1.0 if args.speed is None else args.speed
+    mats = VirtualMats(args.count, broker, prefix=args.prefix, speed=speed, beds=args.beds)
+    print(f"texsense simulate mats: {args.count} virtual mats ({mats.ids[0]} ...) publish to "
+          f"{broker} under {mats.prefix}/ at {speed:g}x; Ctrl-C stops", flush=True)  # fmt: skip
+
+    async def publish() -> None:
+        task = asyncio.ensure_future(mats.run())
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, task.cancel)
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    asyncio.run(publish())
+    print(f"texsense simulate mats: stopped after {mats.published} frames", flush=True)
     return 0
 
 

@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import signal
+import socket
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -49,6 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="N simulated people on virtual seats and bed mats (alternating), publishing "
         "through the broker",
     )  # fmt: skip
+    p.add_argument("--virtual-beds", type=int, metavar="K",
+                   help="of the virtual mats, only the first K even-numbered ones are beds "
+                   "(default: every second one)")  # fmt: skip
     p.add_argument(
         "--speed", type=float, default=1.0,
         help="virtual mats: simulated seconds per second (a frame per 1.6 s at 1)",
@@ -82,6 +86,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--db", default="station.sqlite", help="event store: a SQLite file or postgresql://..."
     )
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
+    group = p.add_argument_group(
+        "a group of stations (docs/station.md, 'A group of stations'): every member with the "
+        "same ward, --broker and --db postgresql://..."
+    )
+    group.add_argument("--group", metavar="NAME", help="join the group NAME: its members share "
+                       "the mats, PostgreSQL decides who holds which, and a mat whose "
+                       "station dies is taken over from its checkpoint")  # fmt: skip
+    group.add_argument("--member", metavar="NAME", help="this member's name in the group "
+                       "(default: HOSTNAME:PORT; a member that comes back under its name gets "
+                       "its mats back)")  # fmt: skip
+    group.add_argument("--checkpoint-every", type=float, default=2.0, metavar="S",
+                       help="checkpoint each held mat this often (and after every alert "
+                       "event; default 2 s)")  # fmt: skip
     add_web_options(p, 8766)
     p.set_defaults(run=run)
 
@@ -225,6 +242,35 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_group(args: argparse.Namespace, local: dict[str, Any]) -> None:
+    """What a member of a group needs: a broker and a PostgreSQL that outlive any member,
+    and only mats that publish to the broker."""
+    if not args.broker:
+        raise ParameterError("--group needs --broker: the site's broker, which every member "
+                             "reaches and the mats publish to")  # fmt: skip
+    if not str(args.db).startswith(("postgresql://", "postgres://")):
+        raise ParameterError("--group needs --db postgresql://...: the group's leases, "
+                             "checkpoints and events")  # fmt: skip
+    if local:
+        raise ParameterError(f"a group's mats publish to the broker; {', '.join(local)} "
+                             "read(s) a device of this machine (source = ...)")  # fmt: skip
+
+
+def group_station(args: argparse.Namespace, url: Any, mats: list[Any]) -> Station:
+    """This member of the group ``--group`` (:mod:`texsense.station.group`)."""
+    from texsense.station.group import GroupStation
+
+    host = args.host if args.host not in ("0.0.0.0", "::") else socket.gethostname()
+    host = f"[{host}]" if ":" in host else host
+    member = args.member or f"{socket.gethostname()}:{args.port}"
+    station = GroupStation(url, mats, group=args.group, member=member, db=args.db,
+                           page=f"http://{host}:{args.port}/", topic=args.mats,
+                           record_dir=args.record_dir, checkpoint_s=args.checkpoint_every,
+                           refuse_after_s=args.refuse_after)  # fmt: skip
+    print(f"texsense station: member {member!r} of the group {args.group!r}", flush=True)
+    return station
+
+
 def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | None:
     from texsense.station.server import serve_ward
 
@@ -233,9 +279,12 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
     )
     if not mats and not args.virtual_mats:
         raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
+    if args.group:
+        check_group(args, local)
     vm = None
     if args.virtual_mats:
-        vm = VirtualMats(args.virtual_mats, None, prefix=args.virtual_prefix, speed=args.speed)
+        vm = VirtualMats(args.virtual_mats, None, prefix=args.virtual_prefix, speed=args.speed,
+                         beds=args.virtual_beds)  # fmt: skip
     if args.broker:
         url = site_broker(args)
     else:
@@ -247,14 +296,21 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
     if vm is not None:
         vm.broker = url
         beds, sides = None, None
-        if args.virtual_mats > 1:
+        if vm.beds:
             beds = bed_calibration()
             sides = virtual_bed_model(beds.id)
         mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
                            args.turn_every)  # fmt: skip
-        background.append(vm.run())
-    station = Station(url, mats, topic=args.mats, store=open_store(args.db),
-                      record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
+        if args.group:  # the mats are devices of their own: a member that dies keeps none
+            print(f"texsense station: {args.virtual_mats} virtual mats, published by "
+                  "`texsense simulate mats`", flush=True)  # fmt: skip
+        else:
+            background.append(vm.run())
+    if args.group:
+        station: Station = group_station(args, url, mats)
+    else:
+        station = Station(url, mats, topic=args.mats, store=open_store(args.db),
+                          record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]
     print(f"texsense station: {len(mats)} mats -> {page_url(args, access.token)}", flush=True)
     stopped: int | None = serve_ward(station, host=args.host, port=args.port, access=access,

@@ -45,6 +45,9 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
+from typing import Any
+
+from texsense.exceptions import ParameterError
 
 __all__ = ["FrameClock", "Quiet"]
 
@@ -127,6 +130,42 @@ class FrameClock:
         self.skipped += 1
         jump = t - last_t
         return "ahead" if jump > 0 else "backwards", t + self.offset, jump
+
+    def state(self) -> dict[str, Any]:
+        """Where the clock stands, JSON-ready (see :meth:`restore`): a mat handed to another
+        station goes on on the same time line."""
+        return {
+            "offset": self.offset,
+            "last_t": self.last_t,
+            "last": None if self._last is None else list(self._last),
+            "history": [list(h) for h in self._history],
+            "period": self._period,
+            "pending": None if self._pending is None else list(self._pending),
+            "skipped": self.skipped,
+            "resyncs": self.resyncs,
+        }
+
+    def restore(self, state: dict[str, Any]) -> FrameClock:
+        """Go on from a :meth:`state`; one that does not fit raises ``ValueError`` naming
+        what (a :class:`~texsense.exceptions.ParameterError`)."""
+
+        def pair(v: Any) -> tuple[float, float] | None:
+            return None if v is None else (float(v[0]), float(v[1]))
+
+        def opt(v: Any) -> float | None:
+            return None if v is None else float(v)
+
+        try:
+            history = [(float(t), float(w)) for t, w in state["history"]]
+            values = (float(state["offset"]), opt(state["last_t"]), pair(state["last"]),
+                      opt(state["period"]), pair(state["pending"]), int(state["skipped"]),
+                      int(state["resyncs"]))  # fmt: skip
+        except (KeyError, TypeError, ValueError, IndexError) as e:
+            raise ParameterError(f"the stored frame clock lacks or mangles {e}") from None
+        self._history = deque(history, maxlen=self._history.maxlen)
+        (self.offset, self.last_t, self._last, self._period, self._pending, self.skipped,
+         self.resyncs) = values  # fmt: skip
+        return self
 
     def _accept(self, t: float, wall: float, verdict: str, jump: float) -> tuple[str, float, float]:
         if self._last is not None and verdict == "ok":

@@ -44,7 +44,8 @@ class VirtualMats:
     ones sit on a virtual 96-element textile seat (postures, standing up, failing elements:
     :class:`~texsense.monitor.virtual.VirtualSeatSource`), the even-numbered ones lie on a
     virtual 64 x 32 bed mat (every side and its variants, turning, sitting up, out of bed:
-    :class:`~texsense.monitor.virtual.VirtualBedSource`).
+    :class:`~texsense.monitor.virtual.VirtualBedSource`); with ``beds``, only the first
+    ``beds`` even-numbered ones (the others sit).
 
     Parameters
     ----------
@@ -67,18 +68,27 @@ class VirtualMats:
         speed: float = 1.0,
         seed: int = 0,
         hold_s: float = 90.0,
+        beds: int | None = None,
     ) -> None:
         self.broker = broker
         self.prefix = prefix.strip("/")
         self.ids = [f"vmat-{k + 1:02d}" for k in range(n)]
+        beds = n // 2 if beds is None else beds
+        if not 0 <= beds <= n // 2:
+            raise ParameterError(f"{n} virtual mats have 0-{n // 2} beds (every second one)")
         self.sources: list[Source] = [
-            VirtualSeatSource(speed=speed, seed=seed + k, hold_s=hold_s)
-            if k % 2 == 0
-            else VirtualBedSource(speed=speed, seed=seed + k, hold_s=4 * hold_s)
+            VirtualBedSource(speed=speed, seed=seed + k, hold_s=4 * hold_s)
+            if k % 2 == 1 and k // 2 < beds
+            else VirtualSeatSource(speed=speed, seed=seed + k, hold_s=hold_s)
             for k in range(n)
         ]
         self.published = 0
         self.logins: dict[str, BrokerURL] | None = None
+
+    @property
+    def beds(self) -> int:
+        """How many of them are beds."""
+        return sum(isinstance(s, VirtualBedSource) for s in self.sources)
 
     def topics(self) -> dict[str, str]:
         """Each mat's topic."""

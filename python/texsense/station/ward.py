@@ -418,6 +418,9 @@ class Station:
         :data:`REFUSE_AFTER_N` messages in a row) is refused.
     """
 
+    #: The class of its mats (a group's station shows the mats held elsewhere too).
+    entry_class: type[MatEntry] = MatEntry
+
     def __init__(
         self,
         broker: BrokerURL | None,
@@ -436,8 +439,9 @@ class Station:
         self.topic = topic
         self.store = store or EventStore(":memory:")
         self.quiet = Quiet(log)
+        entry = self.entry_class
         self.mats = {
-            m.id: MatEntry(m, self.store, Path(record_dir), min_stale_s, refuse_after_s, self.quiet)
+            m.id: entry(m, self.store, Path(record_dir), min_stale_s, refuse_after_s, self.quiet)
             for m in mats
         }
         self.unknown: OrderedDict[str, list[float]] = OrderedDict()  # key -> [count, last]
@@ -477,7 +481,7 @@ class Station:
     def _on_message(self, _client: Any, _u: Any, msg: Any) -> None:
         if self._loop is not None:
             with contextlib.suppress(RuntimeError):  # the loop has closed: the station stops
-                self._loop.call_soon_threadsafe(self.handle, msg.topic, msg.payload)
+                self._loop.call_soon_threadsafe(self.handle, msg.topic, msg.payload, time.time())
 
     def handle(self, topic: str, payload: bytes, now: float | None = None) -> None:
         """One MQTT message (in the event loop)."""

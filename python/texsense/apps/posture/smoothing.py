@@ -63,6 +63,19 @@ class WindowVote:
             last[lab] = k
         return max(score, key=lambda lab: (score[lab], last[lab]))
 
+    def state(self) -> dict[str, Any]:
+        """The votes of the window, JSON-ready for labels that are (see :meth:`restore`)."""
+        return {"window_s": self.window_s, "votes": [list(v) for v in self._votes]}
+
+    def restore(self, state: dict[str, Any]) -> WindowVote:
+        """Go on from a :meth:`state` (the window's length stays this vote's own)."""
+        try:
+            votes = [(float(t), lab, float(w)) for t, lab, w in state["votes"]]
+        except (KeyError, TypeError, ValueError) as e:
+            raise ParameterError(f"the stored posture vote lacks or mangles {e}") from None
+        self._votes = deque(votes)
+        return self
+
 
 def window_vote(
     times: npt.ArrayLike,

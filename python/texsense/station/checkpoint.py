@@ -1,0 +1,297 @@
+"""A mat's state as one small versioned container of named parts: what a station of a group
+writes where every member can read it, and what the member that takes the mat over goes on
+from (docs/station.md, "A group of stations").
+
+The container::
+
+    b"TXSCKPT\\0"  u32 version  u32 header length  header (JSON)  part bytes ...
+
+The header names the mat, the frame time and wall clock of the state, and each part with its
+length; every part is zlib-compressed. A part is registered with :func:`register_part`: a name,
+how to save it from a :class:`~texsense.station.ward.MatEntry` (bytes, or None when the mat
+has no such state) and how to restore it, and how often it is written:
+
+- ``monitor`` (every checkpoint, a few kB): the exposure of every exposed element and the
+  open alert (:meth:`~texsense.apps.alerts.ExposureTracker.state`), the bed's side, time on
+  it and turning schedule (:meth:`~texsense.apps.bed.TurningSchedule.state`), the posture
+  vote, the mat's clock (:meth:`~texsense.monitor.clock.FrameClock.state`) and its counters;
+- ``pipeline`` (every ``sensor_every``-th checkpoint: 100-300 kB for 1024 elements): the
+  compiled chain's state (:meth:`~texsense.compensation.pipeline.Pipeline.snapshot`:
+  Preisach memory, drift history, detector, repair).
+
+A part this version does not know is skipped with one line; a part that does not fit (another
+calibration, another layout) is refused with one line naming the mat and the part, and that
+part of the mat starts afresh: the others are restored all the same.
+
+:func:`replay` applies the alert events a holder stored after its last checkpoint (a
+reposition alert raised, acknowledged or cleared, a turn) to the restored state, so that an
+alert raised just before a station died is not raised again, and an acknowledgement is kept.
+
+Examples
+--------
+>>> blob = pack({"monitor": b'{"a": 1}'}, mat="bed7", t=12.5)
+>>> head, parts = unpack(blob)
+>>> head["mat"], head["t"], parts
+('bed7', 12.5, {'monitor': b'{"a": 1}'})
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import struct
+import time
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from texsense.apps.alerts import Alert
+from texsense.exceptions import ParameterError
+from texsense.monitor.clock import FrameClock
+
+if TYPE_CHECKING:
+    from texsense.station.ward import MatEntry
+
+__all__ = ["PARTS", "Part", "fresh", "pack", "register_part", "replay", "restore", "save", "unpack"]
+
+log = logging.getLogger("texsense.station")
+
+#: The first bytes of a checkpoint.
+MAGIC = b"TXSCKPT\x00"
+#: The container's version (the parts carry their own).
+VERSION = 1
+#: The monitor part's own version.
+MONITOR_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Part:
+    """A named part of a mat's checkpoint: ``save(entry)`` gives its bytes (None: nothing to
+    save), ``restore(entry, data)`` goes on from them (raising ``ValueError`` when they do
+    not fit); ``often``: written with every checkpoint, else with every ``sensor_every``-th."""
+
+    name: str
+    save: Callable[[MatEntry], bytes | None]
+    restore: Callable[[MatEntry, bytes], None]
+    often: bool = True
+
+
+#: The parts, by name, in the order they are restored.
+PARTS: dict[str, Part] = {}
+
+
+def register_part(part: Part) -> Part:
+    """Add a part (e.g. an in-use drift estimator's state) to every checkpoint."""
+    PARTS[part.name] = part
+    return part
+
+
+def pack(parts: dict[str, bytes], **head: Any) -> bytes:
+    """The container of ``parts`` (name -> bytes) with ``head`` (JSON-ready) in its header."""
+    packed = {name: zlib.compress(data, 1) for name, data in parts.items()}
+    header = json.dumps(
+        {**head, "parts": [[name, len(data)] for name, data in packed.items()]},
+        separators=(",", ":"),
+    ).encode()
+    return b"".join([MAGIC, struct.pack("<II", VERSION, len(header)), header, *packed.values()])
+
+
+def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """The header and the parts of a container; anything else is one ParameterError."""
+    k = len(MAGIC)
+    if blob[:k] != MAGIC or len(blob) < k + 8:
+        raise ParameterError("not a texsense checkpoint")
+    version, size = struct.unpack_from("<II", blob, k)
+    if version != VERSION:
+        raise ParameterError(f"a checkpoint of version {version}; this version reads {VERSION}")
+    start = k + 8
+    try:
+        head = json.loads(blob[start : start + size])
+        at = start + size
+        parts: dict[str, bytes] = {}
+        for name, length in head.pop("parts"):
+            parts[str(name)] = zlib.decompress(blob[at : at + int(length)])
+            at += int(length)
+    except (ValueError, TypeError, KeyError, zlib.error) as e:
+        raise ParameterError(f"a damaged checkpoint: {e}") from None
+    if at != len(blob):
+        raise ParameterError("a damaged checkpoint: bytes left over after its parts")
+    return head, parts
+
+
+def save(entry: MatEntry, often: bool = True) -> bytes:
+    """The mat's checkpoint of the parts written every time (``often``), or of the others."""
+    parts = {}
+    for part in PARTS.values():
+        if part.often != often:
+            continue
+        data = part.save(entry)
+        if data is not None:
+            parts[part.name] = data
+    return pack(parts, mat=entry.id, t=entry.monitor.clock.last_t, wall=time.time())
+
+
+def restore(entry: MatEntry, blobs: list[bytes]) -> dict[str, Any]:
+    """Go on from checkpoints of the mat (later blobs' parts win): every part this version
+    knows is restored, each on its own. Returns what was restored and what refused."""
+    parts: dict[str, bytes] = {}
+    head: dict[str, Any] = {}
+    for blob in blobs:
+        h, p = unpack(blob)
+        if h.get("mat") != entry.id:
+            raise ParameterError(f"a checkpoint of mat {h.get('mat')!r}, not of {entry.id!r}")
+        head = h
+        parts.update(p)
+    restored, refused = [], {}
+    for name, data in parts.items():
+        part = PARTS.get(name)
+        if part is None:
+            log.warning("mat %s: the checkpoint's part %r is unknown here; skipped", entry.id, name)
+            refused[name] = "unknown"
+            continue
+        try:
+            part.restore(entry, data)
+            restored.append(name)
+        except ValueError as e:  # ParameterError too: that part starts afresh
+            log.warning("mat %s: the checkpoint's %s does not fit (%s); it starts afresh",
+                        entry.id, name, e)  # fmt: skip
+            refused[name] = str(e)
+    return {"t": head.get("t"), "wall": head.get("wall"), "parts": restored, "refused": refused}
+
+
+# ------------------------------------------------------------------------ the monitor part
+def _save_monitor(entry: MatEntry) -> bytes:
+    m = entry.monitor
+    state = {
+        "version": MONITOR_VERSION,
+        "frames": m.frames,
+        "t_first": m._t_first,
+        "clock": m.clock.state(),
+        "tracker": m.tracker.state(),
+        "bed": None if m.bed is None else m.bed.schedule.state(),
+        "vote": m._vote.state(),
+        "mat": {
+            "messages": entry.messages,
+            "malformed": entry.malformed,
+            "ignored": entry.ignored,
+            "failed": entry.failed,
+            "period_s": entry.period_s,
+            "last_wall": entry.last_wall,
+            "refused": entry.refused,
+            "state": entry.state,
+        },
+    }
+    return json.dumps(state, separators=(",", ":")).encode()
+
+
+def _restore_monitor(entry: MatEntry, data: bytes) -> None:
+    state = json.loads(data)
+    if state.get("version") != MONITOR_VERSION:
+        raise ParameterError(f"monitor state of version {state.get('version')}")
+    m = entry.monitor
+    clock = FrameClock().restore(state["clock"])
+    m.tracker.restore(state["tracker"])
+    if m.bed is not None and state.get("bed") is not None:
+        m.bed.schedule.restore(state["bed"])
+    m._vote.restore(state["vote"])
+    m.clock = clock
+    m.frames = int(state["frames"])
+    m._t_first = state.get("t_first")
+    mat = state["mat"]
+    entry.messages, entry.malformed = int(mat["messages"]), int(mat["malformed"])
+    entry.ignored, entry.failed = int(mat["ignored"]), int(mat["failed"])
+    entry.period_s, entry.last_wall = mat["period_s"], mat["last_wall"]
+    entry.refused = mat["refused"]
+    entry.state = str(mat.get("state", "waiting"))
+    if entry.state == "live":  # stale once two of its periods pass without a frame here
+        entry.last_wall = time.time()
+    entry.version += 1
+    m.changes += 1
+
+
+def _save_pipeline(entry: MatEntry) -> bytes | None:
+    pipeline = entry.monitor.pipeline
+    snapshot = getattr(pipeline, "snapshot", None)  # (until Pipeline.snapshot is merged)
+    if snapshot is None:
+        if pipeline is not None and not _said["pipeline"]:
+            log.warning("this build's pipeline cannot checkpoint its state: a mat taken over "
+                        "starts its Preisach memory and drift history afresh")  # fmt: skip
+            _said["pipeline"] = True
+        return None
+    return bytes(snapshot())
+
+
+def _restore_pipeline(entry: MatEntry, data: bytes) -> None:
+    pipeline = entry.monitor.pipeline
+    if pipeline is None:
+        raise ParameterError("the mat has no calibration here")
+    pipeline.restore(data)  # type: ignore[attr-defined]
+
+
+_said = {"pipeline": False}
+
+
+register_part(Part("monitor", _save_monitor, _restore_monitor, often=True))
+register_part(Part("pipeline", _save_pipeline, _restore_pipeline, often=False))
+
+
+def fresh(entry: MatEntry) -> None:
+    """Start the mat afresh (no checkpoint of it anywhere): unloaded spacer states, no
+    exposure, no alert, a new clock."""
+    m = entry.monitor
+    if m.pipeline is not None:
+        m.pipeline.reset()
+    m.tracker.restore({"size": len(m.tracker.names), "exposed": []})
+    if m.bed is not None:
+        m.bed.schedule.restore({})
+    m._vote.reset()
+    m.clock = FrameClock()
+    m.frames, m._t_first = 0, None
+    entry.state, entry.last_wall, entry.period_s, entry.refused = "waiting", None, None, None
+    entry.version += 1
+    m.changes += 1
+
+
+# ------------------------------------------------------------------------ the events after
+def replay(entry: MatEntry, events: list[dict[str, Any]]) -> list[str]:
+    """Apply the alert events stored after the checkpoint (oldest first; rows of the event
+    store: kind, t, alert, detail) to the restored state; returns the kinds applied."""
+    tracker = entry.monitor.tracker
+    schedule = entry.monitor.bed.schedule if entry.monitor.bed is not None else None
+    applied = []
+    for e in events:
+        kind, t, alert_id, detail = e["kind"], float(e["t"]), e.get("alert"), e.get("detail") or {}
+        known = {a.id: a for a in tracker.alerts}
+        if kind == "reposition" and alert_id is not None and alert_id not in known:
+            if tracker.open_alert is None:  # raised after the checkpoint: it stays raised
+                elements = [int(i) for i in detail.get("elements", [])]
+                alert = Alert(int(alert_id), t, elements, tracker.reposition_s,
+                              where=[str(w) for w in detail.get("where", [])])  # fmt: skip
+                tracker.alerts.append(alert)
+                tracker.restore({**tracker.state(), "next_id": int(alert_id) + 1})
+        elif kind in ("acknowledged", "cleared") and alert_id in known:
+            alert = known[alert_id]
+            if kind == "acknowledged" and alert.acknowledged_t is None:
+                alert.acknowledged_t = t
+            if kind == "cleared":
+                alert.cleared_t = t
+                tracker.alerts = [a for a in tracker.alerts if a.cleared_t is None]
+        elif schedule is not None and kind == "turn-due" and schedule.due_since is None:
+            schedule.due_since = t
+        elif schedule is not None and kind == "turn-done":
+            schedule.due_since = None
+        elif schedule is not None and kind in ("turn", "in-bed"):
+            schedule.side = detail.get("to", detail.get("side", schedule.side))
+            schedule.since_t = t
+            schedule.turns += kind == "turn"
+        elif schedule is not None and kind == "out-of-bed":
+            schedule.side, schedule.since_t = None, None
+        elif kind in ("seated", "left", "in-bed", "out-of-bed", "loaded", "unloaded"):
+            tracker.seated = kind in ("seated", "in-bed", "loaded")
+        else:
+            continue
+        applied.append(kind)
+    if applied:
+        entry.version += 1
+    return applied

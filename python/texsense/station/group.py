@@ -1,0 +1,489 @@
+"""A group of stations that share a site's mats (docs/station.md, "A group of stations").
+
+``texsense station --group NAME`` makes the station a member of a group: every member has the
+same ward, the mats publish to the site's broker, and PostgreSQL decides which member holds
+which mat (:mod:`texsense.station.lease`). A member subscribes to the frames of the mats it
+holds, and only those; it checkpoints every mat it holds (:mod:`texsense.station.checkpoint`)
+every ``checkpoint_s`` and after every alert event, and when it takes a mat over it goes on
+from the mat's last checkpoint and the alert events stored after it.
+
+The ward page of any member shows every mat of the group: the member publishes the tiles of
+its mats that changed, once a second, in one message per 200 kB to
+``<prefix>/_group/<group>/<member>`` (a mat id never starts with ``_``), and reads the
+others'. A mat is shown with the member that holds it; a mat that no alive member holds is
+shown as *unwatched* (red, on top of the ward), and one whose holder has sent no word for
+:data:`SILENT_S` as stale.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import hashlib
+import json
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+from texsense.apps.alerts import Event
+from texsense.exceptions import ParameterError
+from texsense.monitor.store import PostgresEventStore
+from texsense.station import checkpoint
+from texsense.station.broker import BrokerURL, mat_topic
+from texsense.station.lease import BEAT_S, LEASE_S, Grant, Journal, Membership, View
+from texsense.station.ward import URGENCY, MatConfig, MatEntry, Station, mat_id_of
+
+__all__ = ["GroupMatEntry", "GroupStation", "GroupStore", "ward_digest"]
+
+log = logging.getLogger("texsense.station")
+
+#: Tiles of the mats that changed go to the others this often, s.
+TILE_S = 1.0
+#: A message of tiles holds at most this many bytes (a site broker's packet limit is 256 kB).
+TILE_BATCH_BYTES = 200_000
+#: A mat whose holder has sent no word of it for this long is shown stale, s.
+SILENT_S = 5.0
+#: The sensor's state (the ``rarely`` parts) goes with every this many checkpoints.
+SENSOR_EVERY = 15
+#: The ward page's order for a mat nobody watches: above an alert.
+UNWATCHED = 5
+
+
+def ward_digest(mats: list[MatConfig]) -> str:
+    """What every member of a group must share: the mats, their layouts and calibrations."""
+    text = json.dumps(sorted([m.id, m.layout.n_elements, m.quantity, m.bed,
+                              None if m.calibration is None else m.calibration.id]
+                             for m in mats))  # fmt: skip
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class GroupStore(PostgresEventStore):
+    """The event store of a member: reads on a connection of its own, writes through the
+    member's journal (in order with its checkpoints; kept while the server is away). A mat's
+    session comes with its lease (one session per mat across members), so
+    :meth:`start_session` gives 0 until the mat is held, and sessions are not ended when a
+    member stops (the next holder goes on with them)."""
+
+    def __init__(self, url: str, journal: Journal) -> None:
+        super().__init__(url)
+        self.journal = journal
+        self.on_event: list[Any] = []  # called with the session of every event
+
+    def start_session(self, source: str) -> int:
+        return 0
+
+    def end_session(self, session: int) -> None:
+        return None
+
+    def end_sessions(self, sessions: list[int]) -> None:
+        return None
+
+    def add_event(self, session: int, event: Event) -> int:
+        self.journal.event(session, event)
+        for call in self.on_event:
+            call(session)
+        return 0
+
+
+class GroupMatEntry(MatEntry):
+    """A mat of a group: processed here while held, else shown from its holder's tiles."""
+
+    held = False
+    group: GroupStation
+
+    def remote(self) -> tuple[dict[str, Any] | None, str | None, float]:
+        """The holder's latest tile of this mat (parsed), its text, and when it came."""
+        return self.group.remote_tile(self.id)
+
+    def _away(self) -> tuple[dict[str, Any], str]:
+        """The mat as shown when another member holds it, or nobody."""
+        tile, text, wall = self.remote()
+        holder = self.group.view.holders.get(self.id) if self.group.view else None
+        url = self.group.member_url(holder)
+        now = time.time()
+        if holder is None:
+            base = dict(tile or self._blank())
+            since = self.group.unwatched_since(self.id)
+            problem = f"no station watches this mat (for {now - since:.0f} s)"
+            base.update(state="unwatched", urgency=UNWATCHED, holder=None, holder_url=None,
+                        problem=problem)  # fmt: skip
+            return base, ""
+        if tile is None or tile.get("holder") != holder or now - wall > SILENT_S:
+            base = dict(tile or self._blank())
+            base.update(state="stale", urgency=URGENCY["stale"], holder=holder, holder_url=url,
+                        problem=f"no word from {holder} for {now - wall:.0f} s"
+                        if tile is not None else f"waiting for word from {holder}")  # fmt: skip
+            return base, ""
+        return tile, text or ""
+
+    def _blank(self) -> dict[str, Any]:
+        return {"id": self.id, "source": self.config.source, "quantity": self.config.quantity,
+                "elements": self.config.layout.n_elements, "frames": 0, "messages": 0,
+                "malformed": 0, "skipped": 0, "failed": 0, "ignored": 0, "last_error": None,
+                "problem": None, "last_frame_wall": None, "period_s": None, "refused": None,
+                "occupied": False, "minutes_since_reposition": 0.0, "alert": None,
+                "bed": None, "map": None}  # fmt: skip
+
+    def view_state(self) -> tuple[str, int]:
+        if self.held:
+            return super().view_state()
+        tile, _ = self._away()
+        return str(tile["state"]), int(tile["urgency"])
+
+    def status(self) -> dict[str, Any]:
+        if self.held:
+            return {**super().status(), "holder": self.group.member, "holder_url": self.group.page}
+        tile, _ = self._away()
+        return {k: v for k, v in tile.items() if k != "map"}
+
+    def summary(self, now: float) -> dict[str, Any]:
+        if self.held:
+            return super().summary(now)
+        return {**self.status(), "pressure": None, "seconds_since_frame": None}
+
+    def tile(self) -> str:
+        if self.held:
+            return super().tile()
+        tile, text = self._away()
+        return text or json.dumps(tile, separators=(",", ":"))
+
+    def check(self, now: float) -> bool:
+        return super().check(now) if self.held else False
+
+
+class GroupStation(Station):
+    """A :class:`~texsense.station.ward.Station` that is a member of a group (see the
+    module). ``db``: the PostgreSQL URL; ``page``: this member's ward page (for the others'
+    links)."""
+
+    entry_class = GroupMatEntry
+
+    def __init__(
+        self,
+        broker: BrokerURL,
+        mats: list[MatConfig],
+        *,
+        group: str,
+        member: str,
+        db: str,
+        page: str,
+        topic: str = "texsense/+/frames",
+        record_dir: Path | str = "recordings",
+        checkpoint_s: float = 2.0,
+        min_stale_s: float = 0.0,
+        refuse_after_s: float = 10.0,
+    ) -> None:
+        for m in mats:
+            mat_topic(topic, m.id)  # a group subscribes to each mat's own topic
+        if checkpoint_s <= 0:
+            raise ParameterError(f"--checkpoint-every must be > 0 s, got {checkpoint_s}")
+        self.name, self.member, self.page = group, member, page
+        self.prefix = topic.split("/+/")[0]
+        self.checkpoint_s = float(checkpoint_s)
+        self.journal = Journal(db, group, member, self._from_thread(self.lost))
+        store = GroupStore(db, self.journal)
+        super().__init__(broker, mats, topic=topic, store=store, record_dir=record_dir,
+                         min_stale_s=min_stale_s, refuse_after_s=refuse_after_s)  # fmt: skip
+        store.on_event.append(self._soon)
+        for e in self.mats.values():
+            assert isinstance(e, GroupMatEntry)
+            e.group = self
+        self.membership = Membership(
+            db, group, member, page=page, ward=ward_digest(mats),
+            mats={m.id: self.mats[m.id].source.name for m in mats},
+            on_grant=self._from_thread(self.grant), on_release=self._from_thread(self.release),
+            on_lost=self._from_thread(self.lost), on_view=self._from_thread(self._set_view),
+            loop_alive=lambda: time.monotonic() - self.loop_beat < LEASE_S - BEAT_S,
+        )  # fmt: skip
+        self.held: dict[str, int] = {}  # mat -> epoch of its lease
+        self.view: View | None = None
+        self.not_held = 0  # frames of a mat held elsewhere (in flight while it moved)
+        self.loop_beat = time.monotonic()
+        self.moves = {"taken": 0, "released": 0, "lost": 0}
+        self._session_mat: dict[int, str] = {}
+        self._due: collections.deque[tuple[float, str]] = collections.deque()
+        self._count: dict[str, int] = {}  # checkpoints of each held mat so far
+        self._soon_mats: set[str] = set()
+        self._tiles: dict[str, tuple[dict[str, Any] | None, str, float]] = {}
+        self._sent: dict[str, int] = {}
+        self._next_tiles = 0.0
+        self._unwatched: dict[str, float] = {}
+        self._main: asyncio.AbstractEventLoop | None = None
+
+    # ---------------------------------------------------------------- threads -> loop
+    def _from_thread(self, fn: Any) -> Any:
+        def call(*args: Any) -> None:
+            loop = self._main
+            if loop is not None:
+                with contextlib.suppress(RuntimeError):  # the loop closed: the station stops
+                    loop.call_soon_threadsafe(fn, *args)
+
+        return call
+
+    def _set_view(self, view: View) -> None:
+        now = time.time()
+        for mat, holder in view.holders.items():
+            if holder is None:
+                self._unwatched.setdefault(mat, now)
+            else:
+                self._unwatched.pop(mat, None)
+        if self.view is None or view.holders != self.view.holders:
+            for e in self.mats.values():
+                e.version += 1
+        self.view = view
+
+    def unwatched_since(self, mat: str) -> float:
+        """Since when no alive member holds ``mat`` (wall clock)."""
+        return self._unwatched.get(mat, time.time())
+
+    def member_url(self, member: str | None) -> str | None:
+        """A member's ward page."""
+        if member is None or self.view is None:
+            return None
+        return self.view.members.get(member, {}).get("url")
+
+    # ---------------------------------------------------------------- holding
+    def grant(self, grants: list[Grant]) -> None:
+        """Mats this member now holds: restore each (its checkpoint, the events after it),
+        subscribe to its frames and checkpoint it at once."""
+        topics = []
+        for g in grants:
+            entry = self.mats[g.mat]
+            assert isinstance(entry, GroupMatEntry)
+            entry.monitor.session_id = g.session
+            self.journal.adopt(g.session, g.last_event)
+            detail: dict[str, Any] = {"member": self.member, "epoch": g.epoch}
+            if g.blobs:
+                try:
+                    info = checkpoint.restore(entry, g.blobs)
+                except ParameterError as e:  # a damaged container: the mat starts afresh
+                    log.warning("mat %s: %s; it starts afresh", g.mat, e)
+                    checkpoint.fresh(entry)
+                    info = {"parts": [], "refused": {"checkpoint": str(e)}}
+                replayed = checkpoint.replay(entry, g.events)
+                detail.update(checkpoint_from=g.source, checkpoint_age_s=round(g.age_s or 0, 2),
+                              parts=info["parts"], refused=info["refused"],
+                              events_after=replayed)  # fmt: skip
+            else:
+                checkpoint.fresh(entry)
+            entry.held = True
+            entry.version += 1
+            self.held[g.mat] = g.epoch
+            self._session_mat[g.session] = g.mat
+            self._count[g.mat] = 0
+            self._soon_mats.add(g.mat)
+            topics.append(mat_topic(self.topic, g.mat))
+            kind = "taken-over" if g.blobs else "watched"
+            entry.monitor._events([Event(kind, entry.monitor.clock.last_t or 0.0, None, detail)])
+        self.moves["taken"] += len(grants)
+        if topics and self._client is not None:
+            self._client.subscribe([(t, 0) for t in topics])
+        if grants:
+            log.info("group %s: %s holds %d more mat(s): %s", self.name, self.member,
+                     len(grants), ", ".join(g.mat for g in grants[:8]))  # fmt: skip
+
+    def _unhold(self, mats: list[str]) -> list[str]:
+        gone = [m for m in mats if m in self.held]
+        for m in gone:
+            del self.held[m]
+            entry = self.mats[m]
+            assert isinstance(entry, GroupMatEntry)
+            entry.held = False
+            entry.version += 1
+        if gone and self._client is not None:
+            self._client.unsubscribe([mat_topic(self.topic, m) for m in gone])
+        return gone
+
+    def release(self, items: list[tuple[str, int]]) -> None:
+        """Hand mats to the members they belong to: stop reading them, write their last
+        checkpoint and give up their leases (in one transaction)."""
+        mats = [m for m, e in items if self.held.get(m) == e]
+        for m in self._unhold(mats):
+            self._write(m, dict(items)[m], rarely=True, release=True)
+        self.moves["released"] += len(mats)
+
+    def lost(self, mats: list[str]) -> None:
+        """Mats another member took (this member's lease lapsed): stop at once."""
+        gone = self._unhold(mats)
+        if gone:
+            self.moves["lost"] += len(gone)
+            log.warning("group %s: %d mat(s) are held by another member now: %s", self.name,
+                        len(gone), ", ".join(gone[:8]))  # fmt: skip
+
+    def _write(self, mat: str, epoch: int, rarely: bool = False, release: bool = False) -> None:
+        entry = self.mats[mat]
+        often = checkpoint.save(entry, often=True)
+        sensor = checkpoint.save(entry, often=False) if rarely else None
+        self.journal.checkpoint(mat, epoch, entry.monitor.session_id, entry.monitor.clock.last_t,
+                                often, sensor, release)  # fmt: skip
+
+    def _soon(self, session: int) -> None:
+        mat = self._session_mat.get(session)
+        if mat is not None:
+            self._soon_mats.add(mat)
+
+    def checkpoints(self, now: float) -> int:
+        """Checkpoint the held mats that are due (every ``checkpoint_s``, the sensor's state
+        every :data:`SENSOR_EVERY`-th time) and those with a new alert event; returns how
+        many."""
+        soon, self._soon_mats = self._soon_mats, set()
+        for m in soon:
+            if m in self.held:
+                self._checkpoint(m, now)
+        n = len(soon)
+        while self._due and self._due[0][0] <= now:
+            _, m = self._due.popleft()
+            if m in self.held and m not in soon:
+                self._checkpoint(m, now)
+                n += 1
+        return n
+
+    def _checkpoint(self, mat: str, now: float) -> None:
+        k = self._count.get(mat, 0)
+        self._count[mat] = k + 1
+        self._write(mat, self.held[mat], rarely=k % SENSOR_EVERY == 0)
+        self._due.append((now + self.checkpoint_s, mat))
+
+    # ---------------------------------------------------------------- MQTT
+    @property
+    def tiles_topic(self) -> str:
+        return f"{self.prefix}/_group/{self.name}"
+
+    def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
+        if getattr(reason, "is_failure", False):
+            super()._on_connect(client, _u, _f, reason, _p)
+            return
+        self.refusal = None
+        self.connects += 1
+        topics = [self.tiles_topic + "/+"] + [mat_topic(self.topic, m) for m in list(self.held)]
+        client.subscribe([(t, 0) for t in topics])
+
+    def handle(self, topic: str, payload: bytes, now: float | None = None) -> None:
+        if topic.startswith(self.tiles_topic + "/"):
+            self._tiles_from(topic, payload)
+            return
+        mat = mat_id_of(topic)
+        if mat is not None and mat in self.mats and mat not in self.held:
+            self.not_held += 1
+            return
+        super().handle(topic, payload, now)
+
+    def _tiles_from(self, topic: str, payload: bytes) -> None:
+        """A message of tiles from another member: one JSON per line, the first the header
+        (member, wall, and every mat it holds)."""
+        member = topic.rsplit("/", 1)[-1]
+        if member == self.member:
+            return
+        lines = payload.split(b"\n")
+        try:
+            head = json.loads(lines[0])
+            arrived = time.time()
+            for mat in head.get("held", []):
+                old = self._tiles.get(mat)
+                if old is not None and old[0] is not None and old[0].get("holder") == member:
+                    self._tiles[mat] = (old[0], old[1], arrived)
+            for line in lines[1:]:
+                text = line.decode()
+                mat = json.loads(text)["id"]
+                if mat in self.mats and mat not in self.held:
+                    self._tiles[mat] = (None, text, arrived)
+                    self.mats[mat].version += 1
+        except (ValueError, KeyError, TypeError, UnicodeDecodeError) as e:
+            self.quiet.warn("group", "tiles", f"a message of tiles from {member!r} is not "
+                            f"readable ({e}); skipped")  # fmt: skip
+
+    def remote_tile(self, mat: str) -> tuple[dict[str, Any] | None, str | None, float]:
+        """The latest tile of ``mat`` from its holder, parsed (once), its text and arrival."""
+        got = self._tiles.get(mat)
+        if got is None:
+            return None, None, 0.0
+        tile, text, wall = got
+        if tile is None:
+            tile = json.loads(text)
+            self._tiles[mat] = (tile, text, wall)
+        return tile, text, wall
+
+    def publish_tiles(self, now: float) -> int:
+        """Send the tiles of the held mats that changed (in messages of at most
+        :data:`TILE_BATCH_BYTES`); returns how many."""
+        client = self._client
+        if client is None or not self.connected:
+            return 0
+        head = json.dumps({"member": self.member, "url": self.page, "wall": time.time(),
+                           "held": sorted(self.held)}, separators=(",", ":"))  # fmt: skip
+        lines: list[str] = []
+        size, sent = 0, 0
+        topic = f"{self.tiles_topic}/{self.member}"
+        for m in list(self.held):
+            e = self.mats[m]
+            if self._sent.get(m) == e.revision:
+                continue
+            text = e.tile()
+            if lines and size + len(text) > TILE_BATCH_BYTES:
+                client.publish(topic, "\n".join([head, *lines]).encode())
+                lines, size = [], 0
+            lines.append(text)
+            size += len(text) + 1
+            self._sent[m] = e.revision
+            sent += 1
+        client.publish(topic, "\n".join([head, *lines]).encode())
+        return sent
+
+    # ---------------------------------------------------------------- running
+    def start(self) -> None:
+        self._main = asyncio.get_running_loop()
+        self.loop_beat = time.monotonic()
+        self.journal.start()
+        self.membership.join_group()  # here: a refusal (another ward) stops the start
+        self.membership.start()
+        super().start()
+
+    async def watch(self, every_s: float = 0.02) -> None:
+        """Mark mats stale, checkpoint them, send their tiles (runs until cancelled)."""
+        k = 0
+        while True:
+            now = time.time()
+            self.loop_beat = time.monotonic()
+            try:
+                self._beat(now)
+            except Exception as e:  # never the end of the watch: one line, counted
+                self.quiet.warn("group", "beat", f"the group's beat failed ({type(e).__name__}: "
+                                f"{e})")  # fmt: skip
+            k += 1
+            if k % 50 == 0:
+                self.forget_unknown(now)
+            await asyncio.sleep(every_s)
+
+    def _beat(self, now: float) -> None:
+        for m in list(self.held):
+            self.mats[m].check(now)
+        self.checkpoints(time.monotonic())
+        if time.monotonic() >= self._next_tiles:
+            self._next_tiles = time.monotonic() + TILE_S
+            self.publish_tiles(now)
+
+    def stop(self) -> None:
+        """Hand every held mat over (a last checkpoint each, the leases released), say that
+        this member left, then stop as a station does (the sessions go on elsewhere)."""
+        held = dict(self.held)
+        for m in self._unhold(list(held)):
+            self._write(m, held[m], rarely=True, release=True)
+        if not self.journal.stop(3.0):
+            log.warning("group %s: %d write(s) could not be made before the stop", self.name,
+                        self.journal.waiting())  # fmt: skip
+        self.membership.stop()
+        super().stop()
+
+    def header(self) -> dict[str, Any]:
+        view = self.view
+        return {
+            **super().header(),
+            "group": self.name,
+            "member": self.member,
+            "members": view.members if view else {},
+            "held": len(self.held),
+            "unwatched": sum(1 for h in (view.holders.values() if view else []) if h is None),
+            "database": self.membership.down or self.journal.down,
+        }

@@ -1,0 +1,191 @@
+"""Who holds which mat, decided by a real PostgreSQL server (started by the test): the leases
+of texsense.station.lease driven beat by beat, with a member that stops beating, one killed
+(its connection gone), one that comes back, and the journal's fenced checkpoints."""
+
+from __future__ import annotations
+
+import time
+from typing import ClassVar
+
+import psycopg
+import pytest
+
+from postgres_server import PostgresServer
+from texsense.apps.alerts import Event
+from texsense.station import lease
+from texsense.station.lease import Journal, Membership, plan, preferred
+
+MATS = [f"bed{k:02d}" for k in range(12)]
+
+
+@pytest.fixture(scope="module")
+def server():
+    s = PostgresServer()
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+@pytest.fixture
+def db(server):
+    """A fresh database per test (the tables of the group and of the event store)."""
+    name = f"t{time.monotonic_ns()}"
+    with psycopg.connect(server.url, autocommit=True) as c:
+        c.execute(f"CREATE DATABASE {name}")
+    url = server.url.rsplit("/", 1)[0] + "/" + name
+    from texsense.monitor.store import PostgresEventStore
+
+    PostgresEventStore(url).close()  # sessions and events
+    return url
+
+
+class Member:
+    """A Membership driven by hand: what it hands the station is kept here."""
+
+    made: ClassVar[list[Member]] = []
+
+    def __init__(self, db: str, name: str, mats=MATS, alive=lambda: True) -> None:
+        Member.made.append(self)
+        self.held: dict[str, int] = {}
+        self.granted: list = []
+        self.m = Membership(
+            db, "ward", name, page=f"http://{name}/", ward="w1",
+            mats={m: f"mat {m}" for m in mats}, on_grant=self._grant,
+            on_release=self._release, on_lost=self._lost, on_view=lambda v: None,
+            loop_alive=alive,
+        )  # fmt: skip
+        self.m.join_group()
+
+    def _grant(self, grants) -> None:
+        self.granted += grants
+        self.held.update({g.mat: g.epoch for g in grants})
+
+    def _release(self, items) -> None:  # as the station does: gone at once (lease via journal)
+        for mat, epoch in items:
+            self.held.pop(mat)
+            self.m.conn.execute(
+                "UPDATE group_leases SET member = NULL, expires = now() WHERE mat = %s AND "
+                "member = %s AND epoch = %s", (mat, self.m.member, epoch))  # fmt: skip
+
+    def _lost(self, mats) -> None:
+        for mat in mats:
+            self.held.pop(mat)
+
+    def tick(self) -> None:
+        self.m.tick()
+
+
+@pytest.fixture
+def quick(monkeypatch):
+    """Short times: a lease of 1.5 s, settling 0.2 s, ready 0.5 s, a grace of 0.6 s; the members'
+    connections closed at the end."""
+    monkeypatch.setattr(lease, "LEASE_S", 1.5)
+    monkeypatch.setattr(lease, "SETTLE_S", 0.2)
+    monkeypatch.setattr(lease, "READY_S", 0.5)
+    monkeypatch.setattr(lease, "GRACE_S", 0.6)
+    yield
+    for m in Member.made:
+        if m.m.conn is not None:
+            m.m.conn.close()
+    Member.made.clear()
+
+
+def beats(members, n: int = 1, pause: float = 0.25) -> None:
+    for _ in range(n):
+        for m in members:
+            m.tick()
+        time.sleep(pause)
+
+
+def test_the_mats_spread_as_rendezvous_hashing_says_and_move_back(db, quick):
+    a, b = Member(db, "a"), Member(db, "b")
+    beats([a, b], 6)
+    assert set(a.held) | set(b.held) == set(MATS) and not set(a.held) & set(b.held)
+    assert all(preferred(m, ["a", "b"]) == "a" for m in a.held)
+    assert all(preferred(m, ["a", "b"]) == "b" for m in b.held)
+    # a third member joins: exactly the mats that prefer it move to it
+    c = Member(db, "c")
+    beats([a, b, c], 6)
+    for who in (a, b, c):
+        assert all(preferred(m, ["a", "b", "c"]) == who.m.member for m in who.held)
+    assert sorted([*a.held, *b.held, *c.held]) == MATS
+
+
+def test_a_member_killed_loses_its_mats_within_a_beat(db, quick):
+    a, b = Member(db, "a"), Member(db, "b")
+    beats([a, b], 6)
+    of_b, epochs = set(b.held), dict(b.held)
+    assert of_b
+    b.m.conn.close()  # as SIGKILL: the server's process of its connection ends
+    start = time.monotonic()
+    while not of_b <= set(a.held):
+        assert time.monotonic() - start < 1.0, "not taken over at the next beat"
+        beats([a], 1, 0.05)
+    assert time.monotonic() - start < lease.LEASE_S  # before its lease would have expired
+    taken = {g.mat: g.epoch for g in a.granted if g.mat in of_b}  # the latest grant of each
+    assert taken == {m: e + 1 for m, e in epochs.items()}
+
+
+def test_a_member_that_stops_beating_loses_its_mats_and_hears_it(db, quick):
+    stuck = {"b": False}
+    a, b = Member(db, "a"), Member(db, "b", alive=lambda: not stuck["b"])
+    beats([a, b], 6)
+    of_b = set(b.held)
+    stuck["b"] = True  # its event loop does not answer: no heartbeat, no renewal
+    start = time.monotonic()
+    while not of_b <= set(a.held):
+        assert time.monotonic() - start < lease.LEASE_S + 2.0
+        beats([a, b], 1, 0.1)
+    assert time.monotonic() - start >= lease.LEASE_S - 0.3  # not before its lease lapsed
+    beats([b], 1)
+    assert not b.held  # b was told (on_lost) and holds nothing
+    stuck["b"] = False  # back: after settling, the mats that prefer b go back to it
+    beats([a, b], 8)
+    assert set(b.held) == of_b
+
+
+def test_a_member_restarted_under_its_name_takes_its_leases_again(db, quick):
+    a = Member(db, "a")
+    beats([a], 6)
+    assert set(a.held) == set(MATS)
+    epochs = dict(a.held)
+    again = Member(db, "a")  # a new process, the same name: the old leases are in its name
+    beats([again], 4)
+    assert again.held == {m: e + 1 for m, e in epochs.items()}
+
+
+def test_the_plan_takes_free_mats_that_prefer_it_first():
+    leases = {m: lease.Lease(m, None, 0, False) for m in MATS}
+    since: dict[str, float] = {}
+    take, release = plan("a", leases, {"a", "b"}, {"a", "b"}, set(), set(), since, 0.0, True)
+    assert take == [m for m in MATS if preferred(m, ["a", "b"]) == "a"] and not release
+    take, _ = plan("a", leases, {"a", "b"}, {"a", "b"}, set(), set(), since, 10.0, True)
+    assert take == MATS  # after the grace, any free mat
+    take, _ = plan("a", leases, {"a"}, {"a"}, set(), set(), {}, 0.0, False)
+    assert take == []  # not settled yet: nothing
+
+
+def test_the_journal_fences_checkpoints_and_keeps_events_in_order(db, quick):
+    a = Member(db, "a")
+    beats([a], 4)
+    lost: list[str] = []
+    j = Journal(db, "ward", "a", lost.extend)
+    j.start()
+    mat = MATS[0]
+    session = next(g.session for g in a.granted if g.mat == mat)
+    j.event(session, Event("reposition", 300.0, 1, {"elements": [3]}))
+    j.checkpoint(mat, a.held[mat], session, 300.0, b"often-1", b"rarely-1")
+    j.checkpoint(mat, a.held[mat], session, 301.0, b"often-2")  # replaces it, keeps rarely
+    j.checkpoint(MATS[1], a.held[MATS[1]] + 7, session, 1.0, b"x")  # another epoch: refused
+    assert j.flush(10)
+    with psycopg.connect(db) as c:
+        ((often, rarely, last),) = c.execute(
+            "SELECT often, rarely, last_event FROM group_checkpoints WHERE mat = %s", (mat,)
+        ).fetchall()
+        (eid,) = c.execute("SELECT max(id) FROM events").fetchone()
+        assert c.execute("SELECT count(*) FROM group_checkpoints WHERE mat = %s",
+                         (MATS[1],)).fetchone() == (0,)  # fmt: skip
+    assert (bytes(often), bytes(rarely), last) == (b"often-2", b"rarely-1", eid)
+    assert lost == [MATS[1]]
+    j.stop()
