@@ -256,7 +256,9 @@ def check_group(args: argparse.Namespace, local: dict[str, Any]) -> None:
                              "read(s) a device of this machine (source = ...)")  # fmt: skip
 
 
-def group_station(args: argparse.Namespace, url: Any, mats: list[Any]) -> Station:
+def group_station(
+    args: argparse.Namespace, url: Any, mats: list[Any], token: str | None
+) -> Station:
     """This member of the group ``--group`` (:mod:`texsense.station.group`)."""
     from texsense.station.group import GroupStation
 
@@ -266,7 +268,7 @@ def group_station(args: argparse.Namespace, url: Any, mats: list[Any]) -> Statio
     station = GroupStation(url, mats, group=args.group, member=member, db=args.db,
                            page=f"http://{host}:{args.port}/", topic=args.mats,
                            record_dir=args.record_dir, checkpoint_s=args.checkpoint_every,
-                           refuse_after_s=args.refuse_after)  # fmt: skip
+                           refuse_after_s=args.refuse_after, token=token)  # fmt: skip
     print(f"texsense station: member {member!r} of the group {args.group!r}", flush=True)
     return station
 
@@ -307,7 +309,7 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
         else:
             background.append(vm.run())
     if args.group:
-        station: Station = group_station(args, url, mats)
+        station: Station = group_station(args, url, mats, access.token)
     else:
         station = Station(url, mats, topic=args.mats, store=open_store(args.db),
                           record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip

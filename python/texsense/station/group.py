@@ -24,6 +24,8 @@ import hashlib
 import json
 import logging
 import time
+import urllib.error
+import urllib.request
 from pathlib import Path
 from typing import Any
 
@@ -174,12 +176,13 @@ class GroupStation(Station):
         checkpoint_s: float = 2.0,
         min_stale_s: float = 0.0,
         refuse_after_s: float = 10.0,
+        token: str | None = None,
     ) -> None:
         for m in mats:
             mat_topic(topic, m.id)  # a group subscribes to each mat's own topic
         if checkpoint_s <= 0:
             raise ParameterError(f"--checkpoint-every must be > 0 s, got {checkpoint_s}")
-        self.name, self.member, self.page = group, member, page
+        self.name, self.member, self.page, self.token = group, member, page, token
         self.prefix = topic.split("/+/")[0]
         self.checkpoint_s = float(checkpoint_s)
         self.journal = Journal(db, group, member, self._from_thread(self.lost))
@@ -476,6 +479,48 @@ class GroupStation(Station):
         self.membership.stop()
         super().stop()
 
+    # ---------------------------------------------------------------- elsewhere
+    def holder_of(self, mat: str) -> tuple[str | None, str | None]:
+        """The alive member that holds ``mat`` and its page (None, None: nobody)."""
+        holder = self.view.holders.get(mat) if self.view is not None else None
+        return holder, self.member_url(holder)
+
+    async def _forward(self, mat: str, path: str) -> dict[str, Any]:
+        """POST ``path`` to the member that holds ``mat`` (with this member's token: every
+        member of a group has the same) and return its answer."""
+        holder, url = self.holder_of(mat)
+        if holder is None or url is None:
+            raise ParameterError(f"no station watches mat {mat} at the moment; try again")
+        request = urllib.request.Request(url.rstrip("/") + path, method="POST")
+        if self.token:
+            request.add_header("Authorization", f"Bearer {self.token}")
+
+        def post() -> dict[str, Any]:
+            with urllib.request.urlopen(request, timeout=5) as r:
+                return dict(json.load(r))
+
+        try:
+            return await asyncio.to_thread(post)
+        except urllib.error.HTTPError as e:
+            body = e.read().decode(errors="replace")[:300]
+            e.close()
+            raise ParameterError(f"member {holder} answered {e.code}: {body}") from None
+        except (OSError, ValueError) as e:
+            raise ParameterError(f"member {holder} ({url}) did not answer: {e}") from None
+
+    async def acknowledge(self, mat_id: str, alert_id: int) -> dict[str, Any]:
+        if mat_id in self.held:
+            return await super().acknowledge(mat_id, alert_id)
+        return await self._forward(mat_id, f"/api/mats/{mat_id}/alerts/{alert_id}/ack")
+
+    async def admit(self, mat_id: str) -> dict[str, Any]:
+        if mat_id in self.held:
+            return await super().admit(mat_id)
+        return await self._forward(mat_id, f"/api/mats/{mat_id}/admit")
+
+    def layers(self) -> list[tuple[Any, dict[str, Any]]]:
+        return [(Elsewhere, {"station": self})]
+
     def header(self) -> dict[str, Any]:
         view = self.view
         return {
@@ -487,3 +532,33 @@ class GroupStation(Station):
             "unwatched": sum(1 for h in (view.holders.values() if view else []) if h is None),
             "database": self.membership.down or self.journal.down,
         }
+
+
+class Elsewhere:
+    """ASGI middleware: the dashboard of a mat held by another member is that member's
+    (``307`` to the same path there); of a mat nobody watches, ``503`` saying so."""
+
+    def __init__(self, app: Any, station: GroupStation) -> None:
+        self.app, self.station = app, station
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        path = scope.get("path", "")
+        parts = path.split("/")
+        mat = parts[2] if scope["type"] in ("http", "websocket") and len(parts) > 2 and \
+            parts[1] == "mats" else None  # fmt: skip
+        if mat is None or mat not in self.station.mats or mat in self.station.held:
+            await self.app(scope, receive, send)
+            return
+        holder, url = self.station.holder_of(mat)
+        if scope["type"] == "websocket":
+            await send({"type": "websocket.close", "code": 4307 if holder else 4503})
+            return
+        if holder is not None and url is not None:
+            query = scope.get("query_string", b"").decode()
+            where = url.rstrip("/") + path + (f"?{query}" if query else "")
+            status, headers, body = 307, [(b"location", where.encode())], b""
+        else:
+            status, headers = 503, [(b"content-type", b"text/plain; charset=utf-8")]
+            body = f"no station watches mat {mat} at the moment".encode()
+        await send({"type": "http.response.start", "status": status, "headers": headers})
+        await send({"type": "http.response.body", "body": body})

@@ -67,17 +67,19 @@ def _api(station: Station) -> APIRouter:
 
     @r.post("/api/mats/{mat_id}/alerts/{alert_id}/ack")
     async def acknowledge(mat_id: str, alert_id: int) -> dict[str, Any]:
-        """Acknowledge a mat's reposition alert."""
+        """Acknowledge a mat's reposition alert (in a group, where the mat is held)."""
+        entry_of(mat_id)
         try:
-            return entry_of(mat_id).monitor.acknowledge(alert_id).to_dict()
+            return await station.acknowledge(mat_id, alert_id)
         except ParameterError as e:
             raise HTTPException(409, str(e)) from None
 
     @r.post("/api/mats/{mat_id}/admit")
     async def admit(mat_id: str) -> dict[str, Any]:
         """Lift a mat's refusal: its frames are read again (event ``admitted``)."""
+        entry_of(mat_id)
         try:
-            return entry_of(mat_id).admit().to_dict()
+            return await station.admit(mat_id)
         except ParameterError as e:
             raise HTTPException(409, str(e)) from None
 
@@ -113,6 +115,8 @@ def create_ward_app(
     app.include_router(_api(station))
     for mat_id, entry in station.mats.items():
         app.mount(f"/mats/{mat_id}", create_app(entry.monitor, run_source=False, guarded=False))
+    for layer, options in station.layers():  # a group's: the dashboards of mats held elsewhere
+        app.add_middleware(layer, **options)
     app.add_middleware(Guard, access=access or Access(token))
     return app
 

@@ -60,7 +60,7 @@ from texsense.monitor.clock import Quiet
 from texsense.monitor.live import SILENT_S, Monitor
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.station.broker import BrokerURL, check_mat_id, mqtt_client
+from texsense.station.broker import BrokerURL, check_mat_id, mat_id_of, mqtt_client
 from texsense.station.tiles import BlockMap
 
 if TYPE_CHECKING:
@@ -79,14 +79,6 @@ REFUSE_AFTER_N = 10
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
 UNKNOWN_TTL_S = 600.0
-
-
-def mat_id_of(topic: str) -> str | None:
-    """The mat id of a frames topic (``.../<mat id>/frames``), None for other topics."""
-    parts = topic.split("/")
-    if len(parts) < 2 or parts[-1] != "frames" or not parts[-2]:
-        return None
-    return parts[-2]
 
 
 @dataclass
@@ -569,6 +561,18 @@ class Station:
             if k % 50 == 0:
                 self.forget_unknown(now)
             await asyncio.sleep(every_s)
+
+    async def acknowledge(self, mat_id: str, alert_id: int) -> dict[str, Any]:
+        """Acknowledge a mat's alert (the event, JSON-ready)."""
+        return self.mats[mat_id].monitor.acknowledge(alert_id).to_dict()
+
+    async def admit(self, mat_id: str) -> dict[str, Any]:
+        """Lift a mat's refusal (the event, JSON-ready)."""
+        return self.mats[mat_id].admit().to_dict()
+
+    def layers(self) -> list[tuple[Any, dict[str, Any]]]:
+        """ASGI middleware the web server adds (with its options)."""
+        return []
 
     # ---------------------------------------------------------------- views
     def summaries(self) -> list[dict[str, Any]]:

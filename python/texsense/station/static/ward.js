@@ -5,12 +5,13 @@
 const token = new URLSearchParams(location.search).get("token");
 const withToken = (url) => token ? url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token) : url;
 const $ = (id) => document.getElementById(id);
-const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "reposition!", acknowledged: "acknowledged", stale: "no data", refused: "refused" };
+const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "reposition!", acknowledged: "acknowledged", stale: "no data", refused: "refused", unwatched: "NOT WATCHED" };
 const TOP_MMHG = 100;  // one fixed scale on every tile, 0-100 mmHg (the dashboards' preset)
 const NO_READING = 254, NO_ELEMENT = 255;
 const mats = new Map();   // id -> the latest tile data
 const tiles = new Map();  // id -> its element
 let wall = 0;             // the station's clock at the latest message
+let member = null;        // this station's name in its group (none: not in a group)
 function drawMini(canvas, map) {
   const ctx = canvas.getContext("2d");
   ctx.clearRect(0, 0, canvas.width, canvas.height);
@@ -45,6 +46,7 @@ function tile(mat) {
     <div class="line"><span>${mat.occupied ? "occupied" : "empty"}</span><span><span class="big">${mat.minutes_since_reposition.toFixed(1)}</span> min</span></div>
     <div class="line bed-line" hidden></div>
     <div class="line problem" hidden></div>
+    <div class="line holder" hidden></div>
     <div class="line"><span>${mat.frames} frames · <span class="ago"></span></span><span>${skipped ? skipped + " skipped" : ""}</span></div>`;
   if (mat.bed) {  // a bed: its side and the turning schedule
     const line = el.querySelector(".bed-line");
@@ -61,6 +63,11 @@ function tile(mat) {
     line.textContent = trouble;
     el.title = trouble;
   }
+  if (mat.holder !== undefined) {  // a group: which station watches the mat (docs/station.md)
+    const line = el.querySelector(".holder");
+    line.hidden = false;
+    line.textContent = mat.holder === null ? "no station watches it" : `watched by ${mat.holder}${mat.holder === member ? " (here)" : ""}`;
+  }
   el.querySelector(".id").textContent = mat.id;
   el.querySelector(".state").textContent = STATE_TEXT[mat.state] || mat.state;
   el.querySelector(".ago").textContent = ago(mat);
@@ -75,7 +82,8 @@ function tile(mat) {
   const id = encodeURIComponent(mat.id);
   if (mat.alert && mat.alert.active) button("acknowledge", "ack", `/api/mats/${id}/alerts/${mat.alert.id}/ack`);
   if (mat.refused) button("admit again", "admit", `/api/mats/${id}/admit`);
-  el.onclick = () => { location.href = withToken(`mats/${id}/`); };
+  const base = mat.holder_url && mat.holder !== member ? mat.holder_url : "";  // its holder's dashboard
+  el.onclick = () => { location.href = withToken(`${base}mats/${id}/`); };
   return el;
 }
 const order = (a, b) => b.urgency - a.urgency || b.minutes_since_reposition - a.minutes_since_reposition || (a.id < b.id ? -1 : a.id > b.id ? 1 : 0);
@@ -84,7 +92,9 @@ function render(msg) {
   wall = msg.wall;
   if (msg.reset) { mats.clear(); tiles.clear(); $("tiles").replaceChildren(); }
   const trouble = h.refusal ? ` · refused: ${h.refusal}` : "";
-  $("broker").textContent = `${h.broker || "local sources"} · ${h.connected ? "connected" : "disconnected — retrying"}${trouble} · ${h.topic}`;
+  member = h.member || null;
+  const group = h.group ? ` · group ${h.group}: ${h.member} and ${Object.keys(h.members).filter((m) => m !== h.member && h.members[m].alive).length} other(s)${h.database ? ` · database: ${h.database}` : ""}` : "";
+  $("broker").textContent = `${h.broker || "local sources"} · ${h.connected ? "connected" : "disconnected — retrying"}${trouble} · ${h.topic}${group}`;
   for (const mat of msg.mats) {
     mats.set(mat.id, mat);
     const el = tile(mat), old = tiles.get(mat.id);
@@ -97,7 +107,7 @@ function render(msg) {
   if (sorted.some((el, k) => now[k] !== el)) $("tiles").replaceChildren(...sorted);
   const all = [...mats.values()];
   const alerts = all.filter((m) => m.state === "alert").length;
-  const stale = all.filter((m) => m.state === "stale" || m.state === "refused").length;
+  const stale = all.filter((m) => m.state === "stale" || m.state === "refused" || m.state === "unwatched").length;
   const unknown = h.unknown_topics ? ` · ${h.unknown_topics} unknown topic(s)` : "";
   $("counts").textContent = `${all.length} mats · ${alerts} alert(s) · ${stale} without data${unknown}`;
 }
