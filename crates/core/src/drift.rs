@@ -13,8 +13,11 @@
 //! same machinery runs any non-negative Prony series (a fitted kernel where the logarithm does
 //! not hold).
 
+use texsense_kernels::drift::{self as kernel, Element, Settings};
+
 use crate::error::{check_len, CoreError};
 use crate::par::{block_size, run_frames, FrameBlock};
+use crate::snapshot::{Reader, Writer};
 
 /// A kernel `k(t) = Σ_j c_j (1 - exp(-t / τ_j))` (c_j >= 0, τ_j > 0).
 #[derive(Debug, Clone, PartialEq)]
@@ -53,6 +56,16 @@ impl Kernel {
             .sum()
     }
 
+    /// The weights c_j.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The time constants τ_j (s).
+    pub fn taus(&self) -> &[f64] {
+        &self.taus
+    }
+
     /// Number of terms K.
     pub fn len(&self) -> usize {
         self.weights.len()
@@ -64,21 +77,11 @@ impl Kernel {
     }
 }
 
-/// The scalar drift state of one element.
-#[derive(Debug, Clone, Copy, Default)]
-struct DriftElement {
-    total: f64,
-    last_h: f64,
-    smooth: f64,
-    started: bool,
-}
-
 /// The clock and kernel settings shared by all elements of a bank.
 #[derive(Debug, Clone)]
 struct DriftSettings {
     kernel: Kernel,
     gamma: f64,
-    weight_sum: f64,
     rest_rate: f64,
     rest_window: f64,
     gamma_time: f64,
@@ -87,16 +90,13 @@ struct DriftSettings {
 }
 
 impl DriftSettings {
-    /// The level whose steps the kernel superposes: the hysteresis output itself (`q = 1`,
-    /// eq. 5.8), or its `q`-th power (Schapery's nonlinear superposition, the step
-    /// responses scaling as `h^q`; below zero the level is 0).
-    #[inline]
-    fn level(&self, h: f64) -> f64 {
-        if self.exponent == 1.0 {
-            h
-        } else {
-            h.max(0.0).powf(self.exponent)
-        }
+    /// The kernels' view (checked when the bank was built).
+    fn view(&self) -> Settings<'_, f64> {
+        Settings::new(&self.kernel.weights, &self.kernel.taus, self.gamma)
+            .and_then(|s| s.with_rest_rate(self.rest_rate, self.rest_window))
+            .and_then(|s| s.with_time_component(self.gamma_time))
+            .and_then(|s| s.with_exponent(self.exponent))
+            .expect("drift settings checked when set")
     }
 }
 
@@ -104,7 +104,7 @@ impl DriftSettings {
 #[derive(Debug, Clone)]
 pub struct DriftBank {
     settings: DriftSettings,
-    elements: Vec<DriftElement>,
+    elements: Vec<Element<f64>>,
     /// K states per element, element-major (`[N][K]`).
     z: Vec<f64>,
     /// The time clock's K states per element when two clocks run (else empty).
@@ -113,8 +113,8 @@ pub struct DriftBank {
 
 /// The elements of one block of a bank, for a parallel batch.
 pub struct DriftBlock<'a> {
-    settings: &'a DriftSettings,
-    elements: &'a mut [DriftElement],
+    settings: Settings<'a, f64>,
+    elements: &'a mut [Element<f64>],
     z: &'a mut [f64],
     z_time: &'a mut [f64],
     decay: Vec<f64>,
@@ -124,9 +124,7 @@ impl DriftBlock<'_> {
     /// Start a frame `dt` seconds after the previous one (once per frame, before `step`).
     #[inline]
     pub fn frame(&mut self, dt: f64) {
-        for (d, tau) in self.decay.iter_mut().zip(&self.settings.kernel.taus) {
-            *d = (-dt / tau).exp();
-        }
+        kernel::frame(&mut self.decay, self.settings.taus(), dt);
     }
 
     /// Element `i` of the block, in the frame started by [`DriftBlock::frame`] with `dt`:
@@ -134,50 +132,61 @@ impl DriftBlock<'_> {
     /// keep the state (time still passes for it) and give NaN.
     #[inline]
     pub fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
-        let s = self.settings;
-        let k = s.kernel.len();
-        let zs = &mut self.z[i * k..(i + 1) * k];
-        // the second clock only runs beside the rest clock
-        let two_clocks = !self.z_time.is_empty() && s.rest_rate > 0.0;
-        if !(valid && h.is_finite()) {
-            // time still passes for the element's states (at rest: nothing is known)
-            for (zj, d) in zs.iter_mut().zip(&self.decay) {
-                *zj *= d;
-            }
-            if two_clocks {
-                for (zj, d) in self.z_time[i * k..(i + 1) * k].iter_mut().zip(&self.decay) {
-                    *zj *= d;
-                }
-            }
-            return f64::NAN;
-        }
-        let el = &mut self.elements[i];
-        let x = s.level(h);
-        let change = if el.started { x - el.last_h } else { x };
-        el.started = true;
-        el.last_h = x;
-        el.total += change;
-        // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
-        let weighted = if s.rest_rate > 0.0 && dt > 0.0 {
-            // this element's clock: slowed by its own (averaged) rate of change
-            el.smooth += (change / dt - el.smooth) * (1.0 - (-dt / s.rest_window).exp());
-            let clock = dt / (1.0 + el.smooth.abs() / s.rest_rate);
-            for (zj, tau) in zs.iter_mut().zip(&s.kernel.taus) {
-                *zj = *zj * (-clock / tau).exp() + change;
-            }
-            dot(&s.kernel.weights, zs)
-        } else {
-            decay_and_add(zs, &self.decay, change);
-            dot(&s.kernel.weights, zs)
-        };
-        let mut out = h + s.gamma * (el.total * s.weight_sum - weighted);
-        if two_clocks {
-            let zt = &mut self.z_time[i * k..(i + 1) * k];
-            decay_and_add(zt, &self.decay, change);
-            out += s.gamma_time * (el.total * s.weight_sum - dot(&s.kernel.weights, zt));
-        }
-        out
+        let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
+        kernel::step(
+            &self.settings,
+            &mut self.elements[i],
+            z,
+            z_time,
+            &self.decay,
+            dt,
+            h,
+            valid,
+        )
     }
+
+    /// The drift of the elastic response `level(u)` of the hysteresis stage's input `u`,
+    /// added to its output `h` (QLV; `ok`: the validity after the hysteresis stage).
+    #[inline]
+    pub fn step_on_level(
+        &mut self,
+        i: usize,
+        dt: f64,
+        level: &texsense_kernels::convert::Curve<'_, f64>,
+        u: f64,
+        h: f64,
+        ok: bool,
+    ) -> (f64, bool) {
+        let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
+        texsense_kernels::stage::drift_on_level(
+            &self.settings,
+            &mut self.elements[i],
+            z,
+            z_time,
+            &self.decay,
+            dt,
+            level,
+            u,
+            h,
+            ok,
+        )
+    }
+}
+
+/// Element `i`'s K states and (with two clocks) the time clock's K states (empty without).
+#[inline]
+fn states<'b>(
+    z: &'b mut [f64],
+    z_time: &'b mut [f64],
+    k: usize,
+    i: usize,
+) -> (&'b mut [f64], &'b mut [f64]) {
+    let z_time: &mut [f64] = if z_time.is_empty() {
+        &mut []
+    } else {
+        &mut z_time[i * k..(i + 1) * k]
+    };
+    (&mut z[i * k..(i + 1) * k], z_time)
 }
 
 impl FrameBlock for DriftBlock<'_> {
@@ -204,7 +213,6 @@ impl DriftBank {
         let k = kernel.len();
         Ok(Self {
             settings: DriftSettings {
-                weight_sum: kernel.weights.iter().sum(),
                 kernel,
                 gamma,
                 rest_rate: 0.0,
@@ -212,7 +220,7 @@ impl DriftBank {
                 gamma_time: 0.0,
                 exponent: 1.0,
             },
-            elements: vec![DriftElement::default(); n],
+            elements: vec![Element::default(); n],
             z: vec![0.0; n * k],
             z_time: Vec::new(),
         })
@@ -284,6 +292,56 @@ impl DriftBank {
         self.elements.len()
     }
 
+    /// The kernel's weights and time constants.
+    pub fn kernel(&self) -> &Kernel {
+        &self.settings.kernel
+    }
+
+    /// γ, the rest clock's rate and window, the time clock's γ and the level power.
+    pub fn options(&self) -> (f64, f64, f64, f64, f64) {
+        let s = &self.settings;
+        (
+            s.gamma,
+            s.rest_rate,
+            s.rest_window,
+            s.gamma_time,
+            s.exponent,
+        )
+    }
+
+    /// Every element's state into a snapshot.
+    pub(crate) fn save(&self, w: &mut Writer) {
+        w.u32(self.len() as u32);
+        w.u32(self.settings.kernel.len() as u32);
+        w.u32(u32::from(!self.z_time.is_empty()));
+        for e in &self.elements {
+            w.f64(e.total);
+            w.f64(e.last_h);
+            w.f64(e.smooth);
+            w.u32(e.started);
+        }
+        w.f64s(&self.z);
+        w.f64s(&self.z_time);
+    }
+
+    /// Every element's state from a snapshot of a bank of the same shape.
+    pub(crate) fn load(&mut self, r: &mut Reader<'_>) -> Result<(), CoreError> {
+        r.expect("drift elements", self.len())?;
+        r.expect("drift kernel terms", self.settings.kernel.len())?;
+        r.expect("drift clocks", usize::from(!self.z_time.is_empty()))?;
+        for e in &mut self.elements {
+            *e = Element {
+                total: r.f64()?,
+                last_h: r.f64()?,
+                smooth: r.f64()?,
+                started: r.u32()?.min(1),
+            };
+        }
+        r.f64s(&mut self.z)?;
+        r.f64s(&mut self.z_time)?;
+        Ok(())
+    }
+
     /// True without elements.
     pub fn is_empty(&self) -> bool {
         self.elements.is_empty()
@@ -293,12 +351,12 @@ impl DriftBank {
     pub fn state_bytes_per_element(&self) -> usize {
         let k = self.settings.kernel.len();
         let clocks = if self.z_time.is_empty() { 1 } else { 2 };
-        std::mem::size_of::<DriftElement>() + clocks * k * std::mem::size_of::<f64>()
+        std::mem::size_of::<Element<f64>>() + clocks * k * std::mem::size_of::<f64>()
     }
 
     /// Forget the history (the next input is the starting level, with no drift).
     pub fn reset(&mut self) {
-        self.elements.fill(DriftElement::default());
+        self.elements.fill(Element::default());
         self.z.fill(0.0);
         self.z_time.fill(0.0);
     }
@@ -306,7 +364,7 @@ impl DriftBank {
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
     pub fn blocks(&mut self) -> Vec<DriftBlock<'_>> {
         let k = self.settings.kernel.len();
-        let settings = &self.settings;
+        let settings = self.settings.view();
         let size = block_size(self.len());
         let mut z_time = self.z_time.chunks_mut(size * k);
         self.elements
@@ -355,30 +413,6 @@ impl DriftBank {
         });
         Ok(())
     }
-}
-
-/// `z_j <- z_j d_j + change` for every term.
-#[inline]
-fn decay_and_add(z: &mut [f64], decay: &[f64], change: f64) {
-    for (zj, d) in z.iter_mut().zip(decay) {
-        *zj = *zj * d + change;
-    }
-}
-
-/// `Σ w_j z_j` in four independent partial sums (the terms are added in a tree, not one
-/// long chain of dependent additions).
-#[inline]
-fn dot(w: &[f64], z: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (wc, zc) = (w.chunks_exact(4), z.chunks_exact(4));
-    let (wr, zr) = (wc.remainder(), zc.remainder());
-    for (a, b) in wc.zip(zc) {
-        for q in 0..4 {
-            acc[q] += a[q] * b[q];
-        }
-    }
-    let tail: f64 = wr.iter().zip(zr).map(|(a, b)| a * b).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Time steps must be >= 0 (and not NaN).
