@@ -26,10 +26,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from pipeline_speed import mat_chain
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.stages import StageChain
+from texsense.data.layout import Layout
 from texsense.io.hdf5 import RecordingWriter
-from texsense.layout import Layout
-from texsense.stages import StageChain
-from texsense.workflows import seat_calibration
 
 PY = sys.executable
 
@@ -69,8 +69,8 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 WHOLE = """
 import resource, sys
 from texsense.io import load, save
-from texsense.pipeline import Pipeline
-from texsense.stages import load_chain
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import load_chain
 rec = load(sys.argv[1])
 out = Pipeline(load_chain(sys.argv[2]), rec.layout, repair="neighbour-mean").run(rec)
 save(out, sys.argv[3])
@@ -131,7 +131,7 @@ def memory(tmp: Path, quick: bool, text: bool = False) -> None:
 def throughput(tmp: Path, quick: bool) -> None:
     from dask.distributed import LocalCluster
 
-    from texsense.archive import ProcessOptions, archive_jobs, process_archive
+    from texsense.compensation.archive import ProcessOptions, archive_jobs, process_archive
 
     n_files = 20 if quick else 100
     lay = Layout.grid(32, 32, pitch_cm=1.0)

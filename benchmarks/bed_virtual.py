@@ -8,7 +8,7 @@ schedule over simulated nights, and the real check on PhysioNet PMD.
    A prominence counts as found when a region of its name lies within 5 cm.
 2. Nights: 4 people, 8 h each (positions held 20 min to 2 h 12 min, turning, sitting up,
    getting up), a frame every 10 s through the mat and the pipeline; the side model
-   (``texsense.posture.training.train_virtual_bed_model``, trained on other people) gives
+   (``texsense.apps.posture.training.train_virtual_bed_model``, trained on other people) gives
    the side of every frame, and the turning schedule (2 h) runs once on it and once on the
    true sides: turns, time per side and turn-due alerts are compared.
 3. PMD (real maps of 13 people on a 64 x 32 mat of the same size): the virtual bed's side
@@ -33,9 +33,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import DATA, pmd_reliable
-from texsense.bed import TurningSchedule, find_regions
-from texsense.pipeline import Pipeline
-from texsense.posture.training import train_virtual_bed_model
+from texsense.apps.bed import TurningSchedule, find_regions
+from texsense.apps.posture.training import train_virtual_bed_model
+from texsense.calibration.workflows import bed_calibration
+from texsense.compensation.pipeline import Pipeline
 from texsense.sim.bed import (
     POSITIONS,
     Sleeper,
@@ -45,7 +46,6 @@ from texsense.sim.bed import (
     every_position,
     night_plan,
 )
-from texsense.workflows import bed_calibration
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 LAY = bed_layout()

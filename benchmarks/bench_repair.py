@@ -16,7 +16,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense import Layout, Recording
-from texsense.repair import Repair
+from texsense.compensation.repair import Repair
 
 
 def numpy_repair(frames: np.ndarray, valid: np.ndarray, layout: Layout) -> np.ndarray:

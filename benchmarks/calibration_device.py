@@ -87,8 +87,8 @@ def load_error(processed: Path, truth: Path) -> tuple[float, float]:
 
 def linear_baseline(zero: Path, one: Path, recording: Path, out: Path) -> None:
     """The no-model baseline: per element (C - C_zero) / (C_one - C_zero) x 1.0 N/cm²."""
+    from texsense.data.recording import Recording
     from texsense.io import save
-    from texsense.recording import Recording
 
     def typical(p: Path) -> np.ndarray:
         r = load(p)

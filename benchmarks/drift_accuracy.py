@@ -17,8 +17,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import vhb_relaxation
-from texsense.drift import DriftModel, fit_gamma, prony_kernel, split_steps
-from texsense.hysteresis import HysteresisModel
+from texsense.compensation.drift import DriftModel, fit_gamma, prony_kernel, split_steps
+from texsense.compensation.hysteresis import HysteresisModel
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer
 

@@ -15,10 +15,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense._core import Compensation
-from texsense.drift import DriftModel, drift_exact, log_kernel
-from texsense.hysteresis import HysteresisModel
+from texsense.compensation.drift import DriftModel, drift_exact, log_kernel
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.stage import time_steps
 from texsense.sim.protocols import run_protocol
-from texsense.stage import time_steps
 
 
 def main() -> None:

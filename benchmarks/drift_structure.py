@@ -9,8 +9,8 @@ relaxing ten times faster: "stronger creep"), specimen 0:
   (4 x 25 min at 2 N/cm², 10 min off) and the first hour of cycles 0 <-> 5 N/cm² at 10 mm/min;
 - drift candidates fitted on them: the documented workflow (``--clock rest+time``, both clocks
   fitted together), and the structure chosen by held-out validation
-  (:func:`texsense.drift_structure.choose_structure`, ``drift fit LOADS CYCLES --history MODEL``
-  without a clock);
+  (:func:`texsense.compensation.drift_structure.choose_structure`, ``drift fit LOADS CYCLES
+  --history MODEL`` without a clock);
 - scored on hours 1-4 of the four-hour cycling record (mean relative error in 0.5-3.5 N/cm²),
   against hysteresis only.
 
@@ -31,9 +31,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from texsense.drift import DriftModel
-from texsense.drift_structure import choose_structure
-from texsense.hysteresis import HysteresisModel
+from texsense.compensation.drift import DriftModel
+from texsense.compensation.drift_structure import choose_structure
+from texsense.compensation.hysteresis import HysteresisModel
 from texsense.sim import protocols
 from texsense.sim.spacer import PRESETS, Spacer
 

@@ -46,8 +46,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.optimize import nnls
 
-from texsense.drift import DriftKernel, DriftModel, log_kernel, split_steps
-from texsense.hysteresis import HysteresisModel
+from texsense.compensation.drift import DriftKernel, DriftModel, log_kernel, split_steps
+from texsense.compensation.hysteresis import HysteresisModel
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer
 

@@ -12,9 +12,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import elastomer_sawtooth, vhb_cycle
-from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis._identify import identify_thesis
-from texsense.hysteresis.plots import validation_figure
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis._identify import identify_thesis
+from texsense.compensation.hysteresis.plots import validation_figure
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer
 

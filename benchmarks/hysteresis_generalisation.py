@@ -36,9 +36,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import elastomer_sawtooth, forc_record, vhb_cycle
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis.plots import validation_figure
 from texsense.exceptions import ParameterError
-from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis.plots import validation_figure
 from texsense.sim import protocols
 from texsense.sim.magnetic import forc_protocol
 from texsense.sim.spacer import PRESETS, Spacer

@@ -1,6 +1,7 @@
 """How finely must a record be sampled for a Preisach model? The model of a calibration
 record at each rate, run on the validation cycles (§4.5) at each rate: RMSE, and how many
-turning points of the validation input fall between samples (texsense.hysteresis.sampling).
+turning points of the validation input fall between samples
+(texsense.compensation.hysteresis.sampling).
 
 Run:  .venv/bin/python benchmarks/hysteresis_sampling.py
 """
@@ -9,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis.sampling import _nice_rate, coarse_turns
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis.sampling import _nice_rate, coarse_turns
 from texsense.sim.protocols import run_protocol
 
 RATES = (10.0, 20.0, 50.0, 100.0)

@@ -16,8 +16,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
-from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis._identify import update_extrema
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis._identify import update_extrema
 from texsense.sim.magnetic import forc_protocol
 from texsense.sim.protocols import run_protocol
 

@@ -33,10 +33,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import DATA
 from texsense import Layout, load
+from texsense.calibration.workflows import calibrate_virtual_mat
 from texsense.io import write_hdf5
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.workflows import calibrate_virtual_mat
 
 ROWS, COLS, FPS = 32, 32, 10.0
 WARMUP_S = 3.0

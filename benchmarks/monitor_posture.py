@@ -2,7 +2,7 @@
 
 `texsense monitor`'s default source is a simulated person on the 96-element seat (through the
 virtual sensor: hysteresis, drift, failures) taking the 16 postures in random order; its
-posture model is trained on *other* simulated people (texsense.posture.training). This runs
+posture model is trained on *other* simulated people (texsense.apps.posture.training). This runs
 the same source and model through `Monitor.process` as fast as possible and compares the
 label on every seated frame with the simulated truth.
 
@@ -18,10 +18,10 @@ from collections import Counter
 
 import numpy as np
 
+from texsense.apps.posture.training import train_virtual_seat_model
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.pipeline import Pipeline
 from texsense.monitor import Monitor, VirtualSeatSource
-from texsense.pipeline import Pipeline
-from texsense.posture.training import train_virtual_seat_model
-from texsense.workflows import seat_calibration
 
 
 async def collect(monitor: Monitor, frames: int) -> list[tuple]:

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from texsense.muscle import activation, detect
-from texsense.pipeline import Pipeline
+from texsense.apps.muscle import activation, detect
+from texsense.calibration.workflows import sleeve_calibration
+from texsense.compensation.pipeline import Pipeline
 from texsense.sim.muscle import session
-from texsense.workflows import sleeve_calibration
 
 VARIANTS = {
     "compensated (Preisach + drift)": {},

@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import texsense
 from _realdata import DATA
-from texsense.repair import METHODS, Repair
+from texsense.compensation.repair import METHODS, Repair
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 LAG = 5  # frames between the last good reading and the evaluated frame

@@ -26,9 +26,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense import Layout, Recording
-from texsense.pipeline import Pipeline
-from texsense.stages import Convert, StageChain
-from texsense.workflows import seat_calibration
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import Convert, StageChain
 
 
 def copy_rate(shape: tuple[int, int]) -> float:

@@ -16,14 +16,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from pipeline_speed import mat_case
 from texsense import Recording
-from texsense.drift import DriftModel
-from texsense.pipeline import Pipeline
-from texsense.repair import Repair
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.drift import DriftModel
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.repair import Repair
+from texsense.compensation.stages import Drift, StageChain
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.stages import Drift, StageChain
-from texsense.workflows import seat_calibration
 
 
 def calibrate(seed: int = 5) -> StageChain:

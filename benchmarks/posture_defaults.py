@@ -35,12 +35,13 @@ from sklearn.base import clone
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import DATA
-from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS, read_pmd
-from texsense.pipeline import Pipeline
-from texsense.posture import FeatureSet, make_classifier, mirror_samples
-from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
-from texsense.posture.evaluate import takes_groups
-from texsense.posture.smoothing import window_vote
+from texsense.apps.posture import FeatureSet, make_classifier, mirror_samples
+from texsense.apps.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
+from texsense.apps.posture.evaluate import takes_groups
+from texsense.apps.posture.smoothing import window_vote
+from texsense.compensation.pipeline import Pipeline
+from texsense.io import read_pmd
+from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS
 
 THESIS = FeatureSet(("elements", "centre", "areas4", "areas16"))
 MAP = FeatureSet(("elements",), align=True, log=True, pool=2)
@@ -114,8 +115,8 @@ def pmd_sets() -> list[Dataset]:
 
 
 def seat_set(people: int = 8) -> Dataset:
+    from texsense.calibration.workflows import seat_calibration
     from texsense.sim.seated import POSTURES, Subject, simulate_session
-    from texsense.workflows import seat_calibration
 
     cal = seat_calibration()
     frames, y, g, t = [], [], [], []
@@ -136,8 +137,8 @@ def bed_runs(people: int = 10, hold_s: float = 45.0, seed: int = 31) -> list:
     """Compensated pressure of ``people`` on the virtual bed, every position once (random
     order) held ``hold_s``: (frames, side labels, subject, times) per person, all frames
     (transitions and an empty bed included)."""
+    from texsense.calibration.workflows import bed_calibration
     from texsense.sim.bed import bed_layout, every_position
-    from texsense.workflows import bed_calibration
 
     cal = bed_calibration()
     pipe_layout = bed_layout()
@@ -280,7 +281,7 @@ def main() -> None:
     if shipped != (clf, reg, FEATURES[key]):
         print(f"WARNING: texsense ships {shipped}, not the winner")
     else:
-        print("texsense.posture.defaults ships this choice")
+        print("texsense.apps.posture.defaults ships this choice")
 
     print(f"\nThe default per frame and with the live {WINDOW_S:g} s vote (each subject's frames "
           "in time order; PMD votes within a posture file, the virtual people's across their "

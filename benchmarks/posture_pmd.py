@@ -20,15 +20,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import pmd_reliable
 from texsense import Layout
-from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS
-from texsense.posture import FeatureSet, loso, make_classifier, mirror_frames
-from texsense.posture.features import reduce_maps
-from texsense.posture.study import (
+from texsense.apps.posture import FeatureSet, loso, make_classifier, mirror_frames
+from texsense.apps.posture.features import reduce_maps
+from texsense.apps.posture.study import (
     ErrorStudy,
     plot_study,
     sensor_hysteresis_model,
     study_tables,
 )
+from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 EVERY = 5  # every 5th reliable frame (1 Hz frames of a held posture are nearly identical)

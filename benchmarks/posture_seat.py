@@ -19,22 +19,22 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from texsense.pipeline import Pipeline
-from texsense.posture import (
+from texsense.apps.posture import (
     FeatureSet,
     loso,
     make_classifier,
     reduce_maps,
     sequential_forward_selection,
 )
-from texsense.posture.study import (
+from texsense.apps.posture.study import (
     ErrorStudy,
     plot_study,
     sensor_hysteresis_model,
     study_tables,
 )
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.pipeline import Pipeline
 from texsense.sim.seated import Subject, simulate_session
-from texsense.workflows import seat_calibration
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 SUBJECTS = 9

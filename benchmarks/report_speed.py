@@ -27,15 +27,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import DATA
 from _timing import best_of
 from texsense import load
+from texsense.apps.report import write_report
 from texsense.io import save
-from texsense.report import write_report
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--long", action="store_true", help="also a night at 1.06 s per frame")
     args = ap.parse_args()
-    from texsense.workflows import processed_bed_night
+    from texsense.calibration.workflows import processed_bed_night
 
     work = Path(tempfile.mkdtemp(prefix="texsense-report-"))
     cases = [

@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from archive_scale import big_calibration
-from texsense.layout import Layout
+from texsense.data.layout import Layout
 from texsense.monitor.store import EventStore
 from texsense.station.ward import MatConfig, MatEntry
 

@@ -18,8 +18,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from pipeline_speed import mat_case
-from texsense.pipeline import Pipeline
-from texsense.workflows import seat_calibration
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.pipeline import Pipeline
 
 CASES = [
     ("all stages", dict(repair="neighbour-mean")),

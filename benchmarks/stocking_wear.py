@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from texsense.pipeline import Pipeline
+from texsense.apps.stocking import compression_class
+from texsense.calibration.workflows import strip_calibration
+from texsense.compensation.pipeline import Pipeline
+from texsense.data.units import convert
 from texsense.sim.stocking import LEGS, POINTS, wear
-from texsense.stocking import compression_class
-from texsense.units import convert
-from texsense.workflows import strip_calibration
 
 VARIANTS = {
     "compensated (Preisach + drift)": {},

@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from texsense import Layout
-from texsense.plotting import draw_map
+from texsense.apps.plotting import draw_map
 from texsense.sim.failures import FailureModel
 from texsense.sim.machine import TestMachine
 from texsense.sim.mat import VirtualMat

@@ -83,7 +83,8 @@ def _no_progress(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def check_recording(rec: Recording, tmp_path: Path) -> None:
     """Conformance battery every reader's output must pass (cf. MNE's _test_raw_reader)."""
-    from texsense import load, stats
+    from texsense import load
+    from texsense.apps import stats
     from texsense.io import write_hdf5
 
     assert rec.frames.dtype == np.float32

@@ -14,13 +14,13 @@ from __future__ import annotations
 import numpy as np
 
 from texsense._core import Compensation
-from texsense.layout import Layout
-from texsense.repair import Repair, idw_weights
-from texsense.stages import StageChain
+from texsense.compensation.repair import Repair, idw_weights
+from texsense.compensation.stages import StageChain
+from texsense.data.layout import Layout
 
 
 class ReferenceDetector:
-    """The numpy detector of texsense.health before the move (same thresholds)."""
+    """The numpy detector of texsense.compensation.health before the move (same thresholds)."""
 
     def __init__(self, layout: Layout, baseline_pF, max_pF, **kw) -> None:
         self.min_pF = kw.get("min_pF", 0.05)

@@ -10,13 +10,18 @@ import h5py
 import numpy as np
 import pytest
 
-from texsense.archive import ProcessOptions, archive_jobs, process_archive, process_file
+from texsense.calibration.workflows import seat_calibration
 from texsense.cli import main
+from texsense.compensation.archive import (
+    ProcessOptions,
+    archive_jobs,
+    process_archive,
+    process_file,
+)
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import Linear, StageChain
 from texsense.io import load, save
-from texsense.pipeline import Pipeline
 from texsense.sim.seated import Subject, simulate_session
-from texsense.stages import Linear, StageChain
-from texsense.workflows import seat_calibration
 
 PMD = "pmd/experiment-i"
 
@@ -158,7 +163,7 @@ def test_cli_single_file_and_errors(sessions, tmp_path, capsys):
 
 
 def test_cli_seat_sessions_write_capacitance_and_the_chain(tmp_path, capsys):
-    from texsense.stages import load_chain
+    from texsense.compensation.stages import load_chain
 
     assert main(["seat-sessions", "-n", "2", "--rest-s", "5", "-o", str(tmp_path)]) == 0
     assert "wrote 2 sessions" in capsys.readouterr().out

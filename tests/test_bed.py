@@ -1,5 +1,5 @@
 """The virtual bed (texsense.sim.bed), the at-risk regions and the turning schedule
-(texsense.bed), and the monitor's bed mode."""
+(texsense.apps.bed), and the monitor's bed mode."""
 
 import asyncio
 import itertools
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from texsense import Layout
-from texsense.bed import BedWatch, TurningSchedule, body_axis, find_regions
+from texsense.apps.bed import BedWatch, TurningSchedule, body_axis, find_regions
+from texsense.apps.posture.features import mirror_frames
 from texsense.exceptions import ParameterError
-from texsense.posture.features import mirror_frames
 from texsense.sim.bed import (
     BED_PITCH_CM,
     POSITIONS,
@@ -220,16 +220,16 @@ def test_bed_watch_reports_regions_for_the_side():
 
 @pytest.fixture(scope="module")
 def small_bed_model():
-    from texsense.posture.training import train_virtual_bed_model
+    from texsense.apps.posture.training import train_virtual_bed_model
 
     return train_virtual_bed_model(people=3, hold_s=6.0)
 
 
 def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_model):
+    from texsense.calibration.workflows import bed_calibration
+    from texsense.compensation.pipeline import Pipeline
     from texsense.monitor import Monitor
     from texsense.monitor.virtual import VirtualBedSource
-    from texsense.pipeline import Pipeline
-    from texsense.workflows import bed_calibration
 
     assert set(small_bed_model.classes_) == set(SIDES)
     src = VirtualBedSource(speed=0, hold_s=90, positions_per_stay=4, away_s=60, seed=3)
@@ -259,11 +259,11 @@ def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_mo
 
 
 def test_monitor_refuses_a_bed_without_a_side_model():
+    from texsense.apps.posture import FeatureSet, PostureModel
+    from texsense.calibration.workflows import bed_calibration
+    from texsense.compensation.pipeline import Pipeline
     from texsense.monitor import Monitor
     from texsense.monitor.virtual import VirtualBedSource
-    from texsense.pipeline import Pipeline
-    from texsense.posture import FeatureSet, PostureModel
-    from texsense.workflows import bed_calibration
 
     src = VirtualBedSource(speed=0)
     pipe = Pipeline(bed_calibration(), src.layout)

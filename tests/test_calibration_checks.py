@@ -1,19 +1,19 @@
-"""The checks of what a mat calibration is made from (texsense.calibration_checks)."""
+"""The checks of what a mat calibration is made from (texsense.calibration.checks)."""
 
 import numpy as np
 import pytest
 
 from texsense import Layout, Recording
-from texsense.calibration_checks import (
+from texsense.calibration.checks import (
     check_gains,
     check_material,
     check_recordings,
     parse_pressure,
     record_thickness_mm,
 )
+from texsense.calibration.workflows import material_record
 from texsense.exceptions import ParameterError
 from texsense.sim import protocols
-from texsense.workflows import material_record
 
 
 @pytest.mark.parametrize(

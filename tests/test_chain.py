@@ -9,12 +9,12 @@ import pytest
 
 from reference_pipeline import ReferenceDetector, ReferencePipeline
 from texsense import Layout
-from texsense.health import FailureDetector
-from texsense.pipeline import Pipeline
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.health import FailureDetector
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import Convert, StageChain
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.stages import Convert, StageChain
-from texsense.workflows import seat_calibration
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 
 from texsense import Layout, Recording, load
 from texsense.cli import main
-from texsense.hysteresis.sampling import coarse_turns, sampling_warning
+from texsense.compensation.hysteresis.sampling import coarse_turns, sampling_warning
 from texsense.io import read_folder
 from texsense.io.columns import is_columns_csv, read_columns, write_columns
 from texsense.io.columns_csv import write_columns_csv

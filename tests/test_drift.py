@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from texsense.drift import fit_gamma, gamma_from_point, log_kernel, prony_kernel
+from texsense.compensation.drift import fit_gamma, gamma_from_point, log_kernel, prony_kernel
 from texsense.exceptions import ParameterError
 from texsense.sim.spacer import Spacer
 from texsense.sim.targets import step_metrics
@@ -119,12 +119,12 @@ def test_split_steps_and_cli_and_model_file(tmp_path, capsys):
     import json
 
     from texsense.cli import main
-    from texsense.drift import DriftModel, split_steps
+    from texsense.compensation.drift import DriftModel, split_steps
+    from texsense.compensation.hysteresis import HysteresisModel
+    from texsense.compensation.stages import load_chain
     from texsense.exceptions import FormatError
-    from texsense.hysteresis import HysteresisModel
     from texsense.io.columns_csv import read_columns_csv
     from texsense.sim.protocols import run_protocol
-    from texsense.stages import load_chain
 
     rec = run_protocol("steps", "textile-6mm", seed=1, levels=(2.5, 5.0), hold_s=600)
     steps = split_steps(rec.times, rec.labels["pressure_ncm2"], rec.labels["compression_mm"])
@@ -157,7 +157,7 @@ def test_split_steps_and_cli_and_model_file(tmp_path, capsys):
 
 
 def test_exact_windowed_model_against_the_recursive_form():
-    from texsense.drift import DriftModel, drift_exact
+    from texsense.compensation.drift import DriftModel, drift_exact
 
     rng = np.random.default_rng(5)
     t = np.cumsum(np.full(3000, 1.0))  # 1 s samples
@@ -184,11 +184,11 @@ def test_combined_stage_equals_the_stages_in_turn(rest_rate, exponent, qlv):
     """Preisach then drift in one pass (the compiled Compensation) equals the hysteresis and
     drift stages run one after the other, to the bit."""
     from texsense._core import Compensation
-    from texsense.drift import DriftModel
-    from texsense.hysteresis import HysteresisModel
+    from texsense.compensation.drift import DriftModel
+    from texsense.compensation.hysteresis import HysteresisModel
+    from texsense.compensation.stage import time_steps
+    from texsense.compensation.stages import Drift, Hysteresis, StageChain
     from texsense.sim.protocols import run_protocol
-    from texsense.stage import time_steps
-    from texsense.stages import Drift, Hysteresis, StageChain
 
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     m = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
@@ -209,7 +209,7 @@ def test_combined_stage_equals_the_stages_in_turn(rest_rate, exponent, qlv):
 
 
 def test_time_stamps_are_checked():
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
 
     m = DriftModel(-0.025, log_kernel())
     with pytest.raises(ParameterError, match="must not decrease"):
@@ -219,7 +219,7 @@ def test_time_stamps_are_checked():
 
 
 def test_gamma_from_any_history_is_recovered_exactly():
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
 
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.uniform(0.05, 2.0, 3000))
@@ -239,7 +239,7 @@ def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     import json
 
     from texsense.cli import main
-    from texsense.stages import load_chain
+    from texsense.compensation.stages import load_chain
 
     cal, cyc = tmp_path / "cal.csv", tmp_path / "cyc.csv"
     assert main(["simulate", "calibration", "--csv", str(cal)]) == 0
@@ -261,7 +261,7 @@ def test_rest_clock_is_time_on_holds_and_nearly_stops_on_cycles():
     """The rest clock leaves a held step as eq. 5.8 has it (γ from steps is unchanged) and
     adds almost no drift to fast cycles, where the time clock adds a lot; reading noise on a
     hold does not stop it."""
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
 
     k = log_kernel()
     t = np.arange(0, 3600.0, 0.1)
@@ -282,7 +282,7 @@ def test_rest_clock_is_time_on_holds_and_nearly_stops_on_cycles():
 
 
 def test_rest_clock_round_trip_and_old_files(tmp_path):
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
     from texsense.exceptions import FormatError
 
     m = DriftModel(-0.02, log_kernel(), rest_rate=0.03, rest_window=0.7)
@@ -302,7 +302,7 @@ def test_level_power_superposes_the_steps_of_h_to_the_q(tmp_path):
     """exponent q: the drift of a history h is eq. 5.8's drift of h^q (Schapery's nonlinear
     superposition), added to h; the file keeps q, files before it read q = 1, and a q out of
     range is one clear error naming the field."""
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
     from texsense.exceptions import FormatError
 
     t = np.arange(0, 600.0, 1.0)
@@ -344,7 +344,7 @@ def test_joint_fit_recovers_both_clocks_and_the_cli_names_its_limits(tmp_path, c
     """Records made by a known two-clock model (a held step and fast cycles): fit_joint gets
     both factors back; held steps alone cannot separate the clocks, and the CLI says so."""
     from texsense.cli import main
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
 
     k = log_kernel()
     truth = DriftModel(-0.02, k, rest_rate=0.02, gamma_time=-0.008)
@@ -372,7 +372,7 @@ def test_joint_fit_recovers_both_clocks_and_the_cli_names_its_limits(tmp_path, c
 def test_cli_workflow_for_mats_in_use_held_loads_plus_cycles(tmp_path, capsys):
     """docs/drift.md: a mat in use is load-controlled; two clocks from held loads plus cycles."""
     from texsense.cli import main
-    from texsense.stages import load_chain
+    from texsense.compensation.stages import load_chain
 
     cal, loads, cycles = (tmp_path / f"{n}.csv" for n in ("cal", "loads", "cycles"))
     run = [
@@ -409,7 +409,7 @@ def test_cli_workflow_for_mats_in_use_held_loads_plus_cycles(tmp_path, capsys):
 
 
 def test_kind_thesis_is_eq_5_8_as_printed():
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
 
     t = np.concatenate([[0.0], np.geomspace(0.1, 3600, 200)])
     steps = [(t, 2.0 * (1 - 0.025 * np.log1p(t)), 2.0)]
@@ -449,8 +449,8 @@ def test_structure_is_chosen_by_held_out_error_and_refused_without_drift():
     """Records made by a time-clock drift: a structure on time wins on the held-out later
     halves and every candidate's held-out error is reported; records without drift get no
     structure (none beats hysteresis only)."""
-    from texsense.drift import DriftModel
-    from texsense.drift_structure import choose_structure
+    from texsense.compensation.drift import DriftModel
+    from texsense.compensation.drift_structure import choose_structure
 
     truth = DriftModel(-0.02, log_kernel())
     t = np.arange(0, 3600.0, 1.0)
@@ -476,11 +476,11 @@ def test_qlv_drift_file_round_trip_and_where_it_may_run(tmp_path):
     """A QLV drift (level 'backbone') keeps its curve in the file; a file with a bad level
     or curve is one clear error; alone, or in a chain not right after the hysteresis
     stage, it refuses in one line; in a pipeline it runs the compiled chain."""
-    from texsense.drift import DriftModel
+    from texsense.compensation.drift import DriftModel
+    from texsense.compensation.hysteresis import HysteresisModel
+    from texsense.compensation.stages import Drift, Hysteresis, StageChain, load_chain
     from texsense.exceptions import FormatError, ParameterError
-    from texsense.hysteresis import HysteresisModel
     from texsense.sim.protocols import run_protocol
-    from texsense.stages import Drift, Hysteresis, StageChain, load_chain
 
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     m = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
@@ -517,8 +517,8 @@ def test_a_qlv_drift_is_chosen_and_deployed_when_it_forecasts_best():
     this tests the choice and that the chosen model runs, not its accuracy): given the
     backbone curve, qlv is chosen and reproduces the records; without it, it is reported
     but another structure is chosen."""
-    from texsense.drift import DriftModel
-    from texsense.drift_structure import choose_structure
+    from texsense.compensation.drift import DriftModel
+    from texsense.compensation.drift_structure import choose_structure
 
     grid = np.linspace(0.0, 5.0, 101)
     curve = (grid, 0.6 * grid + 0.1 * grid**2)
@@ -547,8 +547,8 @@ def test_a_level_power_is_chosen_only_when_it_wins_clearly():
     drift_structure.py judges on spacer laws not built from it): a squared candidate wins
     by far and is chosen; on records of linear drift a power that wins by less than the
     margin is not chosen."""
-    from texsense.drift import DriftModel
-    from texsense.drift_structure import choose_structure
+    from texsense.compensation.drift import DriftModel
+    from texsense.compensation.drift_structure import choose_structure
 
     t = np.arange(0, 3600.0, 1.0)
     hold = np.where(t < 2.0, 1.0 + t, 3.0)
@@ -568,7 +568,7 @@ def test_a_level_power_is_chosen_only_when_it_wins_clearly():
 
 def test_cli_chooses_the_drift_structure_and_refuses_with_the_numbers(tmp_path, capsys):
     from texsense.cli import main
-    from texsense.hysteresis import HysteresisModel
+    from texsense.compensation.hysteresis import HysteresisModel
     from texsense.io.columns_csv import read_columns_csv, write_columns_csv
 
     cal, cyc = tmp_path / "cal.csv", tmp_path / "cyc.csv"
@@ -595,10 +595,10 @@ def test_a_drift_model_says_what_it_is_and_info_shows_it(tmp_path, capsys):
     """DriftModel.describe names kernel, clock, γ, level power and level; ``texsense info``
     of a chain with a drift stage prints it."""
     from texsense.cli import main
-    from texsense.drift import DriftModel
-    from texsense.hysteresis import HysteresisModel
+    from texsense.compensation.drift import DriftModel
+    from texsense.compensation.hysteresis import HysteresisModel
+    from texsense.compensation.stages import Drift, Hysteresis, StageChain
     from texsense.sim.protocols import run_protocol
-    from texsense.stages import Drift, Hysteresis, StageChain
 
     assert DriftModel(-0.02, log_kernel()).describe() == "log kernel, γ -0.02, time clock"
     two = DriftModel(-0.02, log_kernel(), rest_rate=0.02, gamma_time=0.001, exponent=2.0)

@@ -1,12 +1,12 @@
-"""texsense.files: writes that never lose the previous file."""
+"""texsense.data.files: writes that never lose the previous file."""
 
 import os
 import stat
 
 import pytest
 
+from texsense.data.files import atomic_path, check_not_input, unused_name, write_bytes, write_text
 from texsense.exceptions import ParameterError, WriteError
-from texsense.files import atomic_path, check_not_input, unused_name, write_bytes, write_text
 
 
 def test_new_file_gets_the_umask_permissions_not_private(tmp_path):

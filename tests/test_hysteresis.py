@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from texsense._core import PreisachBank
+from texsense.compensation.hysteresis import HysteresisModel, scale_hysteresis
+from texsense.compensation.hysteresis._identify import everett_design, make_monotone
+from texsense.data.modelfile import envelope
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
-from texsense.hysteresis import HysteresisModel, scale_hysteresis
-from texsense.hysteresis._identify import everett_design, make_monotone
-from texsense.modelfile import envelope
 from texsense.sim.protocols import run_protocol
 
 K = 51
@@ -239,7 +239,7 @@ def test_monotone_qp_solves_isotonic_regression():
     from scipy.sparse import diags
     from sklearn.isotonic import IsotonicRegression
 
-    from texsense.hysteresis._qp import solve_monotone_qp
+    from texsense.compensation.hysteresis._qp import solve_monotone_qp
 
     rng = np.random.default_rng(7)
     y = np.cumsum(rng.normal(0.02, 1.0, 60))

@@ -29,8 +29,13 @@ PLATFORM = {"resource", "fcntl", "termios", "pty", "tty"}
 
 #: Imports inside functions that close what would be a cycle, each with its reason.
 LATE_BOUND = {
-    ("texsense.recording", "texsense.io"): "Recording.save is a façade over texsense.io, whose "
-    "readers build recordings (so texsense.io depends on texsense.recording)",
+    (
+        "texsense.data.recording",
+        "texsense.io",
+    ): "Recording.save is a façade over texsense.io, whose "
+    "readers build recordings (so texsense.io depends on texsense.data.recording)",
+    ("texsense.calibration", "texsense.compensation.conversion"): "the names of the eq. 2.1 "
+    "module that was texsense.calibration, found there for one release (with a warning)",
 }
 
 
@@ -204,11 +209,11 @@ def unjustified() -> list[str]:
 
 def test_the_analysis_sees_what_it_should():
     mods = modules()
-    assert "texsense.stages.chain" in mods and "texsense.io" in mods
+    assert "texsense.compensation.stages.chain" in mods and "texsense.io" in mods
     assert ("texsense.io", 0) != ("", 0)
-    assert any(t == "texsense.io" for t, _ in mods["texsense.recording"].inside)
-    assert "h5py" in heavy("texsense.io") and not heavy("texsense.units")
-    assert not heavy("texsense.repair")  # scipy only where the harmonic repair solves
+    assert any(t == "texsense.io" for t, _ in mods["texsense.data.recording"].inside)
+    assert "h5py" in heavy("texsense.io") and not heavy("texsense.data.units")
+    assert not heavy("texsense.compensation.repair")  # scipy only where the harmonic repair solves
     g = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert cycles(g) == [["a", "b", "c"]]
 
@@ -254,3 +259,92 @@ def test_the_command_line_loads_only_what_the_command_needs(argv):
         assert commands == ["texsense.commands.info"] and "sklearn" not in heavy_loaded, line
     else:
         assert heavy_loaded == [] and commands == [] and not numpy_loaded, line
+
+
+#: The layers of the tree, lowest first (docs/development.md, texsense/__init__.py): a module
+#: imports only from its own group and from groups of lower rank; groups of one rank do not
+#: import each other (the compensation never uses the simulator that grades it, nor the other
+#: way round).
+LAYERS = [
+    (0, "base", ("texsense", "texsense._core", "texsense.exceptions", "texsense._progress",
+                 "texsense._compat")),
+    (1, "data", ("texsense.data", "texsense.io")),
+    (2, "compensation", ("texsense.compensation",)),
+    (2, "physics", ("texsense.sensor", "texsense.sim")),
+    (3, "calibration", ("texsense.calibration",)),
+    (4, "applications", ("texsense.apps",)),
+    (5, "live", ("texsense.monitor", "texsense.station")),
+    (6, "command line", ("texsense.commands", "texsense.cli", "texsense.__main__")),
+]  # fmt: skip
+
+
+def layer_of(module: str) -> tuple[int, str]:
+    """(rank, group) of a texsense module: its longest matching prefix in LAYERS."""
+    best: tuple[int, int, str] | None = None
+    for rank, group, prefixes in LAYERS:
+        for p in prefixes:
+            exact_root = p == "texsense" and module == "texsense"
+            inside = p != "texsense" and (module == p or module.startswith(p + "."))
+            if (exact_root or inside) and (best is None or len(p) > best[0]):
+                best = (len(p), rank, group)
+    assert best is not None, f"{module} is in no layer of LAYERS"
+    return best[1], best[2]
+
+
+def upward_imports() -> list[str]:
+    """The imports (module level or inside functions) that point up or sideways."""
+    bad = []
+    for name, targets in graph().items():
+        rank, group = layer_of(name)
+        for t in sorted(targets):
+            t_rank, t_group = layer_of(t)
+            if t_group != group and t_rank >= rank:
+                bad.append(f"{name} ({group}) imports {t} ({t_group})")
+    return bad
+
+
+def test_every_module_belongs_to_a_layer():
+    for name in modules():
+        layer_of(name)
+
+
+def test_the_layers_point_one_way():
+    assert upward_imports() == []
+
+
+def test_the_layer_check_sees_an_upward_import():
+    assert layer_of("texsense.apps.bed") == (4, "applications")
+    assert layer_of("texsense.data.layout") == (1, "data")
+    assert layer_of("texsense") == (0, "base")
+    assert layer_of("texsense.sim.spacer") == (2, "physics")
+    assert layer_of("texsense.compensation.drift")[1] == "compensation"
+
+
+def test_the_old_import_paths_warn_and_give_the_same_module():
+    code = (
+        "import warnings, json\n"
+        "with warnings.catch_warnings(record=True) as w:\n"
+        "    warnings.simplefilter('always')\n"
+        "    from texsense.stages import StageChain\n"
+        "    import texsense.posture.features as old_features\n"
+        "    from texsense import bed\n"
+        "    from texsense.calibration import fit_conversion\n"
+        "import texsense.apps.bed, texsense.apps.posture.features\n"
+        "from texsense.compensation.stages import StageChain as New\n"
+        "from texsense.compensation.conversion import fit_conversion as new_fit\n"
+        "same = [StageChain is New, bed is texsense.apps.bed,\n"
+        "        old_features is texsense.apps.posture.features, fit_conversion is new_fit,\n"
+        "        old_features.__spec__.name == 'texsense.apps.posture.features']\n"
+        "print('RESULT', json.dumps([same, sorted({str(x.category.__name__) for x in w}),\n"
+        "      [str(x.message) for x in w]]))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120
+    ).stdout
+    line = next(x for x in out.splitlines() if x.startswith("RESULT"))
+    same, categories, messages = json.loads(line[len("RESULT ") :])
+    assert all(same), same
+    assert categories == ["DeprecationWarning"]
+    assert "texsense.stages moved to texsense.compensation.stages" in messages[0]
+    assert any("texsense.bed moved to texsense.apps.bed" in m for m in messages)
+    assert any("fit_conversion moved to texsense.compensation.conversion" in m for m in messages)

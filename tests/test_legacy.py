@@ -1,4 +1,4 @@
-"""The one legacy reader (texsense.legacy) on the model files the code wrote before the
+"""The one legacy reader (texsense.data.legacy) on the model files the code wrote before the
 one-calibration refactor (tests/fixtures/models, made by make_fixtures.py at commit 41db87f):
 every file loads, as a chain, and gives the numbers that code gave."""
 
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import FailureDetector, Repair, load_chain, load_stage
 from texsense.exceptions import FormatError
-from texsense.hysteresis import HysteresisModel
-from texsense.pipeline import Pipeline
-from texsense.stages import FailureDetector, Repair, load_chain, load_stage
 
 HERE = Path(__file__).parent / "fixtures" / "models"
 

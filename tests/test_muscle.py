@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
+from texsense.apps.muscle import activation, detect
 from texsense.cli import main
 from texsense.exceptions import ParameterError
-from texsense.muscle import activation, detect
 from texsense.sim.muscle import HIGH_RATE_CDC, session
 
 
@@ -33,8 +33,8 @@ def test_detect_finds_onsets_ignores_short_blips_and_names_bad_input():
 
 
 def test_a_session_through_the_compensation():
-    from texsense.pipeline import Pipeline
-    from texsense.workflows import sleeve_calibration
+    from texsense.calibration.workflows import sleeve_calibration
+    from texsense.compensation.pipeline import Pipeline
 
     s = session(5.0, seed=3)
     rec = s.scan.capacitance

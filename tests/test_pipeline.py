@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 from texsense import Layout
+from texsense.calibration.workflows import calibrate_mat, material_record
+from texsense.compensation.health import FailureDetector, health_report
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.repair import METHODS, Repair
+from texsense.compensation.stages import Convert, StageChain, load_chain
 from texsense.exceptions import FormatError, ParameterError
-from texsense.health import FailureDetector, health_report
-from texsense.pipeline import Pipeline
-from texsense.repair import METHODS, Repair
 from texsense.sim import protocols
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import VirtualMat
-from texsense.stages import Convert, StageChain, load_chain
-from texsense.workflows import calibrate_mat, material_record
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_zeroing_and_equilibration_make_the_pressure_right(mat_setup):
 
 
 def test_calibration_file_round_trip_and_bad_files(mat_setup, tmp_path):
-    from texsense.modelfile import envelope
+    from texsense.data.modelfile import envelope
 
     cal = mat_setup[0]
     path = cal.save(tmp_path / "cal.json")

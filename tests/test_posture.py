@@ -3,8 +3,7 @@ import pytest
 from sklearn.base import BaseEstimator, ClassifierMixin
 
 from texsense import Layout
-from texsense.exceptions import FormatError, ParameterError
-from texsense.posture import (
+from texsense.apps.posture import (
     FeatureSet,
     PostureModel,
     align_maps,
@@ -16,6 +15,7 @@ from texsense.posture import (
     mirror_samples,
     sequential_forward_selection,
 )
+from texsense.exceptions import FormatError, ParameterError
 
 
 def test_centre_of_force_of_known_maps():
@@ -252,7 +252,7 @@ def test_posture_model_round_trip_and_bad_files(tmp_path):
 
 
 def test_window_vote_follows_the_majority_of_the_last_seconds():
-    from texsense.posture.smoothing import WindowVote, window_vote
+    from texsense.apps.posture.smoothing import WindowVote, window_vote
 
     vote = WindowVote(window_s=2.0)
     got = [vote.step(t, lab) for t, lab in enumerate("aabbbba")]
@@ -295,7 +295,7 @@ def test_loso_passes_the_training_subjects_to_a_classifier_that_takes_them():
 
 
 def test_auto_chooses_by_subject_and_says_what_it_chose():
-    from texsense.posture.evaluate import SubjectSelect, make_classifier
+    from texsense.apps.posture.evaluate import SubjectSelect, make_classifier
 
     rng = np.random.default_rng(3)
     y = np.repeat([0, 1, 2], 40)

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording
+from texsense.apps.posture import PostureModel
 from texsense.cli import main
 from texsense.io import save
-from texsense.posture import PostureModel
 
 
 @pytest.fixture()
@@ -98,7 +98,7 @@ def test_mirror_option_trains_on_mirrored_frames_and_checks_its_map(labelled, tm
 
 
 def test_defaults_are_used_without_options_and_named(labelled, tmp_path, capsys):
-    from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
+    from texsense.apps.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
 
     assert main(["posture", "evaluate", str(labelled), "--where", "hold"]) == 0
     name = DEFAULT_CLASSIFIER + ("" if DEFAULT_C is None else f" C={DEFAULT_C:g}")

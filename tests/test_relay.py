@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis._identify import _beats, identify_relay
-from texsense.hysteresis._relay import (
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis._identify import _beats, identify_relay
+from texsense.compensation.hysteresis._relay import (
     cell_map,
     cells_to_nodes,
     nodes_to_cells,

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording
+from texsense.compensation.repair import Repair
 from texsense.exceptions import NeighbourIndexError, ParameterError, ShapeError
-from texsense.repair import Repair
 
 
 def test_eq_6_14_on_a_checkerboard():

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording, load
+from texsense.apps.report import write_report
+from texsense.apps.review import open_review
+from texsense.apps.roi import save_rois
 from texsense.cli import main
 from texsense.io import save
-from texsense.report import write_report
-from texsense.review import open_review
-from texsense.roi import save_rois
 
 
 def pdf_text(path) -> str:
@@ -35,7 +35,7 @@ def pages(path) -> int:
 def night(tmp_path_factory):
     """4 h of a simulated person on the virtual bed, a frame a minute, through the mat and
     the pipeline (positions held 20 min to 2 h: turns), as a monitor would record it."""
-    from texsense.workflows import processed_bed_night
+    from texsense.calibration.workflows import processed_bed_night
 
     path = tmp_path_factory.mktemp("night") / "night.h5"
     save(processed_bed_night(hours=4.0, frame_s=60.0, seed=0), path)
@@ -134,7 +134,7 @@ def test_render_report_pages_for_the_docs(night, shared_data):
 
 
 def test_health_finds_a_dead_element_inside_the_load_not_the_edges():
-    from texsense.review_events import element_health
+    from texsense.apps.review_events import element_health
 
     lay = Layout.grid(8, 8)
     m = np.zeros((20, 8, 8))

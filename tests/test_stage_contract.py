@@ -1,20 +1,16 @@
-"""One contract for every stage (texsense.testing.check_stage, in the spirit of scikit-learn's
-check_estimator): each stage is checked with the input it reads; the checks have no special
-case for any stage."""
+"""One contract for every stage (texsense.compensation.testing.check_stage, in the spirit of
+scikit-learn's check_estimator): each stage is checked with the input it reads; the checks have no
+special case for any stage."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from texsense.drift import split_steps
-from texsense.exceptions import FormatError
-from texsense.pipeline import Pipeline
-from texsense.sim import protocols
-from texsense.sim.failures import FailureModel
-from texsense.sim.mat import VirtualMat
-from texsense.sim.seated import Subject, simulate_session
-from texsense.stages import (
+from texsense.calibration.workflows import material_record
+from texsense.compensation.drift import split_steps
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import (
     STAGES,
     Convert,
     Drift,
@@ -26,8 +22,12 @@ from texsense.stages import (
     load_chain,
     stage_from_dict,
 )
-from texsense.testing import check_stage
-from texsense.workflows import material_record
+from texsense.compensation.testing import check_stage
+from texsense.exceptions import FormatError
+from texsense.sim import protocols
+from texsense.sim.failures import FailureModel
+from texsense.sim.mat import VirtualMat
+from texsense.sim.seated import Subject, simulate_session
 
 
 def seat_records():
@@ -80,8 +80,18 @@ def world():
     return {"cases": cases, "inputs": inputs, "chain": chain, "session": session}
 
 
-def test_every_stage_is_checked():
-    assert set(STAGES) == {"detect", "convert", "linear", "hysteresis", "drift", "repair"}
+def test_every_registered_stage_has_a_case(world):
+    """A stage class that names itself is in STAGES; this suite needs a case for it."""
+    missing = sorted(set(STAGES) - set(world["cases"]))
+    assert not missing, f"stages without a contract case here: {missing}"
+    assert {"detect", "convert", "linear", "hysteresis", "drift", "repair"} <= set(STAGES)
+
+
+def test_a_stage_name_is_taken_once():
+    from texsense.compensation.stage import Stage
+
+    with pytest.raises(TypeError, match="is Drift's"):
+        type("Other", (Stage,), {"name": "drift"})
 
 
 @pytest.mark.parametrize("name", sorted(STAGES))
@@ -143,8 +153,8 @@ def test_a_qlv_drift_runs_the_same_in_the_pipeline_and_stage_by_stage(world):
     """A drift that relaxes the elastic response of the input (QLV, level 'backbone'):
     the compiled pipeline (Compensation with a level curve) equals the chain run stage
     after stage, batch and streaming."""
-    from texsense.drift import DriftModel, log_kernel
-    from texsense.stages import Drift
+    from texsense.compensation.drift import DriftModel, log_kernel
+    from texsense.compensation.stages import Drift
 
     chain = world["chain"]
     hyst = chain["hysteresis"].model_

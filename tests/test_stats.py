@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from texsense import Layout, Recording, stats
+from texsense import Layout, Recording
+from texsense.apps import stats
 from texsense.exceptions import ParameterError
 
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording
+from texsense.apps.stocking import compression_class, report
 from texsense.cli import main
 from texsense.exceptions import ParameterError
 from texsense.sim.stocking import LEGS, design, truth_mmhg, wear
-from texsense.stocking import compression_class, report
 
 
 def test_classes_of_ral_gz_387_and_the_gaps_between():
@@ -56,9 +56,9 @@ def test_report_of_a_pressure_strip_and_its_errors():
 
 
 def test_a_days_wear_is_read_right_only_with_drift_compensation():
-    from texsense.pipeline import Pipeline
-    from texsense.units import convert
-    from texsense.workflows import strip_calibration
+    from texsense.calibration.workflows import strip_calibration
+    from texsense.compensation.pipeline import Pipeline
+    from texsense.data.units import convert
 
     times, truth, scan = wear("II", LEGS["medium"], hours=8.0)
     cal = strip_calibration()

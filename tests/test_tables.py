@@ -6,8 +6,8 @@ import pytest
 
 from texsense import Layout, Recording
 from texsense.cli import main
+from texsense.commands._tables import confusion_lines, natural_key
 from texsense.io import save
-from texsense.tables import confusion_lines, natural_key
 
 
 def test_natural_order_and_wide_confusion_columns():

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from texsense import units
+from texsense.data import units
 from texsense.exceptions import UnitError
 
 

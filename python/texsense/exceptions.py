@@ -54,7 +54,7 @@ class FormatError(ValueError):
 class WriteError(OSError):
     """A file could not be written (disk full, no permission, a folder in the way, ...).
 
-    The write went to a temporary name (see :mod:`texsense.files`), so the previous file at
+    The write went to a temporary name (see :mod:`texsense.data.files`), so the previous file at
     ``path`` is unchanged.
 
     Parameters

@@ -11,10 +11,10 @@ import pytest
 from fastapi.testclient import TestClient
 
 from texsense import Layout, Recording
-from texsense.calibration_session import CalibrationSession
+from texsense.calibration.session import CalibrationSession
+from texsense.data.protocol import Frame
 from texsense.monitor import Monitor, ReplaySource
 from texsense.monitor.calibrate import _unused_stem
-from texsense.monitor.protocol import Frame
 from texsense.monitor.server import create_app
 
 HOST = "127.0.0.1:8765"

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from faults.conftest import assert_clear_error, run_cli
+from texsense.calibration.workflows import material_record
 from texsense.io.columns_csv import write_columns_csv
 from texsense.sim import protocols
 from texsense.sim.mat import VirtualMat
-from texsense.workflows import material_record
 
 #: a Python that dies of SIGXFSZ when a file grows past the limit, as a process killed in
 #: the middle of a write does (Python itself ignores the signal and gets EFBIG instead)
@@ -248,9 +248,9 @@ def test_a_broken_drift_stage_is_one_line(written, tmp_path, case, field, fault_
     """A hysteresis + drift model file (as ``drift fit --history -o`` writes it) with its
     drift stage broken by hand (and re-hashed): one line naming the file and the field; the
     good file applies."""
-    from texsense.drift import DriftModel, log_kernel
-    from texsense.hysteresis import HysteresisModel
-    from texsense.stages import Drift, Hysteresis, StageChain
+    from texsense.compensation.drift import DriftModel, log_kernel
+    from texsense.compensation.hysteresis import HysteresisModel
+    from texsense.compensation.stages import Drift, Hysteresis, StageChain
 
     model = HysteresisModel.load(written / "model.json")
     drift_model = DriftModel(-0.02, log_kernel(), rest_rate=0.02)

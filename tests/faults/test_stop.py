@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from conftest import ChildServer, free_port
-from texsense.stages import Linear, StageChain
+from texsense.compensation.stages import Linear, StageChain
 
 
 @contextlib.contextmanager

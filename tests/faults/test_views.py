@@ -11,10 +11,10 @@ from fastapi.testclient import TestClient
 from tests.faults.conftest import assert_clear_error, run_cli
 
 from texsense import Layout, Recording
+from texsense.apps.roi import MAX_ROIS, rois_path
 from texsense.io import save
 from texsense.monitor import Monitor, ReplaySource
 from texsense.monitor.server import create_app
-from texsense.roi import MAX_ROIS, rois_path
 
 
 @pytest.fixture()

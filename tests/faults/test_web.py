@@ -20,9 +20,9 @@ from starlette.websockets import WebSocketDisconnect
 from conftest import ROOT, ChildServer
 from faults.conftest import assert_clear_error, run_cli
 from texsense import Layout, Recording
+from texsense.data.protocol import Frame
 from texsense.io import save
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource
-from texsense.monitor.protocol import Frame
 from texsense.monitor.server import create_app
 from texsense.station.server import create_ward_app
 from texsense.station.ward import MatConfig, Station

@@ -23,7 +23,7 @@ from test_browser import open_page
 
 from conftest import MonitorProcess
 from texsense import load
-from texsense.stages.chain import load_chain
+from texsense.compensation.stages.chain import load_chain
 
 #: The device's speed: a frame every 1.6 s / 20 = 0.08 s.
 SPEED = "20"

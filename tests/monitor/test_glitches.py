@@ -15,10 +15,10 @@ import pytest
 from test_sources import FakeSerial
 
 from texsense import Layout, Recording
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import Linear, StageChain
+from texsense.data.protocol import Frame, format_serial_line
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource, SerialSource
-from texsense.monitor.protocol import Frame, format_serial_line
-from texsense.pipeline import Pipeline
-from texsense.stages import Linear, StageChain
 from texsense.station.ward import MatConfig, Station
 
 LAY = Layout.grid(2, 3)

@@ -13,11 +13,11 @@ import pytest
 from fastapi.testclient import TestClient
 
 from texsense import Layout, Recording, load
+from texsense.apps.roi import rois_path
+from texsense.data.protocol import Frame
 from texsense.io import save
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource
-from texsense.monitor.protocol import Frame
 from texsense.monitor.server import STATIC, create_app
-from texsense.roi import rois_path
 
 MMHG = 75.00615
 

@@ -18,8 +18,8 @@ import pytest
 from test_browser import open_page
 
 from texsense import Layout, Recording
+from texsense.apps.roi import rois_path
 from texsense.io import save
-from texsense.roi import rois_path
 
 MMHG = 75.00615
 ROWS, COLS = 8, 6
@@ -162,8 +162,8 @@ def test_a_night_played_back_jumps_to_its_alerts(monitor_process, tmp_path):
     alert, draw a lasso round the place the alert names, save a screenshot."""
     from playwright.sync_api import expect
 
-    from texsense.review import open_review
-    from texsense.workflows import processed_bed_night
+    from texsense.apps.review import open_review
+    from texsense.calibration.workflows import processed_bed_night
 
     rec_dir = tmp_path / "rec"
     rec_dir.mkdir()

@@ -4,9 +4,9 @@ from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
 from texsense import Layout, Recording, load
+from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, ReplaySource
-from texsense.monitor.protocol import Frame
 from texsense.monitor.server import create_app, is_loopback, serve
 
 

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from texsense import Layout, Recording
-from texsense.exceptions import FormatError, ParameterError
-from texsense.monitor import IIOSource, MQTTSource, ReplaySource, SerialSource, VirtualSeatSource
-from texsense.monitor.protocol import (
+from texsense.data.protocol import (
     ProtocolError,
     format_serial_line,
     parse_mqtt_payload,
     parse_serial_line,
 )
+from texsense.exceptions import FormatError, ParameterError
+from texsense.monitor import IIOSource, MQTTSource, ReplaySource, SerialSource, VirtualSeatSource
 
 
 def first(source, n):

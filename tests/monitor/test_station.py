@@ -341,9 +341,9 @@ def test_a_mat_from_a_local_replay_source(broker, station, tmp_path):
     """A ward file can name local sources too: a replayed pressure recording here."""
     import numpy as np
 
+    from texsense.data.layout import Layout
+    from texsense.data.recording import Recording
     from texsense.io import save
-    from texsense.layout import Layout
-    from texsense.recording import Recording
 
     rec = Recording(np.full((50, 16), 0.6), np.arange(50) * 0.05, Layout.grid(4, 4))
     save(rec, tmp_path / "chair.h5")

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from conftest import free_port
-from texsense.monitor.alerts import Event
+from texsense.apps.alerts import Event
 from texsense.monitor.store import PostgresEventStore, open_store
 
 

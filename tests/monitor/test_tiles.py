@@ -9,7 +9,7 @@ import json
 import numpy as np
 
 from texsense import Layout
-from texsense.monitor.protocol import Frame
+from texsense.data.protocol import Frame
 from texsense.station.tiles import NO_ELEMENT, NO_READING, BlockMap, WardFeed
 from texsense.station.ward import MatConfig, Station
 

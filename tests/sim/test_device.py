@@ -8,13 +8,13 @@ import pytest
 import serial
 
 from texsense import load
-from texsense.exceptions import ParameterError
-from texsense.monitor.protocol import (
+from texsense.data.protocol import (
     ProtocolError,
     layout_announcement,
     parse_announcement,
     parse_serial_line,
 )
+from texsense.exceptions import ParameterError
 from texsense.sim.device import VirtualDevice, parse_load
 from texsense.sim.mat import VirtualMat
 

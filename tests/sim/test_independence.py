@@ -12,12 +12,12 @@ ALLOWED = {
     "texsense._core",
     "texsense._progress",
     "texsense.exceptions",
-    "texsense.layout",
-    "texsense.recording",
-    "texsense.units",
+    "texsense.data.layout",
+    "texsense.data.recording",
+    "texsense.data.units",
     # the virtual device (sim/device.py) speaks the serial wire format and records its truth:
     # formats, not models
-    "texsense.monitor.protocol",
+    "texsense.data.protocol",
     "texsense.io.hdf5",
 }
 

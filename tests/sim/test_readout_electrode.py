@@ -3,8 +3,8 @@ import pytest
 
 from texsense.exceptions import ParameterError
 from texsense.sensor.electrode import Electrode, permittivity, wet_factor
+from texsense.sensor.readout import CAPDAC_LSB_PF, CDC, NOISE_AF_RMS
 from texsense.sim.failures import FailureModel
-from texsense.sim.readout import CAPDAC_LSB_PF, CDC, NOISE_AF_RMS
 
 
 def test_permittivity_matches_fig_3_17():

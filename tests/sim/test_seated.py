@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
+from texsense.apps.posture import centre_of_force
 from texsense.exceptions import ParameterError
-from texsense.posture import centre_of_force
 from texsense.sim.mat import VirtualMat
 from texsense.sim.seated import (
     LEANING_BACK,

@@ -128,7 +128,7 @@ def test_second_law_runs_the_protocols_and_is_another_family():
     import numpy as np
     import pytest
 
-    from texsense.drift import fit_gamma, split_steps
+    from texsense.compensation.drift import fit_gamma, split_steps
     from texsense.exceptions import ParameterError
     from texsense.sim import protocols
     from texsense.sim.spacer import PRESETS, BoucWenMaterial, Spacer

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.files import check_not_input
+from texsense.data.files import check_not_input
 from texsense.io import WRITERS, format_for_output, load, save
 
 

@@ -10,18 +10,18 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
-from texsense.drift import DriftModel
-from texsense.drift_structure import (
+from texsense.compensation.drift import DriftModel, read_steps
+from texsense.compensation.drift_structure import (
     LEVEL_EXPONENTS,
     STRUCTURES,
     StructureChoice,
     candidate_name,
     choose_structure,
 )
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.stages import Drift, Hysteresis, StageChain, load_chain
 from texsense.exceptions import FormatError, ParameterError
-from texsense.hysteresis import HysteresisModel
-from texsense.io.columns import read_columns, read_steps
-from texsense.stages import Drift, Hysteresis, StageChain, load_chain
+from texsense.io.columns import read_columns
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -11,14 +11,14 @@ import numpy as np
 
 from texsense.commands import HELP
 from texsense.commands.drift import add_clock_arguments, load_model, rest_rate_of
-from texsense.drift import DriftModel
+from texsense.compensation.drift import DriftModel, read_steps
+from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis.plots import model_figure, validation_report_figure
+from texsense.compensation.hysteresis.sampling import check_sampling
+from texsense.compensation.hysteresis.validation import validate
+from texsense.compensation.stages import Drift, Hysteresis, StageChain
 from texsense.exceptions import FormatError
-from texsense.hysteresis import HysteresisModel
-from texsense.hysteresis.plots import model_figure, validation_report_figure
-from texsense.hysteresis.sampling import check_sampling
-from texsense.hysteresis.validation import validate
-from texsense.io.columns import read_columns, read_steps, write_columns
-from texsense.stages import Drift, Hysteresis, StageChain
+from texsense.io.columns import read_columns, write_columns
 
 #: Pressure bands of the error summary (thesis §4.5), in the output's unit.
 DEFAULT_BANDS = ((0.5, 3.5), (3.5, 10.0))

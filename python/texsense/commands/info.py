@@ -9,12 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from texsense import stats
+from texsense.apps import stats
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.compensation.stages import Drift, load_chain
+from texsense.data.recording import Recording
 from texsense.io import load, sniff_format
-from texsense.recording import Recording
-from texsense.stages import Drift, load_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.commands import HELP
-from texsense.modelfile import rehash
+from texsense.data.modelfile import rehash
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_rehash(args: argparse.Namespace) -> int:
     """Run ``texsense rehash``."""
-    from texsense.stages import chain_from_dict
+    from texsense.compensation.stages import chain_from_dict
 
     for path in args.files:
 

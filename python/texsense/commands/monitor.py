@@ -13,15 +13,14 @@ from pathlib import Path
 from typing import Any
 
 from texsense.commands import HELP
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import StageChain, load_chain
+from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
 from texsense.monitor import ExposureTracker, Monitor, sources
+from texsense.monitor.sources import Source
 from texsense.monitor.store import open_store
-from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
-from texsense.pipeline import Pipeline
-from texsense.stages import load_chain
-from texsense.workflows import bed_calibration, seat_calibration
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -90,12 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def add_source_options(p: argparse.ArgumentParser) -> None:
     """``--source`` and what a source needs (speed, grid, the IIO converter's settings):
     shared by ``monitor`` and ``record``."""
-    p.add_argument(
-        "--source",
-        default="virtual",
-        help="virtual | virtual-bed | replay:FILE | serial:PORT | iio:DEVICE_DIR | "
-        "mqtt:HOST[:PORT]",
-    )
+    p.add_argument("--source", default="virtual", help=sources.source_help())
     p.add_argument(
         "--speed",
         type=float,
@@ -176,10 +170,10 @@ def page_url(args: argparse.Namespace, token: str | None) -> str:
     return f"http://{host}:{args.port}/" + (f"?token={token}" if token else "")
 
 
-def _grid(args: argparse.Namespace) -> Any:
-
+def _grid(args: argparse.Namespace) -> Layout | None:
+    """``--grid ROWSxCOLS``, or None."""
     if not args.grid:
-        raise ParameterError(f"--source {args.source.split(':')[0]} needs --grid ROWSxCOLS")
+        return None
     try:
         rows, cols = (int(v) for v in args.grid.lower().split("x"))
     except ValueError:
@@ -209,50 +203,33 @@ def load_function(spec: str) -> Any:
     return fn
 
 
-def default_calibration(source: str) -> Any:
-    """The calibration a source brings (the virtual mats'), or None."""
-    kind = source.partition(":")[0]
-    if kind == "virtual":
-        return seat_calibration()
-    if kind == "virtual-bed":
-        return bed_calibration()
-    return None
+def default_calibration(source: str) -> StageChain | None:
+    """The calibration a source brings (the virtual mats' own), or None."""
+    cls = sources.available_sources().get(source.partition(":")[0])
+    return None if cls is None else cls.default_calibration()
 
 
-def open_source(args: argparse.Namespace, *, loop: bool = True) -> Any:
+def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
     """The source named by ``--source`` (no calibration: what ``record`` and the wizard
-    need); a replay starts again at its end with ``loop``."""
-    kind, _, rest = args.source.partition(":")
-    if kind == "virtual":
-        return VirtualSeatSource(speed=args.speed)
-    if kind == "virtual-bed":
-        return VirtualBedSource(speed=args.speed)
-    if kind == "replay":
-        return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop)
-    if kind == "serial":
-        return sources.SerialSource(rest, _grid(args) if args.grid else None)
-    if kind == "iio":
-        iio = sources.IIOSource(
-            rest,
-            _grid(args),
-            sampling_frequency=args.sampling_frequency,
-            capdac_pF=args.capdac_pf,
-            multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
-        )
-        return iio
-    if kind == "mqtt":
-        host, _, port = rest.partition(":")
-        return sources.MQTTSource(host, _grid(args), port=int(port or 1883))
-    raise ParameterError(
-        f"unknown source {args.source!r} (virtual, virtual-bed, replay:, serial:, iio:, mqtt:)"
+    need); a replay starts again at its end with ``loop``. The sources are those of the
+    registry (:func:`texsense.monitor.sources.open_source`)."""
+    options = sources.SourceOptions(
+        speed=args.speed,
+        grid=_grid(args),
+        sampling_frequency=args.sampling_frequency,
+        multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
+        capdac_pF=args.capdac_pf,
+        loop=loop,
     )
+    return sources.open_source(args.source, options)
 
 
-def build_monitor(args: argparse.Namespace) -> Any:
+def build_monitor(args: argparse.Namespace) -> Monitor:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.posture import PostureModel
+    from texsense.apps.posture import PostureModel
 
     source = open_source(args)
+    calibration: StageChain | None
     if args.calibration is not None:
         calibration = load_chain(args.calibration)
     else:
@@ -283,7 +260,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
     if args.bed and args.no_posture:
         raise ParameterError("--bed needs the side model: drop --no-posture")
     if args.bed or (args.source == "virtual-bed" and not args.no_posture):
-        from texsense.bed import BedWatch
+        from texsense.apps.bed import BedWatch
 
         if model is None and args.source == "virtual-bed":
             model = virtual_bed_model(_virtual_calibration(args, calibration).id)
@@ -320,7 +297,7 @@ def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
         return "bed"
     rec = getattr(source, "rec", None)
     if rec is not None:
-        from texsense.views import guess_mode
+        from texsense.apps.views import guess_mode
 
         return guess_mode(rec.layout, rec.meta)
     return "seat"
@@ -337,7 +314,7 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     when missing (a broken cache is rebuilt, and said so). The name carries the id of the
     virtual mat's calibration the model is trained on, so a texsense whose compensation
     changed trains a new one instead of reading an old one."""
-    from texsense.posture import PostureModel
+    from texsense.apps.posture import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
     path = cache / f"{name}.joblib"
@@ -360,8 +337,8 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
 def virtual_seat_model(calibration_id: str) -> Any:
     """A posture model for the virtual seat, trained on simulated sessions of other people
     (compensated pressure, §6.5.2) with the calibration ``calibration_id``
-    (:func:`texsense.workflows.seat_calibration`), cached under ~/.cache/texsense."""
-    from texsense.posture.training import train_virtual_seat_model
+    (:func:`texsense.calibration.workflows.seat_calibration`), cached under ~/.cache/texsense."""
+    from texsense.apps.posture.training import train_virtual_seat_model
 
     return _cached_model(
         f"virtual-seat-posture-v3-{calibration_id}",
@@ -374,8 +351,8 @@ def virtual_seat_model(calibration_id: str) -> Any:
 def virtual_bed_model(calibration_id: str) -> Any:
     """A model of the side a person lies on for the virtual bed, trained on other simulated
     people (compensated pressure) with the calibration ``calibration_id``
-    (:func:`texsense.workflows.bed_calibration`), cached under ~/.cache/texsense."""
-    from texsense.posture.training import train_virtual_bed_model
+    (:func:`texsense.calibration.workflows.bed_calibration`), cached under ~/.cache/texsense."""
+    from texsense.apps.posture.training import train_virtual_bed_model
 
     return _cached_model(
         f"virtual-bed-sides-v1-{calibration_id}",

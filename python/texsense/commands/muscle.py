@@ -5,12 +5,17 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.files import check_not_input, write_text
-from texsense.plotting import save_figure
+from texsense.data.files import check_not_input, pyplot, save_figure, write_text
 from texsense.sim.muscle import session
+
+if TYPE_CHECKING:
+    from texsense.apps.muscle import Contractions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,8 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense muscle simulate``: sleeve.h5, calibration.json and truth.json."""
+    from texsense.calibration.workflows import sleeve_calibration
     from texsense.io import save
-    from texsense.workflows import sleeve_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
     s = session(args.minutes, seed=args.seed)
@@ -59,9 +64,9 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_detect(args: argparse.Namespace) -> int:
     """Run ``texsense muscle detect``."""
+    from texsense.apps.muscle import activation, detect
     from texsense.commands.pipeline import to_pressure
     from texsense.io import load
-    from texsense.muscle import activation, detect
 
     if args.plot:
         check_not_input(args.plot, [args.recording])
@@ -83,12 +88,10 @@ def run_detect(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plot(times, act, found, threshold, path) -> None:  # noqa: ANN001
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def _plot(
+    times: np.ndarray, act: np.ndarray, found: Contractions, threshold: float, path: Path
+) -> None:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.plot(times, act, lw=0.8, label="activation")
     ax.axhline(threshold, color="tab:orange", ls=":", lw=1, label="onset threshold")

@@ -11,19 +11,24 @@ from typing import Any
 
 import numpy as np
 
-from texsense.archive import ProcessOptions, archive_jobs, process_archive, process_file
-from texsense.calibration_session import CalibrationSession
+from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.commands._tables import text_table
 from texsense.commands.wizard import register_wizard
+from texsense.compensation.archive import (
+    ProcessOptions,
+    archive_jobs,
+    process_archive,
+    process_file,
+)
+from texsense.compensation.health import FailureDetector, health_report
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.repair import METHODS, Repair
+from texsense.compensation.stages import Convert, Linear, StageChain, load_chain
+from texsense.data.files import check_not_input
 from texsense.exceptions import FormatError, ParameterError
-from texsense.files import check_not_input
-from texsense.health import FailureDetector, health_report
 from texsense.io import load, save
-from texsense.pipeline import Pipeline
-from texsense.repair import METHODS, Repair
-from texsense.stages import Convert, Linear, StageChain, load_chain
-from texsense.tables import text_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -172,7 +177,7 @@ def _capacitance(path: Path, accept_truncated: bool = False) -> Any:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    """Run ``texsense calibrate mat``: check the inputs (:mod:`texsense.calibration_checks`),
+    """Run ``texsense calibrate mat``: check the inputs (:mod:`texsense.calibration.checks`),
     refuse with every reason or warn, then fit and write the chain."""
     inputs = [args.baseline, args.uniform] + ([args.drift] if args.drift else [])
     if Path(args.material).exists():

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from texsense.apps.plotting import peak_frame, save_overview
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.files import check_not_input
+from texsense.data.files import check_not_input
 from texsense.io import load
-from texsense.plotting import peak_frame, save_overview
 
 
 def register(sub: argparse._SubParsersAction) -> None:

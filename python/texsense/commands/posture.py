@@ -11,20 +11,19 @@ from typing import Any
 
 import numpy as np
 
+from texsense.apps.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
+from texsense.apps.posture.evaluate import CLASSIFIERS, loso, make_classifier
+from texsense.apps.posture.features import KINDS, FeatureSet, mirror_samples, reduce_maps
+from texsense.apps.posture.model import PostureModel
+from texsense.apps.posture.smoothing import window_vote
+from texsense.apps.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.commands._tables import confusion_lines, natural_key, text_table
+from texsense.data.files import check_not_input, pyplot, save_figure, write_text
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.files import check_not_input, write_text
 from texsense.io import load
-from texsense.plotting import save_figure
-from texsense.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
-from texsense.posture.evaluate import CLASSIFIERS, loso, make_classifier
-from texsense.posture.features import KINDS, FeatureSet, mirror_samples, reduce_maps
-from texsense.posture.model import PostureModel
-from texsense.posture.smoothing import window_vote
-from texsense.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
-from texsense.recording import Recording
-from texsense.tables import confusion_lines, natural_key, text_table
 
 #: The thesis's feature kinds (§6.3.2), used when feature options are given without --features.
 THESIS_KINDS = "elements,centre,areas4,areas16"
@@ -289,11 +288,7 @@ def run_train(args: argparse.Namespace) -> int:
 
 def run_study(args: argparse.Namespace) -> int:
     """Run ``texsense study``: reference patterns, all sweeps, report.html + numbers.json."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     check_not_input(args.output, [args.recording])
     rec, idx, y = _frames(args)
     frames = np.nan_to_num(rec.frames[idx].astype(np.float64))

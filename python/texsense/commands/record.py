@@ -14,8 +14,8 @@ from typing import Any
 
 from texsense.commands import HELP
 from texsense.commands.monitor import add_source_options, open_source
+from texsense.data.files import check_not_input
 from texsense.exceptions import ParameterError
-from texsense.files import check_not_input
 from texsense.monitor.record import SILENT_S, record
 
 __all__ = ["register"]

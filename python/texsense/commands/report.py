@@ -7,10 +7,10 @@ import json
 import time
 from pathlib import Path
 
+from texsense.apps.report import write_report
+from texsense.apps.roi import parse_rois
 from texsense.commands import HELP
 from texsense.exceptions import ParameterError
-from texsense.report import write_report
-from texsense.roi import parse_rois
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -64,7 +64,7 @@ def run_report(args: argparse.Namespace) -> int:
             raise ParameterError(f"{args.rois}: {e}") from None
     model = None
     if args.model is not None:
-        from texsense.posture import PostureModel
+        from texsense.apps.posture import PostureModel
 
         model = PostureModel.load(args.model)
     out = write_report(

@@ -206,7 +206,7 @@ def register_sessions(sub: argparse._SubParsersAction) -> None:
 
 def run_sessions(args: argparse.Namespace) -> int:
     """Run ``texsense seat-sessions``."""
-    from texsense.workflows import seat_calibration
+    from texsense.calibration.workflows import seat_calibration
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")

@@ -11,6 +11,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from texsense.apps.posture import PostureModel
+from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
 from texsense.commands.monitor import (
     add_web_options,
@@ -19,18 +21,16 @@ from texsense.commands.monitor import (
     virtual_bed_model,
     web_access,
 )
+from texsense.compensation.stages import load_chain
+from texsense.data.layout import Layout
+from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
-from texsense.layout import Layout
 from texsense.monitor import sources
-from texsense.monitor.protocol import payload_limit
 from texsense.monitor.store import open_store
 from texsense.monitor.web import resolve_token, stop_on_sigterm
-from texsense.posture import PostureModel
-from texsense.stages import load_chain
 from texsense.station.broker import mat_topic, parse_broker_url, station_broker
 from texsense.station.virtual import VirtualMats
 from texsense.station.ward import MatConfig, Station
-from texsense.workflows import bed_calibration, seat_calibration
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -7,10 +7,10 @@ import argparse
 import json
 from pathlib import Path
 
+from texsense.apps.stocking import POINTS, report
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.sim.stocking import LEGS, wear
-from texsense.stocking import POINTS, report
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,8 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense stocking simulate``: strip.h5 (capacitance, true pressure as labels) and
     calibration.json (the strip's stage chain)."""
+    from texsense.calibration.workflows import strip_calibration
     from texsense.io import save
-    from texsense.workflows import strip_calibration
 
     args.output.mkdir(parents=True, exist_ok=True)
     _, truth, scan = wear(args.cls, LEGS[args.leg], hours=args.hours)

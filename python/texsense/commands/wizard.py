@@ -5,7 +5,7 @@
 2. a uniform load P on the whole mat: recorded once the readings have risen (at least half the
    change the material's reference element shows at P) and are steady;
 3. the material (a preset, by default the spacer the device announces, or a record): the
-   calibration is fitted after every check of :mod:`texsense.calibration_checks` (refused
+   calibration is fitted after every check of :mod:`texsense.calibration.checks` (refused
    with every reason, or warned);
 4. a check with another known load (``--check``, default 2 x P): every element's reading
    through the new calibration, the elements off by more than 10 % named.
@@ -28,14 +28,14 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration_checks import parse_pressure, typical_reading
-from texsense.calibration_session import CalibrationSession
+from texsense.calibration.checks import parse_pressure, typical_reading
+from texsense.calibration.session import CalibrationSession
 from texsense.commands.monitor import add_source_options, open_source
+from texsense.data.files import unused_name
+from texsense.data.protocol import Frame
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.files import unused_name
 from texsense.io import save
-from texsense.monitor.protocol import Frame
-from texsense.recording import Recording
 
 __all__ = ["register_wizard", "run_wizard"]
 

@@ -36,8 +36,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from texsense import units
-from texsense.drift import split_steps
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io import load, sniff_format
 from texsense.io.columns_csv import (
@@ -48,14 +49,11 @@ from texsense.io.columns_csv import (
     write_columns_csv,
 )
 from texsense.io.hdf5 import write_hdf5
-from texsense.layout import Layout
-from texsense.recording import QUANTITIES, Recording
 
 __all__ = [
     "column_name",
     "is_columns_csv",
     "read_columns",
-    "read_steps",
     "unit_of_column",
     "write_columns",
 ]
@@ -125,14 +123,6 @@ def read_columns(
     return cols
 
 
-def read_steps(path: str | Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """The held steps of a step-and-hold record (``time_s``, ``compression_mm``,
-    ``pressure_ncm2``; a column CSV or a one-element recording), cut by
-    :func:`texsense.drift.split_steps`."""
-    cols = read_columns(path, required=("time_s", "compression_mm", "pressure_ncm2"))
-    return split_steps(cols["time_s"], cols["pressure_ncm2"], cols["compression_mm"])
-
-
 def write_columns(
     path: str | Path,
     columns: Mapping[str, npt.ArrayLike],
@@ -148,7 +138,7 @@ def write_columns(
     Parameters
     ----------
     path : str or Path
-        The file to write (temporary name, then renamed: :mod:`texsense.files`).
+        The file to write (temporary name, then renamed: :mod:`texsense.data.files`).
     columns : mapping of str to array_like
         Equal-length columns.
     values : str, optional

@@ -7,9 +7,9 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from texsense.monitor.alerts import Alert, Event, ExposureTracker
+    from texsense.apps.alerts import Alert, Event, ExposureTracker
+    from texsense.data.protocol import Frame, ProtocolError
     from texsense.monitor.live import Monitor, Recorder
-    from texsense.monitor.protocol import Frame, ProtocolError
     from texsense.monitor.sources import (
         IIOSource,
         MQTTSource,
@@ -21,23 +21,23 @@ if TYPE_CHECKING:
     from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 
 #: The package's names and the modules that define them, imported when first used (so that
-#: ``texsense.monitor.alerts``, which the bed mode and the station use, does not load the
-#: monitor's server and sources).
+#: importing one of them does not load the monitor's server and sources).
 _LAZY = {
-    **dict.fromkeys(("Alert", "Event", "ExposureTracker"), "alerts"),
-    **dict.fromkeys(("Monitor", "Recorder"), "live"),
-    **dict.fromkeys(("Frame", "ProtocolError"), "protocol"),
+    **dict.fromkeys(("Alert", "Event", "ExposureTracker"), "texsense.apps.alerts"),
+    **dict.fromkeys(("Monitor", "Recorder"), "texsense.monitor.live"),
+    **dict.fromkeys(("Frame", "ProtocolError"), "texsense.data.protocol"),
     **dict.fromkeys(
-        ("IIOSource", "MQTTSource", "ReplaySource", "SerialSource", "Source"), "sources"
+        ("IIOSource", "MQTTSource", "ReplaySource", "SerialSource", "Source"),
+        "texsense.monitor.sources",
     ),
-    **dict.fromkeys(("VirtualBedSource", "VirtualSeatSource"), "virtual"),
-    "EventStore": "store",
+    **dict.fromkeys(("VirtualBedSource", "VirtualSeatSource"), "texsense.monitor.virtual"),
+    "EventStore": "texsense.monitor.store",
 }
 
 
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
-        value = getattr(importlib.import_module(f"texsense.monitor.{_LAZY[name]}"), name)
+        value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'texsense.monitor' has no attribute {name!r}")

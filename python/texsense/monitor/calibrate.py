@@ -6,10 +6,10 @@ the steps of ``texsense calibrate wizard`` on the live stream of a running monit
    eq. 2.1's offset and gain per element, §6.1);
 3. **material**: a spacer preset (default: the spacer the device announced); the two
    recordings are checked and the chain is fitted by
-   :class:`~texsense.calibration_session.CalibrationSession` (refusals carry every reason,
+   :class:`~texsense.calibration.session.CalibrationSession` (refusals carry every reason,
    warnings are kept);
 4. **check**: another known load ``P2``; ``N`` frames read through the new calibration, per
-   element (:class:`~texsense.calibration_session.CheckReport`);
+   element (:class:`~texsense.calibration.session.CheckReport`);
 5. **save**: the chain is written to a new file in the monitor's recordings folder (never
    over an existing one), the step recordings as HDF5 beside it, and the running monitor
    switches to calibrated pressure (:meth:`Monitor.use_calibration`).
@@ -29,16 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration_checks import parse_pressure
-from texsense.calibration_session import CHECK_TOLERANCE, CalibrationSession, CheckReport
+from texsense.calibration.checks import parse_pressure
+from texsense.calibration.session import CHECK_TOLERANCE, CalibrationSession, CheckReport
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import Convert
+from texsense.data.files import unused_name
+from texsense.data.protocol import Frame
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.files import unused_name
 from texsense.monitor.live import Monitor
-from texsense.monitor.protocol import Frame
-from texsense.pipeline import Pipeline
-from texsense.recording import Recording
 from texsense.sim.spacer import PRESETS as SPACER_PRESETS
-from texsense.stages import Convert
 
 __all__ = ["DEFAULT_FRAMES", "MAX_FRAMES", "STEPS", "PageCalibration", "StepError"]
 
@@ -381,7 +381,7 @@ def _unused_stem(folder: Path, stem: str, recordings: dict[str, Recording]) -> s
 def _write(
     folder: Path, stem: str, chain: Any, recordings: dict[str, Recording]
 ) -> dict[str, Path]:
-    """The step recordings and then the chain (atomic writes: texsense.files)."""
+    """The step recordings and then the chain (atomic writes: texsense.data.files)."""
     folder.mkdir(parents=True, exist_ok=True)
     out: dict[str, Path] = {}
     for step, rec in recordings.items():

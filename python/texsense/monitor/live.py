@@ -21,23 +21,29 @@ import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from texsense import stats, units
-from texsense.bed import BANDS
+from texsense.apps import stats
+from texsense.apps.alerts import Event, ExposureTracker
+from texsense.apps.bed import BANDS
+from texsense.apps.posture.smoothing import WindowVote
+from texsense.apps.views import MODES, format_duration, orientation_of, place_names, seat_zones
+from texsense.data import units
+from texsense.data.files import unused_name
+from texsense.data.protocol import Frame
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.files import unused_name
-from texsense.monitor.alerts import Event, ExposureTracker
 from texsense.monitor.clock import FrameClock, Quiet
-from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.posture.smoothing import WindowVote
-from texsense.recording import Recording
-from texsense.views import MODES, format_duration, orientation_of, place_names, seat_zones
+
+if TYPE_CHECKING:  # the calibration and models come from the caller; their modules load there
+    from texsense.apps.bed import BedWatch
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.pipeline import Pipeline
 
 __all__ = ["Monitor", "Recorder"]
 
@@ -95,7 +101,7 @@ def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = T
 
 def unused_recording_name(folder: Path, name: str, quantity: str, calibrated: bool = True) -> str:
     """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
-    (:func:`texsense.files.unused_name` on each file of the recording)."""
+    (:func:`texsense.data.files.unused_name` on each file of the recording)."""
     k = 1
     while True:
         candidate = name if k == 1 else f"{name}-{k}"
@@ -192,9 +198,9 @@ class Monitor:
     bed : BedWatch, optional
         For a bed mat: the turning schedule on the side the posture model reports (its
         labels must be sides: supine, prone, left, right, sitting) and the at-risk regions
-        (:mod:`texsense.bed`).
+        (:mod:`texsense.apps.bed`).
     mode : str, optional
-        ``seat``, ``bed``, ``foot`` or ``generic`` (:data:`texsense.views.MODES`): the words
+        ``seat``, ``bed``, ``foot`` or ``generic`` (:data:`texsense.apps.views.MODES`): the words
         of the events and alerts, whether there are any, the page's unit and colour scale.
         Default: ``bed`` with ``bed``, else ``seat``.
     """
@@ -203,12 +209,12 @@ class Monitor:
         self,
         source: Source,
         *,
-        pipeline: Any = None,
+        pipeline: Pipeline | None = None,
         tracker: ExposureTracker | None = None,
-        posture_model: Any = None,
+        posture_model: PostureModel | None = None,
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
-        bed: Any = None,
+        bed: BedWatch | None = None,
         mode: str | None = None,
     ) -> None:
 
@@ -225,6 +231,8 @@ class Monitor:
         if bed is not None:
             if posture_model is None:
                 raise ParameterError("bed monitoring needs a posture model that reports sides")
+            if posture_model.classes_ is None:
+                raise ParameterError("bed monitoring needs a trained posture model")
             unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
             if unknown:
                 raise ParameterError(
@@ -339,7 +347,7 @@ class Monitor:
         self.changes += 1
         return n
 
-    def use_calibration(self, pipeline: Any, path: Path | str | None = None) -> None:
+    def use_calibration(self, pipeline: Pipeline, path: Path | str | None = None) -> None:
         """Show pressure through ``pipeline`` from the next frame on (a calibration just made
         on the page, :mod:`texsense.monitor.calibrate`); an event ``calibrated`` says when.
         A recording in progress goes on (its raw file is complete; a pressure file starts
@@ -375,7 +383,7 @@ class Monitor:
 
     def _where(self, elements: list[int]) -> list[str]:
         """Where elements lie, in words: the bed's at-risk regions or the seat's zones, else
-        rows and columns (:func:`texsense.views.place_names`)."""
+        rows and columns (:func:`texsense.apps.views.place_names`)."""
 
         if self.tracker.by_region:
             return [self.tracker.names[i] for i in elements]

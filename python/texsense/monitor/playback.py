@@ -16,7 +16,7 @@ Routes (an :class:`fastapi.APIRouter`; :func:`playback_router`):
   snapshot; other quantities in their unit).
 - ``GET`` / ``PUT /api/playback/{name}/rois``: the regions of interest (sidecar
   ``<name>.rois.json``); a PUT answers with their statistics over time.
-- ``GET /api/playback/{name}/report?format=pdf|html``: the report (:mod:`texsense.report`),
+- ``GET /api/playback/{name}/report?format=pdf|html``: the report (:mod:`texsense.apps.report`),
   also kept in ``<folder>/reports/``.
 
 A name is a plain file or folder name inside the recordings folder: anything with a path
@@ -37,14 +37,15 @@ import numpy as np
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 
-from texsense import stats, units
+from texsense.apps import stats
+from texsense.apps.report import write_report
+from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
+from texsense.data import units
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.report import write_report
-from texsense.roi import load_rois, parse_rois, roi_elements, save_rois
 
 if TYPE_CHECKING:
+    from texsense.apps.review import Review
     from texsense.monitor.live import Monitor
-    from texsense.review import Review
 
 __all__ = ["MAX_POINTS", "playback_router", "resolve_recording"]
 
@@ -88,8 +89,8 @@ class _Reviews:
         self._lock = threading.Lock()
 
     def get(self, path: Path) -> Review:
+        from texsense.apps.review import open_review
         from texsense.io import load
-        from texsense.review import open_review
 
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
@@ -109,7 +110,7 @@ class _Reviews:
 
 
 def _series(review: Review) -> dict[str, Any]:
-    from texsense.review import decimate
+    from texsense.apps.review import decimate
 
     s = review.series
     n = s["t"].size
@@ -154,7 +155,7 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
 
 
 def _roi_stats(review: Review, rois: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    from texsense.review import BLOCK, decimate
+    from texsense.apps.review import BLOCK, decimate
 
     rec = review.rec
     regions = {r["name"]: roi_elements(r, rec.layout) for r in rois}
@@ -218,7 +219,7 @@ class _Folder:
 
 
 def _view(monitor: Monitor) -> dict[str, Any]:
-    from texsense.views import orientation_of
+    from texsense.apps.views import orientation_of
 
     mode = monitor.mode
     scale = None

@@ -2,7 +2,7 @@
 line, Linux IIO capacitance converters and MQTT (docs/monitor.md).
 
 Every source has a ``layout``, a ``quantity`` (``capacitance`` or ``pressure``) and an async
-iterator :meth:`Source.frames` yielding :class:`~texsense.monitor.protocol.Frame` objects with
+iterator :meth:`Source.frames` yielding :class:`~texsense.data.protocol.Frame` objects with
 per-element time stamps. Sources that parse bytes from outside count malformed input in
 ``errors`` (and log it) and skip it; they never stop on bad input.
 
@@ -17,34 +17,44 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib
 import logging
 import re
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from texsense import units
-from texsense.exceptions import FormatError, ParameterError
-from texsense.layout import Layout
-from texsense.monitor.protocol import (
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.protocol import (
     Frame,
     ProtocolError,
     parse_announcement,
     parse_mqtt_payload,
     parse_serial_line,
 )
-from texsense.recording import Recording
+from texsense.data.recording import Recording
+from texsense.exceptions import FormatError, ParameterError
+
+if TYPE_CHECKING:
+    from texsense.compensation.stages import StageChain
 
 __all__ = [
+    "SOURCES",
     "IIOSource",
     "MQTTSource",
     "ReplaySource",
     "SerialSource",
     "Source",
+    "SourceOptions",
+    "available_sources",
+    "open_source",
+    "source_help",
 ]
 
 log = logging.getLogger("texsense.monitor")
@@ -84,13 +94,68 @@ async def blocking(fn: Callable[..., Any], *args: Any) -> Any:
     return await future
 
 
+@dataclass(frozen=True)
+class SourceOptions:
+    """What the command line says of a source besides its name (``--speed``, ``--grid``, the
+    IIO converter's settings): each source takes what it needs (:meth:`Source.from_option`)."""
+
+    speed: float = 1.0
+    grid: Layout | None = None
+    sampling_frequency: float | None = None
+    multiplexer: Callable[[int], None] | None = None
+    capdac_pF: float | None = None
+    loop: bool = True
+
+    def need_grid(self, scheme: str) -> Layout:
+        """The grid a source of ``scheme`` cannot work without."""
+        if self.grid is None:
+            raise ParameterError(f"--source {scheme} needs --grid ROWSxCOLS")
+        return self.grid
+
+
+#: The sources offered on the command line, by scheme (``--source SCHEME[:ARGUMENT]``).
+SOURCES: dict[str, type[Source]] = {}
+
+#: The modules whose sources the command line offers (each class registers itself).
+SOURCE_MODULES = ("texsense.monitor.sources", "texsense.monitor.virtual")
+
+
 class Source:
-    """Base of all sources."""
+    """Base of all sources.
+
+    A subclass that sets ``scheme`` is offered on the command line as ``--source
+    SCHEME[:ARGUMENT]`` (``argument`` names what follows the colon, empty for none; ``summary``
+    is its help) and builds itself from there with :meth:`from_option`; the help, the error
+    for an unknown source and the source contract test read :data:`SOURCES`.
+    """
 
     name = "source"
     layout: Layout
     quantity = "capacitance"
     unit = "pF"
+    #: the name on the command line (empty: not offered there, e.g. the station's fed source)
+    scheme: ClassVar[str] = ""
+    #: what follows ``SCHEME:`` on the command line (empty: nothing)
+    argument: ClassVar[str] = ""
+    #: one line of help
+    summary: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("scheme"):
+            if cls.scheme in SOURCES and SOURCES[cls.scheme].__qualname__ != cls.__qualname__:
+                raise TypeError(f"{cls.__name__}: --source {cls.scheme} is already taken")
+            SOURCES[cls.scheme] = cls
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """The source ``--source SCHEME:ARGUMENT`` names, with the command line's options."""
+        raise NotImplementedError(f"{cls.__name__} is not offered on the command line")
+
+    @classmethod
+    def default_calibration(cls) -> StageChain | None:
+        """The calibration the source's mat comes with (a virtual mat's), or None."""
+        return None
 
     def __init__(self) -> None:
         self.errors = 0  # malformed lines / payloads skipped
@@ -155,6 +220,14 @@ class ReplaySource(Source):
     time (0: as fast as possible), optionally looping."""
 
     name = "replay"
+    scheme = "replay"
+    argument = "FILE"
+    summary = "a recording of any readable format, at --speed times real time"
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """``replay:FILE``."""
+        return cls(Path(argument), speed=options.speed, loop=options.loop)
 
     def __init__(
         self, recording: Recording | str | Path, *, speed: float = 1.0, loop: bool = False
@@ -205,16 +278,24 @@ class ReplaySource(Source):
 
 class SerialSource(Source):
     """Frames from a serial line in the texsense line protocol
-    (:mod:`texsense.monitor.protocol`). ``port`` is a device (``/dev/ttyACM0``) or any pySerial
+    (:mod:`texsense.data.protocol`). ``port`` is a device (``/dev/ttyACM0``) or any pySerial
     URL (``socket://host:port``, ``loop://``). A port that is missing or refuses is tried
     again every :data:`RETRY_S` s (and said once); so is one that goes away while reading.
 
     Without a ``layout`` the device must announce its own (a ``#layout`` line, see
-    :func:`~texsense.monitor.protocol.parse_announcement`): the source waits up to
+    :func:`~texsense.data.protocol.parse_announcement`): the source waits up to
     ``announce_timeout_s`` for it and keeps what else it says (its spacer, ...) in
     ``announced``."""
 
     name = "serial"
+    scheme = "serial"
+    argument = "PORT"
+    summary = "a mat on a serial line in the texsense line protocol (a device or pySerial URL)"
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """``serial:PORT`` (``--grid`` only for a device that does not announce its layout)."""
+        return cls(argument, options.grid)
 
     def __init__(
         self,
@@ -338,6 +419,20 @@ class IIOSource(Source):
     """
 
     name = "iio"
+    scheme = "iio"
+    argument = "DEVICE_DIR"
+    summary = "a Linux IIO AD7745/46 converter behind a multiplexer (needs --grid)"
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """``iio:DEVICE_DIR`` with ``--grid`` and the converter's settings."""
+        return cls(
+            argument,
+            options.need_grid(cls.scheme),
+            sampling_frequency=options.sampling_frequency,
+            capdac_pF=options.capdac_pF,
+            multiplexer=options.multiplexer,
+        )
 
     def __init__(
         self,
@@ -454,9 +549,24 @@ class IIOSource(Source):
 
 class MQTTSource(Source):
     """Frames from an MQTT broker (paho-mqtt), topic ``texsense/<mat>/frames`` by default, JSON
-    payloads as in :mod:`texsense.monitor.protocol`."""
+    payloads as in :mod:`texsense.data.protocol`."""
 
     name = "mqtt"
+    scheme = "mqtt"
+    argument = "HOST[:PORT]"
+    summary = "frames from an MQTT broker, topic texsense/+/frames (needs --grid)"
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """``mqtt:HOST[:PORT]`` with ``--grid``."""
+        host, _, port = argument.partition(":")
+        try:
+            number = int(port or 1883)
+        except ValueError:
+            raise ParameterError(f"--source mqtt:{argument}: the port must be a number") from None
+        if not host or not 0 < number < 65536:
+            raise ParameterError(f"--source mqtt:{argument}: expected HOST[:PORT]")
+        return cls(host, options.need_grid(cls.scheme), port=number)
 
     def __init__(
         self,
@@ -546,3 +656,38 @@ class MQTTSource(Source):
 
 
 # the simulated people (texsense.monitor.virtual) are sources too
+
+
+def available_sources() -> dict[str, type[Source]]:
+    """Every source the command line offers, by scheme (their modules imported)."""
+    for module in SOURCE_MODULES:
+        importlib.import_module(module)
+    return SOURCES
+
+
+def source_help() -> str:
+    """``virtual | virtual-bed | replay:FILE | ...``, from :data:`SOURCES`."""
+    return " | ".join(
+        f"{s}:{c.argument}" if c.argument else s for s, c in available_sources().items()
+    )
+
+
+def open_source(spec: str, options: SourceOptions | None = None) -> Source:
+    """The source ``--source`` names (``SCHEME`` or ``SCHEME:ARGUMENT``).
+
+    Raises
+    ------
+    ParameterError
+        For an unknown scheme (naming those known), a missing or unexpected argument, or what
+        the source itself refuses.
+    """
+    scheme, colon, argument = spec.partition(":")
+    known = available_sources()
+    cls = known.get(scheme)
+    if cls is None:
+        raise ParameterError(f"unknown source {spec!r}; known: {source_help()}")
+    if cls.argument and not argument:
+        raise ParameterError(f"--source {scheme} needs {scheme}:{cls.argument}")
+    if not cls.argument and colon:
+        raise ParameterError(f"--source {scheme} takes nothing after the colon, got {spec!r}")
+    return cls.from_option(argument, options or SourceOptions())

@@ -3,7 +3,7 @@ no server) or PostgreSQL (``--db postgresql://...``).
 
 Examples
 --------
->>> from texsense.monitor.alerts import Event
+>>> from texsense.apps.alerts import Event
 >>> store = EventStore(":memory:")
 >>> sid = store.start_session("virtual seat")
 >>> store.add_event(sid, Event("reposition", 1200.0, 1, {"where": ["17"]}))
@@ -21,8 +21,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from texsense.apps.alerts import Event
 from texsense.exceptions import ParameterError
-from texsense.monitor.alerts import Event
 
 __all__ = ["EventStore", "PostgresEventStore", "open_store"]
 

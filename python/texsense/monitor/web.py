@@ -93,7 +93,7 @@ _CSP_DOCS = (
     "https://cdn.redoc.ly; connect-src 'self'; worker-src blob:; frame-ancestors 'none'; "
     "base-uri 'none'"
 )
-#: A report (texsense.report) is a document of its own: its styles inline, its figures in
+#: A report (texsense.apps.report) is a document of its own: its styles inline, its figures in
 #: ``data:`` images, no script at all.
 _CSP_REPORT = (
     "default-src 'none'; style-src 'unsafe-inline'; img-src data:; frame-ancestors 'none'; "

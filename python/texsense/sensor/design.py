@@ -24,7 +24,7 @@ from scipy.optimize import brentq
 
 from texsense.exceptions import ParameterError
 from texsense.sensor.electrode import Electrode
-from texsense.sim.readout import CDC
+from texsense.sensor.readout import CDC
 
 __all__ = [
     "THESIS_AREA_PER_THICKNESS_CM",

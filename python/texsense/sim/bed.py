@@ -27,7 +27,7 @@ lost, as on a real mat (tall people lose their heels).
 a few seconds between them (labelled ``transition``), sitting up, getting out of bed and
 back. Its truth carries, per frame, the position, the side and where each bony prominence
 lies (:data:`PROMINENCES`), the reference for the at-risk regions found from the map
-(:mod:`texsense.bed`).
+(:mod:`texsense.apps.bed`).
 
 Examples
 --------
@@ -47,11 +47,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.recording import Recording
+from texsense.sensor.readout import CDC
 from texsense.sim.mat import VirtualMat
-from texsense.sim.readout import CDC
 from texsense.sim.seated import SEAT_FAILURES
 
 __all__ = [

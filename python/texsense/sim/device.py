@@ -1,5 +1,5 @@
 """A virtual device behind a real serial line: a virtual mat's capacitance, served in the
-texsense serial line protocol (:mod:`texsense.monitor.protocol`) on a pseudo-terminal, so
+texsense serial line protocol (:mod:`texsense.data.protocol`) on a pseudo-terminal, so
 that everything a real mat goes through — the serial port, the line protocol, the recorder,
 the calibration, the monitor — can be run and tested without hardware (docs/calibration.md).
 
@@ -44,9 +44,9 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data.layout import Layout
+from texsense.data.protocol import format_serial_line, layout_announcement
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.monitor.protocol import format_serial_line, layout_announcement
 from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat, night_frames, night_plan
 from texsense.sim.mat import VirtualMat
 from texsense.sim.seated import SEAT_FAILURES, Subject, posture_pressure

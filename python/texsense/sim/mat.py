@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.recording import Recording
 from texsense.sensor.electrode import Electrode, wet_factor
+from texsense.sensor.readout import CDC
 from texsense.sim.failures import FailureModel
-from texsense.sim.readout import CDC
 from texsense.sim.spacer import PRESETS, Spacer
 
 __all__ = ["CROSSTALK_AT_HALF", "MatScan", "VirtualMat"]

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
+from texsense.sensor.readout import CDC
 from texsense.sim.mat import MatScan, VirtualMat
-from texsense.sim.readout import CDC
 
 __all__ = ["HIGH_RATE_CDC", "MuscleSession", "session", "sleeve_layout"]
 

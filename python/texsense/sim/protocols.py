@@ -26,12 +26,12 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.recording import Recording
 from texsense.sensor.electrode import Electrode
+from texsense.sensor.readout import CDC
 from texsense.sim.machine import TestMachine
-from texsense.sim.readout import CDC
 from texsense.sim.spacer import DriveResult, Spacer
 
 __all__ = [

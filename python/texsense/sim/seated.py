@@ -32,9 +32,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.recording import Recording
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import SEAT_COLS, SEAT_PITCH_CM, SEAT_ROWS, VirtualMat
 

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from texsense.data.layout import Layout
+from texsense.data.units import convert
 from texsense.exceptions import ParameterError
-from texsense.layout import Layout
 from texsense.sim.mat import MatScan, VirtualMat
-from texsense.units import convert
 
 __all__ = [
     "DESIGN_PROFILE",

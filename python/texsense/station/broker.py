@@ -44,8 +44,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
+from texsense.data.files import atomic_path
 from texsense.exceptions import FormatError, ParameterError
-from texsense.files import atomic_path
 
 __all__ = [
     "STATION_USER",

@@ -18,7 +18,7 @@ second to every viewer: tens of megabytes a second each.
 Examples
 --------
 >>> import numpy as np
->>> from texsense.layout import Layout
+>>> from texsense.data.layout import Layout
 >>> blocks = BlockMap(Layout.grid(64, 32))
 >>> (blocks.rows, blocks.cols)
 (22, 11)
@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from texsense.layout import Layout
+from texsense.data.layout import Layout
 
 __all__ = ["MAX_BYTES_PER_S", "MAX_SIDE", "TICK_S", "BlockMap", "WardFeed"]
 
@@ -55,7 +55,7 @@ HEARTBEAT_S = 1.0
 #: Byte values of the map: 0..250 the block's highest reading in mmHg (250: 250 or more);
 #: these two mean no reading (a failed element) and no element.
 NO_READING, NO_ELEMENT = 254, 255
-#: mmHg per N/cm² (texsense.units).
+#: mmHg per N/cm² (texsense.data.units).
 MMHG_PER_NCM2 = 75.00615
 
 

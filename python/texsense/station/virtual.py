@@ -8,8 +8,8 @@ import json
 import math
 from typing import Any
 
+from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
-from texsense.monitor.protocol import Frame
 from texsense.monitor.sources import Source
 from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.station.broker import BrokerURL, mqtt_client

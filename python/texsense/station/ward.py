@@ -2,7 +2,7 @@
 calibration, pipeline state, exposure and reposition alerts (docs/station.md).
 
 A mat publishes its frames to ``<prefix>/<mat id>/frames`` with the payload of
-:mod:`texsense.monitor.protocol`. The station subscribes to one topic filter (default
+:mod:`texsense.data.protocol`. The station subscribes to one topic filter (default
 ``texsense/+/frames``; ``--mats 'ward3/+/frames'`` lets several stations split a site without
 any coordination of their own: the broker routes). Every mat is a
 :class:`~texsense.monitor.live.Monitor` fed by the station; what the station adds per mat:
@@ -39,18 +39,15 @@ from collections import OrderedDict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from texsense import units
-from texsense.bed import BedWatch
-from texsense.exceptions import ParameterError
-from texsense.layout import Layout
-from texsense.monitor.alerts import Event, ExposureTracker
-from texsense.monitor.clock import Quiet
-from texsense.monitor.live import SILENT_S, Monitor
-from texsense.monitor.protocol import (
+from texsense.apps.alerts import Event, ExposureTracker
+from texsense.apps.bed import BedWatch
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.protocol import (
     CountError,
     Frame,
     PayloadSizeError,
@@ -58,10 +55,17 @@ from texsense.monitor.protocol import (
     parse_mqtt_payload,
     payload_limit,
 )
+from texsense.exceptions import ParameterError
+from texsense.monitor.clock import Quiet
+from texsense.monitor.live import SILENT_S, Monitor
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 from texsense.station.broker import BrokerURL, check_mat_id, mqtt_client
 from texsense.station.tiles import BlockMap
+
+if TYPE_CHECKING:
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.stages import StageChain
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -94,15 +98,15 @@ class MatConfig:
 
     id: str
     layout: Layout
-    calibration: Any = None
+    calibration: StageChain | None = None
     quantity: str = "capacitance"
     source: str = "mqtt"
     reposition_min: float = 20.0
     extra: dict[str, Any] = field(default_factory=dict)
     #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
-    #: regions (:class:`texsense.bed.BedWatch`); the model's labels must be sides.
+    #: regions (:class:`texsense.apps.bed.BedWatch`); the model's labels must be sides.
     bed: bool = False
-    posture_model: Any = None
+    posture_model: PostureModel | None = None
     turn_every_min: float = 120.0
 
 
@@ -122,7 +126,7 @@ class _FedSource(Source):
 
 def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: Path) -> Monitor:
     """The single-mat monitor of a mat of the ward."""
-    from texsense.pipeline import Pipeline
+    from texsense.compensation.pipeline import Pipeline
 
     pipeline = None
     if config.quantity == "capacitance":
@@ -420,7 +424,7 @@ class Station:
         mats: list[MatConfig],
         *,
         topic: str = "texsense/+/frames",
-        store: Any = None,
+        store: EventStore | None = None,
         record_dir: Path | str = "recordings",
         min_stale_s: float = 0.0,
         refuse_after_s: float = 10.0,

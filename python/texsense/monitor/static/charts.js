@@ -68,7 +68,7 @@ function clockOf(s) {
   const h = Math.floor(s / 3600), m = Math.floor(s / 60) % 60, sec = String(s % 60).padStart(2, "0");
   return h ? `${h}:${String(m).padStart(2, "0")}:${sec}` : `${m}:${sec}`;
 }
-// a duration in words: 8 s, 1 min 15 s, 1 h 30 min (as texsense.views.format_duration)
+// a duration in words: 8 s, 1 min 15 s, 1 h 30 min (as texsense.apps.views.format_duration)
 function duration(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return "–";
   const sign = s < 0 ? "-" : ""; s = Math.round(Math.abs(s));

@@ -1,7 +1,7 @@
 // The live side of the dashboard: alerts in the mode's words, the bed's schedule, exposure,
 // events with clock times, the WebSocket, the controls and the start.
 "use strict";
-const EVENT_TEXT = {  // as texsense.review.EVENT_TEXT
+const EVENT_TEXT = {  // as texsense.apps.review.EVENT_TEXT
   seated: "sat down", left: "got up", "in-bed": "in bed", "out-of-bed": "out of bed",
   loaded: "load on the mat", unloaded: "mat unloaded", reposition: "reposition alert",
   acknowledged: "alert acknowledged", cleared: "alert cleared (skin offloaded)",

@@ -1,5 +1,5 @@
 // Regions of interest drawn on the map: a box (drag) or a lasso (draw round an area), the
-// elements whose centres lie inside (the rule of texsense.roi), their statistics on the frame
+// elements whose centres lie inside (the rule of texsense.apps.roi), their statistics on the frame
 // shown, kept by the page and saved with an open recording.
 "use strict";
 

@@ -1,0 +1,249 @@
+"""Pressure-exposure and reposition alerts (thesis §1.1: tissue pressure above 32 mmHg held
+for 5-20 min obstructs the blood flow; decubitus prevention).
+
+:class:`ExposureTracker` follows, per element (or per region), how long the pressure has been
+above a threshold. Time above the threshold accumulates while the element stays loaded; short
+reliefs do not reset it (the tissue does not recover in a few seconds); an element below the
+threshold for ``offload_s`` without interruption starts again from zero. When the exposure of
+any element reaches ``reposition_s``, a *reposition* alert opens. It stays open until every
+exposed element has been offloaded (then it is *cleared*); acknowledging it silences it but
+does not clear it, and no second reposition alert opens while one is open.
+
+Examples
+--------
+>>> import numpy as np
+>>> from texsense import Layout
+>>> tr = ExposureTracker(Layout.grid(1, 2), threshold=32, unit="mmHg", reposition_min=5)
+>>> events = []
+>>> for t in range(0, 301, 10):  # 5 min at 1 N/cm² (75 mmHg) on element 0
+...     events += tr.step(float(t), np.array([1.0, 0.0]))
+>>> [(e.kind, e.t) for e in events], tr.exposure_s.tolist()
+([('seated', 0.0), ('reposition', 300.0)], [300.0, 0.0])
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.exceptions import ParameterError
+
+__all__ = ["REPOSITION_RANGE_MIN", "Alert", "Event", "ExposureTracker"]
+
+#: Allowed reposition intervals, minutes (§1.1: 5-20 min obstruct the blood flow; bed-care
+#: turning schedules reach 2 h).
+REPOSITION_RANGE_MIN = (5.0, 120.0)
+
+
+@dataclass
+class Event:
+    """Something the monitor reports: ``kind`` is ``reposition`` (an alert opened),
+    ``cleared`` (it ended: the exposed skin was offloaded), ``acknowledged``, or the load
+    appearing / disappearing in the mode's words (``seated`` / ``left`` on a seat, ``in-bed``
+    / ``out-of-bed`` on a bed, ``loaded`` / ``unloaded`` otherwise)."""
+
+    kind: str
+    t: float
+    alert_id: int | None = None
+    detail: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {"kind": self.kind, "t": self.t, "alert_id": self.alert_id, "detail": self.detail}
+
+
+@dataclass
+class Alert:
+    """An open or closed reposition alert."""
+
+    id: int
+    opened_t: float
+    elements: list[int]  # element (or region) indices over the limit when it opened
+    peak_exposure_s: float
+    acknowledged_t: float | None = None
+    cleared_t: float | None = None
+    #: where, in words: the regions the mode knows, else rows and columns (the monitor
+    #: names them; :func:`texsense.apps.views.place_names`)
+    where: list[str] = field(default_factory=list)
+
+    @property
+    def active(self) -> bool:
+        """Open and not acknowledged: the banner shows."""
+        return self.cleared_t is None and self.acknowledged_t is None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "id": self.id,
+            "opened_t": self.opened_t,
+            "elements": self.elements,
+            "peak_exposure_s": self.peak_exposure_s,
+            "acknowledged_t": self.acknowledged_t,
+            "cleared_t": self.cleared_t,
+            "active": self.active,
+            "where": self.where,
+        }
+
+
+class ExposureTracker:
+    """Per-element (or per-region) pressure exposure and the reposition alert.
+
+    Parameters
+    ----------
+    layout : Layout
+        The sensor's elements.
+    threshold : float
+        Pressure above which tissue counts as exposed, in ``unit`` (default 32 mmHg).
+    unit : str
+        Any pressure unit of :mod:`texsense.data.units`.
+    reposition_min : float
+        Exposure after which the reposition alert opens, minutes (5-120, default 20).
+    offload_min : float
+        Time below the threshold that resets an element's exposure, minutes (default 1).
+    regions : dict of name -> element indices, optional
+        Track the mean pressure of each region instead of single elements (e.g.
+        ``layout.equal_areas(16)``); the exposure map then repeats a region's value on its
+        elements.
+    occupancy : (str, str) or None
+        Event kinds when the mat becomes loaded / unloaded (default ``seated`` / ``left``);
+        None: no such events (a foot sensor, loaded at every step).
+    occupancy_hold_s : float
+        A change of occupancy is reported once it has held this long (default 0: at once).
+    """
+
+    def __init__(
+        self,
+        layout: Layout,
+        *,
+        threshold: float = 32.0,
+        unit: str = "mmHg",
+        reposition_min: float = 20.0,
+        offload_min: float = 1.0,
+        regions: dict[str, npt.ArrayLike] | None = None,
+        occupancy: tuple[str, str] | None = ("seated", "left"),
+        occupancy_hold_s: float = 0.0,
+    ) -> None:
+        if not units.is_pressure_unit(unit):
+            raise ParameterError(f"threshold unit {unit!r} is not a pressure unit")
+        if not np.isfinite(threshold) or threshold <= 0:
+            raise ParameterError(f"threshold must be > 0, got {threshold}")
+        lo, hi = REPOSITION_RANGE_MIN
+        if not lo <= reposition_min <= hi:
+            raise ParameterError(
+                f"reposition interval must lie in {lo:g}-{hi:g} min, got {reposition_min}"
+            )
+        if not np.isfinite(offload_min) or offload_min < 0:
+            raise ParameterError(f"offload time must be >= 0 min, got {offload_min}")
+        self.layout = layout
+        self.threshold_ncm2 = float(units.convert(threshold, unit, "N/cm2"))
+        self.threshold, self.unit = float(threshold), units.canonical(unit)
+        self.reposition_s = 60.0 * float(reposition_min)
+        self.offload_s = 60.0 * float(offload_min)
+        if regions is None:
+            self._groups: list[np.ndarray] | None = None
+            self.names = [str(i) for i in range(layout.n_elements)]
+        else:
+            self._groups = [np.asarray(v, dtype=np.int64) for v in regions.values()]
+            for name, g in zip(regions, self._groups, strict=True):
+                if g.size == 0 or g.min() < 0 or g.max() >= layout.n_elements:
+                    raise ParameterError(f"region {name!r} has no elements or bad indices")
+            self.names = [str(k) for k in regions]
+        n = len(self.names)
+        self.exposure_s = np.zeros(n)
+        self._relief_s = np.zeros(n)
+        self._last_t: float | None = None
+        self._ids = itertools.count(1)
+        self.alerts: list[Alert] = []
+        self.seated = False
+        self.occupancy = occupancy
+        self.occupancy_hold_s = float(occupancy_hold_s)
+        self._occupancy_since: float | None = None  # when the load last changed state
+
+    @property
+    def open_alert(self) -> Alert | None:
+        """The alert not yet cleared, if any."""
+        return next((a for a in self.alerts if a.cleared_t is None), None)
+
+    @property
+    def by_region(self) -> bool:
+        """True when the tracker follows regions (its indices and names are the regions')."""
+        return self._groups is not None
+
+    def exposure_map(self) -> np.ndarray:
+        """Exposure in seconds per element (a region's value on each of its elements)."""
+        if self._groups is None:
+            return self.exposure_s.copy()
+        out = np.zeros(self.layout.n_elements)
+        for g, v in zip(self._groups, self.exposure_s, strict=True):
+            out[g] = np.maximum(out[g], v)
+        return out
+
+    def _values(self, pressure: np.ndarray) -> np.ndarray:
+        p = np.nan_to_num(pressure, nan=0.0)
+        if self._groups is None:
+            return p
+        return np.array([p[g].mean() for g in self._groups])
+
+    def step(self, t: float, pressure_ncm2: npt.ArrayLike) -> list[Event]:
+        """Advance to time ``t`` (s) with the pressure (N/cm²) of every element; returns the
+        events this frame caused. A missing (NaN) reading counts as unloaded."""
+        p = np.asarray(pressure_ncm2, dtype=np.float64)
+        if p.shape != (self.layout.n_elements,):
+            raise ParameterError(
+                f"expected {self.layout.n_elements} pressures, got shape {p.shape}"
+            )
+        if self._last_t is not None and t < self._last_t:
+            raise ParameterError(f"time went backwards: {t} after {self._last_t}")
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        self._last_t = t
+        events: list[Event] = []
+        loaded = self._values(p) > self.threshold_ncm2
+        # exposure grows while loaded; relief time grows while not; a long relief resets
+        self.exposure_s[loaded] += dt
+        self._relief_s[loaded] = 0.0
+        self._relief_s[~loaded] += dt
+        self.exposure_s[self._relief_s >= self.offload_s] = 0.0
+        events += self._occupancy(t, bool(loaded.any()))
+        alert = self.open_alert
+        if alert is None:
+            over = np.flatnonzero(self.exposure_s >= self.reposition_s)
+            if over.size:
+                alert = Alert(next(self._ids), t, over.tolist(), float(self.exposure_s.max()))
+                self.alerts.append(alert)
+                names = [self.names[i] for i in over]
+                events.append(Event("reposition", t, alert.id, {"where": names}))
+        else:
+            alert.peak_exposure_s = max(alert.peak_exposure_s, float(self.exposure_s.max()))
+            if not np.any(self.exposure_s[alert.elements] > 0):
+                alert.cleared_t = t
+                events.append(Event("cleared", t, alert.id))
+        return events
+
+    def _occupancy(self, t: float, any_load: bool) -> list[Event]:
+        """The load appearing or disappearing, once the change has held ``occupancy_hold_s``."""
+        if any_load == self.seated:
+            self._occupancy_since = None
+            return []
+        if self._occupancy_since is None:
+            self._occupancy_since = t
+        if t - self._occupancy_since < self.occupancy_hold_s:
+            return []
+        self.seated, self._occupancy_since = any_load, None
+        if self.occupancy is None:
+            return []
+        return [Event(self.occupancy[0] if any_load else self.occupancy[1], t)]
+
+    def acknowledge(self, alert_id: int, t: float) -> Event:
+        """Silence an alert (it stays open until the skin is offloaded)."""
+        for a in self.alerts:
+            if a.id == alert_id:
+                if a.acknowledged_t is None:
+                    a.acknowledged_t = float(t)
+                return Event("acknowledged", float(t), a.id)
+        raise ParameterError(f"no alert with id {alert_id}")

@@ -1,0 +1,291 @@
+"""Going back through a recording: everything the dashboard's playback and ``texsense report``
+show about one recording, computed once (docs/monitor.md "Playback", docs/report.md).
+
+:func:`open_review` takes any recording texsense reads (HDF5, PMD, vendor exports) and gives
+a :class:`Review`: the mode (:mod:`texsense.apps.views`), the display unit and the fixed colour
+scale, the orientation, the statistics of every frame (load, peak, contact area, centre of
+force), the events and alerts, the time per side and the turns of a bed, and per-element
+health. The events are **recomputed** from the frames with the monitor's own rules and the
+settings the recording declares (a monitor recording stores its threshold, reposition and
+turning intervals) — the same events for the same frames, whether the file came from the
+monitor, a vendor's software or a simulation.
+
+Memory: the statistics are computed in blocks of frames, so a night of 27,000 frames of a
+2048-element mat needs a few blocks' worth, not a float64 copy of the whole recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense.apps import stats
+from texsense.apps.review_events import (
+    BLOCK,
+    EVENT_TEXT,
+    element_health,
+    recompute_events,
+    side_labels,
+)
+from texsense.apps.views import MODES, Mode, guess_mode, orientation_of, recording_scale, started_at
+from texsense.data import units
+from texsense.data.recording import Recording
+from texsense.exceptions import ParameterError
+
+__all__ = ["EVENT_TEXT", "Review", "open_review", "side_labels"]
+
+#: A cell is in contact above this pressure (N/cm², 3.75 mmHg: the monitor's) or, for other
+#: quantities, above this share of the colour scale's top.
+CONTACT_NCM2 = 0.05
+CONTACT_SHARE = 0.02
+
+
+@dataclass
+class Review:
+    """One recording, ready to be played back or reported (see :func:`open_review`)."""
+
+    rec: Recording
+    name: str
+    mode: Mode
+    unit: str  # the unit values are shown in (pressure: the mode's or the user's)
+    factor: float  # stored value x factor = value in ``unit``
+    scale: tuple[float, float]  # fixed colour scale, in ``unit``
+    threshold: float | None  # in ``unit``; None: no threshold (not pressure, or foot)
+    orientation: dict[str, Any]
+    started: float | None  # wall clock (Unix s) of the first frame, if known
+    settings: dict[str, float]
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    sides: dict[str, Any] | None = None  # a bed: time per side, turns, where the label came from
+    health: dict[str, np.ndarray] = field(default_factory=dict)
+    #: frames used for the maps and statistics: all but those the reader labels unreliable
+    #: (label ``reliable``: PMD's first and last 3 frames of every file, often saturated)
+    use: np.ndarray = field(default_factory=lambda: np.ones(0, bool))
+    #: (T, N) True where a pressure reading was flagged invalid but carries a repaired value
+    #: (it counts, as it does live); None when nothing was repaired
+    repaired: np.ndarray | None = None
+
+    @property
+    def pressure(self) -> bool:
+        """True when the recording holds pressure."""
+        return self.rec.quantity == "pressure"
+
+    def frame(self, i: int) -> np.ndarray:
+        """Frame ``i`` in the display unit, NaN where a reading is invalid."""
+        if not 0 <= i < self.rec.n_frames:
+            raise ParameterError(f"frame {i} is out of range 0..{self.rec.n_frames - 1}")
+        v = self.rec.frames[i].astype(np.float64) * self.factor
+        v[~self.rec.valid[i]] = np.nan
+        return v
+
+    def summary_map(self, how: str) -> np.ndarray:
+        """Per element over the whole recording: ``peak`` (the highest valid value) or
+        ``mean`` (over the frames with load on the mat), in the display unit."""
+        out = np.full(self.rec.n_elements, -np.inf if how == "peak" else 0.0)
+        count = np.zeros(self.rec.n_elements)
+        loaded = (self.series["area_cm2"] > 0) & self.use
+        for start in range(0, self.rec.n_frames, BLOCK):
+            sl = slice(start, start + BLOCK)
+            v = np.where(self.rec.valid[sl], self.rec.frames[sl], np.nan).astype(np.float64)
+            v[~self.use[sl]] = np.nan
+            if how == "peak":
+                with np.errstate(invalid="ignore"):
+                    out = np.fmax(out, np.nanmax(np.where(np.isfinite(v), v, -np.inf), axis=0))
+            else:
+                v = v[loaded[sl]]
+                out += np.nansum(v, axis=0)
+                count += np.sum(np.isfinite(v), axis=0)
+        if how == "peak":
+            out[~np.isfinite(out)] = np.nan
+            return out * self.factor
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(count > 0, out / count, np.nan) * self.factor
+
+
+def _display_unit(rec: Recording, mode: Mode, unit: str | None) -> tuple[str, float]:
+    if rec.quantity != "pressure":
+        if unit is not None and units.canonical(unit) != rec.unit:
+            raise ParameterError(f"the recording holds {rec.quantity} in {rec.unit}: no {unit}")
+        return rec.unit, 1.0
+    want = units.canonical(unit or mode.unit)
+    if not units.is_pressure_unit(want):
+        raise ParameterError(f"{unit!r} is not a pressure unit")
+    return want, units.factor(rec.unit, want)
+
+
+def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
+    """The alert settings: given, else what the recording declares, else the defaults."""
+    defaults = {
+        "threshold_mmhg": 32.0,
+        "reposition_min": 20.0,
+        "offload_min": 1.0,
+        "turn_every_min": 120.0,
+    }
+    found = meta.get("alerts")
+    declared: dict[str, Any] = found if isinstance(found, dict) else {}
+    out = {}
+    for k, v in defaults.items():
+        chosen = given.get(k)
+        if chosen is None:
+            chosen = declared.get(k, v)
+        try:
+            out[k] = float(chosen)
+        except (TypeError, ValueError):
+            raise ParameterError(f"the setting {k} must be a number, got {chosen!r}") from None
+    return out
+
+
+def _series(review: Review) -> dict[str, np.ndarray]:
+    """Load (N), peak (display unit), contact area (cm²) and centre of force (cm) per frame."""
+    rec = review.rec
+    contact = (
+        CONTACT_NCM2 * units.factor("N/cm2", rec.unit)
+        if review.pressure
+        else CONTACT_SHARE * review.scale[1] / review.factor
+    )
+    parts: dict[str, list[np.ndarray]] = {"load_N": [], "peak": [], "area_cm2": [], "cof": []}
+    for start in range(0, rec.n_frames, BLOCK):
+        block = rec.select(slice(start, start + BLOCK))
+        if review.pressure:
+            parts["load_N"].append(stats.total_load(block))
+        parts["peak"].append(stats.peak_pressure(block) * review.factor)
+        parts["area_cm2"].append(stats.contact_area(block, contact))
+        parts["cof"].append(stats.centre_of_force(block))
+    cof = np.concatenate(parts["cof"]) if parts["cof"] else np.zeros((0, 2))
+    out = {
+        "t": rec.times - (rec.times[0] if rec.n_frames else 0.0),
+        "peak": np.concatenate(parts["peak"]),
+        "area_cm2": np.concatenate(parts["area_cm2"]),
+        "cof_x": cof[:, 0],
+        "cof_y": cof[:, 1],
+    }
+    if review.pressure:
+        out["load_N"] = np.concatenate(parts["load_N"])
+    for k, v in out.items():
+        if k != "t":
+            v[~review.use] = np.nan
+    return out
+
+
+def open_review(
+    source: str | Path | Recording,
+    *,
+    mode: str | None = None,
+    unit: str | None = None,
+    scale: tuple[float, float] | None = None,
+    threshold_mmhg: float | None = None,
+    reposition_min: float | None = None,
+    turn_every_min: float | None = None,
+    model: Any = None,
+    name: str | None = None,
+) -> Review:
+    """Read a recording (or take one) and compute its :class:`Review`.
+
+    Parameters
+    ----------
+    source : path or Recording
+        Any file or folder :func:`texsense.load` reads.
+    mode : str, optional
+        ``seat``, ``bed``, ``foot``, ``generic``; default :func:`texsense.apps.views.guess_mode`.
+    unit : str, optional
+        Display unit for pressure (default: the mode's: mmHg on seats and beds).
+    scale : (float, float), optional
+        The colour scale in ``unit`` (default: the mode's fixed scale, or one fixed from the
+        recording's values for non-pressure data).
+    threshold_mmhg, reposition_min, turn_every_min : float, optional
+        The alert settings (default: what a monitor recording declares, else 32 mmHg, 20 min,
+        120 min).
+    model : PostureModel, optional
+        A model of sides for a bed recording without side labels.
+    name : str, optional
+        What to call the recording (default: the file name).
+    """
+    from texsense.io import load
+
+    original = source if isinstance(source, Recording) else load(source)
+    rec = _with_repairs(original)
+    if rec.n_frames == 0:
+        raise ParameterError("the recording has no frames")
+    label = name or (Path(source).name if not isinstance(source, Recording) else "recording")
+    mode = mode or guess_mode(rec.layout, rec.meta)
+    if mode not in MODES:
+        raise ParameterError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
+    m = MODES[mode]
+    shown, factor = _display_unit(rec, m, unit)
+    settings = _settings(
+        rec.meta,
+        threshold_mmhg=threshold_mmhg,
+        reposition_min=reposition_min,
+        turn_every_min=turn_every_min,
+    )
+    if scale is None:
+        keep = rec.labels.get("reliable")  # PMD: the first and last 3 frames of a file
+        pick = (
+            np.flatnonzero(keep) if keep is not None and keep.dtype == bool and keep.any() else None
+        )
+        pick = np.arange(rec.n_frames) if pick is None else pick
+        sample = rec.frames[pick[:: max(1, pick.size // 400)]] * factor
+        scale = recording_scale(sample, shown, mode)
+    if not (np.isfinite(scale[0]) and np.isfinite(scale[1]) and scale[1] > scale[0]):
+        raise ParameterError(f"the colour scale must run from low to high, got {scale}")
+    threshold = None
+    if rec.quantity == "pressure" and m.threshold_mmhg is not None:
+        threshold = settings["threshold_mmhg"] * units.factor("mmHg", shown)
+    review = Review(
+        rec,
+        label,
+        m,
+        shown,
+        factor,
+        (float(scale[0]), float(scale[1])),
+        threshold,
+        orientation_of(rec.layout, rec.meta, mode),
+        started_at(rec.meta),
+        settings,
+    )
+    review.use = _usable(rec)
+    review.series = _series(review)
+
+    review.events, review.sides = recompute_events(review, model)
+    review.health = element_health(original)
+    review.repaired = None if rec is original else ~original.valid
+    return review
+
+
+def _with_repairs(rec: Recording) -> Recording:
+    """A pressure recording whose repaired readings count: the monitor and ``texsense
+    process`` flag a repaired element invalid but keep its estimate (eq. 6.14), and the live
+    map, statistics and alerts use that estimate; the report and playback do the same.
+    Other quantities keep their flags."""
+    if rec.quantity != "pressure" or rec.valid.all():
+        return rec
+    return Recording(rec.frames, rec.times, rec.layout, rec.quantity, rec.unit,
+                     valid=np.isfinite(rec.frames), element_times=rec.element_times,
+                     labels=rec.labels, meta=rec.meta)  # fmt: skip
+
+
+def _usable(rec: Recording) -> np.ndarray:
+    """The frames not labelled unreliable (all of them without a ``reliable`` label)."""
+    keep = rec.labels.get("reliable")
+    if keep is not None and keep.dtype == bool and keep.any():
+        return keep.copy()
+    return np.ones(rec.n_frames, bool)
+
+
+def decimate(values: npt.ArrayLike, bins: int, how: str = "max") -> np.ndarray:
+    """``values`` reduced to at most ``bins`` points (max or mean per bin, NaN-aware)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size <= bins:
+        return v
+    edges = np.linspace(0, v.size, bins + 1).astype(int)
+    out = np.full(bins, np.nan)
+    for k in range(bins):
+        part = v[edges[k] : edges[k + 1]]
+        part = part[np.isfinite(part)]
+        if part.size:
+            out[k] = part.max() if how == "max" else part.mean()
+    return out

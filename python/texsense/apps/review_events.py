@@ -1,0 +1,205 @@
+"""The events of a recording recomputed with the monitor's rules, the time per side of a bed,
+and per-element health (part of :mod:`texsense.apps.review`).
+
+- **Exposure** (pressure recordings, modes with alerts): :class:`ExposureTracker` with the
+  recording's settings (32 mmHg, 20 min, 1 min offload unless it declares others) — the
+  same reposition alerts and clearings the live monitor raised on these frames, minus the
+  acknowledgements (a person's act, not in the frames).
+- **Turning** (beds with a side per frame: a side model, or the recording's label ``side``
+  / ``posture_class``): :class:`texsense.apps.bed.TurningSchedule` — turns, turn due, time per side.
+- **Places**: an alert names the at-risk regions of the bed's side at that frame
+  (:func:`texsense.apps.bed.find_regions`) or the seat's zones, else rows and columns.
+- **Health**: the share of frames each element was invalid (failed and repaired, or not
+  read), and *silent* elements: near zero throughout while all their neighbours carried
+  load (a dead element on a mat the reader did not flag).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from texsense.apps import stats
+from texsense.apps.alerts import REPOSITION_RANGE_MIN, Event, ExposureTracker
+from texsense.apps.bed import BANDS, TurningSchedule, find_regions
+from texsense.apps.views import format_duration, place_names, seat_zones
+from texsense.data import units
+from texsense.data.recording import Recording
+from texsense.exceptions import ParameterError
+
+if TYPE_CHECKING:
+    from texsense.apps.review import Review
+
+__all__ = [
+    "BLOCK",
+    "EVENT_TEXT",
+    "element_health",
+    "event_text",
+    "recompute_events",
+    "side_labels",
+]
+
+#: Frames per block of the statistics (bounds memory).
+BLOCK = 2048
+
+#: What the events are called on the pages and in the report.
+EVENT_TEXT = {
+    "seated": "sat down",
+    "left": "got up",
+    "in-bed": "in bed",
+    "out-of-bed": "out of bed",
+    "loaded": "load on the mat",
+    "unloaded": "mat unloaded",
+    "reposition": "reposition alert",
+    "acknowledged": "alert acknowledged",
+    "cleared": "alert cleared (skin offloaded)",
+    "turn": "turned",
+    "turn-due": "turn due",
+    "turn-done": "turn alert closed",
+    "calibrated": "calibration in use",
+}
+
+
+def side_labels(rec: Recording, model: Any = None) -> tuple[np.ndarray | None, str]:
+    """The side a person lies on in every frame of a bed recording (``None`` for an empty
+    bed) and where it came from: a posture model of sides (``model``), else the recording's
+    label ``side`` (the virtual bed) or ``posture_class`` (PhysioNet PMD); (None, "") if
+    none of them is there."""
+
+    if model is not None:
+        if model.layout != rec.layout:
+            raise ParameterError("the posture model was trained on another layout")
+        frames = np.nan_to_num(rec.masked_frames())
+        sides = np.asarray(model.predict(frames)).astype(object)
+        if rec.quantity == "pressure":
+            sides[stats.total_load(rec) < 50.0] = None  # under 5 kg: nobody
+        return sides, "the posture model"
+    for name in ("side", "posture_class"):
+        if name in rec.labels:
+            raw = np.asarray(rec.labels[name]).astype(str).astype(object)
+            known = np.isin(raw, [*BANDS, "transition"])
+            raw[~known] = None  # out, empty, unknown labels: nobody on a side
+            return raw, f"the recording's label {name!r}"
+    return None, ""
+
+
+def event_text(kind: str, detail: dict[str, Any]) -> str:
+    """One line for an event, in the words of the pages."""
+
+    text = EVENT_TEXT.get(kind, kind)
+    if kind == "turn":
+        text += f" {detail.get('from')} → {detail.get('to')}"
+        if detail.get("after_s") is not None:
+            text += f" after {format_duration(detail['after_s'])}"
+    elif kind == "turn-due":
+        text += f": {format_duration(detail.get('since_s'))} on {detail.get('side')}"
+    elif kind == "out-of-bed" and detail.get("after_s") is not None:
+        text += f" (for {format_duration(detail['after_s'])})"
+    if detail.get("where"):
+        text += ": " + ", ".join(detail["where"])
+    return text
+
+
+def _where(review: Review, elements: list[int], row: np.ndarray, side: Any) -> list[str]:
+
+    lay = review.rec.layout
+    regions: dict[str, Any] = {}
+    if review.mode.name == "bed" and side in BANDS and lay.shape is not None:
+        found = find_regions(row, lay, str(side), threshold=review.settings["threshold_mmhg"])
+        regions = {r.name: list(r.elements) for r in found.values()}
+    elif review.mode.name == "seat" and lay.shape is not None:
+        regions = seat_zones(lay)
+    return place_names(elements, lay, regions)
+
+
+def recompute_events(
+    review: Review, model: Any = None
+) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+    """The events of ``review``'s frames (see the module) and, for a bed with sides, the
+    time per side and the turns."""
+
+    rec, mode, s = review.rec, review.mode, review.settings
+    sides, origin = side_labels(rec, model) if mode.name == "bed" else (None, "")
+    tracker = None
+    if review.pressure and mode.alerts:
+        lo, hi = REPOSITION_RANGE_MIN
+        tracker = ExposureTracker(
+            rec.layout,
+            threshold=s["threshold_mmhg"],
+            unit="mmHg",
+            reposition_min=min(max(s["reposition_min"], lo), hi),
+            offload_min=s["offload_min"],
+            occupancy=None if sides is not None else mode.occupancy,
+            occupancy_hold_s=mode.occupancy_hold_s,
+        )
+    schedule = None if sides is None else TurningSchedule(interval_min=s["turn_every_min"])
+    to_ncm2 = units.factor(rec.unit, "N/cm2") if review.pressure else 1.0
+    t0 = float(rec.times[0])
+    out: list[dict[str, Any]] = []
+    for start in range(0, rec.n_frames, BLOCK):
+        block = np.where(
+            rec.valid[start : start + BLOCK], rec.frames[start : start + BLOCK], np.nan
+        )
+        for k, row in enumerate(block.astype(np.float64) * to_ncm2):
+            i = start + k
+            t = float(rec.times[i])
+            events: list[Event] = []
+            if tracker is not None:
+                events += tracker.step(t, row)
+            if schedule is not None and sides is not None:
+                events += schedule.step(t, sides[i])
+            for e in events:
+                detail = dict(e.detail)
+                if e.kind == "reposition" and tracker is not None:
+                    alert = next(a for a in tracker.alerts if a.id == e.alert_id)
+                    side = sides[i] if sides is not None else None
+                    detail = {
+                        "where": _where(review, alert.elements, row, side),
+                        "elements": alert.elements,
+                    }
+                out.append(
+                    {
+                        "i": i,
+                        "t": round(t - t0, 3),
+                        "kind": e.kind,
+                        "alert": e.alert_id,
+                        "detail": detail,
+                        "text": event_text(e.kind, detail),
+                    }
+                )
+    beds = None
+    if schedule is not None:
+        beds = {
+            "source": origin,
+            "time_per_side_s": {k: round(v, 1) for k, v in schedule.time_per_side.items()},
+            "turns": schedule.turns,
+            "interval_min": s["turn_every_min"],
+        }
+    return out, beds
+
+
+def element_health(rec: Recording) -> dict[str, np.ndarray]:
+    """Per element: ``invalid_share`` (share of frames flagged invalid) and ``silent``: its
+    highest valid reading stays under 2 % of the mat's high values (the 99th percentile of
+    the elements' highest readings) while each of its 3 or 4 neighbours reached a tenth of
+    them — a dead element inside a loaded area, not one at its edge or in noise."""
+
+    n = rec.n_elements
+    invalid = np.zeros(n)
+    top = np.full(n, -np.inf)
+    for start in range(0, rec.n_frames, BLOCK):
+        valid = rec.valid[start : start + BLOCK]
+        invalid += np.sum(~valid, axis=0)
+        v = np.where(valid, rec.frames[start : start + BLOCK], -np.inf)
+        top = np.maximum(top, v.max(axis=0))
+    indptr, indices = rec.layout.neighbours
+    finite = top[np.isfinite(top)]
+    ref = float(np.percentile(finite, 99)) if finite.size else 0.0
+    # never valid: already counted as invalid, not silent
+    quiet: Any = np.flatnonzero(np.isfinite(top) & (top <= 0.02 * ref)) if ref > 0 else []
+    silent = np.zeros(n, bool)
+    for i in quiet:  # neighbours that carried real load (a tenth of the mat's high values)
+        nb = indices[indptr[i] : indptr[i + 1]]
+        silent[i] = nb.size >= 3 and bool(np.all(top[nb] > 0.1 * ref))
+    return {"invalid_share": invalid / max(rec.n_frames, 1), "silent": silent}

@@ -1,0 +1,254 @@
+"""Frame statistics that pressure-mapping users expect.
+
+All functions take a :class:`~texsense.Recording` and return one value per frame. Pressures
+are taken in N/cm² (a recording in kPa or mmHg is converted first), forces are in N, areas in
+cm², positions in cm in the layout's coordinates. Readings flagged invalid are left out.
+
+- :func:`total_load`: sum of pressure x element area (N).
+- :func:`contact_area`: area of the elements whose value exceeds a threshold (cm²).
+- :func:`peak_pressure`: the highest element value.
+- :func:`peak_pressure_index`: mean of the highest-loaded k x k window of elements (3 x 3 by
+  default, the convention of seating-clinic pressure mapping).
+- :func:`centre_of_force`: force-weighted mean of the element centres (x, y in cm).
+- :func:`coefficient_of_variation`: standard deviation / mean of the loaded elements.
+- :func:`region_stats`: load, mean, peak and contact area per named region.
+
+Statistics other than the load also work on raw counts (``quantity="raw"``); the centre of
+force is then the centre of the raw values.
+
+Examples
+--------
+>>> import numpy as np
+>>> from texsense import Layout, Recording, stats
+>>> lay = Layout.grid(2, 2, pitch_cm=2.0)                 # 4 elements of 4 cm²
+>>> rec = Recording([[1.0, 0.0, 0.0, 1.0]], [0.0], lay)    # N/cm²
+>>> stats.total_load(rec).tolist(), stats.centre_of_force(rec).tolist()
+([8.0], [[2.0, 2.0]])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense.data import units
+from texsense.data.layout import Layout
+from texsense.data.recording import Recording
+from texsense.exceptions import ParameterError
+
+__all__ = [
+    "FrameStats",
+    "centre_of_force",
+    "centre_of_force_values",
+    "coefficient_of_variation",
+    "contact_area",
+    "frame_stats",
+    "peak_pressure",
+    "peak_pressure_index",
+    "region_stats",
+    "total_load",
+]
+
+_Array = npt.NDArray[np.float64]
+_BLOCK = 1024  # frames per block in the windowed statistics (bounds memory)
+
+
+def _values(rec: Recording, *, need_pressure: bool = False) -> _Array:
+    """Frames as float64 with invalid readings as NaN, pressure converted to N/cm²."""
+    if rec.quantity == "pressure":
+        f = units.factor(rec.unit, "N/cm2")
+    elif need_pressure:
+        raise ParameterError(
+            f"this statistic needs pressure, but the recording holds {rec.quantity} in "
+            f"{rec.unit}; calibrate it to pressure first"
+        )
+    else:
+        f = 1.0
+    v = rec.frames.astype(np.float64) * f
+    v[~rec.valid] = np.nan
+    return v
+
+
+def _nan_if_empty(total: _Array, count: npt.NDArray[np.int64]) -> _Array:
+    return np.where(count > 0, total, np.nan)
+
+
+def total_load(rec: Recording) -> _Array:
+    """Total force per frame in N: sum of pressure (N/cm²) x element area (cm²), eq. 2.1 of a
+    pressure map. Frames without any valid reading give NaN."""
+    v = _values(rec, need_pressure=True)
+    count = np.sum(np.isfinite(v), axis=1)
+    return _nan_if_empty(np.nansum(v * rec.layout.area_cm2, axis=1), count)
+
+
+def contact_area(rec: Recording, threshold: float = 0.0) -> _Array:
+    """Area in cm² of the elements whose value is above ``threshold`` (same unit as the
+    statistic: N/cm² for pressure, counts for raw)."""
+    v = _values(rec)
+    with np.errstate(invalid="ignore"):
+        loaded = v > threshold
+    return (loaded * rec.layout.area_cm2).sum(axis=1)
+
+
+def peak_pressure(rec: Recording) -> _Array:
+    """Highest valid element value per frame (N/cm² for pressure); NaN if none is valid."""
+    v = _values(rec)
+    out = np.full(rec.n_frames, np.nan)
+    ok = np.isfinite(v).any(axis=1)
+    out[ok] = np.nanmax(v[ok], axis=1)
+    return out
+
+
+def centre_of_force(rec: Recording) -> _Array:
+    """Centre of force (T, 2): x and y in cm, weights pressure x area; NaN when unloaded."""
+    return centre_of_force_values(_values(rec), rec.layout)
+
+
+def centre_of_force_values(values: npt.ArrayLike, layout: Layout) -> _Array:
+    """:func:`centre_of_force` of plain frames (T, N) on ``layout`` (NaN readings count 0)."""
+    v = np.asarray(values, dtype=np.float64)
+    w = np.clip(np.nan_to_num(v, nan=0.0) * layout.area_cm2, 0.0, None)
+    total = w.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        xy = (w @ layout.xy_cm) / total[:, None]
+    xy[total <= 0] = np.nan
+    return xy
+
+
+def coefficient_of_variation(rec: Recording, threshold: float = 0.0) -> _Array:
+    """Standard deviation / mean of the element values above ``threshold`` per frame; NaN
+    with fewer than two loaded elements."""
+    v = _values(rec)
+    with np.errstate(invalid="ignore"):
+        loaded = np.where(v > threshold, v, np.nan)
+    count = np.sum(np.isfinite(loaded), axis=1)
+    out = np.full(rec.n_frames, np.nan)
+    ok = count >= 2
+    if ok.any():
+        out[ok] = np.nanstd(loaded[ok], axis=1) / np.nanmean(loaded[ok], axis=1)
+    return out
+
+
+def _window_means_grid(maps: _Array, k: int) -> _Array:
+    """Max over all k x k windows of the mean of the valid cells in the window, per map."""
+    t, rows, cols = maps.shape
+    kr, kc = min(k, rows), min(k, cols)
+    finite = np.isfinite(maps)
+    vals = np.where(finite, maps, 0.0)
+
+    def box_sums(a: _Array) -> _Array:
+        s = np.zeros((a.shape[0], rows + 1, cols + 1))
+        s[:, 1:, 1:] = a.cumsum(axis=1).cumsum(axis=2)
+        return s[:, kr:, kc:] - s[:, :-kr, kc:] - s[:, kr:, :-kc] + s[:, :-kr, :-kc]
+
+    sums = box_sums(vals)
+    counts = np.rint(box_sums(finite.astype(np.float64)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = np.where(counts > 0, sums / counts, -np.inf)
+    best = means.reshape(t, -1).max(axis=1)
+    return np.where(np.isfinite(best), best, np.nan)
+
+
+def peak_pressure_index(rec: Recording, window: int = 3) -> _Array:
+    """Peak pressure index: the highest mean over a ``window`` x ``window`` group of elements.
+
+    On a grid the windows are all k x k blocks of cells (empty cells and invalid readings are
+    left out of the mean; the window shrinks on grids smaller than k). On a points layout the
+    group is the peak element and its k² - 1 nearest elements.
+    """
+    if window < 1:
+        raise ParameterError(f"window must be >= 1, got {window}")
+    v = _values(rec)
+    lay = rec.layout
+    out = np.empty(rec.n_frames)
+    if lay.shape is not None:
+        for start in range(0, rec.n_frames, _BLOCK):
+            block = lay.to_grid(v[start : start + _BLOCK])
+            out[start : start + _BLOCK] = _window_means_grid(block, window)
+        return out
+    k = min(window * window, lay.n_elements)
+    d = np.linalg.norm(lay.xy_cm[:, None, :] - lay.xy_cm[None, :, :], axis=2)
+    nearest = np.argsort(d, axis=1, kind="stable")[:, :k]
+    for t in range(rec.n_frames):
+        row = v[t]
+        if not np.isfinite(row).any():
+            out[t] = np.nan
+            continue
+        peak = int(np.nanargmax(row))
+        out[t] = np.nanmean(row[nearest[peak]])
+    return out
+
+
+@dataclass(frozen=True)
+class FrameStats:
+    """Per-frame statistics of a recording (arrays of length T)."""
+
+    load_N: _Array | None
+    contact_area_cm2: _Array
+    peak: _Array
+    ppi: _Array
+    cof_cm: _Array
+    cov: _Array
+
+
+def frame_stats(rec: Recording, threshold: float = 0.0, ppi_window: int = 3) -> FrameStats:
+    """All frame statistics at once (``load_N`` is None unless the recording holds pressure)."""
+    return FrameStats(
+        load_N=total_load(rec) if rec.quantity == "pressure" else None,
+        contact_area_cm2=contact_area(rec, threshold),
+        peak=peak_pressure(rec),
+        ppi=peak_pressure_index(rec, ppi_window),
+        cof_cm=centre_of_force(rec),
+        cov=coefficient_of_variation(rec, threshold),
+    )
+
+
+def region_stats(
+    rec: Recording,
+    regions: dict[str, npt.ArrayLike] | None = None,
+    threshold: float = 0.0,
+) -> dict[str, dict[str, _Array]]:
+    """Statistics per named region.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    regions : mapping of str to element indices, optional
+        Default: the layout's named regions.
+    threshold : float
+        Contact threshold.
+
+    Returns
+    -------
+    dict
+        region name -> {"load_N" (pressure only), "mean", "peak", "contact_area_cm2"}, each an
+        array of length T. ``mean`` is the mean over the region's valid elements.
+    """
+    named: Mapping[str, npt.ArrayLike] = rec.layout.regions if regions is None else regions
+    if not named:
+        raise ParameterError("no regions: the layout has none and none were given")
+    v = _values(rec)
+    area = rec.layout.area_cm2
+    out: dict[str, dict[str, _Array]] = {}
+    for name, members in named.items():
+        idx = np.asarray(members, dtype=np.int64)
+        if idx.size == 0:
+            raise ParameterError(f"region {name!r} has no elements")
+        sub = v[:, idx]
+        count = np.sum(np.isfinite(sub), axis=1)
+        with np.errstate(invalid="ignore"):
+            entry = {
+                "mean": _nan_if_empty(np.nansum(sub, axis=1), count) / np.maximum(count, 1),
+                "peak": np.where(
+                    count > 0, np.nanmax(np.where(count[:, None] > 0, sub, 0), axis=1), np.nan
+                ),
+                "contact_area_cm2": ((sub > threshold) * area[idx]).sum(axis=1),
+            }
+        if rec.quantity == "pressure":
+            entry["load_N"] = _nan_if_empty(np.nansum(sub * area[idx], axis=1), count)
+        out[name] = entry
+    return out

@@ -1,0 +1,360 @@
+"""Wire formats of live sources: the serial line protocol and the MQTT payload (docs/monitor.md).
+
+Serial (one ASCII line per frame, ``\\n`` terminated)::
+
+    F,<seq>,<t0_us>,<dt_us>,<v_1>,...,<v_N>[*<XX>]
+
+``seq`` counts frames (wraps at 2**32), ``t0_us`` is the microcontroller's clock when element 1
+was read, ``dt_us`` the time between two elements (element i was read at
+``t0_us + (i - 1) * dt_us``), ``v_i`` the capacitance in pF (decimal; empty or ``nan`` for a
+reading that failed), ``*XX`` an optional checksum: the XOR of all bytes between the start of
+the line and ``*``, two hex digits (as in NMEA). Lines starting with ``#`` are comments.
+
+A device may announce its layout in a comment line (first, and again now and then for a
+reader that opens the port later), so that no ``--grid`` is needed::
+
+    #layout {"grid": [15, 16], "pitch_cm": [2.07, 2.07], "element_cm": [2.0, 2.0],
+             "active": "<hex>", "elements": 96, "spacer": "textile-3mm", ...}
+
+(one line; ``active`` is the hex bitmask of the active cells, row by row, omitted when every
+cell is active; further keys describe the device). A grid layout is all the announcement
+carries (4-neighbours linked across one empty cell, as :meth:`Layout.grid` does).
+
+MQTT (topic ``texsense/<mat>/frames``), a JSON object per message::
+
+    {"seq": 17, "t": 12.25, "dt": 0.0005, "values": [0.0, 12.3, ...], "unit": "pF"}
+
+``t`` is the time (s) of element 1, ``dt`` (s, optional, default 0) the time between elements
+or ``element_times`` (s, one per element) instead; ``unit`` any capacitance or pressure unit
+(default pF); ``null`` for a failed reading.
+
+Both parsers raise :class:`ProtocolError` naming what is wrong; the sources count, log and skip
+such lines (the monitor keeps running). A payload longer than :func:`payload_limit` allows
+for the mat's element count is refused by its length, before any parsing
+(:class:`PayloadSizeError`); a payload with another number of values than the mat has elements
+raises :class:`CountError`, which says how many it had.
+
+Examples
+--------
+>>> line = format_serial_line(3, 1_000_000, 500, [12.5, 13.0])
+>>> line
+'F,3,1000000,500,12.5,13*47'
+>>> f = parse_serial_line(line, 2)
+>>> f.seq, f.element_times.tolist(), f.values.tolist()
+(3, [1.0, 1.0005], [12.5, 13.0])
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense.data import units
+from texsense.data.layout import Layout
+
+if TYPE_CHECKING:
+    from texsense.data.layout import Layout
+
+__all__ = [
+    "CountError",
+    "Frame",
+    "PayloadSizeError",
+    "ProtocolError",
+    "format_serial_line",
+    "layout_announcement",
+    "parse_announcement",
+    "parse_mqtt_payload",
+    "parse_serial_line",
+    "payload_limit",
+]
+
+MAX_LINE = 65536  # characters; longer lines are rejected before parsing
+#: Largest integer the protocol's counters and time stamps may hold (int64).
+MAX_INT = 2**63 - 1
+
+
+class ProtocolError(ValueError):
+    """A line or payload that does not follow the protocol."""
+
+
+class CountError(ProtocolError):
+    """A payload with another number of values than the mat has elements (``got`` values)."""
+
+    def __init__(self, message: str, got: int) -> None:
+        super().__init__(message)
+        self.got = got
+
+
+class PayloadSizeError(ProtocolError):
+    """A payload longer than :func:`payload_limit` (``size`` bytes): refused unparsed."""
+
+    def __init__(self, size: int, limit: int) -> None:
+        super().__init__(f"a payload of {size} bytes, more than the {limit} a frame can need")
+        self.size, self.limit = size, limit
+
+
+def payload_limit(n_elements: int) -> int:
+    """The longest MQTT payload a frame of ``n_elements`` can need, bytes: room for every value
+    and every element time written with 17 significant digits, spaces, and the keys (4 kB +
+    64 bytes per element: 10 kB for 96 elements, 135 kB for 2048)."""
+    return 4096 + 64 * int(n_elements)
+
+
+@dataclass
+class Frame:
+    """One frame from a source: per-element time stamps (s) and values in ``unit``."""
+
+    seq: int
+    element_times: np.ndarray  # (N,)
+    values: np.ndarray  # (N,), NaN for a failed reading
+    unit: str = "pF"
+
+    @property
+    def t(self) -> float:
+        """Time of the first element, s."""
+        return float(self.element_times[0])
+
+
+def _checksum(body: str) -> str:
+    x = 0
+    for b in body.encode("ascii", errors="replace"):
+        x ^= b
+    return f"{x:02X}"
+
+
+def format_serial_line(
+    seq: int, t0_us: int, dt_us: int, values: npt.ArrayLike, checksum: bool = True
+) -> str:
+    """One frame as a serial line (without the newline); what a sender writes."""
+    vals = ",".join("" if not math.isfinite(v) else f"{v:.6g}" for v in np.asarray(values, float))
+    body = f"F,{int(seq)},{int(t0_us)},{int(dt_us)},{vals}"
+    return f"{body}*{_checksum(body)}" if checksum else body
+
+
+def _int(text: str, what: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise ProtocolError(f"{what} is not an integer: {text[:20]!r}") from None
+    if abs(value) > MAX_INT:
+        raise ProtocolError(f"{what} is out of range: {text[:20]!r}")
+    return value
+
+
+def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
+    """Parse one serial line; None for a blank line or a comment."""
+    if isinstance(line, bytes):
+        try:
+            line = line.decode("ascii")
+        except UnicodeDecodeError:
+            raise ProtocolError("line is not ASCII") from None
+    if len(line) > MAX_LINE:
+        raise ProtocolError(f"line longer than {MAX_LINE} characters")
+    line = line.strip()
+    if not line or line.startswith("#"):
+        return None
+    body = line
+    if "*" in line:
+        body, _, check = line.rpartition("*")
+        if len(check) != 2 or check.upper() != _checksum(body):
+            raise ProtocolError(f"checksum mismatch ({check[:4]!r}, expected {_checksum(body)})")
+    parts = body.split(",")
+    if parts[0] != "F":
+        raise ProtocolError(f"unknown record type {parts[0][:8]!r} (expected 'F')")
+    if len(parts) != 4 + n_elements:
+        raise ProtocolError(f"expected {n_elements} values, got {max(len(parts) - 4, 0)}")
+    seq = _int(parts[1], "frame counter")
+    t0 = _int(parts[2], "time stamp")
+    dt = _int(parts[3], "element period")
+    if seq < 0 or t0 < 0 or dt < 0:
+        raise ProtocolError("frame counter, time stamp and element period must be >= 0")
+    values = np.empty(n_elements)
+    for i, text in enumerate(parts[4:]):
+        if text == "" or text.lower() == "nan":
+            values[i] = np.nan
+            continue
+        try:
+            values[i] = float(text)
+        except ValueError:
+            raise ProtocolError(f"value {i + 1} is not a number: {text[:20]!r}") from None
+        if not math.isfinite(values[i]):
+            raise ProtocolError(f"value {i + 1} is not finite: {text[:20]!r}")
+    times = (float(t0) + float(dt) * np.arange(n_elements)) * 1e-6
+    return Frame(seq, times, values, "pF")
+
+
+def _values(vals: list[Any], n: int) -> np.ndarray:
+    """The values of a payload: numbers, ``null`` for a failed reading (NaN). One numpy
+    conversion for the common case of plain numbers; the element-wise check names the first
+    bad value otherwise."""
+    if set(map(type, vals)) <= {float, int}:  # not bool, str, None (one pass in C)
+        try:
+            values = np.array(vals, dtype=np.float64)
+        except OverflowError:  # an integer beyond any float: named below
+            values = np.empty(0)
+        if values.shape == (n,) and np.all(np.isfinite(values)):
+            return values
+    values = np.empty(n)
+    for i, v in enumerate(vals):
+        if v is None:
+            values[i] = np.nan
+        elif isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v):
+            values[i] = v
+        else:
+            raise ProtocolError(f"value {i + 1} is not a finite number or null")
+    return values
+
+
+def _finite(v: float) -> bool:
+    try:
+        return math.isfinite(v) and math.isfinite(float(v))
+    except OverflowError:  # an integer beyond any float
+        return False
+
+
+def parse_mqtt_payload(
+    payload: bytes | str, n_elements: int, max_bytes: int | None = None
+) -> Frame:
+    """Parse one MQTT message (JSON, see the module docstring); ``max_bytes`` (default
+    :func:`payload_limit`) is checked first, before anything is parsed."""
+    limit = payload_limit(n_elements) if max_bytes is None else max_bytes
+    if len(payload) > limit:
+        raise PayloadSizeError(len(payload), limit)
+    try:
+        text = payload.decode("utf-8") if isinstance(payload, bytes) else payload
+    except UnicodeDecodeError:
+        raise ProtocolError("payload is not JSON: not UTF-8 text") from None
+    try:
+        d: Any = json.loads(text)
+    except ValueError as e:
+        raise ProtocolError(f"payload is not JSON: {e}") from None
+    if not isinstance(d, dict):
+        raise ProtocolError("payload must be a JSON object")
+    for key in ("seq", "t", "values"):
+        if key not in d:
+            raise ProtocolError(f"payload lacks {key!r}")
+    seq, t, vals = d["seq"], d["t"], d["values"]
+    if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
+        raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {str(seq)[:20]!r}")
+    if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
+        raise ProtocolError(f"'t' must be a finite number, got {str(t)[:20]!r}")
+    if not isinstance(vals, list):
+        raise ProtocolError(f"'values' must be a list of {n_elements} numbers")
+    if len(vals) != n_elements:
+        raise CountError(
+            f"'values' must be a list of {n_elements} numbers, got {len(vals)}", len(vals)
+        )
+    values = _values(vals, n_elements)
+    unit = d.get("unit", "pF")
+    if not isinstance(unit, str):
+        raise ProtocolError("'unit' must be a string")
+    try:
+        unit = units.canonical(unit)
+    except ValueError as e:
+        raise ProtocolError(str(e)) from None
+    if units.quantity_of(unit) not in ("capacitance", "pressure"):
+        raise ProtocolError(f"unit {unit!r} is neither capacitance nor pressure")
+    if "element_times" in d:
+        et = d["element_times"]
+        ok = isinstance(et, list) and len(et) == n_elements
+        if not ok or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and _finite(x) for x in et
+        ):
+            raise ProtocolError(f"'element_times' must be {n_elements} finite numbers")
+        times = np.asarray(et, dtype=np.float64)
+    else:
+        dt = d.get("dt", 0.0)
+        if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt >= 0:
+            raise ProtocolError("'dt' must be a number >= 0")
+        if not _finite(dt):
+            raise ProtocolError("'t' + 'dt' x elements is not a finite time")
+        times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
+        if not np.isfinite(times[-1]):
+            raise ProtocolError("'t' + 'dt' x elements is not a finite time")
+    return Frame(seq, times, values, unit)
+
+
+ANNOUNCE = "#layout "
+
+
+def layout_announcement(layout: Layout, **info: Any) -> str:
+    """The ``#layout`` comment line of a grid ``layout`` (without newline), with ``info``
+    (JSON-able: the device, its spacer, frame time, ...) added to it.
+
+    >>> from texsense.data.layout import Layout
+    >>> line = layout_announcement(Layout.grid(2, 3, pitch_cm=1.5), spacer="textile-3mm")
+    >>> line[:61]
+    '#layout {"grid": [2, 3], "pitch_cm": [1.5, 1.5], "element_cm"'
+    >>> parse_announcement(line)[0] == Layout.grid(2, 3, pitch_cm=1.5)
+    True
+    """
+    if layout.shape is None or layout.pitch_cm is None:
+        raise ProtocolError("only a grid layout can be announced on the serial line")
+    rows, cols = layout.shape
+    size = np.unique(layout.size_cm, axis=0)
+    if size.shape[0] != 1:
+        raise ProtocolError("only a grid of equal elements can be announced")
+    d: dict[str, Any] = {
+        "grid": [int(rows), int(cols)],
+        "pitch_cm": [float(v) for v in layout.pitch_cm],
+        "element_cm": [float(size[0, 1]), float(size[0, 0])],  # (height, width)
+    }
+    active = layout.active
+    if active is not None and not bool(np.all(active)):
+        bits = np.packbits(np.asarray(active, dtype=bool).ravel())
+        d["active"] = bits.tobytes().hex()
+    d["elements"] = layout.n_elements
+    d.update(info)
+    line = ANNOUNCE + json.dumps(d)
+    if len(line) > MAX_LINE:
+        raise ProtocolError(f"the announcement is longer than {MAX_LINE} characters")
+    return line
+
+
+def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | None:
+    """(layout, the other keys) of a ``#layout`` line; None for any other line;
+    :class:`ProtocolError` naming the field for a malformed announcement."""
+
+    if isinstance(line, bytes):
+        line = line.decode("ascii", errors="replace")
+    line = line.strip()
+    if not line.startswith(ANNOUNCE.strip()):
+        return None
+    if len(line) > MAX_LINE:
+        raise ProtocolError(f"announcement longer than {MAX_LINE} characters")
+    try:
+        d = json.loads(line[len(ANNOUNCE) - 1 :])
+    except ValueError as e:
+        raise ProtocolError(f"layout announcement is not JSON: {e}") from None
+    if not isinstance(d, dict):
+        raise ProtocolError("layout announcement must be a JSON object")
+    try:
+        rows, cols = (int(v) for v in d["grid"])
+        pitch = tuple(float(v) for v in d["pitch_cm"])
+        element = tuple(float(v) for v in d.get("element_cm", pitch))
+        if not (0 < rows <= 4096 and 0 < cols <= 4096) or len(pitch) != 2 or len(element) != 2:
+            raise ValueError("grid, pitch_cm and element_cm need two positive numbers each")
+        active = None
+        if "active" in d:
+            bits = np.unpackbits(np.frombuffer(bytes.fromhex(str(d["active"])), np.uint8))
+            if bits.size < rows * cols:
+                raise ValueError("'active' has fewer bits than the grid has cells")
+            active = bits[: rows * cols].reshape(rows, cols).astype(bool)
+        layout = Layout.grid(
+            rows, cols, pitch_cm=(pitch[0], pitch[1]), active=active,
+            element_size_cm=(element[0], element[1]),
+        )  # fmt: skip
+    except (KeyError, TypeError, ValueError) as e:
+        what = f"lacks {e}" if isinstance(e, KeyError) else str(e)
+        raise ProtocolError(f"layout announcement {what}") from None
+    if "elements" in d and d["elements"] != layout.n_elements:
+        raise ProtocolError(
+            f"layout announcement says {d['elements']} elements, its grid has {layout.n_elements}"
+        )
+    info = {k: v for k, v in d.items() if k not in ("grid", "pitch_cm", "element_cm", "active")}
+    return layout, info
