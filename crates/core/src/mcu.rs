@@ -132,14 +132,8 @@ fn repair(r: &LocalRepair) -> Words {
 
 impl Chain {
     /// The chain as the model blob of a microcontroller (`texsense_kernels::blob`): every
-    /// parameter in `f32`, each element keeping at most `capacity` Preisach turning points.
-    pub fn mcu_blob(&self, capacity: usize) -> Result<Vec<u8>, CoreError> {
-        if !(4..=1 << 16).contains(&capacity) {
-            return Err(CoreError::Parameter {
-                what: "capacity",
-                why: format!("must be 4 ..= 65536 turning points, got {capacity}"),
-            });
-        }
+    /// parameter in `f32`; each element keeps as many Preisach turning points as here.
+    pub fn mcu_blob(&self) -> Result<Vec<u8>, CoreError> {
         let mut body = Words::default();
         let mut count = 0;
         for s in self.stages() {
@@ -163,6 +157,13 @@ impl Chain {
                 }
                 Stage::Compensation(c) => {
                     let p = c.preisach();
+                    let capacity = p.capacity();
+                    if capacity > 1 << 16 {
+                        return Err(CoreError::Parameter {
+                            what: "capacity",
+                            why: format!("a blob keeps <= 65536 turning points, not {capacity}"),
+                        });
+                    }
                     let e = p.everett();
                     let (offset, sign) = p.output();
                     let mut w = Words::default();
@@ -227,7 +228,7 @@ mod tests {
     fn the_blob_reads_back_the_chain_and_refuses_damage() {
         let mat = Mat { rows: 4, cols: 5 };
         let chain = usual(&mat);
-        let blob = chain.mcu_blob(16).unwrap();
+        let blob = chain.mcu_blob().unwrap();
         assert_eq!(
             texsense_kernels::blob::crc32(&blob[..blob.len() - 4]).to_le_bytes(),
             blob[blob.len() - 4..]
@@ -244,7 +245,7 @@ mod tests {
                     "convert"
                 }
                 StageView::Hysteresis { capacity, .. } => {
-                    assert_eq!(capacity, 16);
+                    assert_eq!(capacity, 32);
                     "hysteresis"
                 }
                 StageView::Drift { level, .. } => {
@@ -275,6 +276,5 @@ mod tests {
         );
         let cut = aligned(&blob[..blob.len() - 8]);
         assert!(Model::parse(as_bytes(&cut)).is_err());
-        assert!(chain.mcu_blob(3).is_err());
     }
 }

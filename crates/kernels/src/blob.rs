@@ -535,3 +535,32 @@ fn stage(k: u32, payload: &[u32], n: usize, full: bool) -> Result<StageView<'_>,
 
 /// The failure codes a detector stage gives (re-exported for the C side).
 pub use detect::codes;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_is_zlibs() {
+        // the check value of CRC-32/ISO-HDLC (zlib.crc32(b"123456789"))
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32(b""), 0);
+    }
+
+    #[test]
+    fn a_header_alone_is_refused_with_its_reason() {
+        let mut b = [0u32; 10];
+        let bytes =
+            |w: &[u32]| -> std::vec::Vec<u8> { w.iter().flat_map(|x| x.to_le_bytes()).collect() };
+        assert_eq!(Model::parse(&bytes(&b)).unwrap_err(), BlobError::Magic);
+        b[0] = u32::from_le_bytes(*b"TXSN");
+        b[1] = u32::from_le_bytes(*b"MCU\0");
+        b[2] = 7;
+        let v = bytes(&b);
+        let w = words(&v);
+        // a Vec<u8> is not necessarily 4-aligned: only check when it is
+        if w.is_ok() {
+            assert_eq!(Model::parse(&v).unwrap_err(), BlobError::Version(7));
+        }
+    }
+}

@@ -225,3 +225,67 @@ pub fn set_sum<T: Real>(
     head.last_h = h;
     h
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::everett::Everett;
+    use std::vec;
+    use std::vec::Vec;
+
+    fn table<T: Real>(k: usize) -> Vec<T> {
+        let mut t = vec![T::ZERO; k * k];
+        for i in 0..k {
+            for j in 0..i {
+                let d = (i - j) as f64 / (k - 1) as f64;
+                t[i * k + j] = T::from_f64(0.5 * d * d + 0.2 * d);
+            }
+        }
+        t
+    }
+
+    /// One element along `path`, with room for `cap` turning points.
+    fn run<T: Real>(path: &[f64], cap: usize) -> Vec<f64> {
+        let t = table::<T>(33);
+        let e = Everett::new(33, T::ZERO, T::ONE, &t).unwrap();
+        let mut head = Head::new(T::ZERO);
+        let mut stack = vec![[T::ZERO; 2]; cap + 1];
+        start(&mut head, &mut stack, T::ZERO);
+        path.iter()
+            .map(|&u| {
+                step(&mut head, &mut stack, cap, &e, T::from_f64(u))
+                    .0
+                    .to_f64()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn f32_follows_f64_and_a_full_stack_forgets_the_innermost_loop() {
+        // a random walk with turning points everywhere
+        let mut x = 0.5f64;
+        let path: Vec<f64> = (0..5000u64)
+            .map(|k| {
+                let r = ((k.wrapping_mul(6_364_136_223_846_793_005) >> 33) % 1000) as f64;
+                x = (x + (r / 1000.0 - 0.5) * 0.08).clamp(-0.05, 1.05);
+                x
+            })
+            .collect();
+        let (a, b) = (run::<f64>(&path, 64), run::<f32>(&path, 64));
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 2e-5, "f32 differs by {worst}");
+        // nested, ever smaller loops, then out again (return-point memory): 4 turning points
+        // keep the outer ones only, which changes the way back
+        let nested: Vec<f64> = (0..20)
+            .chain((0..20).rev())
+            .flat_map(|k| [0.9 - 0.02 * k as f64, 0.1 + 0.02 * k as f64])
+            .collect();
+        let (deep, shallow) = (run::<f64>(&nested, 64), run::<f64>(&nested, 4));
+        assert_eq!(deep[..4], shallow[..4]);
+        assert!(deep.iter().zip(&shallow).any(|(p, q)| p != q));
+    }
+}

@@ -3,10 +3,10 @@
 //!
 //! A mat is initialised from the model blob `texsense export mcu` writes (read in place,
 //! typically from flash: the blob must stay where it is while the mat runs) in memory the
-//! caller gives ([`ts_mem_size`] says how much: a fixed amount per element and per stage,
-//! nothing allocated). [`ts_step`] runs one frame of raw readings through the chain the blob
+//! caller gives (`ts_mem_size` says how much: a fixed amount per element and per stage,
+//! nothing allocated). `ts_step` runs one frame of raw readings through the chain the blob
 //! holds, stage after stage as the desktop pipeline runs it, in `f32`: values out, and per
-//! reading its failure code (0 = measured). Errors are codes ([`TS_OK`] and the `TS_ERR_`
+//! reading its failure code (0 = measured). Errors are codes (`TS_OK` and the `TS_ERR_`
 //! constants), never panics: a blob is checked completely (and its checksum) before a mat
 //! runs it.
 
@@ -26,7 +26,7 @@ use texsense_kernels::blob::{BlobError, Model};
 pub const TS_OK: i32 = 0;
 /// A pointer argument is NULL.
 pub const TS_ERR_NULL: i32 = -1;
-/// The blob or the memory is not 4-byte aligned.
+/// The blob is not 4-byte aligned, or the mat's memory not 8-byte aligned.
 pub const TS_ERR_ALIGN: i32 = -2;
 /// Not a model blob (wrong magic, shorter than a header).
 pub const TS_ERR_MAGIC: i32 = -3;
@@ -59,9 +59,10 @@ pub const TS_CODE_STUCK: u8 = 3;
 pub const TS_CODE_JUMP: u8 = 4;
 
 /// The version of the blob format this library reads.
-pub const TS_BLOB_VERSION: u32 = texsense_kernels::blob::VERSION;
+pub const TS_BLOB_VERSION: u32 = 1;
+const _: () = assert!(TS_BLOB_VERSION == texsense_kernels::blob::VERSION);
 
-/// A mat (opaque): lives at the start of the memory given to [`ts_init`].
+/// A mat (opaque): lives at the start of the memory given to `ts_init`.
 #[allow(non_camel_case_types)]
 pub struct ts_mat {
     _private: [u8; 0],
@@ -116,7 +117,7 @@ pub unsafe extern "C" fn ts_mem_size(blob: *const u8, blob_len: usize, bytes: *m
 }
 
 /// Initialise a mat of `n_elements` from a blob in `mem` (`mem_len` bytes, at least what
-/// [`ts_mem_size`] says, 4-byte aligned); `*mat` is the mat. The blob is checked completely
+/// `ts_mem_size` says, 8-byte aligned); `*mat` is the mat. The blob is checked completely
 /// and read in place from then on: it must stay where it is, unchanged, while the mat runs.
 /// On an error nothing is initialised.
 ///
@@ -159,11 +160,11 @@ pub unsafe extern "C" fn ts_init(
 /// One frame: `readings` (N raw values, e.g. pF) with their validity (`valid`, N bytes,
 /// nonzero = valid; NULL: all valid), `dt_s` seconds after the previous frame (0 for the
 /// first) -> `values` (N, e.g. N/cm²; NaN where nothing is known) and, if `codes` is not
-/// NULL, each reading's failure code (N bytes, [`TS_CODE_OK`] = measured; a repaired value
+/// NULL, each reading's failure code (N bytes, `TS_CODE_OK` = measured; a repaired value
 /// keeps its code). `readings` and `values` may be the same array.
 ///
 /// # Safety
-/// `mat` comes from [`ts_init`]; the arrays hold N elements (or the optional ones are NULL).
+/// `mat` comes from `ts_init`; the arrays hold N elements (or the optional ones are NULL).
 #[no_mangle]
 pub unsafe extern "C" fn ts_step(
     mat: *mut ts_mat,
@@ -183,10 +184,10 @@ pub unsafe extern "C" fn ts_step(
     unsafe { mat::Mat::step(mat.cast(), readings, valid, dt_s, values, codes) }
 }
 
-/// Start over: every element's state as after [`ts_init`].
+/// Start over: every element's state as after `ts_init`.
 ///
 /// # Safety
-/// `mat` comes from [`ts_init`] (or is NULL).
+/// `mat` comes from `ts_init` (or is NULL).
 #[no_mangle]
 pub unsafe extern "C" fn ts_reset(mat: *mut ts_mat) -> i32 {
     if mat.is_null() {
@@ -199,7 +200,7 @@ pub unsafe extern "C" fn ts_reset(mat: *mut ts_mat) -> i32 {
 /// The number of elements of a mat (0 for NULL or a mat not initialised).
 ///
 /// # Safety
-/// `mat` comes from [`ts_init`] (or is NULL).
+/// `mat` comes from `ts_init` (or is NULL).
 #[no_mangle]
 pub unsafe extern "C" fn ts_n_elements(mat: *const ts_mat) -> u32 {
     if mat.is_null() {
@@ -239,3 +240,10 @@ fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
     // SAFETY: the C library's abort takes nothing and does not return
     unsafe { abort() }
 }
+
+/// The prebuilt `core` of a desktop target has unwinding tables that name this personality
+/// routine; the static library is built with panic=abort, so nothing unwinds and it is never
+/// called (a Cortex-M build's `core` is built with panic=abort and has none).
+#[cfg(all(feature = "panic-handler", not(test), not(target_os = "none")))]
+#[no_mangle]
+extern "C" fn rust_eh_personality() {}

@@ -87,6 +87,9 @@ impl<'m> Carver<'m> {
         let rest = core::mem::take(&mut self.rest);
         let (head, tail) = rest.split_at_mut(bytes);
         self.rest = tail;
+        if count == 0 {
+            return &mut [];
+        }
         let p = head[pad..].as_mut_ptr();
         debug_assert_eq!(p as usize % align_of::<T>(), 0);
         // SAFETY: `head[pad..]` is `count * size_of::<T>()` bytes of this region, aligned for

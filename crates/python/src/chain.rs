@@ -116,10 +116,10 @@ impl PyChain {
         self.inner.restore(state).map_err(to_py)
     }
 
-    /// The chain as the model blob of a microcontroller (f32; at most `capacity` Preisach
-    /// turning points per element).
-    fn mcu_blob<'py>(&self, py: Python<'py>, capacity: usize) -> PyResult<Bound<'py, PyBytes>> {
-        let blob = self.inner.mcu_blob(capacity).map_err(to_py)?;
+    /// The chain as the model blob of a microcontroller (f32; each element keeps as many
+    /// Preisach turning points as here).
+    fn mcu_blob<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let blob = self.inner.mcu_blob().map_err(to_py)?;
         Ok(PyBytes::new(py, &blob))
     }
 }

@@ -1,12 +1,12 @@
 """From raw capacitance frames to pressure maps: a mat's chain of stages
-(:class:`~texsense.compensation.stages.StageChain`) compiled into passes of the Rust core, streaming frame
-by frame or in batch over a recording.
+(:class:`~texsense.compensation.stages.StageChain`) compiled into passes of the Rust core,
+streaming frame by frame or in batch over a recording.
 
 The pipeline runs the chain **as written**, stage after stage, each with the compiled kernel
 its Python stage runs (``crates/core/src/chain.rs``):
 
-- **detect** (:class:`~texsense.compensation.health.FailureDetector`): every detect stage of the chain;
-  a chain without one gets the detector its conversion implies (the expected capacitance
+- **detect** (:class:`~texsense.compensation.health.FailureDetector`): every detect stage of
+  the chain; a chain without one gets the detector its conversion implies (the expected capacitance
   range of every element), right before the conversion;
 - **convert** (:class:`~texsense.compensation.stages.Convert`,
   :class:`~texsense.compensation.stages.Linear`):
@@ -41,6 +41,7 @@ import numpy.typing as npt
 
 from texsense._core import Chain, Compensation, __version__
 from texsense.compensation.health import FailureDetector
+from texsense.compensation.hysteresis import DEFAULT_CAPACITY
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
 from texsense.compensation.stage import Stage, time_steps
 from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, StageChain
@@ -79,10 +80,15 @@ class Pipeline:
         the chain's included; ``hysteresis=False``: the first-loading curve in place of the
         hysteresis stage, and no drift).
     repair : str or None
-        A method of :data:`texsense.compensation.repair.METHODS` added after the last stage of a chain
-        that holds no repair stage (a chain's own repair stages run where they stand); None:
-        no repair at all, failed elements stay NaN (an unknown name raises
+        A method of :data:`texsense.compensation.repair.METHODS` added after the last stage of
+        a chain that holds no repair stage (a chain's own repair stages run where they stand);
+        None: no repair at all, failed elements stay NaN (an unknown name raises
         :class:`ParameterError`).
+    capacity : int
+        Preisach turning points each element keeps (eq. 4.18-4.22); when a stack is full the
+        innermost minor loop is forgotten. The default holds every loop seen on real and
+        simulated records; a microcontroller keeps fewer (``texsense export mcu
+        --capacity``), and the same value here gives its numbers in float64.
     """
 
     def __init__(
@@ -94,6 +100,7 @@ class Pipeline:
         hysteresis: bool = True,
         drift: bool = True,
         repair: str | None = "harmonic",
+        capacity: int = DEFAULT_CAPACITY,
     ) -> None:
         if not isinstance(chain, StageChain):
             raise ParameterError(f"a Pipeline compiles a StageChain, not {type(chain).__name__}")
@@ -107,6 +114,9 @@ class Pipeline:
         self.chain = chain
         self.layout = layout
         self.detect, self.hysteresis, self.drift, self.repair = detect, hysteresis, drift, repair
+        if not 4 <= capacity <= 1 << 16:
+            raise ParameterError(f"capacity must be 4 ..= 65536 turning points, got {capacity}")
+        self.capacity = int(capacity)
         self.calibration_id = chain.id
         #: the stages the pipeline runs, in order (the chain's, switched, plus what it adds)
         self.plan: list[Stage | _Loading] = self._plan()
@@ -194,10 +204,10 @@ class Pipeline:
                 after = plan[k + 1] if k + 1 < len(plan) else None
                 if isinstance(after, Drift):  # one pass: Preisach, then its drift (QLV too)
                     bank, level = after.bank(n), after.model_.level_curve()
-                    kernels.append(Compensation(s.bank(n), bank, level))
+                    kernels.append(Compensation(s.bank(n, self.capacity), bank, level))
                     k += 1
                 else:
-                    kernels.append(Compensation(s.bank(n)))
+                    kernels.append(Compensation(s.bank(n, self.capacity)))
             elif isinstance(s, Drift):
                 if s.needs_inputs:
                     raise ParameterError(
