@@ -127,8 +127,6 @@ impl Stage {
 #[derive(Debug, Clone, Default)]
 struct Scratch {
     values: Vec<f64>,
-    valid: Vec<bool>,
-    codes: Vec<u8>,
     changes: Changes,
 }
 
@@ -235,14 +233,22 @@ impl Chain {
         out: &mut [f64],
         codes: &mut [u8],
     ) -> Result<(), CoreError> {
-        for ((c, &r), &v) in codes.iter_mut().zip(readings).zip(valid) {
-            *c = if v && r.is_finite() { code::OK } else { UNSET };
-        }
         let Self { n, stages, scratch } = self;
         let n = *n;
         scratch.values.resize(readings.len(), 0.0);
         let mut at = At::Readings;
         let mut k = 0;
+        // the validity of every reading as codes: 0, or UNSET until a detect stage codes it
+        // (a first detect stage codes every reading from the readings and their validity)
+        let coded = matches!(stages.first(), Some(Stage::Detect(_)));
+        if let Some(Stage::Detect(d)) = stages.first_mut() {
+            d.run(readings, valid, codes, &mut scratch.changes)?;
+            k = 1;
+        } else {
+            for ((c, &r), &v) in codes.iter_mut().zip(readings).zip(valid) {
+                *c = if v && r.is_finite() { code::OK } else { UNSET };
+            }
+        }
         while k < stages.len() {
             if stages[k].elementwise() {
                 let end = (k..stages.len())
@@ -265,20 +271,7 @@ impl Chain {
                         At::Out => &*out,
                         At::Scratch => &scratch.values,
                     };
-                    scratch.valid.clear();
-                    scratch.valid.extend(codes.iter().map(|&c| c == code::OK));
-                    scratch.codes.resize(codes.len(), 0);
-                    d.run(
-                        values,
-                        &scratch.valid,
-                        &mut scratch.codes,
-                        &mut scratch.changes,
-                    )?;
-                    for (c, &found) in codes.iter_mut().zip(&scratch.codes) {
-                        if *c == code::OK || *c == UNSET {
-                            *c = found;
-                        }
-                    }
+                    d.run_on_codes(values, codes, UNSET, &mut scratch.changes)?;
                 }
                 Stage::Repair(r) => {
                     let values: &mut [f64] = match at {
@@ -301,9 +294,11 @@ impl Chain {
             At::Scratch => out.copy_from_slice(&scratch.values),
             At::Out => {}
         }
-        for c in codes.iter_mut() {
-            if *c == UNSET {
-                *c = code::OUT_OF_RANGE;
+        if !coded {
+            for c in codes.iter_mut() {
+                if *c == UNSET {
+                    *c = code::OUT_OF_RANGE;
+                }
             }
         }
         Ok(())
@@ -420,9 +415,17 @@ fn segment(
         }
     }
     let codes_in: &[u8] = codes;
-    run_frames(dst, n, blocks, dt, |idx, _| {
-        (codes_in[idx] == code::OK).then(|| src[idx])
-    });
+    let input = |idx: usize, _| (codes_in[idx] == code::OK).then(|| src[idx]);
+    if blocks.iter().all(SegmentBlock::is_usual) {
+        // conversion then compensation, the usual segment: one step without a dispatch
+        let usual = blocks
+            .into_iter()
+            .filter_map(SegmentBlock::into_usual)
+            .collect();
+        run_frames(dst, n, usual, dt, input);
+    } else {
+        run_frames(dst, n, blocks, dt, input);
+    }
     for (c, v) in codes.iter_mut().zip(dst.iter()) {
         if *c == code::OK && !v.is_finite() {
             *c = code::OUT_OF_RANGE;
@@ -444,6 +447,48 @@ struct SegmentBlock<'a> {
     parts: Vec<Part<'a>>,
 }
 
+impl<'a> SegmentBlock<'a> {
+    fn is_usual(&self) -> bool {
+        matches!(
+            self.parts.as_slice(),
+            [Part::Convert(_), Part::Compensation(_)]
+        )
+    }
+
+    fn into_usual(self) -> Option<UsualBlock<'a>> {
+        let mut parts = self.parts.into_iter();
+        match (parts.next(), parts.next()) {
+            (Some(Part::Convert(conv)), Some(Part::Compensation(comp))) => Some(UsualBlock {
+                start: self.start,
+                conv,
+                comp,
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// A block of the usual segment: conversion, then compensation (the same rules as
+/// [`SegmentBlock`], without the dispatch).
+struct UsualBlock<'a> {
+    start: usize,
+    conv: ConverterView<'a>,
+    comp: CompensationBlock<'a>,
+}
+
+impl FrameBlock for UsualBlock<'_> {
+    #[inline]
+    fn frame(&mut self, dt: f64) {
+        self.comp.frame(dt);
+    }
+
+    #[inline(always)]
+    fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64 {
+        let (x, ok) = self.conv.stage(self.start + i, x, valid);
+        self.comp.stage(i, dt, x, ok).0
+    }
+}
+
 impl FrameBlock for SegmentBlock<'_> {
     #[inline]
     fn frame(&mut self, dt: f64) {
@@ -456,7 +501,7 @@ impl FrameBlock for SegmentBlock<'_> {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64 {
         let (mut x, mut ok) = (x, valid);
         for p in &mut self.parts {

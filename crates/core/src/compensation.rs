@@ -52,7 +52,7 @@ impl CompensationBlock<'_> {
 
     /// Element `i`'s stages (hysteresis, then drift) with the validity rules of a chain
     /// (`texsense_kernels::stage`): value and validity in, the same out.
-    #[inline]
+    #[inline(always)]
     pub fn stage(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> (f64, bool) {
         let h = self.preisach.step(i, u, valid);
         let ok = h.is_finite();

@@ -101,7 +101,7 @@ impl ConverterView<'_> {
     }
 
     /// Element `i`'s stage: reading and validity -> value and validity.
-    #[inline]
+    #[inline(always)]
     pub fn stage(&self, i: usize, c: f64, ok: bool) -> (f64, bool) {
         stage::conversion(self.offset[i], self.gain[i], self.curve.as_ref(), c, ok)
     }

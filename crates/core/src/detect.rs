@@ -27,6 +27,16 @@ pub use texsense_kernels::detect::codes as code;
 /// Thresholds of the detector (see the module documentation).
 pub type DetectorParams = kernel::Params<f64>;
 
+/// Where pass 2 finds a reading's validity.
+#[derive(Clone, Copy)]
+enum Validity<'a> {
+    /// In an array.
+    Given(&'a [bool]),
+    /// Code 0 in the codes it writes (which it merges: codes other than 0 and the `unset`
+    /// one stay).
+    InCodes(u8),
+}
+
 /// Streaming failure detector of N elements.
 #[derive(Debug, Clone)]
 pub struct FailureDetector {
@@ -157,7 +167,37 @@ impl FailureDetector {
         scratch.delta.resize(t * n, 0.0);
         let par = parallel(t, n);
         self.changes(readings, &mut scratch.delta, par);
-        self.codes(readings, valid, &scratch.delta, codes, par);
+        self.codes(readings, Validity::Given(valid), &scratch.delta, codes, par);
+        Ok(())
+    }
+
+    /// [`FailureDetector::run`] in a chain: a reading is valid when its code is 0 (`codes`
+    /// in), and the detector's code replaces the codes 0 and `unset` (a reading invalid on
+    /// input that no detect stage has coded yet); other codes stay (`codes` out).
+    pub fn run_on_codes(
+        &mut self,
+        readings: &[f64],
+        codes: &mut [u8],
+        unset: u8,
+        scratch: &mut Changes,
+    ) -> Result<(), CoreError> {
+        let n = self.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let t = readings.len() / n;
+        check_len("readings", readings.len(), t * n)?;
+        check_len("codes", codes.len(), t * n)?;
+        scratch.delta.resize(t * n, 0.0);
+        let par = parallel(t, n);
+        self.changes(readings, &mut scratch.delta, par);
+        self.codes(
+            readings,
+            Validity::InCodes(unset),
+            &scratch.delta,
+            codes,
+            par,
+        );
         Ok(())
     }
 
@@ -183,7 +223,7 @@ impl FailureDetector {
     fn codes(
         &mut self,
         readings: &[f64],
-        valid: &[bool],
+        valid: Validity<'_>,
         delta: &[f64],
         codes: &mut [u8],
         par: bool,
@@ -216,8 +256,20 @@ impl FailureDetector {
                         baseline: this.baseline.as_ref().map(|b| b[i]),
                         max: this.max.as_ref().map(|m| m[i]),
                     };
-                    let (c, v, d) = (readings[row + i], valid[row + i], delta[row + i]);
-                    out[li] = kernel::code(p, el, lim, c, v, d, nb_move, !nbs.is_empty());
+                    let (c, d) = (readings[row + i], delta[row + i]);
+                    let has_nbs = !nbs.is_empty();
+                    match valid {
+                        Validity::Given(v) => {
+                            out[li] = kernel::code(p, el, lim, c, v[row + i], d, nb_move, has_nbs);
+                        }
+                        Validity::InCodes(unset) => {
+                            let was = out[li];
+                            let k = kernel::code(p, el, lim, c, was == 0, d, nb_move, has_nbs);
+                            if was == 0 || was == unset {
+                                out[li] = k;
+                            }
+                        }
+                    }
                 }
             }
         });

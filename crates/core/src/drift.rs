@@ -130,7 +130,7 @@ impl DriftBlock<'_> {
     /// Element `i` of the block, in the frame started by [`DriftBlock::frame`] with `dt`:
     /// hysteresis output `h` in, drift-corrected output out (eq. 5.8); NaN or invalid inputs
     /// keep the state (time still passes for it) and give NaN.
-    #[inline]
+    #[inline(always)]
     pub fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
         let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
         kernel::step(

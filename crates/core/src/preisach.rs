@@ -28,7 +28,7 @@
 use std::sync::Arc;
 
 use texsense_kernels::everett::Everett as EverettView;
-use texsense_kernels::preisach::{self as kernel, Head, Output, CLAMPED, FORGOT};
+use texsense_kernels::preisach::{self as kernel, Head, Output, Prepared, CLAMPED};
 
 use crate::error::{check_len, frames_of, CoreError};
 pub use crate::everett::{everett_terms, Everett, EverettTerms};
@@ -90,42 +90,64 @@ impl Element {
         }
     }
 
-    /// The stack is full and the input turns: grow it on the heap (doubling) up to the
-    /// capacity (at the capacity the kernel forgets the innermost loop instead).
-    #[cold]
-    #[inline(never)]
-    fn grow_if_turning(&mut self, e: &EverettView<'_, f64>, capacity: usize, u: f64) {
-        if kernel::turns(&self.head, e, u) {
-            let room = self.stack().len() - 1;
-            self.grow_to((2 * room).min(capacity));
-        }
-    }
-
-    /// One valid input (eq. 4.16-4.22): the kernel's step on this element's stack.
+    /// One valid input (eq. 4.16-4.22): the kernel's step (`prepare`, then `finish`) on
+    /// this element's stack, which grows on the heap up to the capacity.
     #[inline]
-    fn step(&mut self, e: &EverettView<'_, f64>, capacity: usize, u: f64) -> f64 {
-        let room = (self.stack().len() - 1).min(capacity);
-        if self.head.len as usize == room && room < capacity {
-            self.grow_if_turning(e, capacity, u);
+    fn step(&mut self, e: &EverettView<'_, f64>, capacity: usize, u_in: f64) -> f64 {
+        let (prepared, flags) = kernel::prepare(&self.head, e, u_in);
+        self.clamped += u64::from(flags & CLAMPED != 0);
+        let (u, rising, turned) = match prepared {
+            Prepared::Same(h) => return h,
+            Prepared::Moves { u, rising, turned } => (u, rising, turned),
+        };
+        if self.head.len as usize == (self.stack().len() - 1).min(capacity) {
+            // rare; `turned` is tested inside, out of line, so that the compiler cannot
+            // test it first (it is as unpredictable as a coin on a real input)
+            self.make_room(capacity, turned);
         }
         let Element {
             head,
             inline,
             spill,
-            clamped,
-            forgotten,
+            ..
         } = self;
         let s: &mut [[f64; 2]] = match spill {
             Some(b) => b,
             None => inline,
         };
-        let (h, flags) = kernel::step(head, s, capacity, e, u);
-        *clamped += u64::from(flags & CLAMPED != 0);
-        *forgotten += u64::from(flags & FORGOT != 0);
+        let h = kernel::finish(head, s, e, u, rising, turned);
         if head.len as usize <= INLINE_EXTREMA / 2 && spill.is_some() {
             self.unspill();
         }
         h
+    }
+
+    /// The stack is full: if the input turned, grow it on the heap (doubling) while below
+    /// the capacity, else forget the innermost loop (the kernel's `forget`).
+    #[cold]
+    #[inline(never)]
+    fn make_room(&mut self, capacity: usize, turned: bool) {
+        if !turned {
+            return;
+        }
+        let room = self.stack().len() - 1;
+        if room < capacity {
+            self.grow_to((2 * room).min(capacity));
+            return;
+        }
+        let Element {
+            head,
+            inline,
+            spill,
+            forgotten,
+            ..
+        } = self;
+        let s: &mut [[f64; 2]] = match spill {
+            Some(b) => b,
+            None => inline,
+        };
+        kernel::forget(head, s);
+        *forgotten += 1;
     }
 
     /// The element's state in a snapshot: head, counters, the extrema on the stack.
@@ -204,7 +226,7 @@ pub struct PreisachBlock<'a> {
 impl PreisachBlock<'_> {
     /// Element `i` of the block reads `u`: the model's output (skipped, NaN out, when
     /// invalid or not finite).
-    #[inline]
+    #[inline(always)]
     pub fn step(&mut self, i: usize, u: f64, valid: bool) -> f64 {
         if valid && u.is_finite() {
             self.output

@@ -56,6 +56,8 @@ pub enum Method {
 pub struct LocalRepair {
     method: Method,
     last: Vec<f64>,
+    /// The fills of a frame until all are known (scratch).
+    fills: Vec<f64>,
 }
 
 impl LocalRepair {
@@ -79,6 +81,7 @@ impl LocalRepair {
         Ok(Self {
             method,
             last: vec![f64::NAN; n],
+            fills: vec![0.0; n],
         })
     }
 
@@ -158,24 +161,21 @@ impl LocalRepair {
         if let Some(o) = outcome.as_deref() {
             check_len("outcome", o.len(), values.len())?;
         }
-        let method = match &self.method {
+        let Self {
+            method,
+            last,
+            fills,
+        } = self;
+        let method = match method {
             Method::Zero => kernel::Method::Zero,
             Method::LastValue => kernel::Method::LastValue,
             Method::NeighbourMean(nb) => kernel::Method::NeighbourMean(nb.graph()),
             Method::Weighted(nb, w) => kernel::Method::Weighted(nb.graph(), w),
         };
-        let mut fills = vec![0.0; n];
         for (r, frame) in values.chunks_exact_mut(n).enumerate() {
             let row = r * n;
             let o = outcome.as_deref_mut().map(|o| &mut o[row..row + n]);
-            repair_frame(
-                &method,
-                &mut self.last,
-                frame,
-                |j| ok(row + j),
-                &mut fills,
-                o,
-            );
+            repair_frame(&method, last, frame, |j| ok(row + j), fills, o);
         }
         Ok(())
     }

@@ -406,131 +406,137 @@ fn stage(k: u32, payload: &[u32], n: usize, full: bool) -> Result<StageView<'_>,
         }
     };
     let mut r = Reader { w: payload, what };
-    let fmt = BlobError::Format;
     let view = match k {
-        kind::DETECT => {
-            let stuck_frames = r.u32()?;
-            let flags = r.u32()?;
-            let params = Params {
-                min_pf: r.f32()?,
-                low_share: r.f32()?,
-                high_share: r.f32()?,
-                stuck_frames,
-                stuck_pf: r.f32()?,
-                neighbour_change_pf: r.f32()?,
-                stuck_floor_pf: r.f32()?,
-            };
-            params.check().map_err(fmt)?;
-            let jump = r.f32s(n)?;
-            let baseline = if flags & 1 != 0 {
-                Some(r.f32s(n)?)
-            } else {
-                None
-            };
-            let max = if flags & 2 != 0 {
-                Some(r.f32s(n)?)
-            } else {
-                None
-            };
-            let graph = r.graph(n, full)?;
-            StageView::Detect {
-                params,
-                jump,
-                baseline,
-                max,
-                graph,
-            }
-        }
-        kind::CONVERT => {
-            let flags = r.u32()?;
-            let (offset, gain) = (r.f32s(n)?, r.f32s(n)?);
-            if full
-                && !(offset.iter().all(|o| o.is_finite())
-                    && gain.iter().all(|g| g.is_finite() && *g > 0.0))
-            {
-                return Err(r.fail("offsets must be finite and gains finite and > 0"));
-            }
-            let curve = if flags & 1 != 0 {
-                Some(r.curve(full)?)
-            } else {
-                None
-            };
-            StageView::Convert {
-                offset,
-                gain,
-                curve,
-            }
-        }
+        kind::DETECT => detect_view(&mut r, n, full)?,
+        kind::CONVERT => convert_view(&mut r, n, full)?,
         kind::LOADING => StageView::Loading(r.curve(full)?),
-        kind::HYSTERESIS => {
-            let k = r.u32()? as usize;
-            let capacity = r.u32()? as usize;
-            let (u_min, u_max) = (r.f32()?, r.f32()?);
-            let output = Output {
-                offset: r.f32()?,
-                sign: r.f32()?,
-            };
-            if !(4..=1 << 16).contains(&capacity)
-                || !output.offset.is_finite()
-                || (output.sign != 1.0 && output.sign != -1.0)
-                || k > 1 << 12
-            {
-                return Err(
-                    r.fail("needs capacity 4 ..= 65536, a finite offset, sign +-1, K <= 4096")
-                );
-            }
-            let table = r.f32s(k * k)?;
-            if full && !table.iter().all(|v| v.is_finite()) {
-                return Err(r.fail("an Everett entry is not finite"));
-            }
-            StageView::Hysteresis {
-                everett: Everett::new(k, u_min, u_max, table).map_err(fmt)?,
-                capacity,
-                output,
-            }
-        }
-        kind::DRIFT => {
-            let terms = r.u32()? as usize;
-            let flags = r.u32()?;
-            if !(1..=64).contains(&terms) {
-                return Err(r.fail("needs 1 ..= 64 kernel terms"));
-            }
-            let (gamma, rest_rate, rest_window, gamma_time, exponent) =
-                (r.f32()?, r.f32()?, r.f32()?, r.f32()?, r.f32()?);
-            let (weights, taus) = (r.f32s(terms)?, r.f32s(terms)?);
-            let settings = Settings::new(weights, taus, gamma)
-                .and_then(|s| s.with_rest_rate(rest_rate, rest_window))
-                .and_then(|s| s.with_time_component(gamma_time))
-                .and_then(|s| s.with_exponent(exponent))
-                .map_err(fmt)?;
-            let level = if flags & 1 != 0 {
-                Some(r.curve(full)?)
-            } else {
-                None
-            };
-            StageView::Drift { settings, level }
-        }
-        _ => {
-            let method = match r.u32()? {
-                repair_method::ZERO => Method::Zero,
-                repair_method::LAST_VALUE => Method::LastValue,
-                repair_method::NEIGHBOUR_MEAN => Method::NeighbourMean(r.graph(n, full)?),
-                repair_method::WEIGHTED => {
-                    let g = r.graph(n, full)?;
-                    Method::Weighted(g, r.f32s(g.nnz())?)
-                }
-                _ => return Err(r.fail("unknown repair method")),
-            };
-            if full {
-                method.check(n).map_err(fmt)?;
-            }
-            StageView::Repair(method)
-        }
+        kind::HYSTERESIS => hysteresis_view(&mut r, full)?,
+        kind::DRIFT => drift_view(&mut r, full)?,
+        _ => repair_view(&mut r, n, full)?,
     };
     if !r.w.is_empty() {
         return Err(r.fail("the payload is longer than its arrays"));
     }
     Ok(view)
+}
+
+fn detect_view<'a>(r: &mut Reader<'a>, n: usize, full: bool) -> Result<StageView<'a>, BlobError> {
+    let stuck_frames = r.u32()?;
+    let flags = r.u32()?;
+    let params = Params {
+        min_pf: r.f32()?,
+        low_share: r.f32()?,
+        high_share: r.f32()?,
+        stuck_frames,
+        stuck_pf: r.f32()?,
+        neighbour_change_pf: r.f32()?,
+        stuck_floor_pf: r.f32()?,
+    };
+    params.check().map_err(BlobError::Format)?;
+    let jump = r.f32s(n)?;
+    let baseline = if flags & 1 != 0 {
+        Some(r.f32s(n)?)
+    } else {
+        None
+    };
+    let max = if flags & 2 != 0 {
+        Some(r.f32s(n)?)
+    } else {
+        None
+    };
+    let graph = r.graph(n, full)?;
+    Ok(StageView::Detect {
+        params,
+        jump,
+        baseline,
+        max,
+        graph,
+    })
+}
+
+fn convert_view<'a>(r: &mut Reader<'a>, n: usize, full: bool) -> Result<StageView<'a>, BlobError> {
+    let flags = r.u32()?;
+    let (offset, gain) = (r.f32s(n)?, r.f32s(n)?);
+    if full
+        && !(offset.iter().all(|o| o.is_finite()) && gain.iter().all(|g| g.is_finite() && *g > 0.0))
+    {
+        return Err(r.fail("offsets must be finite and gains finite and > 0"));
+    }
+    let curve = if flags & 1 != 0 {
+        Some(r.curve(full)?)
+    } else {
+        None
+    };
+    Ok(StageView::Convert {
+        offset,
+        gain,
+        curve,
+    })
+}
+
+fn hysteresis_view<'a>(r: &mut Reader<'a>, full: bool) -> Result<StageView<'a>, BlobError> {
+    let k = r.u32()? as usize;
+    let capacity = r.u32()? as usize;
+    let (u_min, u_max) = (r.f32()?, r.f32()?);
+    let output = Output {
+        offset: r.f32()?,
+        sign: r.f32()?,
+    };
+    if !(4..=1 << 16).contains(&capacity)
+        || !output.offset.is_finite()
+        || (output.sign != 1.0 && output.sign != -1.0)
+        || k > 1 << 12
+    {
+        return Err(r.fail("needs capacity 4 ..= 65536, a finite offset, sign +-1, K <= 4096"));
+    }
+    let table = r.f32s(k * k)?;
+    if full && !table.iter().all(|v| v.is_finite()) {
+        return Err(r.fail("an Everett entry is not finite"));
+    }
+    Ok(StageView::Hysteresis {
+        everett: Everett::new(k, u_min, u_max, table).map_err(BlobError::Format)?,
+        capacity,
+        output,
+    })
+}
+
+fn drift_view<'a>(r: &mut Reader<'a>, full: bool) -> Result<StageView<'a>, BlobError> {
+    let terms = r.u32()? as usize;
+    let flags = r.u32()?;
+    if !(1..=64).contains(&terms) {
+        return Err(r.fail("needs 1 ..= 64 kernel terms"));
+    }
+    let (gamma, rest_rate, rest_window, gamma_time, exponent) =
+        (r.f32()?, r.f32()?, r.f32()?, r.f32()?, r.f32()?);
+    let (weights, taus) = (r.f32s(terms)?, r.f32s(terms)?);
+    let settings = Settings::new(weights, taus, gamma)
+        .and_then(|s| s.with_rest_rate(rest_rate, rest_window))
+        .and_then(|s| s.with_time_component(gamma_time))
+        .and_then(|s| s.with_exponent(exponent))
+        .map_err(BlobError::Format)?;
+    let level = if flags & 1 != 0 {
+        Some(r.curve(full)?)
+    } else {
+        None
+    };
+    Ok(StageView::Drift { settings, level })
+}
+
+fn repair_view<'a>(r: &mut Reader<'a>, n: usize, full: bool) -> Result<StageView<'a>, BlobError> {
+    let method = match r.u32()? {
+        repair_method::ZERO => Method::Zero,
+        repair_method::LAST_VALUE => Method::LastValue,
+        repair_method::NEIGHBOUR_MEAN => Method::NeighbourMean(r.graph(n, full)?),
+        repair_method::WEIGHTED => {
+            let g = r.graph(n, full)?;
+            Method::Weighted(g, r.f32s(g.nnz())?)
+        }
+        _ => return Err(r.fail("unknown repair method")),
+    };
+    if full {
+        method.check(n).map_err(BlobError::Format)?;
+    }
+    Ok(StageView::Repair(method))
 }
 
 /// The failure codes a detector stage gives (re-exported for the C side).

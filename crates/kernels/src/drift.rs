@@ -196,7 +196,7 @@ pub fn frame<T: Real>(decay: &mut [T], taus: &[T], dt: T) {
 /// drift-corrected output out (eq. 5.8). An invalid or NaN input keeps the state (time still
 /// passes for it) and gives NaN. `z` holds the element's K states; `z_time` the K states of
 /// the second clock (empty without one).
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn step<T: Real>(
     s: &Settings<'_, T>,

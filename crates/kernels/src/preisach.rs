@@ -92,45 +92,57 @@ impl<T: Real> Output<T> {
     }
 }
 
-/// True when a step to `u_in` pushes a turning point (the input turns at the last one).
-#[inline]
-pub fn turns<T: Real>(head: &Head<T>, e: &Everett<'_, T>, u_in: T) -> bool {
-    let u = u_in.clamp(e.u_min(), e.u_max());
-    u != head.last_u && (u > head.last_u) != (head.len % 2 == 1)
+/// What a step does before it touches the stack ([`prepare`]).
+#[derive(Debug, Clone, Copy)]
+pub enum Prepared<T> {
+    /// The (clamped) input equals the last one: the output is the last output.
+    Same(T),
+    /// The input moves: [`finish`] the step (after making room for a turning point if the
+    /// stack is full and `turned`).
+    Moves {
+        /// The input, clamped into the range.
+        u: T,
+        /// Rising (else falling).
+        rising: bool,
+        /// The input turns at the last one: a turning point is pushed.
+        turned: bool,
+    },
 }
 
-/// One valid input (a number) of one element (eq. 4.16-4.22): the Preisach sum, and the
-/// flags [`CLAMPED`] and [`FORGOT`]. `stack` holds at least the head's `len` extrema plus one
-/// slot; at most `capacity` (>= 4) are kept.
-///
-/// Written so that the outcomes that are unpredictable on a real input (rising or falling,
-/// turning or not, wiping out or not) select values instead of branching.
-#[inline]
-pub fn step<T: Real>(
-    head: &mut Head<T>,
-    stack: &mut [[T; 2]],
-    capacity: usize,
-    e: &Everett<'_, T>,
-    u_in: T,
-) -> (T, u8) {
+/// The first half of a step: clamp the input (the flag [`CLAMPED`]) and see whether it moves
+/// and turns.
+#[inline(always)]
+pub fn prepare<T: Real>(head: &Head<T>, e: &Everett<'_, T>, u_in: T) -> (Prepared<T>, u8) {
     let u = u_in.clamp(e.u_min(), e.u_max());
-    let mut flags = if u != u_in { CLAMPED } else { 0 };
+    let flags = if u != u_in { CLAMPED } else { 0 };
     let prev = head.last_u;
     if u == prev {
-        return (head.last_h, flags);
+        return (Prepared::Same(head.last_h), flags);
     }
-    let mut len = head.len as usize;
     let rising = u > prev;
     // the top is a minimum when len is odd (stack = m0, M1, m1, ...); a turn at `prev`
     // pushes it as a new extremum
-    let turned = rising != (len % 2 == 1);
-    let s = stack;
-    if len == (s.len() - 1).min(capacity) {
-        // rare; `turned` is tested inside, out of line, so that the compiler cannot test it
-        // first (it is as unpredictable as a coin on a real input)
-        flags |= forget_if_turned(s, turned, &mut len);
-    }
-    s[len] = [prev, head.last_h]; // written always, kept only on a turn
+    let turned = rising != (head.len % 2 == 1);
+    (Prepared::Moves { u, rising, turned }, flags)
+}
+
+/// The second half of a step that moves (eq. 4.16-4.22): push the turning point, wipe out
+/// the loops the input passes, and return the Preisach sum. `s` must have a slot beyond the
+/// head's `len` extrema (the caller makes room first: [`forget`], or a larger stack).
+///
+/// Written so that the outcomes that are unpredictable on a real input (rising or falling,
+/// turning or not, wiping out or not) select values instead of branching.
+#[inline(always)]
+pub fn finish<T: Real>(
+    head: &mut Head<T>,
+    s: &mut [[T; 2]],
+    e: &Everett<'_, T>,
+    u: T,
+    rising: bool,
+    turned: bool,
+) -> T {
+    let mut len = head.len as usize;
+    s[len] = [head.last_u, head.last_h]; // written always, kept only on a turn
     len += usize::from(turned);
     // wiping-out: the new input passes the extremum before the top
     let dir = if rising { T::ONE } else { -T::ONE };
@@ -153,20 +165,50 @@ pub fn step<T: Real>(
     head.len = len as u32;
     head.last_u = u;
     head.last_h = h;
-    (h, flags)
+    h
 }
 
-/// The stack is full: if the input turned, forget the most recent completed minor loop (the
+/// The stack is full and the input turns: forget the most recent completed minor loop (the
 /// two entries below the top).
 #[cold]
 #[inline(never)]
-fn forget_if_turned<T: Real>(s: &mut [[T; 2]], turned: bool, len: &mut usize) -> u8 {
-    if !turned {
-        return 0;
+pub fn forget<T: Real>(head: &mut Head<T>, s: &mut [[T; 2]]) {
+    let len = head.len as usize;
+    s[len - 3] = s[len - 1];
+    head.len = (len - 2) as u32;
+}
+
+/// True when a step to `u_in` pushes a turning point (the input turns at the last one).
+#[inline]
+pub fn turns<T: Real>(head: &Head<T>, e: &Everett<'_, T>, u_in: T) -> bool {
+    matches!(
+        prepare(head, e, u_in).0,
+        Prepared::Moves { turned: true, .. }
+    )
+}
+
+/// One valid input (a number) of one element on a stack of fixed size (eq. 4.16-4.22): the
+/// Preisach sum, and the flags [`CLAMPED`] and [`FORGOT`]. `stack` holds at least the head's
+/// `len` extrema plus one slot; at most `capacity` (>= 4) are kept: [`prepare`], [`forget`]
+/// when full and turning, [`finish`].
+#[inline]
+pub fn step<T: Real>(
+    head: &mut Head<T>,
+    stack: &mut [[T; 2]],
+    capacity: usize,
+    e: &Everett<'_, T>,
+    u_in: T,
+) -> (T, u8) {
+    match prepare(head, e, u_in) {
+        (Prepared::Same(h), flags) => (h, flags),
+        (Prepared::Moves { u, rising, turned }, mut flags) => {
+            if head.len as usize == (stack.len() - 1).min(capacity) && turned {
+                forget(head, stack);
+                flags |= FORGOT;
+            }
+            (finish(head, stack, e, u, rising, turned), flags)
+        }
     }
-    s[*len - 3] = s[*len - 1];
-    *len -= 2;
-    FORGOT
 }
 
 /// Set an element to input `u` with the Preisach sum `target` (§6.4.4: a model started from

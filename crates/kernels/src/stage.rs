@@ -11,7 +11,7 @@ use crate::preisach::{self, Head, Output};
 use crate::real::Real;
 
 /// `convert` / `linear` (eq. 2.1): NaN where invalid or not a number; the validity passes.
-#[inline]
+#[inline(always)]
 pub fn conversion<T: Real>(
     offset: T,
     gain: T,
@@ -29,7 +29,7 @@ pub fn conversion<T: Real>(
 
 /// `hysteresis` (eq. 4.15-4.22): the model's output `sign (h + offset)`; also the step's
 /// flags ([`preisach::CLAMPED`], [`preisach::FORGOT`]).
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn hysteresis<T: Real>(
     head: &mut Head<T>,
@@ -50,7 +50,7 @@ pub fn hysteresis<T: Real>(
 }
 
 /// `drift` (eq. 5.8) on the level of its input, in the frame [`drift::frame`] started.
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn drift<T: Real>(
     s: &Settings<'_, T>,
@@ -69,7 +69,7 @@ pub fn drift<T: Real>(
 /// A QLV `drift` right after `hysteresis`: the drift of the elastic response `level(u)` of
 /// the hysteresis stage's input `u`, added to its output `h` (validity `ok`, after the
 /// hysteresis stage).
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn drift_on_level<T: Real>(
     s: &Settings<'_, T>,
@@ -89,7 +89,7 @@ pub fn drift_on_level<T: Real>(
 }
 
 /// The first-loading curve in place of `hysteresis` (an uncompensated system).
-#[inline]
+#[inline(always)]
 pub fn loading<T: Real>(curve: &Curve<'_, T>, x: T, ok: bool) -> (T, bool) {
     let y = if ok { curve.at(x) } else { T::NAN };
     (y, ok && y.is_finite())
