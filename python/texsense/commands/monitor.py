@@ -9,8 +9,9 @@ import logging
 import os
 import signal
 import socket
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
@@ -21,6 +22,10 @@ from texsense.monitor import ExposureTracker, Monitor, sources
 from texsense.monitor.sources import Source
 from texsense.monitor.store import open_store
 from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
+
+if TYPE_CHECKING:
+    from texsense.apps.bed import BedWatch
+    from texsense.apps.posture import PostureModel
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -150,7 +155,7 @@ def add_web_options(p: argparse.ArgumentParser, port: int) -> None:
     )  # fmt: skip
 
 
-def web_access(args: argparse.Namespace, what: str) -> Any:
+def web_access(args: argparse.Namespace, what: str) -> Access:
     """The :class:`~texsense.monitor.web.Access` of the command's options; refuses binding
     beyond loopback without a token."""
 
@@ -181,7 +186,7 @@ def _grid(args: argparse.Namespace) -> Layout | None:
     return Layout.grid(rows, cols)
 
 
-def load_function(spec: str) -> Any:
+def load_function(spec: str) -> Callable[[int], None]:
     """``module:function`` or ``path/to/file.py:function`` -> the function."""
     where, _, name = spec.rpartition(":")
     if not where or not name:
@@ -255,7 +260,7 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
     if raw_only and (model is not None or args.bed):
         raise ParameterError("--model and --bed need pressure: give the mat's --calibration")
     if model is None and args.source == "virtual" and not args.no_posture:
-        model = virtual_seat_model(_virtual_calibration(args, calibration).id)
+        model = virtual_seat_model(_virtual_calibration(args).id)
     bed = None
     if args.bed and args.no_posture:
         raise ParameterError("--bed needs the side model: drop --no-posture")
@@ -263,7 +268,7 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
         from texsense.apps.bed import BedWatch
 
         if model is None and args.source == "virtual-bed":
-            model = virtual_bed_model(_virtual_calibration(args, calibration).id)
+            model = virtual_bed_model(_virtual_calibration(args).id)
         if model is None:
             raise ParameterError("--bed needs --model: a posture model of sides")
         bed = BedWatch(
@@ -288,7 +293,7 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
     return monitor
 
 
-def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
+def _mode(args: argparse.Namespace, source: Source, bed: BedWatch | None) -> str:
     """``--mode``, or for ``auto``: bed with a bed watch, the file's for a replay, else seat."""
     mode = getattr(args, "mode", "auto")
     if mode != "auto":
@@ -303,13 +308,18 @@ def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
     return "seat"
 
 
-def _virtual_calibration(args: argparse.Namespace, calibration: Any) -> Any:
-    """The calibration a virtual mat's posture model is trained with: the mat's own one (the
-    one in use, unless ``--calibration`` names another)."""
-    return calibration if args.calibration is None else default_calibration(args.source)
+def _virtual_calibration(args: argparse.Namespace) -> StageChain:
+    """The calibration a virtual mat's posture model is trained with: the mat's own one
+    (whichever ``--calibration`` is in use)."""
+    calibration = default_calibration(args.source)
+    if calibration is None:
+        raise ParameterError(f"--source {args.source} brings no calibration of its own")
+    return calibration
 
 
-def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
+def _cached_model(
+    name: str, what: str, seconds: int, train: Callable[[], PostureModel]
+) -> PostureModel:
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
     when missing (a broken cache is rebuilt, and said so). The name carries the id of the
     virtual mat's calibration the model is trained on, so a texsense whose compensation
@@ -334,7 +344,7 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     return model
 
 
-def virtual_seat_model(calibration_id: str) -> Any:
+def virtual_seat_model(calibration_id: str) -> PostureModel:
     """A posture model for the virtual seat, trained on simulated sessions of other people
     (compensated pressure, §6.5.2) with the calibration ``calibration_id``
     (:func:`texsense.calibration.workflows.seat_calibration`), cached under ~/.cache/texsense."""
@@ -348,7 +358,7 @@ def virtual_seat_model(calibration_id: str) -> Any:
     )
 
 
-def virtual_bed_model(calibration_id: str) -> Any:
+def virtual_bed_model(calibration_id: str) -> PostureModel:
     """A model of the side a person lies on for the virtual bed, trained on other simulated
     people (compensated pressure) with the calibration ``calibration_id``
     (:func:`texsense.calibration.workflows.bed_calibration`), cached under ~/.cache/texsense."""
