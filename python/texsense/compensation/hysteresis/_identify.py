@@ -31,7 +31,8 @@ branch, which a non-negative density cannot produce).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -52,7 +53,8 @@ from texsense.exceptions import ParameterError
 __all__ = [
     "Identified",
     "find_thesis_curves",
-    "fold_errors_of_table",
+    "fold_mse",
+    "held_out_of_table",
     "identify_lsq",
     "identify_relay",
     "identify_thesis",
@@ -69,7 +71,10 @@ class Identified:
     u_max: float
     offset: float
     method: str
-    details: dict
+    details: dict[str, Any]
+    #: prediction of every held-out sample by the identification without its fold (NaN for
+    #: samples that always train): what the default compares candidates on; not saved
+    held_out: npt.NDArray[np.float64] | None = field(default=None, repr=False)
 
 
 def make_monotone(table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -280,6 +285,7 @@ def identify_lsq(
             "prior": "thesis" if weight else None,
             "cv": [{**c.as_dict(), "rmse": r} for c, r in res.scores],
         },
+        res.held_out,
     )
 
 
@@ -371,18 +377,18 @@ def _beats(challenger: np.ndarray, incumbent: np.ndarray) -> bool:
     return bool(d.mean() < -se) and bool(d.mean() < 0)
 
 
-def fold_errors_of_table(
+def held_out_of_table(
     u: np.ndarray,
-    p: np.ndarray,
     fold: np.ndarray,
     table_of: Callable[[np.ndarray], tuple[np.ndarray, float] | None],
 ) -> np.ndarray | None:
-    """Held-out mean squared error of every fold for an identification given as
-    ``table_of(held_out_mask) -> (Everett table, offset)`` (None if it cannot), the table
-    evaluated by the Rust core over the whole input history."""
+    """Prediction of every held-out sample by an identification given as
+    ``table_of(held_out_mask) -> (Everett table, offset)`` (None if it cannot) without that
+    sample's fold, the table evaluated by the Rust core over the whole input history; NaN
+    for samples that always train. None if the identification cannot do without some fold."""
     n_folds = int(fold.max()) + 1
     u_min, u_max = float(u.min()), float(u.max())
-    out = []
+    out = np.full(u.size, np.nan)
     for f in range(n_folds):
         held = fold == f
         got = table_of(held)
@@ -391,5 +397,12 @@ def fold_errors_of_table(
         table, offset = got
         bank = PreisachBank(u_min, u_max, np.ascontiguousarray(table), 1, 256, offset, 1.0)
         pred = bank.run(np.ascontiguousarray(u[:, None]), np.ones((u.size, 1), bool))[:, 0]
-        out.append(float(np.mean((pred[held] - p[held]) ** 2)))
-    return np.asarray(out)
+        out[held] = pred[held]
+    return out
+
+
+def fold_mse(pred: np.ndarray, p: np.ndarray, fold: np.ndarray) -> np.ndarray:
+    """Held-out mean squared error of every fold from held-out predictions."""
+    return np.asarray(
+        [float(np.mean((pred[fold == f] - p[fold == f]) ** 2)) for f in range(int(fold.max()) + 1)]
+    )
