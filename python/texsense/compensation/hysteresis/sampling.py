@@ -16,9 +16,10 @@ reversal happens between the turning sample's neighbours, so the intersection is
 that interval: the estimate never exceeds the input's travel over those two sample intervals
 at the speed of either side, nor the input's range. A turning point is *unresolved* when the
 estimate exceeds ``tolerance`` (by default :data:`TOLERANCE` of the input range). For a
-reversal at constant speed ``v`` sampled every ``dt`` the missed excursion is up to ``v dt /
-2``; the rate that keeps it under the tolerance is ``v / (2 tolerance)``, the rate the
-warning names, and without a clock the input step per sample that does, ``2 tolerance``.
+reversal at constant speed ``v`` sampled every ``dt`` the missed excursion is up to
+``v dt / 2``; the rate that keeps it under the tolerance is ``v / (2 tolerance)``, the rate
+the warning names, and without a clock the input step per sample that does,
+``2 tolerance``.
 
 **What is not estimated.** A turning point with fewer than two samples on a branch next to
 it (the samples either side do not approach it and recede from it, or another turning point
