@@ -255,7 +255,7 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
             "holds no recording texsense reads (and is not a PMD tree: no S1, S2, ... or "
             "1.txt .. 17.txt)",
         )
-    parts = []
+    parts: list[Recording] = []
     for p in files:
         rec = load(p, accept_truncated=accept_truncated, **options)
         if "file" not in rec.labels:

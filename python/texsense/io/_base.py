@@ -189,6 +189,13 @@ class BlockReader:
     #: the text file a line-oriented reader holds open (closed by :meth:`close`)
     _lines: TextLines | None = None
 
+    @property
+    def lines(self) -> TextLines:
+        """The text file a line-oriented reader opened in its constructor."""
+        if self._lines is None:
+            raise RuntimeError(f"{type(self).__name__} reads no text file")
+        return self._lines
+
     def close(self) -> None:
         """Release the file (the text file in ``_lines``; a format that holds another kind
         of file overrides this)."""
@@ -276,7 +283,7 @@ class RecordingReader(BlockReader):
             np.array([r.time for r in rows], dtype=np.float64),
             {k: np.array([r.labels[k] for r in rows], dtype=dt) for k, dt in dtypes.items()},
             lines=np.array([r.line for r in rows], dtype=np.int64),
-            valid=None if rows[0].valid is None else np.stack([r.valid for r in rows]),
+            valid=None if rows[0].valid is None else np.stack([_mask(r) for r in rows]),
         )
 
     def _impossible(self, values: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.bool_]]:
@@ -411,6 +418,13 @@ class RecordingReader(BlockReader):
                 meta=h.meta,
             )
         return self._recording(_join(pieces))
+
+
+def _mask(row: FrameRow) -> npt.NDArray[np.bool_]:
+    """The validity mask of a row of a format whose rows all carry one."""
+    if row.valid is None:
+        raise RuntimeError(f"the row of line {row.line} has no validity mask, the first had one")
+    return row.valid
 
 
 def _join(pieces: list[Piece]) -> Piece:

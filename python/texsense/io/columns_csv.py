@@ -166,8 +166,8 @@ class ColumnsReader(BlockReader):
 
     def _read_header(self, required: Sequence[str]) -> tuple[list[str], int | None]:
         path, declared = self.path, None
-        while (line := self._lines.peek()) is not None and line.text.startswith("#"):
-            next(self._lines)
+        while (line := self.lines.peek()) is not None and line.text.startswith("#"):
+            next(self.lines)
             key, _, value = line.text[1:].partition(":")
             if key.strip() == "rows":
                 try:
@@ -176,7 +176,7 @@ class ColumnsReader(BlockReader):
                     raise FormatError(
                         path, f"rows: expected a count, found {value.strip()!r}", line.number
                     ) from None
-        head = self._lines.next_nonblank()
+        head = self.lines.next_nonblank()
         if head is None:
             raise FormatError(path, "empty file: expected a header line of column names")
         names = [s.strip() for s in head.text.split(",")]
@@ -194,7 +194,7 @@ class ColumnsReader(BlockReader):
     def _rows(self) -> Iterator[list[float]]:
         n = len(self.names)
         what = f"{n} values ({', '.join(self.names)})"
-        for line in self._lines.data_lines("the table"):
+        for line in self.lines.data_lines("the table"):
             if not line.ended and self.declared_rows is not None:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return

@@ -280,7 +280,7 @@ class RecordingWriter:
             self.flush()
         self._check()
 
-    def _append_labels(self, labels: dict[str, npt.ArrayLike], start: int, stop: int) -> None:
+    def _append_labels(self, labels: Mapping[str, npt.ArrayLike], start: int, stop: int) -> None:
         group = self._file["labels"]
         if self.n_frames > 0 and set(labels) != set(group):
             raise ParameterError(

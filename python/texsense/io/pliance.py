@@ -70,11 +70,14 @@ class PlianceReader(RecordingReader):
         path = self.path
         with TextLines(path) as lines:
             head: list[str] = []
+
+            def is_table(s: str) -> bool:
+                head.append(s)
+                return s.strip().startswith("time[secs]") and "force" not in s
+
             table = _find(
                 lines,
-                lambda s: (
-                    head.append(s) or (s.strip().startswith("time[secs]") and "force" not in s)
-                ),
+                is_table,
                 "the 'time[secs] <sensor numbers>' table header",
                 path,
             )

@@ -121,7 +121,7 @@ class TekscanReader(RecordingReader):
     def _read_header(self) -> Header:
         path = self.path
         self._lines = TextLines(path)
-        header, where = _parse_header(path, self._lines)
+        header, where = _parse_header(path, self.lines)
         for key in ("ROWS", "COLS"):
             if key not in header:
                 raise FormatError(path, f"header lacks {key}")
@@ -135,7 +135,7 @@ class TekscanReader(RecordingReader):
             )
         check_declared_size(path, f"ROWS x COLS = {rows} x {cols}", rows * cols, 2, where["ROWS"])
         self.rows, self.cols = rows, cols
-        pitch = tuple(
+        row_cm, col_cm = (
             _spacing_cm(path, where.get(k, 0), k, header.get(k, "1 cm"))
             for k in ("ROW_SPACING", "COL_SPACING")
         )
@@ -165,7 +165,7 @@ class TekscanReader(RecordingReader):
             raise FormatError(path, "every cell is 'B': no sensel in the map")
         internal = units.INTERNAL_UNIT[quantity]
         return Header(
-            Layout.grid(rows, cols, pitch_cm=pitch, active=self.active),
+            Layout.grid(rows, cols, pitch_cm=(row_cm, col_cm), active=self.active),
             quantity,
             internal,
             {"format": "tekscan-ascii", "source": str(path), "source_unit": unit, "header": header},
@@ -177,7 +177,7 @@ class TekscanReader(RecordingReader):
     def _next_frame(self) -> tuple[np.ndarray, np.ndarray, float, int, int] | None:
         """(cells, 'B' mask, time, frame number, line) of the next frame; None at ``@@``
         (``self.ended``) or at a cut (noted)."""
-        line = self._lines.next_nonblank()
+        line = self.lines.next_nonblank()
         if line is None:
             self._cut("truncated: no closing '@@' after the last complete frame")
             return None
@@ -201,7 +201,7 @@ class TekscanReader(RecordingReader):
         cells = np.empty((self.rows, self.cols), dtype=np.float64)
         is_b = np.zeros((self.rows, self.cols), dtype=bool)
         for r in range(self.rows):
-            line = next(self._lines, None)
+            line = next(self.lines, None)
             if line is None or not line.ended:
                 self._cut(f"truncated: the file ends inside frame {number} (line {frame_line})")
                 return None
@@ -230,7 +230,7 @@ class TekscanReader(RecordingReader):
         return cells, is_b
 
     def _frames(self) -> Iterator[FrameRow]:
-        frame = self._first
+        frame: tuple[np.ndarray, np.ndarray, float, int, int] | None = self._first
         first: list[int] = []  # the first two frame numbers: the export's step
         last = 0
         while frame is not None:

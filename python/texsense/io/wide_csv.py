@@ -148,8 +148,8 @@ class WideCSVReader(RecordingReader):
     def _read_header(self) -> Header:
         path = self.path
         self._lines = TextLines(path)
-        info, where, self.version = _comments(path, self._lines)
-        head = self._lines.next_nonblank()
+        info, where, self.version = _comments(path, self.lines)
+        head = self.lines.next_nonblank()
         if head is None:
             raise FormatError(path, "no header line 'time_s,<element>,...'")
         header = [s.strip() for s in head.text.split(",")]
@@ -217,7 +217,7 @@ class WideCSVReader(RecordingReader):
     def _frames(self) -> Iterator[FrameRow]:
         n = self.header.layout.n_elements
         count = 0
-        for line in self._lines.data_lines():
+        for line in self.lines.data_lines():
             if self.version >= 2 and not line.ended:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return
