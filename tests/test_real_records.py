@@ -85,6 +85,7 @@ def test_a_forc_export_whose_columns_are_named_reads_as_a_column_table(
         out = tmp_path / "out.csv"
         assert main(["hysteresis", "apply", str(model), str(odd_csv), "-o", str(out)]) == 0
     assert report["nrmse"] < 0.01  # odd curves predicted from the even ones
+    assert report["worst"] and all(w["time_s"] is None for w in report["worst"])  # no clock
     modelled = read_columns(out, ["moment_emu_model"])["moment_emu_model"]
     np.testing.assert_allclose(modelled, HysteresisModel.load(model).predict(u[odd]))
     # the reversals of a FORC set are jumps between curves, sampled in field, not in time

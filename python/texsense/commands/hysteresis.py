@@ -14,7 +14,7 @@ from texsense.commands.drift import add_clock_arguments, load_model, rest_rate_o
 from texsense.compensation.drift import DriftModel, read_steps
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis.plots import model_figure, validation_report_figure
-from texsense.compensation.hysteresis.sampling import check_sampling
+from texsense.compensation.hysteresis.sampling import check_sampling, is_row_count
 from texsense.compensation.hysteresis.validation import validate
 from texsense.compensation.stages import Drift, Hysteresis, StageChain
 from texsense.exceptions import FormatError
@@ -316,6 +316,8 @@ def run_validate(args: argparse.Namespace) -> int:
     model, drift, cols, in_name, out_name, u = _model_and_record(args, True)
     y = _column(cols, out_name, args.data)
     times = cols.get("time_s")
+    if times is not None and drift is None and is_row_count(times):
+        times = None  # row numbers, not a clock: the worst places are named by sample alone
     report = validate(model, u, y, times_s=times, drift=drift)
     if args.plot:
         validation_report_figure(

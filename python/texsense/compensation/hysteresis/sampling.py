@@ -57,7 +57,14 @@ from texsense._progress import logger
 from texsense.compensation.hysteresis._model import HysteresisModel
 from texsense.compensation.hysteresis._segments import reversal_indices
 
-__all__ = ["TOLERANCE", "CoarseTurns", "check_sampling", "coarse_turns", "sampling_warning"]
+__all__ = [
+    "TOLERANCE",
+    "CoarseTurns",
+    "check_sampling",
+    "coarse_turns",
+    "is_row_count",
+    "sampling_warning",
+]
 
 #: Missed excursion at a turning point that counts as unresolved: this share of the range.
 TOLERANCE = 0.0025
@@ -104,8 +111,13 @@ class CoarseTurns:
     needed_step: float = 0.0
 
 
-def _is_row_count(t: npt.NDArray[np.float64]) -> bool:
-    """Times that are the row numbers 0, 1, 2, ... (an index exported as time, not a clock)."""
+def is_row_count(times_s: npt.ArrayLike) -> bool:
+    """Times that are the row numbers 0, 1, 2, ... (an index exported as time, not a clock).
+
+    >>> is_row_count([0, 1, 2, 3]), is_row_count([0.0, 0.1, 0.2])
+    (True, False)
+    """
+    t = np.asarray(times_s, dtype=np.float64)
     return bool(t.size >= 2 and t[0] == 0.0 and np.all(np.diff(t) == 1.0))
 
 
@@ -155,7 +167,7 @@ def coarse_turns(
     t = np.arange(x.size, dtype=np.float64) if times_s is None else np.asarray(times_s, float)
     ok = np.isfinite(x) & np.isfinite(t)
     x, t = x[ok], t[ok]
-    clock = times_s is not None and not _is_row_count(t)
+    clock = times_s is not None and not is_row_count(t)
     if not clock:
         t = np.arange(x.size, dtype=np.float64)
     steps = np.diff(t)
