@@ -52,7 +52,7 @@ def from_ident(ident: Identified) -> HysteresisModel:
 def rows_of(name: str, cal: Recording, vals: tuple[Recording, Recording]) -> list[dict]:
     u, p = cal.labels["compression_mm"], cal.labels["pressure_ncm2"]
     default = HysteresisModel().fit(u, p)
-    thesis_curves = find_thesis_curves(u, 0.01 * float(np.ptp(u))) is not None
+    thesis_curves = find_thesis_curves(u, 0.01 * float(np.ptp(u)), outputs=p) is not None
     models: dict[str, HysteresisModel | None] = {"default": default, "thesis": None}
     models["lsq"] = from_ident(identify_lsq(u, p, thesis_prior=thesis_curves))
     if thesis_curves:

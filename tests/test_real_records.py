@@ -14,7 +14,11 @@ import pytest
 
 from texsense.cli import main
 from texsense.compensation.hysteresis import HysteresisModel
-from texsense.compensation.hysteresis._identify import identify_lsq, identify_thesis
+from texsense.compensation.hysteresis._identify import (
+    find_thesis_curves,
+    identify_lsq,
+    identify_thesis,
+)
 from texsense.compensation.hysteresis._model import _clearly_smaller_tail
 from texsense.compensation.hysteresis.sampling import coarse_turns, sampling_warning
 from texsense.io.columns import is_columns_csv, read_columns
@@ -179,3 +183,19 @@ def test_the_default_keeps_the_thesis_method_where_the_average_costs_its_tail():
     uv, pv = val.labels["compression_mm"], val.labels["pressure_ncm2"]
     chosen, averaged = _band_p95(pv, model.predict(uv)), _band_p95(pv, average.predict(uv))
     assert chosen < 0.95 * averaged, (chosen, averaged)
+
+
+def test_the_thesis_protocol_of_a_spacer_with_a_set_is_recognised_by_its_unloading():
+    """The machine unloads to 0 N/cm² (§4.4.2); a spacer with a large set is unloaded while
+    still compressed by a fifth of the range, so its falling curves never reach the bottom
+    compression: they end at the record's lowest output."""
+    legs, bottom = [], 0.0  # (input from, to; output from, to): up to 10, 7, 3 and back to 0
+    for top, p_top in ((4.2, 10.0), (3.97, 7.0), (3.25, 3.0)):
+        legs += [(bottom, top, 0.0, p_top), (top, 0.94, p_top, 0.0)]
+        bottom = 0.94
+    u = np.concatenate([np.linspace(a, b, 300) for a, b, _, _ in legs])
+    p = np.concatenate([np.linspace(c, d, 300) ** 1.5 / 10**0.5 for _, _, c, d in legs])
+    assert find_thesis_curves(u, 0.042) is None  # by the input alone: not recognised
+    rising, falling = find_thesis_curves(u, 0.042, outputs=p)
+    assert (rising.start, len(falling)) == (0, 3)
+    assert HysteresisModel("thesis").fit(u, p).method_ == "thesis"

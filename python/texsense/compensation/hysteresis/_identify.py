@@ -93,13 +93,16 @@ def find_thesis_curves(
     tolerance: float,
     reach: float = 0.8,
     exclude: npt.NDArray[np.bool_] | None = None,
+    outputs: npt.NDArray[np.float64] | None = None,
 ) -> tuple[Branch, list[Branch]] | None:
     """The designed curves in a record: a rising curve over the whole range (within 3 % at
     both ends) and falling curves from at least two different maxima (5 % of the range
     apart; the first curve from each) that go down to within ``1 - reach`` of the bottom (a
-    spacer stops carrying load a little above zero compression). None if absent —
-    ascending first-order reversal curves, which all fall from the top, are not the
-    thesis's protocol. Falling curves that touch a sample in ``exclude`` are left out."""
+    spacer stops carrying load a little above zero compression) or, with ``outputs``, to the
+    record's lowest output (within 3 % of its range: the machine unloaded the specimen, which
+    a spacer with a large set does while still compressed). None if absent — ascending
+    first-order reversal curves, which all fall from the top, are not the thesis's protocol.
+    Falling curves that touch a sample in ``exclude`` are left out."""
     lo, hi = float(u.min()), float(u.max())
     span = hi - lo
     branches = split_branches(u, tolerance)
@@ -108,7 +111,15 @@ def find_thesis_curves(
         for b in branches
         if b.rising and u[b.start] - lo < 0.03 * span and hi - u[b.stop] < 0.03 * span
     ]
-    falling = [b for b in branches if not b.rising and u[b.stop] - lo < (1 - reach) * span]
+
+    def down(b: Branch) -> bool:
+        if u[b.stop] - lo < (1 - reach) * span:
+            return True
+        if outputs is None or not np.ptp(outputs) > 0:
+            return False
+        return bool(outputs[b.stop] - outputs.min() < 0.03 * np.ptp(outputs))
+
+    falling = [b for b in branches if not b.rising and down(b)]
     if exclude is not None:  # held-out curves (cross-validation) are not used
         falling = [b for b in falling if not exclude[b.start + 1 : b.stop].any()]
     # the thesis's curves fall from *different* maxima (100, 70, 30 %); first-order reversal
@@ -134,7 +145,7 @@ def identify_thesis(
     u = np.asarray(u, dtype=np.float64)
     p = np.asarray(p, dtype=np.float64)
     tol = 0.01 * np.ptp(u) if tolerance is None else tolerance
-    found = find_thesis_curves(u, tol, exclude=exclude)
+    found = find_thesis_curves(u, tol, exclude=exclude, outputs=p)
     if found is None:
         raise ParameterError(
             "the record does not hold the thesis's calibration curves (a rising curve over "

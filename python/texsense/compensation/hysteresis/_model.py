@@ -277,7 +277,7 @@ class HysteresisModel:
           already wins and the folds ask for it (interacting magnetic systems).
         """
         tol = 0.01 * float(np.ptp(u))
-        thesis_found = find_thesis_curves(u, tol) is not None
+        thesis_found = find_thesis_curves(u, tol, outputs=p) is not None
         lsq = identify_lsq(
             u, p, grid=self.grid, cells=self.cells, smoothing=self.smoothing,
             folds=self.folds, thesis_prior=thesis_found,
