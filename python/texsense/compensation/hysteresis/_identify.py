@@ -98,11 +98,30 @@ def find_thesis_curves(
     """The designed curves in a record: a rising curve over the whole range (within 3 % at
     both ends) and falling curves from at least two different maxima (5 % of the range
     apart; the first curve from each) that go down to within ``1 - reach`` of the bottom (a
-    spacer stops carrying load a little above zero compression) or, with ``outputs``, to the
-    record's lowest output (within 3 % of its range: the machine unloaded the specimen, which
-    a spacer with a large set does while still compressed). None if absent — ascending
-    first-order reversal curves, which all fall from the top, are not the thesis's protocol.
-    Falling curves that touch a sample in ``exclude`` are left out."""
+    spacer stops carrying load a little above zero compression). Where the whole record
+    holds no such curves, with ``outputs``, falling curves that go down to the record's
+    lowest output (within 3 % of its range: the machine unloads to zero load, which a spacer
+    with a large set reaches while still compressed). None if absent — ascending first-order
+    reversal curves, which all fall from the top, are not the thesis's protocol. Falling
+    curves that touch a sample in ``exclude`` are left out (the criterion is the whole
+    record's, so that a fold does not change it)."""
+    by_output = (
+        outputs is not None
+        and np.ptp(outputs) > 0
+        and _thesis_curves(u, tolerance, reach, None, None) is None
+    )
+    return _thesis_curves(u, tolerance, reach, exclude, outputs if by_output else None)
+
+
+def _thesis_curves(
+    u: npt.NDArray[np.float64],
+    tolerance: float,
+    reach: float,
+    exclude: npt.NDArray[np.bool_] | None,
+    outputs: npt.NDArray[np.float64] | None,
+) -> tuple[Branch, list[Branch]] | None:
+    """:func:`find_thesis_curves` with falls that end low in the input, or (``outputs``
+    given) in the input or the output."""
     lo, hi = float(u.min()), float(u.max())
     span = hi - lo
     branches = split_branches(u, tolerance)
@@ -115,7 +134,7 @@ def find_thesis_curves(
     def down(b: Branch) -> bool:
         if u[b.stop] - lo < (1 - reach) * span:
             return True
-        if outputs is None or not np.ptp(outputs) > 0:
+        if outputs is None:
             return False
         return bool(outputs[b.stop] - outputs.min() < 0.03 * np.ptp(outputs))
 
