@@ -45,6 +45,7 @@ from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
+from texsense.io._registry import Probe, register_reader
 from texsense.io._text import Line, TextLines
 
 __all__ = [
@@ -150,7 +151,7 @@ class BlockReader:
         complete frame and warn, instead of refusing it.
     """
 
-    #: the name of the format (``texsense.io.READERS``)
+    #: the name of the format (``texsense.io.READER_CLASSES``)
     format: ClassVar[str] = ""
 
     def __init__(self, path: str | Path, *, accept_truncated: bool = False) -> None:
@@ -233,6 +234,21 @@ class RecordingReader(BlockReader):
 
     #: quantities whose readings this format cannot hold negative (in addition to NON_NEGATIVE)
     non_negative: ClassVar[frozenset[str]] = frozenset()
+    #: what the format is, in a few words (the table of formats, help and errors)
+    what: ClassVar[str] = ""
+    #: when format detection asks this reader (lower first: a specific rule before a loose one)
+    sniff_order: ClassVar[int] = 100
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass that names its format is registered (:mod:`texsense.io._registry`)."""
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("format"):
+            register_reader(cls)
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """Whether the file (or folder) ``probe`` describes is of this format, by content."""
+        return False
 
     def __init__(self, path: str | Path, *, accept_truncated: bool = False) -> None:
         super().__init__(path, accept_truncated=accept_truncated)

@@ -24,9 +24,10 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
+from texsense.io._registry import Probe, writer
 from texsense.io._text import Line, TextLines, format_float
 
-__all__ = ["TekscanReader", "read_tekscan", "write_tekscan"]
+__all__ = ["TekscanReader", "write_tekscan"]
 
 _KEY = re.compile(r"^([A-Z][A-Z0-9_]*):?(?:\s+(.*))?$")
 _FRAME = re.compile(r"^Frame\s+(\d+)\s*(?:,(.*))?$")
@@ -108,14 +109,40 @@ def _header_int(path: Path, header: dict[str, str], where: dict[str, int], key: 
 
 
 class TekscanReader(RecordingReader):
-    """A Tekscan ASCII export read a frame at a time (see :func:`read_tekscan`).
+    """Read a Tekscan ASCII export (``.csv`` or ``.asf``).
 
-    The header's ``START_FRAME``/``END_FRAME`` declare how many frames follow: a file closed
-    early (fewer frames before ``@@``) or cut (no ``@@``) is refused, or read with
-    ``accept_truncated`` and reported.
+    Parameters
+    ----------
+    path : str or Path
+        The export.
+    accept_truncated : bool
+        Read an export that was cut or closed early up to its last complete frame (with a
+        warning) instead of refusing it.
+
+    Returns
+    -------
+    Recording
+        Raw counts (``UNITS raw``) or pressure in N/cm² on a ROWS x COLS grid whose 'B' cells
+        are empty. Frame times come from each frame line, else from ``SECONDS_PER_FRAME``.
+        Cells that are not a number, infinite or negative are invalid readings.
+
+    Raises
+    ------
+    FormatError
+        On a missing key, a frame of the wrong shape, a non-number, a 'B' pattern that
+        changes between frames, times that go back, or a file cut short (no ``@@``, fewer
+        frames than ``START_FRAME``/``END_FRAME`` declare); the message names the line.
     """
 
     format = "tekscan"
+    what = "Tekscan ASCII .csv / .asf"
+    sniff_order = 10
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A ``DATA_TYPE`` first line, or Tekscan named near the top."""
+        return probe.first.startswith("DATA_TYPE") or "Tekscan" in probe.text[:400]
+
     non_negative = frozenset({"raw"})
 
     def _read_header(self) -> Header:
@@ -277,35 +304,7 @@ def _frame_time(path: Path, line: Line, rest: str | None) -> float:
     return float("nan")
 
 
-def read_tekscan(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """Read a Tekscan ASCII export (``.csv`` or ``.asf``).
-
-    Parameters
-    ----------
-    path : str or Path
-        The export.
-    accept_truncated : bool
-        Read an export that was cut or closed early up to its last complete frame (with a
-        warning) instead of refusing it.
-
-    Returns
-    -------
-    Recording
-        Raw counts (``UNITS raw``) or pressure in N/cm² on a ROWS x COLS grid whose 'B' cells
-        are empty. Frame times come from each frame line, else from ``SECONDS_PER_FRAME``.
-        Cells that are not a number, infinite or negative are invalid readings.
-
-    Raises
-    ------
-    FormatError
-        On a missing key, a frame of the wrong shape, a non-number, a 'B' pattern that
-        changes between frames, times that go back, or a file cut short (no ``@@``, fewer
-        frames than ``START_FRAME``/``END_FRAME`` declare); the message names the line.
-    """
-    with TekscanReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()
-
-
+@writer("tekscan", what="Tekscan ASCII (exact round trip)", suffixes=(".asf",))
 def write_tekscan(rec: Recording, path: str | Path, *, unit: str | None = None) -> Path:
     """Write ``rec`` as a Tekscan ASCII export readable by :func:`read_tekscan`.
 

@@ -30,12 +30,12 @@ import numpy as np
 
 from texsense.data import units
 from texsense.data.layout import Layout
-from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
+from texsense.io._registry import Probe
 from texsense.io._text import Line, TextLines, is_number, parse_float
 
-__all__ = ["XSensorReader", "read_xsensor"]
+__all__ = ["XSensorReader"]
 
 _GAP = 2  # empty columns between two sensors in the combined grid
 # statistic -> (label prefix, is a pressure in the file's unit)
@@ -96,9 +96,32 @@ class _Frame:
 
 
 class XSensorReader(RecordingReader):
-    """An XSENSOR CSV export read a frame at a time (see :func:`read_xsensor`)."""
+    """Read an XSENSOR CSV export.
+
+    Parameters
+    ----------
+    path : str or Path
+        The export.
+    accept_truncated : bool
+        Read an export whose last frame was cut short without it (with a warning) instead
+        of refusing it.
+
+    Returns
+    -------
+    Recording
+        Pressure in N/cm² (converted from the file's ``Units:``), frames timed from each
+        frame's ``Time`` field relative to the first frame. Values that are not a number,
+        infinite or negative are invalid readings.
+    """
 
     format = "xsensor"
+    what = "XSENSOR CSV export"
+    sniff_order = 20
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A ``File:`` first line and ``FRAME`` blocks."""
+        return probe.first.startswith("File:") and "FRAME" in probe.text
 
     def _read_header(self) -> Header:
         path = self.path
@@ -333,25 +356,3 @@ def _layout(path: Path, sensors: list[_Block]) -> tuple[Layout, list[np.ndarray]
         cells = (np.arange(s.rows)[:, None] * cols + off + np.arange(s.cols)[None, :]).ravel()
         regions[s.name] = cell_to_element[cells]
     return layout.with_regions(regions), [regions[s.name] for s in sensors]
-
-
-def read_xsensor(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """Read an XSENSOR CSV export.
-
-    Parameters
-    ----------
-    path : str or Path
-        The export.
-    accept_truncated : bool
-        Read an export whose last frame was cut short without it (with a warning) instead
-        of refusing it.
-
-    Returns
-    -------
-    Recording
-        Pressure in N/cm² (converted from the file's ``Units:``), frames timed from each
-        frame's ``Time`` field relative to the first frame. Values that are not a number,
-        infinite or negative are invalid readings.
-    """
-    with XSensorReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()

@@ -436,7 +436,7 @@ class Monitor:
         if self._t_first is None:
             self._t_first = frame.t
         alerts = self.mode.alerts and not self.raw_only
-        exposure_events = self.tracker.step(frame.t, pressure) if alerts else []
+        exposure_events = self.tracker.step(pressure, frame.t) if alerts else []
         if self.recorder is not None:
             self.recorder.append(frame, pressure, measured)
         frame_stats, load = self._stats_of(frame.t, pressure)
@@ -444,7 +444,7 @@ class Monitor:
         bed = None
         if self.bed is not None:
             exposure_events += self.bed.step(
-                frame.t, pressure, posture["label"] if posture else None
+                pressure, posture["label"] if posture else None, frame.t
             )
             bed = self.bed.status(frame.t)
         for e in exposure_events:  # name the places (the bed's regions are this frame's)
@@ -537,7 +537,7 @@ class Monitor:
         label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
         conf = float(confidence[0])
         return {
-            "label": str(self._vote.step(t, str(label[0]), conf)),
+            "label": str(self._vote.step(str(label[0]), t, conf)),
             "frame_label": str(label[0]),
             "confidence": conf,
             "window_s": POSTURE_WINDOW_S,
