@@ -1,0 +1,142 @@
+"""A group of `texsense station` members as real processes, with a real PostgreSQL and a real
+Mosquitto and `texsense simulate mats` publishing the virtual mats (docs/station.md, "A group
+of stations"); shared by tests/faults/test_group.py and benchmarks/station_failover.py."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import psycopg
+
+from conftest import free_port
+from postgres_server import PostgresServer
+from texsense.station.broker import Broker
+
+
+class NotReachedError(AssertionError):
+    """A condition was not reached (with the members' logs)."""
+
+
+class Cluster:
+    """``members`` members of the group ``ward`` over ``mats`` virtual mats at ``speed``
+    simulated seconds per second, in ``folder``. No beds by default: a station calibrates
+    each kind of virtual mat when it starts (the seat's takes ~10 s of a quiet core, the bed's
+    as much again)."""
+
+    def __init__(self, folder: Path, members: list[str], mats: int, *, speed: float = 1.0,
+                 reposition_min: float = 20.0, beds: int = 0,
+                 extra: tuple[str, ...] = ()) -> None:  # fmt: skip
+        self.folder, self.mats, self.speed = folder, mats, speed
+        self.extra = ("--reposition-min", str(reposition_min), "--virtual-beds", str(beds),
+                      *extra)  # fmt: skip
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self.ports: dict[str, int] = {}
+        self.groups: dict[str, str] = {}
+        self.pg = PostgresServer()
+        self.broker = Broker()
+        self.broker.start()
+        self.broker_url = f"mqtt://127.0.0.1:{self.broker.port}"
+        self.publisher = self._spawn("simulate", ["simulate", "mats", "--count", str(mats),
+                                                  "--broker", self.broker_url,
+                                                  "--speed", str(speed),
+                                                  "--beds", str(beds)])  # fmt: skip
+        for m in members:
+            self.start(m)
+
+    def _spawn(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
+        with (self.folder / f"{name}.log").open("ab") as out:
+            return subprocess.Popen([sys.executable, "-m", "texsense.cli", *args], stdout=out,
+                                    stderr=subprocess.STDOUT, cwd=self.folder,
+                                    env={**os.environ, "TMPDIR": str(self.folder)})  # fmt: skip
+
+    # ---------------------------------------------------------------- members
+    def database(self, name: str) -> str:
+        """A database ``name`` of its own on the server (for a second group)."""
+        with psycopg.connect(self.pg.url, autocommit=True) as c:
+            c.execute(f"CREATE DATABASE {name}")
+        return self.pg.url.rsplit("/", 1)[0] + "/" + name
+
+    def start(self, member: str, group: str = "ward", db: str | None = None) -> None:
+        """Start ``member`` of ``group`` (again, on its port: its page stays where it was)."""
+        port = self.ports.setdefault(member, free_port())
+        self.groups[member] = group
+        self.procs[member] = self._spawn(member, [
+            "station", "--group", group, "--member", member, "--broker", self.broker_url,
+            "--db", db or self.pg.url, "--virtual-mats", str(self.mats), "--speed", str(self.speed),
+            "--port", str(port), "--record-dir", f"rec-{member}", *self.extra])  # fmt: skip
+
+    def kill(self, member: str) -> None:
+        """SIGKILL ``member`` (no last word)."""
+        proc = self.procs.pop(member)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+
+    def url(self, member: str) -> str:
+        return f"http://127.0.0.1:{self.ports[member]}/"
+
+    def get(self, member: str, path: str) -> Any:
+        with urllib.request.urlopen(self.url(member) + path, timeout=5) as r:
+            return json.load(r)
+
+    def mats_of(self, member: str) -> dict[str, dict[str, Any]]:
+        """``GET /api/mats`` of ``member``: every mat of the group by id."""
+        return {m["id"]: m for m in self.get(member, "api/mats")}
+
+    def until(self, what: Any, cond: Any, timeout: float, step: float = 0.1) -> Any:
+        """Poll ``what()`` until ``cond(value)``; :class:`NotReachedError` with the logs
+        otherwise."""
+        deadline = time.monotonic() + timeout
+        value = None
+        while True:
+            for name, proc in self.procs.items():
+                if proc.poll() is not None:
+                    raise NotReachedError(f"member {name} exited:\n{self.log(name)[-3000:]}")
+            with contextlib.suppress(OSError, KeyError, ValueError):
+                value = what()
+                if cond(value):
+                    return value
+            if time.monotonic() > deadline:
+                logs = "\n".join(f"--- {n}\n{self.log(n)[-1500:]}" for n in self.procs)
+                raise NotReachedError(
+                    f"not reached in {timeout} s (last: {str(value)[:800]}):\n{logs}"
+                )
+            time.sleep(step)
+
+    def all_held(
+        self, member: str, alive: set[str] | None = None, timeout: float = 60.0
+    ) -> dict[str, dict[str, Any]]:
+        """Until every mat is held (by a member of ``alive``, default: the running members of
+        ``member``'s group) and live, as ``member`` sees it."""
+        alive = alive or {m for m in self.procs if self.groups[m] == self.groups[member]}
+
+        def ok(mats: dict[str, dict[str, Any]]) -> bool:
+            return len(mats) == self.mats and all(
+                m.get("holder") in alive and m["state"] not in ("stale", "unwatched", "waiting")
+                for m in mats.values())  # fmt: skip
+
+        return dict(self.until(lambda: self.mats_of(member), ok, timeout))
+
+    def log(self, name: str) -> str:
+        path = self.folder / f"{name}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def close(self) -> None:
+        for proc in [*self.procs.values(), self.publisher]:
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(signal.SIGTERM)
+        for proc in [*self.procs.values(), self.publisher]:
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        self.broker.stop()
+        self.pg.close()
