@@ -65,14 +65,14 @@ def main() -> None:
     rows = []
     try:
         c.start("ref", group="ref", db=c.database("reference"))
-        c.all_held("ref")
+        c.all_held("ref", timeout=600)  # the stations start (calibrations)
         for k in range(args.kills):
             victim = names[(k + 1) % len(names)]
-            c.all_held(names[0])
-            if k:  # the member that came back has its share again
-                c.until(lambda: c.mats_of(names[0]),
-                        lambda s: all(any(m["holder"] == n for m in s.values())
-                                      for n in names), 90)  # fmt: skip
+            c.all_held(names[0], timeout=120)
+            # every member holds a share (one that came back takes it after 10 s)
+            c.until(lambda: c.mats_of(names[0]),
+                    lambda s: all(any(m["holder"] == n for m in s.values()) for n in names),
+                    120)  # fmt: skip
             rows.append(one_kill(c, victim, names[0] if victim != names[0] else names[1]))
             print(f"kill {k + 1}: {rows[-1]}", flush=True)
     finally:
