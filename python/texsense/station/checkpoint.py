@@ -212,24 +212,14 @@ def _restore_monitor(entry: MatEntry, data: bytes) -> None:
 
 def _save_pipeline(entry: MatEntry) -> bytes | None:
     pipeline = entry.monitor.pipeline
-    snapshot = getattr(pipeline, "snapshot", None)  # (until Pipeline.snapshot is merged)
-    if snapshot is None:
-        if pipeline is not None and not _said["pipeline"]:
-            log.warning("this build's pipeline cannot checkpoint its state: a mat taken over "
-                        "starts its Preisach memory and drift history afresh")  # fmt: skip
-            _said["pipeline"] = True
-        return None
-    return bytes(snapshot())
+    return None if pipeline is None else bytes(pipeline.snapshot())
 
 
 def _restore_pipeline(entry: MatEntry, data: bytes) -> None:
     pipeline = entry.monitor.pipeline
     if pipeline is None:
         raise ParameterError("the mat has no calibration here")
-    pipeline.restore(data)  # type: ignore[attr-defined]
-
-
-_said = {"pipeline": False}
+    pipeline.restore(data)
 
 
 register_part(Part("monitor", _save_monitor, _restore_monitor, often=True))
