@@ -34,6 +34,7 @@ pub mod preisach;
 pub mod repair;
 mod snapshot;
 pub mod spacer;
+pub mod spacer_batch;
 pub mod topology;
 
 pub use bouc_wen::{BoucWenBank, BoucWenParams};
@@ -46,4 +47,5 @@ pub use everett::{everett_terms, Everett, EverettTerms};
 pub use preisach::PreisachBank;
 pub use repair::{LocalRepair, Method as RepairMethod};
 pub use spacer::{SpacerBank, SpacerLaw, SpacerParams};
+pub use spacer_batch::SpacerBatch;
 pub use topology::Neighbours;
