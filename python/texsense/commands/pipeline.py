@@ -119,6 +119,14 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-hysteresis", action="store_true", help="first-loading curve only")
     p.add_argument("--no-drift", action="store_true", help="skip the drift stage")
     p.add_argument(
+        "--in-use-drift",
+        choices=("on", "off"),
+        default="on",
+        help="on (default): correct the drift from the mat in use (stillness, an empty mat) "
+        "instead of with the calibration's drift stage, where the calibration has a spacer "
+        "model; off: the laboratory drift stage only (docs/drift.md)",
+    )
+    p.add_argument(
         "--chunk-frames",
         type=int,
         help="frames per block (default: about 2^18 element-samples, 256 frames of 1024)",
@@ -233,6 +241,7 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
         drift=not args.no_drift,
         chunk_frames=args.chunk_frames,
         accept_truncated=args.accept_truncated,
+        in_use=args.in_use_drift == "on",
     )
 
 
@@ -257,6 +266,7 @@ def run_process(args: argparse.Namespace) -> int:
                     f"wrote {args.output}: {report.frames} frames; "
                     f"{report.failed_share:.1%} of readings failed"
                 )
+                _say_in_use(args.output, options)
             return 0
         return _process_in_memory(src, cal, args.output, options)
     jobs, ignored = archive_jobs(args.inputs, args.output)
@@ -290,7 +300,34 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
         f"{', '.join(out.meta['stages'])}; {failed.mean():.1%} of readings failed, "
         f"{int(failed.any(axis=0).sum())} elements failed at least once"
     )
+    if options.in_use:
+        print(in_use_line(pipe.in_use_status()))
     return 0
+
+
+def in_use_line(status: dict[str, Any]) -> str:
+    """The in-use drift correction in one line (``process``, the report)."""
+    if status["state"] == "off":
+        return f"in-use drift correction off: {status['why']}"
+    if status["state"] != "correcting":
+        return "in-use drift correction: no still period seen, nothing corrected"
+    return (
+        f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
+        f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
+        f"zero taken {status['zeroed']} times"
+    )
+
+
+def _say_in_use(output: Path, options: ProcessOptions) -> None:
+    """After an HDF5 output: the in-use drift state it ended with (its metadata)."""
+    if not options.in_use:
+        return
+    import h5py
+
+    with h5py.File(output, "r") as f:
+        meta = json.loads(f.attrs.get("meta", "{}"))
+    if "in_use_drift" in meta:
+        print(in_use_line(meta["in_use_drift"]))
 
 
 def run_repair(args: argparse.Namespace) -> int:

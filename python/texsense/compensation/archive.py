@@ -63,11 +63,19 @@ class ProcessOptions:
     #: Read an input cut short up to its last complete frame (with a warning) instead of
     #: refusing it (``--accept-truncated``).
     accept_truncated: bool = False
+    #: Correct the drift in use (stillness, an empty mat) instead of with the calibration's
+    #: drift stage, where the calibration allows it (``--in-use-drift off``: laboratory only).
+    in_use: bool = True
 
     def pipeline(self, chain: StageChain, layout: Layout) -> Pipeline:
         """The compiled pipeline of ``chain`` for ``layout`` with these settings."""
         return Pipeline(
-            chain, layout, hysteresis=self.hysteresis, drift=self.drift, repair=self.repair
+            chain,
+            layout,
+            hysteresis=self.hysteresis,
+            drift=self.drift,
+            repair=self.repair,
+            in_use=self.in_use and self.drift,
         )
 
     def frames_per_block(self, n_elements: int) -> int:
@@ -99,8 +107,11 @@ def input_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
-    """True when ``dst`` is a complete output of the same calibration and input."""
+def _output_matches(
+    dst: Path, calibration_id: str, digest: str, stages: list[str] | None = None
+) -> bool:
+    """True when ``dst`` is a complete output of the same calibration and input (and, given
+    ``stages``, of the same stages)."""
     if not dst.is_file():
         return False
     import h5py
@@ -115,6 +126,7 @@ def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
         complete
         and meta.get("calibration_id") == calibration_id
         and meta.get("input_sha256") == digest
+        and (stages is None or meta.get("stages") == stages)
     )
 
 
@@ -143,11 +155,11 @@ def process_file(
     check_not_input(dst, [src])
     cal = load_chain(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
-    if _output_matches(dst, cal.id, digest):
-        return FileReport(str(src), str(dst), "skipped")
     with open_reader(src, accept_truncated=opts.accept_truncated) as reader:
         head = reader.header
         pipe = opts.pipeline(cal, head.layout)
+        if _output_matches(dst, cal.id, digest, pipe.provenance()["stages"]):
+            return FileReport(str(src), str(dst), "skipped")
         quantity, unit = pipe.input_quantity
         if head.quantity != quantity:
             raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
@@ -182,6 +194,8 @@ def process_file(
                 failed += int(np.count_nonzero(codes))
             if frames == 0:
                 raise FormatError(src, "the recording has no frames")
+            if pipe.in_use:
+                writer.update_meta({"in_use_drift": pipe.in_use_status()})
     share = failed / max(1, frames * head.layout.n_elements)
     return FileReport(str(src), str(dst), "done", frames, share)
 

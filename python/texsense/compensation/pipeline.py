@@ -12,6 +12,9 @@ streaming frame by frame or in batch over a recording.
   reading is skipped: the element's Preisach and drift states stay frozen until it reads again.
   Without the hysteresis stage the compression is converted with the first-loading curve (what an
   uncompensated system does);
+- **in-use drift** (``in_use=True``, :class:`~texsense.compensation.inuse.InUseDrift`): the
+  drift read from the mat in use (stillness, an empty mat) in place of the laboratory drift
+  stage; it needs a spacer model and says why when it cannot run (:attr:`Pipeline.in_use_note`);
 - **repair** (:class:`~texsense.compensation.repair.Repair`): failed elements are filled (eq. 6.14
   or a better method) and stay marked False in the output's ``valid`` mask.
 
@@ -32,6 +35,8 @@ import numpy.typing as npt
 
 from texsense._core import Chain, Compensation, __version__
 from texsense.compensation.health import FailureDetector
+from texsense.compensation.intervals import bounds, drift_share
+from texsense.compensation.inuse import InUseDrift
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
 from texsense.compensation.stage import time_steps
 from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, StageChain
@@ -58,6 +63,16 @@ class Pipeline:
     repair : str or None
         A method of :data:`texsense.compensation.repair.METHODS`, or None to leave failed elements
         NaN (an unknown name raises :class:`ParameterError`).
+    in_use : bool
+        Correct the drift in use (:class:`~texsense.compensation.inuse.InUseDrift`) instead of
+        with the calibration's drift stage; where the calibration cannot (no spacer model, the
+        hysteresis stage off) the pipeline runs without it and :attr:`in_use_note` says why.
+    in_use_options : dict, optional
+        Settings of :class:`~texsense.compensation.inuse.InUseDrift`.
+    interval : float, optional
+        Give every value a bound at this level (e.g. 0.95; :mod:`texsense.compensation.intervals`):
+        ``bounds_`` holds the lower and upper maps of the last frames. The calibration's
+        hysteresis model needs held-out residuals (a preset's, or a held-out record).
     """
 
     def __init__(
@@ -69,6 +84,9 @@ class Pipeline:
         hysteresis: bool = True,
         drift: bool = True,
         repair: str | None = "harmonic",
+        in_use: bool = False,
+        in_use_options: dict[str, Any] | None = None,
+        interval: float | None = None,
     ) -> None:
         if not isinstance(chain, StageChain):
             raise ParameterError(f"a Pipeline compiles a StageChain, not {type(chain).__name__}")
@@ -89,11 +107,38 @@ class Pipeline:
         self.detect, self.hysteresis, self.drift, self.repair = detect, hysteresis, drift, repair
         self.calibration_id = chain.id
         linear = isinstance(conversion, Linear)
+        self.in_use, self.in_use_options = in_use, in_use_options
+        hyst = chain.find(Hysteresis)
+        #: why the in-use drift correction does not run although asked for (None: it runs)
+        self.in_use_note: str | None = None
+        self.estimator: InUseDrift | None = None
+        if in_use and (linear or hyst is None):
+            self.in_use_note = "the calibration has no spacer model (hysteresis stage)"
+        elif in_use and not hysteresis:
+            self.in_use_note = "the hysteresis stage is off"
+        elif in_use and hyst is not None:
+            self.estimator = InUseDrift(*hyst.loading_points(), layout, **(in_use_options or {}))
         self.stages = {
             "detect": detect,
             "hysteresis": hysteresis and not linear,
-            "drift": drift and hysteresis and "drift" in chain,
+            "drift": drift and hysteresis and "drift" in chain and self.estimator is None,
+            "in-use drift": self.estimator is not None,
         }
+        self.interval = interval
+        self._held_out = None
+        if interval is not None:
+            self._held_out = None if hyst is None else getattr(hyst.model_, "held_out_", None)
+            if self._held_out is None:
+                raise ParameterError(
+                    "bounds need the calibration's held-out residuals: calibrate with a spacer "
+                    "preset, held steps or a held-out record (docs/drift.md, Bounds)"
+                )
+            if not 0.5 <= interval < 1.0:
+                raise ParameterError(f"the interval level must lie in [0.5, 1), got {interval}")
+            self._range_max = float(hyst.loading_points()[1][-1]) if hyst is not None else None
+        #: lower and upper maps of the last frames (with ``interval``)
+        self.bounds_: tuple[np.ndarray, np.ndarray] | None = None
+        self._t_first: float | None = None
         self.detector: FailureDetector = chain.find(FailureDetector) or conversion.detector(layout)
         self._repair = None
         if repair is not None and repair in GLOBAL_METHODS:
@@ -102,6 +147,7 @@ class Pipeline:
         self._chain.reset()  # the kernels' copies start a stream of their own
         self._last_t: float | None = None
         self._dt1 = np.zeros(1)
+        self._t1 = np.zeros(1)
         self._all_valid = np.ones(layout.n_elements, bool)
         #: the failure codes of the last frames (0: measured)
         self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
@@ -148,7 +194,10 @@ class Pipeline:
         self._chain.reset()
         if self._repair is not None:
             self._repair.reset()
+        if self.estimator is not None:
+            self.estimator.forget()
         self._last_t = None
+        self._t_first = None
         return self
 
     def state_bytes_per_element(self) -> int:
@@ -159,13 +208,22 @@ class Pipeline:
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
         convert = "convert:linear" if "linear" in self.chain else "convert"
-        return {
+        out = {
             "calibration_id": self.calibration_id,
             "software": f"texsense {__version__}",
             "stages": [k for k, v in self.stages.items() if v]
             + [convert]
             + ([f"repair:{self.repair}"] if self.repair else []),
         }
+        if self.in_use:
+            out["in_use_drift"] = self.in_use_status()
+        return out
+
+    def in_use_status(self) -> dict[str, Any]:
+        """The in-use drift correction now (:meth:`InUseState.status`), or why it is off."""
+        if self.estimator is None:
+            return {"state": "off", "why": self.in_use_note or "not asked for"}
+        return self.estimator.state.status()
 
     def process(
         self, frames_pF: npt.ArrayLike, times_s: npt.ArrayLike, valid: npt.ArrayLike | None = None
@@ -187,20 +245,45 @@ class Pipeline:
         )
         if cap.shape[0] == 0:
             return np.empty(cap.shape), np.zeros(cap.shape, bool), np.zeros(cap.shape, np.uint8)
-        return self._pass(time_steps(t, self._last_t), cap, v, float(t[-1]))
+        return self._pass(time_steps(t, self._last_t), cap, v, t)
 
     def _pass(
-        self, dt: np.ndarray, cap: np.ndarray, valid: np.ndarray, last_t: float
+        self, dt: np.ndarray, cap: np.ndarray, valid: np.ndarray, times: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The compiled chain (and a harmonic repair) over checked arrays: what ``process``
-        and ``step`` share."""
+        """The compiled chain, the in-use drift and a harmonic repair over checked arrays:
+        what ``process`` and ``step`` share."""
         values, codes = self._chain.run(dt, cap, valid)
-        self._last_t = last_t
+        self._last_t = float(times[-1])
         ok = codes == 0
+        if self.estimator is not None:
+            values = self.estimator.run(values, ok, times)
         if self._repair is not None:
             values, _ = self._repair._block(values, ok & np.isfinite(values), dt)
         self.codes_ = codes
+        if self.interval is not None:
+            self.bounds_ = self._bounds(values, ok, times)
         return values, ok, codes
+
+    def _bounds(
+        self, values: np.ndarray, ok: np.ndarray, times: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds of a block (:func:`texsense.compensation.intervals.bounds`): the drift
+        share from the in-use correction of every frame, or from the time since the stream
+        began (the calibration taken as made just before)."""
+        assert self._held_out is not None and self.interval is not None
+        if self._t_first is None:
+            self._t_first = float(times[0])
+        hours = (np.asarray(times, dtype=np.float64) - self._t_first) / 3600.0
+        corr = (
+            self.estimator.corrections_
+            if self.estimator is not None
+            else np.full(hours.shape, np.nan)
+        )
+        d = np.array(
+            [drift_share(h, None if np.isnan(c) else c) for h, c in zip(hours, corr, strict=True)]
+        )
+        return bounds(values, self.interval, self._held_out, drift=d[:, None], repaired=~ok,
+                      range_max=self._range_max)  # fmt: skip
 
     def step(
         self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
@@ -219,9 +302,9 @@ class Pipeline:
         dt = 0.0 if self._last_t is None else t - self._last_t
         if not (dt >= 0 and np.isfinite(t)):
             raise ParameterError("frame times must be numbers and must not decrease")
-        self._dt1[0] = dt
+        self._dt1[0], self._t1[0] = dt, t
         # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
-        out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
+        out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), self._t1)
         self.codes_ = codes[0]
         return out[0], ok[0]
 

@@ -296,6 +296,13 @@ class RecordingWriter:
             ds.resize((stop,))
             ds[start:stop] = arr.astype(object) if arr.dtype.kind == "U" else arr
 
+    def update_meta(self, extra: Mapping[str, Any]) -> None:
+        """Add ``extra`` to the file's ``meta`` (e.g. a state known only at the end: the
+        in-use drift correction)."""
+        meta = json.loads(self._file.attrs["meta"])
+        meta.update(extra)
+        self._file.attrs["meta"] = json.dumps(meta)
+
     def flush(self) -> None:
         """Write everything appended so far to disk."""
         self._file.flush()
