@@ -127,6 +127,13 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
         "model; off: the laboratory drift stage only (docs/drift.md)",
     )
     p.add_argument(
+        "--interval",
+        type=float,
+        metavar="LEVEL",
+        help="give every value a bound at this level (e.g. 0.95): lower and upper maps beside "
+        "the frames of an HDF5 output (docs/data-model.md, docs/drift.md)",
+    )
+    p.add_argument(
         "--chunk-frames",
         type=int,
         help="frames per block (default: about 2^18 element-samples, 256 frames of 1024)",
@@ -242,6 +249,7 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
         chunk_frames=args.chunk_frames,
         accept_truncated=args.accept_truncated,
         in_use=args.in_use_drift == "on",
+        interval=args.interval,
     )
 
 
@@ -290,6 +298,8 @@ def run_process(args: argparse.Namespace) -> int:
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
     check_not_input(output, [src])
+    if options.interval is not None:
+        raise ParameterError("--interval stores lower and upper maps: write an HDF5 output (.h5)")
     raw = load(src, accept_truncated=options.accept_truncated)
     pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)

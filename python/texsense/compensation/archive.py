@@ -66,6 +66,9 @@ class ProcessOptions:
     #: Correct the drift in use (stillness, an empty mat) instead of with the calibration's
     #: drift stage, where the calibration allows it (``--in-use-drift off``: laboratory only).
     in_use: bool = True
+    #: Give every value a bound at this level (``--interval 0.95``): lower and upper maps
+    #: beside the frames (docs/data-model.md).
+    interval: float | None = None
 
     def pipeline(self, chain: StageChain, layout: Layout) -> Pipeline:
         """The compiled pipeline of ``chain`` for ``layout`` with these settings."""
@@ -76,6 +79,7 @@ class ProcessOptions:
             drift=self.drift,
             repair=self.repair,
             in_use=self.in_use and self.drift,
+            interval=self.interval,
         )
 
     def frames_per_block(self, n_elements: int) -> int:
@@ -108,7 +112,11 @@ def input_hash(path: str | Path) -> str:
 
 
 def _output_matches(
-    dst: Path, calibration_id: str, digest: str, stages: list[str] | None = None
+    dst: Path,
+    calibration_id: str,
+    digest: str,
+    stages: list[str] | None = None,
+    interval: float | None = None,
 ) -> bool:
     """True when ``dst`` is a complete output of the same calibration and input (and, given
     ``stages``, of the same stages)."""
@@ -127,6 +135,7 @@ def _output_matches(
         and meta.get("calibration_id") == calibration_id
         and meta.get("input_sha256") == digest
         and (stages is None or meta.get("stages") == stages)
+        and (meta.get("interval") or {}).get("level") == interval
     )
 
 
@@ -158,13 +167,15 @@ def process_file(
     with open_reader(src, accept_truncated=opts.accept_truncated) as reader:
         head = reader.header
         pipe = opts.pipeline(cal, head.layout)
-        if _output_matches(dst, cal.id, digest, pipe.provenance()["stages"]):
+        if _output_matches(dst, cal.id, digest, pipe.provenance()["stages"], opts.interval):
             return FileReport(str(src), str(dst), "skipped")
         quantity, unit = pipe.input_quantity
         if head.quantity != quantity:
             raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
         out_quantity, out_unit = pipe.output_quantity
         meta = {**head.meta, **pipe.provenance(), "source": src.name, "input_sha256": digest}
+        if opts.interval is not None:
+            meta["interval"] = {"level": opts.interval, "method": "split conformal (issue 37)"}
         dst.parent.mkdir(parents=True, exist_ok=True)
         frames, failed = 0, 0
         with (
@@ -178,17 +189,21 @@ def process_file(
                 element_times=head.element_times,
                 compress=True,
                 live=False,
+                bounds=opts.interval is not None,
             ) as writer,
         ):
             for block in reader.blocks(opts.frames_per_block(head.layout.n_elements)):
                 values = block.to_unit(unit).frames if block.unit != unit else block.frames
                 p, ok, codes = pipe.process(values, block.times, block.valid)
+                lo, hi = pipe.bounds_ if pipe.bounds_ is not None else (None, None)
                 writer.append(
                     p,
                     block.times,
                     valid=ok,
                     element_times=block.element_times,
                     labels=block.labels or None,
+                    lower=lo,
+                    upper=hi,
                 )
                 frames += block.n_frames
                 failed += int(np.count_nonzero(codes))

@@ -117,7 +117,8 @@ class Pipeline:
         elif in_use and not hysteresis:
             self.in_use_note = "the hysteresis stage is off"
         elif in_use and hyst is not None:
-            self.estimator = InUseDrift(*hyst.loading_points(), layout, **(in_use_options or {}))
+            opts = {"converter": conversion.kernel(), **(in_use_options or {})}
+            self.estimator = InUseDrift(*hyst.loading_points(), layout, **opts)
         self.stages = {
             "detect": detect,
             "hysteresis": hysteresis and not linear,
@@ -136,6 +137,9 @@ class Pipeline:
             if not 0.5 <= interval < 1.0:
                 raise ParameterError(f"the interval level must lie in [0.5, 1), got {interval}")
             self._range_max = float(hyst.loading_points()[1][-1]) if hyst is not None else None
+        #: the conformal multiplier (None: the calibrated one of the level, ``SCORES``); 1
+        #: gives the score's scale σ (what ``benchmarks/night_drift.py --calibrate`` needs)
+        self.interval_multiplier: float | None = None
         #: lower and upper maps of the last frames (with ``interval``)
         self.bounds_: tuple[np.ndarray, np.ndarray] | None = None
         self._t_first: float | None = None
@@ -256,7 +260,7 @@ class Pipeline:
         self._last_t = float(times[-1])
         ok = codes == 0
         if self.estimator is not None:
-            values = self.estimator.run(values, ok, times)
+            values = self.estimator.run(values, ok, times, raw=cap)
         if self._repair is not None:
             values, _ = self._repair._block(values, ok & np.isfinite(values), dt)
         self.codes_ = codes
@@ -282,8 +286,15 @@ class Pipeline:
         d = np.array(
             [drift_share(h, None if np.isnan(c) else c) for h, c in zip(hours, corr, strict=True)]
         )
-        return bounds(values, self.interval, self._held_out, drift=d[:, None], repaired=~ok,
-                      range_max=self._range_max)  # fmt: skip
+        return bounds(
+            values,
+            self.interval,
+            self._held_out,
+            drift=d[:, None],
+            repaired=~ok,
+            range_max=self._range_max,
+            multiplier_value=self.interval_multiplier,
+        )
 
     def step(
         self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
