@@ -16,6 +16,7 @@ from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis.plots import model_figure, validation_report_figure
 from texsense.compensation.hysteresis.sampling import check_sampling
 from texsense.compensation.hysteresis.validation import validate
+from texsense.compensation.intervals import bounds, drift_share
 from texsense.compensation.stages import Drift, Hysteresis, StageChain
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io.columns import read_columns, write_columns
@@ -331,8 +332,6 @@ def _apply_bounds(
     context ``record``): the held-out scale by band, the drift share from the time since the
     record began (the model taken as made just before), an input beyond the identified range
     uncertain by how far it lies beyond."""
-    from texsense.compensation.intervals import bounds, drift_share
-
     if getattr(model, "held_out_", None) is None:
         raise ParameterError(
             "--interval needs the model's held-out residuals: fit it with --held-out RECORD.csv "

@@ -274,7 +274,8 @@ def run_process(args: argparse.Namespace) -> int:
                     f"wrote {args.output}: {report.frames} frames; "
                     f"{report.failed_share:.1%} of readings failed"
                 )
-                _say_in_use(args.output, options)
+                if report.in_use is not None:
+                    print(in_use_line(report.in_use))
             return 0
         return _process_in_memory(src, cal, args.output, options)
     jobs, ignored = archive_jobs(args.inputs, args.output)
@@ -326,18 +327,6 @@ def in_use_line(status: dict[str, Any]) -> str:
         f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
         f"zero taken {status['zeroed']} times"
     )
-
-
-def _say_in_use(output: Path, options: ProcessOptions) -> None:
-    """After an HDF5 output: the in-use drift state it ended with (its metadata)."""
-    if not options.in_use:
-        return
-    import h5py
-
-    with h5py.File(output, "r") as f:
-        meta = json.loads(f.attrs.get("meta", "{}"))
-    if "in_use_drift" in meta:
-        print(in_use_line(meta["in_use_drift"]))
 
 
 def run_repair(args: argparse.Namespace) -> int:

@@ -14,10 +14,12 @@ import numpy as np
 
 from texsense._progress import progress
 from texsense.commands import HELP
+from texsense.data.files import check_not_input
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
 from texsense.sim.device import VirtualDevice
+from texsense.sim.night import virtual_night
 from texsense.sim.protocols import PROTOCOLS, run_protocol
 from texsense.sim.seated import Subject, simulate_session
 from texsense.sim.spacer import PRESETS
@@ -192,8 +194,6 @@ def run_device(args: argparse.Namespace) -> int:
 def run_night(args: argparse.Namespace) -> int:
     """Run ``texsense simulate night``: the raw night, its truth and the mat's calibration."""
     from texsense.calibration.night import night_calibration
-    from texsense.data.files import check_not_input
-    from texsense.sim.night import virtual_night
 
     if args.output is None:
         raise ParameterError("simulate night needs -o NIGHT.h5 (the raw capacitance)")

@@ -100,6 +100,8 @@ class FileReport:
     frames: int = 0
     failed_share: float = 0.0
     error: str = ""
+    #: the in-use drift correction at the end (:meth:`Pipeline.in_use_status`), if it ran
+    in_use: dict[str, Any] | None = None
 
 
 def input_hash(path: str | Path) -> str:
@@ -212,7 +214,8 @@ def process_file(
             if pipe.in_use:
                 writer.update_meta({"in_use_drift": pipe.in_use_status()})
     share = failed / max(1, frames * head.layout.n_elements)
-    return FileReport(str(src), str(dst), "done", frames, share)
+    status = pipe.in_use_status() if pipe.in_use else None
+    return FileReport(str(src), str(dst), "done", frames, share, in_use=status)
 
 
 def archive_jobs(

@@ -150,7 +150,7 @@ class InUseState:
         try:
             creep = np.asarray(d["creep"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as e:
-            raise ParameterError(f"in-use drift state: {e}") from None
+            raise ParameterError(f"in-use drift state: the creep: {e}") from None
         if creep.ndim != 1:
             raise ParameterError("in-use drift state: creep must be a list of numbers")
         if n_elements is not None and creep.size != n_elements:
@@ -412,9 +412,18 @@ class InUseDrift:
             if self.predict and self._predict_unread(x0, ok):
                 c = self._refresh(x0)
             loaded = ok & (c > self.loaded_ncm2)
-            self._period = {"loaded": loaded, "ref": np.where(loaded, c, 0.0), "t": t,
-                            "last": t, "sum": np.zeros(c.size), "n": np.zeros(c.size),
-                            "moved": 0.0, "cum": np.zeros(c.size)}  # fmt: skip
+            self._period = {
+                "loaded": loaded,
+                "ref": np.where(loaded, c, 0.0),
+                "t": t,
+                "last": t,
+                "sum": np.zeros(c.size),
+                "n": np.zeros(c.size),
+                "moved": 0.0,
+                "cum": np.zeros(c.size),
+                "creep0": self.state.creep.copy(),
+                "still0": self.state.still_s,
+            }
             return c
         per["sum"] += np.where(ok, c, 0.0)
         per["n"] += ok
@@ -437,9 +446,12 @@ class InUseDrift:
         per["moved"] += change
         per["last"], per["sum"][:], per["n"][:] = t, 0.0, 0
         if abs(per["moved"]) > self.max_rate * (t - per["t"]) + LOAD_SLACK:
-            self.state.refused += 1  # faster than drift: a load change; start again
+            # faster than drift: a load change, also what was read of it; start again
+            self.state.refused += 1
+            self.state.creep[:] = per["creep0"]
+            self.state.still_s = per["still0"]
             self._period = None
-            return c
+            return self._refresh(x0)
         rel = np.where(mask, mean / np.where(mask, ref, 1.0) - 1.0, 0.0)
         per["cum"] += rel  # an element changing faster than drift is not drifting
         fast = np.abs(per["cum"]) > self.max_rate * (t - per["t"]) + ELEMENT_SLACK
