@@ -332,14 +332,15 @@ def _apply_bounds(
     context ``record``): the held-out scale by band, the drift share from the time since the
     record began (the model taken as made just before), an input beyond the identified range
     uncertain by how far it lies beyond."""
-    if getattr(model, "held_out_", None) is None:
+    held = getattr(model, "held_out_", None)
+    if held is None:
         raise ParameterError(
             "--interval needs the model's held-out residuals: fit it with --held-out RECORD.csv "
             "(a record it is not fitted on)"
         )
     hours = np.zeros(u.size) if times is None else (times - times[0]) / 3600.0
     d = np.array([drift_share(h, None) for h in hours])
-    lo, hi = bounds(modelled, level, model.held_out_, drift=d, context="record")
+    lo, hi = bounds(modelled, level, held, drift=d, context="record")
     # beyond the identified range the input is clamped: the value is at least that of the
     # edge and may lie beyond by the slope at the edge times how far (twice, to be safe)
     span = model.u_max_ - model.u_min_

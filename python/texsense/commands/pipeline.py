@@ -322,10 +322,12 @@ def in_use_line(status: dict[str, Any]) -> str:
         return f"in-use drift correction off: {status['why']}"
     if status["state"] != "correcting":
         return "in-use drift correction: no still period seen, nothing corrected"
+    z = status["zeroed"]
+    zeros = {0: "never", 1: "once", 2: "twice"}.get(z, f"{z} times")
     return (
         f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
         f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
-        f"zero taken {status['zeroed']} times"
+        f"zero taken {zeros}"
     )
 
 

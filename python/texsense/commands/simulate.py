@@ -220,10 +220,15 @@ def run_night(args: argparse.Namespace) -> int:
     outs = int(np.count_nonzero((sides[1:] == "out") & (sides[:-1] != "out")))
     print(
         f"night of {night.sleeper.name} ({night.sleeper.weight_kg:.0f} kg) on the {spacer} bed "
-        f"mat: {night.raw.n_frames} frames over {args.hours:g} h, empty at first, {turns} "
-        f"turns, out of bed {outs} times"
+        f"mat: {night.raw.n_frames} frames over {args.hours:g} h, empty at first, "
+        f"{turns} turn{'' if turns == 1 else 's'}, out of bed {_times(outs)}"
     )
     return 0
+
+
+def _times(n: int) -> str:
+    """never, once, twice, 3 times."""
+    return {0: "never", 1: "once", 2: "twice"}.get(n, f"{n} times")
 
 
 def _loads_from_stdin(device: VirtualDevice) -> None:

@@ -54,7 +54,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -99,16 +99,19 @@ class InUseState:
     zeroed: int = 0  # how many empty periods gave the creep
     refused: int = 0  # still periods refused (their load changed faster than drift can)
     load_correction: float = 0.0  # the correction of the present load (share, -0.12: 12 % less)
-    exposure: np.ndarray | None = None  # (N,) ∫ pressure dt, N/cm² s: the creep law's clock
-    read: np.ndarray | None = None  # (N,) bool: the element's creep was read in stillness
+    exposure: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) ∫ p dt, N/cm² s
+    read: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (N,) creep was read
     law: tuple[float, ...] | None = None  # creep = a · exposure^b fitted on the read ones
-    at_read: np.ndarray | None = None  # (N,) the exposure when the creep was last set
+    at_read: np.ndarray = field(default_factory=lambda: np.zeros(0))  # exposure when last set
 
     def __post_init__(self) -> None:
         n = self.creep.size
-        self.exposure = np.zeros(n) if self.exposure is None else self.exposure
-        self.read = np.zeros(n, bool) if self.read is None else self.read
-        self.at_read = np.zeros(n) if self.at_read is None else self.at_read
+        if self.exposure.size != n:
+            self.exposure = np.zeros(n)
+        if self.read.size != n:
+            self.read = np.zeros(n, bool)
+        if self.at_read.size != n:
+            self.at_read = np.zeros(n)
 
     def status(self, t: float | None = None) -> dict[str, Any]:
         """The state in words and numbers (dashboard, metadata, report)."""
@@ -215,6 +218,9 @@ class InUseDrift:
         The calibration's conversion (capacitance -> compression, eq. 2.1,
         ``Convert.kernel()``): with it, :meth:`run` given the raw frames reads the set of an
         empty mat.
+    rest_input : float, optional
+        What ``converter`` gives for a rested, unloaded element (its lowest compression; default
+        the loading curve's first input).
     """
 
     def __init__(
@@ -233,6 +239,7 @@ class InUseDrift:
         predict: bool = True,
         zero: bool = True,
         converter: Any = None,
+        rest_input: float | None = None,
     ) -> None:
         u = np.asarray(curve_input, dtype=np.float64)
         p = np.asarray(curve_output, dtype=np.float64)
@@ -242,6 +249,9 @@ class InUseDrift:
         self._u, self._p = u[keep], p[keep]
         if self._u.size < 2:
             raise ParameterError("the loading curve does not rise")
+        # the compression an unloaded, rested spacer reads (the conversion's floor): an empty
+        # mat's set is what it reads beyond this
+        self._u_rest = float(self._u[0]) if rest_input is None else float(rest_input)
         for name, v in (("settle_s", settle_s), ("motion", motion), ("update_s", update_s),
                         ("max_rate", max_rate), ("max_creep_mm", max_creep_mm)):  # fmt: skip
             if not (np.isfinite(v) and v > 0):
@@ -360,7 +370,7 @@ class InUseDrift:
         if t - self._empty_since < self.settle_s:
             return
         r = np.ascontiguousarray(np.asarray(raw, dtype=np.float64).reshape(1, -1))
-        u = self.converter.run(r, np.ascontiguousarray(ok.reshape(1, -1)))[0]
+        u = self.converter.run(r, np.ascontiguousarray(ok.reshape(1, -1)))[0] - self._u_rest
         good = ok & np.isfinite(u)
         if self._set is None or not self._zeroing:
             self._set = np.where(good, u, np.nan)

@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from texsense._core import Chain, Compensation, __version__
 from texsense.compensation.health import FailureDetector
-from texsense.compensation.intervals import bounds, drift_share
+from texsense.compensation.intervals import bounds, drift_share, multiplier
 from texsense.compensation.inuse import InUseDrift
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
 from texsense.compensation.stage import time_steps
@@ -116,8 +116,12 @@ class Pipeline:
             self.in_use_note = "the calibration has no spacer model (hysteresis stage)"
         elif in_use and not hysteresis:
             self.in_use_note = "the hysteresis stage is off"
-        elif in_use and hyst is not None:
-            opts = {"converter": conversion.kernel(), **(in_use_options or {})}
+        elif in_use and hyst is not None and isinstance(conversion, Convert):
+            opts = {
+                "converter": conversion.kernel(),
+                "rest_input": float(conversion.curve_compression_mm_[0]),
+                **(in_use_options or {}),
+            }
             self.estimator = InUseDrift(*hyst.loading_points(), layout, **opts)
         self.stages = {
             "detect": detect,
@@ -134,8 +138,7 @@ class Pipeline:
                     "bounds need the calibration's held-out residuals: calibrate with a spacer "
                     "preset, held steps or a held-out record (docs/drift.md, Bounds)"
                 )
-            if not 0.5 <= interval < 1.0:
-                raise ParameterError(f"the interval level must lie in [0.5, 1), got {interval}")
+            multiplier(interval)  # the level is in range and its scores are calibrated
             self._range_max = float(hyst.loading_points()[1][-1]) if hyst is not None else None
         #: the conformal multiplier (None: the calibrated one of the level, ``SCORES``); 1
         #: gives the score's scale σ (what ``benchmarks/night_drift.py --calibrate`` needs)
@@ -212,7 +215,7 @@ class Pipeline:
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
         convert = "convert:linear" if "linear" in self.chain else "convert"
-        out = {
+        out: dict[str, Any] = {
             "calibration_id": self.calibration_id,
             "software": f"texsense {__version__}",
             "stages": [k for k, v in self.stages.items() if v]

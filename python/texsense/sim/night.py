@@ -13,11 +13,11 @@ Nothing here knows the compensation: the spacer laws are the simulator's
 
 Examples
 --------
->>> n = virtual_night("textile-3mm", hours=0.05, seed=1)
+>>> n = virtual_night("textile-3mm", hours=0.1, seed=1)
 >>> n.raw.quantity, n.truth.quantity, n.raw.n_frames == n.truth.n_frames
 ('capacitance', 'pressure', True)
->>> sorted(set(n.truth.labels["side"]))[:2]
-['out', 'supine']
+>>> sorted(str(s) for s in set(n.truth.labels["side"]))  # empty for 5 min, then lying
+['out', 'supine', 'transition']
 """
 
 from __future__ import annotations
@@ -85,7 +85,9 @@ def night_positions(hours: float, seed: int) -> list[tuple[str, float]]:
     while total < end:
         for position, seconds in night_plan(rng, 4, 3600.0, sit_every=4, out_every=0,
                                             spread=(0.33, 2.2)):  # fmt: skip
-            if not away and total >= end / 2:
+            # out of bed after half the night, once a position was held (a short night's half
+            # may fall inside the empty start)
+            if not away and total >= end / 2 and len(plan) > 1:
                 plan.append(("out", min(AWAY_S, end - total)))
                 total += plan[-1][1]
                 away = True

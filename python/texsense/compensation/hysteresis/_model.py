@@ -414,6 +414,7 @@ class HysteresisModel:
     def to_content(self) -> dict[str, Any]:
         """The content of the model file (JSON-able)."""
         self._check_fitted()
+        held: HeldOut | None = getattr(self, "held_out_", None)
         return {
             "method": self.method_,
             "params": {
@@ -439,11 +440,7 @@ class HysteresisModel:
             "everett": self.everett_.tolist(),
             "details": self.details_,
             "provenance": dict(self.provenance_),
-            **(
-                {}
-                if getattr(self, "held_out_", None) is None
-                else {"held_out": self.held_out_.to_dict()}
-            ),
+            **({} if held is None else {"held_out": held.to_dict()}),
         }
 
     def save(self, path: str | Path) -> Path:
