@@ -27,10 +27,18 @@ from texsense._progress import logger
 from texsense.data import units
 from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
-from texsense.data.recording import QUANTITIES, Recording
+from texsense.data.recording import QUANTITIES
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import BlockReader, Header, Piece, RecordingReader
-from texsense.io._text import TextLines, decode_head, is_number, open_binary, parse_csv_row
+from texsense.io._registry import Probe
+from texsense.io._text import (
+    UTF16_BOMS,
+    TextLines,
+    decode_head,
+    is_number,
+    open_binary,
+    parse_csv_row,
+)
 
 __all__ = [
     "ColumnsReader",
@@ -38,7 +46,6 @@ __all__ = [
     "column_name",
     "is_columns_csv",
     "read_columns_csv",
-    "read_table",
     "unit_of_column",
     "write_columns_csv",
 ]
@@ -75,8 +82,8 @@ def _header(path: Path) -> tuple[list[str], list[str]]:
     """The ``#`` lines and the names of the first other line of a text file."""
     with open_binary(path) as fh:
         head = fh.read(1 << 14)
-    if b"\0" in head:
-        return [], []
+    if b"\0" in head and not head.startswith(UTF16_BOMS):
+        return [], []  # binary (UTF-16 text has NUL bytes too, after its byte-order mark)
     comments, names = [], []
     for line in decode_head(head).splitlines():
         if line.startswith("#"):
@@ -87,23 +94,28 @@ def _header(path: Path) -> tuple[list[str], list[str]]:
     return comments, names
 
 
-def is_columns_csv(path: str | Path) -> bool:
+def is_columns_csv(path: str | Path, names: Sequence[str] = ()) -> bool:
     """Whether ``path`` is a column table rather than a recording: texsense's ``# rows:``
-    line, or a header of names that does not start with ``time_s`` followed by element
-    columns (a wide CSV), or whose every other column names a unit (``force_n``)."""
+    line; a header that holds every column the caller ``names`` (``--input field_oe
+    --output moment_emu``: whoever names columns reads a table, whatever else the header
+    holds); or a header of names that does not start with ``time_s`` followed by element
+    columns (a wide CSV), or whose every other column names a unit (``force_n``). A file
+    that says it is a texsense wide CSV is one."""
     path = Path(path)
     if not path.is_file():
         return False
-    comments, names = _header(path)
+    comments, header = _header(path)
     if any(c.startswith("# rows:") for c in comments):
         return True
-    if any(c.startswith("# texsense wide-csv") for c in comments) or len(names) < 2:
+    if any(c.startswith("# texsense wide-csv") for c in comments) or len(header) < 2:
         return False
-    if any(is_number(n) for n in names):
+    if any(is_number(n) for n in header):
         return False  # numbers, not names: a PMD or other data line
-    if names[0] != "time_s":
+    if names and all(n in header for n in names):
         return True
-    return all(unit_of_column(n) is not None for n in names[1:])
+    if header[0] != "time_s":
+        return True
+    return all(unit_of_column(n) is not None for n in header[1:])
 
 
 def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) -> Path:
@@ -161,8 +173,8 @@ class ColumnsReader(BlockReader):
 
     def _read_header(self, required: Sequence[str]) -> tuple[list[str], int | None]:
         path, declared = self.path, None
-        while (line := self._lines.peek()) is not None and line.text.startswith("#"):
-            next(self._lines)
+        while (line := self.lines.peek()) is not None and line.text.startswith("#"):
+            next(self.lines)
             key, _, value = line.text[1:].partition(":")
             if key.strip() == "rows":
                 try:
@@ -171,7 +183,7 @@ class ColumnsReader(BlockReader):
                     raise FormatError(
                         path, f"rows: expected a count, found {value.strip()!r}", line.number
                     ) from None
-        head = self._lines.next_nonblank()
+        head = self.lines.next_nonblank()
         if head is None:
             raise FormatError(path, "empty file: expected a header line of column names")
         names = [s.strip() for s in head.text.split(",")]
@@ -189,7 +201,7 @@ class ColumnsReader(BlockReader):
     def _rows(self) -> Iterator[list[float]]:
         n = len(self.names)
         what = f"{n} values ({', '.join(self.names)})"
-        for line in self._lines.data_lines("the table"):
+        for line in self.lines.data_lines("the table"):
             if not line.ended and self.declared_rows is not None:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return
@@ -268,12 +280,16 @@ def _quantity_of_column(name: str) -> tuple[str, str] | None:
 
 
 class TableReader(RecordingReader):
-    """A column table read as a one-element recording (``texsense info calib.csv``): its
-    values are the last column that names a unit (``capacitance_pF`` of the simulator's
-    tables, ``<output>_model`` of ``hysteresis apply``), ``time_s`` the times (else one per
-    row), every other column a label."""
+    """A column table as a one-element recording (see :class:`TableReader`)."""
 
     format = "columns-csv"
+    what = "column table (one element)"
+    sniff_order = 40
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A header of column names (see :func:`is_columns_csv`)."""
+        return bool(probe.text) and is_columns_csv(probe.path)
 
     def _read_header(self) -> Header:
         self._table = ColumnsReader(self.path, accept_truncated=self.accept_truncated)
@@ -315,9 +331,3 @@ class TableReader(RecordingReader):
         table = getattr(self, "_table", None)
         if table is not None:
             table.close()
-
-
-def read_table(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """A column table as a one-element recording (see :class:`TableReader`)."""
-    with TableReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()

@@ -21,7 +21,7 @@ import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -39,6 +39,11 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
+
+if TYPE_CHECKING:  # the calibration and models come from the caller; their modules load there
+    from texsense.apps.bed import BedWatch
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.pipeline import Pipeline
 
 __all__ = ["Monitor", "Recorder"]
 
@@ -224,12 +229,12 @@ class Monitor:
         self,
         source: Source,
         *,
-        pipeline: Any = None,
+        pipeline: Pipeline | None = None,
         tracker: ExposureTracker | None = None,
-        posture_model: Any = None,
+        posture_model: PostureModel | None = None,
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
-        bed: Any = None,
+        bed: BedWatch | None = None,
         mode: str | None = None,
     ) -> None:
 
@@ -246,6 +251,8 @@ class Monitor:
         if bed is not None:
             if posture_model is None:
                 raise ParameterError("bed monitoring needs a posture model that reports sides")
+            if posture_model.classes_ is None:
+                raise ParameterError("bed monitoring needs a trained posture model")
             unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
             if unknown:
                 raise ParameterError(
@@ -367,7 +374,7 @@ class Monitor:
         self.changes += 1
         return n
 
-    def use_calibration(self, pipeline: Any, path: Path | str | None = None) -> None:
+    def use_calibration(self, pipeline: Pipeline, path: Path | str | None = None) -> None:
         """Show pressure through ``pipeline`` from the next frame on (a calibration just made
         on the page, :mod:`texsense.monitor.calibrate`); an event ``calibrated`` says when.
         A recording in progress goes on (its raw file is complete; a pressure file starts
@@ -458,7 +465,7 @@ class Monitor:
             self._t_first = frame.t
         alerts = self.mode.alerts and not self.raw_only
         lo, hi = (None, None) if bounds is None else bounds
-        exposure_events = self.tracker.step(frame.t, pressure, lo, hi) if alerts else []
+        exposure_events = self.tracker.step(pressure, frame.t, lo, hi) if alerts else []
         if self.recorder is not None:
             self.recorder.append(frame, pressure, measured, bounds)
         frame_stats, load = self._stats_of(frame.t, pressure)
@@ -466,7 +473,7 @@ class Monitor:
         bed = None
         if self.bed is not None:
             exposure_events += self.bed.step(
-                frame.t, pressure, posture["label"] if posture else None
+                pressure, posture["label"] if posture else None, frame.t
             )
             bed = self.bed.status(frame.t)
             if bounds is not None:
@@ -545,7 +552,7 @@ class Monitor:
         out: dict[str, Any] = {"in_use": None, "interval": None}
         if self.pipeline is not None and getattr(self.pipeline, "in_use", False):
             out["in_use"] = self.pipeline.in_use_status()
-        if bounds is not None:
+        if bounds is not None and self.pipeline is not None:
             out["interval"] = self.pipeline.interval
             out["lower"], out["upper"] = _rounded(bounds[0]), _rounded(bounds[1])
             out["possible"] = np.flatnonzero(self.tracker.possible).tolist()
@@ -595,7 +602,7 @@ class Monitor:
         label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
         conf = float(confidence[0])
         return {
-            "label": str(self._vote.step(t, str(label[0]), conf)),
+            "label": str(self._vote.step(str(label[0]), t, conf)),
             "frame_label": str(label[0]),
             "confidence": conf,
             "window_s": POSTURE_WINDOW_S,

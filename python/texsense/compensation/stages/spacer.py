@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from texsense._core import Curve, DriftBank, PreisachBank
 from texsense.compensation.drift import DriftModel, StepFit
-from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis import DEFAULT_CAPACITY, HysteresisModel
 from texsense.compensation.stage import Stage
 from texsense.data.modelfile import Fields
 from texsense.exceptions import ParameterError
@@ -73,10 +73,11 @@ class Hysteresis(Stage):
     def _reset_stream(self) -> None:
         self._bank: PreisachBank | None = None
 
-    def bank(self, n_elements: int) -> PreisachBank:
-        """A fresh compiled Preisach bank of ``n_elements`` (lower saturation)."""
+    def bank(self, n_elements: int, capacity: int = DEFAULT_CAPACITY) -> PreisachBank:
+        """A fresh compiled Preisach bank of ``n_elements`` (lower saturation), each element
+        keeping at most ``capacity`` turning points."""
         self._check_fitted()
-        return self.model_.bank(n_elements)
+        return self.model_.bank(n_elements, capacity)
 
     def loading_points(self, points: int = 400) -> tuple[np.ndarray, np.ndarray]:
         """The first-loading curve as arrays (compression, pressure): the model's output on a
@@ -130,7 +131,7 @@ class Drift(Stage):
 
     #: learned: γ and the kernel; how well γ fitted the held steps (after fit only)
     model_: DriftModel
-    step_fit_: StepFit
+    step_fit_: StepFit | None
 
     def __init__(self, kind: str = "log", rest_rate: float = 0.0) -> None:
         self.kind = kind
@@ -143,9 +144,8 @@ class Drift(Stage):
 
     def fit(self, steps: Sequence[Any]) -> Drift:
         """γ (and the kernel) from held steps (:func:`texsense.compensation.drift.split_steps`)."""
-        model, self.step_fit_ = DriftModel.fit(
-            list(steps), kind=self.kind, rest_rate=float(self.rest_rate)
-        )
+        model = DriftModel.fit_steps(list(steps), kind=self.kind, rest_rate=float(self.rest_rate))
+        self.step_fit_ = model.step_fit_
         return self.set_fitted(model=model)
 
     def _prepare(self) -> None:
