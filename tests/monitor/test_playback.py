@@ -74,7 +74,15 @@ def test_alerts_name_the_place_in_words(tmp_path, caplog):
     p = np.zeros(36)
     p[[grid.element_at(2, 3), grid.element_at(3, 3)]] = 1.0
     feed(g, p, 301)
-    assert g.tracker.open_alert.where == ["rows 3-4, column 4"]
+    # no anatomy on a generic mat: the alert names no region, its details line the cells
+    assert g.tracker.open_alert.where == []
+    assert g.tracker.open_alert.details == ["rows 3-4, column 4"]
+    # the same seat with no orientation declared (a mat on a serial line that says none):
+    # its front cannot be told from its back, so no zone and no left or right is named
+    bare = monitor_of(seat.with_orientation(None), tmp_path, mode="seat")
+    feed(bare, np.where(np.arange(seat.n_elements) == left_it, 1.0, 0.0), 301)
+    assert bare.tracker.open_alert.where == []
+    assert bare.tracker.open_alert.details[0].startswith("row")
 
 
 @pytest.fixture()

@@ -8,7 +8,11 @@ force), the events and alerts, the time per side and the turns of a bed, and per
 health. The events are **recomputed** from the frames with the monitor's own rules and the
 settings the recording declares (a monitor recording stores its threshold, reposition and
 turning intervals) — the same events for the same frames, whether the file came from the
-monitor, a vendor's software or a simulation.
+monitor, a vendor's software or a simulation. A recording made live carries its clinical
+state (:mod:`texsense.apps.clinical`): the recomputation starts from the state the monitor
+had when it started (an alert open before the first frame stays open), and the events shown
+are the ones the monitor raised, at their wall-clock times, with the recomputed ones it did
+not raise marked as such.
 
 Memory: the statistics are computed in blocks of frames, so a night of 27,000 frames of a
 2048-element mat needs a few blocks' worth, not a float64 copy of the whole recording.
@@ -24,10 +28,12 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.apps import stats
+from texsense.apps.clinical import frame_walls, live_events, start_state
 from texsense.apps.review_events import (
     BLOCK,
     EVENT_TEXT,
     element_health,
+    merge_events,
     recompute_events,
     side_labels,
 )
@@ -68,11 +74,37 @@ class Review:
     #: (T, N) True where a pressure reading was flagged invalid but carries a repaired value
     #: (it counts, as it does live); None when nothing was repaired
     repaired: np.ndarray | None = None
+    #: the clinical state the monitor had when the recording started (None: not recorded live)
+    start: dict[str, Any] | None = None
+    #: the wall clock of every frame (Unix s; None: the file does not say)
+    walls: np.ndarray | None = None
+    #: whether the events shown are the monitor's own (a live recording) or all recomputed
+    live: bool = False
+    #: what the review could not use (a start state that does not fit), in words
+    notes: list[str] = field(default_factory=list)
 
     @property
     def pressure(self) -> bool:
         """True when the recording holds pressure."""
         return self.rec.quantity == "pressure"
+
+    def wall_at(self, i: int) -> float | None:
+        """The wall clock (Unix s) of frame ``i``: its own, else the start + its frame time."""
+        if self.walls is not None:
+            return float(self.walls[i])
+        if self.started is None:
+            return None
+        return self.started + float(self.rec.times[i] - self.rec.times[0])
+
+    @property
+    def clock_rate(self) -> float:
+        """Frame seconds per wall-clock second over the recording (1 for a real mat; 20 for a
+        device simulated or replayed at 20x); 1 when the file does not say."""
+        if self.walls is None or self.rec.n_frames < 2:
+            return 1.0
+        wall = float(self.walls[-1] - self.walls[0])
+        frames = float(self.rec.times[-1] - self.rec.times[0])
+        return frames / wall if wall > 0 and frames > 0 else 1.0
 
     def frame(self, i: int) -> np.ndarray:
         """Frame ``i`` in the display unit, NaN where a reading is invalid."""
@@ -248,9 +280,20 @@ def open_review(
         settings,
     )
     review.use = _usable(rec)
+    review.walls = frame_walls(rec)
+    if review.walls is not None:
+        review.started = float(review.walls[0])
+    try:
+        review.start = start_state(rec.meta)
+    except ParameterError as e:
+        review.notes.append(f"the clinical state at the start is not used ({e})")
     review.series = _series(review)
 
-    review.events, review.sides = recompute_events(review, model)
+    recomputed, review.sides, notes = recompute_events(review, model)
+    review.notes += notes
+    live = live_events(rec)
+    review.live = live is not None
+    review.events = recomputed if live is None else merge_events(review, live, recomputed)
     review.health = element_health(original)
     review.repaired = None if rec is original else ~original.valid
     return review

@@ -19,6 +19,7 @@ import asyncio
 import json
 import logging
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,9 +29,16 @@ import numpy.typing as npt
 
 from texsense.apps import stats
 from texsense.apps.alerts import Event, ExposureTracker
-from texsense.apps.bed import BANDS
+from texsense.apps.bed import BANDS, exposure_with_turns, region_elements
+from texsense.apps.clinical import (
+    EVENTS_LABEL,
+    POSTURE_LABEL,
+    WALL_LABEL,
+    clinical_state,
+    encode_events,
+)
 from texsense.apps.posture.smoothing import WindowVote
-from texsense.apps.views import MODES, format_duration, orientation_of, place_names, seat_zones
+from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
 from texsense.data import units
 from texsense.data.files import unused_name
 from texsense.data.protocol import Frame
@@ -46,6 +54,9 @@ log = logging.getLogger("texsense.monitor")
 
 #: Longest time between two flushes of a live recording: a killed monitor loses at most this.
 FLUSH_S = 0.5
+#: Frames of statistics the monitor keeps for the page's charts (a page opened late still
+#: draws what came before it: ``GET /api/history``).
+HISTORY = 1200
 #: The posture shown live is the vote over this many seconds of frame-by-frame predictions
 #: (``posture.frame_label`` in the snapshot is the present frame's own).
 POSTURE_WINDOW_S = 5.0
@@ -119,6 +130,7 @@ class Recorder:
         meta: dict[str, Any],
         *,
         calibrated: bool = True,
+        posture: bool = False,
     ) -> None:
         from texsense.io.hdf5 import RecordingWriter
 
@@ -149,19 +161,46 @@ class Recorder:
                 flush_interval_s=FLUSH_S,
             )
         self.frames = 0
+        self.posture = posture
+        #: events raised since the last frame was written: they go with the next one
+        self.pending: list[dict[str, Any]] = []
 
-    def append(self, frame: Frame, pressure: np.ndarray, measured: np.ndarray) -> None:
-        """Append one frame (raw values and pressure)."""
+    def append(
+        self,
+        frame: Frame,
+        pressure: np.ndarray,
+        measured: np.ndarray,
+        wall: float,
+        posture: str | None = None,
+    ) -> None:
+        """Append one frame (raw values and pressure) with its labels: the wall clock when it
+        arrived, the events raised since the last frame, the posture shown
+        (:mod:`texsense.apps.clinical`)."""
         t = [frame.t]
         et = frame.element_times[None, :]
         valid = np.isfinite(frame.values)[None, :]
+        labels: dict[str, Any] = {
+            WALL_LABEL: [wall],
+            EVENTS_LABEL: np.array([encode_events(self.pending)], dtype=object).astype(str),
+        }
+        if self.posture:
+            labels[POSTURE_LABEL] = np.array([posture or ""]).astype(str)
         self._raw.append(
-            np.nan_to_num(frame.values)[None, :], times=t, valid=valid, element_times=et
+            np.nan_to_num(frame.values)[None, :],
+            times=t,
+            valid=valid,
+            element_times=et,
+            labels=labels,
         )
         if self._pressure is not None:
             self._pressure.append(
-                np.nan_to_num(pressure)[None, :], times=t, valid=measured[None, :], element_times=et
+                np.nan_to_num(pressure)[None, :],
+                times=t,
+                valid=measured[None, :],
+                element_times=et,
+                labels=labels,
             )
+        self.pending = []
         self.frames += 1
 
     def close(self) -> None:
@@ -265,6 +304,9 @@ class Monitor:
         self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
+        #: the statistics of the last :data:`HISTORY` frames (the page's charts)
+        self.history: deque[list[Any]] = deque(maxlen=HISTORY)
+        self.calibrated_wall: float | None = None  # when the calibration came into use
         #: called with every frame on the mat's clock, before it is processed (the page's
         #: calibration steps record the live stream this way)
         self.taps: list[Callable[[Frame], None]] = []
@@ -311,6 +353,7 @@ class Monitor:
             "mode": self.mode.name,
             "started_at": time.time(),
             "orientation": orientation_of(self.layout, mode=self.mode.name),
+            "clinical": self.clinical_state(),
             "alerts": {
                 "threshold_mmhg": round(
                     units.convert(self.tracker.threshold_ncm2, "N/cm2", "mmHg"), 3
@@ -323,12 +366,30 @@ class Monitor:
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
         self.recorder = Recorder(
-            self.record_dir, name, self.source, meta, calibrated=not self.raw_only
+            self.record_dir,
+            name,
+            self.source,
+            meta,
+            calibrated=not self.raw_only,
+            posture=self.posture_model is not None,
         )
         self.changes += 1
         paths = [str(p) for p in self.recorder.paths]
         self.store.set_recording(self.session_id, paths)
         return paths
+
+    def clinical_state(self) -> dict[str, Any]:
+        """What the monitor knows now, for a recording that starts now
+        (:func:`texsense.apps.clinical.clinical_state`)."""
+        alerts = self.mode.alerts and not self.raw_only
+        return clinical_state(
+            t=self.clock.last_t,
+            wall=self.last_wall,
+            exposure=self.tracker.state() if alerts else None,
+            bed=self.bed.schedule.state() if self.bed is not None else None,
+            calibration_id=None if self.pipeline is None else self.pipeline.calibration_id,
+            calibrated_wall=self.calibrated_wall,
+        )
 
     def stop_recording(self) -> int:
         """Stop recording; returns the number of frames written."""
@@ -351,6 +412,9 @@ class Monitor:
             raise ParameterError("the pipeline and the source have different element counts")
         self.pipeline = pipeline
         self.raw_only = False
+        self.calibrated_wall = time.time()
+        # the load the calibration was made with may still lie on the mat: not a person
+        self.tracker.wait_for_empty()
         self.changes += 1
         t = self._latest["t"] if self._latest else 0.0
         detail = {
@@ -362,10 +426,13 @@ class Monitor:
                     path or pipeline.calibration_id)  # fmt: skip
 
     # ------------------------------------------------------------------ processing
-    def _events(self, events: list[Event]) -> None:
-
+    def _events(self, events: list[Event], wall: float | None = None) -> None:
+        """Store and log events (and keep them for the recording's next frame)."""
+        wall = time.time() if wall is None else wall
         for e in events:
             self.store.add_event(self.session_id, e)
+            if self.recorder is not None:
+                self.recorder.pending.append({**e.to_dict(), "wall": wall})
             log.info(
                 "%s: %s %s into the session %s",
                 self.source.name,
@@ -374,18 +441,19 @@ class Monitor:
                 e.detail or "",
             )
 
-    def _where(self, elements: list[int]) -> list[str]:
-        """Where elements lie, in words: the bed's at-risk regions or the seat's zones, else
-        rows and columns (:func:`texsense.apps.views.place_names`)."""
+    def _where(self, elements: list[int]) -> tuple[list[str], list[str]]:
+        """Where elements lie, in words: the bed's at-risk regions or the seat's zones (as
+        far as the mat's orientation names them), and the rest as rows and columns for the
+        details line (:func:`texsense.apps.views.alert_places`)."""
 
         if self.tracker.by_region:
-            return [self.tracker.names[i] for i in elements]
+            return [self.tracker.names[i] for i in elements], []
         regions: dict[str, Any] = {}
         if self.bed is not None:
-            regions = {r.name: list(r.elements) for r in self.bed.regions.values()}
+            regions = region_elements(self.bed.regions)
         elif self.mode.name == "seat" and self.layout.shape is not None:
             regions = seat_zones(self.layout)
-        return place_names(elements, self.layout, regions)
+        return alert_places(elements, self.layout, regions)
 
     def acknowledge(self, alert_id: int) -> Event:
         """Acknowledge an alert."""
@@ -428,24 +496,14 @@ class Monitor:
         pressure, measured, codes = self._pressure_of(frame)
         if self._t_first is None:
             self._t_first = frame.t
-        alerts = self.mode.alerts and not self.raw_only
-        exposure_events = self.tracker.step(frame.t, pressure) if alerts else []
-        if self.recorder is not None:
-            self.recorder.append(frame, pressure, measured)
         frame_stats, load = self._stats_of(frame.t, pressure)
         posture = self._posture_of(frame.t, pressure, load)
-        bed = None
-        if self.bed is not None:
-            exposure_events += self.bed.step(
-                frame.t, pressure, posture["label"] if posture else None
-            )
-            bed = self.bed.status(frame.t)
-        for e in exposure_events:  # name the places (the bed's regions are this frame's)
-            if e.kind == "reposition" and e.alert_id is not None:
-                raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
-                raised.where = self._where(raised.elements)
-                e.detail = {"where": raised.where, "elements": raised.elements}
-        self._events(exposure_events)
+        events = self._exposure(frame.t, pressure, posture, received_at)
+        bed = self.bed.status(frame.t) if self.bed is not None else None
+        self._events(events, received_at)
+        if self.recorder is not None:
+            label = posture["label"] if posture else None
+            self.recorder.append(frame, pressure, measured, received_at, label)
         self.frames += 1
         self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
@@ -455,6 +513,7 @@ class Monitor:
             floor = self._raw_floor
             self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
             raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
+        self._remember(frame.t, frame_stats, raw_stats)
         alert = self.tracker.open_alert
         snap = {
             "seq": frame.seq,
@@ -484,6 +543,29 @@ class Monitor:
             self._publish(self.latest_text)
         return snap
 
+    def _exposure(
+        self, t: float, pressure: np.ndarray, posture: dict[str, Any] | None, wall: float
+    ) -> list[Event]:
+        """The bed's schedule and the exposure tracker on one frame: a turn hands the
+        exposure to new skin (and clears an open alert), no alert opens while a turn is being
+        confirmed; a new alert is named by the places of this frame."""
+        events: list[Event] = []
+        schedule = None
+        if self.bed is not None:
+            events += self.bed.step(t, pressure, posture["label"] if posture else None)
+            schedule = self.bed.schedule
+        if not (self.mode.alerts and not self.raw_only):
+            return events
+        events = exposure_with_turns(self.tracker, t, pressure, schedule, events)
+        for e in events:
+            if e.kind == "reposition" and e.alert_id is not None:
+                raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
+                raised.where, raised.details = self._where(raised.elements)
+                raised.opened_wall = wall
+                e.detail = {"where": raised.where, "details": raised.details,
+                            "elements": raised.elements}  # fmt: skip
+        return events
+
     def _pressure_of(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A frame's pressure (N/cm², NaN where unknown), which elements were measured, and
         the pipeline's codes: the calibration's pipeline, nothing (raw only), or the
@@ -499,6 +581,15 @@ class Monitor:
         pressure = units.convert(raw, frame.unit, "N/cm2")
         measured = np.isfinite(pressure)
         return pressure, measured, np.where(measured, 0, 2)
+
+    def _remember(self, t: float, st: dict[str, Any], raw: dict[str, Any] | None) -> None:
+        """One row of the charts' history: t, load, peak, area, centre of force x and y,
+        and without a calibration the peak rise and the elements responding."""
+        cof = st.get("cof_cm") or [None, None]
+        rise = raw or {}
+        self.history.append([round(t, 3), st.get("load_N"), st.get("peak_ncm2"),
+                             st.get("contact_area_cm2"), cof[0], cof[1],
+                             rise.get("peak_rise"), rise.get("responding")])  # fmt: skip
 
     def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
         """The frame's statistics for the snapshot (null for a mat with no calibration) and
