@@ -11,6 +11,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from report_layout import check_layout
 from texsense import Layout, Recording, load
 from texsense.apps.report import write_report
 from texsense.apps.review import open_review
@@ -47,7 +48,7 @@ def test_report_of_a_pmd_subject(shared_data, tmp_path):
     out = tmp_path / "s2.pdf"
     assert main(["report", str(subject), "-o", str(out)]) == 0
     text = pdf_text(out)
-    assert pages(out) >= 4
+    assert check_layout(out, tmp_path) == pages(out) == 4  # as docs/report.md says
     for words in ("Pressure report: S2", "Vista Medical FSA SoftFlex 2048", "raw in count",
                   "head (assumed)", "Time per side", "posture_class", "Sensor health"):  # fmt: skip
         assert words in text, words
@@ -81,6 +82,7 @@ def test_report_of_a_virtual_night_with_regions(night, tmp_path):
     out = tmp_path / "night.pdf"
     assert main(["report", str(night), "-o", str(out)]) == 0
     text = pdf_text(out)
+    assert check_layout(out, tmp_path) == pages(out)
     review = open_review(night)
     assert "my heel box" in text and "region(s) of interest drawn by the user" in text
     assert "calibration id" in text and load(night).meta["calibration_id"] in text

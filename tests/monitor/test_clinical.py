@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from report_layout import check_layout
 from texsense import Layout, Recording, load
 from texsense.apps.alerts import ExposureTracker
 from texsense.apps.bed import TurningSchedule, exposure_with_turns
@@ -74,6 +75,7 @@ def test_an_alert_raised_before_the_recording_is_in_its_report(tmp_path):
     text = subprocess.run(["pdftotext", "-layout", str(out), "-"], capture_output=True,
                           text=True, check=True).stdout  # fmt: skip
     flat = " ".join(text.split())
+    check_layout(out, tmp_path)  # a seat's report: no blank band, nothing off the page
     assert "1 reposition (1 open when the recording started)" in flat
     assert f"{_clock(300)} 20 s before open at start reposition alert (open when the recording " \
         "started): ischium-l" in flat  # fmt: skip

@@ -102,6 +102,7 @@ def folder(tmp_path, shared_data):
     save(rec, rec_dir / "tiny.h5")
     shutil.copyfile(shared_data / "vendor-formats" / "fscan_testL.asf", rec_dir / "walk.asf")
     (rec_dir / "notes.txt").write_text("not a recording\n")
+    (rec_dir / "calibration-1.json").write_text('{"format": "texsense.chain"}\n')
     (tmp_path / "secret.h5").write_bytes((rec_dir / "tiny.h5").read_bytes())
     return rec_dir
 
@@ -116,7 +117,8 @@ def client(folder):
 
 def test_recordings_are_listed_and_played(client):
     names = [r["name"] for r in client.get("/api/playback").json()]
-    assert sorted(names) == ["notes.txt", "tiny.h5", "walk.asf"]
+    # only recordings are listed: not a note, not a calibration file (issue 33)
+    assert sorted(names) == ["tiny.h5", "walk.asf"]
     info = client.get("/api/playback/tiny.h5").json()
     assert info["frames"] == 5 and info["mode"]["name"] == "seat" and info["unit"] == "N/cm2"
     assert info["orientation"]["top"] == "front" and info["times"] == [0, 60, 120, 180, 240]

@@ -1,8 +1,10 @@
 """Frame statistics that pressure-mapping users expect.
 
-All functions take a :class:`~texsense.Recording` and return one value per frame. Pressures
-are taken in N/cm² (a recording in kPa or mmHg is converted first), forces are in N, areas in
-cm², positions in cm in the layout's coordinates. Readings flagged invalid are left out.
+All functions take a :class:`~texsense.Recording` and return one value per frame. Values
+(the peak, the PPI, a contact threshold) are in the recording's own unit:
+``peak_pressure(rec.to_unit("mmHg"))`` is in mmHg; forces are in N (the load converts the
+pressure to N/cm² first), areas in cm², positions in cm in the layout's coordinates.
+Readings flagged invalid are left out.
 
 - :func:`total_load`: sum of pressure x element area (N).
 - :func:`contact_area`: area of the elements whose value exceeds a threshold (cm²).
@@ -57,8 +59,9 @@ _BLOCK = 1024  # frames per block in the windowed statistics (bounds memory)
 
 
 def _values(rec: Recording, *, need_pressure: bool = False) -> _Array:
-    """Frames as float64 with invalid readings as NaN, pressure converted to N/cm²."""
-    if rec.quantity == "pressure":
+    """Frames as float64 with invalid readings as NaN; with ``need_pressure`` (the load),
+    pressure converted to N/cm²; otherwise in the recording's unit."""
+    if rec.quantity == "pressure" and need_pressure:
         f = units.factor(rec.unit, "N/cm2")
     elif need_pressure:
         raise ParameterError(
@@ -85,8 +88,8 @@ def total_load(rec: Recording) -> _Array:
 
 
 def contact_area(rec: Recording, threshold: float = 0.0) -> _Array:
-    """Area in cm² of the elements whose value is above ``threshold`` (same unit as the
-    statistic: N/cm² for pressure, counts for raw)."""
+    """Area in cm² of the elements whose value is above ``threshold`` (in the recording's
+    unit)."""
     v = _values(rec)
     with np.errstate(invalid="ignore"):
         loaded = v > threshold
@@ -94,7 +97,8 @@ def contact_area(rec: Recording, threshold: float = 0.0) -> _Array:
 
 
 def peak_pressure(rec: Recording) -> _Array:
-    """Highest valid element value per frame (N/cm² for pressure); NaN if none is valid."""
+    """Highest valid element value per frame, in the recording's unit; NaN if none is
+    valid."""
     v = _values(rec)
     out = np.full(rec.n_frames, np.nan)
     ok = np.isfinite(v).any(axis=1)

@@ -54,10 +54,12 @@ __all__ = [
     "format_duration",
     "guess_mode",
     "orientation_of",
+    "outline_segments",
     "place_names",
     "recording_scale",
     "seat_zones",
     "started_at",
+    "threshold_mask",
 ]
 
 
@@ -341,6 +343,46 @@ def alert_places(
     named = [k for k, v in (regions or {}).items() if np.asarray(v).size]
     names = place_names(idx, layout, regions)
     return [n for n in names if n in named], [n for n in names if n not in named]
+
+
+def threshold_mask(grid: npt.ArrayLike, active: npt.ArrayLike, threshold: float) -> np.ndarray:
+    """The cells of a map (rows x cols) inside the region above ``threshold``: the elements
+    above it, and an empty cell (no element, ``active`` False: a checkerboard's gaps) when at
+    least half of the elements among its 4 neighbours, and at least two, are above — so that
+    the outline follows the loaded area rather than each cell of a checkerboard. The page
+    draws the same region (``aboveMask`` in mapview.js).
+
+    >>> active = np.indices((3, 3)).sum(axis=0) % 2 == 0     # a 3 x 3 checkerboard
+    >>> threshold_mask(np.where(active, 1.0, np.nan), active, 0.5).astype(int)
+    array([[1, 1, 1],
+           [1, 1, 1],
+           [1, 1, 1]])
+    """
+    g = np.asarray(grid, dtype=np.float64)
+    act = np.asarray(active, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        above = act & (np.nan_to_num(g, nan=-np.inf) > threshold)
+    padded_a = np.pad(above, 1).astype(int)
+    padded_n = np.pad(act, 1).astype(int)
+    up = padded_a[:-2, 1:-1] + padded_a[2:, 1:-1] + padded_a[1:-1, :-2] + padded_a[1:-1, 2:]
+    n = padded_n[:-2, 1:-1] + padded_n[2:, 1:-1] + padded_n[1:-1, :-2] + padded_n[1:-1, 2:]
+    return above | (~act & (up >= 2) & (2 * up >= n))
+
+
+def outline_segments(mask: npt.ArrayLike) -> np.ndarray:
+    """The boundary of a region of cells as line segments (K, 2, 2) of (column, row) corner
+    coordinates: the cell edges between a cell inside and one outside (or the map's edge)."""
+    m = np.pad(np.asarray(mask, dtype=bool), 1)
+    segs = []
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[:-2, 1:-1])  # top edges
+    segs += [((x, y), (x + 1, y)) for y, x in zip(r, c, strict=True)]
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[2:, 1:-1])  # bottom edges
+    segs += [((x, y + 1), (x + 1, y + 1)) for y, x in zip(r, c, strict=True)]
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[1:-1, :-2])  # left edges
+    segs += [((x, y), (x, y + 1)) for y, x in zip(r, c, strict=True)]
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[1:-1, 2:])  # right edges
+    segs += [((x + 1, y), (x + 1, y + 1)) for y, x in zip(r, c, strict=True)]
+    return np.array(segs, dtype=np.float64).reshape(-1, 2, 2)
 
 
 # ---------------------------------------------------------------------------- scale

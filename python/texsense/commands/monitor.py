@@ -16,7 +16,7 @@ from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import load_chain
-from texsense.data.layout import Layout
+from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
 from texsense.monitor.store import open_store
@@ -108,6 +108,14 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
         metavar="ROWSxCOLS",
         help="iio/mqtt: the sensor's grid (e.g. 15x16); serial: only for a device that does "
         "not announce its layout",
+    )
+    p.add_argument(
+        "--orientation",
+        default=None,
+        metavar="KIND[:EDGE]|EDGE=LABEL,...|none",
+        help="how the mat lies, if its device does not say: bed, seat or foot with its head, "
+        "front or toes at the top of the map (row 1), or e.g. bed:bottom for the head at the "
+        "last row; or top=head,bottom=foot,...; without it a mat names no left or right",
     )
     p.add_argument(
         "--sampling-frequency",
@@ -221,7 +229,20 @@ def default_calibration(source: str) -> Any:
 
 def open_source(args: argparse.Namespace, *, loop: bool = True) -> Any:
     """The source named by ``--source`` (no calibration: what ``record`` and the wizard
-    need); a replay starts again at its end with ``loop``."""
+    need), turned as ``--orientation`` says; a replay starts again at its end with
+    ``loop``."""
+    given = getattr(args, "orientation", None)
+    try:
+        orientation = None if given is None else parse_orientation(given)
+    except ParameterError as e:
+        raise ParameterError(f"--{e}") from None
+    source = _source(args, loop)
+    if orientation is not None:
+        source.layout = source.layout.with_orientation(orientation or None)
+    return source
+
+
+def _source(args: argparse.Namespace, loop: bool) -> Any:
     kind, _, rest = args.source.partition(":")
     if kind == "virtual":
         return VirtualSeatSource(speed=args.speed)

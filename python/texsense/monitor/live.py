@@ -307,6 +307,7 @@ class Monitor:
         #: the statistics of the last :data:`HISTORY` frames (the page's charts)
         self.history: deque[list[Any]] = deque(maxlen=HISTORY)
         self.calibrated_wall: float | None = None  # when the calibration came into use
+        self._adopt_orientation(pipeline)
         #: called with every frame on the mat's clock, before it is processed (the page's
         #: calibration steps record the live stream this way)
         self.taps: list[Callable[[Frame], None]] = []
@@ -401,6 +402,23 @@ class Monitor:
         self.changes += 1
         return n
 
+    def set_orientation(self, orientation: dict[str, str]) -> None:
+        """How the mat lies (what lies beyond each edge of its map; {}: unknown): the maps'
+        labels, the seat's zones and the bed's sides follow from the next frame on."""
+        self.layout = self.layout.with_orientation(orientation or None)
+        self.source.layout = self.source.layout.with_orientation(orientation or None)
+        if self.bed is not None:
+            self.bed.layout = self.layout
+        self.tracker.layout = self.layout
+        self.changes += 1
+
+    def _adopt_orientation(self, pipeline: Any) -> None:
+        """A mat that does not declare its orientation takes its calibration's (declared when
+        it was calibrated: the wizard, the page's panel)."""
+        declared = getattr(getattr(pipeline, "chain", None), "orientation", None)
+        if declared and not self.layout.orientation:
+            self.set_orientation(dict(declared))
+
     def use_calibration(self, pipeline: Any, path: Path | str | None = None) -> None:
         """Show pressure through ``pipeline`` from the next frame on (a calibration just made
         on the page, :mod:`texsense.monitor.calibrate`); an event ``calibrated`` says when.
@@ -411,6 +429,7 @@ class Monitor:
         if pipeline.layout.n_elements != self.layout.n_elements:
             raise ParameterError("the pipeline and the source have different element counts")
         self.pipeline = pipeline
+        self._adopt_orientation(pipeline)
         self.raw_only = False
         self.calibrated_wall = time.time()
         # the load the calibration was made with may still lie on the mat: not a person

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from texsense import __version__
-from texsense.apps.bed import BANDS, find_regions
+from texsense.apps.bed import BANDS, find_regions, region_elements
 from texsense.apps.review import BLOCK, Review, side_labels
 from texsense.apps.roi import roi_elements
 from texsense.apps.views import format_clock, format_duration, place_names, seat_zones
@@ -105,10 +105,7 @@ def _identity(review: Review) -> Table:
         ],
         ["mode", review.mode.name],
         ["orientation", _orientation_text(o)],
-        [
-            "colour scale",
-            f"{_fmt(review.scale[0], '', 0)}-{_fmt(review.scale[1], review.unit, 0)} (fixed)",
-        ],
+        ["colour scale", _scale_text(review)],
     ]
     if review.threshold is not None:
         s = review.settings
@@ -133,6 +130,16 @@ def _identity(review: Review) -> Table:
     rows += [["note", n] for n in review.notes]
     rows.append(["made by", f"texsense {__version__}, {_dt.datetime.now():%Y-%m-%d %H:%M}"])
     return Table("Recording", ["", ""], rows, align="ll")
+
+
+def _scale_text(review: Review) -> str:
+    """The maps' colour scale: the mode's fixed one for pressure, the data's otherwise."""
+    if review.pressure:
+        return f"{_fmt(review.scale[0], '', 0)}-{_fmt(review.scale[1], review.unit, 0)} (fixed)"
+    return (
+        f"from the data ({review.rec.quantity}, not pressure): each map from 0 to its highest "
+        "value, rounded up"
+    )
 
 
 def _orientation_text(o: dict[str, Any]) -> str:
@@ -208,10 +215,13 @@ def _regions(review: Review, rois: list[dict[str, Any]]) -> tuple[dict[str, Any]
         notes.append(f"{len(rois)} region(s) of interest drawn by the user")
     for k, v in lay.regions.items():
         out.setdefault(k, (np.asarray(v), None))
-    if review.mode.name == "seat" and lay.shape is not None:
-        for k, v in seat_zones(lay).items():
-            out.setdefault(f"{k} (zone)", (v, None))
+    zones = seat_zones(lay) if review.mode.name == "seat" and lay.shape is not None else {}
+    for k, v in zones.items():
+        out.setdefault(f"{k} (zone)", (v, None))
+    if zones:
         notes.append("seat zones by position on the seat, not found anatomy")
+    elif review.mode.name == "seat":
+        notes.append("no seat zones: the seat's orientation is not declared")
     if review.sides is not None and lay.shape is not None:
         out.update(_bed_regions(review))
         notes.append("bed regions: found on the mean map of each side's frames")
@@ -231,8 +241,9 @@ def _bed_regions(review: Review) -> dict[str, Any]:
         frames = rec.frames[mask].astype(np.float64) * review.factor * to_ncm2
         mean = np.nanmean(np.where(rec.valid[mask], frames, np.nan), axis=0)
         thr = review.settings["threshold_mmhg"] if review.pressure else 1e9
-        for r in find_regions(np.nan_to_num(mean), rec.layout, side, threshold=thr).values():
-            out[f"{r.name} ({side})"] = (np.asarray(r.elements), mask)
+        found = find_regions(np.nan_to_num(mean), rec.layout, side, threshold=thr)
+        for name, elements in region_elements(found).items():
+            out[f"{name} ({side})"] = (np.asarray(elements), mask)
     return out
 
 
