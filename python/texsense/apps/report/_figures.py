@@ -164,9 +164,12 @@ def colour_bar(fig: Figure, img: Any, cax: Axes, label: str, threshold: float | 
         bar.ax.axhline(threshold, color="black", lw=0.8, ls="--")
 
 
+Box = tuple[float, float, float, float]
+
+
 def map_boxes(
     fig: Figure, rect: tuple[float, float, float, float], aspect: float, n: int = 2
-) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
+) -> list[tuple[Box, Box]]:
     """Where ``n`` maps of height/width ``aspect`` go inside ``rect`` (figure fraction), each
     with its colour bar beside it, as large as they fit: side by side or one above the other,
     whichever gives the larger maps, at the top of ``rect``. Returns (map box,
@@ -187,13 +190,13 @@ def map_boxes(
     h = w * aspect
     cell_w = W / cols
     y_top = H  # at the top of the space: whatever is left over is below them
-    boxes = []
+    boxes: list[tuple[Box, Box]] = []
     for k in range(n):
         c, r = (k, 0) if cols == n else (0, k)
         x = c * cell_w + (cell_w - (pad_l + w + pad_r)) / 2 + pad_l
         y = y_top - r * (h + 2 * pad_v) - pad_v - h
-        box = (left + x / fw, bottom + y / fh, w / fw, h / fh)
-        cbar = (left + (x + w + gap) / fw, bottom + y / fh, bar / fw, h / fh)
+        box = (float(left + x / fw), float(bottom + y / fh), float(w / fw), float(h / fh))
+        cbar = (float(left + (x + w + gap) / fw), box[1], float(bar / fw), box[3])
         boxes.append((box, cbar))
     return boxes
 
