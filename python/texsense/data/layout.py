@@ -449,13 +449,15 @@ class Layout:
 
     def element_name(self, element: int) -> str:
         """How people name an element: its own name if the layout has names, else
-        ``e17 (r2c5)`` on a grid (index, row and column from 0), else ``e17``."""
+        ``e17 (row 3, column 6)`` on a grid (the index from 0, as ``texsense health`` and the
+        files count elements; row and column from 1 at the top left of the drawn map, as
+        ``texsense health``, the report and the pages count them), else ``e17``."""
         if self._names is not None:
             return self._names[element]
         if self._shape is None or self._cells is None:
             return f"e{element}"
         row, col = divmod(int(self._cells[element]), self._shape[1])
-        return f"e{element} (r{row}c{col})"
+        return f"e{element} (row {row + 1}, column {col + 1})"
 
     def to_grid(self, values: npt.ArrayLike, fill: float = np.nan) -> np.ndarray:
         """Arrange per-element values (..., N) as maps (..., rows, cols); empty cells = ``fill``."""

@@ -133,8 +133,11 @@ def mqtt_client(broker: BrokerURL, name: str) -> Any:
 def _die_with_parent() -> None:
     """In the child before exec (Linux): end with the parent, even one that is killed. (As
     root, Mosquitto drops to its own user at start, which clears this: a station killed with
-    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
+    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.) The child
+    gets a process group of its own: a Ctrl-C on the terminal reaches the station alone,
+    which disconnects first and then stops its broker (no "lost the broker" on a clean stop)."""
 
+    os.setpgid(0, 0)
     with contextlib.suppress(OSError):  # not Linux: the parent's stop() is the only way
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 

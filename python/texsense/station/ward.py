@@ -25,7 +25,12 @@ any coordination of their own: the broker routes). Every mat is a
 - **unknown topics**: counted, at most :data:`UNKNOWN_MAX` of them, each forgotten
   :data:`UNKNOWN_TTL_S` after its last message;
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
-  back, and subscribes again.
+  back, and subscribes again;
+- **the pages stay served under load**: messages wait in an inbox and are handled in slices of
+  at most :data:`SLICE_S` of the event loop, so that a page request or a WebSocket message is
+  never queued behind a second's worth of frames (20 mats at 10x kept the ward page on
+  "connecting…" for 16 s before); an inbox that overflows (the machine cannot keep up) drops
+  its oldest messages, counted and logged.
 """
 
 from __future__ import annotations
@@ -34,8 +39,9 @@ import asyncio
 import contextlib
 import json
 import logging
+import threading
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -75,6 +81,10 @@ REFUSE_AFTER_N = 10
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
 UNKNOWN_TTL_S = 600.0
+#: The longest the station handles messages before the event loop serves pages again, s.
+SLICE_S = 0.02
+#: Messages waiting at most (beyond: the oldest are dropped, counted and logged).
+INBOX_MAX = 20_000
 
 
 def mat_id_of(topic: str) -> str | None:
@@ -339,8 +349,10 @@ class MatEntry:
         bed = latest.get("bed") if latest and state != "stale" else None
         if bed is not None:
             bed = {"side": bed["side"], "since_turn_s": bed["since_turn_s"],
-                   "turn_due": bed["turn_due"], "interval_s": bed["interval_s"]}  # fmt: skip
+                   "turn_due": bed["turn_due"], "interval_s": bed["interval_s"],
+                   "due_in_s": bed["due_in_s"]}  # fmt: skip
         exposure = self.monitor.tracker.exposure_s
+        peak = stats["peak_ncm2"] if stats else None
         return {
             "id": self.id,
             "source": self.config.source,
@@ -360,6 +372,15 @@ class MatEntry:
             "refused": self.refused,
             "occupied": bool(stats and (stats["load_N"] or 0.0) > 5.0),  # null: no calibration
             "minutes_since_reposition": round(float(np.max(exposure, initial=0.0)) / 60.0, 1),
+            # what the tile says: "above 32 mmHg for 8.6 min", "peak 45 mmHg"
+            "threshold_mmhg": round(
+                units.convert(self.monitor.tracker.threshold_ncm2, "N/cm2", "mmHg"), 1
+            ),
+            "peak_mmhg": None
+            if peak is None
+            else round(float(units.convert(peak, "N/cm2", "mmHg")), 1),
+            "action": self.monitor.mode.action,
+            "orientation": self.monitor.layout.orientation,
             "alert": alert.to_dict() if alert is not None else None,
             "urgency": urgency,
             "bed": bed,
@@ -444,6 +465,11 @@ class Station:
         self.started = time.time()
         self._client: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._stopping = False
+        self._inbox: deque[tuple[str, bytes, float]] = deque()
+        self._inbox_lock = threading.Lock()
+        self._draining = False
+        self.dropped = 0  # messages dropped from a full inbox
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
@@ -466,14 +492,40 @@ class Station:
         log.info("connected to %s, subscribed to %s", self.broker, self.topic)
 
     def _on_disconnect(self, *_args: Any) -> None:
-        if self.connected:
+        if self.connected and not self._stopping:  # a stop is no loss
             log.warning("lost the broker %s; reconnecting", self.broker)
         self.connected = False
 
     def _on_message(self, _client: Any, _u: Any, msg: Any) -> None:
+        """In paho's thread: into the inbox, and the loop told once to drain it."""
+        if self._loop is None:
+            return
+        with self._inbox_lock:
+            if len(self._inbox) >= INBOX_MAX:
+                self._inbox.popleft()
+                self.dropped += 1
+                why = "the machine does not keep up with the mats: the oldest messages are dropped"
+                self.quiet.warn("station", "behind", why)
+            self._inbox.append((msg.topic, msg.payload, time.time()))
+            if self._draining:
+                return
+            self._draining = True
+        with contextlib.suppress(RuntimeError):  # the loop has closed: the station stops
+            self._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        """Handle waiting messages for at most :data:`SLICE_S`, then let the loop serve the
+        pages before the next slice."""
+        deadline = time.monotonic() + SLICE_S
+        while time.monotonic() < deadline:
+            with self._inbox_lock:
+                if not self._inbox:
+                    self._draining = False
+                    return
+                topic, payload, arrived = self._inbox.popleft()
+            self.handle(topic, payload, arrived)
         if self._loop is not None:
-            with contextlib.suppress(RuntimeError):  # the loop has closed: the station stops
-                self._loop.call_soon_threadsafe(self.handle, msg.topic, msg.payload)
+            self._loop.call_soon(self._drain)
 
     def handle(self, topic: str, payload: bytes, now: float | None = None) -> None:
         """One MQTT message (in the event loop)."""
@@ -528,6 +580,7 @@ class Station:
 
     def stop(self) -> None:
         """Disconnect and end every mat's session (in one write)."""
+        self._stopping = True
         if self._client is not None:
             self._client.disconnect()
             self._client.loop_stop()
@@ -581,6 +634,7 @@ class Station:
             "unknown": {k: int(v[0]) for k, v in busiest},
             "unknown_topics": len(self.unknown),
             "unknown_forgotten": self.unknown_forgotten,
+            "dropped": self.dropped,
         }
 
     def ward(self) -> dict[str, Any]:

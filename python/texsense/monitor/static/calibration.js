@@ -66,6 +66,8 @@ const CAL = {
     }
     this.findings(s);
     this.report(s.check);
+    const o = s.orientation || {}, edges = ["top", "bottom", "left", "right"].filter((k) => o[k]);
+    $("cal-orient-status").textContent = edges.length ? `now: ${edges.map((k) => `${k} ${o[k]}`).join(", ")}` : "now: unknown (no left or right is named)";
     $("cal-saved").textContent = s.saved ? `✓ in use: ${s.saved.calibration}${s.saved.checked ? "" : " (not checked)"}` : "";
     clearTimeout(this.timer);
     this.timer = waiting ? setTimeout(() => this.refresh(), 300) : null;
@@ -113,6 +115,9 @@ const CAL = {
     $("cal-fit").onclick = () => this.run("/api/calibration/fit", { material: $("cal-material").value });
     $("cal-check").onclick = () => this.run("/api/calibration/record/check", { frames: frames(), pressure: $("cal-check-pressure").value });
     $("cal-save").onclick = () => this.run("/api/calibration/save");
+    const orient = async (kind) => { await this.run("/api/calibration/orientation", { kind, edge: $("cal-edge").value }); refreshView(); };
+    $("cal-orient").onclick = () => orient($("cal-kind").value);
+    $("cal-orient-none").onclick = () => orient("none");
   },
 };
 
