@@ -257,7 +257,7 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
             sides = virtual_bed_model(beds.id)
         mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
                            args.turn_every)  # fmt: skip
-        background.append(vm.run())
+        background.append(vm.run_apart())
     station = Station(url, mats, topic=args.mats, store=open_store(args.db),
                       record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]
