@@ -40,7 +40,14 @@ def mats(url: str) -> list[dict]:
         return list(json.load(r))
 
 
-def measure(python_dir: str | None, n_mats: int, speed: float, opens: int, warm_s: float) -> dict:
+def measure(
+    python_dir: str | None,
+    n_mats: int,
+    speed: float,
+    opens: int,
+    warm_s: float,
+    screenshot: Path | None = None,
+) -> dict:
     """Start a station, let it run ``warm_s`` after every mat has sent, open the page."""
     from playwright.sync_api import sync_playwright
 
@@ -78,6 +85,9 @@ def measure(python_dir: str | None, n_mats: int, speed: float, opens: int, warm_
                 page.wait_for_function(f"document.querySelectorAll('.tile').length >= {n_mats}",
                                        timeout=120_000)  # fmt: skip
                 every.append(time.monotonic() - t0)
+                if screenshot is not None:
+                    page.wait_for_timeout(1500)
+                    page.screenshot(path=str(screenshot))
                 page.close()
                 time.sleep(2.0)
             browser.close()
@@ -94,6 +104,7 @@ def main() -> None:
     ap.add_argument("--speed", type=float, default=10.0)
     ap.add_argument("--opens", type=int, default=5)
     ap.add_argument("--warm-s", type=float, default=20.0)
+    ap.add_argument("--screenshot", type=Path, help="save the busy ward page here (PNG)")
     args = ap.parse_args()
     runs = [
         ("quiet: 1 mat at 1x (baseline)", None, 1, 1.0),
@@ -110,8 +121,9 @@ def main() -> None:
     )
     print("|---|---:|---:|---:|---:|---:|")
     base = None
-    for name, path, n, speed in runs:
-        r = measure(path, n, speed, args.opens, args.warm_s)
+    for k, (name, path, n, speed) in enumerate(runs):
+        shot = args.screenshot if k == 1 else None
+        r = measure(path, n, speed, args.opens, args.warm_s, shot)
         first = statistics.median(r["first"])
         base = base or first
         print(f"| {name} | {first:.2f} s | {max(r['first']):.2f} s | "

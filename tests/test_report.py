@@ -124,11 +124,44 @@ def test_report_refuses_to_replace_its_input(night, tmp_path, capsys):
     assert copy.read_bytes() == before
 
 
+def live_seat_recording(folder):
+    """20 min of the virtual seat's person through the monitor (reposition after 5 min), the
+    recording started once an alert had been raised: what a nurse records."""
+    import asyncio
+
+    from texsense.apps.alerts import ExposureTracker
+    from texsense.calibration.workflows import seat_calibration
+    from texsense.compensation.pipeline import Pipeline
+    from texsense.monitor import Monitor
+    from texsense.monitor.virtual import VirtualSeatSource
+
+    source = VirtualSeatSource(speed=0, hold_s=300.0)
+    tracker = ExposureTracker(source.layout, reposition_min=5)
+    pipeline = Pipeline(seat_calibration(), source.layout)
+    m = Monitor(source, pipeline=pipeline, tracker=tracker, record_dir=folder)
+    wall = 1_767_250_800.0  # 2026-01-01 07:00 (UTC): the wall clock of a real mat
+
+    async def run() -> list[str]:
+        paths: list[str] = []
+        async for frame in source.frames():
+            m.process(frame, wall=wall + frame.t)
+            if not paths and m.tracker.open_alert is not None:
+                paths = m.start_recording("seat")
+            if frame.t > 20 * 60:
+                m.stop_recording()
+                return paths
+        return paths
+
+    return asyncio.run(run())[-1]
+
+
 @pytest.mark.skipif(os.environ.get("TEXSENSE_REPORT_PAGES") is None, reason="docs images only")
-def test_render_report_pages_for_the_docs(night, shared_data):
-    """TEXSENSE_REPORT_PAGES=docs/img renders the first pages of two reports as PNG."""
+def test_render_report_pages_for_the_docs(night, shared_data, tmp_path):
+    """TEXSENSE_REPORT_PAGES=docs/img renders the first pages of three reports as PNG."""
     target = os.environ["TEXSENSE_REPORT_PAGES"]
-    for name, src in (("night", night), ("pmd", shared_data / "pmd/experiment-i/S2")):
+    seat = live_seat_recording(tmp_path)
+    for name, src in (("night", night), ("pmd", shared_data / "pmd/experiment-i/S2"),
+                      ("seat", seat)):  # fmt: skip
         out = f"/tmp/report-{name}.pdf"
         write_report(src, out)
         subprocess.run(["pdftoppm", "-r", "70", "-png", "-f", "1", "-l", "3", out,

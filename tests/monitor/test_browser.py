@@ -125,6 +125,13 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
         assert len(files) == 2 and all(Path(f).is_file() for f in files)
         assert load(files[1]).n_frames > 0
         assert errors == [], errors
+    # the recording began after the alert: its report lists the alert, open at the start,
+    # at the time it fired, and its acknowledgement as the monitor raised them (issue 33)
+    from texsense.apps.report import write_report
+
+    html = write_report(files[1], tmp_path / "recording.html").read_text()
+    assert "reposition alert (open when the recording started)" in html
+    assert "1 reposition (1 open when the recording started)" in html
 
 
 @pytest.mark.slow
@@ -156,9 +163,8 @@ def test_bed_dashboard_in_headless_chromium(monitor_process, tmp_path):
         if page.locator("#alert").is_visible():  # a pressure alert names regions, no cells
             assert not re.search(r"\b(row|column)s? \d", page.locator("#alert-text").inner_text())
         # no card is cut ("41 min 41…"): every value fits its card
-        assert page.evaluate(
-            "[...document.querySelectorAll('.card .v')].every((e) => e.scrollWidth <= e.clientWidth + 1)"
-        )
+        fits = "(e) => e.scrollWidth <= e.clientWidth + 1"
+        assert page.evaluate(f"[...document.querySelectorAll('.card .v')].every({fits})")
         page.select_option("#unit", "mmHg")
         expect(page.locator("#regions")).to_contain_text("mmHg")
         page.wait_for_timeout(300)

@@ -302,6 +302,11 @@ def test_a_page_without_calibration_shows_no_pressure(page, tmp_path):
         expect(web.locator("#ppi")).to_have_text("–")
         expect(web.locator("#raw-cards-note")).to_contain_text("calibrate to see pressure")
         expect(web.locator("#unit")).to_be_hidden()  # no pressure unit to choose
+        # no "compensated" toggle that does nothing; the map knows how the mat lies (its
+        # device announces it on the serial line) and names its edges
+        expect(web.locator("#data-toggle")).to_be_hidden()
+        edges = web.evaluate("() => [map.orientation.top, map.orientation.left]")
+        assert edges == ["front", "left"], edges
         expect(web.locator("#exposure-panel")).to_be_hidden()
         expect(web.locator("#threshold-note")).to_have_text("")
         options = "os => os.map(o => o.textContent)"

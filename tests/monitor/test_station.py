@@ -287,7 +287,8 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         expect(page.locator("#broker")).to_contain_text("connected")
         # a tile says what its numbers are: "above 32 mmHg for ... min", the peak in mmHg;
         # a bed is drawn as a bed (taller than wide), with what lies beyond its edges
-        seat, bed = page.locator('.tile[data-id="vmat-01"]'), page.locator('.tile[data-id="vmat-02"]')
+        seat = page.locator('.tile[data-id="vmat-01"]')
+        bed = page.locator('.tile[data-id="vmat-02"]')
         expect(seat.locator(".above")).to_have_text("above 32.0 mmHg for")
         expect(seat.locator(".peak")).to_contain_text(re.compile(r"peak \d+ mmHg"))
         assert page.evaluate("() => { const c = document.querySelector('.tile[data-id=\"vmat-02\"] "
