@@ -114,7 +114,7 @@ def test_a_confirmed_turn_hands_the_exposure_to_new_skin():
     events = []
     for t in range(0, 500, 2):
         side, p = ("right", right) if t < 276 else ("supine", supine)
-        step = schedule.step(float(t), side)
+        step = schedule.step(side, float(t))
         events += [(t, e.kind) for e in exposure_with_turns(tracker, float(t), p, schedule, step)]
     assert [t for t, k in events if k == "turn"] == [336]  # confirmed after 60 s held
     assert "reposition" not in [k for t, k in events if t < 276 + 300]
@@ -123,5 +123,5 @@ def test_a_confirmed_turn_hands_the_exposure_to_new_skin():
     # the same frames without the rule: the alert at t = 300 s
     plain = ExposureTracker(lay, reposition_min=5, occupancy=None)
     first = next(t for t in range(0, 500, 2)
-                 if plain.step(float(t), right if t < 276 else supine))  # fmt: skip
+                 if plain.step(right if t < 276 else supine, float(t)))  # fmt: skip
     assert first == 300

@@ -280,6 +280,18 @@ def open_review(
         settings,
     )
     review.use = _usable(rec)
+    review.series = _series(review)
+    _events(review, model)
+    review.health = element_health(original)
+    review.repaired = None if rec is original else ~original.valid
+    return review
+
+
+def _events(review: Review, model: Any) -> None:
+    """The events of a review: a live recording's own (:mod:`texsense.apps.clinical`: its
+    wall clock, the state it started in, the events the monitor raised) with the recomputed
+    ones it did not raise; else all recomputed."""
+    rec = review.rec
     review.walls = frame_walls(rec)
     if review.walls is not None:
         review.started = float(review.walls[0])
@@ -287,16 +299,11 @@ def open_review(
         review.start = start_state(rec.meta)
     except ParameterError as e:
         review.notes.append(f"the clinical state at the start is not used ({e})")
-    review.series = _series(review)
-
     recomputed, review.sides, notes = recompute_events(review, model)
     review.notes += notes
     live = live_events(rec)
     review.live = live is not None
     review.events = recomputed if live is None else merge_events(review, live, recomputed)
-    review.health = element_health(original)
-    review.repaired = None if rec is original else ~original.valid
-    return review
 
 
 def _with_repairs(rec: Recording) -> Recording:

@@ -198,7 +198,7 @@ def recompute_events(
             t = float(rec.times[i])
             events: list[Event] = []
             if schedule is not None and sides is not None:
-                events += schedule.step(t, sides[i])
+                events += schedule.step(sides[i], t)
             if tracker is not None:
                 events = exposure_with_turns(tracker, t, row, schedule, events)
             for e in events:

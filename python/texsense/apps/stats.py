@@ -14,6 +14,7 @@ Readings flagged invalid are left out.
 - :func:`centre_of_force`: force-weighted mean of the element centres (x, y in cm).
 - :func:`coefficient_of_variation`: standard deviation / mean of the loaded elements.
 - :func:`region_stats`: load, mean, peak and contact area per named region.
+- :func:`raw_rise`: what a mat without a calibration can say of a frame (the live monitor's).
 
 Statistics other than the load also work on raw counts (``quantity="raw"``); the centre of
 force is then the centre of the raw values.
@@ -32,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +52,7 @@ __all__ = [
     "frame_stats",
     "peak_pressure",
     "peak_pressure_index",
+    "raw_rise",
     "region_stats",
     "total_load",
 ]
@@ -256,3 +259,29 @@ def region_stats(
             entry["load_N"] = _nan_if_empty(np.nansum(sub * area[idx], axis=1), count)
         out[name] = entry
     return out
+
+
+#: Without a calibration an element "responds" when it reads above its lowest reading so far
+#: by more than this fraction of the mat's typical (median) lowest reading (unit-free). On the
+#: virtual seat behind a serial line (`texsense simulate device`, 3.3-4.0 pF empty): 1 N/cm²
+#: on every element -> 96 of 96 respond (threshold 0.0125 pF, highest rise 2.5 pF); the mat
+#: emptied again -> 0 of 96 (highest rise 0.003 pF, what the spacer's hysteresis leaves).
+RESPOND_FRACTION = 0.005
+
+
+def raw_rise(raw: np.ndarray, floor: np.ndarray) -> dict[str, Any]:
+    """What a mat without a calibration can honestly say of a frame, in its raw unit: each
+    element's rise above its lowest reading so far (``floor``), the highest rise and how
+    many elements respond (rise above :data:`RESPOND_FRACTION` of the median floor)."""
+    rise = raw - floor
+    finite = np.isfinite(rise)
+    if not finite.any():
+        return {"peak_rise": None, "responding": 0, "working": 0, "respond_above": None}
+    typical = float(np.median(np.abs(floor[np.isfinite(floor)])))
+    above = RESPOND_FRACTION * typical
+    return {
+        "peak_rise": round(float(np.max(rise[finite])), 4),
+        "responding": int(np.count_nonzero(rise[finite] > above)),
+        "working": int(np.count_nonzero(finite)),
+        "respond_above": round(above, 4),
+    }

@@ -22,7 +22,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -30,30 +30,28 @@ import numpy.typing as npt
 from texsense.apps import stats
 from texsense.apps.alerts import Event, ExposureTracker
 from texsense.apps.bed import BANDS, exposure_with_turns, region_elements
-from texsense.apps.clinical import (
-    EVENTS_LABEL,
-    POSTURE_LABEL,
-    WALL_LABEL,
-    clinical_state,
-    encode_events,
-)
+from texsense.apps.clinical import clinical_state
 from texsense.apps.posture.smoothing import WindowVote
+from texsense.apps.stats import raw_rise
 from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
 from texsense.data import units
-from texsense.data.files import unused_name
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock, Quiet
+from texsense.monitor.record import Recorder, unused_recording_name
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 
-__all__ = ["Monitor", "Recorder"]
+if TYPE_CHECKING:  # the calibration and models come from the caller; their modules load there
+    from texsense.apps.bed import BedWatch
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.pipeline import Pipeline
+
+__all__ = ["Monitor", "Recorder", "raw_rise"]
 
 log = logging.getLogger("texsense.monitor")
 
-#: Longest time between two flushes of a live recording: a killed monitor loses at most this.
-FLUSH_S = 0.5
 #: Frames of statistics the monitor keeps for the page's charts (a page opened late still
 #: draws what came before it: ``GET /api/history``).
 HISTORY = 1200
@@ -62,30 +60,6 @@ HISTORY = 1200
 POSTURE_WINDOW_S = 5.0
 #: A source that has sent nothing for this long is said to be silent (console and page).
 SILENT_S = 10.0
-#: Without a calibration an element "responds" when it reads above its lowest reading so far
-#: by more than this fraction of the mat's typical (median) lowest reading (unit-free). On the
-#: virtual seat behind a serial line (`texsense simulate device`, 3.3-4.0 pF empty): 1 N/cm²
-#: on every element -> 96 of 96 respond (threshold 0.0125 pF, highest rise 2.5 pF); the mat
-#: emptied again -> 0 of 96 (highest rise 0.003 pF, what the spacer's hysteresis leaves).
-RESPOND_FRACTION = 0.005
-
-
-def raw_rise(raw: np.ndarray, floor: np.ndarray) -> dict[str, Any]:
-    """What a mat without a calibration can honestly say of a frame, in its raw unit: each
-    element's rise above its lowest reading so far (``floor``), the highest rise and how
-    many elements respond (rise above :data:`RESPOND_FRACTION` of the median floor)."""
-    rise = raw - floor
-    finite = np.isfinite(rise)
-    if not finite.any():
-        return {"peak_rise": None, "responding": 0, "working": 0, "respond_above": None}
-    typical = float(np.median(np.abs(floor[np.isfinite(floor)])))
-    above = RESPOND_FRACTION * typical
-    return {
-        "peak_rise": round(float(np.max(rise[finite])), 4),
-        "responding": int(np.count_nonzero(rise[finite] > above)),
-        "working": int(np.count_nonzero(finite)),
-        "respond_above": round(above, 4),
-    }
 
 
 def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
@@ -94,120 +68,6 @@ def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
     out = np.round(a, nd).astype(object)
     out[~np.isfinite(a)] = None
     return out.tolist()
-
-
-def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = True) -> list[Path]:
-    """The files of a recording named ``name``: ``<name>-raw.h5`` and, for capacitance
-    through a calibration, the pressure ``<name>.h5``."""
-    paths = [folder / f"{name}-raw.h5"]
-    if quantity == "capacitance" and calibrated:
-        return [*paths, folder / f"{name}.h5"]
-    return paths
-
-
-def unused_recording_name(folder: Path, name: str, quantity: str, calibrated: bool = True) -> str:
-    """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
-    (:func:`texsense.data.files.unused_name` on each file of the recording)."""
-    k = 1
-    while True:
-        candidate = name if k == 1 else f"{name}-{k}"
-        paths = recording_paths(folder, candidate, quantity, calibrated)
-        if all(unused_name(p) == p for p in paths):
-            return candidate
-        k += 1
-
-
-class Recorder:
-    """Crash-safe HDF5 recording of one session: the source's readings (``<name>-raw.h5``,
-    re-processable) and, for capacitance sources through a calibration, the pressure
-    (``<name>.h5``), both flushed at least every :data:`FLUSH_S` s."""
-
-    def __init__(
-        self,
-        folder: Path,
-        name: str,
-        source: Source,
-        meta: dict[str, Any],
-        *,
-        calibrated: bool = True,
-        posture: bool = False,
-    ) -> None:
-        from texsense.io.hdf5 import RecordingWriter
-
-        folder.mkdir(parents=True, exist_ok=True)
-        lay = source.layout
-        self.paths = recording_paths(folder, name, source.quantity, calibrated)
-        taken = [p.name for p in self.paths if p.exists()]
-        if taken:  # never write over an earlier recording
-            raise ParameterError(f"a recording named {name!r} exists already ({taken[0]})")
-        self._raw = RecordingWriter(
-            self.paths[0],
-            lay,
-            source.quantity,
-            source.unit,
-            meta=meta,
-            element_times=True,
-            flush_interval_s=FLUSH_S,
-        )
-        self._pressure = None
-        if len(self.paths) > 1:
-            self._pressure = RecordingWriter(
-                self.paths[1],
-                lay,
-                "pressure",
-                "N/cm2",
-                meta=meta,
-                element_times=True,
-                flush_interval_s=FLUSH_S,
-            )
-        self.frames = 0
-        self.posture = posture
-        #: events raised since the last frame was written: they go with the next one
-        self.pending: list[dict[str, Any]] = []
-
-    def append(
-        self,
-        frame: Frame,
-        pressure: np.ndarray,
-        measured: np.ndarray,
-        wall: float,
-        posture: str | None = None,
-    ) -> None:
-        """Append one frame (raw values and pressure) with its labels: the wall clock when it
-        arrived, the events raised since the last frame, the posture shown
-        (:mod:`texsense.apps.clinical`)."""
-        t = [frame.t]
-        et = frame.element_times[None, :]
-        valid = np.isfinite(frame.values)[None, :]
-        labels: dict[str, Any] = {
-            WALL_LABEL: [wall],
-            EVENTS_LABEL: np.array([encode_events(self.pending)], dtype=object).astype(str),
-        }
-        if self.posture:
-            labels[POSTURE_LABEL] = np.array([posture or ""]).astype(str)
-        self._raw.append(
-            np.nan_to_num(frame.values)[None, :],
-            times=t,
-            valid=valid,
-            element_times=et,
-            labels=labels,
-        )
-        if self._pressure is not None:
-            self._pressure.append(
-                np.nan_to_num(pressure)[None, :],
-                times=t,
-                valid=measured[None, :],
-                element_times=et,
-                labels=labels,
-            )
-        self.pending = []
-        self.frames += 1
-
-    def close(self) -> None:
-        """Finish the files."""
-        self._raw.close()
-        if self._pressure is not None:
-            self._pressure.close()
 
 
 class Monitor:
@@ -243,12 +103,12 @@ class Monitor:
         self,
         source: Source,
         *,
-        pipeline: Any = None,
+        pipeline: Pipeline | None = None,
         tracker: ExposureTracker | None = None,
-        posture_model: Any = None,
+        posture_model: PostureModel | None = None,
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
-        bed: Any = None,
+        bed: BedWatch | None = None,
         mode: str | None = None,
     ) -> None:
 
@@ -265,6 +125,8 @@ class Monitor:
         if bed is not None:
             if posture_model is None:
                 raise ParameterError("bed monitoring needs a posture model that reports sides")
+            if posture_model.classes_ is None:
+                raise ParameterError("bed monitoring needs a trained posture model")
             unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
             if unknown:
                 raise ParameterError(
@@ -419,7 +281,7 @@ class Monitor:
         if declared and not self.layout.orientation:
             self.set_orientation(dict(declared))
 
-    def use_calibration(self, pipeline: Any, path: Path | str | None = None) -> None:
+    def use_calibration(self, pipeline: Pipeline, path: Path | str | None = None) -> None:
         """Show pressure through ``pipeline`` from the next frame on (a calibration just made
         on the page, :mod:`texsense.monitor.calibrate`); an event ``calibrated`` says when.
         A recording in progress goes on (its raw file is complete; a pressure file starts
@@ -571,7 +433,7 @@ class Monitor:
         events: list[Event] = []
         schedule = None
         if self.bed is not None:
-            events += self.bed.step(t, pressure, posture["label"] if posture else None)
+            events += self.bed.step(pressure, posture["label"] if posture else None, t)
             schedule = self.bed.schedule
         if not (self.mode.alerts and not self.raw_only):
             return events
@@ -640,7 +502,7 @@ class Monitor:
         label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
         conf = float(confidence[0])
         return {
-            "label": str(self._vote.step(t, str(label[0]), conf)),
+            "label": str(self._vote.step(str(label[0]), t, conf)),
             "frame_label": str(label[0]),
             "confidence": conf,
             "window_s": POSTURE_WINDOW_S,

@@ -51,6 +51,7 @@ __all__ = [
     "STATION_USER",
     "Broker",
     "BrokerURL",
+    "mat_id_of",
     "mat_topic",
     "mqtt_client",
     "parse_broker_url",
@@ -308,6 +309,14 @@ def mat_topic(topic_filter: str, mat_id: str) -> str:
             "PREFIX/+/frames (one '+', for the mat id)"
         )
     return "/".join([*parts[:-2], mat_id, "frames"])
+
+
+def mat_id_of(topic: str) -> str | None:
+    """The mat id of a frames topic (``.../<mat id>/frames``), None for other topics."""
+    parts = topic.split("/")
+    if len(parts) < 2 or parts[-1] != "frames" or not parts[-2]:
+        return None
+    return parts[-2]
 
 
 def check_mat_id(mat_id: str) -> str:

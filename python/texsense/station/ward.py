@@ -26,26 +26,21 @@ any coordination of their own: the broker routes). Every mat is a
   :data:`UNKNOWN_TTL_S` after its last message;
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
   back, and subscribes again;
-- **the pages stay served under load**: messages wait in an inbox and are handled in slices of
-  at most :data:`SLICE_S` of the event loop, so that a page request or a WebSocket message is
-  never queued behind a second's worth of frames (20 mats at 10x kept the ward page on
-  "connecting…" for 16 s before); an inbox that overflows (the machine cannot keep up) drops
-  its oldest messages, counted and logged.
+- **the pages stay served under load**: messages are handled in slices of the event loop
+  (:mod:`texsense.station.inbox`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
-import threading
 import time
-from collections import OrderedDict, deque
+from collections import OrderedDict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -66,8 +61,13 @@ from texsense.monitor.clock import Quiet
 from texsense.monitor.live import SILENT_S, Monitor
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
-from texsense.station.broker import BrokerURL, check_mat_id, mqtt_client
+from texsense.station.broker import BrokerURL, check_mat_id, mat_id_of, mqtt_client
+from texsense.station.inbox import Inbox
 from texsense.station.tiles import BlockMap
+
+if TYPE_CHECKING:
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.stages import StageChain
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -81,18 +81,6 @@ REFUSE_AFTER_N = 10
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
 UNKNOWN_TTL_S = 600.0
-#: The longest the station handles messages before the event loop serves pages again, s.
-SLICE_S = 0.02
-#: Messages waiting at most (beyond: the oldest are dropped, counted and logged).
-INBOX_MAX = 20_000
-
-
-def mat_id_of(topic: str) -> str | None:
-    """The mat id of a frames topic (``.../<mat id>/frames``), None for other topics."""
-    parts = topic.split("/")
-    if len(parts) < 2 or parts[-1] != "frames" or not parts[-2]:
-        return None
-    return parts[-2]
 
 
 @dataclass
@@ -104,7 +92,7 @@ class MatConfig:
 
     id: str
     layout: Layout
-    calibration: Any = None
+    calibration: StageChain | None = None
     quantity: str = "capacitance"
     source: str = "mqtt"
     reposition_min: float = 20.0
@@ -112,7 +100,7 @@ class MatConfig:
     #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
     #: regions (:class:`texsense.apps.bed.BedWatch`); the model's labels must be sides.
     bed: bool = False
-    posture_model: Any = None
+    posture_model: PostureModel | None = None
     turn_every_min: float = 120.0
 
 
@@ -352,6 +340,7 @@ class MatEntry:
                    "turn_due": bed["turn_due"], "interval_s": bed["interval_s"],
                    "due_in_s": bed["due_in_s"]}  # fmt: skip
         exposure = self.monitor.tracker.exposure_s
+        mmhg = float(units.factor("N/cm2", "mmHg"))
         peak = stats["peak_ncm2"] if stats else None
         return {
             "id": self.id,
@@ -373,12 +362,8 @@ class MatEntry:
             "occupied": bool(stats and (stats["load_N"] or 0.0) > 5.0),  # null: no calibration
             "minutes_since_reposition": round(float(np.max(exposure, initial=0.0)) / 60.0, 1),
             # what the tile says: "above 32 mmHg for 8.6 min", "peak 45 mmHg"
-            "threshold_mmhg": round(
-                units.convert(self.monitor.tracker.threshold_ncm2, "N/cm2", "mmHg"), 1
-            ),
-            "peak_mmhg": None
-            if peak is None
-            else round(float(units.convert(peak, "N/cm2", "mmHg")), 1),
+            "threshold_mmhg": round(self.monitor.tracker.threshold_ncm2 * mmhg, 1),
+            "peak_mmhg": None if peak is None else round(peak * mmhg, 1),
             "action": self.monitor.mode.action,
             "orientation": self.monitor.layout.orientation,
             "alert": alert.to_dict() if alert is not None else None,
@@ -441,7 +426,7 @@ class Station:
         mats: list[MatConfig],
         *,
         topic: str = "texsense/+/frames",
-        store: Any = None,
+        store: EventStore | None = None,
         record_dir: Path | str = "recordings",
         min_stale_s: float = 0.0,
         refuse_after_s: float = 10.0,
@@ -464,12 +449,8 @@ class Station:
         self.refusal: str | None = None  # why the broker refused the station, if it did
         self.started = time.time()
         self._client: Any = None
-        self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping = False
-        self._inbox: deque[tuple[str, bytes, float]] = deque()
-        self._inbox_lock = threading.Lock()
-        self._draining = False
-        self.dropped = 0  # messages dropped from a full inbox
+        self._inbox: Inbox | None = None  # MQTT messages waiting for the loop
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
@@ -497,35 +478,8 @@ class Station:
         self.connected = False
 
     def _on_message(self, _client: Any, _u: Any, msg: Any) -> None:
-        """In paho's thread: into the inbox, and the loop told once to drain it."""
-        if self._loop is None:
-            return
-        with self._inbox_lock:
-            if len(self._inbox) >= INBOX_MAX:
-                self._inbox.popleft()
-                self.dropped += 1
-                why = "the machine does not keep up with the mats: the oldest messages are dropped"
-                self.quiet.warn("station", "behind", why)
-            self._inbox.append((msg.topic, msg.payload, time.time()))
-            if self._draining:
-                return
-            self._draining = True
-        with contextlib.suppress(RuntimeError):  # the loop has closed: the station stops
-            self._loop.call_soon_threadsafe(self._drain)
-
-    def _drain(self) -> None:
-        """Handle waiting messages for at most :data:`SLICE_S`, then let the loop serve the
-        pages before the next slice."""
-        deadline = time.monotonic() + SLICE_S
-        while time.monotonic() < deadline:
-            with self._inbox_lock:
-                if not self._inbox:
-                    self._draining = False
-                    return
-                topic, payload, arrived = self._inbox.popleft()
-            self.handle(topic, payload, arrived)
-        if self._loop is not None:
-            self._loop.call_soon(self._drain)
+        if self._inbox is not None:  # paho's thread: into the inbox, handled on the loop
+            self._inbox.put(msg.topic, msg.payload)
 
     def handle(self, topic: str, payload: bytes, now: float | None = None) -> None:
         """One MQTT message (in the event loop)."""
@@ -569,7 +523,7 @@ class Station:
         """Connect (in paho's network thread) from within the running event loop."""
         if self.broker is None:
             return
-        self._loop = asyncio.get_running_loop()
+        self._inbox = Inbox(asyncio.get_running_loop(), self.handle, self.quiet)
         client = mqtt_client(self.broker, f"texsense-station-{id(self)}")
         client.on_connect = self._on_connect
         client.on_subscribe = self._on_subscribe
@@ -634,7 +588,7 @@ class Station:
             "unknown": {k: int(v[0]) for k, v in busiest},
             "unknown_topics": len(self.unknown),
             "unknown_forgotten": self.unknown_forgotten,
-            "dropped": self.dropped,
+            "dropped": 0 if self._inbox is None else self._inbox.dropped,
         }
 
     def ward(self) -> dict[str, Any]:

@@ -23,17 +23,6 @@ CMAP = "viridis"
 SMALL, NORMAL = 7.5, 9
 
 
-def pyplot() -> Any:
-    """matplotlib.pyplot on the Agg backend, with TrueType fonts in PDFs (copyable text)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    matplotlib.rcParams["pdf.fonttype"] = 42
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def nice_top(values: np.ndarray) -> float:
     """The top of a colour scale from the data: the largest finite value rounded up to 1, 2,
     2.5 or 5 times a power of ten (1 when there is nothing above 0)."""
