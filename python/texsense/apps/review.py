@@ -239,7 +239,7 @@ def open_review(
     from texsense.io import load
 
     original = source if isinstance(source, Recording) else load(source)
-    rec = _with_repairs(original)
+    rec = _oriented(_with_repairs(original))
     if rec.n_frames == 0:
         raise ParameterError("the recording has no frames")
     label = name or (Path(source).name if not isinstance(source, Recording) else "recording")
@@ -304,6 +304,22 @@ def _events(review: Review, model: Any) -> None:
     live = live_events(rec)
     review.live = live is not None
     review.events = recomputed if live is None else merge_events(review, live, recomputed)
+
+
+def _oriented(rec: Recording) -> Recording:
+    """The recording with the orientation its metadata declares on its layout (a monitor's
+    recording keeps it in ``meta``, its HDF5 layout does not): its seat zones and a bed's
+    left and right are then named as they were live."""
+    declared = rec.meta.get("orientation")
+    if rec.layout.orientation or not isinstance(declared, dict) or not declared:
+        return rec
+    edges = {k: v for k, v in declared.items() if k in ("top", "bottom", "left", "right")}
+    try:
+        layout = rec.layout.with_orientation(edges or None)
+    except ParameterError:
+        return rec  # a mangled declaration: the map says what orientation_of finds
+    return Recording(rec.frames, rec.times, layout, rec.quantity, rec.unit, valid=rec.valid,
+                     element_times=rec.element_times, labels=rec.labels, meta=rec.meta)  # fmt: skip
 
 
 def _with_repairs(rec: Recording) -> Recording:

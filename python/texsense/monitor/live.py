@@ -274,10 +274,10 @@ class Monitor:
         self.tracker.layout = self.layout
         self.changes += 1
 
-    def _adopt_orientation(self, pipeline: Any) -> None:
+    def _adopt_orientation(self, pipeline: Pipeline | None) -> None:
         """A mat that does not declare its orientation takes its calibration's (declared when
         it was calibrated: the wizard, the page's panel)."""
-        declared = getattr(getattr(pipeline, "chain", None), "orientation", None)
+        declared = pipeline.chain.orientation if pipeline is not None else {}
         if declared and not self.layout.orientation:
             self.set_orientation(dict(declared))
 

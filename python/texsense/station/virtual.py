@@ -24,7 +24,7 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.sources import Source
 from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.station.broker import BrokerURL, mqtt_client
-from texsense.station.ward import MatConfig
+from texsense.station.config import MatConfig
 
 if TYPE_CHECKING:
     from texsense.apps.posture import PostureModel
@@ -155,7 +155,14 @@ class VirtualMats:
         args = (self.n, self.broker, self.logins, self.prefix, self.speed, self.seed, self.hold_s)
         proc = ctx.Process(target=_publish_apart, args=args, daemon=True,
                            name="texsense-virtual-mats")  # fmt: skip
-        proc.start()
+        # the child starts with Ctrl-C ignored (Python keeps an ignored SIGINT ignored): a
+        # Ctrl-C on the terminal is the station's, which then stops the child itself; one
+        # arriving while the child still imports would print a traceback
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            proc.start()
+        finally:
+            signal.signal(signal.SIGINT, previous)
         try:
             while proc.is_alive():
                 await asyncio.sleep(0.5)

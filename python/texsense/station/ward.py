@@ -38,7 +38,6 @@ import logging
 import time
 from collections import OrderedDict
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -47,7 +46,6 @@ import numpy as np
 from texsense.apps.alerts import Event, ExposureTracker
 from texsense.apps.bed import BedWatch
 from texsense.data import units
-from texsense.data.layout import Layout
 from texsense.data.protocol import (
     CountError,
     Frame,
@@ -62,12 +60,12 @@ from texsense.monitor.live import SILENT_S, Monitor
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 from texsense.station.broker import BrokerURL, check_mat_id, mat_id_of, mqtt_client
+from texsense.station.config import MatConfig
 from texsense.station.inbox import Inbox
 from texsense.station.tiles import BlockMap
 
 if TYPE_CHECKING:
-    from texsense.apps.posture.model import PostureModel
-    from texsense.compensation.stages import StageChain
+    pass
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -81,27 +79,6 @@ REFUSE_AFTER_N = 10
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
 UNKNOWN_TTL_S = 600.0
-
-
-@dataclass
-class MatConfig:
-    """One mat of the ward: its id (the topic segment before ``/frames``), layout, calibration
-    (a stage chain or mat calibration; None for a mat that sends pressure), where its
-    frames come from (``mqtt``, or a local source built by the command line) and, for a bed,
-    its side model and turning schedule."""
-
-    id: str
-    layout: Layout
-    calibration: StageChain | None = None
-    quantity: str = "capacitance"
-    source: str = "mqtt"
-    reposition_min: float = 20.0
-    extra: dict[str, Any] = field(default_factory=dict)
-    #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
-    #: regions (:class:`texsense.apps.bed.BedWatch`); the model's labels must be sides.
-    bed: bool = False
-    posture_model: PostureModel | None = None
-    turn_every_min: float = 120.0
 
 
 class _FedSource(Source):
