@@ -254,14 +254,7 @@ def open_review(
         reposition_min=reposition_min,
         turn_every_min=turn_every_min,
     )
-    if scale is None:
-        keep = rec.labels.get("reliable")  # PMD: the first and last 3 frames of a file
-        pick = (
-            np.flatnonzero(keep) if keep is not None and keep.dtype == bool and keep.any() else None
-        )
-        pick = np.arange(rec.n_frames) if pick is None else pick
-        sample = rec.frames[pick[:: max(1, pick.size // 400)]] * factor
-        scale = recording_scale(sample, shown, mode)
+    scale = _scale(rec, factor, shown, mode) if scale is None else scale
     if not (np.isfinite(scale[0]) and np.isfinite(scale[1]) and scale[1] > scale[0]):
         raise ParameterError(f"the colour scale must run from low to high, got {scale}")
     threshold = None
@@ -304,6 +297,14 @@ def _events(review: Review, model: Any) -> None:
     live = live_events(rec)
     review.live = live is not None
     review.events = recomputed if live is None else merge_events(review, live, recomputed)
+
+
+def _scale(rec: Recording, factor: float, shown: str, mode: str) -> tuple[float, float]:
+    """The colour scale a recording gets when none is given: the mode's, or one from a sample
+    of at most ~400 of its reliable frames (PMD: all but the first and last 3 of a file)."""
+    pick = np.flatnonzero(_usable(rec))
+    sample = rec.frames[pick[:: max(1, pick.size // 400)]] * factor
+    return recording_scale(sample, shown, mode)
 
 
 def _oriented(rec: Recording) -> Recording:
