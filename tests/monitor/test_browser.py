@@ -6,11 +6,17 @@ shows the acknowledged text without the button after acknowledge; a screenshot i
 Set TEXSENSE_SCREENSHOT=docs/img/monitor_dashboard.png to refresh the one in docs/monitor.md.
 """
 
+import atexit
 import os
+import queue
 import re
 import shutil
+import subprocess
+import tempfile
+import threading
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -39,21 +45,68 @@ def chromium() -> str:
     return CHROMIUM
 
 
+_SHARED: dict[str, Any] = {}
+
+
+def shared_chromium() -> str:
+    """The DevTools address of the one headless Chromium every page of this test process
+    opens in (started on first use, stopped when the process exits): a Chromium per test
+    cost a launch each. The Playwright driver itself is not kept between tests, as its
+    event loop would stay current and break the tests that run their own (asyncio.run)."""
+    proc = _SHARED.get("proc")
+    if proc is not None and proc.poll() is None:
+        return str(_SHARED["ws"])
+    profile = tempfile.mkdtemp(prefix="texsense-chromium-")
+    proc = subprocess.Popen(
+        [chromium(), "--headless", "--remote-debugging-port=0", f"--user-data-dir={profile}",
+         *CHROMIUM_ARGS, "about:blank"],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    lines: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(x) for x in proc.stderr], daemon=True).start()
+    seen: list[str] = []
+    while True:
+        try:
+            line = lines.get(timeout=60)
+        except queue.Empty:
+            proc.kill()
+            pytest.fail(f"Chromium gave no DevTools address in 60 s: {''.join(seen[-5:])}")
+        seen.append(line)
+        found = re.search(r"DevTools listening on (ws://\S+)", line)
+        if found:
+            break
+    _SHARED.update(proc=proc, ws=found.group(1))
+    atexit.register(_stop_chromium, proc, profile)
+    return found.group(1)
+
+
+def _stop_chromium(proc: subprocess.Popen, profile: str) -> None:
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+    shutil.rmtree(profile, ignore_errors=True)
+
+
 @contextmanager
 def open_page(url: str, width: int, height: int):
-    """A page of a headless Chromium at ``url``, and the list its script errors go to."""
+    """A page at ``url`` in a fresh context (its own cookies and storage) of the shared headless
+    Chromium (:func:`shared_chromium`), and the list its script errors go to."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=chromium(), args=CHROMIUM_ARGS)
+        browser = pw.chromium.connect_over_cdp(shared_chromium())
+        context = browser.new_context(viewport={"width": width, "height": height})
         try:
-            page = browser.new_page(viewport={"width": width, "height": height})
+            page = context.new_page()
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(url)
             yield page, errors
         finally:
-            browser.close()
+            context.close()
+            browser.close()  # disconnects: the shared Chromium runs on
 
 
 @pytest.fixture()
@@ -137,11 +190,12 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
 @pytest.mark.slow
 def test_bed_dashboard_in_headless_chromium(monitor_process, tmp_path):
     """`texsense monitor --source virtual-bed`: the turning schedule panel, the at-risk
-    regions, time per side and the turn-due band (15 min schedule, positions held 18 min or
-    more). TEXSENSE_SCREENSHOT_BED=docs/img/monitor_bed.png refreshes the one in docs/bed.md."""
+    regions, time per side and the turn-due band (a 5 min schedule, positions held 18 min or
+    more: the band comes after 300 frames, where a 15 min schedule took 900, over 90 s of a
+    busy machine). TEXSENSE_SCREENSHOT_BED=docs/img/monitor_bed.png refreshes the one in docs/bed.md."""
     from playwright.sync_api import expect
 
-    m = monitor_process("--source", "virtual-bed", "--speed", "600", "--turn-every", "15",
+    m = monitor_process("--source", "virtual-bed", "--speed", "600", "--turn-every", "5",
                         "--record-dir", str(tmp_path / "rec"))  # fmt: skip
     m.wait_for_frames(1, timeout=300)  # the first run trains the virtual bed's side model
     assert m.status()["bed"] is True

@@ -247,4 +247,6 @@ def test_a_foot_replay_shows_only_the_controls_that_apply(monitor_process, share
         expect(page.locator("#exposure-panel")).to_be_hidden()
         labels = page.evaluate("() => charts.labels")
         assert labels[0] == "0.0 s" and labels[1].endswith(" s") and labels[1] != "0.0 s", labels
+        if os.environ.get("TEXSENSE_SCREENSHOT_FOOT"):  # to look at, not in the docs
+            page.screenshot(path=os.environ["TEXSENSE_SCREENSHOT_FOOT"], full_page=True)
         assert errors == [], errors

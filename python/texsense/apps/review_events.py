@@ -42,6 +42,7 @@ __all__ = [
     "BLOCK",
     "EVENT_TEXT",
     "element_health",
+    "event_places",
     "event_text",
     "merge_events",
     "open_at_start",
@@ -112,9 +113,15 @@ def event_text(kind: str, detail: dict[str, Any]) -> str:
         text += " (open when the recording started)"
     if detail.get("where"):
         text += ": " + ", ".join(detail["where"])
-    if detail.get("details"):
-        text += ("; also " if detail.get("where") else ": ") + ", ".join(detail["details"])
     return text
+
+
+def event_places(detail: dict[str, Any]) -> str:
+    """The details line of an event: the grid positions no region names (the text names
+    regions only, as the live alert band does: issue 33), or ``""``."""
+    if not detail.get("details"):
+        return ""
+    return ("also " if detail.get("where") else "where on the map: ") + ", ".join(detail["details"])
 
 
 def _places(
@@ -160,7 +167,8 @@ def _entry(
     alert = e.alert_id if isinstance(e, Event) else e.get("alert_id")
     detail = dict(e.detail if isinstance(e, Event) else e.get("detail") or {})
     return {"i": i, "t": round(t_rel, 3), "kind": kind, "alert": alert, "detail": detail,
-            "text": event_text(kind, detail), "source": source, "wall": wall}  # fmt: skip
+            "text": event_text(kind, detail), "places": event_places(detail),
+            "source": source, "wall": wall}  # fmt: skip
 
 
 def recompute_events(

@@ -296,6 +296,8 @@ def _event_table(review: Review, limit: int = 300) -> Table:
         when = format_clock(None, e["t"]) if wall is None else format_clock(wall, 0.0)
         into = format_duration(e["t"]) if e["t"] >= 0 else f"{format_duration(-e['t'])} before"
         rows.append([when, into, _ORIGIN.get(e["source"], e["source"]), e["text"]])
+        if e.get("places"):  # the grid positions on a line of their own, under the regions
+            rows.append(["", "", "", f"  {e['places']}"])
     note = "clock time: the wall clock" if review.wall_at(0) else "time since the start"
     if review.live:
         note += (

@@ -23,8 +23,8 @@ if TYPE_CHECKING:
 __all__ = ["table_lines", "write_pdf"]
 
 A4 = (8.27, 11.69)
-#: Characters per line of the monospaced tables, lines per page.
-WIDTH, LINES = 108, 78
+#: Characters per line of the monospaced tables.
+WIDTH = 108
 _TOP, _LINE = 0.95, 0.0118  # figure fraction
 
 
@@ -113,7 +113,7 @@ def _first_page(pdf: Any, plt: Any, c: ReportContent) -> None:
 
 
 #: The lowest line of a page (figure fraction), and the top of the tables under the health map.
-_BOTTOM, _UNDER_HEALTH = 0.035, 0.5
+_BOTTOM, _UNDER_HEALTH = 0.035, 0.56
 
 
 def write_pdf(c: ReportContent, out: Path) -> Path:
@@ -131,15 +131,47 @@ def write_pdf(c: ReportContent, out: Path) -> Path:
         pdf.savefig(fig)
         plt.close(fig)
         fig = plt.figure(figsize=A4)
-        health_figure(fig, (0.02, _UNDER_HEALTH + 0.01, 0.62 if c.sides else 0.96, 0.44), c)
+        health_figure(fig, (0.02, _UNDER_HEALTH + 0.01, 0.62 if c.sides else 0.96, 0.38), c)
         if c.sides is not None:
-            sides_figure(fig.add_axes((0.72, _UNDER_HEALTH + 0.1, 0.24, 0.26)), c)
+            sides_figure(fig.add_axes((0.72, _UNDER_HEALTH + 0.08, 0.24, 0.24)), c)
         lines: list[tuple[str, str]] = []
         for table in (c.regions, c.events, c.sides, c.health):
             if table is not None:
                 lines += table_lines(table)
-        first = int((_UNDER_HEALTH - _BOTTOM) / _LINE)
-        _text_page(pdf, plt, lines[:first], header, fig, top=_UNDER_HEALTH)
-        for start in range(first, len(lines), LINES):
-            _text_page(pdf, plt, lines[start : start + LINES], header)
+        pages = _paginate(lines, _UNDER_HEALTH - _BOTTOM, _TOP - _BOTTOM)
+        _text_page(pdf, plt, pages[0], header, fig, top=_UNDER_HEALTH)
+        for more in pages[1:]:
+            _text_page(pdf, plt, more, header)
     return out
+
+
+def _paginate(
+    lines: list[tuple[str, str]], first: float, height: float
+) -> list[list[tuple[str, str]]]:
+    """The lines split into pages: the first ``first`` high (figure fraction), the others
+    ``height``; a title takes its extra space, and no page starts or ends with blank lines (a
+    page of nothing but the blank line after the last table was once written)."""
+    while lines and not lines[-1][1]:
+        lines = lines[:-1]
+    pages: list[list[tuple[str, str]]] = [[]]
+    room = first
+    title, head = "", []  # of the table being written: repeated where it runs on
+    for k, (style, text) in enumerate(lines):
+        need = _LINE + (0.006 if style == "title" else 0.0)
+        # a table's title, head and first row stay together (no title alone at a page's foot)
+        keep = 3 * _LINE if style == "title" and len(lines) - k > 1 else 0.0
+        if need + keep > room and (pages[-1] or len(pages) == 1):
+            pages.append([])
+            room = height
+            if style in ("row", "note") and text and title:
+                pages[-1] = [("title", f"{title} (continued)"), *head]
+                room -= _LINE + 0.006 + _LINE * len(head)
+        if not pages[-1] and not text:
+            continue
+        if style == "title":
+            title, head = text, []
+        elif style == "head":
+            head.append((style, text))
+        pages[-1].append((style, text))
+        room -= need
+    return pages

@@ -153,6 +153,10 @@ const PB = {
       if (e.wall) when.textContent = new Date(e.wall * 1000).toLocaleTimeString();
       li.classList.toggle("current", e.i === this.i);
       li.append(when, what);
+      if (e.places) {  // the grid positions no region names, on a line of their own
+        const places = document.createElement("div"); places.className = "places"; places.textContent = e.places;
+        what.append(places);
+      }
       return li;
     }));
   },
