@@ -190,12 +190,14 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
 @pytest.mark.slow
 def test_bed_dashboard_in_headless_chromium(monitor_process, tmp_path):
     """`texsense monitor --source virtual-bed`: the turning schedule panel, the at-risk
-    regions, time per side and the turn-due band (a 5 min schedule, positions held 18 min or
-    more: the band comes after 300 frames, where a 15 min schedule took 900, over 90 s of a
-    busy machine). TEXSENSE_SCREENSHOT_BED=docs/img/monitor_bed.png refreshes the one in docs/bed.md."""
+    regions, time per side and "Turn now" (a 15 min schedule, positions held 18 min or more;
+    a pressure alert after 5 min above 32 mmHg comes first: waiting for the schedule took over
+    90 s on a busy machine). TEXSENSE_SCREENSHOT_BED=docs/img/monitor_bed.png refreshes the
+    one in docs/bed.md."""
     from playwright.sync_api import expect
 
-    m = monitor_process("--source", "virtual-bed", "--speed", "600", "--turn-every", "5",
+    m = monitor_process("--source", "virtual-bed", "--speed", "600", "--turn-every", "15",
+                        "--reposition-min", "5",
                         "--record-dir", str(tmp_path / "rec"))  # fmt: skip
     m.wait_for_frames(1, timeout=300)  # the first run trains the virtual bed's side model
     assert m.status()["bed"] is True

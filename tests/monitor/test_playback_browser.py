@@ -232,7 +232,7 @@ def test_a_night_played_back_jumps_to_its_alerts(monitor_process, tmp_path):
 @pytest.mark.slow
 def test_a_foot_replay_shows_only_the_controls_that_apply(monitor_process, shared_data):
     """A Tekscan F-Scan export replayed live (foot mode): no "compensated" title or raw
-    toggle, no threshold in the legend, and a chart whose time axis says seconds (it read
+    toggle, no threshold in the legend, no posture card, and a chart whose time axis says seconds (it read
     0:00 - 0:00 on a few seconds)."""
     from playwright.sync_api import expect
 
@@ -245,6 +245,7 @@ def test_a_foot_replay_shows_only_the_controls_that_apply(monitor_process, share
         expect(page.locator("#data-toggle")).to_be_hidden()
         expect(page.locator("#threshold-mark")).to_be_hidden()
         expect(page.locator("#exposure-panel")).to_be_hidden()
+        expect(page.locator("#posture")).to_be_hidden()  # no model, no posture on a foot
         labels = page.evaluate("() => charts.labels")
         assert labels[0] == "0.0 s" and labels[1].endswith(" s") and labels[1] != "0.0 s", labels
         if os.environ.get("TEXSENSE_SCREENSHOT_FOOT"):  # to look at, not in the docs

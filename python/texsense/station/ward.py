@@ -342,6 +342,7 @@ class MatEntry:
             "threshold_mmhg": round(self.monitor.tracker.threshold_ncm2 * mmhg, 1),
             "peak_mmhg": None if peak is None else round(peak * mmhg, 1),
             "action": self.monitor.mode.action,
+            "mode": self.monitor.mode.name,  # a bed's tile is drawn as a bed, stale or not
             "orientation": self.monitor.layout.orientation,
             "alert": alert.to_dict() if alert is not None else None,
             "urgency": urgency,

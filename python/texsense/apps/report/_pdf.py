@@ -155,7 +155,8 @@ def _paginate(
         lines = lines[:-1]
     pages: list[list[tuple[str, str]]] = [[]]
     room = first
-    title, head = "", []  # of the table being written: repeated where it runs on
+    # the title and head of the table being written, repeated where it runs on
+    title, head = "", list[tuple[str, str]]()
     for k, (style, text) in enumerate(lines):
         need = _LINE + (0.006 if style == "title" else 0.0)
         # a table's title, head and first row stay together (no title alone at a page's foot)

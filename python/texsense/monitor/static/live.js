@@ -22,6 +22,8 @@ function renderLive(f) {
   drawExposure(exp, limit);
   $("exposure-max").textContent = duration(limit);
   $("posture").textContent = last.posture ? `${last.posture.label} (${fmt(100 * last.posture.confidence, 0)} %)` : (status && status.posture_model ? "nobody" : "no model");
+  // a foot or other mode without a posture model has no posture to show (issue 33: only what applies)
+  $("posture").closest(".card").hidden = !PB.active && !last.posture && !(status && status.posture_model) && !!view && !view.mode.alerts;
   $("posture").title = last.posture ? `vote over ${last.posture.window_s} s; this frame alone: ${last.posture.frame_label}` : "";
   $("posture-truth").textContent = last.source.true_posture !== undefined
     ? `simulated person: ${last.source.true_posture === null ? "away" : last.source.true_posture}` : "";

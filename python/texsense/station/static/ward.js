@@ -15,7 +15,7 @@ let wall = 0;             // the station's clock at the latest message
 // lies beyond each edge; whole pixels per block (no seams); a bed drawn as a bed: its
 // mattress with the headboard at the head end
 function drawMini(canvas, map, mat) {
-  const o = mat.orientation || {}, bed = !!mat.bed, m = 12;  // m: room for the edge labels
+  const o = mat.orientation || {}, bed = !!mat.bed || mat.mode === "bed", m = 12;  // m: room for the edge labels
   if (map) {  // the canvas takes the mat's shape: a bed is tall, a seat square
     const want = Math.round(Math.min(230, Math.max(100, 150 * map.rows / map.cols + 2 * m)));
     if (canvas.height !== want) canvas.height = want;
@@ -57,7 +57,7 @@ async function post(url) {
 }
 function tile(mat) {
   const el = document.createElement("div");
-  el.className = `tile is-${mat.state}${mat.bed ? " is-bed" : ""}`;  // not the monitor's .alert band style
+  el.className = `tile is-${mat.state}${mat.bed || mat.mode === "bed" ? " is-bed" : ""}`;  // not the monitor's .alert band style
   el.dataset.id = mat.id;
   el.setAttribute("data-state", mat.state);
   const skipped = mat.malformed + mat.skipped;
