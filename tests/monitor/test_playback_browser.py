@@ -232,8 +232,8 @@ def test_a_night_played_back_jumps_to_its_alerts(monitor_process, tmp_path):
 @pytest.mark.slow
 def test_a_foot_replay_shows_only_the_controls_that_apply(monitor_process, shared_data):
     """A Tekscan F-Scan export replayed live (foot mode): no "compensated" title or raw
-    toggle, no threshold in the legend, no posture card, and a chart whose time axis says seconds (it read
-    0:00 - 0:00 on a few seconds)."""
+    toggle, no threshold in the legend, no posture card, and a chart whose time axis says
+    seconds (it read 0:00 - 0:00 on a few seconds)."""
     from playwright.sync_api import expect
 
     walk = shared_data / "vendor-formats" / "fscan_testL.asf"
