@@ -221,6 +221,8 @@ def test_a_night_played_back_jumps_to_its_alerts(monitor_process, tmp_path):
         page.click("#roi-save")
         expect(page.locator("#roi-save")).to_have_text("saved ✓", timeout=20_000)
         page.wait_for_timeout(300)
+        # the header stays on the recording (a live render used to put the live source back)
+        expect(page.locator("#source")).to_have_text("playing back night.h5 · 241 frames")
         shot = tmp_path / "playback.png"
         page.screenshot(path=str(shot), full_page=True)
         assert shot.stat().st_size > 20_000

@@ -73,7 +73,9 @@ function frameStats(ncm2) {  // load (N), peak, contact area of one frame (N/cmÂ
 
 function render() {
   const pb = PB.active && PB.frame;
-  if (!pb && !last) return;
+  // nothing live is drawn while a recording opens (its first frame not yet here): a live
+  // render then put the live source back into the header over "playing back ..."
+  if ((!pb && !last) || (PB.active && !PB.frame)) return;
   const f = FACTOR[unit], pressure = pressureShown();
   let values, ncm2 = null, thr = null, shownUnit, title, st;
   if (pb) {
