@@ -9,6 +9,13 @@ any element reaches ``reposition_s``, a *reposition* alert opens. It stays open 
 exposed element has been offloaded (then it is *cleared*); acknowledging it silences it but
 does not clear it, and no second reposition alert opens while one is open.
 
+A tracker's state (:meth:`ExposureTracker.state`: the exposure and relief of every exposed
+element, whether the mat is loaded, the open alert) is what a recording started on a live
+mat stores, so that its review goes on from where the monitor was
+(:meth:`ExposureTracker.restore`); a turn on a bed hands the exposure to new skin
+(:meth:`ExposureTracker.turned`); a mat that still carries its calibration load is not a
+person (:meth:`ExposureTracker.wait_for_empty`).
+
 Examples
 --------
 >>> import numpy as np
@@ -78,9 +85,15 @@ class Alert:
     peak_exposure_s: float
     acknowledged_t: float | None = None
     cleared_t: float | None = None
-    #: where, in words: the regions the mode knows, else rows and columns (the monitor
-    #: names them; :func:`texsense.apps.views.place_names`)
+    #: where, in words: the anatomical regions (or seat zones) the mode knows; empty when it
+    #: knows none (a mat whose orientation is unknown)
     where: list[str] = field(default_factory=list)
+    #: the places no region names, as rows and columns (the alert's details line)
+    details: list[str] = field(default_factory=list)
+    #: wall clock (Unix s) when it opened, when the monitor knows it
+    opened_wall: float | None = None
+    #: why it cleared: ``offloaded`` or ``turned``
+    cleared_by: str | None = None
     #: with bounds: "confident" (above the threshold with the bounds' confidence: the lower
     #: bound is above it) or "possible" (only the upper bound is; counted only when the user
     #: chose so); None without bounds
@@ -102,8 +115,30 @@ class Alert:
             "cleared_t": self.cleared_t,
             "active": self.active,
             "where": self.where,
+            "details": self.details,
+            "opened_wall": self.opened_wall,
+            "cleared_by": self.cleared_by,
             "certainty": self.certainty,
         }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Alert:
+        """The alert of :meth:`to_dict` (a recording's stored state)."""
+        try:
+            return cls(
+                int(d["id"]),
+                float(d["opened_t"]),
+                [int(i) for i in d["elements"]],
+                float(d["peak_exposure_s"]),
+                None if d.get("acknowledged_t") is None else float(d["acknowledged_t"]),
+                None,
+                [str(w) for w in d.get("where") or []],
+                [str(w) for w in d.get("details") or []],
+                None if d.get("opened_wall") is None else float(d["opened_wall"]),
+                certainty=None if d.get("certainty") is None else str(d["certainty"]),
+            )
+        except (KeyError, TypeError, ValueError) as e:
+            raise ParameterError(f"a stored alert lacks or mangles {e}") from None
 
 
 class ExposureTracker:
@@ -189,6 +224,8 @@ class ExposureTracker:
         #: the bounds' confidence, and only possibly above it
         self.confident = np.zeros(n, bool)
         self.possible = np.zeros(n, bool)
+        self.waiting_empty = False  # a calibration load on the mat: nothing counts yet
+        self.hold = False  # no new alert this frame (a bed's turn is being confirmed)
 
     @property
     def open_alert(self) -> Alert | None:
@@ -239,6 +276,10 @@ class ExposureTracker:
         self._last_t = t
         events: list[Event] = []
         loaded = self._values(p) > self.threshold_ncm2
+        if self.waiting_empty:  # the calibration load: no person, no exposure, no events
+            if loaded.any():
+                return events
+            self.waiting_empty, self.seated = False, False
         if lower is not None and upper is not None:
             self.confident = self._values(np.asarray(lower, np.float64)) > self.threshold_ncm2
             self.possible = (
@@ -254,7 +295,7 @@ class ExposureTracker:
         alert = self.open_alert
         if alert is None:
             over = np.flatnonzero(self.exposure_s >= self.reposition_s)
-            if over.size:
+            if over.size and not self.hold:
                 alert = Alert(next(self._ids), t, over.tolist(), float(self.exposure_s.max()))
                 detail: dict[str, Any] = {"where": [self.names[i] for i in over]}
                 if lower is not None and upper is not None:
@@ -265,9 +306,74 @@ class ExposureTracker:
         else:
             alert.peak_exposure_s = max(alert.peak_exposure_s, float(self.exposure_s.max()))
             if not np.any(self.exposure_s[alert.elements] > 0):
-                alert.cleared_t = t
-                events.append(Event("cleared", t, alert.id))
+                alert.cleared_t, alert.cleared_by = t, "offloaded"
+                events.append(Event("cleared", t, alert.id, {"by": "offloaded"}))
         return events
+
+    def turned(self, t: float, since_t: float) -> list[Event]:
+        """A bed's turn that began at ``since_t`` is confirmed at ``t``: other skin now lies on
+        the mat, so no element has been exposed longer than ``t - since_t``, and an open alert
+        clears (by the turn)."""
+        np.minimum(self.exposure_s, max(t - since_t, 0.0), out=self.exposure_s)
+        alert = self.open_alert
+        if alert is None:
+            return []
+        alert.cleared_t, alert.cleared_by = t, "turned"
+        return [Event("cleared", t, alert.id, {"by": "turned"})]
+
+    def wait_for_empty(self) -> None:
+        """Count nothing until the mat has been seen empty: what lies on it now is the load a
+        calibration was made with, not a person (no *seated*, no exposure)."""
+        self.waiting_empty = True
+        self.exposure_s[:] = 0.0
+
+    def state(self) -> dict[str, Any]:
+        """What the tracker knows now, JSON-ready and compact: the time of the last frame,
+        per exposed element (or region) ``[index, exposure s, relief s]``, whether the mat
+        is loaded, and the open alert (see :meth:`restore`)."""
+        exposed = np.flatnonzero(self.exposure_s > 0)
+        relief = np.minimum(self._relief_s, self.offload_s)
+        alert = self.open_alert
+        return {
+            "t": self._last_t,
+            "by": "region" if self._groups is not None else "element",
+            "size": len(self.names),
+            "exposed": [
+                [int(i), round(float(self.exposure_s[i]), 3), round(float(relief[i]), 3)]
+                for i in exposed
+            ],
+            "loaded": self.seated,
+            "waiting_empty": self.waiting_empty,
+            "alert": None if alert is None else alert.to_dict(),
+            "next_id": max((a.id for a in self.alerts), default=0) + 1,
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Go on from a :meth:`state` (of a tracker of the same layout and regions); a state
+        that does not fit raises :class:`ParameterError` naming what."""
+        try:
+            size = int(state["size"])
+            exposed = [(int(i), float(e), float(r)) for i, e, r in state["exposed"]]
+            t = None if state.get("t") is None else float(state["t"])
+            next_id = int(state.get("next_id", 1))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ParameterError(f"the stored exposure state lacks or mangles {e}") from None
+        if size != len(self.names) or any(not 0 <= i < size for i, _, _ in exposed):
+            raise ParameterError(
+                f"the stored exposure state is of {size} places, the tracker has {len(self.names)}"
+            )
+        self.exposure_s[:] = 0.0
+        self._relief_s[:] = self.offload_s
+        for i, exposure, relief in exposed:
+            self.exposure_s[i], self._relief_s[i] = exposure, relief
+        self._last_t = t
+        self.seated = bool(state.get("loaded", False))
+        self.waiting_empty = bool(state.get("waiting_empty", False))
+        self.alerts = []
+        if isinstance(state.get("alert"), dict):
+            self.alerts.append(Alert.from_dict(state["alert"]))
+            next_id = max(next_id, self.alerts[0].id + 1)
+        self._ids = itertools.count(next_id)
 
     def _occupancy(self, t: float, any_load: bool) -> list[Event]:
         """The load appearing or disappearing, once the change has held ``occupancy_hold_s``."""

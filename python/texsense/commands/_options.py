@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-__all__ = ["add_accept_truncated"]
+from texsense.exceptions import ParameterError
+
+__all__ = ["add_accept_truncated", "refuse_replacing"]
 
 ACCEPT_TRUNCATED_HELP = (
     "read a recording that holds less than it declares (an export cut short or closed early, "
@@ -17,3 +20,13 @@ def add_accept_truncated(p: argparse.ArgumentParser) -> None:
     """Add ``--accept-truncated`` (``args.accept_truncated``) to a command that reads
     recordings."""
     p.add_argument("--accept-truncated", action="store_true", help=ACCEPT_TRUNCATED_HELP)
+
+
+def refuse_replacing(path: Path, replace: bool) -> None:
+    """A calibration file is not written over without ``--replace`` (a monitor may be using
+    it; the mat's readings would change without a word)."""
+    if path.exists() and not replace:
+        raise ParameterError(
+            f"{path} exists: a calibration is not replaced without --replace "
+            "(or write it to another name)"
+        )

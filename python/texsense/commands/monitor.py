@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.layout import Layout
+from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
 from texsense.monitor.sources import Source
@@ -131,6 +131,14 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
         "not announce its layout",
     )
     p.add_argument(
+        "--orientation",
+        default=None,
+        metavar="KIND[:EDGE]|EDGE=LABEL,...|none",
+        help="how the mat lies, if its device does not say: bed, seat or foot with its head, "
+        "front or toes at the top of the map (row 1), or e.g. bed:bottom for the head at the "
+        "last row; or top=head,bottom=foot,...; without it a mat names no left or right",
+    )
+    p.add_argument(
         "--sampling-frequency",
         type=float,
         default=None,
@@ -238,8 +246,14 @@ def default_calibration(source: str) -> StageChain | None:
 
 def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
     """The source named by ``--source`` (no calibration: what ``record`` and the wizard
-    need); a replay starts again at its end with ``loop``. The sources are those of the
-    registry (:func:`texsense.monitor.sources.open_source`)."""
+    need), turned as ``--orientation`` says; a replay starts again at its end with
+    ``loop``. The sources are those of the registry
+    (:func:`texsense.monitor.sources.open_source`)."""
+    given = getattr(args, "orientation", None)
+    try:
+        orientation = None if given is None else parse_orientation(given)
+    except ParameterError as e:
+        raise ParameterError(f"--{e}") from None
     options = sources.SourceOptions(
         speed=args.speed,
         grid=_grid(args),
@@ -248,7 +262,10 @@ def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
         capdac_pF=args.capdac_pf,
         loop=loop,
     )
-    return sources.open_source(args.source, options)
+    source = sources.open_source(args.source, options)
+    if orientation is not None:
+        source.layout = source.layout.with_orientation(orientation or None)
+    return source
 
 
 def build_monitor(args: argparse.Namespace) -> Monitor:

@@ -13,7 +13,7 @@ import numpy as np
 
 from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
-from texsense.commands._options import add_accept_truncated
+from texsense.commands._options import add_accept_truncated, refuse_replacing
 from texsense.commands._tables import text_table
 from texsense.commands.wizard import register_wizard
 from texsense.compensation.archive import (
@@ -27,6 +27,7 @@ from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.repair import METHODS, Repair
 from texsense.compensation.stages import Convert, Linear, StageChain, load_chain
 from texsense.data.files import check_not_input
+from texsense.data.layout import parse_orientation
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io import load, save
 
@@ -68,6 +69,14 @@ def _register_calibrate(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--thickness-mm", type=float, help="spacer thickness (a preset knows its own)")
     m.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     m.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    m.add_argument(
+        "--orientation",
+        metavar="KIND[:EDGE]|EDGE=LABEL,...",
+        help="how the mat lies (written into the calibration): bed, seat or foot with its "
+        "head, front or toes at the map's first row, or e.g. bed:bottom; the monitor then "
+        "names left and right",
+    )
+    m.add_argument("--replace", action="store_true", help="write over an existing file")
     add_accept_truncated(m)
     m.set_defaults(run=run_calibrate)
 
@@ -90,6 +99,7 @@ def _register_calibrate(sub: argparse._SubParsersAction) -> None:
     )
     lin.add_argument("--full-scale", type=float, help="readings beyond it are out of range")
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    lin.add_argument("--replace", action="store_true", help="write over an existing file")
     add_accept_truncated(lin)
     lin.set_defaults(run=run_calibrate_linear)
     register_wizard(cs)
@@ -198,12 +208,18 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if Path(args.material).exists():
         inputs.append(Path(args.material))
     check_not_input(args.output, inputs)
+    refuse_replacing(args.output, args.replace)
+    try:
+        orientation = parse_orientation(args.orientation)
+    except ParameterError as e:
+        raise ParameterError(f"--{e}") from None
     session = CalibrationSession(args.material, args.pressure, args.thickness_mm, args.drift)
     chain = session.fit(
         _capacitance(args.baseline, args.accept_truncated),
         _capacitance(args.uniform, args.accept_truncated),
         (str(args.baseline), str(args.uniform)),
     )
+    chain.orientation = orientation
     for f in session.findings:
         print(f, file=sys.stderr)
     chain.save(args.output)
@@ -222,6 +238,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
     check_not_input(args.output, [args.like])
+    refuse_replacing(args.output, args.replace)
     rec = load(args.like, accept_truncated=args.accept_truncated)
     quantity, unit = rec.quantity, rec.unit
     if args.to is not None:

@@ -22,7 +22,7 @@ from texsense.commands.monitor import (
     web_access,
 )
 from texsense.compensation.stages import load_chain
-from texsense.data.layout import Layout
+from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor import sources
@@ -108,6 +108,8 @@ def read_config(
     [[mat]]
     id = "bed12"                      # the topic segment: <prefix>/bed12/frames
     layout = "grid:64x32"             # or the path of a recording of the mat
+    orientation = "bed"               # how it lies: bed, seat, foot, bed:bottom, top=head,...
+                                      # (default: the calibration's, else none declared)
     calibration = "bed12.json"        # omit for a mat that sends pressure
     source = "mqtt"                   # or "serial:/dev/ttyUSB0", "iio:DIR", "replay:FILE"
     bed = true                        # a bed: turning schedule and at-risk regions ...
@@ -135,6 +137,13 @@ def read_config(
                 calibrations[key] = load_chain(key)
             cal = calibrations[key]
         quantity = "capacitance" if cal is not None else "pressure"
+        if m.get("orientation") is not None:
+            try:
+                layout = layout.with_orientation(parse_orientation(m["orientation"]) or None)
+            except ParameterError as e:
+                raise FormatError(path, f"[[mat]] #{k + 1}: {e}") from None
+        elif cal is not None and cal.orientation and not layout.orientation:
+            layout = layout.with_orientation(cal.orientation)
         spec = str(m.get("source", "mqtt"))
         if spec != "mqtt":  # a source of this machine, from the registry (docs/station.md)
             try:
@@ -252,7 +261,7 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
             sides = virtual_bed_model(beds.id)
         mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
                            args.turn_every)  # fmt: skip
-        background.append(vm.run())
+        background.append(vm.run_apart())
     station = Station(url, mats, topic=args.mats, store=open_store(args.db),
                       record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]

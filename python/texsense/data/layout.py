@@ -40,44 +40,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense.data.orientation import (
+    EDGES,
+    ORIENTATIONS,
+    _orientation,
+    orientation_toward,
+    parse_orientation,
+)
 from texsense.exceptions import ParameterError
 
-__all__ = ["EDGES", "ORIENTATIONS", "Layout"]
-
-#: The edges of a map as drawn: ``top`` is row 0 (small y), ``left`` is column 0 (small x).
-EDGES = ("top", "bottom", "left", "right")
-
-#: Orientation presets. ``left`` / ``right`` are the body's own left and right: the patient's
-#: lying on the back on a bed (head at the top), the sitter's on a seat (front edge at the top).
-#: A foot sensor declares toes and heel only (its sides depend on which foot it is).
-ORIENTATIONS: dict[str, dict[str, str]] = {
-    "bed": {"top": "head", "bottom": "foot", "left": "left", "right": "right"},
-    "seat": {"top": "front", "bottom": "back", "left": "left", "right": "right"},
-    "foot": {"top": "toes", "bottom": "heel"},
-}
-
-
-def _orientation(value: Mapping[str, str] | str | None) -> dict[str, str]:
-    """Check an orientation (a preset name or edge -> label) and return it as a dict."""
-    if value is None:
-        return {}
-    if isinstance(value, str):
-        if value not in ORIENTATIONS:
-            raise ParameterError(
-                f"orientation: unknown preset {value!r}; known: {', '.join(ORIENTATIONS)}"
-            )
-        return dict(ORIENTATIONS[value])
-    if not isinstance(value, Mapping):
-        raise ParameterError("orientation: expected a preset name or a mapping edge -> label")
-    out: dict[str, str] = {}
-    for edge, label in value.items():
-        if edge not in EDGES:
-            raise ParameterError(f"orientation: unknown edge {edge!r}; edges: {', '.join(EDGES)}")
-        if not isinstance(label, str) or not label.strip() or len(label) > 40:
-            raise ParameterError(f"orientation: the {edge} label must be a short text")
-        out[edge] = label.strip()
-    return out
-
+__all__ = ["EDGES", "ORIENTATIONS", "Layout", "orientation_toward", "parse_orientation"]
 
 _FloatArray = npt.NDArray[np.float64]
 _IntArray = npt.NDArray[np.int64]
@@ -401,13 +373,15 @@ class Layout:
 
     def element_name(self, element: int) -> str:
         """How people name an element: its own name if the layout has names, else
-        ``e17 (r2c5)`` on a grid (index, row and column from 0), else ``e17``."""
+        ``e17 (row 3, column 6)`` on a grid (the index from 0, as ``texsense health`` and the
+        files count elements; row and column from 1 at the top left of the drawn map, as
+        ``texsense health``, the report and the pages count them), else ``e17``."""
         if self._names is not None:
             return self._names[element]
         if self._shape is None or self._cells is None:
             return f"e{element}"
         row, col = divmod(int(self._cells[element]), self._shape[1])
-        return f"e{element} (r{row}c{col})"
+        return f"e{element} (row {row + 1}, column {col + 1})"
 
     def to_grid(self, values: npt.ArrayLike, fill: float = np.nan) -> np.ndarray:
         """Arrange per-element values (..., N) as maps (..., rows, cols); empty cells = ``fill``."""

@@ -7,7 +7,9 @@ Routes (an :class:`fastapi.APIRouter`; :func:`playback_router`):
 
 - ``GET /api/view``: the live mode (seat, bed, foot, generic), its words, fixed colour scale
   (N/cm²), threshold and orientation.
-- ``GET /api/playback``: the recordings in the monitor's folder (newest first).
+- ``GET /api/playback``: the recordings in the monitor's folder (newest first): the files and
+  folders texsense reads as a recording (a calibration file, a report, a regions sidecar
+  are not listed).
 - ``GET /api/playback/{name}``: one recording: frames, times, layout, mode, scale, the
   statistics per frame (load, peak, contact area, centre of force; at most
   :data:`MAX_POINTS` points, each the max or mean of its frames), events, time per side,
@@ -38,6 +40,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 
 from texsense.apps import stats
+from texsense.apps.clinical import POSTURE_LABEL
 from texsense.apps.report import write_report
 from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.data import units
@@ -133,6 +136,9 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
         "frames": rec.n_frames,
         "duration_s": round(rec.duration_s, 3),
         "started_at": review.started,
+        "clock_rate": round(review.clock_rate, 6),  # frame s per wall-clock s (1: a real mat)
+        "live": review.live,
+        "notes": review.notes,
         "quantity": rec.quantity,
         "unit": review.unit,
         "mode": review.mode.to_dict(),
@@ -190,6 +196,22 @@ class _Folder:
         self.monitor = monitor
         self.path = Path(monitor.record_dir)
         self.reviews = _Reviews()
+        self._kinds: dict[tuple[str, int, float], bool] = {}  # (name, size, mtime) -> readable
+
+    def is_recording(self, p: Path, size: int, mtime: float) -> bool:
+        """Whether texsense reads ``p`` as a recording (by its content, as ``load`` would;
+        remembered while the file is unchanged)."""
+        from texsense.io import sniff_format
+
+        key = (p.name, size, mtime)
+        if key not in self._kinds:
+            try:
+                self._kinds[key] = sniff_format(p) != "folder"
+            except (FormatError, OSError):
+                self._kinds[key] = False
+            if len(self._kinds) > 4096:
+                self._kinds.clear()
+        return self._kinds[key]
 
     def path_of(self, name: str) -> Path:
         path = resolve_recording(self.path, name) if self.path.is_dir() else None
@@ -214,6 +236,8 @@ class _Folder:
             if p.name.startswith(".") or p.name.endswith(".rois.json") or p.name == "reports":
                 continue
             st = p.stat()
+            if p.name not in now and not self.is_recording(p, st.st_size, st.st_mtime):
+                continue
             rows.append({"name": p.name, "bytes": st.st_size, "modified": st.st_mtime,
                          "folder": p.is_dir(), "recording": p.name in now})  # fmt: skip
         return sorted(rows, key=lambda r: -r["modified"])
@@ -236,12 +260,28 @@ def _view(monitor: Monitor) -> dict[str, Any]:
     }
 
 
+#: The per-frame labels that say a frame's posture or side, most telling first: what the
+#: monitor showed live, a simulation's side, PMD's posture class, a recorded posture.
+POSTURE_LABELS = (POSTURE_LABEL, "side", "posture_class", "posture")
+
+
 def _frame(review: Review, i: int) -> dict[str, Any]:
     if not 0 <= i < review.rec.n_frames:
         raise HTTPException(404, f"frame {i} is out of range 0..{review.rec.n_frames - 1}")
+    rec = review.rec
     repaired = [] if review.repaired is None else np.flatnonzero(review.repaired[i]).tolist()
-    return {"i": i, "t": round(float(review.series["t"][i]), 3),
-            "values": _rounded(review.frame(i), 4), "repaired": repaired}  # fmt: skip
+    out = {"i": i, "t": round(float(review.series["t"][i]), 3),
+           "values": _rounded(review.frame(i), 4), "repaired": repaired}  # fmt: skip
+    if review.pressure:  # the frame's peak pressure index, N/cm² (as the live snapshot's)
+        one = rec.select(slice(i, i + 1)).to_unit("N/cm2")
+        ppi = float(stats.peak_pressure_index(one)[0])
+        out["ppi_ncm2"] = round(ppi, 4) if np.isfinite(ppi) else None
+    for name in POSTURE_LABELS:
+        if name in rec.labels:
+            value = str(rec.labels[name][i])
+            out["posture"] = {"label": value or None, "from": name}
+            break
+    return out
 
 
 async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, Any]:

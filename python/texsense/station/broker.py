@@ -51,6 +51,7 @@ __all__ = [
     "STATION_USER",
     "Broker",
     "BrokerURL",
+    "mat_id_of",
     "mat_topic",
     "mqtt_client",
     "parse_broker_url",
@@ -133,8 +134,11 @@ def mqtt_client(broker: BrokerURL, name: str) -> Any:
 def _die_with_parent() -> None:
     """In the child before exec (Linux): end with the parent, even one that is killed. (As
     root, Mosquitto drops to its own user at start, which clears this: a station killed with
-    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
+    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.) The child
+    gets a process group of its own: a Ctrl-C on the terminal reaches the station alone,
+    which disconnects first and then stops its broker (no "lost the broker" on a clean stop)."""
 
+    os.setpgid(0, 0)
     with contextlib.suppress(OSError):  # not Linux: the parent's stop() is the only way
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
@@ -305,6 +309,14 @@ def mat_topic(topic_filter: str, mat_id: str) -> str:
             "PREFIX/+/frames (one '+', for the mat id)"
         )
     return "/".join([*parts[:-2], mat_id, "frames"])
+
+
+def mat_id_of(topic: str) -> str | None:
+    """The mat id of a frames topic (``.../<mat id>/frames``), None for other topics."""
+    parts = topic.split("/")
+    if len(parts) < 2 or parts[-1] != "frames" or not parts[-2]:
+        return None
+    return parts[-2]
 
 
 def check_mat_id(mat_id: str) -> str:
