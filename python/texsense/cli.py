@@ -9,11 +9,13 @@ Exit codes: 0 ok, 1 failed (bad file, bad data), 2 bad usage.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
+import signal
 import sys
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Iterator, Sequence
 
 from texsense._core import __version__
 from texsense.commands import COMMANDS
@@ -63,11 +65,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = _command_of(argv)
     parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)
+    with _terminate_as_interrupt():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run a parsed command: every failure is one line on stderr and exit 1 (one clean way
+    out: a bad file or option, an output place that cannot be written, a database that cannot
+    be opened, the memory budget); SIGTERM and Ctrl-C clean up as they stop."""
     try:
         return int(args.run(args) or 0)
-    except (FormatError, ParameterError, UnitError, WriteError, FileNotFoundError) as e:
+    except (FormatError, ParameterError, UnitError, WriteError) as e:
         print(f"texsense {args.command}: error: {e}", file=sys.stderr)
         return 1
+    except Terminated:
+        print(f"texsense {args.command}: stopped (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print(f"texsense {args.command}: interrupted", file=sys.stderr)
         return 1
@@ -75,6 +88,48 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as e:  # an output place: no permission, a folder or a file in the way
+        print(f"texsense {args.command}: error: {_os_error(e)}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(
+            f"texsense {args.command}: error: out of memory; set the memory budget "
+            "$TEXSENSE_MAX_MEMORY below what the machine has (docs/reliability.md)",
+            file=sys.stderr,
+        )
+        return 1
+    except Exception as e:
+        if type(e).__module__.split(".")[0] not in ("sqlite3", "psycopg"):
+            raise
+        print(f"texsense {args.command}: error: the event store: {e}", file=sys.stderr)
+        return 1
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that its clean-up runs as for Ctrl-C."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    def stop(_sig: int, _frame: object) -> None:
+        raise Terminated
+
+    try:
+        previous = signal.signal(signal.SIGTERM, stop)
+    except ValueError:  # not the main thread (texsense.cli.main called by a program)
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _os_error(e: OSError) -> str:
+    """One line for an OSError: the path(s) and the reason."""
+    reason = e.strerror or str(e) or type(e).__name__
+    paths = [str(p) for p in (e.filename, e.filename2) if p is not None]
+    return f"{' -> '.join(paths)}: {reason}" if paths else reason
 
 
 if __name__ == "__main__":

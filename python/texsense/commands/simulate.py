@@ -12,6 +12,7 @@ from typing import Any
 
 from texsense._progress import progress
 from texsense.commands import HELP
+from texsense.data.files import make_folder
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
@@ -210,7 +211,7 @@ def run_sessions(args: argparse.Namespace) -> int:
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")
-    args.output.mkdir(parents=True, exist_ok=True)
+    make_folder(args.output)
     cal = seat_calibration(mat_seed=args.mat_seed)
     cal.save(args.output / "calibration.json")
     frames = 0

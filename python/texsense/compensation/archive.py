@@ -35,7 +35,13 @@ import numpy as np
 from texsense._progress import progress
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.files import atomic_path, check_not_input
+from texsense.data.files import (
+    atomic_path,
+    check_not_input,
+    make_folder,
+    open_regular,
+    regular_files,
+)
 from texsense.data.layout import Layout
 from texsense.data.modelfile import content_hash
 from texsense.exceptions import FormatError, ParameterError
@@ -93,7 +99,7 @@ class FileReport:
 def input_hash(path: str | Path) -> str:
     """SHA-256 of a file's bytes (read in 1 MiB blocks)."""
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -103,13 +109,13 @@ def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
     """True when ``dst`` is a complete output of the same calibration and input."""
     if not dst.is_file():
         return False
-    import h5py
+    from texsense.io.policy import open_hdf5  # the one HDF5 policy (loads h5py)
 
     try:
-        with h5py.File(dst, "r") as f:
+        with open_hdf5(dst) as f:
             meta = json.loads(f.attrs.get("meta", "{}"))
             complete = not int(f.attrs.get("open", 1))
-    except (OSError, ValueError):
+    except (OSError, ValueError, TypeError):  # FormatError among them: not an output of ours
         return False
     return (
         complete
@@ -153,7 +159,7 @@ def process_file(
             raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
         out_quantity, out_unit = pipe.output_quantity
         meta = {**head.meta, **pipe.provenance(), "source": src.name, "input_sha256": digest}
-        dst.parent.mkdir(parents=True, exist_ok=True)
+        make_folder(dst.parent)
         frames, failed = 0, 0
         with (
             atomic_path(dst) as tmp,
@@ -204,7 +210,9 @@ def archive_jobs(
     for spec in map(str, inputs):
         path = Path(spec)
         if path.is_dir():
-            for p in sorted(q for q in path.rglob("*") if q.is_file()):
+            found, passed = regular_files(path, recursive=True)  # no link out, FIFO, device
+            ignored += [p for p, _ in passed]
+            for p in found:
                 try:
                     sniff_format(p)
                 except FormatError:

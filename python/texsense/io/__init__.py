@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from texsense._progress import logger
+from texsense.data.files import check_regular, regular_files
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
@@ -109,8 +111,7 @@ def sniff_format(path: str | Path) -> str:
         If the file or folder matches no known format; the message lists what is known.
     """
     path = Path(path)
-    if not path.exists():
-        raise FormatError(path, "no such file or folder")
+    check_regular(path, folder_ok=True)  # no FIFO, device, dangling link: nothing waits
     if path.is_dir():
         return "pmd" if is_pmd_path(path) else "folder"  # a folder of recordings: read_folder
     with open_binary(path) as fh:
@@ -243,7 +244,10 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
     if not folder.is_dir():
         raise FormatError(folder, "no such folder")
     files = []
-    for p in sorted((q for q in folder.rglob("*") if q.is_file()), key=_natural):
+    found, passed = regular_files(folder, recursive=True)  # no link out, FIFO, device
+    for p, why in passed:
+        logger.warning("warning: %s: passed over (%s)", p, why)
+    for p in sorted(found, key=_natural):
         try:
             sniff_format(p)
         except FormatError:

@@ -32,7 +32,7 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError
 from texsense.io._base import FrameRow, Header, RecordingReader
-from texsense.io._text import TextLines, is_number
+from texsense.io._text import TextLines, is_number, open_binary
 
 __all__ = [
     "MIRROR_CLASS",
@@ -174,7 +174,7 @@ def published_sums(path: Path) -> tuple[Path | None, dict[Path, str]]:
 
 def _sha256(path: Path) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_binary(path) as f:  # a regular file only: nothing waits on a FIFO
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()

@@ -33,7 +33,7 @@ from texsense.calibration.checks import parse_pressure
 from texsense.calibration.session import CHECK_TOLERANCE, CalibrationSession, CheckReport
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Convert
-from texsense.data.files import unused_name
+from texsense.data.files import make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
@@ -382,7 +382,7 @@ def _write(
     folder: Path, stem: str, chain: Any, recordings: dict[str, Recording]
 ) -> dict[str, Path]:
     """The step recordings and then the chain (atomic writes: texsense.data.files)."""
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder, "recordings folder")
     out: dict[str, Path] = {}
     for step, rec in recordings.items():
         out[step] = rec.save(unused_name(folder / f"{stem}-{step}.h5"))

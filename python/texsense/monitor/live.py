@@ -32,7 +32,7 @@ from texsense.apps.bed import BANDS
 from texsense.apps.posture.smoothing import WindowVote
 from texsense.apps.views import MODES, format_duration, orientation_of, place_names, seat_zones
 from texsense.data import units
-from texsense.data.files import unused_name
+from texsense.data.files import make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
@@ -122,7 +122,7 @@ class Recorder:
     ) -> None:
         from texsense.io.hdf5 import RecordingWriter
 
-        folder.mkdir(parents=True, exist_ok=True)
+        make_folder(folder, "recordings folder")
         lay = source.layout
         self.paths = recording_paths(folder, name, source.quantity, calibrated)
         taken = [p.name for p in self.paths if p.exists()]
