@@ -27,19 +27,23 @@ a grid of 2147483648 x 2147483648 cells needs 4096 PiB
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 from texsense.exceptions import FormatError, ParameterError
 
-__all__ = ["ENV", "check", "human", "max_memory", "parse_size"]
+__all__ = ["ENV", "check", "human", "max_memory", "parse_size", "share"]
 
 #: The environment variable that sets the budget.
 ENV = "TEXSENSE_MAX_MEMORY"
 #: The share of the memory the process may use that is the default budget.
 DEFAULT_SHARE = 0.5
 
+_SHARE: contextvars.ContextVar[int | None] = contextvars.ContextVar("budget_share", default=None)
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 
@@ -74,11 +78,23 @@ def _machine_bytes() -> int:
 
 def max_memory() -> int:
     """The budget in bytes: ``TEXSENSE_MAX_MEMORY`` if set, else half of
-    :func:`_machine_bytes`."""
+    :func:`_machine_bytes`; less inside :func:`share`."""
     text = os.environ.get(ENV)
-    if text:
-        return parse_size(text)
-    return int(_machine_bytes() * DEFAULT_SHARE)
+    whole = parse_size(text) if text else int(_machine_bytes() * DEFAULT_SHARE)
+    part = _SHARE.get()
+    return whole if part is None else max(0, min(whole, part))
+
+
+@contextlib.contextmanager
+def share(nbytes: int) -> Iterator[None]:
+    """Within the block (this thread or task), the budget is at most ``nbytes``: a server
+    that already holds some memory (the monitor's cache of recordings) reads the next file
+    with what is left."""
+    token = _SHARE.set(int(nbytes))
+    try:
+        yield
+    finally:
+        _SHARE.reset(token)
 
 
 def human(nbytes: float) -> str:

@@ -324,13 +324,13 @@ def make_folder(path: str | Path, what: str = "output folder") -> Path:
 
 
 def regular_files(
-    folder: str | Path, *, recursive: bool = False
+    folder: str | Path, *, recursive: bool = False, folders: bool = False
 ) -> tuple[list[Path], list[tuple[Path, str]]]:
-    """The regular files in ``folder`` (and its subfolders with ``recursive``), sorted, and
-    what was passed over with why: links that lead out of the folder, dangling links, loops
-    of links, FIFOs, devices and sockets. Nothing is opened (only the status of each entry is
-    asked), so nothing can wait on an entry that does not answer; a subfolder reached through
-    a link is not entered.
+    """The regular files in ``folder`` (and its subfolders with ``recursive``; the subfolders
+    themselves with ``folders``), sorted, and what was passed over with why: links that lead
+    out of the folder, dangling links, loops of links, FIFOs, devices and sockets. Nothing is
+    opened (only the status of each entry is asked), so nothing can wait on an entry that
+    does not answer; a subfolder reached through a link is not entered.
 
     >>> import os, tempfile
     >>> d = tempfile.mkdtemp(); _ = write_text(os.path.join(d, "a.csv"), "x")
@@ -357,6 +357,8 @@ def regular_files(
             if why == "folder":
                 if recursive:
                     pending.append(path)
+                if folders:
+                    files.append(path)
             elif why:
                 skipped.append((path, why))
             else:
@@ -400,7 +402,7 @@ def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:
         detail = getattr(e, "detail", str(e))
         raise ParameterError(f"{what} {p}: {detail}") from None
     if len(data) > limit:
-        raise ParameterError(f"{what} {p}: larger than {limit} bytes, not a {what} file")
+        raise ParameterError(f"{what} {p}: larger than {limit} bytes, not a small text file")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:

@@ -38,6 +38,7 @@ from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
+from texsense.monitor.sources import blocking
 from texsense.sim.spacer import PRESETS as SPACER_PRESETS
 
 __all__ = ["DEFAULT_FRAMES", "MAX_FRAMES", "STEPS", "PageCalibration", "StepError"]
@@ -307,7 +308,7 @@ class PageCalibration:
 
         self.busy, self.material = "material", material
         try:
-            await asyncio.to_thread(make)
+            await blocking(make)
         except ParameterError as e:
             self.refused = str(e)
             raise
@@ -333,7 +334,7 @@ class PageCalibration:
             self.busy = None
 
     async def _check_in_thread(self) -> None:
-        await asyncio.to_thread(self._check)
+        await blocking(self._check)
 
     async def save(self) -> dict[str, Any]:
         """Step 5: write the chain and the step recordings (new names in the monitor's
@@ -352,7 +353,7 @@ class PageCalibration:
         )
         self.busy = "save"
         try:
-            paths = await asyncio.to_thread(_write, folder, stem, chain, self.recordings)
+            paths = await blocking(_write, folder, stem, chain, self.recordings)
             pipeline = Pipeline(chain, self.monitor.layout)
         finally:
             self.busy = None
