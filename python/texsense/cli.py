@@ -53,6 +53,10 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
         elif module not in registered:
             importlib.import_module(f"texsense.commands.{module}").register(sub)
             registered.add(module)
+    if wanted:
+        from texsense.commands._options import check_numbers
+
+        check_numbers(parser)  # every numeric option refuses what lies outside its range
     return parser
 
 

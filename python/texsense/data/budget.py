@@ -107,8 +107,9 @@ def human(nbytes: float) -> str:
     return f"{value:.4g} PiB"
 
 
-def check(nbytes: float, what: str, path: str | Path | None = None) -> None:
-    """Refuse to allocate ``nbytes`` for ``what`` when they exceed the budget.
+def check(nbytes: float, what: str, path: str | Path | None = None, hint: str = "") -> None:
+    """Refuse to allocate ``nbytes`` for ``what`` when they exceed the budget (``hint``: what
+    to do instead, appended to the message).
 
     Raises
     ------
@@ -120,11 +121,8 @@ def check(nbytes: float, what: str, path: str | Path | None = None) -> None:
     budget = max_memory()
     if nbytes <= budget:
         return
-    message = (
-        f"{what} needs {human(nbytes)}, more than the memory budget of {human(budget)} "
-        f"(${ENV}); a file this large is read in blocks ('texsense process', "
-        "texsense.io.open_reader)"
-    )
+    message = f"{what} needs {human(nbytes)}, more than the memory budget of {human(budget)} "
+    message += f"(${ENV})" + (f"; {hint}" if hint else "")
     if path is not None:
         raise FormatError(path, message)
     raise ParameterError(message)

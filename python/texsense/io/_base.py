@@ -455,8 +455,9 @@ class RecordingReader(BlockReader):
     def _over_budget(self, frames: int) -> None:
         n = self.header.layout.n_elements
         budget.check(
-            frames * self._frame_bytes(), f"reading {frames} frames of {n} elements", self.path
-        )
+            frames * self._frame_bytes(), f"reading {frames} frames of {n} elements", self.path,
+            "a recording this long is read in blocks ('texsense process', texsense.io.open_reader)",
+        )  # fmt: skip
 
     def read(self) -> Recording:
         """The whole recording (all frames in memory).
