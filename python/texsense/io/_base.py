@@ -42,7 +42,7 @@ import numpy.typing as npt
 
 from texsense._progress import logger
 from texsense.data import budget, units
-from texsense.data.layout import Layout
+from texsense.data.layout import BYTES_PER_CELL, Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
 from texsense.io._text import Line, TextLines
@@ -168,11 +168,18 @@ def plausible(values: npt.NDArray[np.floating[Any]], quantity: str) -> npt.NDArr
 
 
 def check_declared_size(
-    path: Path, what: str, count: int, min_bytes_each: int, line: int | None = None
+    path: Path,
+    what: str,
+    count: int,
+    min_bytes_each: int,
+    line: int | None = None,
+    memory_each: int = BYTES_PER_CELL,
 ) -> None:
     """Refuse a header number that the file cannot hold (``Rows,1000000000`` in a 2 MB
-    file) before anything is allocated from it: ``what`` declares ``count`` values of at
-    least ``min_bytes_each`` bytes each."""
+    file) or that needs more memory than the budget (``ROWS 3000 COLS 3000``: a layout of 9 M
+    elements), before anything is allocated or parsed from it: ``what`` declares ``count``
+    values of at least ``min_bytes_each`` bytes each in the file and ``memory_each`` bytes
+    each in memory (by default a layout's element, :data:`texsense.data.layout.BYTES_PER_CELL`)."""
     size = path.stat().st_size
     if count < 0 or count * min_bytes_each > size:
         raise FormatError(
@@ -181,6 +188,7 @@ def check_declared_size(
             "(a damaged header?)",
             line,
         )
+    budget.check(count * memory_each, f"{what} (line {line})" if line else what, path)
 
 
 class BlockReader:
@@ -442,8 +450,10 @@ class RecordingReader(BlockReader):
             yield self._recording(_join(held))
 
     def _expected_frames(self) -> int | None:
-        """The frames :meth:`read` will read, if known before (the declared count)."""
-        return self.header.declared_frames
+        """The frames :meth:`read` will read, if the file proves it before they are read
+        (HDF5: what every dataset holds); a text file's declared count is only a claim (a file
+        cut short is said as such), so text readers count the frames as they come."""
+        return None
 
     def _frame_bytes(self) -> int:
         """Memory per frame while :meth:`read` holds the whole file."""

@@ -9,15 +9,17 @@ The schema is documented in ``docs/data-model.md`` so that h5py alone can read a
     /times                 float64 (T,), s
     /valid                 bool (T, N)
     /element_times         float64 (T, N), s                         (only if present)
-    /labels/<name>         (T,) numbers or UTF-8 strings
-    /layout                attrs: kind ("grid" | "points"), rows, cols, pitch_cm (grid only)
+    /labels/<name>         (T,) numbers or UTF-8 strings, attr name (as for regions)
+    /layout                attrs: kind ("grid" | "points"), rows, cols, pitch_cm (grid only),
+                                  orientation (JSON, edge -> label; only if declared)
     /layout/xy_cm          float64 (N, 2)
     /layout/size_cm        float64 (N, 2)
     /layout/area_cm2       float64 (N,)
     /layout/cells          int64 (N,)                                 (grid only)
     /layout/neighbours_indptr, /layout/neighbours_indices   int64
     /layout/names          UTF-8 strings (N,)                         (only if present)
-    /layout/regions/<name> int64 element indices
+    /layout/regions/<name> int64 element indices, attr name (a name HDF5 cannot hold as a
+                           link name, "left/heel", is stored as "#<k>" with its name here)
 
 :class:`RecordingWriter` appends frames while recording and flushes them to disk, so that a
 process that is killed leaves a readable file holding everything flushed before (``live``).
@@ -50,7 +52,7 @@ from texsense.data.files import atomic_path
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
-from texsense.io._base import Header, Piece, RecordingReader
+from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
 from texsense.io.policy import check_text, link_name, named, open_hdf5
 
@@ -80,6 +82,8 @@ def _chunk_rows(n_elements: int) -> int:
 
 def _write_layout(group: h5py.Group, layout: Layout) -> None:
     group.attrs["kind"] = layout.kind
+    if layout.orientation:
+        group.attrs["orientation"] = json.dumps(layout.orientation)
     if layout.shape is not None and layout.cells is not None:
         group.attrs["rows"], group.attrs["cols"] = layout.shape
         group.create_dataset("cells", data=layout.cells)
@@ -135,6 +139,9 @@ def _read_layout(group: h5py.Group) -> Layout:
     regions = {}
     for key, ds in group["regions"].items() if "regions" in group else ():
         regions[_text(ds.attrs.get("name", key))] = _whole(ds)
+    orientation = None
+    if "orientation" in group.attrs:
+        orientation = json.loads(_text(group.attrs["orientation"]))
     return Layout(
         _whole(group["xy_cm"]),
         _whole(group["size_cm"]),
@@ -145,6 +152,7 @@ def _read_layout(group: h5py.Group) -> Layout:
         neighbours=(_whole(group["neighbours_indptr"]), _whole(group["neighbours_indices"])),
         names=names,
         regions=regions,
+        orientation=orientation,
     )
 
 
@@ -158,6 +166,9 @@ def _label_dtype(values: np.ndarray) -> Any:
 
 class RecordingWriter:
     """Append frames to an HDF5 recording while it is being made.
+
+    Readings that every reader finds impossible (not a number, infinite, a negative pressure,
+    beyond any sensor: :func:`texsense.io._base.impossible`) are written as invalid.
 
     Every :meth:`append` writes the frames into growable datasets; the file is flushed to disk
     at most ``flush_interval_s`` after the last flush (0: after every append), so a killed
@@ -224,6 +235,7 @@ class RecordingWriter:
         )
         self.path = Path(path)
         self.n_elements = layout.n_elements
+        self.quantity = probe.quantity
         self.flush_interval_s = float(flush_interval_s)
         self._last_flush = time.monotonic()
         _check_texts(layout, probe)
@@ -289,7 +301,9 @@ class RecordingWriter:
         if t.shape != (k,):
             raise ParameterError(f"append: expected {k} time stamps, got {t.shape}")
         v = np.ones_like(fr, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
-        v = v.reshape(k, self.n_elements)
+        # what every reader will find impossible is written as invalid (a compensated
+        # pressure below zero, say): the file says what it holds, and reading it warns of nothing
+        v = v.reshape(k, self.n_elements) & plausible(fr, self.quantity)
         has_et = "element_times" in f
         if has_et != (element_times is not None):
             raise ParameterError(
