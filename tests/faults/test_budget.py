@@ -82,11 +82,12 @@ def _sparse_grid(f):
 
 
 def _tekscan(rows: int, cols: int, frames: int = 1, end: int | None = None) -> str:
+    last = frames if end is None else end
     head = ["DATA_TYPE MOVIE", f"ROWS {rows}", f"COLS {cols}", "ROW_SPACING 1 centimeters",
             "COL_SPACING 1 centimeters", "SECONDS_PER_FRAME 0.1", "START_FRAME 1",
-            f"END_FRAME {frames if end is None else end}", "UNITS raw", "ASCII_DATA @@", ""]  # fmt: skip
-    row = ",".join(["1"] * cols)
-    body = "".join(f"Frame {k + 1}, {k * 0.1}\n" + (row + "\n") * rows + "\n" for k in range(frames))
+            f"END_FRAME {last}", "UNITS raw", "ASCII_DATA @@", ""]  # fmt: skip
+    grid = (",".join(["1"] * cols) + "\n") * rows
+    body = "".join(f"Frame {k + 1}, {k * 0.1}\n" + grid + "\n" for k in range(frames))
     return "\n".join(head) + "\n" + body + "@@\n"
 
 
@@ -145,7 +146,8 @@ def outcomes(tmp_path_factory):
     for _, path, _ in cases:
         argvs += [["info", str(path)], ["convert", str(path), str(path) + ".out.h5"]]
     warm = [["info", str(base)], ["convert", str(base), str(folder / "warm.h5")]]
-    results, base_kib, peak_kib = batch(argvs, folder, warm=warm, env={"TEXSENSE_MAX_MEMORY": BUDGET})
+    env = {"TEXSENSE_MAX_MEMORY": BUDGET}
+    results, base_kib, peak_kib = batch(argvs, folder, warm=warm, env=env)
     return cases, results, base_kib, peak_kib
 
 
@@ -159,8 +161,12 @@ def test_declared_sizes_are_refused_within_the_budget(outcomes, fault_row):
         fault_row("declares more", case, "clear error", "info, convert under a 64 MiB budget")
     grown = peak_kib - base_kib
     assert grown <= BUDGET_KIB + CONSTANT_KIB, f"the child grew by {grown} KiB"
-    fault_row("declares more", f"peak memory of those {len(results)} commands",
-              "within the budget", f"{grown // 1024} MiB over the warm-up, budget 64 MiB")  # fmt: skip
+    fault_row(
+        "declares more",
+        f"peak memory of those {len(results)} commands",
+        "within the budget",
+        f"{grown // 1024} MiB over the warm-up, budget 64 MiB",
+    )
 
 
 @pytest.mark.parametrize("build", [
@@ -170,7 +176,7 @@ def test_declared_sizes_are_refused_within_the_budget(outcomes, fault_row):
 ], ids=["grid 100000 x 100000", "2 elements on 10^10 cells", "grid 50000 x 50000"])  # fmt: skip
 def test_layouts_from_numbers_are_checked_before_allocation(build, monkeypatch, fault_row):
     monkeypatch.setenv("TEXSENSE_MAX_MEMORY", BUDGET)
-    with pytest.raises(ParameterError, match="budget|cells for"):
+    with pytest.raises(ParameterError, match=r"budget|cells for"):
         build()
     fault_row("declares more", "a layout from numbers (Python API)", "clear error")
 

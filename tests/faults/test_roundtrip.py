@@ -111,8 +111,12 @@ WRITERS = {"hdf5": (".h5", check_hdf5), "wide-csv": (".csv", check_wide),
 
 
 @pytest.mark.parametrize("fmt", list(WRITERS))
-@settings(max_examples=60, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])  # fmt: skip
+@settings(
+    max_examples=60,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 @given(rec=recordings())
 def test_what_texsense_writes_texsense_reads(fmt, rec, tmp_path_factory):
     suffix, check = WRITERS[fmt]
@@ -134,5 +138,6 @@ def test_the_round_trip_table(fault_row):
         pytest.skip("the property tests did not run in this session")
     for fmt in WRITERS:
         done, refused = OUTCOMES[f"{fmt}: read back"], OUTCOMES[f"{fmt}: refused before writing"]
-        fault_row("round trip", f"{fmt} writer x reader, {done + refused} generated recordings",
-                  "read back", f"{done} read back exactly, {refused} refused before writing")  # fmt: skip
+        detail = f"{done} read back exactly, {refused} refused before writing"
+        case = f"{fmt} writer x reader, {done + refused} generated recordings"
+        fault_row("round trip", case, "read back", detail)

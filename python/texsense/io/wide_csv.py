@@ -269,8 +269,9 @@ def write_wide_csv(rec: Recording, path: str | Path) -> Path:
 
     Written exactly: frames (shortest float32 text), times (shortest float64 text), the
     validity mask (with the readings no reader accepts marked invalid: not a number, infinite,
-    negative pressure, beyond any sensor), quantity, unit, layout and meta. Not written: labels, per-element times.
-    The file is written to a temporary name and renamed (:mod:`texsense.data.files`).
+    negative pressure, beyond any sensor), quantity, unit, layout and meta. Not written:
+    labels, per-element times. The file is written to a temporary name and renamed
+    (:mod:`texsense.data.files`).
     """
     path = Path(path)
     names = [f"e{k}" for k in range(rec.n_elements)]
