@@ -62,6 +62,7 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    from_command_line = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     # matplotlib's own housekeeping (a font cache it cannot save, e.g. on a full disk) is
     # not the user's concern: the command's one line says what went wrong
@@ -70,7 +71,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)
     with _terminate_as_interrupt():
-        return _run(args)
+        code = _run(args)
+    if from_command_line:
+        _leave_busy_workers(code)
+    return code
+
+
+def _leave_busy_workers(code: int) -> None:
+    """A server stopped while its workers still read (a recording that takes long to read,
+    a file that does not answer): they are daemon threads nobody waits for, but the
+    interpreter's teardown would share the processor with them for seconds. Once the command
+    has cleaned up, end the process at once instead (only then, and only when ``main`` runs
+    as the program: called with arguments by a program, it returns)."""
+    import threading
+
+    busy = [t for t in threading.enumerate() if t.daemon and t.name.startswith("texsense-")]
+    if busy and threading.current_thread() is threading.main_thread():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -12,7 +12,7 @@ from typing import Any
 
 from texsense._progress import progress
 from texsense.commands import HELP
-from texsense.data.files import make_folder
+from texsense.data.files import make_folder, real_path
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         return run_device(args)
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
-    if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
+    if args.output and args.csv and real_path(args.output) == real_path(args.csv):
         raise ParameterError(f"-o and --csv name the same file {args.output}")
     options: dict[str, Any] = {}
     for flag, keyword in _OPTIONS.items():

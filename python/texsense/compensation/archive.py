@@ -40,6 +40,7 @@ from texsense.data.files import (
     check_not_input,
     make_folder,
     open_regular,
+    real_path,
     regular_files,
 )
 from texsense.data.layout import Layout
@@ -230,13 +231,13 @@ def archive_jobs(
         else:
             raise ParameterError(f"{spec}: no such file or folder, and not a glob pattern")
     seen: dict[Path, Path] = {}
-    sources = {src.resolve(): src for src, _ in jobs}
+    sources = {real_path(src): src for src, _ in jobs}
     for src, dst in jobs:
         if dst in seen and seen[dst] != src:
             raise ParameterError(f"{seen[dst]} and {src} would both be written to {dst}")
         seen[dst] = src
-        if dst.resolve() in sources:  # the output would replace an input
-            check_not_input(dst, [sources[dst.resolve()]])
+        if real_path(dst) in sources:  # the output would replace an input
+            check_not_input(dst, [sources[real_path(dst)]])
     if not jobs:
         raise ParameterError(f"no recordings found in {', '.join(map(str, inputs))}")
     return jobs, ignored

@@ -61,6 +61,7 @@ __all__ = [
     "make_folder",
     "open_regular",
     "read_small_text",
+    "real_path",
     "regular_files",
     "save_figure",
     "unused_name",
@@ -182,6 +183,12 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def real_path(path: str | Path) -> Path:
+    """``path`` with every link followed; a loop of links is left as it is (``Path.resolve``
+    raises RuntimeError on one, which would be a traceback)."""
+    return Path(os.path.realpath(path))
+
+
 def check_not_input(
     output: str | Path, inputs: Iterable[str | Path], *, what: str = "output"
 ) -> None:
@@ -196,7 +203,7 @@ def check_not_input(
     out = Path(output)
     for item in inputs:
         src = Path(item)
-        if _same_file(out, src) or out.resolve() == src.resolve():
+        if _same_file(out, src) or real_path(out) == real_path(src):
             raise ParameterError(
                 f"the {what} {out} is also an input: writing it would destroy the input; "
                 "choose another name"

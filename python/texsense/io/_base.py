@@ -40,7 +40,7 @@ from typing import Any, ClassVar, NamedTuple, Self
 import numpy as np
 import numpy.typing as npt
 
-from texsense._progress import logger
+from texsense._progress import check_stopping, logger
 from texsense.data import budget, units
 from texsense.data.layout import BYTES_PER_CELL, Layout
 from texsense.data.recording import Recording
@@ -321,6 +321,7 @@ class RecordingReader(BlockReader):
         """Blocks of frames; by default :meth:`_frames` grouped by the block length."""
         rows: list[FrameRow] = []
         for row in self._frames():
+            check_stopping()
             rows.append(row)
             if len(rows) > self._max_frames:
                 self._over_budget(len(rows))
@@ -416,6 +417,7 @@ class RecordingReader(BlockReader):
 
     def _checked_pieces(self) -> Iterator[Piece]:
         for piece in self._pieces():
+            check_stopping()
             checked = self._checked(piece)
             self.frames_read += checked.times.size
             if self.frames_read > self._max_frames:  # read() holds them all

@@ -51,7 +51,7 @@ from texsense.apps import stats
 from texsense.apps.report import write_report
 from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.data import budget, units
-from texsense.data.files import check_regular, make_folder, regular_files
+from texsense.data.files import check_regular, make_folder, real_path, regular_files
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 from texsense.monitor.web import Lane
 
@@ -81,8 +81,8 @@ def resolve_recording(folder: Path, name: str) -> Path | None:
         or name.endswith(".rois.json")
     ):
         return None
-    base = folder.resolve()
-    path = (base / name).resolve()
+    base = real_path(folder)
+    path = real_path(base / name)
     if path.parent != base:
         return None
     try:

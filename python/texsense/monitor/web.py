@@ -59,7 +59,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from texsense.data.files import read_small_text
+from texsense._progress import STOPPING, StoppingError, check_stopping
+from texsense.data.files import read_small_text, real_path
 from texsense.exceptions import ParameterError
 
 __all__ = [
@@ -151,8 +152,8 @@ def safe_file(folder: Path, name: str) -> Path | None:
     """``folder / name`` if it is a plain file inside ``folder`` (no traversal), else None."""
     if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
         return None
-    base = folder.resolve()
-    path = (base / name).resolve()
+    base = real_path(folder)
+    path = real_path(base / name)
     if path.parent != base or not path.is_file():
         return None
     return path
@@ -464,18 +465,32 @@ class Lane:
 
         if self._slots is None:
             self._slots = asyncio.Semaphore(self.workers)
+        if STOPPING.is_set():
+            raise HTTPException(503, "the server is stopping")
         if self._queued >= self.workers + self.waiting:
             raise HTTPException(503, f"{self.name} is busy: try again in a moment")
         self._queued += 1
         try:
             async with self._slots:
+                check_stopping()  # waited while the server was told to stop
                 return await blocking(functools.partial(fn, *args, **kwargs))
+        except StoppingError:  # the server stops: the work was dropped (texsense._progress)
+            raise HTTPException(503, "the server is stopping") from None
         finally:
             self._queued -= 1
 
 
+def _cut_short(record: logging.LogRecord) -> bool:
+    """False for uvicorn's report of a request it cancelled because the server stops (a
+    request still waiting when the grace period ends): an expected end, not an error."""
+    exc = record.exc_info[1] if record.exc_info else None
+    return not isinstance(exc, asyncio.CancelledError)
+
+
 def _server_class() -> Any:
     import uvicorn
+
+    logging.getLogger("uvicorn.error").addFilter(_cut_short)
 
     class Server(uvicorn.Server):
         """uvicorn's server, but a signal only stops it (uvicorn would re-raise SIGTERM
@@ -488,6 +503,7 @@ def _server_class() -> Any:
         def capture_signals(self) -> Iterator[None]:
             def stop(sig: int, _frame: Any) -> None:
                 self.signal_received = sig
+                STOPPING.set()  # the workers' long loops end (texsense._progress)
                 if self.should_exit:
                     # a second Ctrl-C: stop waiting for anything, and say so in one line
                     # instead of the tracebacks of the tasks uvicorn then cancels
