@@ -35,6 +35,7 @@ def check_stopping() -> None:
     if STOPPING.is_set():
         raise StoppingError("texsense is stopping")
 
+
 T = TypeVar("T")
 
 

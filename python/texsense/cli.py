@@ -92,7 +92,6 @@ def _leave_busy_workers(code: int) -> None:
         os._exit(code)
 
 
-
 def _run(args: argparse.Namespace) -> int:
     """Run a parsed command: every failure is one line on stderr and exit 1 (one clean way
     out: a bad file or option, an output place that cannot be written, a database that cannot

@@ -9,7 +9,6 @@ then stops the monitor within 2 s).
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import signal
@@ -70,7 +69,7 @@ def test_the_command_line_never_waits_on_an_entry(tmp_path, fault_row):
     results, _, _ = batch(argvs, tmp_path, timeout=180)  # a hang fails here
     k = 0
     for name, (_, said) in KINDS.items():
-        for c in commands:
+        for _ in commands:
             one_line(*results[k][::2], name, said)
             k += 1
         fault_row("not a file", f"{name} ({said}) named to info, convert, plot, report",
@@ -128,7 +127,7 @@ def test_a_monitor_never_waits_on_its_folder(tmp_path, fault_row):
             for route, method in routes:
                 status, took = _request(f"{m.url}api/playback/{name}{route}", method)
                 assert status == 404 and took < 2.0, (name, route, method, status, took)
-        for name, (_, said) in KINDS.items():
+        for name in KINDS:
             assert sum(name in line for line in m.log().splitlines()) == 1, m.log()[-2000:]
         fault_row("not a file", f"{len(KINDS) + 1} entries x {len(routes)} playback routes "
                   "(and the listing) of a running monitor", "refused", "404 at once; each "
@@ -165,4 +164,3 @@ def _starve_and_stop(m: ChildServer, fault_row) -> None:
     assert "Traceback" not in m.log()
     fault_row("not a file", "SIGTERM while the playback's workers read", "stopped",
               f"{took:.2f} s")  # fmt: skip
-    json.dumps(answers)
