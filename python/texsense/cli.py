@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 from collections.abc import Collection, Iterator, Sequence
+from typing import Any
 
 from texsense._core import __version__
 from texsense.commands import COMMANDS
@@ -137,15 +138,27 @@ def _terminate_as_interrupt() -> Iterator[None]:
     def stop(_sig: int, _frame: object) -> None:
         raise Terminated
 
+    def lost(unraisable: Any) -> None:
+        """A stop raised where Python cannot raise (a weakref callback during garbage
+        collection: "Exception ignored in ..."): deliver the signal again, so that it is raised
+        at the next line of the program instead of being lost."""
+        exc = unraisable.exc_value
+        if isinstance(exc, KeyboardInterrupt):
+            signal.raise_signal(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+            return
+        hook(unraisable)
+
     try:
         previous = signal.signal(signal.SIGTERM, stop)
     except ValueError:  # not the main thread (texsense.cli.main called by a program)
         yield
         return
+    hook, sys.unraisablehook = sys.unraisablehook, lost
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = hook
 
 
 def _os_error(e: OSError) -> str:

@@ -21,6 +21,7 @@ import contextlib, io, json, resource, sys, time, traceback
 from texsense.cli import main
 warm, argvs = json.load(sys.stdin)
 def run(argv):
+    print("#", json.dumps(argv), file=sys.__stderr__, flush=True)  # which one, if it hangs
     start = time.monotonic()
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -53,11 +54,15 @@ def batch(
     """``texsense ARGV`` for each ARGV in one child process: the (exit code, stdout, stderr)
     of each, and the child's peak resident memory (KiB) after ``warm`` and at the end."""
     full_env = dict(os.environ, TEXSENSE_NO_PROGRESS="1", **(env or {}))
-    proc = subprocess.run(
-        [sys.executable, "-c", _BATCH], input=json.dumps([list(warm), argvs]),
-        capture_output=True, text=True, cwd=cwd, env=full_env, timeout=timeout,
-        preexec_fn=preexec,
-    )  # fmt: skip
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _BATCH], input=json.dumps([list(warm), argvs]),
+            capture_output=True, text=True, cwd=cwd, env=full_env, timeout=timeout,
+            preexec_fn=preexec,
+        )  # fmt: skip
+    except subprocess.TimeoutExpired as e:
+        text = e.stderr.decode(errors="replace") if isinstance(e.stderr, bytes) else e.stderr
+        raise AssertionError(f"the batch hung; its last lines:\n{(text or '')[-2000:]}") from None
     assert proc.returncode == 0, proc.stderr[-3000:]
     doc = json.loads(proc.stdout)
     took = {" ".join(argv): r[3] for argv, r in zip(argvs, doc["results"], strict=True)}
@@ -88,15 +93,19 @@ def small_recording(frames: int = 5) -> Recording:
                      labels={"posture": np.array(["sit"] * frames)})  # fmt: skip
 
 
-def nobody():
-    """A preexec function that drops root to the user ``nobody`` (so that file permissions
-    apply: root may write anywhere), or None when not root."""
+def no_override():
+    """A preexec function that takes from root the capabilities that let it write anywhere
+    (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER: dropped from the bounding set, so the
+    program run keeps none of them), so that file permissions apply; None when not root."""
     if os.geteuid() != 0:
         return None
+    import ctypes
+
+    libc = ctypes.CDLL("libc.so.6", use_errno=True)
 
     def drop() -> None:
-        os.setgroups([])
-        os.setgid(65534)
-        os.setuid(65534)
+        for cap in (1, 2, 3):  # dac_override, dac_read_search, fowner
+            if libc.prctl(24, cap, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+                raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
 
     return drop

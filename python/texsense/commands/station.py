@@ -25,7 +25,7 @@ from texsense.commands.monitor import (
 )
 from texsense.compensation.stages import load_chain
 from texsense.data import budget
-from texsense.data.files import open_regular
+from texsense.data.files import check_writable, open_regular
 from texsense.data.layout import Layout
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
@@ -255,6 +255,9 @@ def run(args: argparse.Namespace) -> int:
 
     access = web_access(args, "ward")
     check_port_free(args.host, args.port)
+    check_writable(args.record_dir, "--record-dir", folder=True)  # now, not at the first recording
+    if not str(args.db).startswith(("postgresql://", "postgres://")):
+        check_writable(args.db, "--db")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     if args.virtual_mats < 0:
         raise ParameterError("--virtual-mats must be >= 0")

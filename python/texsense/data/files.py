@@ -44,7 +44,7 @@ import errno
 import os
 import stat
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
@@ -58,6 +58,7 @@ __all__ = [
     "atomic_path",
     "check_not_input",
     "check_regular",
+    "check_writable",
     "make_folder",
     "open_regular",
     "read_small_text",
@@ -110,26 +111,35 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        raise WriteError(target, f"the folder {folder} {what}")
+        where = f"{folder} is a file, not a folder" if folder.exists() else (
+            f"the folder {folder} does not exist")  # fmt: skip
+        raise WriteError(target, where)
     if target.is_dir():
         raise WriteError(target, "is a folder, expected a file name")
     if target.exists() and not target.is_file():
         raise WriteError(target, "is not a regular file (a device, a FIFO, ...): not replaced")
-    try:
-        fd, tmp_name = tempfile.mkstemp(
-            prefix=_TMP_PREFIX + target.name[:80] + ".",
-            suffix=target.suffix if suffix is None else suffix,
-            dir=folder,
-        )
-    except OSError as e:
-        raise WriteError(target, _reason(e)) from None
-    # mkstemp makes the file private (0600): give it the mode the file had, or that a new
-    # file gets (0666 less the umask), so that writing safely does not change who may read
-    with contextlib.suppress(OSError):
-        os.fchmod(fd, _mode_of(target))
-    os.close(fd)
-    tmp = Path(tmp_name)
+    mode = _mode_of(target)
+    with _signals_held() as release:  # a stop signal between the file and the try: no leftover
+        try:
+            fd, tmp_name = tempfile.mkstemp(
+                prefix=_TMP_PREFIX + target.name[:80] + ".",
+                suffix=target.suffix if suffix is None else suffix,
+                dir=folder,
+            )
+        except OSError as e:
+            raise WriteError(target, _reason(e)) from None
+        tmp = Path(tmp_name)
+        try:
+            release()  # from here a signal's exception removes the temporary file
+            # mkstemp makes the file private (0600): give it the mode the file had, or that a
+            # new file gets (0666 less the umask): writing safely does not change who may read
+            with contextlib.suppress(OSError):
+                os.fchmod(fd, mode)
+            os.close(fd)
+        except BaseException:
+            os.close(fd)
+            _remove(tmp)
+            raise
     try:
         yield tmp
         _fsync_file(tmp)
@@ -305,6 +315,36 @@ def open_regular(path: str | Path) -> IO[bytes]:
         raise
 
 
+def check_writable(path: str | Path, what: str, *, folder: bool = False) -> Path:
+    """Refuse now, in one :class:`~texsense.exceptions.WriteError` naming ``what``, a place
+    where a file (with ``folder``: a folder) cannot be made: a folder or a file in the way,
+    no permission, a read-only file system. For a server, which would otherwise find out
+    hours later, when it first writes (a recording, an event)."""
+    p = Path(path)
+    if folder and p.exists() and not p.is_dir():
+        raise WriteError(p, f"{what} is a file, expected a folder")
+    if not folder and p.is_dir():
+        raise WriteError(p, f"{what} is a folder, expected a file name")
+    nearest = p if folder and p.is_dir() else (p.parent if str(p.parent) else Path("."))
+    if not folder and not nearest.exists():
+        raise WriteError(p, f"{what}: the folder {nearest} does not exist")
+    while not nearest.exists() and nearest != nearest.parent:
+        nearest = nearest.parent
+    if not nearest.is_dir():
+        raise WriteError(p, f"{what}: {nearest} is a file, expected a folder")
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        reason = "a read-only file system" if _read_only(nearest) else "no permission"
+        raise WriteError(p, f"{what}: cannot write in {nearest} ({reason})")
+    return p
+
+
+def _read_only(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
+
+
 def make_folder(path: str | Path, what: str = "output folder") -> Path:
     """Make the folder ``path`` (and its parents) if it is missing; one
     :class:`~texsense.exceptions.WriteError` naming it when it cannot be (a file in the way,
@@ -414,6 +454,30 @@ def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:
         return data.decode("utf-8")
     except UnicodeDecodeError:
         raise ParameterError(f"{what} {p}: not UTF-8 text") from None
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[Callable[[], None]]:
+    """Hold SIGINT and SIGTERM (in the main thread) until the block calls ``release()`` or
+    ends; a signal that came meanwhile takes effect at the release."""
+    import signal
+    import threading
+
+    held = {signal.SIGINT, signal.SIGTERM}
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if main else None
+    done = False
+
+    def release() -> None:
+        nonlocal done
+        if previous is not None and not done:
+            done = True
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+    try:
+        yield release
+    finally:
+        release()
 
 
 def _mode_of(target: Path) -> int:
