@@ -54,7 +54,8 @@ def pmd_reliable() -> tuple:
     """PhysioNet PMD experiment I, the frames its publishers mark reliable: layout, frames
     (float64), posture file number, main class (supine / left / right), subject and the
     frame's index in its file."""
-    from texsense.io.pmd import POSTURE_CLASS, read_pmd
+    from texsense.io import read_pmd
+    from texsense.io.pmd import POSTURE_CLASS
 
     rec = read_pmd(DATA / "pmd" / "experiment-i")
     keep = rec.labels["reliable"]

@@ -146,7 +146,7 @@ def nights(cal, model, people: int = 4, hours: float = 8.0, frame_s: float = 10.
 
 def schedule_of(t, sides, settle_s: float = 60.0) -> tuple[TurningSchedule, list]:
     sched = TurningSchedule(interval_min=120, settle_s=settle_s)
-    events = [e for tt, sd in zip(t, sides, strict=True) for e in sched.step(float(tt), sd)]
+    events = [e for tt, sd in zip(t, sides, strict=True) for e in sched.step(sd, float(tt))]
     return sched, events
 
 
@@ -212,7 +212,7 @@ def night_figure(r: dict) -> None:
     sched = TurningSchedule(interval_min=120, settle_s=60)
     since = []
     for tt, sd in zip(r["t"], r["predicted"], strict=True):
-        sched.step(float(tt), sd)
+        sched.step(sd, float(tt))
         st = sched.status(float(tt))
         since.append(np.nan if st["since_turn_s"] is None else st["since_turn_s"] / 60)
     ax[1].plot(h, since, color="#2764c5")

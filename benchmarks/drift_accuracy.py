@@ -113,7 +113,7 @@ def _cycling_run(seed: int, hours: float) -> tuple[np.ndarray, ...]:
     cal = protocols.run_protocol("calibration", sp, seed=seed, sample_hz=None)
     model = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
     st = protocols.run_protocol("steps", "textile-6mm", seed=seed, sample_hz=10)
-    drift, _ = DriftModel.fit(
+    drift = DriftModel.fit_steps(
         split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
     )
     sp.reset()
@@ -159,7 +159,7 @@ def cycling(hours: float = 4.0, specimens: int = 4) -> None:
     runs = [_cycling_run(seed, hours) for seed in range(specimens)]
     t0, p0, h0 = runs[0][:3]
     first = t0 < 3600
-    cyc, _ = DriftModel.fit_history(h0[first], p0[first], t0[first])
+    cyc = DriftModel.fit_history(h0[first], p0[first], t0[first])
     print(
         f"γ fitted on the first hour of specimen 0's cycles: {cyc.gamma:.5f}; specimen 0's "
         f"time-mean pressure {p0.mean():.2f} N/cm², for which eq. 5.8 with the step γ predicts "

@@ -34,8 +34,9 @@ import numpy as np
 from texsense.compensation.drift import DriftModel
 from texsense.compensation.drift_structure import choose_structure
 from texsense.compensation.hysteresis import HysteresisModel
+from texsense.sensor.materials import PRESETS
 from texsense.sim import protocols
-from texsense.sim.spacer import PRESETS, Spacer
+from texsense.sim.spacer import Spacer
 
 #: name -> material: the three spacer laws and variants with other creep
 LAWS = {
@@ -74,7 +75,7 @@ def run(law: str) -> list[str]:
     first = t < 3600.0
 
     recs = [record_of(model, loads), record_of(model, cyc, first)]
-    joint, _ = DriftModel.fit_joint([(a, c, d) for a, _, c, d in recs], rest_rate=0.02)
+    joint = DriftModel.fit_joint([(a, c, d) for a, _, c, d in recs], rest_rate=0.02)
     choice = choose_structure(recs, backbone=model.backbone_curve())
     rows = []
     candidates = {"hysteresis only": h, "documented workflow (rest+time)": joint.apply(h, t)}

@@ -128,9 +128,9 @@ def main(preset: str = "textile-6mm") -> None:
     def model(g: float, rest: float = 0.0) -> DriftModel:
         return DriftModel(g, log_kernel(), "log", rest)
 
-    joint, _ = DriftModel.fit_joint([s0["holds"], first_hour], rest_rate=REST_RATE)
-    joint3, _ = DriftModel.fit_joint([s0["holds"], first_hour, s0["bouts"]], rest_rate=REST_RATE)
-    joint_load, _ = DriftModel.fit_joint([s0["bouts"], first_hour], rest_rate=REST_RATE)
+    joint = DriftModel.fit_joint([s0["holds"], first_hour], rest_rate=REST_RATE)
+    joint3 = DriftModel.fit_joint([s0["holds"], first_hour, s0["bouts"]], rest_rate=REST_RATE)
+    joint_load = DriftModel.fit_joint([s0["bouts"], first_hour], rest_rate=REST_RATE)
     # a Prony kernel (non-negative exponentials, τ 0.1 s .. 10^5 s) fitted to the holds'
     # drift after the Preisach model, on the time clock
     h, p, t = s0["holds"]
@@ -228,7 +228,7 @@ def main(preset: str = "textile-6mm") -> None:
     curves = []
     for seed, sp in enumerate(specs):
         g = fit_gamma([sp["holds"]], 0.0)
-        one = DriftModel.fit(sp["steps"])[1]
+        one = DriftModel.fit_steps(sp["steps"]).step_fit_
         h, p, t = sp["cycles"]
         variants = (
             h,

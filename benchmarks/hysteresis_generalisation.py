@@ -39,9 +39,10 @@ from _realdata import elastomer_sawtooth, forc_record, vhb_cycle
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis.plots import validation_figure
 from texsense.exceptions import ParameterError
+from texsense.sensor.materials import PRESETS
 from texsense.sim import protocols
 from texsense.sim.magnetic import forc_protocol
-from texsense.sim.spacer import PRESETS, Spacer
+from texsense.sim.spacer import Spacer
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 METHODS = (("default", "auto"), ("lsq", "lsq"), ("thesis", "thesis"), ("relay", "relay"))

@@ -40,7 +40,7 @@ def cycling_drift(cal: StageChain, seed: int = 11) -> StageChain:
     keep = rec.times < 3600
     t = rec.times[keep]
     h = cal["hysteresis"].model_.predict(rec.labels["compression_mm"][keep])
-    cyc, _ = DriftModel.fit_history(h, rec.labels["pressure_ncm2"][keep], t)
+    cyc = DriftModel.fit_history(h, rec.labels["pressure_ncm2"][keep], t)
     return StageChain([*copy.deepcopy(cal).without("drift").stages, Drift.of(cyc)])
 
 

@@ -40,7 +40,8 @@ from texsense.apps.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAUL
 from texsense.apps.posture.evaluate import takes_groups
 from texsense.apps.posture.smoothing import window_vote
 from texsense.compensation.pipeline import Pipeline
-from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS, read_pmd
+from texsense.io import read_pmd
+from texsense.io.pmd import MIRROR_CLASS, MIRROR_POSTURE, POSTURE_CLASS
 
 THESIS = FeatureSet(("elements", "centre", "areas4", "areas16"))
 MAP = FeatureSet(("elements",), align=True, log=True, pool=2)

@@ -17,10 +17,11 @@ import numpy as np
 
 from texsense import Layout
 from texsense.apps.plotting import draw_map
+from texsense.sensor.materials import PRESETS, SpacerMaterial
 from texsense.sim.failures import FailureModel
 from texsense.sim.machine import TestMachine
 from texsense.sim.mat import VirtualMat
-from texsense.sim.spacer import PRESETS, Spacer, SpacerMaterial
+from texsense.sim.spacer import Spacer
 from texsense.sim.targets import (
     cyclic_peaks,
     hysteresis_metrics,

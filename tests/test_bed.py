@@ -144,7 +144,7 @@ def test_body_axis_follows_a_rotated_body():
 
 def run(schedule, steps):
     """(t, side) steps -> [(kind, t)]."""
-    return [(e.kind, e.t) for t, side in steps for e in schedule.step(float(t), side)]
+    return [(e.kind, e.t) for t, side in steps for e in schedule.step(side, float(t))]
 
 
 def test_turning_schedule_counts_turns_time_per_side_and_alerts():
@@ -211,10 +211,12 @@ def test_turning_schedule_parameters_are_checked():
 def test_bed_watch_reports_regions_for_the_side():
     w = BedWatch(LAY, interval_min=15)
     p = lying_pressure(LAY, "left")
-    assert [e.kind for e in w.step(0.0, p, "left")] == ["in-bed"]
+    assert [e.kind for e in w.step(p, "left", 0.0)] == ["in-bed"]
     st = w.status(0.0)
     assert {r["name"] for r in st["regions"]} == {"shoulder", "trochanter", "knee", "ankle"}
-    w.step(1.0, np.zeros(LAY.n_elements), None)
+    w.step(np.zeros(LAY.n_elements), None, 1.0)
+    with pytest.raises(TypeError, match="the time comes last"):
+        w.step(2.0, p, "left")  # the order of before: time first
     assert w.status(1.0)["regions"] == []
 
 

@@ -255,17 +255,19 @@ def test_window_vote_follows_the_majority_of_the_last_seconds():
     from texsense.apps.posture.smoothing import WindowVote, window_vote
 
     vote = WindowVote(window_s=2.0)
-    got = [vote.step(t, lab) for t, lab in enumerate("aabbbba")]
+    got = [vote.step(lab, t) for t, lab in enumerate("aabbbba")]
     # t=3: a,b,b in [1,3] -> b; a lone 'a' at t=6 after four 'b' stays 'b'
     assert got == ["a", "a", "a", "b", "b", "b", "b"]
     # a confident frame outweighs two unsure ones; ties go to the most recent label
     vote = WindowVote(window_s=10.0)
-    vote.step(0, "x", 0.2)
-    vote.step(1, "x", 0.2)
-    assert vote.step(2, "y", 0.9) == "y"
-    assert WindowVote(10.0).step(0, "p") == "p"
+    vote.step("x", 0, 0.2)
+    vote.step("x", 1, 0.2)
+    assert vote.step("y", 2, 0.9) == "y"
+    assert WindowVote(10.0).step("p", 0) == "p"
     with pytest.raises(ParameterError, match="must not decrease"):
-        vote.step(1.0, "x")
+        vote.step("x", 1.0)
+    with pytest.raises(TypeError, match="the time comes second"):
+        vote.step(3.0, "x")
     with pytest.raises(ParameterError, match=">= 0 s"):
         WindowVote(-1.0)
     # recorded sequences: the vote restarts at a new subject, never carries over

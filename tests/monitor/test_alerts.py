@@ -12,7 +12,7 @@ def run(tracker, schedule, dt=10.0):
     t = 0.0 if tracker._last_t is None else tracker._last_t + dt
     for seconds, p in schedule:
         for _ in range(int(seconds / dt)):
-            events += tracker.step(t, np.asarray(p, float))
+            events += tracker.step(np.asarray(p, float), t)
             t += dt
     return events
 
@@ -74,10 +74,10 @@ def test_bad_parameters_are_named():
         ExposureTracker(lay, threshold=-1)
     tr = ExposureTracker(lay)
     with pytest.raises(ParameterError, match="expected 2"):
-        tr.step(0.0, np.zeros(3))
-    tr.step(5.0, np.zeros(2))
+        tr.step(np.zeros(3), 0.0)
+    tr.step(np.zeros(2), 5.0)
     with pytest.raises(ParameterError, match="backwards"):
-        tr.step(4.0, np.zeros(2))
+        tr.step(np.zeros(2), 4.0)
 
 
 def test_event_store_keeps_sessions_and_events(tmp_path):

@@ -4,7 +4,6 @@ declares against what it holds."""
 import h5py
 import numpy as np
 import pytest
-from _conformance import check_reader
 
 import texsense
 from texsense import Layout, Recording
@@ -21,10 +20,6 @@ def _rec(t=30, seed=0):
         labels={"posture": rng.integers(0, 3, t), "who": np.array(["a", "b"] * (t // 2))},
         meta={"x": 1},
     )  # fmt: skip
-
-
-def test_conformance(tmp_path, caplog):
-    check_reader(write_hdf5(_rec(), tmp_path / "r.h5"), tmp_path, caplog)
 
 
 def test_datasets_of_different_length(tmp_path, caplog):

@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -76,11 +75,6 @@ def test_not_a_pmd_folder(tmp_path):
         read_pmd(tmp_path)
     with pytest.raises(FormatError, match="no such file"):
         read_pmd(tmp_path / "missing")
-
-
-def test_conformance(tree, tmp_path, caplog):
-    check_reader(tree / "S2" / "7.txt", tmp_path / "file", caplog)
-    check_reader(tree / "S5", tmp_path / "folder", caplog)
 
 
 def _published_copy(tree, tmp_path, subject="S1"):

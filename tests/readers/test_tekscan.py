@@ -2,7 +2,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -160,16 +159,6 @@ def test_missing_rows_key_and_data_marker(iscan, tmp_path):
         )
     with pytest.raises(FormatError, match="ASCII_DATA"):
         read_tekscan(_corrupt(iscan, tmp_path / "d.csv", lambda ls: ls[:20]))
-
-
-@pytest.mark.parametrize("name", ["iscan_test.csv", "fscan_testL.asf"])
-def test_conformance(shared_data, tmp_path, caplog, name):
-    check_reader(shared_data / "vendor-formats" / name, tmp_path, caplog)
-
-
-def test_conformance_of_a_written_file(iscan, tmp_path, caplog):
-    written = write_tekscan(texsense.load(iscan), tmp_path / "written.asf", unit="raw")
-    check_reader(written, tmp_path, caplog)
 
 
 def test_closed_early_is_refused_or_read_with_a_warning(iscan, tmp_path, caplog):

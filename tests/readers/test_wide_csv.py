@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-from _conformance import check_reader
 
 import texsense
 from conftest import check_recording
@@ -64,14 +63,6 @@ def test_bad_files(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(FormatError, match=message):
         read_wide_csv(path)
-
-
-def test_conformance(tmp_path, caplog):
-    rng = np.random.default_rng(5)
-    lay = Layout.grid(3, 4, pitch_cm=1.5)
-    valid = rng.random((40, 12)) > 0.2
-    rec = Recording(rng.random((40, 12)) * 5, np.arange(40) * 0.05, lay, valid=valid)
-    check_reader(write_wide_csv(rec, tmp_path / "w.csv"), tmp_path, caplog)
 
 
 def test_foreign_file_impossible_values_are_invalid(tmp_path, caplog):

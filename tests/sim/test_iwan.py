@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from texsense.exceptions import ParameterError
-from texsense.sim.iwan import IwanMaterial
-from texsense.sim.spacer import PRESETS, Spacer
+from texsense.sensor.materials import PRESETS, IwanMaterial
+from texsense.sim.spacer import Spacer
 
 
 def test_loading_passes_p50_and_loops_run_clockwise():

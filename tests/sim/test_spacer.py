@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 
 from texsense.exceptions import ParameterError
+from texsense.sensor.materials import PRESETS, SpacerMaterial
 from texsense.sim.machine import TestMachine
-from texsense.sim.spacer import PRESETS, Spacer, SpacerMaterial
+from texsense.sim.spacer import Spacer
 
 
 @pytest.mark.parametrize(
@@ -130,8 +131,9 @@ def test_second_law_runs_the_protocols_and_is_another_family():
 
     from texsense.compensation.drift import fit_gamma, split_steps
     from texsense.exceptions import ParameterError
+    from texsense.sensor.materials import PRESETS, BoucWenMaterial
     from texsense.sim import protocols
-    from texsense.sim.spacer import PRESETS, BoucWenMaterial, Spacer
+    from texsense.sim.spacer import Spacer
 
     sp = Spacer.preset("bouc-wen-6mm", seed=3)
     cal = protocols.run_protocol("calibration", sp, seed=3, sample_hz=None)

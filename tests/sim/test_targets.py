@@ -6,7 +6,8 @@ The numbers are collected and printed in the terminal summary ("virtual sensor t
 import numpy as np
 import pytest
 
-from texsense.sim.spacer import PRESETS, Spacer
+from texsense.sensor.materials import PRESETS
+from texsense.sim.spacer import Spacer
 from texsense.sim.targets import cyclic_peaks, hysteresis_metrics, speed_metrics, step_metrics
 
 SEEDS = (0, 1, 2, 3)  # four specimens, as in the thesis

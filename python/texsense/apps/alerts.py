@@ -16,7 +16,7 @@ Examples
 >>> tr = ExposureTracker(Layout.grid(1, 2), threshold=32, unit="mmHg", reposition_min=5)
 >>> events = []
 >>> for t in range(0, 301, 10):  # 5 min at 1 N/cm² (75 mmHg) on element 0
-...     events += tr.step(float(t), np.array([1.0, 0.0]))
+...     events += tr.step(np.array([1.0, 0.0]), float(t))
 >>> [(e.kind, e.t) for e in events], tr.exposure_s.tolist()
 ([('seated', 0.0), ('reposition', 300.0)], [300.0, 0.0])
 """
@@ -34,11 +34,21 @@ from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 
-__all__ = ["REPOSITION_RANGE_MIN", "Alert", "Event", "ExposureTracker"]
+__all__ = ["REPOSITION_RANGE_MIN", "Alert", "Event", "ExposureTracker", "frame_time"]
 
 #: Allowed reposition intervals, minutes (§1.1: 5-20 min obstruct the blood flow; bed-care
 #: turning schedules reach 2 h).
 REPOSITION_RANGE_MIN = (5.0, 120.0)
+
+
+def frame_time(t: object) -> float:
+    """The time argument of a tracker's ``step(..., t)``, checked: a number (a value in its
+    place means the call has the arguments of before, time first)."""
+    if isinstance(t, bool) or not isinstance(t, int | float | np.floating | np.integer):
+        raise TypeError(
+            f"step(..., t): the time comes last and is a number, got {type(t).__name__}"
+        )
+    return float(t)
 
 
 @dataclass
@@ -190,9 +200,11 @@ class ExposureTracker:
             return p
         return np.array([p[g].mean() for g in self._groups])
 
-    def step(self, t: float, pressure_ncm2: npt.ArrayLike) -> list[Event]:
+    def step(self, pressure_ncm2: npt.ArrayLike, t: float) -> list[Event]:
         """Advance to time ``t`` (s) with the pressure (N/cm²) of every element; returns the
-        events this frame caused. A missing (NaN) reading counts as unloaded."""
+        events this frame caused. A missing (NaN) reading counts as unloaded. (Time last, as
+        a stage's ``step(values, valid, t)``.)"""
+        t = frame_time(t)
         p = np.asarray(pressure_ncm2, dtype=np.float64)
         if p.shape != (self.layout.n_elements,):
             raise ParameterError(

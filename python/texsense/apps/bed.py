@@ -30,7 +30,7 @@ Examples
 >>> sorted(found)
 ['heel-l', 'heel-r', 'occiput', 'sacrum', 'scapula-l', 'scapula-r']
 >>> s = TurningSchedule(interval_min=120)
->>> events = [e for t in range(0, 7300, 60) for e in s.step(float(t), "supine")]
+>>> events = [e for t in range(0, 7300, 60) for e in s.step("supine", float(t))]
 >>> [(e.kind, e.t) for e in events]
 [('in-bed', 0.0), ('turn-due', 7200.0)]
 """
@@ -44,7 +44,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from texsense.apps.alerts import Event
+from texsense.apps.alerts import Event, frame_time
 from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
@@ -267,8 +267,9 @@ class TurningSchedule:
         self._candidate_t = 0.0
         self._last_t: float | None = None
 
-    def step(self, t: float, side: str | None) -> list[Event]:
-        """One frame at time ``t`` (s)."""
+    def step(self, side: str | None, t: float) -> list[Event]:
+        """One frame at time ``t`` (s): the side the person lies on (None or ``out``: nobody)."""
+        t = frame_time(t)
         side = None if side in (None, "out") else str(side)
         events: list[Event] = []
         if self._last_t is not None and self.side is not None:
@@ -365,9 +366,10 @@ class BedWatch:
         self.threshold, self.unit = float(threshold), unit
         self.regions: dict[str, Region] = {}
 
-    def step(self, t: float, pressure: npt.ArrayLike, side: str | None) -> list[Event]:
-        """One frame: its pressure (N/cm²) and the side the person lies on (None: nobody)."""
-        events = self.schedule.step(t, side)
+    def step(self, pressure: npt.ArrayLike, side: str | None, t: float) -> list[Event]:
+        """One frame at ``t`` (s): its pressure (N/cm²) and the side the person lies on (None:
+        nobody)."""
+        events = self.schedule.step(side, t)
         self.regions = {}
         if side in BANDS:
             self.regions = find_regions(

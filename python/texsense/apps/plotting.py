@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from texsense.apps import stats
-from texsense.data.files import save_figure
+from texsense.data.files import pyplot, save_figure
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
@@ -23,15 +23,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = ["draw_map", "overview_figure", "peak_frame", "save_figure"]
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def peak_frame(rec: Recording) -> int:
@@ -113,7 +104,7 @@ def draw_map(ax: Axes, rec: Recording, frame: int, *, vmax: float | None = None)
 def overview_figure(rec: Recording, frame: int | None = None, title: str = "") -> Figure:
     """A figure with the map of one frame (default: the peak frame) beside the load (or sum)
     and the centre of force over time."""
-    plt = _pyplot()
+    plt = pyplot()
     frame = peak_frame(rec) if frame is None else frame
     if not 0 <= frame < rec.n_frames:
         raise ParameterError(f"frame {frame} is out of range 0..{rec.n_frames - 1}")
@@ -157,7 +148,7 @@ def save_overview(
     rec: Recording, path: str | Path, frame: int | None = None, title: str = ""
 ) -> Path:
     """Render :func:`overview_figure` to a PNG file."""
-    plt = _pyplot()
+    plt = pyplot()
     fig = overview_figure(rec, frame, title)
     try:
         return save_figure(fig, path, dpi=110)

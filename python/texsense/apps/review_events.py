@@ -146,9 +146,9 @@ def recompute_events(
             t = float(rec.times[i])
             events: list[Event] = []
             if tracker is not None:
-                events += tracker.step(t, row)
+                events += tracker.step(row, t)
             if schedule is not None and sides is not None:
-                events += schedule.step(t, sides[i])
+                events += schedule.step(sides[i], t)
             for e in events:
                 detail = dict(e.detail)
                 if e.kind == "reposition" and tracker is not None:

@@ -19,7 +19,8 @@ force is then the centre of the raw values.
 Examples
 --------
 >>> import numpy as np
->>> from texsense import Layout, Recording, stats
+>>> from texsense import Layout, Recording
+>>> from texsense.apps import stats
 >>> lay = Layout.grid(2, 2, pitch_cm=2.0)                 # 4 elements of 4 cm²
 >>> rec = Recording([[1.0, 0.0, 0.0, 1.0]], [0.0], lay)    # N/cm²
 >>> stats.total_load(rec).tolist(), stats.centre_of_force(rec).tolist()

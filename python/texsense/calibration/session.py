@@ -43,7 +43,7 @@ from texsense.compensation.stages import Convert, Drift, StageChain
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.io.columns import read_columns
-from texsense.sim.spacer import PRESETS as SPACER_PRESETS
+from texsense.sensor.materials import PRESETS as SPACER_PRESETS
 
 __all__ = ["CalibrationSession", "CheckReport", "load_material"]
 

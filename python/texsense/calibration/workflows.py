@@ -22,11 +22,11 @@ from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Drift, Hysteresis, StageChain
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
+from texsense.sensor.materials import PRESETS
 from texsense.sim import protocols
 from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
 from texsense.sim.mat import VirtualMat
 from texsense.sim.muscle import HIGH_RATE_CDC, sleeve_layout
-from texsense.sim.spacer import PRESETS
 from texsense.sim.stocking import strip_layout
 
 __all__ = [
@@ -68,7 +68,7 @@ def material_preset(name: str) -> tuple[dict[str, np.ndarray], float, Drift]:
     ``texsense calibrate mat --material NAME`` uses in place of a test-machine record.
 
     The records are those of the simulator's reference specimen of that spacer
-    (:data:`texsense.sim.spacer.PRESETS`, seed :data:`PRESET_SPECIMEN`): the virtual sensor's
+    (:data:`texsense.sensor.materials.PRESETS`, seed :data:`PRESET_SPECIMEN`): the virtual sensor's
     materials. The drift stage's γ is fitted on an hour of the §4.5 validation cycles of that
     specimen (:meth:`DriftModel.fit_history` on the Preisach model's output): γ from held
     steps over-corrects the cyclic loads of a mat in use by 11 % on the virtual seat
@@ -85,7 +85,7 @@ def material_preset(name: str) -> tuple[dict[str, np.ndarray], float, Drift]:
     )
     hour = cycles.times < 3600
     predicted = hyst.model_.predict(cycles.labels["compression_mm"][hour])
-    drift, _ = DriftModel.fit_history(
+    drift = DriftModel.fit_history(
         predicted, cycles.labels["pressure_ncm2"][hour], cycles.times[hour]
     )
     return m, float(PRESETS[name].thickness_mm), Drift.of(drift)

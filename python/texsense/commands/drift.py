@@ -139,10 +139,12 @@ def run_fit_history(args: argparse.Namespace) -> int:
     if args.clock is None:
         return _choose_and_report(args, model, records, backbones)
     if args.clock == "rest+time":
-        drift, rms = DriftModel.fit_joint(records, rest_rate=rest_rate_of(args))
+        drift = DriftModel.fit_joint(records, rest_rate=rest_rate_of(args))
+        rms = drift.rms_ncm2_
     elif len(records) == 1:
         h, p, t = records[0]
-        drift, rms = DriftModel.fit_history(h, p, t, rest_rate=rest_rate_of(args))
+        drift = DriftModel.fit_history(h, p, t, rest_rate=rest_rate_of(args))
+        rms = drift.rms_ncm2_
     else:
         raise ParameterError("several records need --clock rest+time (one record otherwise)")
     h = np.concatenate([r[0] for r in records])
@@ -244,7 +246,9 @@ def run_fit(args: argparse.Namespace) -> int:
             "(held steps alone cannot tell the two clocks apart)"
         )
     steps = read_steps(args.steps[0])
-    model, fit = DriftModel.fit(steps, kind=args.kind, rest_rate=rest_rate_of(args))
+    model = DriftModel.fit_steps(steps, kind=args.kind, rest_rate=rest_rate_of(args))
+    fit = model.step_fit_
+    assert fit is not None  # fit_steps sets it
     summary: dict[str, Any] = {
         "steps": [round(s, 6) for _, _, s in steps],
         "gamma_common": fit.gamma_common,

@@ -164,7 +164,7 @@ def run_fit(args: argparse.Namespace) -> int:
     )
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
     if args.drift:
-        drift, _ = DriftModel.fit(
+        drift = DriftModel.fit_steps(
             read_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
         )
         # hysteresis followed by drift: a chain of the two stages

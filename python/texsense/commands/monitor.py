@@ -9,20 +9,24 @@ import logging
 import os
 import signal
 import socket
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
-from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
-from texsense.compensation.stages import load_chain
+from texsense.compensation.stages import StageChain, load_chain
 from texsense.data.files import check_writable
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
+from texsense.monitor.sources import Source
 from texsense.monitor.store import open_store
-from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
+
+if TYPE_CHECKING:
+    from texsense.apps.bed import BedWatch
+    from texsense.apps.posture import PostureModel
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -91,12 +95,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def add_source_options(p: argparse.ArgumentParser) -> None:
     """``--source`` and what a source needs (speed, grid, the IIO converter's settings):
     shared by ``monitor`` and ``record``."""
-    p.add_argument(
-        "--source",
-        default="virtual",
-        help="virtual | virtual-bed | replay:FILE | serial:PORT | iio:DEVICE_DIR | "
-        "mqtt:HOST[:PORT]",
-    )
+    p.add_argument("--source", default="virtual", help=sources.source_help())
     p.add_argument(
         "--speed",
         type=float,
@@ -157,7 +156,7 @@ def add_web_options(p: argparse.ArgumentParser, port: int) -> None:
     )  # fmt: skip
 
 
-def web_access(args: argparse.Namespace, what: str) -> Any:
+def web_access(args: argparse.Namespace, what: str) -> Access:
     """The :class:`~texsense.monitor.web.Access` of the command's options; refuses binding
     beyond loopback without a token."""
 
@@ -177,10 +176,10 @@ def page_url(args: argparse.Namespace, token: str | None) -> str:
     return f"http://{host}:{args.port}/" + (f"?token={token}" if token else "")
 
 
-def _grid(args: argparse.Namespace) -> Any:
-
+def _grid(args: argparse.Namespace) -> Layout | None:
+    """``--grid ROWSxCOLS``, or None."""
     if not args.grid:
-        raise ParameterError(f"--source {args.source.split(':')[0]} needs --grid ROWSxCOLS")
+        return None
     try:
         rows, cols = (int(v) for v in args.grid.lower().split("x"))
     except ValueError:
@@ -188,7 +187,7 @@ def _grid(args: argparse.Namespace) -> Any:
     return Layout.grid(rows, cols)
 
 
-def load_function(spec: str) -> Any:
+def load_function(spec: str) -> Callable[[int], None]:
     """``module:function`` or ``path/to/file.py:function`` -> the function."""
     where, _, name = spec.rpartition(":")
     if not where or not name:
@@ -210,50 +209,33 @@ def load_function(spec: str) -> Any:
     return fn
 
 
-def default_calibration(source: str) -> Any:
-    """The calibration a source brings (the virtual mats'), or None."""
-    kind = source.partition(":")[0]
-    if kind == "virtual":
-        return seat_calibration()
-    if kind == "virtual-bed":
-        return bed_calibration()
-    return None
+def default_calibration(source: str) -> StageChain | None:
+    """The calibration a source brings (the virtual mats' own), or None."""
+    cls = sources.available_sources().get(source.partition(":")[0])
+    return None if cls is None else cls.default_calibration()
 
 
-def open_source(args: argparse.Namespace, *, loop: bool = True) -> Any:
+def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
     """The source named by ``--source`` (no calibration: what ``record`` and the wizard
-    need); a replay starts again at its end with ``loop``."""
-    kind, _, rest = args.source.partition(":")
-    if kind == "virtual":
-        return VirtualSeatSource(speed=args.speed)
-    if kind == "virtual-bed":
-        return VirtualBedSource(speed=args.speed)
-    if kind == "replay":
-        return sources.ReplaySource(Path(rest), speed=args.speed, loop=loop)
-    if kind == "serial":
-        return sources.SerialSource(rest, _grid(args) if args.grid else None)
-    if kind == "iio":
-        iio = sources.IIOSource(
-            rest,
-            _grid(args),
-            sampling_frequency=args.sampling_frequency,
-            capdac_pF=args.capdac_pf,
-            multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
-        )
-        return iio
-    if kind == "mqtt":
-        host, _, port = rest.partition(":")
-        return sources.MQTTSource(host, _grid(args), port=int(port or 1883))
-    raise ParameterError(
-        f"unknown source {args.source!r} (virtual, virtual-bed, replay:, serial:, iio:, mqtt:)"
+    need); a replay starts again at its end with ``loop``. The sources are those of the
+    registry (:func:`texsense.monitor.sources.open_source`)."""
+    options = sources.SourceOptions(
+        speed=args.speed,
+        grid=_grid(args),
+        sampling_frequency=args.sampling_frequency,
+        multiplexer=load_function(args.multiplexer) if args.multiplexer else None,
+        capdac_pF=args.capdac_pf,
+        loop=loop,
     )
+    return sources.open_source(args.source, options)
 
 
-def build_monitor(args: argparse.Namespace) -> Any:
+def build_monitor(args: argparse.Namespace) -> Monitor:
     """Source, pipeline, tracker, model, store -> a Monitor."""
     from texsense.apps.posture import PostureModel
 
     source = open_source(args)
+    calibration: StageChain | None
     if args.calibration is not None:
         calibration = load_chain(args.calibration)
     else:
@@ -279,7 +261,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
     if raw_only and (model is not None or args.bed):
         raise ParameterError("--model and --bed need pressure: give the mat's --calibration")
     if model is None and args.source == "virtual" and not args.no_posture:
-        model = virtual_seat_model(_virtual_calibration(args, calibration).id)
+        model = virtual_seat_model(_virtual_calibration(args).id)
     bed = None
     if args.bed and args.no_posture:
         raise ParameterError("--bed needs the side model: drop --no-posture")
@@ -287,7 +269,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
         from texsense.apps.bed import BedWatch
 
         if model is None and args.source == "virtual-bed":
-            model = virtual_bed_model(_virtual_calibration(args, calibration).id)
+            model = virtual_bed_model(_virtual_calibration(args).id)
         if model is None:
             raise ParameterError("--bed needs --model: a posture model of sides")
         bed = BedWatch(
@@ -312,7 +294,7 @@ def build_monitor(args: argparse.Namespace) -> Any:
     return monitor
 
 
-def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
+def _mode(args: argparse.Namespace, source: Source, bed: BedWatch | None) -> str:
     """``--mode``, or for ``auto``: bed with a bed watch, the file's for a replay, else seat."""
     mode = getattr(args, "mode", "auto")
     if mode != "auto":
@@ -327,13 +309,18 @@ def _mode(args: argparse.Namespace, source: Any, bed: Any) -> str:
     return "seat"
 
 
-def _virtual_calibration(args: argparse.Namespace, calibration: Any) -> Any:
-    """The calibration a virtual mat's posture model is trained with: the mat's own one (the
-    one in use, unless ``--calibration`` names another)."""
-    return calibration if args.calibration is None else default_calibration(args.source)
+def _virtual_calibration(args: argparse.Namespace) -> StageChain:
+    """The calibration a virtual mat's posture model is trained with: the mat's own one
+    (whichever ``--calibration`` is in use)."""
+    calibration = default_calibration(args.source)
+    if calibration is None:
+        raise ParameterError(f"--source {args.source} brings no calibration of its own")
+    return calibration
 
 
-def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
+def _cached_model(
+    name: str, what: str, seconds: int, train: Callable[[], PostureModel]
+) -> PostureModel:
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
     when missing (a broken cache is rebuilt, and said so). The name carries the id of the
     virtual mat's calibration the model is trained on, so a texsense whose compensation
@@ -358,7 +345,7 @@ def _cached_model(name: str, what: str, seconds: int, train: Any) -> Any:
     return model
 
 
-def virtual_seat_model(calibration_id: str) -> Any:
+def virtual_seat_model(calibration_id: str) -> PostureModel:
     """A posture model for the virtual seat, trained on simulated sessions of other people
     (compensated pressure, §6.5.2) with the calibration ``calibration_id``
     (:func:`texsense.calibration.workflows.seat_calibration`), cached under ~/.cache/texsense."""
@@ -372,7 +359,7 @@ def virtual_seat_model(calibration_id: str) -> Any:
     )
 
 
-def virtual_bed_model(calibration_id: str) -> Any:
+def virtual_bed_model(calibration_id: str) -> PostureModel:
     """A model of the side a person lies on for the virtual bed, trained on other simulated
     people (compensated pressure) with the calibration ``calibration_id``
     (:func:`texsense.calibration.workflows.bed_calibration`), cached under ~/.cache/texsense."""

@@ -5,11 +5,17 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.data.files import check_not_input, make_folder, save_figure, write_text
+from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
 from texsense.sim.muscle import session
+
+if TYPE_CHECKING:
+    from texsense.apps.muscle import Contractions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -82,12 +88,10 @@ def run_detect(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plot(times, act, found, threshold, path) -> None:  # noqa: ANN001
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def _plot(
+    times: np.ndarray, act: np.ndarray, found: Contractions, threshold: float, path: Path
+) -> None:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.plot(times, act, lw=0.8, label="activation")
     ax.axhline(threshold, color="tab:orange", ls=":", lw=1, label="onset threshold")

@@ -20,7 +20,7 @@ from texsense.apps.posture.study import ErrorStudy, plot_study, sensor_hysteresi
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.commands._tables import confusion_lines, natural_key, text_table
-from texsense.data.files import check_not_input, make_folder, save_figure, write_text
+from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.io import load
@@ -288,11 +288,7 @@ def run_train(args: argparse.Namespace) -> int:
 
 def run_study(args: argparse.Namespace) -> int:
     """Run ``texsense study``: reference patterns, all sweeps, report.html + numbers.json."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     check_not_input(args.output, [args.recording])
     rec, idx, y = _frames(args)
     frames = np.nan_to_num(rec.frames[idx].astype(np.float64))

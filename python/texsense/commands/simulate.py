@@ -16,10 +16,10 @@ from texsense.data.files import make_folder, real_path
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
+from texsense.sensor.materials import PRESETS
 from texsense.sim.device import VirtualDevice
 from texsense.sim.protocols import PROTOCOLS, run_protocol
 from texsense.sim.seated import Subject, simulate_session
-from texsense.sim.spacer import PRESETS
 
 #: CLI option -> protocol keyword, for the protocols that take it.
 _OPTIONS = {

@@ -184,15 +184,19 @@ def read_config(
                 calibrations[key] = load_chain(key)
             cal = calibrations[key]
         quantity = "capacitance" if cal is not None else "pressure"
-        kind, _, rest = str(m.get("source", "mqtt")).partition(":")
-        if kind == "serial":
-            local[m["id"]] = sources.SerialSource(rest, layout)
-        elif kind == "iio":
-            local[m["id"]] = sources.IIOSource(rest, layout)
-        elif kind == "replay":
-            local[m["id"]] = sources.ReplaySource(Path(rest), speed=1.0, loop=True)
-        elif kind != "mqtt":
-            raise FormatError(path, f"[[mat]] #{k + 1}: unknown source {m.get('source')!r}")
+        spec = str(m.get("source", "mqtt"))
+        if spec != "mqtt":  # a source of this machine, from the registry (docs/station.md)
+            try:
+                local[m["id"]] = sources.open_source(spec, sources.SourceOptions(grid=layout))
+            except ParameterError as e:
+                raise FormatError(path, f"[[mat]] #{k + 1}: source {spec!r}: {e}") from None
+            if local[m["id"]].layout.n_elements != layout.n_elements:
+                raise FormatError(
+                    path,
+                    f"[[mat]] #{k + 1}: source {spec!r} reads "
+                    f"{local[m['id']].layout.n_elements} elements, the layout has "
+                    f"{layout.n_elements}",
+                )
         bed = m.get("bed", False)
         if not isinstance(bed, bool):
             raise FormatError(path, f"[[mat]] #{k + 1}: bed must be true or false, got {bed!r}")

@@ -36,6 +36,7 @@ from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.io import save
+from texsense.monitor.sources import Source
 
 __all__ = ["register_wizard", "run_wizard"]
 
@@ -80,7 +81,7 @@ class _Feed:
     """Every frame of a source, read in the background (so that no stale frame waits in a
     buffer while the person reads a prompt)."""
 
-    def __init__(self, source: Any) -> None:
+    def __init__(self, source: Source) -> None:
         self.source = source
         self.recent: deque[Frame] = deque(maxlen=256)
         self.count = 0
@@ -114,7 +115,7 @@ class _Feed:
         self.source.close()
 
 
-def _as_recording(frames: list[Frame], source: Any, step: str) -> Recording:
+def _as_recording(frames: list[Frame], source: Source, step: str) -> Recording:
     values = np.array([f.values for f in frames], dtype=np.float64)
     valid = np.isfinite(values)
     meta = {"source": source.name, "recorded_by": f"texsense calibrate wizard ({step})"}

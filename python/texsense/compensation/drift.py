@@ -17,8 +17,9 @@ chain).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import pairwise
 from pathlib import Path
 
@@ -327,6 +328,11 @@ class DriftModel:
     exponent: float = 1.0
     level: str = "output"
     backbone: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+    #: how well the identification that made the model fitted its records (learned state, not
+    #: parameters: not compared, not saved): the :class:`StepFit` of :meth:`fit_steps`, the RMS
+    #: residual in N/cm² of :meth:`fit_history` and :meth:`fit_joint`; None otherwise
+    step_fit_: StepFit | None = field(default=None, compare=False, repr=False)
+    rms_ncm2_: float | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.level not in LEVELS:
@@ -418,18 +424,36 @@ class DriftModel:
         kind: str = "log",
         rest_rate: float = 0.0,
     ) -> tuple[DriftModel, StepFit]:
-        """Fit from step responses: γ with the logarithmic kernel (``kind="log"``), or a
+        """Deprecated: :meth:`fit_steps` (the model, its :class:`StepFit` in ``step_fit_``)."""
+        warnings.warn(
+            "DriftModel.fit(steps) -> (model, fit) is now DriftModel.fit_steps(steps) -> model "
+            "(the fit in model.step_fit_); the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        model = cls.fit_steps(steps, kind, rest_rate)
+        assert model.step_fit_ is not None
+        return model, model.step_fit_
+
+    @classmethod
+    def fit_steps(
+        cls,
+        steps: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, float]],
+        kind: str = "log",
+        rest_rate: float = 0.0,
+    ) -> DriftModel:
+        """The model of step responses: γ with the logarithmic kernel (``kind="log"``), or a
         non-negative Prony kernel of the common normalised response (``"prony"``);
         ``kind="thesis"`` is eq. 5.8 exactly as printed (``ln(1 + t)``, time clock). With
         ``rest_rate`` > 0 the model runs on the rest clock; γ is the same (a hold is at
-        rest)."""
+        rest). How well γ fits the steps is the model's ``step_fit_`` (:class:`StepFit`)."""
         fit = fit_gamma(steps)
         if kind == "thesis":  # eq. 5.8 exactly as printed: ln(1 + t) on the time clock
             if rest_rate:
                 raise ParameterError("kind='thesis' is eq. 5.8 as printed: no rest clock")
-            return cls(fit.gamma_common, log_kernel(), "thesis"), fit
+            return cls(fit.gamma_common, log_kernel(), "thesis", step_fit_=fit)
         if kind == "log":
-            return cls(fit.gamma_common, log_kernel(), "log", rest_rate), fit
+            return cls(fit.gamma_common, log_kernel(), "log", rest_rate, step_fit_=fit)
         if kind == "prony":
             times = np.concatenate(
                 [np.asarray(t, float) - float(np.asarray(t)[0]) for t, _, _ in steps]
@@ -439,7 +463,8 @@ class DriftModel:
             )
             order = np.argsort(times)
             k = prony_kernel(times[order], norm[order])
-            return cls(-1.0 if norm[order][-1] < 0 else 1.0, k, "prony", rest_rate), fit
+            sign = -1.0 if norm[order][-1] < 0 else 1.0
+            return cls(sign, k, "prony", rest_rate, step_fit_=fit)
         raise ParameterError(f"kind must be 'thesis', 'log' or 'prony', got {kind!r}")
 
     @classmethod
@@ -451,7 +476,7 @@ class DriftModel:
         band: tuple[float, float] = (0.5, 3.5),
         kernel: DriftKernel | None = None,
         rest_rate: float = 0.0,
-    ) -> tuple[DriftModel, float]:
+    ) -> DriftModel:
         """γ by least squares over any load history, not only held steps.
 
         Eq. 5.8 is linear in γ: ``p(t) = h(t) + γ D(t)`` with ``D`` the superposition of the
@@ -459,7 +484,7 @@ class DriftModel:
         and γ solves the one-parameter least-squares problem over the samples whose true
         ``pressure`` lies in ``band`` (N/cm², the thesis's §4.5 range). Use it to identify γ on
         the kind of load the application sees (e.g. an hour of cycles) when γ from steps does
-        not transfer (docs/drift.md). Returns the model and the RMS residual in N/cm².
+        not transfer (docs/drift.md). The RMS residual in N/cm² is the model's ``rms_ncm2_``.
         """
         x = np.asarray(h, dtype=np.float64)
         p = np.asarray(pressure, dtype=np.float64)
@@ -478,7 +503,7 @@ class DriftModel:
             )
         gamma = float(unit[sel] @ (p - x)[sel] / denom)
         rms = float(np.sqrt(np.mean((x + gamma * unit - p)[sel] ** 2)))
-        return cls(gamma, k, kind, rest_rate), rms
+        return cls(gamma, k, kind, rest_rate, rms_ncm2_=rms)
 
     @classmethod
     def fit_joint(
@@ -487,13 +512,14 @@ class DriftModel:
         rest_rate: float = 0.02,
         band: tuple[float, float] = (0.5, 3.5),
         kernel: DriftKernel | None = None,
-    ) -> tuple[DriftModel, float]:
+    ) -> DriftModel:
         """Both clocks from records that hold both kinds of load (e.g. held steps and an
         hour of cycles): ``p = h + γ D_rest(h) + γ_time D_time(h)`` is linear in the two
         factors, which solve one least-squares problem over the samples in ``band`` with every
         record weighted equally. The data decide which clock the spacer's drift runs on: on
         the virtual textile spacer γ_time comes out near 0, on the second law (creep on time)
-        the time part dominates (docs/drift.md). Returns the model and the RMS residual.
+        the time part dominates (docs/drift.md). The RMS residual (N/cm²) is the model's
+        ``rms_ncm2_``.
         """
         if not records:
             raise ParameterError("fit_joint needs at least one record")
@@ -519,7 +545,7 @@ class DriftModel:
         (g_rest, g_time), *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
         resid = np.concatenate([d @ [g_rest, g_time] - r for d, r in plain])
         rms = float(np.sqrt(np.mean(resid**2)))
-        return cls(float(g_rest), k, kind, rest_rate, 0.5, float(g_time)), rms
+        return cls(float(g_rest), k, kind, rest_rate, 0.5, float(g_time), rms_ncm2_=rms)
 
     def to_dict(self) -> dict:
         """The content of the model file (JSON-able)."""

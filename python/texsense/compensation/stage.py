@@ -36,7 +36,7 @@ from texsense.data.modelfile import Fields, load, write
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, NotFittedError, ParameterError
 
-__all__ = ["Stage", "Stream", "time_steps"]
+__all__ = ["STAGES", "Stage", "Stream", "time_steps"]
 
 
 def time_steps(times: npt.ArrayLike, last_t: float | None = None) -> np.ndarray:
@@ -97,11 +97,28 @@ class Stream:
         )
 
 
+#: Every stage class by its name in files and chains (a subclass of :class:`Stage` that sets
+#: ``name`` registers itself here; :mod:`texsense.compensation.stages` loads them all).
+STAGES: dict[str, type[Stage]] = {}
+
+
 class Stage(Stream):
-    """The contract (see the module documentation)."""
+    """The contract (see the module documentation). A subclass that sets ``name`` is a stage
+    of the registry :data:`STAGES`: model files, chains and the stage contract test find it
+    there."""
 
     #: Name in files and in a chain.
     name: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        name = cls.__dict__.get("name")
+        if name:
+            other = STAGES.get(name)
+            if other is not None and other.__qualname__ != cls.__qualname__:
+                raise TypeError(f"{cls.__name__}: the stage name {name!r} is {other.__name__}'s")
+            STAGES[name] = cls
+
     #: (quantity, unit) read and given; "" passes what comes.
     _reads: ClassVar[tuple[str, str]] = ("", "")
     _gives: ClassVar[tuple[str, str]] = ("", "")

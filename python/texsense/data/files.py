@@ -46,6 +46,7 @@ import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any
 
 from texsense.exceptions import FormatError, ParameterError, WriteError
@@ -502,6 +503,18 @@ def _remove(path: Path) -> None:
 def _reason(e: OSError) -> str:
     text = e.strerror or str(e) or type(e).__name__
     return f"could not write ({text}); the previous file, if any, is unchanged"
+
+
+def pyplot() -> ModuleType:
+    """matplotlib.pyplot on the Agg backend (files only, no window), with TrueType fonts in
+    PDFs (their text can be copied): the one place texsense sets matplotlib up."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    matplotlib.rcParams["pdf.fonttype"] = 42
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def save_figure(fig: Figure, path: str | Path, **savefig: object) -> Path:

@@ -9,7 +9,7 @@ rejected, never guessed.
 
 Examples
 --------
->>> from texsense import units
+>>> from texsense.data import units
 >>> round(units.convert(32.0, "mmHg", "N/cm2"), 4)
 0.4266
 >>> units.canonical("kpa")

@@ -3,26 +3,33 @@
 :func:`load` opens any supported file or folder and picks the reader by content (not by
 extension alone); :func:`open_reader` does the same but returns the format's reader, which
 parses the header and then yields the frames in blocks (constant memory, what ``texsense
-process`` uses); :func:`save` writes HDF5, wide CSV or Tekscan ASCII by extension or by
-``format``, always under a temporary name that is renamed when complete. One module per
-format, one reader class each over :class:`texsense.io._base.RecordingReader`:
+process`` uses); :func:`save` writes a recording in the format its extension names, always
+under a temporary name that is renamed when complete.
 
-===============  =====================================  ========  ===========
-format           what                                   read      write
-===============  =====================================  ========  ===========
-``hdf5``         texsense recording (``.h5``)           yes       yes
-``pmd``          PhysioNet PMD text files (folders)     yes       no
-``tekscan``      Tekscan ASCII ``.csv`` / ``.asf``      yes       yes
-``xsensor``      XSENSOR CSV export                     yes       no
-``pliance``      novel pliance ``.asc``                 yes       no
-``wide-csv``     ``time_s,e0,e1,...``                   yes       yes
-``columns-csv``  a column table (one element)           yes       no (``io.columns``)
-===============  =====================================  ========  ===========
+One module per format, one reader class each over :class:`texsense.io._base.RecordingReader`,
+which declares its name, what it reads and its detection rule; the writers declare themselves
+with :func:`texsense.io._registry.writer`. This package imports every public module in its
+folder, so a new format is one new module: detection, ``load(format=...)``, ``read_<format>``,
+``texsense convert --format``, the errors and the table of docs/formats.md
+(:func:`formats_table`) all read the registry:
+
+>>> print(formats_table())  # doctest: +NORMALIZE_WHITESPACE
+| format | `format=` | read | write (chosen by the output's extension) |
+|---|---|---|---|
+| texsense recording (.h5) | `hdf5` | yes | yes: `.h5`, `.hdf5` (exact round trip) |
+| Tekscan ASCII .csv / .asf | `tekscan` | yes | yes: `.asf` (exact round trip) |
+| XSENSOR CSV export | `xsensor` | yes | no |
+| novel pliance .asc | `pliance` | yes | no |
+| column table (one element) | `columns-csv` | yes | no (`texsense.io.columns.write_columns`) |
+| wide CSV (time_s,e0,e1,...) | `wide-csv` | yes | yes: `.csv` (exact round trip) |
+| PhysioNet PMD text files and folders | `pmd` | yes | no |
 """
 
 from __future__ import annotations
 
+import importlib
 import inspect
+import pkgutil
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -35,65 +42,26 @@ from texsense.data.files import check_regular, regular_files
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
+from texsense.io._registry import READER_CLASSES, WRITERS, Probe
 from texsense.io._text import decode_head, open_binary
-from texsense.io.columns_csv import TableReader, is_columns_csv, read_table
-from texsense.io.hdf5 import HDF5Reader, RecordingWriter, read_hdf5, write_hdf5
-from texsense.io.pliance import PlianceReader, read_pliance
-from texsense.io.pmd import PMDReader, is_pmd_path, read_pmd
-from texsense.io.tekscan import TekscanReader, read_tekscan, write_tekscan
-from texsense.io.wide_csv import MAGIC as _WIDE_MAGIC
-from texsense.io.wide_csv import WideCSVReader, read_wide_csv, write_wide_csv
-from texsense.io.xsensor import XSensorReader, read_xsensor
+from texsense.io.hdf5 import RecordingWriter
 
 __all__ = [
-    "READERS",
     "READER_CLASSES",
     "WRITERS",
     "RecordingReader",
     "RecordingWriter",
+    "formats_table",
     "load",
     "open_reader",
     "read_folder",
-    "read_hdf5",
-    "read_pliance",
-    "read_pmd",
-    "read_tekscan",
-    "read_wide_csv",
-    "read_xsensor",
     "save",
     "sniff_format",
-    "write_hdf5",
-    "write_tekscan",
-    "write_wide_csv",
 ]
 
-READERS: dict[str, Callable[..., Recording]] = {
-    "hdf5": read_hdf5,
-    "pmd": read_pmd,
-    "tekscan": read_tekscan,
-    "xsensor": read_xsensor,
-    "pliance": read_pliance,
-    "wide-csv": read_wide_csv,
-    "columns-csv": read_table,
-}
+#: Readers that do not write, and where their format is written instead (formats_table).
+_WRITTEN_ELSEWHERE = {"columns-csv": "texsense.io.columns.write_columns"}
 
-READER_CLASSES: dict[str, type[RecordingReader]] = {
-    "hdf5": HDF5Reader,
-    "pmd": PMDReader,
-    "tekscan": TekscanReader,
-    "xsensor": XSensorReader,
-    "pliance": PlianceReader,
-    "wide-csv": WideCSVReader,
-    "columns-csv": TableReader,
-}
-
-WRITERS: dict[str, Callable[..., Path]] = {
-    "hdf5": write_hdf5,
-    "wide-csv": write_wide_csv,
-    "tekscan": write_tekscan,
-}
-
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 # Binary vendor files people try to open: a hint instead of a parse error.
 _BINARY_HINTS = {
     ".fsx": "a Tekscan binary movie: export it as ASCII (File > Save As ASCII) first",
@@ -102,8 +70,15 @@ _BINARY_HINTS = {
 }
 
 
+def known_formats() -> str:
+    """What texsense reads, in words (for errors and help)."""
+    return ", ".join(cls.what for cls in READER_CLASSES.values())
+
+
 def sniff_format(path: str | Path) -> str:
-    """Name the format of ``path`` by looking at its content.
+    """Name the format of ``path`` by looking at its content: the first reader in
+    :data:`READER_CLASSES` whose ``sniff`` claims it (``"folder"`` for a folder no reader
+    claims: :func:`read_folder`).
 
     Raises
     ------
@@ -113,36 +88,73 @@ def sniff_format(path: str | Path) -> str:
     path = Path(path)
     check_regular(path, folder_ok=True)  # no FIFO, device, dangling link: nothing waits
     if path.is_dir():
-        return "pmd" if is_pmd_path(path) else "folder"  # a folder of recordings: read_folder
-    with open_binary(path) as fh:
-        head = fh.read(1 << 16)
-    if head.startswith(_HDF5_SIGNATURE):
-        return "hdf5"
-    hint = _BINARY_HINTS.get(path.suffix.lower())
-    if hint:
-        raise FormatError(path, f"this is {hint}")
-    if not head:
-        raise FormatError(path, "empty file")
-    text = decode_head(head)
-    first = text.split("\n", 1)[0].strip()
-    if first.startswith("DATA_TYPE") or "Tekscan" in text[:400]:
-        return "tekscan"
-    if first.startswith("File:") and "FRAME" in text:
-        return "xsensor"
-    if first.startswith("file name:") and "mat type" in text[:300]:
-        return "pliance"
-    if is_columns_csv(path):
-        return "columns-csv"
-    if first.startswith(_WIDE_MAGIC) or first.startswith("time_s,") or first.startswith("# "):
-        return "wide-csv"
-    tokens = [t for t in first.strip().split("\t") if t.strip()]
-    if len(tokens) == 2048 and sum(t.strip().isdigit() for t in tokens) >= 1024:
-        return "pmd"  # (a few impossible counts, "nan" or "1.5", are the reader's to judge)
-    raise FormatError(
-        path,
-        "unknown format; texsense reads texsense HDF5, PhysioNet PMD, Tekscan ASCII, "
-        "XSENSOR CSV, novel pliance .asc and wide CSV (time_s,e0,e1,...)",
-    )
+        probe = Probe(path)
+    else:
+        with open_binary(path) as fh:
+            head = fh.read(1 << 16)
+        hint = _BINARY_HINTS.get(path.suffix.lower())
+        if hint:
+            raise FormatError(path, f"this is {hint}")
+        if not head:
+            raise FormatError(path, "empty file")
+        text = decode_head(head)
+        probe = Probe(path, head, text, text.split("\n", 1)[0].strip())
+    for name, cls in READER_CLASSES.items():
+        if cls.sniff(probe):
+            return name
+    if probe.is_folder:
+        return "folder"
+    raise FormatError(path, f"unknown format; texsense reads {known_formats()}")
+
+
+def formats_table() -> str:
+    """The table of formats (docs/formats.md shows it; a test keeps them equal)."""
+    rows = ["| format | `format=` | read | write (chosen by the output's extension) |",
+            "|---|---|---|---|"]  # fmt: skip
+    for name, cls in READER_CLASSES.items():
+        w = WRITERS.get(name)
+        if w is not None:
+            note = w.what.partition("(")[2].rstrip(")")
+            written = f"yes: {', '.join(f'`{s}`' for s in w.suffixes)}" + (
+                f" ({note})" if note else ""
+            )
+        elif name in _WRITTEN_ELSEWHERE:
+            written = f"no (`{_WRITTEN_ELSEWHERE[name]}`)"
+        else:
+            written = "no"
+        rows.append(f"| {cls.what} | `{name}` | yes | {written} |")
+    return "\n".join(rows)
+
+
+def _reader_function(name: str) -> Callable[..., Recording]:
+    """``read_<format>(path, *, accept_truncated=False, **options)``: :func:`load` with that
+    format, documented by the reader class."""
+    cls = READER_CLASSES[name]
+
+    def read(path: str | Path, *, accept_truncated: bool = False, **options: Any) -> Recording:
+        with open_reader(path, format=name, accept_truncated=accept_truncated, **options) as r:
+            return r.read()
+
+    read.__name__ = read.__qualname__ = f"read_{name.replace('-', '_')}"
+    read.__doc__ = cls.__doc__
+    read.__module__ = __name__
+    return read
+
+
+def __getattr__(attr: str) -> Callable[..., Any]:
+    """``read_hdf5``, ``read_tekscan``, ... : one per registered reader; ``write_hdf5``, ...:
+    the registered writers."""
+    if attr.startswith("write_") and attr[len("write_") :].replace("_", "-") in WRITERS:
+        return WRITERS[attr[len("write_") :].replace("_", "-")].write
+    if attr.startswith("read_"):
+        name = attr[len("read_") :].replace("_", "-")
+        if name == "table":
+            name = "columns-csv"  # the column table's reader has always been read_table
+        if name in READER_CLASSES:
+            fn = _reader_function(name)
+            globals()[attr] = fn
+            return fn
+    raise AttributeError(f"module 'texsense.io' has no attribute {attr!r}")
 
 
 def open_reader(
@@ -206,7 +218,7 @@ def load(
     path : str or Path
         File or folder.
     format : str, optional
-        Force a reader (one of :data:`READERS`); by default the content decides.
+        Force a reader (one of :data:`READER_CLASSES`); by default the content decides.
     accept_truncated : bool
         Read a file cut short up to its last complete frame, with a warning (see
         :func:`open_reader`).
@@ -259,7 +271,7 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
             "holds no recording texsense reads (and is not a PMD tree: no S1, S2, ... or "
             "1.txt .. 17.txt)",
         )
-    parts = []
+    parts: list[Recording] = []
     for p in files:
         rec = load(p, accept_truncated=accept_truncated, **options)
         if "file" not in rec.labels:
@@ -317,21 +329,30 @@ def _differs(a: Recording, b: Recording) -> str | None:
 def format_for_output(path: str | Path) -> str:
     """The writer for an output path, chosen by its extension."""
     suffix = Path(path).suffix.lower()
-    if suffix in (".h5", ".hdf5"):
-        return "hdf5"
-    if suffix in (".asf",):
-        return "tekscan"
-    if suffix == ".csv":
-        return "wide-csv"
+    for name, w in WRITERS.items():
+        if suffix in w.suffixes:
+            return name
+    known = "; ".join(f"{', '.join(w.suffixes)} ({w.name})" for w in WRITERS.values())
     raise ParameterError(
-        f"cannot tell the output format from {Path(path).name!r}: use .h5, .csv (wide CSV) "
-        "or .asf (Tekscan ASCII), or pass the format explicitly"
+        f"cannot tell the output format from {Path(path).name!r}: use {known}, or pass the "
+        "format explicitly"
     )
 
 
 def save(rec: Recording, path: str | Path, *, format: str | None = None) -> Path:
-    """Write ``rec`` as HDF5 (``.h5``), wide CSV (``.csv``) or Tekscan ASCII (``.asf``)."""
+    """Write ``rec`` in ``format``, by default the one its extension names
+    (:data:`WRITERS`: HDF5 ``.h5``, wide CSV ``.csv``, Tekscan ASCII ``.asf``)."""
     fmt = format or format_for_output(path)
     if fmt not in WRITERS:
         raise ParameterError(f"no writer for {fmt!r}; writable: {', '.join(WRITERS)}")
-    return WRITERS[fmt](rec, path)
+    return WRITERS[fmt].write(rec, path)
+
+
+def _load_formats() -> None:
+    """Import every public module of this package: each format registers itself."""
+    for info in pkgutil.iter_modules(__path__):
+        if not info.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{info.name}")
+
+
+_load_formats()

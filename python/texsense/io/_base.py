@@ -45,6 +45,7 @@ from texsense.data import budget, units
 from texsense.data.layout import BYTES_PER_CELL, Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
+from texsense.io._registry import Probe, register_reader
 from texsense.io._text import Line, TextLines
 
 __all__ = [
@@ -204,7 +205,7 @@ class BlockReader:
         complete frame and warn, instead of refusing it.
     """
 
-    #: the name of the format (``texsense.io.READERS``)
+    #: the name of the format (``texsense.io.READER_CLASSES``)
     format: ClassVar[str] = ""
 
     def __init__(self, path: str | Path, *, accept_truncated: bool = False) -> None:
@@ -242,6 +243,13 @@ class BlockReader:
 
     #: the text file a line-oriented reader holds open (closed by :meth:`close`)
     _lines: TextLines | None = None
+
+    @property
+    def lines(self) -> TextLines:
+        """The text file a line-oriented reader opened in its constructor."""
+        if self._lines is None:
+            raise RuntimeError(f"{type(self).__name__} reads no text file")
+        return self._lines
 
     def close(self) -> None:
         """Release the file (the text file in ``_lines``; a format that holds another kind
@@ -283,6 +291,21 @@ class RecordingReader(BlockReader):
     #: bytes of memory per value while a whole file is read (:meth:`read`): a text reader
     #: parses float64 rows, stacks them and converts them to float32 with a validity mask
     bytes_per_value: ClassVar[int] = 22
+    #: what the format is, in a few words (the table of formats, help and errors)
+    what: ClassVar[str] = ""
+    #: when format detection asks this reader (lower first: a specific rule before a loose one)
+    sniff_order: ClassVar[int] = 100
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass that names its format is registered (:mod:`texsense.io._registry`)."""
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("format"):
+            register_reader(cls)
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """Whether the file (or folder) ``probe`` describes is of this format, by content."""
+        return False
 
     def __init__(self, path: str | Path, *, accept_truncated: bool = False) -> None:
         super().__init__(path, accept_truncated=accept_truncated)
@@ -338,7 +361,7 @@ class RecordingReader(BlockReader):
             np.array([r.time for r in rows], dtype=np.float64),
             {k: np.array([r.labels[k] for r in rows], dtype=dt) for k, dt in dtypes.items()},
             lines=np.array([r.line for r in rows], dtype=np.int64),
-            valid=None if rows[0].valid is None else np.stack([r.valid for r in rows]),
+            valid=None if rows[0].valid is None else np.stack([_mask(r) for r in rows]),
         )
 
     def _impossible(self, values: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.bool_]]:
@@ -500,6 +523,13 @@ class RecordingReader(BlockReader):
                 meta=h.meta,
             )
         return self._recording(_join(pieces))
+
+
+def _mask(row: FrameRow) -> npt.NDArray[np.bool_]:
+    """The validity mask of a row of a format whose rows all carry one."""
+    if row.valid is None:
+        raise RuntimeError(f"the row of line {row.line} has no validity mask, the first had one")
+    return row.valid
 
 
 def _join(pieces: list[Piece]) -> Piece:

@@ -30,7 +30,7 @@ __all__ = [
 
 #: A line longer than this is not a text export (a binary file without NUL bytes, say).
 MAX_LINE_BYTES = 64 << 20
-_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 
 
 class Line(NamedTuple):
@@ -52,7 +52,7 @@ def open_binary(path: Path) -> IO[bytes]:
 
 def decode_head(head: bytes) -> str:
     """The text of the first bytes of a file, for sniffing its format (UTF-16 by its BOM)."""
-    if head.startswith(_UTF16_BOMS):
+    if head.startswith(UTF16_BOMS):
         return head[: len(head) // 2 * 2].decode("utf-16", errors="replace")
     return head.decode("utf-8", errors="replace").lstrip("\ufeff")
 
@@ -84,7 +84,7 @@ class TextLines:
         head = self._raw.read(4096)
         self._raw.seek(0)
         self._text: io.TextIOWrapper | None = None
-        if head.startswith(_UTF16_BOMS):
+        if head.startswith(UTF16_BOMS):
             self._text = io.TextIOWrapper(
                 self._raw, encoding="utf-16", errors="replace", newline=""
             )

@@ -27,10 +27,18 @@ from texsense._progress import logger
 from texsense.data import units
 from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
-from texsense.data.recording import QUANTITIES, Recording
+from texsense.data.recording import QUANTITIES
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import BlockReader, Header, Piece, RecordingReader
-from texsense.io._text import TextLines, decode_head, is_number, open_binary, parse_csv_row
+from texsense.io._registry import Probe
+from texsense.io._text import (
+    UTF16_BOMS,
+    TextLines,
+    decode_head,
+    is_number,
+    open_binary,
+    parse_csv_row,
+)
 
 __all__ = [
     "ColumnsReader",
@@ -38,7 +46,6 @@ __all__ = [
     "column_name",
     "is_columns_csv",
     "read_columns_csv",
-    "read_table",
     "unit_of_column",
     "write_columns_csv",
 ]
@@ -75,8 +82,8 @@ def _header(path: Path) -> tuple[list[str], list[str]]:
     """The ``#`` lines and the names of the first other line of a text file."""
     with open_binary(path) as fh:
         head = fh.read(1 << 14)
-    if b"\0" in head:
-        return [], []
+    if b"\0" in head and not head.startswith(UTF16_BOMS):
+        return [], []  # binary (UTF-16 text has NUL bytes too, after its byte-order mark)
     comments, names = [], []
     for line in decode_head(head).splitlines():
         if line.startswith("#"):
@@ -161,8 +168,8 @@ class ColumnsReader(BlockReader):
 
     def _read_header(self, required: Sequence[str]) -> tuple[list[str], int | None]:
         path, declared = self.path, None
-        while (line := self._lines.peek()) is not None and line.text.startswith("#"):
-            next(self._lines)
+        while (line := self.lines.peek()) is not None and line.text.startswith("#"):
+            next(self.lines)
             key, _, value = line.text[1:].partition(":")
             if key.strip() == "rows":
                 try:
@@ -171,7 +178,7 @@ class ColumnsReader(BlockReader):
                     raise FormatError(
                         path, f"rows: expected a count, found {value.strip()!r}", line.number
                     ) from None
-        head = self._lines.next_nonblank()
+        head = self.lines.next_nonblank()
         if head is None:
             raise FormatError(path, "empty file: expected a header line of column names")
         names = [s.strip() for s in head.text.split(",")]
@@ -189,7 +196,7 @@ class ColumnsReader(BlockReader):
     def _rows(self) -> Iterator[list[float]]:
         n = len(self.names)
         what = f"{n} values ({', '.join(self.names)})"
-        for line in self._lines.data_lines("the table"):
+        for line in self.lines.data_lines("the table"):
             if not line.ended and self.declared_rows is not None:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return
@@ -268,12 +275,16 @@ def _quantity_of_column(name: str) -> tuple[str, str] | None:
 
 
 class TableReader(RecordingReader):
-    """A column table read as a one-element recording (``texsense info calib.csv``): its
-    values are the last column that names a unit (``capacitance_pF`` of the simulator's
-    tables, ``<output>_model`` of ``hysteresis apply``), ``time_s`` the times (else one per
-    row), every other column a label."""
+    """A column table as a one-element recording (see :class:`TableReader`)."""
 
     format = "columns-csv"
+    what = "column table (one element)"
+    sniff_order = 40
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A header of column names (see :func:`is_columns_csv`)."""
+        return bool(probe.text) and is_columns_csv(probe.path)
 
     def _read_header(self) -> Header:
         self._table = ColumnsReader(self.path, accept_truncated=self.accept_truncated)
@@ -315,9 +326,3 @@ class TableReader(RecordingReader):
         table = getattr(self, "_table", None)
         if table is not None:
             table.close()
-
-
-def read_table(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """A column table as a one-element recording (see :class:`TableReader`)."""
-    with TableReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()

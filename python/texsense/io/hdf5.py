@@ -54,6 +54,7 @@ from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
+from texsense.io._registry import Probe, writer
 from texsense.io.policy import check_text, link_name, named, open_hdf5
 
 __all__ = [
@@ -61,10 +62,11 @@ __all__ = [
     "FORMAT_VERSION",
     "HDF5Reader",
     "RecordingWriter",
-    "read_hdf5",
     "write_hdf5",
 ]
 
+#: The first bytes of every HDF5 file.
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 FORMAT_NAME = "texsense.recording"
 FORMAT_VERSION = 1
 _STR = h5py.string_dtype("utf-8")
@@ -325,7 +327,7 @@ class RecordingWriter:
             self.flush()
         self._check()
 
-    def _append_labels(self, labels: dict[str, npt.ArrayLike], start: int, stop: int) -> None:
+    def _append_labels(self, labels: Mapping[str, npt.ArrayLike], start: int, stop: int) -> None:
         keys = self._label_keys
         if self.n_frames > 0 and set(labels) != set(keys):
             raise ParameterError(
@@ -379,6 +381,7 @@ class RecordingWriter:
         self.close()
 
 
+@writer("hdf5", what="texsense recording (exact round trip)", suffixes=(".h5", ".hdf5"))
 def write_hdf5(rec: Recording, path: str | Path) -> Path:
     """Write ``rec`` to ``path`` (HDF5, schema version 1) and return the path.
 
@@ -461,27 +464,32 @@ def _labels(group: h5py.Group, a: int, b: int) -> dict[str, np.ndarray]:
 
 
 class HDF5Reader(RecordingReader):
-    """A texsense HDF5 recording read a block of frames at a time (see :func:`read_hdf5`).
+    """Read a texsense HDF5 recording.
 
-    What the file holds is checked against what it declares: every dataset must have the
-    same length and the storage for it (a file whose datasets differ, or that declares more
-    frames than it holds, is refused, or read up to what all hold with ``accept_truncated``);
-    a file written in one go that its writer did not finish (``open`` = 1, ``live`` = 0) is
-    refused likewise. A live recording left open by a killed recorder is read up to its last
-    complete frame and the loss is reported in one warning line and in ``meta["recovered"]``.
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    accept_truncated : bool
+        Read a damaged or unfinished file up to the frames that every dataset holds (with a
+        warning) instead of refusing it.
 
-    Examples
-    --------
-    >>> import numpy as np, tempfile, os
-    >>> from texsense import Layout, Recording
-    >>> path = os.path.join(tempfile.mkdtemp(), "r.h5")
-    >>> _ = write_hdf5(Recording(np.ones((10, 4)), np.arange(10.0), Layout.grid(2, 2)), path)
-    >>> with HDF5Reader(path) as reader:
-    ...     [block.n_frames for block in reader.blocks(4)]
-    [4, 4, 2]
+    Raises
+    ------
+    FormatError
+        If the file is not HDF5, not a texsense recording, of an unknown schema version,
+        lacks a required dataset, or holds less than it declares.
     """
 
     format = "hdf5"
+    what = "texsense recording (.h5)"
+    sniff_order = 0
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """HDF5's signature."""
+        return probe.head.startswith(HDF5_SIGNATURE)
+
     #: the frames as stored (up to float64) and as float32, their validity, a mask
     bytes_per_value = 15
 
@@ -630,24 +638,3 @@ class HDF5Reader(RecordingReader):
         f = getattr(self, "_file", None)
         if f is not None and f.id.valid:
             f.close()
-
-
-def read_hdf5(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """Read a texsense HDF5 recording.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    accept_truncated : bool
-        Read a damaged or unfinished file up to the frames that every dataset holds (with a
-        warning) instead of refusing it.
-
-    Raises
-    ------
-    FormatError
-        If the file is not HDF5, not a texsense recording, of an unknown schema version,
-        lacks a required dataset, or holds less than it declares.
-    """
-    with HDF5Reader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()

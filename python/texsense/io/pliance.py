@@ -30,12 +30,12 @@ import numpy as np
 
 from texsense.data import units
 from texsense.data.layout import Layout
-from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader
+from texsense.io._registry import Probe
 from texsense.io._text import Line, TextLines, parse_float, parse_floats
 
-__all__ = ["PlianceReader", "read_pliance"]
+__all__ = ["PlianceReader"]
 
 _UNIT = re.compile(r"pressure values in\s+(\S+)", re.IGNORECASE)
 _PERIOD = re.compile(r"time per frame \[secs\]:\s*([0-9.eE+-]+)")
@@ -62,19 +62,44 @@ def _first_token_is_time(text: str) -> bool | None:
 
 
 class PlianceReader(RecordingReader):
-    """A novel pliance ``.asc`` export (see :func:`read_pliance`)."""
+    """Read a novel pliance ASCII export.
+
+    Parameters
+    ----------
+    path : str or Path
+        The export.
+    accept_truncated : bool
+        Accepted for a uniform interface; a pliance export cut short has lost its geometry
+        table and cannot be read.
+
+    Returns
+    -------
+    Recording
+        Pressure in N/cm² on a points layout (one element per pliance sensor); values that
+        are not a number, infinite or negative are invalid readings.
+    """
 
     format = "pliance"
+    what = "novel pliance .asc"
+    sniff_order = 30
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A ``file name:`` first line and a ``mat type`` near the top."""
+        return probe.first.startswith("file name:") and "mat type" in probe.text[:300]
 
     def _read_header(self) -> Header:
         path = self.path
         with TextLines(path) as lines:
             head: list[str] = []
+
+            def is_table(s: str) -> bool:
+                head.append(s)
+                return s.strip().startswith("time[secs]") and "force" not in s
+
             table = _find(
                 lines,
-                lambda s: (
-                    head.append(s) or (s.strip().startswith("time[secs]") and "force" not in s)
-                ),
+                is_table,
                 "the 'time[secs] <sensor numbers>' table header",
                 path,
             )
@@ -202,24 +227,3 @@ def _unit(path: Path, head: str) -> str:
     if units.quantity_of(unit) != "pressure":
         raise FormatError(path, f"'pressure values in {m.group(1)}' is not a pressure unit")
     return unit
-
-
-def read_pliance(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """Read a novel pliance ASCII export.
-
-    Parameters
-    ----------
-    path : str or Path
-        The export.
-    accept_truncated : bool
-        Accepted for a uniform interface; a pliance export cut short has lost its geometry
-        table and cannot be read.
-
-    Returns
-    -------
-    Recording
-        Pressure in N/cm² on a points layout (one element per pliance sensor); values that
-        are not a number, infinite or negative are invalid readings.
-    """
-    with PlianceReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()

@@ -30,9 +30,9 @@ import numpy as np
 from texsense._progress import progress
 from texsense.data.files import real_path
 from texsense.data.layout import Layout
-from texsense.data.recording import Recording
 from texsense.exceptions import FormatError
 from texsense.io._base import FrameRow, Header, RecordingReader
+from texsense.io._registry import Probe
 from texsense.io._text import TextLines, is_number, open_binary
 
 __all__ = [
@@ -42,7 +42,6 @@ __all__ = [
     "POSTURE_CLASS",
     "PMDReader",
     "is_pmd_path",
-    "read_pmd",
 ]
 
 ROWS, COLS = 64, 32
@@ -182,10 +181,45 @@ def _sha256(path: Path) -> str:
 
 
 class PMDReader(RecordingReader):
-    """PhysioNet PMD experiment I: a posture file, a subject folder or the whole tree, read a
-    block of frames at a time (see :func:`read_pmd`)."""
+    """Read PMD experiment-I data: one posture file, a subject folder or the whole tree.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.../S3/7.txt``, ``.../S3`` or ``.../experiment-i``.
+    pitch_cm : float
+        Sensor pitch in cm (not stated by the dataset; 2.54 cm assumed).
+    accept_truncated : bool
+        Read files that do not match the publisher's checksums or end mid-line, and a tree
+        with posture files missing, up to what is there (with a warning) instead of refusing.
+
+    Returns
+    -------
+    Recording
+        Raw counts (quantity ``"raw"``, unit ``"count"``) on a 64 x 32 grid, files placed back
+        to back in time at the nominal 1 s frame period.
+
+    Examples
+    --------
+    >>> from texsense.io import read_pmd
+    >>> rec = read_pmd("../shared/data/pmd/experiment-i/S1")
+    >>> rec.layout.shape, sorted(set(rec.labels["posture"].tolist()))[:3]
+    ((64, 32), [1, 2, 3])
+    """
 
     format = "pmd"
+    what = "PhysioNet PMD text files and folders"
+    sniff_order = 60
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A PMD tree or subject folder, or a line of 2048 tab-separated counts (a few
+        impossible ones, "nan" or "1.5", are the reader's to judge)."""
+        if probe.is_folder:
+            return is_pmd_path(probe.path)
+        tokens = [t for t in probe.first.split("\t") if t.strip()]
+        return len(tokens) == 2048 and sum(t.strip().isdigit() for t in tokens) >= 1024
+
     non_negative = frozenset({"raw"})
 
     def __init__(
@@ -337,34 +371,3 @@ class PMDReader(RecordingReader):
             raise FormatError(
                 path, f"expected integer counts, found {bad!r}", line.number
             ) from None
-
-
-def read_pmd(
-    path: str | Path, *, pitch_cm: float = DEFAULT_PITCH_CM, accept_truncated: bool = False
-) -> Recording:
-    """Read PMD experiment-I data: one posture file, a subject folder or the whole tree.
-
-    Parameters
-    ----------
-    path : str or Path
-        ``.../S3/7.txt``, ``.../S3`` or ``.../experiment-i``.
-    pitch_cm : float
-        Sensor pitch in cm (not stated by the dataset; 2.54 cm assumed).
-    accept_truncated : bool
-        Read files that do not match the publisher's checksums or end mid-line, and a tree
-        with posture files missing, up to what is there (with a warning) instead of refusing.
-
-    Returns
-    -------
-    Recording
-        Raw counts (quantity ``"raw"``, unit ``"count"``) on a 64 x 32 grid, files placed back
-        to back in time at the nominal 1 s frame period.
-
-    Examples
-    --------
-    >>> rec = read_pmd("../shared/data/pmd/experiment-i/S1")
-    >>> rec.layout.shape, sorted(set(rec.labels["posture"].tolist()))[:3]
-    ((64, 32), [1, 2, 3])
-    """
-    with PMDReader(path, pitch_cm=pitch_cm, accept_truncated=accept_truncated) as reader:
-        return reader.read()

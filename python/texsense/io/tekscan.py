@@ -24,9 +24,10 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
+from texsense.io._registry import Probe, writer
 from texsense.io._text import Line, TextLines, format_float
 
-__all__ = ["TekscanReader", "read_tekscan", "write_tekscan"]
+__all__ = ["TekscanReader", "write_tekscan"]
 
 _KEY = re.compile(r"^([A-Z][A-Z0-9_]*):?(?:\s+(.*))?$")
 _FRAME = re.compile(r"^Frame\s+(\d+)\s*(?:,(.*))?$")
@@ -108,20 +109,46 @@ def _header_int(path: Path, header: dict[str, str], where: dict[str, int], key: 
 
 
 class TekscanReader(RecordingReader):
-    """A Tekscan ASCII export read a frame at a time (see :func:`read_tekscan`).
+    """Read a Tekscan ASCII export (``.csv`` or ``.asf``).
 
-    The header's ``START_FRAME``/``END_FRAME`` declare how many frames follow: a file closed
-    early (fewer frames before ``@@``) or cut (no ``@@``) is refused, or read with
-    ``accept_truncated`` and reported.
+    Parameters
+    ----------
+    path : str or Path
+        The export.
+    accept_truncated : bool
+        Read an export that was cut or closed early up to its last complete frame (with a
+        warning) instead of refusing it.
+
+    Returns
+    -------
+    Recording
+        Raw counts (``UNITS raw``) or pressure in N/cm² on a ROWS x COLS grid whose 'B' cells
+        are empty. Frame times come from each frame line, else from ``SECONDS_PER_FRAME``.
+        Cells that are not a number, infinite or negative are invalid readings.
+
+    Raises
+    ------
+    FormatError
+        On a missing key, a frame of the wrong shape, a non-number, a 'B' pattern that
+        changes between frames, times that go back, or a file cut short (no ``@@``, fewer
+        frames than ``START_FRAME``/``END_FRAME`` declare); the message names the line.
     """
 
     format = "tekscan"
+    what = "Tekscan ASCII .csv / .asf"
+    sniff_order = 10
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A ``DATA_TYPE`` first line, or Tekscan named near the top."""
+        return probe.first.startswith("DATA_TYPE") or "Tekscan" in probe.text[:400]
+
     non_negative = frozenset({"raw"})
 
     def _read_header(self) -> Header:
         path = self.path
         self._lines = TextLines(path)
-        header, where = _parse_header(path, self._lines)
+        header, where = _parse_header(path, self.lines)
         for key in ("ROWS", "COLS"):
             if key not in header:
                 raise FormatError(path, f"header lacks {key}")
@@ -135,7 +162,7 @@ class TekscanReader(RecordingReader):
             )
         check_declared_size(path, f"ROWS x COLS = {rows} x {cols}", rows * cols, 2, where["ROWS"])
         self.rows, self.cols = rows, cols
-        pitch = tuple(
+        row_cm, col_cm = (
             _spacing_cm(path, where.get(k, 0), k, header.get(k, "1 cm"))
             for k in ("ROW_SPACING", "COL_SPACING")
         )
@@ -165,7 +192,7 @@ class TekscanReader(RecordingReader):
             raise FormatError(path, "every cell is 'B': no sensel in the map")
         internal = units.INTERNAL_UNIT[quantity]
         return Header(
-            Layout.grid(rows, cols, pitch_cm=pitch, active=self.active),
+            Layout.grid(rows, cols, pitch_cm=(row_cm, col_cm), active=self.active),
             quantity,
             internal,
             {"format": "tekscan-ascii", "source": str(path), "source_unit": unit, "header": header},
@@ -177,7 +204,7 @@ class TekscanReader(RecordingReader):
     def _next_frame(self) -> tuple[np.ndarray, np.ndarray, float, int, int] | None:
         """(cells, 'B' mask, time, frame number, line) of the next frame; None at ``@@``
         (``self.ended``) or at a cut (noted)."""
-        line = self._lines.next_nonblank()
+        line = self.lines.next_nonblank()
         if line is None:
             self._cut("truncated: no closing '@@' after the last complete frame")
             return None
@@ -201,7 +228,7 @@ class TekscanReader(RecordingReader):
         cells = np.empty((self.rows, self.cols), dtype=np.float64)
         is_b = np.zeros((self.rows, self.cols), dtype=bool)
         for r in range(self.rows):
-            line = next(self._lines, None)
+            line = next(self.lines, None)
             if line is None or not line.ended:
                 self._cut(f"truncated: the file ends inside frame {number} (line {frame_line})")
                 return None
@@ -230,7 +257,7 @@ class TekscanReader(RecordingReader):
         return cells, is_b
 
     def _frames(self) -> Iterator[FrameRow]:
-        frame = self._first
+        frame: tuple[np.ndarray, np.ndarray, float, int, int] | None = self._first
         first: list[int] = []  # the first two frame numbers: the export's step
         last = 0
         while frame is not None:
@@ -277,35 +304,7 @@ def _frame_time(path: Path, line: Line, rest: str | None) -> float:
     return float("nan")
 
 
-def read_tekscan(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """Read a Tekscan ASCII export (``.csv`` or ``.asf``).
-
-    Parameters
-    ----------
-    path : str or Path
-        The export.
-    accept_truncated : bool
-        Read an export that was cut or closed early up to its last complete frame (with a
-        warning) instead of refusing it.
-
-    Returns
-    -------
-    Recording
-        Raw counts (``UNITS raw``) or pressure in N/cm² on a ROWS x COLS grid whose 'B' cells
-        are empty. Frame times come from each frame line, else from ``SECONDS_PER_FRAME``.
-        Cells that are not a number, infinite or negative are invalid readings.
-
-    Raises
-    ------
-    FormatError
-        On a missing key, a frame of the wrong shape, a non-number, a 'B' pattern that
-        changes between frames, times that go back, or a file cut short (no ``@@``, fewer
-        frames than ``START_FRAME``/``END_FRAME`` declare); the message names the line.
-    """
-    with TekscanReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()
-
-
+@writer("tekscan", what="Tekscan ASCII (exact round trip)", suffixes=(".asf",))
 def write_tekscan(rec: Recording, path: str | Path, *, unit: str | None = None) -> Path:
     """Write ``rec`` as a Tekscan ASCII export readable by :func:`read_tekscan`.
 

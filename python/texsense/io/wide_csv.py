@@ -38,9 +38,10 @@ from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, plausible
+from texsense.io._registry import Probe, writer
 from texsense.io._text import Line, TextLines, format_float, is_number
 
-__all__ = ["MAGIC", "WideCSVReader", "read_wide_csv", "write_wide_csv"]
+__all__ = ["MAGIC", "WideCSVReader", "write_wide_csv"]
 
 #: The first line of a texsense-written wide CSV (followed by the version).
 MAGIC = "# texsense wide-csv"
@@ -130,9 +131,28 @@ def _layout(path: Path, info: dict[str, str], where: dict[str, int], names: list
 
 
 class WideCSVReader(RecordingReader):
-    """A wide CSV read a block of frames at a time (see :func:`read_wide_csv`)."""
+    """Read a wide CSV (``time_s,<element>,...``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    quantity, unit : str, optional
+        Needed when the file has no ``# quantity:`` / ``# unit:`` lines; if both are given
+        they must agree.
+    accept_truncated : bool
+        Read a file that holds fewer frames than its ``# frames:`` line declares, or whose
+        last line was cut, up to its last complete frame (with a warning).
+    """
 
     format = "wide-csv"
+    what = "wide CSV (time_s,e0,e1,...)"
+    sniff_order = 50
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """texsense's first line, or a ``time_s,`` header, or comment lines first."""
+        return probe.first.startswith((MAGIC, "time_s,", "# "))
 
     def __init__(
         self,
@@ -148,8 +168,8 @@ class WideCSVReader(RecordingReader):
     def _read_header(self) -> Header:
         path = self.path
         self._lines = TextLines(path)
-        info, where, self.version = _comments(path, self._lines)
-        head = self._lines.next_nonblank()
+        info, where, self.version = _comments(path, self.lines)
+        head = self.lines.next_nonblank()
         if head is None:
             raise FormatError(path, "no header line 'time_s,<element>,...'")
         header = [s.strip() for s in head.text.split(",")]
@@ -217,7 +237,7 @@ class WideCSVReader(RecordingReader):
     def _frames(self) -> Iterator[FrameRow]:
         n = self.header.layout.n_elements
         count = 0
-        for line in self._lines.data_lines():
+        for line in self.lines.data_lines():
             if self.version >= 2 and not line.ended:
                 self._cut(f"truncated: the file ends in the middle of line {line.number}")
                 return
@@ -238,32 +258,7 @@ class WideCSVReader(RecordingReader):
             )
 
 
-def read_wide_csv(
-    path: str | Path,
-    *,
-    quantity: str | None = None,
-    unit: str | None = None,
-    accept_truncated: bool = False,
-) -> Recording:
-    """Read a wide CSV (``time_s,<element>,...``).
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    quantity, unit : str, optional
-        Needed when the file has no ``# quantity:`` / ``# unit:`` lines; if both are given
-        they must agree.
-    accept_truncated : bool
-        Read a file that holds fewer frames than its ``# frames:`` line declares, or whose
-        last line was cut, up to its last complete frame (with a warning).
-    """
-    with WideCSVReader(
-        path, quantity=quantity, unit=unit, accept_truncated=accept_truncated
-    ) as reader:
-        return reader.read()
-
-
+@writer("wide-csv", what="wide CSV (exact round trip)", suffixes=(".csv",))
 def write_wide_csv(rec: Recording, path: str | Path) -> Path:
     """Write ``rec`` as a wide CSV that :func:`read_wide_csv` reads back exactly.
 

@@ -30,12 +30,12 @@ import numpy as np
 
 from texsense.data import units
 from texsense.data.layout import Layout
-from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
+from texsense.io._registry import Probe
 from texsense.io._text import Line, TextLines, is_number, parse_float
 
-__all__ = ["XSensorReader", "read_xsensor"]
+__all__ = ["XSensorReader"]
 
 _GAP = 2  # empty columns between two sensors in the combined grid
 # statistic -> (label prefix, is a pressure in the file's unit)
@@ -87,20 +87,50 @@ class _Frame:
     def sensors(self) -> list[_Block]:
         return [b for b in self.blocks if b.kind == "SENSOR"]
 
+    @property
+    def when(self) -> datetime:
+        """The time stamp (every frame that passes ``XSensorReader._complete`` has one)."""
+        if self.stamp is None:
+            raise RuntimeError(f"frame {self.number} has no Time line")
+        return self.stamp
+
 
 class XSensorReader(RecordingReader):
-    """An XSENSOR CSV export read a frame at a time (see :func:`read_xsensor`)."""
+    """Read an XSENSOR CSV export.
+
+    Parameters
+    ----------
+    path : str or Path
+        The export.
+    accept_truncated : bool
+        Read an export whose last frame was cut short without it (with a warning) instead
+        of refusing it.
+
+    Returns
+    -------
+    Recording
+        Pressure in N/cm² (converted from the file's ``Units:``), frames timed from each
+        frame's ``Time`` field relative to the first frame. Values that are not a number,
+        infinite or negative are invalid readings.
+    """
 
     format = "xsensor"
+    what = "XSENSOR CSV export"
+    sniff_order = 20
+
+    @classmethod
+    def sniff(cls, probe: Probe) -> bool:
+        """A ``File:`` first line and ``FRAME`` blocks."""
+        return probe.first.startswith("File:") and "FRAME" in probe.text
 
     def _read_header(self) -> Header:
         path = self.path
         self._lines = TextLines(path)
         unit = None
-        for line in self._lines:
+        for line in self.lines:
             f = _fields(line.text)
             if f and f[0] == "FRAME":
-                self._lines.push(line)
+                self.lines.push(line)
                 break
             if f and f[0] == "Units:":
                 value = f[1] if len(f) > 1 else ""
@@ -119,7 +149,7 @@ class XSensorReader(RecordingReader):
         sensors = first.sensors()
         if not sensors:
             raise FormatError(path, f"frame {first.number} has no SENSOR block", first.line)
-        self._t0 = first.stamp
+        self._t0 = first.when
         layout, self._members = _layout(path, sensors)
         self._signature = [b.signature() for b in first.blocks]
         to_ncm2 = units.factor(unit, "N/cm2")
@@ -139,15 +169,15 @@ class XSensorReader(RecordingReader):
                 "source": str(path),
                 "source_unit": unit,
                 "sensors": [s.name for s in sensors],
-                "start_time": first.stamp.isoformat(),
-            },  # type: ignore[union-attr]
+                "start_time": first.when.isoformat(),
+            },
             source_unit=unit,
             label_dtypes=dtypes,
         )
 
     def _next_frame(self) -> _Frame | None:
         """The next frame, complete; None at the end of the file or at a cut (noted)."""
-        start = self._lines.next_nonblank(",")
+        start = self.lines.next_nonblank(",")
         if start is None:
             return None
         f = _fields(start.text)
@@ -165,12 +195,12 @@ class XSensorReader(RecordingReader):
             ) from None
         block: _Block | None = None
         while True:
-            line = self._lines.peek()
+            line = self.lines.peek()
             if line is None or (
                 line.text.lstrip().startswith("FRAME") and _fields(line.text)[:1] == ["FRAME"]
             ):
                 break
-            next(self._lines)
+            next(self.lines)
             if not line.ended:
                 self._cut(
                     f"truncated: the file ends in the middle of line {line.number}, inside "
@@ -231,13 +261,13 @@ class XSensorReader(RecordingReader):
         check_declared_size(self.path, f"{block.kind} {block.name!r}", want, 2, at.number)
         values: list[float] = []
         while len(values) < want:
-            line = self._lines.peek()
+            line = self.lines.peek()
             if line is None or not line.ended:
                 return  # cut: the block stays incomplete
             row = _fields(line.text)
             if row and not is_number(row[0]):
                 return  # the next key: fewer values than declared (checked by the frame)
-            next(self._lines)
+            next(self.lines)
             if not row:
                 continue
             if block.kind == "SENSOR" and len(row) != block.cols:
@@ -277,17 +307,17 @@ class XSensorReader(RecordingReader):
         raise FormatError(self.path, f"frame {frame.number} {problem}", frame.line)
 
     def _frames(self) -> Iterator[FrameRow]:
-        frame = self._first
+        frame: _Frame | None = self._first
         n = self.header.layout.n_elements
         while frame is not None:
             values = np.empty(n)
             for s, members in zip(frame.sensors(), self._members, strict=True):
                 values[members] = s.values.ravel()  # type: ignore[union-attr]
             sensors = frame.sensors()
-            labels = {"frame_number": frame.number}
+            labels: dict[str, float] = {"frame_number": frame.number}
             for si, stat, name, scale in self._stats:
                 labels[name] = sensors[si].stats.get(stat, np.nan) * scale
-            t = (frame.stamp - self._t0).total_seconds()  # type: ignore[operator]
+            t = (frame.when - self._t0).total_seconds()
             yield FrameRow(values, t, frame.line, labels)
             frame = self._next_frame()
 
@@ -326,25 +356,3 @@ def _layout(path: Path, sensors: list[_Block]) -> tuple[Layout, list[np.ndarray]
         cells = (np.arange(s.rows)[:, None] * cols + off + np.arange(s.cols)[None, :]).ravel()
         regions[s.name] = cell_to_element[cells]
     return layout.with_regions(regions), [regions[s.name] for s in sensors]
-
-
-def read_xsensor(path: str | Path, *, accept_truncated: bool = False) -> Recording:
-    """Read an XSENSOR CSV export.
-
-    Parameters
-    ----------
-    path : str or Path
-        The export.
-    accept_truncated : bool
-        Read an export whose last frame was cut short without it (with a warning) instead
-        of refusing it.
-
-    Returns
-    -------
-    Recording
-        Pressure in N/cm² (converted from the file's ``Units:``), frames timed from each
-        frame's ``Time`` field relative to the first frame. Values that are not a number,
-        infinite or negative are invalid readings.
-    """
-    with XSensorReader(path, accept_truncated=accept_truncated) as reader:
-        return reader.read()

@@ -9,14 +9,9 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from texsense.apps.alerts import Alert, Event, ExposureTracker
     from texsense.data.protocol import Frame, ProtocolError
+    from texsense.monitor.devices import IIOSource, MQTTSource, SerialSource
     from texsense.monitor.live import Monitor, Recorder
-    from texsense.monitor.sources import (
-        IIOSource,
-        MQTTSource,
-        ReplaySource,
-        SerialSource,
-        Source,
-    )
+    from texsense.monitor.sources import ReplaySource, Source
     from texsense.monitor.store import EventStore
     from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 
@@ -26,10 +21,8 @@ _LAZY = {
     **dict.fromkeys(("Alert", "Event", "ExposureTracker"), "texsense.apps.alerts"),
     **dict.fromkeys(("Monitor", "Recorder"), "texsense.monitor.live"),
     **dict.fromkeys(("Frame", "ProtocolError"), "texsense.data.protocol"),
-    **dict.fromkeys(
-        ("IIOSource", "MQTTSource", "ReplaySource", "SerialSource", "Source"),
-        "texsense.monitor.sources",
-    ),
+    **dict.fromkeys(("ReplaySource", "Source"), "texsense.monitor.sources"),
+    **dict.fromkeys(("IIOSource", "MQTTSource", "SerialSource"), "texsense.monitor.devices"),
     **dict.fromkeys(("VirtualBedSource", "VirtualSeatSource"), "texsense.monitor.virtual"),
     "EventStore": "texsense.monitor.store",
 }

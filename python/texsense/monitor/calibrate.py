@@ -32,14 +32,14 @@ import numpy as np
 from texsense.calibration.checks import parse_pressure
 from texsense.calibration.session import CHECK_TOLERANCE, CalibrationSession, CheckReport
 from texsense.compensation.pipeline import Pipeline
-from texsense.compensation.stages import Convert
+from texsense.compensation.stages import Convert, StageChain
 from texsense.data.files import make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
 from texsense.monitor.sources import blocking
-from texsense.sim.spacer import PRESETS as SPACER_PRESETS
+from texsense.sensor.materials import PRESETS as SPACER_PRESETS
 
 __all__ = ["DEFAULT_FRAMES", "MAX_FRAMES", "STEPS", "PageCalibration", "StepError"]
 
@@ -380,7 +380,7 @@ def _unused_stem(folder: Path, stem: str, recordings: dict[str, Recording]) -> s
 
 
 def _write(
-    folder: Path, stem: str, chain: Any, recordings: dict[str, Recording]
+    folder: Path, stem: str, chain: StageChain, recordings: dict[str, Recording]
 ) -> dict[str, Path]:
     """The step recordings and then the chain (atomic writes: texsense.data.files)."""
     make_folder(folder, "recordings folder")

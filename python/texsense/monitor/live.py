@@ -21,7 +21,7 @@ import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -39,6 +39,11 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
+
+if TYPE_CHECKING:  # the calibration and models come from the caller; their modules load there
+    from texsense.apps.bed import BedWatch
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.pipeline import Pipeline
 
 __all__ = ["Monitor", "Recorder"]
 
@@ -204,12 +209,12 @@ class Monitor:
         self,
         source: Source,
         *,
-        pipeline: Any = None,
+        pipeline: Pipeline | None = None,
         tracker: ExposureTracker | None = None,
-        posture_model: Any = None,
+        posture_model: PostureModel | None = None,
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
-        bed: Any = None,
+        bed: BedWatch | None = None,
         mode: str | None = None,
     ) -> None:
 
@@ -226,6 +231,8 @@ class Monitor:
         if bed is not None:
             if posture_model is None:
                 raise ParameterError("bed monitoring needs a posture model that reports sides")
+            if posture_model.classes_ is None:
+                raise ParameterError("bed monitoring needs a trained posture model")
             unknown = [str(c) for c in posture_model.classes_ if str(c) not in BANDS]
             if unknown:
                 raise ParameterError(
@@ -340,7 +347,7 @@ class Monitor:
         self.changes += 1
         return n
 
-    def use_calibration(self, pipeline: Any, path: Path | str | None = None) -> None:
+    def use_calibration(self, pipeline: Pipeline, path: Path | str | None = None) -> None:
         """Show pressure through ``pipeline`` from the next frame on (a calibration just made
         on the page, :mod:`texsense.monitor.calibrate`); an event ``calibrated`` says when.
         A recording in progress goes on (its raw file is complete; a pressure file starts
@@ -429,7 +436,7 @@ class Monitor:
         if self._t_first is None:
             self._t_first = frame.t
         alerts = self.mode.alerts and not self.raw_only
-        exposure_events = self.tracker.step(frame.t, pressure) if alerts else []
+        exposure_events = self.tracker.step(pressure, frame.t) if alerts else []
         if self.recorder is not None:
             self.recorder.append(frame, pressure, measured)
         frame_stats, load = self._stats_of(frame.t, pressure)
@@ -437,7 +444,7 @@ class Monitor:
         bed = None
         if self.bed is not None:
             exposure_events += self.bed.step(
-                frame.t, pressure, posture["label"] if posture else None
+                pressure, posture["label"] if posture else None, frame.t
             )
             bed = self.bed.status(frame.t)
         for e in exposure_events:  # name the places (the bed's regions are this frame's)
@@ -530,7 +537,7 @@ class Monitor:
         label, confidence = self.posture_model.predict_with_confidence(pressure[None, :])
         conf = float(confidence[0])
         return {
-            "label": str(self._vote.step(t, str(label[0]), conf)),
+            "label": str(self._vote.step(str(label[0]), t, conf)),
             "frame_label": str(label[0]),
             "confidence": conf,
             "window_s": POSTURE_WINDOW_S,

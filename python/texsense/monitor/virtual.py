@@ -10,9 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from texsense.calibration.workflows import bed_calibration, seat_calibration
+from texsense.compensation.stages import StageChain
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
-from texsense.monitor.sources import Source, _pace
+from texsense.monitor.sources import Source, SourceOptions, _pace
 from texsense.sim.bed import BED_CONVERTERS, Sleeper, bed_mat, night_frames, night_plan
 from texsense.sim.mat import VirtualMat
 from texsense.sim.seated import POSTURES, SEAT_FAILURES, Subject, posture_pressure
@@ -30,6 +32,19 @@ class VirtualSeatSource(Source):
     """
 
     name = "virtual seat"
+    scheme = "virtual"
+    summary = "a simulated person on the thesis's 96-element textile seat (the default)"
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """``virtual``."""
+        return cls(speed=options.speed)
+
+    @classmethod
+    def default_calibration(cls) -> StageChain:
+        """The seat calibrated as a user would
+        (:func:`texsense.calibration.workflows.seat_calibration`)."""
+        return seat_calibration()
 
     def __init__(
         self,
@@ -103,6 +118,19 @@ class VirtualBedSource(Source):
     ``away_s`` after every ``positions_per_stay``."""
 
     name = "virtual bed"
+    scheme = "virtual-bed"
+    summary = "a simulated sleeper on the virtual 64 x 32 bed mat"
+
+    @classmethod
+    def from_option(cls, argument: str, options: SourceOptions) -> Source:
+        """``virtual-bed``."""
+        return cls(speed=options.speed)
+
+    @classmethod
+    def default_calibration(cls) -> StageChain:
+        """The bed mat calibrated as a user would
+        (:func:`texsense.calibration.workflows.bed_calibration`)."""
+        return bed_calibration()
 
     def __init__(
         self,

@@ -22,74 +22,13 @@ Stresses in N/cm², compressions in fractions of the thickness, times in s.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-
 import numpy as np
 import numpy.typing as npt
 
 from texsense.exceptions import ParameterError
+from texsense.sensor.materials import IwanMaterial
 
-__all__ = ["IwanBank", "IwanMaterial"]
-
-
-@dataclass(frozen=True)
-class IwanMaterial:
-    """Parameters of the Iwan spacer law (see the module docstring)."""
-
-    name: str
-    thickness_mm: float
-    p50_ncm2: float
-    densification: float = 0.85
-    cubic: float = 4.0
-    # (stiffness as a share of E, slip strength as a share of p50) per Jenkins element
-    elements: tuple[tuple[float, float], ...] = (
-        (12.0, 0.01),
-        (6.0, 0.02),
-        (3.0, 0.03),
-        (1.5, 0.04),
-        (0.7, 0.05),
-    )
-    base_load: float = 0.3
-    stiffening_strain: float = 0.35
-    relax_s: float = 2000.0
-    relax_exponent: float = 4.0
-    description: str = ""
-    variation: float = 0.05
-
-    def stiffness(self) -> float:
-        """Backbone modulus E so that the loading curve from rest passes through p50 at 50 %
-        (elements all slipping forwards carry Σ τ_i (b p50 + σ_b))."""
-        e = 0.5
-        share = sum(t for _, t in self.elements)
-        backbone = (self.p50_ncm2 - share * self.base_load * self.p50_ncm2) / (1 + share)
-        shape = e * (1 + self.cubic * e * e) / (1 - e / self.densification)
-        return backbone / shape
-
-    def validate(self) -> None:
-        """Raise :class:`ParameterError` on a bad value."""
-        if not self.thickness_mm > 0 or not self.p50_ncm2 > 0:
-            raise ParameterError(f"{self.name}: thickness and p50 must be > 0")
-        if not 0.5 < self.densification < 1.0:
-            raise ParameterError(f"{self.name}: densification must lie in (0.5, 1)")
-        if not 0 <= self.variation < 0.5:
-            raise ParameterError(f"{self.name}: variation must lie in [0, 0.5)")
-        if not self.elements or any(k <= 0 or t <= 0 for k, t in self.elements):
-            raise ParameterError(f"{self.name}: element stiffness and strength must be > 0")
-        if not self.relax_s > 0 or self.relax_exponent < 0:
-            raise ParameterError(f"{self.name}: relax_s must be > 0 and the exponent >= 0")
-
-    def varied(self, rng: np.random.Generator) -> IwanMaterial:
-        """One batch: slip strengths and relaxation time varied by ``variation``."""
-        f = float(np.exp(rng.normal(0.0, self.variation)))
-        return replace(
-            self,
-            elements=tuple((k, t * f) for k, t in self.elements),
-            relax_s=self.relax_s * float(np.exp(rng.normal(0.0, self.variation))),
-        )
-
-    def bank(self, scale: npt.NDArray[np.float64]) -> IwanBank:
-        """The state of elements whose stresses are multiplied by ``scale``."""
-        return IwanBank(self, np.asarray(scale, dtype=np.float64))
+__all__ = ["IwanBank"]
 
 
 class IwanBank:

@@ -32,9 +32,10 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.sensor.electrode import Electrode, wet_factor
+from texsense.sensor.materials import PRESETS
 from texsense.sensor.readout import CDC
 from texsense.sim.failures import FailureModel
-from texsense.sim.spacer import PRESETS, Spacer
+from texsense.sim.spacer import Spacer
 
 __all__ = ["CROSSTALK_AT_HALF", "MatScan", "VirtualMat"]
 

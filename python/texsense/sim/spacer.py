@@ -1,4 +1,6 @@
-"""Spacer materials of the virtual sensor: presets, specimen variation, and driving them.
+"""Spacer materials of the virtual sensor driven: specimen variation, the laws' states
+(banks) and driving them. The materials' parameters and presets are
+:mod:`texsense.sensor.materials`.
 
 The mechanics are in the Rust core (``crates/core/src/spacer.rs``, documented there): a
 foam/pile backbone, friction elements whose stress follows the backbone (rate-independent
@@ -8,11 +10,6 @@ path travelled (loops shift towards higher compression over many cycles) and slo
 creep with slower recovery (10²-10⁴ s). None of it is a Preisach model or a logarithmic
 step-response superposition — the two models the compensation uses — so accuracy tests do not
 grade themselves.
-
-Presets follow thesis §2.3.3 (compression at which the loading curve reaches the quoted
-pressure is 50 %): textile spacers of 3 mm (1.8 N/cm²) and 6 mm (2.3 N/cm²), PU foams of 7 mm
-and 13 mm (2.0 N/cm²) and a 9 mm foam (1.7 N/cm²) that keeps a permanent set of 0.6-0.8 mm
-after a compression and recovers over hours.
 
 Examples
 --------
@@ -27,7 +24,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -35,233 +32,74 @@ import numpy.typing as npt
 
 from texsense._core import SpacerBank
 from texsense.exceptions import ParameterError
-from texsense.sim.iwan import IwanBank, IwanMaterial
+from texsense.sensor.materials import (
+    PRESETS,
+    BoucWenMaterial,
+    IwanMaterial,
+    Material,
+    SpacerMaterial,
+)
+from texsense.sim.iwan import IwanBank
 
-__all__ = ["PRESETS", "BoucWenMaterial", "DriveResult", "Spacer", "SpacerMaterial"]
-
-
-def _check_material(m: SpacerMaterial | BoucWenMaterial) -> None:
-    """The checks every spacer material shares (its law's own are in the core)."""
-    if not m.thickness_mm > 0:
-        raise ParameterError(f"{m.name}: thickness must be > 0 mm, got {m.thickness_mm}")
-    if not m.p50_ncm2 > 0:
-        raise ParameterError(f"{m.name}: p50 must be > 0 N/cm², got {m.p50_ncm2}")
-    if not 0.5 < m.densification < 1.0:
-        raise ParameterError(f"{m.name}: densification must lie in (0.5, 1), got {m.densification}")
-    if not 0 <= m.variation < 0.5:
-        raise ParameterError(f"{m.name}: variation must lie in [0, 0.5)")
+__all__ = ["DriveResult", "Spacer", "bank_of"]
 
 
-@dataclass(frozen=True)
-class SpacerMaterial:
-    """Parameters of a spacer material (see the module docstring and spacer.rs).
+def bank_of(material: Material, scale: npt.NDArray[np.float64]) -> SpacerBank | IwanBank:
+    """The state of elements of ``material`` whose stresses are multiplied by ``scale``: the
+    core's bank of its law (``spacer.rs``, ``bouc_wen.rs``) or the Iwan bank."""
+    if isinstance(material, IwanMaterial):
+        return IwanBank(material, np.asarray(scale, dtype=np.float64))
+    if isinstance(material, BoucWenMaterial):
+        return _bouc_wen_bank(material, scale)
+    return _spacer_bank(material, scale)
 
-    Stresses are in N/cm², compressions in fractions of the thickness, times in s.
-    """
 
-    name: str
-    thickness_mm: float
-    p50_ncm2: float
-    densification: float = 0.86
-    backbone_m: float = 1.25
-    linear_share: float = 0.15
-    friction: tuple[tuple[float, float], ...] = ((0.09, 0.004), (0.14, 0.012), (0.14, 0.024))
-    creep_a: float = 0.0
-    creep_tc: float = 1.0
-    rest_rate: float = 1e-7
-    clutch: tuple[float, float] = (0.3, 0.108)
-    viscous: tuple[tuple[float, float], ...] = ((0.01, 0.1), (0.01, 1.0), (0.005, 10.0))
-    kelvin: tuple[tuple[float, float], ...] = ()
-    recovery_factor: float = 3.0
-    softening: tuple[tuple[float, float], ...] = ((0.03, 0.01), (0.05, 0.001))
-    softening_recovery_s: float = 3.0 * 3600.0
-    description: str = ""
-    variation: float = 0.05  # relative specimen-to-specimen spread (1 sigma)
+def _spacer_bank(m: SpacerMaterial, scale: npt.NDArray[np.float64]) -> SpacerBank:
+    """The first law's bank (``spacer.rs``)."""
+    amplitude, linear = m.backbone_amplitude()
 
-    @property
-    def friction_share(self) -> float:
-        """Share φ of the backbone stress carried by friction when fully dragged."""
-        return float(sum(w for w, _ in self.friction))
+    def table(rows: tuple[tuple[float, float], ...]) -> np.ndarray:
+        return np.asarray(rows, dtype=np.float64).reshape(-1, 2)
 
-    def backbone_amplitude(self) -> tuple[float, float]:
-        """Backbone amplitude A and linear stiffness E_lin so that the loading curve (friction
-        fully dragged) passes through p50 at 50 % compression."""
-        e = 0.5
-        shape = (e / (self.densification - e)) ** self.backbone_m
-        total = self.p50_ncm2 / ((1.0 + self.friction_share) * (1.0 + self.clutch[0]))
-        linear = self.linear_share * total / e
-        amplitude = (1.0 - self.linear_share) * total / shape
-        return amplitude, linear
+    return SpacerBank(
+        amplitude,
+        m.backbone_m,
+        m.densification,
+        linear,
+        table(m.friction),
+        m.creep_a,
+        m.creep_tc,
+        m.rest_rate,
+        m.clutch[0],
+        m.clutch[1],
+        table(m.viscous),
+        table(m.kelvin),
+        m.recovery_factor,
+        m.p50_ncm2,
+        table(m.softening),
+        m.softening_recovery_s,
+        np.ascontiguousarray(scale, dtype=np.float64),
+    )
 
-    def validate(self) -> None:
-        """Raise :class:`ParameterError` on a bad value (before the core sees it)."""
-        _check_material(self)
 
-    def varied(self, rng: np.random.Generator) -> SpacerMaterial:
-        """One batch of the material: friction and creep varied by ``variation`` (1 sigma)."""
-        f = float(np.exp(rng.normal(0.0, self.variation)))
-        return replace(
-            self,
-            friction=tuple((w * f, r) for w, r in self.friction),
-            creep_a=self.creep_a * float(np.exp(rng.normal(0.0, self.variation))),
-            clutch=(
-                self.clutch[0],
-                self.clutch[1] * float(np.exp(rng.normal(0.0, self.variation))),
-            ),
-        )
-
-    def bank(self, scale: npt.NDArray[np.float64]) -> SpacerBank:
-        """The core's state for elements whose stresses are multiplied by ``scale``."""
-        amplitude, linear = self.backbone_amplitude()
-
-        def table(rows: tuple[tuple[float, float], ...]) -> np.ndarray:
-            return np.asarray(rows, dtype=np.float64).reshape(-1, 2)
-
-        return SpacerBank(
-            amplitude,
-            self.backbone_m,
-            self.densification,
-            linear,
-            table(self.friction),
-            self.creep_a,
-            self.creep_tc,
-            self.rest_rate,
-            self.clutch[0],
-            self.clutch[1],
-            table(self.viscous),
-            table(self.kelvin),
-            self.recovery_factor,
-            self.p50_ncm2,
-            table(self.softening),
-            self.softening_recovery_s,
+def _bouc_wen_bank(m: BoucWenMaterial, scale: npt.NDArray[np.float64]) -> SpacerBank:
+    """The second law's bank (``bouc_wen.rs``)."""
+    try:
+        return SpacerBank.bouc_wen(
+            m.stiffness(),
+            m.exponent,
+            m.densification,
+            m.friction,
+            m.slip,
+            m.bw_n,
+            m.bw_beta,
+            m.creep_share,
+            m.creep_rate,
+            m.creep_exponent,
             np.ascontiguousarray(scale, dtype=np.float64),
         )
-
-
-@dataclass(frozen=True)
-class BoucWenMaterial:
-    """A spacer of the second law (``crates/core/src/bouc_wen.rs``): exponential backbone,
-    Bouc–Wen friction, Norton (power-law) creep that runs on time, moving or not. Another
-    family than the first law and than the compensation's models; used to check that results
-    do not depend on one simulator.
-
-    Stresses in N/cm², compressions in fractions of the thickness, times in s.
-    """
-
-    name: str
-    thickness_mm: float
-    p50_ncm2: float
-    densification: float = 0.85
-    exponent: float = 6.0
-    friction: float = 0.35
-    slip: float = 0.015
-    bw_n: float = 1.5
-    bw_beta: float = 0.6
-    creep_share: float = 0.3
-    creep_rate: float = 1e-3
-    creep_exponent: float = 2.0
-    description: str = ""
-    variation: float = 0.05
-
-    def stiffness(self) -> float:
-        """Backbone stiffness E so that the loading curve passes through p50 at 50 %."""
-        return self.p50_ncm2 / (
-            (1.0 + self.friction) * (1.0 + self.creep_share) * (np.exp(0.5 * self.exponent) - 1)
-        )
-
-    def validate(self) -> None:
-        """Raise :class:`ParameterError` on a bad value (before the core sees it)."""
-        _check_material(self)
-
-    def varied(self, rng: np.random.Generator) -> BoucWenMaterial:
-        """One batch of the material: friction and creep rate varied by ``variation``."""
-        return replace(
-            self,
-            friction=self.friction * float(np.exp(rng.normal(0.0, self.variation))),
-            creep_rate=self.creep_rate * float(np.exp(rng.normal(0.0, self.variation))),
-        )
-
-    def bank(self, scale: npt.NDArray[np.float64]) -> SpacerBank:
-        """The core's state for elements whose stresses are multiplied by ``scale``."""
-        try:
-            return SpacerBank.bouc_wen(
-                self.stiffness(),
-                self.exponent,
-                self.densification,
-                self.friction,
-                self.slip,
-                self.bw_n,
-                self.bw_beta,
-                self.creep_share,
-                self.creep_rate,
-                self.creep_exponent,
-                np.ascontiguousarray(scale, dtype=np.float64),
-            )
-        except ValueError as e:
-            raise ParameterError(f"{self.name}: {e}") from None
-
-
-PRESETS: dict[str, SpacerMaterial | BoucWenMaterial | IwanMaterial] = {
-    m.name: m
-    for m in (
-        SpacerMaterial(
-            "textile-3mm",
-            3.0,
-            1.8,
-            description="3D knit polyester spacer fabric, 3 mm (Müller Textil), 50 % at 1.8 N/cm²",
-        ),
-        SpacerMaterial(
-            "textile-6mm",
-            6.0,
-            2.3,
-            description="3D knit polyester spacer fabric, 6 mm (Müller Textil), 50 % at 2.3 N/cm²",
-        ),
-        SpacerMaterial(
-            "foam-7mm",
-            7.0,
-            2.0,
-            friction=((0.04, 0.008), (0.05, 0.02), (0.05, 0.05)),
-            creep_a=0.12,
-            kelvin=((0.004, 300.0), (0.006, 3000.0)),
-            description="soft open-cell PU foam, 7 mm, 50 % at 2.0 N/cm², small hysteresis",
-        ),
-        SpacerMaterial(
-            "foam-13mm",
-            13.0,
-            2.0,
-            friction=((0.08, 0.006), (0.11, 0.02), (0.11, 0.05)),
-            creep_a=0.12,
-            kelvin=((0.004, 300.0), (0.006, 3000.0)),
-            description="soft PU foam, 13 mm, 50 % at 2.0 N/cm², large hysteresis",
-        ),
-        SpacerMaterial(
-            "foam-9mm",
-            9.0,
-            1.7,
-            friction=((0.02, 0.006), (0.03, 0.02), (0.03, 0.05)),
-            creep_a=0.12,
-            kelvin=((0.16, 4.0),),
-            recovery_factor=720.0,
-            description="open-cell foam, 9 mm, 50 % at 1.7 N/cm²; after a compression it "
-            "recovers only to 8.2-8.4 mm, and to > 8.9 mm after hours",
-        ),
-        BoucWenMaterial(
-            "bouc-wen-6mm",
-            6.0,
-            2.3,
-            description="second law (Bouc–Wen friction, Norton creep on time), 6 mm, 50 % at "
-            "2.3 N/cm²: a spacer of another family for generalisation checks",
-        ),
-        IwanMaterial(
-            "iwan-6mm",
-            6.0,
-            2.3,
-            description="third law (Iwan bank of Jenkins elements with stiffening springs on a "
-            "stiffening backbone, viscoplastic relaxation), 6 mm, 50 % at 2.3 N/cm²: a spacer "
-            "of neither the textile nor the Bouc–Wen family, for generalisation checks",
-        ),
-    )
-}
+    except ValueError as e:
+        raise ParameterError(f"{m.name}: {e}") from None
 
 
 @dataclass
@@ -290,7 +128,7 @@ class Spacer:
 
     def __init__(
         self,
-        material: SpacerMaterial | BoucWenMaterial | IwanMaterial,
+        material: Material,
         n_specimens: int = 1,
         seed: int | None = None,
     ):
@@ -320,7 +158,7 @@ class Spacer:
         return cls(PRESETS[name], n_specimens, seed)
 
     def _new_bank(self) -> SpacerBank | IwanBank:
-        return self._effective.bank(self.scale)
+        return bank_of(self._effective, self.scale)
 
     @property
     def thickness_mm(self) -> float:

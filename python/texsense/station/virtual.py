@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
@@ -14,6 +14,10 @@ from texsense.monitor.sources import Source
 from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.station.broker import BrokerURL, mqtt_client
 from texsense.station.ward import MatConfig
+
+if TYPE_CHECKING:
+    from texsense.apps.posture import PostureModel
+    from texsense.compensation.stages import StageChain
 
 __all__ = ["VirtualMats", "frame_payload"]
 
@@ -82,10 +86,10 @@ class VirtualMats:
 
     def configs(
         self,
-        seat_calibration: Any,
-        bed_calibration: Any,
+        seat_calibration: StageChain,
+        bed_calibration: StageChain | None,
         reposition_min: float = 20.0,
-        bed_model: Any = None,
+        bed_model: PostureModel | None = None,
         turn_every_min: float = 120.0,
     ) -> list[MatConfig]:
         """The station's view of these mats (the seats share the seat's calibration, the beds

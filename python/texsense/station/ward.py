@@ -39,7 +39,7 @@ from collections import OrderedDict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -62,6 +62,10 @@ from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 from texsense.station.broker import BrokerURL, check_mat_id, mqtt_client
 from texsense.station.tiles import BlockMap
+
+if TYPE_CHECKING:
+    from texsense.apps.posture.model import PostureModel
+    from texsense.compensation.stages import StageChain
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -94,7 +98,7 @@ class MatConfig:
 
     id: str
     layout: Layout
-    calibration: Any = None
+    calibration: StageChain | None = None
     quantity: str = "capacitance"
     source: str = "mqtt"
     reposition_min: float = 20.0
@@ -102,7 +106,7 @@ class MatConfig:
     #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
     #: regions (:class:`texsense.apps.bed.BedWatch`); the model's labels must be sides.
     bed: bool = False
-    posture_model: Any = None
+    posture_model: PostureModel | None = None
     turn_every_min: float = 120.0
 
 
@@ -420,7 +424,7 @@ class Station:
         mats: list[MatConfig],
         *,
         topic: str = "texsense/+/frames",
-        store: Any = None,
+        store: EventStore | None = None,
         record_dir: Path | str = "recordings",
         min_stale_s: float = 0.0,
         refuse_after_s: float = 10.0,

@@ -11,7 +11,7 @@ reports the accuracy per window beside the accuracy per frame.
 Examples
 --------
 >>> vote = WindowVote(window_s=5.0)
->>> [vote.step(t, label) for t, label in enumerate(["sit", "sit", "lean", "sit", "lean"])]
+>>> [vote.step(label, t) for t, label in enumerate(["sit", "sit", "lean", "sit", "lean"])]
 ['sit', 'sit', 'sit', 'sit', 'sit']
 """
 
@@ -45,8 +45,11 @@ class WindowVote:
         self._votes.clear()
         return self
 
-    def step(self, t: float, label: Hashable, confidence: float = math.nan) -> Any:
-        """Add the prediction at time ``t`` (s, not decreasing) and return the window's label."""
+    def step(self, label: Hashable, t: float, confidence: float = math.nan) -> Any:
+        """Add the prediction at time ``t`` (s, not decreasing) and return the window's label
+        (time after the value, as the stages' and trackers' ``step``)."""
+        if isinstance(t, str) or not isinstance(t, int | float | np.floating | np.integer):
+            raise TypeError(f"step(label, t): the time comes second, got {type(t).__name__}")
         if self._votes and t < self._votes[-1][0]:
             raise ParameterError(f"times must not decrease ({t} after {self._votes[-1][0]})")
         weight = confidence if math.isfinite(confidence) and confidence > 0 else 1.0
@@ -81,6 +84,6 @@ def window_vote(
     for k in range(t.size):
         if k and (seq[k] != seq[k - 1] or t[k] < t[k - 1]):
             vote.reset()
-        out[k] = vote.step(float(t[k]), y[k].item() if hasattr(y[k], "item") else y[k],
+        out[k] = vote.step(y[k].item() if hasattr(y[k], "item") else y[k], float(t[k]),
                            float(conf[k]))  # fmt: skip
     return out

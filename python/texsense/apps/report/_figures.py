@@ -23,17 +23,6 @@ CMAP = "viridis"
 SMALL, NORMAL = 7.5, 9
 
 
-def pyplot() -> Any:
-    """matplotlib.pyplot on the Agg backend, with TrueType fonts in PDFs (copyable text)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    matplotlib.rcParams["pdf.fonttype"] = 42
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def draw_values(
     ax: Axes,
     layout: Layout,

@@ -11,11 +11,10 @@ from typing import TYPE_CHECKING
 from texsense.apps.report._figures import (
     health_figure,
     maps_figure,
-    pyplot,
     series_figure,
     sides_figure,
 )
-from texsense.data.files import write_text
+from texsense.data.files import pyplot, write_text
 
 if TYPE_CHECKING:
     from texsense.apps.report._content import ReportContent, Table

@@ -12,11 +12,10 @@ from texsense.apps.report._figures import (
     SMALL,
     health_figure,
     maps_figure,
-    pyplot,
     series_figure,
     sides_figure,
 )
-from texsense.data.files import atomic_path
+from texsense.data.files import atomic_path, pyplot
 
 if TYPE_CHECKING:
     from texsense.apps.report._content import ReportContent, Table

@@ -237,23 +237,23 @@ def identify_lsq(
     ``thesis_prior``) the weight of the thesis method's table as a prior are chosen by
     cross-validation on held-out reversal curves unless given. The prior of each fold is
     identified without that fold's held-out falling curves."""
-    u = np.asarray(u, dtype=np.float64)
-    p = np.asarray(p, dtype=np.float64)
-    ok = np.isfinite(u) & np.isfinite(p)
-    u, p = u[ok], p[ok]
-    if u.size < 10 or np.ptp(u) <= 0:
+    u_all = np.asarray(u, dtype=np.float64)
+    p_all = np.asarray(p, dtype=np.float64)
+    ok = np.isfinite(u_all) & np.isfinite(p_all)
+    x, y = u_all[ok], p_all[ok]
+    if x.size < 10 or np.ptp(x) <= 0:
         raise ParameterError("least squares needs at least 10 samples over a non-zero input range")
-    u_min, u_max = float(u.min()), float(u.max())
+    u_min, u_max = float(x.min()), float(x.max())
 
     def thesis_table(exclude: np.ndarray | None) -> np.ndarray | None:
         try:
-            return identify_thesis(u, p, grid, exclude=exclude).everett
+            return identify_thesis(x, y, grid, exclude=exclude).everett
         except ParameterError:  # the fold holds out too many of the curves
             return None
 
     res = fit_everett_lsq(
-        u,
-        p,
+        x,
+        y,
         grid=grid,
         cells=cells,
         smoothing=smoothing,
@@ -276,7 +276,7 @@ def identify_lsq(
             "validation_folds": res.folds,
             "fit_rmse": res.fit_rmse,
             "fold_mse": res.fold_mse,
-            "samples_used": int(u.size),
+            "samples_used": int(x.size),
             "prior": "thesis" if weight else None,
             "cv": [{**c.as_dict(), "rmse": r} for c, r in res.scores],
         },

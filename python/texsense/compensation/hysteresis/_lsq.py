@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -69,7 +70,7 @@ class Candidate:
             "prior_weight": self.prior_weight,
         }
 
-    def but(self, **changes: float) -> Candidate:
+    def but(self, **changes: Any) -> Candidate:
         """A copy with some settings changed."""
         return replace(self, **changes)
 
@@ -107,7 +108,7 @@ def design_entries(
     indptr, alpha, beta, coef = everett_terms(
         np.ascontiguousarray(u, dtype=np.float64), float(nodes[0]), float(nodes[-1])
     )
-    row = np.repeat(np.arange(u.size), np.diff(indptr.astype(np.int64)))
+    row = np.repeat(np.arange(u.size), np.diff(indptr.astype(np.int64)).astype(np.intp))
     step = nodes[1] - nodes[0]
     a = np.clip((alpha - nodes[0]) / step, 0.0, k - 1)
     b = np.clip((beta - nodes[0]) / step, 0.0, k - 1)
@@ -336,7 +337,7 @@ class _Problem:
             for f in [None, *range(self.n_folds)]:
                 table = prior(None if f is None else fold == f)
                 self.priors[f] = None if table is None else table[i, j]
-        self._cache: dict[tuple, tuple] = {}
+        self._cache: dict[tuple[int, int, float], _System] = {}
         self.fold_mse: dict[Candidate, list[float]] = {}
 
     def system(self, alpha_cells: int, d_cells: int, spacing: float) -> _System:

@@ -9,23 +9,14 @@ import numpy.typing as npt
 
 from texsense.compensation.hysteresis._model import HysteresisModel
 from texsense.compensation.hysteresis.validation import ValidationReport
-from texsense.data.files import save_figure
+from texsense.data.files import pyplot, save_figure
 
 __all__ = ["model_figure", "validation_figure", "validation_report_figure"]
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def model_figure(model: HysteresisModel, path: str | Path) -> Path:
     """Everett surface and the model's major loop with falling curves from 100/70/30 %."""
-    plt = _plt()
+    plt = pyplot()
     model._check_fitted()
     fig = plt.figure(figsize=(12, 4.8), layout="constrained")
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
@@ -65,7 +56,7 @@ def validation_figure(
     title: str = "",
 ) -> Path:
     """Measured and modelled output over the input, and the relative error (fig. 4.8/4.9)."""
-    plt = _plt()
+    plt = pyplot()
     u, y, m = (np.asarray(v, dtype=np.float64) for v in (u, measured, modelled))
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), layout="constrained")
     axes[0].plot(u, y, lw=0.8, label="measured")
@@ -98,7 +89,7 @@ def validation_report_figure(
     """Measured vs model over the input (loops) and the error along the record, with the
     worst places of a :class:`texsense.compensation.hysteresis.validation.ValidationReport`
     marked."""
-    plt = _plt()
+    plt = pyplot()
     u = np.asarray(inputs, dtype=np.float64)
     y = np.asarray(outputs, dtype=np.float64)
     m = report.modelled

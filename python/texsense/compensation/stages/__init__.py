@@ -36,6 +36,9 @@ Examples
 (4.0, False)
 """
 
+import importlib
+import pkgutil
+
 from texsense.compensation.health import FailureDetector
 from texsense.compensation.repair import Repair
 from texsense.compensation.stage import Stage
@@ -49,6 +52,17 @@ from texsense.compensation.stages.chain import (
 )
 from texsense.compensation.stages.convert import Convert, Linear
 from texsense.compensation.stages.spacer import Drift, Hysteresis
+
+
+def _load_stages() -> None:
+    """Import every public module of this folder: a stage defined there registers itself
+    (:data:`STAGES`), so a new stage is one module here plus its tests."""
+    for info in pkgutil.iter_modules(__path__):
+        if not info.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{info.name}")
+
+
+_load_stages()
 
 __all__ = [
     "STAGES",

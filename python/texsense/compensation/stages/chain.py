@@ -12,8 +12,7 @@ import numpy.typing as npt
 from texsense.compensation.drift import DriftModel
 from texsense.compensation.health import FailureDetector
 from texsense.compensation.hysteresis import HysteresisModel
-from texsense.compensation.repair import Repair
-from texsense.compensation.stage import Stage, Stream, time_steps
+from texsense.compensation.stage import STAGES, Stage, Stream, time_steps
 from texsense.compensation.stages.convert import Convert, Linear
 from texsense.compensation.stages.spacer import Drift, Hysteresis
 from texsense.data.layout import Layout
@@ -24,11 +23,6 @@ from texsense.exceptions import FormatError, NotFittedError, ParameterError
 __all__ = ["STAGES", "StageChain", "load_chain", "load_stage", "stage_from_dict"]
 
 S = TypeVar("S", bound=Stage)
-
-#: Every stage by its name in files.
-STAGES: dict[str, type[Stage]] = {
-    s.name: s for s in (FailureDetector, Convert, Linear, Hysteresis, Drift, Repair)
-}
 
 
 def stage_from_dict(content: Any, source: str | Path = "<dict>") -> Stage:

@@ -125,7 +125,7 @@ class Drift(Stage):
 
     #: learned: γ and the kernel; how well γ fitted the held steps (after fit only)
     model_: DriftModel
-    step_fit_: StepFit
+    step_fit_: StepFit | None
 
     def __init__(self, kind: str = "log", rest_rate: float = 0.0) -> None:
         self.kind = kind
@@ -138,9 +138,8 @@ class Drift(Stage):
 
     def fit(self, steps: Sequence[Any]) -> Drift:
         """γ (and the kernel) from held steps (:func:`texsense.compensation.drift.split_steps`)."""
-        model, self.step_fit_ = DriftModel.fit(
-            list(steps), kind=self.kind, rest_rate=float(self.rest_rate)
-        )
+        model = DriftModel.fit_steps(list(steps), kind=self.kind, rest_rate=float(self.rest_rate))
+        self.step_fit_ = model.step_fit_
         return self.set_fitted(model=model)
 
     def _prepare(self) -> None:
