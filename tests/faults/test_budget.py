@@ -158,7 +158,9 @@ def test_declared_sizes_are_refused_within_the_budget(outcomes, fault_row):
             line = one_line(rc, err, path.name)
             assert any(s in line for s in said.split("|")), (case, line)
         assert not Path(str(path) + ".out.h5").exists()
-        fault_row("declares more", case, "clear error", "info, convert under a 64 MiB budget")
+        fault_row(
+            "declares more", case, "clear error", "info, convert under a 64 MiB budget", cases=2
+        )
     grown = peak_kib - base_kib
     assert grown <= BUDGET_KIB + CONSTANT_KIB, f"the child grew by {grown} KiB"
     fault_row(
@@ -191,7 +193,7 @@ def test_a_ward_line_or_an_option_cannot_allocate_a_grid(tmp_path, fault_row):
     for argv, (rc, _out, err) in zip(argvs, results, strict=True):
         one_line(rc, err, "100000 x 100000")
         fault_row("declares more", f"texsense {argv[0]} with a grid of 100000 x 100000",
-                  "clear error")  # fmt: skip
+                  "clear error", cases=1)  # fmt: skip
     assert peak_kib - base_kib <= BUDGET_KIB + CONSTANT_KIB
 
 
@@ -211,7 +213,7 @@ def test_playback_of_a_file_beyond_the_budget_is_refused(outcomes, monkeypatch, 
             r = c.get(f"/api/playback/{path.name}")
             assert r.status_code == 422 and path.name in r.json()["detail"], (case, r.text)
         fault_row("declares more", f"the {len(cases)} files in the monitor's playback",
-                  "refused")  # fmt: skip
+                  "refused", cases=len(cases))  # fmt: skip
     with pytest.raises(FormatError, match="memory budget"):
         from texsense.io import load
 

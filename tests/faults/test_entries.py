@@ -72,8 +72,12 @@ def test_the_command_line_never_waits_on_an_entry(tmp_path, fault_row):
         for _ in commands:
             one_line(*results[k][::2], name, said)
             k += 1
-        fault_row("not a file", f"{name} ({said}) named to info, convert, plot, report",
-                  "clear error")  # fmt: skip
+        fault_row(
+            "not a file",
+            f"{name} ({said}) named to info, convert, plot, report",
+            "clear error",
+            cases=len(commands),
+        )
     rc, out, err = results[-1]
     # ok.h5 only: out.h5 leads out of the folder, the rest are no files
     assert rc == 0 and re.search(r"frames +5 ", out) and "ok.h5" in out, err
@@ -129,9 +133,14 @@ def test_a_monitor_never_waits_on_its_folder(tmp_path, fault_row):
                 assert status == 404 and took < 2.0, (name, route, method, status, took)
         for name in KINDS:
             assert sum(name in line for line in m.log().splitlines()) == 1, m.log()[-2000:]
-        fault_row("not a file", f"{len(KINDS) + 1} entries x {len(routes)} playback routes "
-                  "(and the listing) of a running monitor", "refused", "404 at once; each "
-                  "left out of the listing and said once")  # fmt: skip
+        fault_row(
+            "not a file",
+            f"{len(KINDS) + 1} entries x {len(routes)} playback routes "
+            "(and the listing) of a running monitor",
+            "refused",
+            "404 at once; each left out of the listing and said once",
+            cases=(len(KINDS) + 1) * len(routes) + 1,
+        )
         _starve_and_stop(m, fault_row)
     finally:
         if m.proc.poll() is None:
@@ -153,9 +162,14 @@ def _starve_and_stop(m: ChildServer, fault_row) -> None:
         assert status == 200 and took < 1.5, (path, status, took)
     busy = [a for a in answers if a[0] == 503]
     assert len(busy) >= 2, answers  # 2 read, 8 wait, the rest are told at once
-    fault_row("not a file", "12 requests for a file that takes long to read", "refused",
-              "2 read at once, 8 wait, 2 told 503 at once; the calibration panel, the status "
-              "and the live frame answered meanwhile")  # fmt: skip
+    fault_row(
+        "not a file",
+        "12 requests for a file that takes long to read",
+        "refused",
+        "2 read at once, 8 wait, 2 told 503 at once; the calibration panel, the status "
+        "and the live frame answered meanwhile",
+        cases=12,
+    )
     start = time.monotonic()
     m.proc.send_signal(signal.SIGTERM)
     m.proc.wait(timeout=10)

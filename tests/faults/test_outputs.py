@@ -127,7 +127,7 @@ def test_every_output_place_fails_the_same_clean_way(root, fault_row):
     for kind in PLACES:
         done = [name for k, name, _, _ in cases if k == kind]
         fault_row("output place", f"{kind}: {len(done)} commands", "clear error",
-                  ", ".join(done))  # fmt: skip
+                  ", ".join(done), cases=len(done))  # fmt: skip
 
 
 def test_a_read_only_file_system(root, fault_row):
@@ -158,7 +158,7 @@ def test_a_read_only_file_system(root, fault_row):
         line = one_line(rc, err)
         assert "ead-only" in line, (name, line)
     fault_row("output place", f"a read-only file system: {len(COMMANDS)} commands",
-              "clear error", ", ".join(COMMANDS))  # fmt: skip
+              "clear error", ", ".join(COMMANDS), cases=len(COMMANDS))  # fmt: skip
 
 
 def _big(folder: Path) -> tuple[Path, Path]:

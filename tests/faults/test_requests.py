@@ -100,7 +100,7 @@ def test_every_route_that_changes_state_asks_first(app, fault_row):
                 tried += 1
     fault_row("requests", f"{kind}: {len(unsafe)} state-changing routes x another site, "
               "bodies over the limit, odd bodies", "refused", f"{tried} requests: 403, 413, "
-              "4xx (never 500)")  # fmt: skip
+              "4xx (never 500)", cases=tried)  # fmt: skip
 
 
 def test_no_get_route_writes(app, fault_row):
@@ -113,7 +113,12 @@ def test_no_get_route_writes(app, fault_row):
                 r = client.get(_fill(path, alert) + query)
                 assert r.status_code < 500, (path, query, r.status_code, r.text[:200])
     assert _snapshot(folder) == before
-    fault_row("requests", f"{kind}: {len(gets)} GET routes (reports included)", "nothing written")
+    fault_row(
+        "requests",
+        f"{kind}: {len(gets)} GET routes (reports included)",
+        "nothing written",
+        cases=3 * len(gets),
+    )
 
 
 def _rss_kib(pid: int) -> int:
@@ -165,7 +170,7 @@ def test_a_300_mb_body_is_refused_before_it_is_read(tmp_path, fault_row):
     finally:
         m.stop()
     fault_row("requests", "PUT of 300 MB (announced, and chunked) to a real monitor", "refused",
-              f"413; the monitor grew by {max(grown, 0) // 1024} MiB")  # fmt: skip
+              f"413; the monitor grew by {max(grown, 0) // 1024} MiB", cases=2)  # fmt: skip
 
 
 def test_token_files_that_are_no_small_files(tmp_path, fault_row):
@@ -186,4 +191,4 @@ def test_token_files_that_are_no_small_files(tmp_path, fault_row):
         one_line(rc, err, words)
     assert peak_kib - base_kib < 64 * 1024
     fault_row("requests", f"{len(argvs)} token and password files: /dev/zero, a FIFO, 10 MB, "
-              "binary, missing", "clear error")  # fmt: skip
+              "binary, missing", "clear error", cases=len(argvs))  # fmt: skip

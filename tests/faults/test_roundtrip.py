@@ -140,4 +140,4 @@ def test_the_round_trip_table(fault_row):
         done, refused = OUTCOMES[f"{fmt}: read back"], OUTCOMES[f"{fmt}: refused before writing"]
         detail = f"{done} read back exactly, {refused} refused before writing"
         case = f"{fmt} writer x reader, {done + refused} generated recordings"
-        fault_row("round trip", case, "read back", detail)
+        fault_row("round trip", case, "read back", detail, cases=done + refused)

@@ -64,7 +64,7 @@ def test_every_numeric_option_refuses_what_lies_outside_its_range(fault_row):
         assert allowed.holds(action.type(_inside(allowed, kind))), (command, name)
     fault_row("settings", f"{len(OPTIONS)} numeric options of every command x values outside "
               "their range", "refused", f"{refused} of {tried} values refused (argparse, exit 2); "
-              "a value inside each range accepted")  # fmt: skip
+              "a value inside each range accepted", cases=tried)  # fmt: skip
 
 
 def test_out_of_range_options_end_to_end(tmp_path, fault_row):
@@ -81,7 +81,7 @@ def test_out_of_range_options_end_to_end(tmp_path, fault_row):
         assert err.strip().splitlines()[-1].startswith(f"texsense {argv[0]}"), err
         assert "argument " in err.strip().splitlines()[-1], err
     fault_row("settings", f"{len(argvs)} of them on the command line", "refused",
-              "usage and one error line naming the option, exit 2")  # fmt: skip
+              "usage and one error line naming the option, exit 2", cases=len(argvs))  # fmt: skip
 
 
 def _misspellings(key: str) -> list[str]:
@@ -135,7 +135,7 @@ def test_every_ward_key_is_checked(tmp_path, fault_row):
         read_config(path, 20.0)
     fault_row("settings", f"{tried + 1} ward files: every key misspelt and of the wrong type, "
               "ids a mat may not have, intervals out of range", "clear error",
-              "the nearest known key named")  # fmt: skip
+              "the nearest known key named", cases=tried + 1)  # fmt: skip
 
 
 def test_a_calibration_for_another_mat_is_refused(fault_row):
@@ -158,7 +158,7 @@ def test_a_calibration_for_another_mat_is_refused(fault_row):
             Pipeline(cal, lay)
     Pipeline(cal, made_for)  # its own mat
     fault_row("settings", f"a mat calibration applied to {len(others)} mats of the same element "
-              "count in other places", "refused", ", ".join(others))  # fmt: skip
+              "count in other places", "refused", ", ".join(others), cases=len(others))  # fmt: skip
 
 
 IMPOSSIBLE = {"pressure": [np.inf, -np.inf, np.nan, -5.0, 3e38, 2e5],
@@ -183,7 +183,7 @@ def test_impossible_readings_are_invalid_whatever_the_file_says(tmp_path, suffix
         assert int((~back.valid).sum()) == len(bad), (quantity, suffix)
         assert not back.valid[1, : len(bad)].any()
     case = f"inf, -inf, NaN, negative, beyond any sensor under valid = True ({suffix})"
-    fault_row("values", case, "invalid readings")
+    fault_row("values", case, "invalid readings", cases=sum(map(len, IMPOSSIBLE.values())))
 
 
 def test_values_that_are_no_numbers_are_refused(tmp_path, fault_row):
