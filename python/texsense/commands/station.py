@@ -221,7 +221,7 @@ def site_broker(args: argparse.Namespace) -> Any:
     url = parse_broker_url(args.broker)
     password = url.password
     if args.broker_password_file is not None:
-        password = resolve_token(None, args.broker_password_file, {})
+        password = resolve_token(None, args.broker_password_file, {}, "--broker-password-file")
     elif password is None and os.environ.get("TEXSENSE_BROKER_PASSWORD"):
         password = os.environ["TEXSENSE_BROKER_PASSWORD"]
     if password is not None and not url.username:
@@ -284,6 +284,8 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
         read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
     )
     if not mats and not args.virtual_mats:
+        if args.config:
+            raise FormatError(args.config, "no [[mat]]: a ward file names at least one mat")
         raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
     vm = None
     if args.virtual_mats:

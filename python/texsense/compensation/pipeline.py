@@ -53,7 +53,9 @@ def layout_mismatch(expected: Layout, given: Layout) -> str | None:
     if expected.shape is not None and expected.shape != given.shape:
         (r, c), (gr, gc) = expected.shape, given.shape  # type: ignore[misc]
         return f"a grid of {r} x {c}, not {gr} x {gc}"
-    if expected.cells is not None and not np.array_equal(expected.cells, given.cells):
+    if expected.cells is not None and (
+        given.cells is None or not np.array_equal(expected.cells, given.cells)
+    ):
         return "the same grid with its elements in other cells"
     return None
 

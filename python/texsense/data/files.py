@@ -62,6 +62,7 @@ __all__ = [
     "check_writable",
     "make_folder",
     "open_regular",
+    "read_regular",
     "read_small_text",
     "real_path",
     "regular_files",
@@ -436,6 +437,22 @@ def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | Non
     if not stat.S_ISREG(st.st_mode):
         return _kind(st.st_mode)
     return None
+
+
+def read_regular(path: str | Path, what: str) -> bytes:
+    """The bytes of a regular file that an option names (a model, a calibration, regions,
+    credentials), read without ever waiting on it (:func:`open_regular`) and only when its
+    size fits the memory budget (:func:`texsense.data.budget.check`): missing, a folder, a
+    FIFO, a device or a file larger than the budget is a
+    :class:`~texsense.exceptions.FormatError` naming it (``what`` says what it should have
+    been)."""
+    from texsense.data import budget
+
+    p = Path(path)
+    with open_regular(p) as f:
+        size = os.fstat(f.fileno()).st_size
+        budget.check(size, what, p)
+        return f.read(size + 1)
 
 
 def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:

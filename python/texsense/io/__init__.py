@@ -278,9 +278,10 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
             name = str(p.relative_to(folder))
             rec = rec.with_labels({**rec.labels, "file": np.full(rec.n_frames, name)})
         first = parts[0] if parts else rec
-        why = _differs(first, rec)
-        if why:
-            raise FormatError(p, f"{why} than {files[0].name}: a folder is read as one recording")
+        unlike = _differs(first, rec)
+        if unlike:
+            one = "a folder is read as one recording"
+            raise FormatError(p, f"{unlike} than {files[0].name}: {one}")
         if parts and rec.n_frames and parts[-1].n_frames:
             rec = _after(parts[-1], rec)
         parts.append(rec)

@@ -160,10 +160,15 @@ def safe_file(folder: Path, name: str) -> Path | None:
 
 
 def resolve_token(
-    token: str | None = None, token_file: str | Path | None = None, env: Any = None
+    token: str | None = None,
+    token_file: str | Path | None = None,
+    env: Any = None,
+    option: str = "--token-file",
 ) -> str | None:
     """The token from ``--token``, else ``--token-file`` (its first line), else the
-    environment variable :data:`TOKEN_ENV`; None when none is given.
+    environment variable :data:`TOKEN_ENV`; None when none is given. ``option`` names the
+    file's option in the errors (the station's ``--broker-password-file`` reads its password
+    the same way).
 
     Raises
     ------
@@ -177,9 +182,9 @@ def resolve_token(
     where = "--token"
     if token_file is not None:
         path = Path(token_file)
-        text = read_small_text(path, "--token-file", limit=4096)  # not /dev/zero, nor a FIFO
+        text = read_small_text(path, option, limit=4096)  # not /dev/zero, nor a FIFO
         token = text.strip().splitlines()[0].strip() if text.strip() else ""
-        where = f"--token-file {path}"
+        where = f"{option} {path}"
     elif token is None and env.get(TOKEN_ENV):
         token, where = env[TOKEN_ENV].strip(), f"${TOKEN_ENV}"
     if token is None:

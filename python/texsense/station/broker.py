@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
-from texsense.data.files import atomic_path
+from texsense.data.files import atomic_path, read_regular
 from texsense.exceptions import FormatError, ParameterError
 
 __all__ = [
@@ -360,10 +360,10 @@ def read_mat_credentials(path: Path) -> dict[str, str]:
     """The mats' passwords in ``path`` (TOML: ``[mats]`` ``id = "password"``); empty when the
     file does not exist yet."""
 
-    if not path.exists():
+    if not os.path.lexists(path):
         return {}
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(read_regular(path, "the mats' credentials").decode("utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise FormatError(path, f"cannot read the mats' credentials: {e}") from None
     mats = doc.get("mats", {})
