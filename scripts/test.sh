@@ -9,7 +9,7 @@ say "mypy";                  mypy
 say "stubtest";              MYPYPATH=python python -m mypy.stubtest texsense._core
 say "cargo fmt --check";     cargo fmt --all --check
 say "cargo clippy";          cargo clippy --quiet --all-targets -- -D warnings
-say "cargo test";            cargo test --quiet -p texsense-core
+say "cargo test";            cargo test --quiet -p texsense-core -p texsense-kernels -p texsense-mcu
 # the browser test drives Debian's chromium (docs/monitor.md); install it if we may
 if [ ! -x "${TEXSENSE_CHROMIUM:-/usr/bin/chromium}" ] && ! command -v chromium >/dev/null 2>&1; then
   if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
@@ -25,4 +25,30 @@ if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
 fi
 # the report tests read the PDFs back as text with poppler's pdftotext (docs/report.md)
 need_debian pdftotext poppler-utils "the report tests"
+# texsense on a mat's microcontroller (docs/embedded.md, tests/test_mcu.py): the C tests
+# build with gcc; the emulated Cortex-M4 needs Debian's rustc and its rust-src, the Arm
+# compiler with newlib, and QEMU; the header check runs cbindgen. One apt-get for all.
+mcu_missing=()
+mcu_need() {  # PROGRAM-OR-PATH PACKAGE
+  case "$1" in
+    /*) [ -e "$1" ] || mcu_missing+=("$2") ;;
+    *) command -v "$1" >/dev/null 2>&1 || mcu_missing+=("$2") ;;
+  esac
+}
+mcu_need gcc gcc
+mcu_need cbindgen cbindgen
+mcu_need /usr/bin/rustc rustc
+mcu_need "/usr/src/rustc-$(/usr/bin/rustc --version 2>/dev/null | cut -d' ' -f2)/library/core/src/lib.rs" rust-src
+mcu_need arm-none-eabi-gcc gcc-arm-none-eabi
+mcu_need /usr/lib/arm-none-eabi/newlib/rdimon.specs libnewlib-arm-none-eabi
+mcu_need qemu-system-arm qemu-system-arm
+if [ "${#mcu_missing[@]}" -gt 0 ]; then
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    say "installing Debian's ${mcu_missing[*]} for the microcontroller tests"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+      --no-install-recommends "${mcu_missing[@]}" >/dev/null
+  else
+    say "${mcu_missing[*]} missing and apt-get is not available as root: the microcontroller tests that need them are skipped"
+  fi
+fi
 say "pytest";                python -m pytest -q --durations=25 "$@"

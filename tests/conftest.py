@@ -30,12 +30,34 @@ _TOUR_FOLDER = pytest.StashKey[tempfile.TemporaryDirectory]()
 _TOUR_CANCEL = pytest.StashKey[threading.Event]()
 
 
+#: The C builds of tests/test_mcu.py (host, arm), started in the background when collected.
+MCU_BUILDS: dict[str, concurrent.futures.Future] = {}
+
+
+def _start_mcu_builds(session: pytest.Session) -> None:
+    """Build the C ABI and its test program for the host and the Cortex-M4 (tests/mcu/
+    build.py: a minute the first time, cached in target/mcu/) while other tests run."""
+    if session.config.option.collectonly or not any(
+        item.nodeid.startswith("tests/test_mcu.py") for item in session.items
+    ):
+        return
+    sys.path.insert(0, str(ROOT / "tests" / "mcu"))
+    import build
+
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcu")
+    for kind in ("host", "arm"):
+        MCU_BUILDS[kind] = pool.submit(build.build, kind)
+    pool.shutdown(wait=False)
+
+
 def pytest_collection_finish(session: pytest.Session) -> None:
     """Start the selected pages of the tour (every console block of the docs, about 2 min
     of child processes) now, in the background: the other tests run meanwhile. The
-    environment is this moment's (tests that change os.environ do not reach the tour)."""
+    environment is this moment's (tests that change os.environ do not reach the tour).
+    Start the C builds of the microcontroller tests too."""
     from tour import start_pages
 
+    _start_mcu_builds(session)
     pages = [
         item.callspec.params["page"]
         for item in session.items

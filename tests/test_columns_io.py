@@ -43,6 +43,26 @@ def test_drift_fit_gives_the_same_gamma_from_hdf5_and_csv(steps, capsys):
     assert results[0] < 0  # the virtual spacer relaxes at held compression
 
 
+def test_a_table_whose_named_columns_are_there_is_a_table_whatever_else_it_holds(
+    steps, tmp_path, capsys
+):
+    """An export that starts with time_s and holds a column without a unit (here the
+    specimen) was taken for a wide CSV; drift fit names its columns, so it is a table."""
+    _, csv = steps
+    cols = read_columns(csv)
+    export = tmp_path / "export.csv"
+    names = ("time_s", "compression_mm", "pressure_ncm2")
+    rows = zip(*(cols[n].tolist() for n in names), strict=True)
+    text = "time_s,compression_mm,pressure_ncm2,specimen\n"
+    export.write_text(text + "".join(f"{t!r},{c!r},{p!r},7\n" for t, c, p in rows), "utf-8")
+    assert not is_columns_csv(export) and is_columns_csv(export, names)
+    results = []
+    for path in (csv, export):
+        assert main(["drift", "fit", str(path), "--json"]) == 0
+        results.append(json.loads(capsys.readouterr().out)["gamma_common"])
+    assert results[1] == pytest.approx(results[0], rel=1e-9)
+
+
 def test_hysteresis_fit_apply_on_hdf5_writes_a_recording(tmp_path, capsys):
     cal, val = tmp_path / "cal.h5", tmp_path / "val.h5"
     assert main(["simulate", "calibration", "--seed", "1", "-o", str(cal)]) == 0

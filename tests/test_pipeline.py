@@ -318,7 +318,9 @@ def test_the_pipeline_follows_the_streaming_contract(mat_setup):
     rec = scan.capacitance
     pipe = Pipeline(cal, rec.layout, repair="idw8", drift=False)
     params = pipe.get_params()
-    assert list(params) == ["chain", "layout", "detect", "hysteresis", "drift", "repair"]
+    assert list(params) == [
+        "chain", "layout", "detect", "hysteresis", "drift", "repair", "capacity",
+    ]  # fmt: skip
     assert params["repair"] == "idw8" and params["drift"] is False
     step = inspect.signature(Pipeline.step).parameters
     assert list(step)[1:] == ["values", "valid", "t"]

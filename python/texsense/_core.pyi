@@ -1,6 +1,7 @@
 """Type stubs of the compiled core ``texsense._core`` (crates/python), checked against the
 module by ``stubtest`` in scripts/test.sh."""
 
+from collections.abc import Sequence
 from typing import Self, final
 
 import numpy as np
@@ -27,6 +28,7 @@ __all__ = [
     "SpacerBank",
     "__version__",
     "everett_terms",
+    "mcu_blob_info",
 ]
 
 __version__: str
@@ -205,24 +207,27 @@ class LocalRepair:
     def reset(self) -> None: ...
     def run(self, values: _F64, valid: _Bools) -> tuple[_F64, _U8]: ...
 
+_ChainStage = FailureDetector | Converter | Compensation | DriftBank | Curve | LocalRepair
+
 @final
 class Chain:
-    """detect -> convert -> compensation -> repair in one pass (crates/core/src/chain.rs)."""
+    """A mat's stages compiled, run in order (crates/core/src/chain.rs)."""
 
-    def __new__(
-        cls,
-        converter: Converter,
-        *,
-        detector: FailureDetector | None = None,
-        compensation: Compensation | None = None,
-        loading: Curve | None = None,
-        repair: LocalRepair | None = None,
-    ) -> Self: ...
+    def __new__(cls, n_elements: int, stages: Sequence[_ChainStage]) -> Self: ...
     @property
     def n_elements(self) -> int: ...
+    @property
+    def stage_names(self) -> list[str]: ...
     def reset(self) -> None: ...
     def state_bytes_per_element(self) -> int: ...
     def run(self, dt: _F64, readings: _F64, valid: _Bools) -> tuple[_F64, _U8]: ...
+    def snapshot(self) -> bytes: ...
+    def restore(self, state: bytes) -> None: ...
+    def mcu_blob(self) -> bytes: ...
+
+def mcu_blob_info(blob: bytes) -> tuple[int, list[str], int, int, int, int]:
+    """(elements, stage names, memory bytes, state bytes per element, scratch bytes per
+    element, fixed bytes) of a model blob, checked as the C side checks it."""
 
 def everett_terms(inputs: _F64, u_min: float, u_max: float) -> tuple[_U64, _F64, _F64, _F64]:
     """The Everett terms (indptr, alpha, beta, coef) of every sample of an input history."""

@@ -1,123 +1,194 @@
-//! The whole capacitance-to-pressure chain of a mat in one compiled pass over a `T x N` block:
-//! failure detection -> conversion -> Preisach + drift (or the first-loading curve) -> local
-//! repair of failed readings. Every stage is the kernel the stage uses on its own
-//! ([`FailureDetector`], [`Converter`], [`Compensation`], [`LocalRepair`]): the chain only
-//! runs them one after the other, so it gives the numbers of the stages run in turn.
+//! A mat's chain of stages compiled: the stages' own kernels run one after the other, as
+//! the chain file holds them, over a `T x N` block of frames (or one frame: `step` is the
+//! same code with T = 1).
 //!
-//! - **detect**: [`FailureDetector`]; without it a reading fails when the converter flagged
-//!   it or it is not a number;
-//! - **convert** (eq. 2.1 per element): [`Converter`];
-//! - **respond**: [`Compensation`] (eq. 4.15-4.22 and 5.8), or without hysteresis the
-//!   first-loading curve `p(e)`, or nothing (a linear calibration); failed readings are NaN
-//!   and leave the states untouched;
-//! - **repair** (thesis §6.5.2.5): [`LocalRepair`] of the readings that failed (code != 0).
+//! A [`Stage`] is one of the kernels the Python stages run: [`FailureDetector`] (`detect`),
+//! [`Converter`] (`convert` / `linear`), [`Compensation`] (`hysteresis`, or `hysteresis` and
+//! the `drift` right after it, QLV included), [`DriftBank`] (a `drift` on its own), the
+//! first-loading [`Curve`] (in place of `hysteresis`: an uncompensated system) and
+//! [`LocalRepair`] (`repair`). Any order runs, with the rules of the stage contract
+//! (`texsense.stage`): every reading carries a value and a validity; a stage that fails a
+//! reading makes it invalid (it stays so: a repaired reading is filled but still invalid);
+//! an invalid reading leaves the element's state untouched.
 //!
-//! Conversion and response run in one pass per block of elements (no intermediate array);
-//! `step` is the same code with T = 1.
+//! The per-reading failure code (`codes`, 0 = valid) is the code of the first detect stage
+//! that failed it; a reading that was invalid or not a number on input, or that a stage
+//! made invalid, and that no detect stage coded is [`code::OUT_OF_RANGE`]. A value that is
+//! not a number is never valid.
+//!
+//! Stages that work element by element (convert, compensation, drift, loading curve) run
+//! as one pass per block of elements in parallel (no intermediate array); a detect or repair
+//! stage, which reads the neighbours' readings of the same frame, is a pass of its own.
 
-use crate::compensation::Compensation;
-use crate::convert::{Converter, Curve};
+use crate::compensation::{Compensation, CompensationBlock};
+use crate::convert::{Converter, ConverterView, Curve};
 use crate::detect::{code, Changes, FailureDetector};
-use crate::drift::check_time_steps;
+use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
 use crate::par::{block_size, run_frames, FrameBlock};
 use crate::repair::LocalRepair;
+use crate::snapshot::{Reader, Writer};
+use texsense_kernels::blob::kind;
+use texsense_kernels::stage as rules;
 
 /// Element-samples per tile of frames in a batch (a float64 array of a tile is 1 MiB).
 const TILE_SAMPLES: usize = 1 << 17;
 
-/// The compression -> pressure stage.
+/// A reading invalid on input that no detect stage has coded yet.
+const UNSET: u8 = u8::MAX;
+
+/// The first 8 bytes of a snapshot.
+pub const SNAPSHOT_MAGIC: [u8; 8] = *b"TXSNSNAP";
+/// The snapshot format this build writes and reads.
+pub const SNAPSHOT_VERSION: u32 = 1;
+
+/// One stage of a compiled chain.
 #[derive(Debug, Clone)]
-pub enum Response {
-    /// Preisach (and drift): the compensated output.
+pub enum Stage {
+    /// `detect`: failure codes; failed readings become invalid.
+    Detect(FailureDetector),
+    /// `convert` or `linear` (eq. 2.1).
+    Convert(Converter),
+    /// `hysteresis` (eq. 4.15-4.22), with the `drift` that follows it (eq. 5.8, QLV
+    /// included) if any.
     Compensation(Compensation),
-    /// The first-loading curve (what an uncompensated system does).
+    /// A `drift` stage on its own (eq. 5.8).
+    Drift(DriftBank),
+    /// The first-loading curve in place of `hysteresis`.
     Loading(Curve),
-    /// The converted value itself (a linear calibration: no spacer model).
-    Direct,
+    /// `repair` (eq. 6.14 and the other local methods).
+    Repair(LocalRepair),
+}
+
+impl Stage {
+    /// The stage's name, as the Python stages name theirs.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Stage::Detect(_) => "detect",
+            Stage::Convert(_) => "convert",
+            Stage::Compensation(_) => "hysteresis",
+            Stage::Drift(_) => "drift",
+            Stage::Loading(_) => "loading curve",
+            Stage::Repair(_) => "repair",
+        }
+    }
+
+    fn kind(&self) -> u32 {
+        match self {
+            Stage::Detect(_) => kind::DETECT,
+            Stage::Convert(_) => kind::CONVERT,
+            Stage::Compensation(_) => kind::HYSTERESIS,
+            Stage::Drift(_) => kind::DRIFT,
+            Stage::Loading(_) => kind::LOADING,
+            Stage::Repair(_) => kind::REPAIR,
+        }
+    }
+
+    /// Number of elements (None: a curve, the same for every element).
+    fn len(&self) -> Option<usize> {
+        match self {
+            Stage::Detect(d) => Some(d.len()),
+            Stage::Convert(c) => Some(c.len()),
+            Stage::Compensation(c) => Some(c.len()),
+            Stage::Drift(d) => Some(d.len()),
+            Stage::Loading(_) => None,
+            Stage::Repair(r) => Some(r.len()),
+        }
+    }
+
+    fn elementwise(&self) -> bool {
+        !matches!(self, Stage::Detect(_) | Stage::Repair(_))
+    }
+
+    fn reset(&mut self) {
+        match self {
+            Stage::Detect(d) => d.reset(),
+            Stage::Compensation(c) => c.reset(),
+            Stage::Drift(d) => d.reset(),
+            Stage::Repair(r) => r.reset(),
+            Stage::Convert(_) | Stage::Loading(_) => {}
+        }
+    }
+
+    fn state_bytes_per_element(&self) -> usize {
+        let f64s = std::mem::size_of::<f64>();
+        match self {
+            Stage::Detect(d) => d.state_bytes_per_element() + 3 * f64s,
+            Stage::Convert(_) => 2 * f64s,
+            Stage::Compensation(c) => c.state_bytes_per_element(),
+            Stage::Drift(d) => d.state_bytes_per_element(),
+            Stage::Loading(_) => 0,
+            Stage::Repair(r) => r.state_bytes_per_element(),
+        }
+    }
+}
+
+/// The scratch of a batch (reused from one call to the next).
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    values: Vec<f64>,
+    changes: Changes,
 }
 
 /// The chain of one mat.
 #[derive(Debug, Clone)]
 pub struct Chain {
-    detector: Option<FailureDetector>,
-    converter: Converter,
-    response: Response,
-    repair: Option<LocalRepair>,
-    changes: Changes,
+    n: usize,
+    stages: Vec<Stage>,
+    scratch: Scratch,
+}
+
+/// Where the values of a tile are between passes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum At {
+    Readings,
+    Out,
+    Scratch,
 }
 
 impl Chain {
-    /// Assemble a chain; every stage must have the same number of elements.
-    pub fn new(
-        detector: Option<FailureDetector>,
-        converter: Converter,
-        response: Response,
-        repair: Option<LocalRepair>,
-    ) -> Result<Self, CoreError> {
-        let n = converter.len();
-        if let Some(d) = &detector {
-            check_len("detector elements", d.len(), n)?;
-        }
-        if let Response::Compensation(c) = &response {
-            check_len("compensation elements", c.len(), n)?;
-        }
-        if let Some(r) = &repair {
-            check_len("repair elements", r.len(), n)?;
+    /// Assemble a chain of `n` elements from its stages in order; every stage must have `n`
+    /// elements.
+    pub fn new(n: usize, stages: Vec<Stage>) -> Result<Self, CoreError> {
+        for s in &stages {
+            if let Some(len) = s.len() {
+                check_len("stage elements", len, n)?;
+            }
         }
         Ok(Self {
-            detector,
-            converter,
-            response,
-            repair,
-            changes: Changes::default(),
+            n,
+            stages,
+            scratch: Scratch::default(),
         })
     }
 
     /// Number of elements.
     pub fn len(&self) -> usize {
-        self.converter.len()
+        self.n
     }
 
     /// True without elements.
     pub fn is_empty(&self) -> bool {
-        self.converter.is_empty()
+        self.n == 0
+    }
+
+    /// The stages in order.
+    pub fn stages(&self) -> &[Stage] {
+        &self.stages
     }
 
     /// Every stage back to its initial state.
     pub fn reset(&mut self) {
-        if let Some(d) = &mut self.detector {
-            d.reset();
-        }
-        if let Response::Compensation(c) = &mut self.response {
-            c.reset();
-        }
-        if let Some(r) = &mut self.repair {
-            r.reset();
-        }
+        self.stages.iter_mut().for_each(Stage::reset);
     }
 
     /// Bytes of state per element, all stages together (parameters per element included).
     pub fn state_bytes_per_element(&self) -> usize {
-        let f64s = std::mem::size_of::<f64>();
-        let response = match &self.response {
-            Response::Compensation(c) => c.state_bytes_per_element(),
-            Response::Loading(_) | Response::Direct => 0,
-        };
-        2 * f64s // offset, gain
-            + self
-                .detector
-                .as_ref()
-                .map_or(0, |d| d.state_bytes_per_element() + 3 * f64s)
-            + response
-            + self
-                .repair
-                .as_ref()
-                .map_or(0, LocalRepair::state_bytes_per_element)
+        self.stages.iter().map(Stage::state_bytes_per_element).sum()
     }
 
-    /// A batch: time steps `dt` (T,), readings and the converter's validity (T x N) ->
-    /// pressure (T x N) and failure codes (T x N; 0 = measured).
+    /// A batch: time steps `dt` (T,), readings and their validity (T x N) -> values
+    /// (T x N) and failure codes (T x N; 0 = valid).
     pub fn run(
         &mut self,
         dt: &[f64],
@@ -153,7 +224,7 @@ impl Chain {
         Ok(())
     }
 
-    /// The passes over one tile of frames: detect, convert and respond, repair.
+    /// The passes over one tile of frames, stage after stage.
     fn run_tile(
         &mut self,
         dt: &[f64],
@@ -162,336 +233,291 @@ impl Chain {
         out: &mut [f64],
         codes: &mut [u8],
     ) -> Result<(), CoreError> {
-        match &mut self.detector {
-            Some(d) => d.run(readings, valid, codes, &mut self.changes)?,
-            None => {
-                for ((c, &r), &v) in codes.iter_mut().zip(readings).zip(valid) {
-                    *c = if v && r.is_finite() {
-                        code::OK
-                    } else {
-                        code::OUT_OF_RANGE
-                    };
-                }
+        let Self { n, stages, scratch } = self;
+        let n = *n;
+        scratch.values.resize(readings.len(), 0.0);
+        let mut at = At::Readings;
+        let mut k = 0;
+        // the validity of every reading as codes: 0, or UNSET until a detect stage codes it
+        // (a first detect stage codes every reading from the readings and their validity)
+        let coded = matches!(stages.first(), Some(Stage::Detect(_)));
+        if let Some(Stage::Detect(d)) = stages.first_mut() {
+            d.run(readings, valid, codes, &mut scratch.changes)?;
+            k = 1;
+        } else {
+            for ((c, &r), &v) in codes.iter_mut().zip(readings).zip(valid) {
+                *c = if v && r.is_finite() { code::OK } else { UNSET };
             }
         }
-        self.respond(dt, readings, codes, out);
-        if let Some(r) = &mut self.repair {
-            r.run(out, |idx| codes[idx] == code::OK, None)?;
+        while k < stages.len() {
+            if stages[k].elementwise() {
+                let end = (k..stages.len())
+                    .find(|&j| !stages[j].elementwise())
+                    .unwrap_or(stages.len());
+                let (src, dst, to): (&[f64], &mut [f64], At) = match at {
+                    At::Readings => (readings, &mut *out, At::Out),
+                    At::Out => (&*out, &mut scratch.values, At::Scratch),
+                    At::Scratch => (&scratch.values, &mut *out, At::Out),
+                };
+                segment(n, &mut stages[k..end], dt, src, codes, dst);
+                at = to;
+                k = end;
+                continue;
+            }
+            match &mut stages[k] {
+                Stage::Detect(d) => {
+                    let values = match at {
+                        At::Readings => readings,
+                        At::Out => &*out,
+                        At::Scratch => &scratch.values,
+                    };
+                    d.run_on_codes(values, codes, UNSET, &mut scratch.changes)?;
+                }
+                Stage::Repair(r) => {
+                    let values: &mut [f64] = match at {
+                        At::Readings => {
+                            out.copy_from_slice(readings);
+                            at = At::Out;
+                            &mut *out
+                        }
+                        At::Out => &mut *out,
+                        At::Scratch => &mut scratch.values,
+                    };
+                    r.run(values, |idx| codes[idx] == code::OK, None)?;
+                }
+                _ => unreachable!("element-wise stages run as a segment"),
+            }
+            k += 1;
+        }
+        match at {
+            At::Readings => out.copy_from_slice(readings),
+            At::Scratch => out.copy_from_slice(&scratch.values),
+            At::Out => {}
+        }
+        if !coded {
+            for c in codes.iter_mut() {
+                if *c == UNSET {
+                    *c = code::OUT_OF_RANGE;
+                }
+            }
         }
         Ok(())
     }
 
-    /// Conversion and response of every measured reading, NaN for the failed ones.
-    fn respond(&mut self, dt: &[f64], readings: &[f64], codes: &[u8], out: &mut [f64]) {
-        let n = self.len();
-        let conv = &self.converter;
-        let input =
-            |idx: usize, i: usize| (codes[idx] == code::OK).then(|| conv.at(i, readings[idx]));
-        match &mut self.response {
-            Response::Compensation(comp) => run_frames(out, n, comp.blocks(), dt, input),
-            Response::Loading(curve) => {
-                let blocks = vec![Static(Some(curve)); n.div_ceil(block_size(n))];
-                run_frames(out, n, blocks, dt, input);
+    /// The state of every stage as bytes (versioned): what [`Chain::restore`] takes, in this
+    /// process or another, to continue the stream exactly where it stopped.
+    pub fn snapshot(&self) -> Vec<u8> {
+        let mut w = Writer::default();
+        w.buf.extend_from_slice(&SNAPSHOT_MAGIC);
+        w.u32(SNAPSHOT_VERSION);
+        w.u32(self.n as u32);
+        w.u32(self.stages.len() as u32);
+        for s in &self.stages {
+            w.u32(s.kind());
+            match s {
+                Stage::Detect(d) => d.save(&mut w),
+                Stage::Compensation(c) => c.save(&mut w),
+                Stage::Drift(d) => d.save(&mut w),
+                Stage::Repair(r) => r.save(&mut w),
+                Stage::Convert(_) | Stage::Loading(_) => {}
             }
-            Response::Direct => {
-                let blocks = vec![Static(None); n.div_ceil(block_size(n))];
-                run_frames(out, n, blocks, dt, input);
+        }
+        w.buf
+    }
+
+    /// Continue from a [`Chain::snapshot`] of a chain of the same stages and sizes (all or
+    /// nothing: on an error the state is unchanged).
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<(), CoreError> {
+        if bytes.len() < 12 || bytes[..8] != SNAPSHOT_MAGIC {
+            return Err(CoreError::Parameter {
+                what: "snapshot",
+                why: "not a texsense chain snapshot".into(),
+            });
+        }
+        let mut r = Reader::new(&bytes[8..]);
+        let version = r.u32()?;
+        if version != SNAPSHOT_VERSION {
+            return Err(CoreError::Parameter {
+                what: "snapshot",
+                why: format!("version {version}; this build reads version {SNAPSHOT_VERSION}"),
+            });
+        }
+        r.expect("elements", self.n)?;
+        r.expect("stages", self.stages.len())?;
+        let mut stages = self.stages.clone();
+        for (i, s) in stages.iter_mut().enumerate() {
+            let k = r.u32()?;
+            if k != s.kind() {
+                return Err(CoreError::Parameter {
+                    what: "snapshot",
+                    why: format!("stage {}: the snapshot holds another kind of stage", i + 1),
+                });
             }
+            match s {
+                Stage::Detect(d) => d.load(&mut r)?,
+                Stage::Compensation(c) => c.load(&mut r)?,
+                Stage::Drift(d) => d.load(&mut r)?,
+                Stage::Repair(rep) => rep.load(&mut r)?,
+                Stage::Convert(_) | Stage::Loading(_) => {}
+            }
+        }
+        if !r.is_empty() {
+            return Err(r.error("bytes left over after the last stage"));
+        }
+        self.stages = stages;
+        Ok(())
+    }
+}
+
+/// A run of element-wise stages over a tile: `src` (T x N) and the validity in `codes` ->
+/// `dst`; a reading the stages made invalid gets [`code::OUT_OF_RANGE`].
+fn segment(
+    n: usize,
+    stages: &mut [Stage],
+    dt: &[f64],
+    src: &[f64],
+    codes: &mut [u8],
+    dst: &mut [f64],
+) {
+    let size = block_size(n);
+    let n_blocks = n.div_ceil(size);
+    let mut blocks: Vec<SegmentBlock<'_>> = (0..n_blocks)
+        .map(|b| SegmentBlock {
+            start: b * size,
+            parts: Vec::with_capacity(stages.len()),
+        })
+        .collect();
+    for s in stages.iter_mut() {
+        match s {
+            Stage::Convert(c) => {
+                let view = c.view();
+                blocks
+                    .iter_mut()
+                    .for_each(|b| b.parts.push(Part::Convert(view)));
+            }
+            Stage::Loading(curve) => {
+                let view = curve.view();
+                blocks
+                    .iter_mut()
+                    .for_each(|b| b.parts.push(Part::Loading(view)));
+            }
+            Stage::Compensation(c) => {
+                for (b, part) in blocks.iter_mut().zip(c.blocks()) {
+                    b.parts.push(Part::Compensation(part));
+                }
+            }
+            Stage::Drift(d) => {
+                for (b, part) in blocks.iter_mut().zip(d.blocks()) {
+                    b.parts.push(Part::Drift(part));
+                }
+            }
+            Stage::Detect(_) | Stage::Repair(_) => unreachable!("not element-wise"),
+        }
+    }
+    let codes_in: &[u8] = codes;
+    let input = |idx: usize, _| (codes_in[idx] == code::OK).then(|| src[idx]);
+    if blocks.iter().all(SegmentBlock::is_usual) {
+        // conversion then compensation, the usual segment: one step without a dispatch
+        let usual = blocks
+            .into_iter()
+            .filter_map(SegmentBlock::into_usual)
+            .collect();
+        run_frames(dst, n, usual, dt, input);
+    } else {
+        run_frames(dst, n, blocks, dt, input);
+    }
+    for (c, v) in codes.iter_mut().zip(dst.iter()) {
+        if *c == code::OK && !v.is_finite() {
+            *c = code::OUT_OF_RANGE;
         }
     }
 }
 
-/// A response without state: the first-loading curve, or the value itself.
-#[derive(Clone, Copy)]
-struct Static<'a>(Option<&'a Curve>);
+/// One element-wise stage of a block.
+enum Part<'a> {
+    Convert(ConverterView<'a>),
+    Loading(texsense_kernels::convert::Curve<'a, f64>),
+    Compensation(CompensationBlock<'a>),
+    Drift(DriftBlock<'a>),
+}
 
-impl FrameBlock for Static<'_> {
-    #[inline]
-    fn step(&mut self, _i: usize, _dt: f64, x: f64, valid: bool) -> f64 {
-        match (valid, self.0) {
-            (false, _) => f64::NAN,
-            (true, Some(curve)) => curve.at(x),
-            (true, None) => x,
+/// The element-wise stages of one block of elements, run one after the other per element.
+struct SegmentBlock<'a> {
+    start: usize,
+    parts: Vec<Part<'a>>,
+}
+
+impl<'a> SegmentBlock<'a> {
+    fn is_usual(&self) -> bool {
+        matches!(
+            self.parts.as_slice(),
+            [Part::Convert(_), Part::Compensation(_)]
+        )
+    }
+
+    fn into_usual(self) -> Option<UsualBlock<'a>> {
+        let mut parts = self.parts.into_iter();
+        match (parts.next(), parts.next()) {
+            (Some(Part::Convert(conv)), Some(Part::Compensation(comp))) => Some(UsualBlock {
+                start: self.start,
+                conv,
+                comp,
+            }),
+            _ => None,
         }
+    }
+}
+
+/// A block of the usual segment: conversion, then compensation (the same rules as
+/// [`SegmentBlock`], without the dispatch).
+struct UsualBlock<'a> {
+    start: usize,
+    conv: ConverterView<'a>,
+    comp: CompensationBlock<'a>,
+}
+
+impl FrameBlock for UsualBlock<'_> {
+    #[inline]
+    fn frame(&mut self, dt: f64) {
+        self.comp.frame(dt);
+    }
+
+    #[inline(always)]
+    fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64 {
+        let (x, ok) = self.conv.stage(self.start + i, x, valid);
+        self.comp.stage(i, dt, x, ok).0
+    }
+}
+
+impl FrameBlock for SegmentBlock<'_> {
+    #[inline]
+    fn frame(&mut self, dt: f64) {
+        for p in &mut self.parts {
+            match p {
+                Part::Compensation(c) => c.frame(dt),
+                Part::Drift(d) => d.frame(dt),
+                Part::Convert(_) | Part::Loading(_) => {}
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64 {
+        let (mut x, mut ok) = (x, valid);
+        for p in &mut self.parts {
+            (x, ok) = match p {
+                Part::Convert(c) => c.stage(self.start + i, x, ok),
+                Part::Loading(curve) => rules::loading(curve, x, ok),
+                Part::Compensation(c) => c.stage(i, dt, x, ok),
+                Part::Drift(d) => {
+                    let y = d.step(i, dt, x, ok);
+                    (y, ok && y.is_finite())
+                }
+            };
+        }
+        x
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::detect::DetectorParams;
-    use crate::drift::{DriftBank, Kernel};
-    use crate::preisach::PreisachBank;
-    use crate::repair::Method;
-    use crate::topology::Neighbours;
-
-    /// A tiny pseudo-random sequence in [0, 1) (tests need no extra crate).
-    fn noise(k: usize) -> f64 {
-        let x = (k as u64 + 1).wrapping_mul(6_364_136_223_846_793_005);
-        ((x >> 11) % 1_000_000) as f64 / 1e6
-    }
-
-    struct Mat {
-        rows: usize,
-        cols: usize,
-    }
-
-    impl Mat {
-        fn n(&self) -> usize {
-            self.rows * self.cols
-        }
-
-        fn converter(&self) -> Converter {
-            let n = self.n();
-            let curve = Curve::new(vec![10.0, 11.0, 12.5, 15.0], vec![0.0, 0.8, 1.6, 2.4]).unwrap();
-            let offset = (0..n).map(|i| 0.1 * noise(i)).collect();
-            let gain = (0..n).map(|i| 0.9 + 0.2 * noise(i + 99)).collect();
-            Converter::new(offset, gain, Some(curve)).unwrap()
-        }
-
-        fn detector(&self) -> FailureDetector {
-            let n = self.n();
-            let params = DetectorParams {
-                min_pf: 0.05,
-                low_share: 0.5,
-                high_share: 1.2,
-                stuck_frames: 5,
-                stuck_pf: 1e-4,
-                neighbour_change_pf: 0.05,
-                stuck_floor_pf: f64::NEG_INFINITY,
-            };
-            let nb = Neighbours::grid4(self.rows, self.cols);
-            FailureDetector::new(
-                params,
-                nb,
-                vec![3.0; n],
-                Some(vec![10.0; n]),
-                Some(vec![15.0; n]),
-            )
-            .unwrap()
-        }
-
-        fn compensation(&self, drift: bool) -> Compensation {
-            let e = crate::everett::quadratic(21, 2.4);
-            let p = PreisachBank::new(e, self.n(), 32)
-                .and_then(|p| p.with_output(0.1, 1.0))
-                .unwrap();
-            let kernel = Kernel::new(vec![0.5, 0.5], vec![1.0, 100.0]).unwrap();
-            let d = drift.then(|| DriftBank::new(kernel, -0.025, self.n()).unwrap());
-            Compensation::new(p, d).unwrap()
-        }
-
-        fn repair(&self, which: usize) -> Option<LocalRepair> {
-            let nb = Neighbours::grid4(self.rows, self.cols);
-            let w = vec![1.0; nb.nnz()];
-            let method = match which {
-                0 => return None,
-                1 => Method::Zero,
-                2 => Method::LastValue,
-                3 => Method::NeighbourMean(nb),
-                _ => Method::Weighted(nb, w),
-            };
-            Some(LocalRepair::new(method, self.n()).unwrap())
-        }
-
-        /// Readings (pF) of `t` frames with shorts, saturated and NaN readings.
-        fn readings(&self, t: usize) -> (Vec<f64>, Vec<bool>, Vec<f64>) {
-            let n = self.n();
-            let mut r: Vec<f64> = (0..t * n)
-                .map(|k| 10.5 + 3.0 * noise(k) * (1.0 + ((k / n) as f64 / 7.0).sin()) / 2.0)
-                .collect();
-            let valid: Vec<bool> = (0..t * n).map(|k| noise(k + 7) > 0.03).collect();
-            for (k, v) in r.iter_mut().enumerate() {
-                if noise(k + 3) < 0.03 {
-                    *v = 0.0;
-                } else if noise(k + 5) < 0.01 {
-                    *v = f64::NAN;
-                }
-            }
-            let dt = (0..t).map(|k| if k == 0 { 0.0 } else { 0.1 }).collect();
-            (r, valid, dt)
-        }
-    }
-
-    fn run(chain: &mut Chain, dt: &[f64], r: &[f64], v: &[bool]) -> (Vec<f64>, Vec<u8>) {
-        let mut out = vec![0.0; r.len()];
-        let mut codes = vec![0; r.len()];
-        chain.run(dt, r, v, &mut out, &mut codes).unwrap();
-        (out, codes)
-    }
-
-    fn same(a: &[f64], b: &[f64]) {
-        assert_eq!(a.len(), b.len());
-        for (k, (x, y)) in a.iter().zip(b).enumerate() {
-            assert_eq!(x.to_bits(), y.to_bits(), "sample {k}: {x} vs {y}");
-        }
-    }
-
-    #[test]
-    fn the_chain_equals_its_stages_run_one_after_the_other() {
-        let mat = Mat { rows: 5, cols: 6 };
-        let n = mat.n();
-        let (r, v, dt) = mat.readings(60);
-        let loading = Curve::new(vec![0.0, 1.0, 2.4], vec![0.0, 0.5, 3.0]).unwrap();
-        for response in 0..4 {
-            for repair in 0..5 {
-                let resp = match response {
-                    0 => Response::Compensation(mat.compensation(true)),
-                    1 => Response::Compensation(mat.compensation(false)),
-                    2 => Response::Loading(loading.clone()),
-                    _ => Response::Direct,
-                };
-                let mut chain = Chain::new(
-                    Some(mat.detector()),
-                    mat.converter(),
-                    resp.clone(),
-                    mat.repair(repair),
-                )
-                .unwrap();
-                let (got, codes) = run(&mut chain, &dt, &r, &v);
-                // the same kernels, one after the other
-                let mut expected_codes = vec![0; r.len()];
-                mat.detector()
-                    .run(&r, &v, &mut expected_codes, &mut Changes::default())
-                    .unwrap();
-                assert_eq!(codes, expected_codes);
-                let ok: Vec<bool> = codes.iter().map(|&c| c == code::OK).collect();
-                let mut e = vec![0.0; r.len()];
-                mat.converter().run(&r, &ok, &mut e).unwrap();
-                let mut p = vec![0.0; r.len()];
-                match resp {
-                    Response::Compensation(mut c) => c.run(&dt, &e, &ok, &mut p).unwrap(),
-                    Response::Loading(c) => {
-                        p.iter_mut().zip(&e).for_each(|(p, &e)| *p = c.at(e));
-                    }
-                    Response::Direct => p.copy_from_slice(&e),
-                }
-                if let Some(mut rep) = mat.repair(repair) {
-                    rep.run(&mut p, |i| ok[i], None).unwrap();
-                }
-                same(&got, &p);
-                assert!(codes.iter().any(|&c| c != 0) && ok.iter().filter(|&&o| o).count() > n);
-            }
-        }
-    }
-
-    #[test]
-    fn streaming_equals_batch_also_on_a_large_mat_in_parallel_blocks() {
-        for mat in [Mat { rows: 4, cols: 6 }, Mat { rows: 64, cols: 64 }] {
-            let n = mat.n();
-            let t = 12;
-            let (r, v, dt) = mat.readings(t);
-            let make = || {
-                Chain::new(
-                    Some(mat.detector()),
-                    mat.converter(),
-                    Response::Compensation(mat.compensation(true)),
-                    mat.repair(3),
-                )
-                .unwrap()
-            };
-            let (batch, codes) = run(&mut make(), &dt, &r, &v);
-            let mut stream = make();
-            for k in 0..t {
-                let rows = k * n..(k + 1) * n;
-                let (out, c) = run(&mut stream, &dt[k..=k], &r[rows.clone()], &v[rows.clone()]);
-                same(&out, &batch[rows.clone()]);
-                assert_eq!(c, &codes[rows]);
-            }
-        }
-    }
-
-    #[test]
-    fn a_failed_reading_leaves_the_element_as_if_it_had_not_been_read() {
-        let mat = Mat { rows: 3, cols: 4 };
-        let n = mat.n();
-        let t = 40;
-        let r: Vec<f64> = (0..t * n).map(|k| 10.2 + 4.0 * noise(k)).collect();
-        let dt: Vec<f64> = (0..t).map(|k| if k == 0 { 0.0 } else { 0.5 }).collect();
-        let mut v = vec![true; t * n];
-        for k in 10..20 {
-            v[k * n + 5] = false;
-        }
-        let make = || {
-            let resp = Response::Compensation(mat.compensation(true));
-            Chain::new(None, mat.converter(), resp, None).unwrap()
-        };
-        let (with_gap, codes) = run(&mut make(), &dt, &r, &v);
-        assert!((10..20).all(|k| with_gap[k * n + 5].is_nan() && codes[k * n + 5] != 0));
-        // element 5 alone, without the failed frames (their time added to the next step)
-        let keep: Vec<usize> = (0..t).filter(|k| !(10..20).contains(k)).collect();
-        let r2: Vec<f64> = keep
-            .iter()
-            .flat_map(|&k| r[k * n..(k + 1) * n].to_vec())
-            .collect();
-        let mut dt2: Vec<f64> = keep.iter().map(|&k| dt[k]).collect();
-        dt2[10] += 10.0 * 0.5;
-        let (without, _) = run(&mut make(), &dt2, &r2, &vec![true; r2.len()]);
-        for (j, &k) in keep.iter().enumerate() {
-            let (a, b) = (with_gap[k * n + 5], without[j * n + 5]);
-            assert!(
-                (a - b).abs() <= 1e-12 * b.abs().max(1.0),
-                "frame {k}: {a} vs {b}"
-            );
-        }
-    }
-
-    #[test]
-    fn bad_shapes_and_time_steps_are_errors() {
-        let mat = Mat { rows: 2, cols: 3 };
-        let small = Mat { rows: 2, cols: 2 };
-        let e = Chain::new(
-            Some(small.detector()),
-            mat.converter(),
-            Response::Direct,
-            None,
-        );
-        assert!(matches!(e, Err(CoreError::Shape { .. })));
-        let e = Chain::new(None, mat.converter(), Response::Direct, small.repair(3));
-        assert!(matches!(e, Err(CoreError::Shape { .. })));
-        let mut chain = Chain::new(None, mat.converter(), Response::Direct, None).unwrap();
-        let (mut out, mut codes) = (vec![0.0; 12], vec![0; 12]);
-        let e = chain.run(&[0.0, -1.0], &[10.0; 12], &[true; 12], &mut out, &mut codes);
-        assert!(matches!(e, Err(CoreError::Parameter { what: "dt", .. })));
-        let e = chain.run(&[0.0, 1.0], &[10.0; 11], &[true; 12], &mut out, &mut codes);
-        assert!(matches!(
-            e,
-            Err(CoreError::Shape {
-                what: "readings",
-                ..
-            })
-        ));
-    }
-
-    #[test]
-    fn the_curve_interpolates_as_a_binary_search_does() {
-        let x: Vec<f64> = (0..50).map(|k| (k as f64).powf(1.3) + noise(k)).collect();
-        let y: Vec<f64> = x.iter().map(|v| v.sqrt()).collect();
-        let curve = Curve::new(x.clone(), y.clone()).unwrap();
-        let reference = |v: f64| {
-            if v.is_nan() {
-                return f64::NAN;
-            }
-            if v <= x[0] {
-                return y[0];
-            }
-            if v >= x[49] {
-                return y[49];
-            }
-            let j = x.partition_point(|&xi| xi <= v) - 1;
-            if x[j] == v {
-                return y[j];
-            }
-            (y[j + 1] - y[j]) / (x[j + 1] - x[j]) * (v - x[j]) + y[j]
-        };
-        let probes = (0..2000)
-            .map(|k| -5.0 + 180.0 * noise(k))
-            .chain(x.iter().copied())
-            .chain([f64::NAN, f64::INFINITY, f64::NEG_INFINITY]);
-        for v in probes {
-            let (a, b) = (curve.at(v), reference(v));
-            assert!(a.to_bits() == b.to_bits(), "at {v}: {a} vs {b}");
-        }
-        assert!(Curve::new(vec![0.0, 0.0], vec![1.0, 2.0]).is_err());
-    }
-}
+pub(crate) mod tests;

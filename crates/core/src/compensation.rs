@@ -22,7 +22,7 @@ pub struct Compensation {
 pub struct CompensationBlock<'a> {
     preisach: PreisachBlock<'a>,
     drift: Option<DriftBlock<'a>>,
-    level: Option<&'a Curve>,
+    level: Option<texsense_kernels::convert::Curve<'a, f64>>,
 }
 
 impl CompensationBlock<'_> {
@@ -47,15 +47,22 @@ impl CompensationBlock<'_> {
     /// Element `i` of the block reads the input `u` in the current frame; NaN when skipped.
     #[inline]
     pub fn step(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> f64 {
+        self.stage(i, dt, u, valid).0
+    }
+
+    /// Element `i`'s stages (hysteresis, then drift) with the validity rules of a chain
+    /// (`texsense_kernels::stage`): value and validity in, the same out.
+    #[inline(always)]
+    pub fn stage(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> (f64, bool) {
         let h = self.preisach.step(i, u, valid);
-        match (&mut self.drift, self.level) {
-            (Some(d), Some(curve)) => {
-                // the drift of the elastic response, added to the Preisach output
-                let b = if u.is_finite() { curve.at(u) } else { f64::NAN };
-                h + (d.step(i, dt, b, valid && h.is_finite()) - b)
+        let ok = h.is_finite();
+        match (&mut self.drift, &self.level) {
+            (Some(d), Some(curve)) => d.step_on_level(i, dt, curve, u, h, ok),
+            (Some(d), None) => {
+                let y = d.step(i, dt, h, ok);
+                (y, ok && y.is_finite())
             }
-            (Some(d), None) => d.step(i, dt, h, valid),
-            (None, _) => h,
+            (None, _) => (h, ok),
         }
     }
 }
@@ -121,6 +128,30 @@ impl Compensation {
         &self.preisach
     }
 
+    /// The drift stage, if any, and the level curve it runs on (QLV), if any.
+    pub fn drift(&self) -> (Option<&DriftBank>, Option<&Curve>) {
+        (self.drift.as_ref(), self.level.as_deref())
+    }
+
+    /// Every element's state into a snapshot.
+    pub(crate) fn save(&self, w: &mut crate::snapshot::Writer) {
+        self.preisach.save(w);
+        w.u32(u32::from(self.drift.is_some()));
+        if let Some(d) = &self.drift {
+            d.save(w);
+        }
+    }
+
+    /// Every element's state from a snapshot of a compensation of the same shape.
+    pub(crate) fn load(&mut self, r: &mut crate::snapshot::Reader<'_>) -> Result<(), CoreError> {
+        self.preisach.load(r)?;
+        r.expect("drift stages", usize::from(self.drift.is_some()))?;
+        if let Some(d) = &mut self.drift {
+            d.load(r)?;
+        }
+        Ok(())
+    }
+
     /// Bytes of state per element (both stages).
     pub fn state_bytes_per_element(&self) -> usize {
         let n = self.len().max(1);
@@ -134,7 +165,7 @@ impl Compensation {
     /// Both stages split into blocks of [`crate::par::block_size`] elements.
     pub fn blocks(&mut self) -> Vec<CompensationBlock<'_>> {
         let mut drift = self.drift.as_mut().map(|d| d.blocks().into_iter());
-        let level = self.level.as_deref();
+        let level = self.level.as_deref().map(Curve::view);
         self.preisach
             .blocks()
             .into_iter()

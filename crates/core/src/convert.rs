@@ -1,9 +1,14 @@
 //! Capacitance -> compression per element (thesis eq. 2.1), the conversion that every
 //! calibrated reading goes through: `C_ref = (C - a_i) / b_i`, then the compression from the
 //! material curve `C_ref(e)` of a reference element, linearly interpolated and held at its
-//! ends (or, without a curve, the scaled reading itself: a linear calibration).
+//! ends (or, without a curve, the scaled reading itself: a linear calibration). The kernels
+//! are `texsense_kernels::convert` (one implementation with the microcontroller's); this
+//! module owns their arrays.
 //!
 //! [`Curve`] is also the first-loading curve `p(e)` of an uncompensated chain.
+
+use texsense_kernels::convert::{self as kernel, buckets};
+use texsense_kernels::stage;
 
 use crate::error::{check_len, frames_of, CoreError};
 
@@ -25,70 +30,45 @@ impl Curve {
     /// Build from points with strictly increasing `x` (at least 2).
     pub fn new(x: Vec<f64>, y: Vec<f64>) -> Result<Self, CoreError> {
         check_len("curve y", y.len(), x.len())?;
-        if x.len() < 2
-            || x.len() > u32::MAX as usize
-            || x.windows(2)
-                .any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
-            || x.iter().chain(&y).any(|v| !v.is_finite())
-        {
-            return Err(CoreError::Parameter {
+        let mut slope = vec![0.0; x.len().saturating_sub(1)];
+        let mut bucket_start = vec![0; buckets(x.len()) + 1];
+        let inv_width = kernel::tables(&x, &y, &mut slope, &mut bucket_start).map_err(|_| {
+            CoreError::Parameter {
                 what: "curve",
                 why: "needs >= 2 finite points with strictly increasing x".into(),
-            });
-        }
-        let last = x.len() - 1;
-        let buckets = 4 * x.len();
-        let width = (x[last] - x[0]) / buckets as f64;
-        let bucket_start = (0..=buckets)
-            .map(|b| {
-                let lo = x[0] + b as f64 * width;
-                (x.partition_point(|&xi| xi <= lo).max(1) - 1).min(last - 1) as u32
-            })
-            .collect();
-        // per segment, as np.interp computes it (so the same bits)
-        let slope = (0..last)
-            .map(|j| (y[j + 1] - y[j]) / (x[j + 1] - x[j]))
-            .collect();
+            }
+        })?;
         Ok(Self {
-            bucket_start,
-            inv_width: 1.0 / width,
-            slope,
             x,
             y,
+            slope,
+            bucket_start,
+            inv_width,
         })
+    }
+
+    /// The kernels' view (checked when the curve was built).
+    #[inline]
+    pub fn view(&self) -> kernel::Curve<'_, f64> {
+        kernel::Curve::new_trusted(
+            &self.x,
+            &self.y,
+            &self.slope,
+            &self.bucket_start,
+            self.inv_width,
+        )
+        .expect("a curve checked when built")
     }
 
     /// `y` at `v` (NaN for NaN).
     #[inline]
     pub fn at(&self, v: f64) -> f64 {
-        let (x, y) = (&self.x, &self.y);
-        let last = x.len() - 1;
-        if v.is_nan() {
-            return f64::NAN;
-        }
-        if v >= x[last] {
-            return y[last];
-        }
-        if v <= x[0] {
-            return y[0];
-        }
-        let top = (self.bucket_start.len() - 1) as f64;
-        let pos = ((v - x[0]) * self.inv_width).min(top);
-        // SAFETY: x[0] < v and v is a number, so 0 <= pos <= top < 2^32 (a plain `as` cast
-        // spends a dozen instructions on saturation that cannot happen here)
-        let b = unsafe { pos.to_int_unchecked::<u32>() } as usize;
-        let mut j = self.bucket_start[b] as usize;
-        // the bucket's start may round either way at its edge: settle on x[j] <= v < x[j + 1]
-        while j > 0 && x[j] > v {
-            j -= 1;
-        }
-        while j + 1 < last && x[j + 1] <= v {
-            j += 1;
-        }
-        if x[j] == v {
-            return y[j];
-        }
-        self.slope[j] * (v - x[j]) + y[j]
+        self.view().at(v)
+    }
+
+    /// The points (x, y).
+    pub fn points(&self) -> (&[f64], &[f64]) {
+        (&self.x, &self.y)
     }
 }
 
@@ -100,6 +80,31 @@ pub struct Converter {
     offset: Vec<f64>,
     gain: Vec<f64>,
     curve: Option<Curve>,
+}
+
+/// A [`Converter`] seen by the kernels (built once per pass, not per element).
+#[derive(Debug, Clone, Copy)]
+pub struct ConverterView<'a> {
+    /// Per element offset.
+    pub offset: &'a [f64],
+    /// Per element gain.
+    pub gain: &'a [f64],
+    /// The material curve.
+    pub curve: Option<kernel::Curve<'a, f64>>,
+}
+
+impl ConverterView<'_> {
+    /// Element `i` reading `c`: its compression (the scaled reading without a curve).
+    #[inline]
+    pub fn at(&self, i: usize, c: f64) -> f64 {
+        kernel::convert(self.offset[i], self.gain[i], self.curve.as_ref(), c)
+    }
+
+    /// Element `i`'s stage: reading and validity -> value and validity.
+    #[inline(always)]
+    pub fn stage(&self, i: usize, c: f64, ok: bool) -> (f64, bool) {
+        stage::conversion(self.offset[i], self.gain[i], self.curve.as_ref(), c, ok)
+    }
 }
 
 impl Converter {
@@ -131,14 +136,24 @@ impl Converter {
         self.offset.is_empty()
     }
 
+    /// Per-element offsets and gains, and the curve.
+    pub fn parts(&self) -> (&[f64], &[f64], Option<&Curve>) {
+        (&self.offset, &self.gain, self.curve.as_ref())
+    }
+
+    /// The kernels' view.
+    pub fn view(&self) -> ConverterView<'_> {
+        ConverterView {
+            offset: &self.offset,
+            gain: &self.gain,
+            curve: self.curve.as_ref().map(Curve::view),
+        }
+    }
+
     /// Element `i` reading `c`: its compression (the scaled reading without a curve).
     #[inline]
     pub fn at(&self, i: usize, c: f64) -> f64 {
-        let scaled = (c - self.offset[i]) / self.gain[i];
-        match &self.curve {
-            Some(curve) => curve.at(scaled),
-            None => scaled,
-        }
+        self.view().at(i, c)
     }
 
     /// A batch (T x N): readings and validity -> converted values, NaN where a reading is
@@ -151,16 +166,13 @@ impl Converter {
         frames_of("readings", readings.len(), n)?;
         check_len("valid", valid.len(), readings.len())?;
         check_len("out", out.len(), readings.len())?;
+        let view = self.view();
         for (row, (r, v)) in out
             .chunks_exact_mut(n)
             .zip(readings.chunks_exact(n).zip(valid.chunks_exact(n)))
         {
             for (i, o) in row.iter_mut().enumerate() {
-                *o = if v[i] && r[i].is_finite() {
-                    self.at(i, r[i])
-                } else {
-                    f64::NAN
-                };
+                *o = view.stage(i, r[i], v[i]).0;
             }
         }
         Ok(())

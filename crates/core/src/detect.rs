@@ -14,60 +14,27 @@
 //! reading first (each element on its own), then the codes (which read the neighbours'
 //! changes of the same frame). Same results as frame after frame (tested).
 
+use texsense_kernels::detect::{self as kernel, Element, Limits};
+
 use crate::error::{check_len, CoreError};
 use crate::par::{block_size, for_blocks, parallel};
+use crate::snapshot::{Reader, Writer};
 use crate::topology::Neighbours;
 
 /// Failure codes.
-pub mod code {
-    /// Healthy.
-    pub const OK: u8 = 0;
-    /// Short or break.
-    pub const SHORT_OR_BREAK: u8 = 1;
-    /// Out of range (saturated or far beyond the expected maximum).
-    pub const OUT_OF_RANGE: u8 = 2;
-    /// Stuck while the neighbours move.
-    pub const STUCK: u8 = 3;
-    /// A jump faster than a body moves the spacer.
-    pub const JUMP: u8 = 4;
-}
+pub use texsense_kernels::detect::codes as code;
 
 /// Thresholds of the detector (see the module documentation).
-#[derive(Debug, Clone, PartialEq)]
-pub struct DetectorParams {
-    /// Readings at or below this are shorts or breaks (pF).
-    pub min_pf: f64,
-    /// Readings below this share of the unloaded value are shorts or breaks.
-    pub low_share: f64,
-    /// Readings beyond this multiple of the expected maximum are out of range.
-    pub high_share: f64,
-    /// Frames without change before an element counts as stuck.
-    pub stuck_frames: u32,
-    /// A change at or below this (pF) is no change.
-    pub stuck_pf: f64,
-    /// The neighbours' accumulated median change that makes a still element stuck (pF).
-    pub neighbour_change_pf: f64,
-    /// Readings at or below this never count as stuck (an unloaded element of a mat that
-    /// reads 0 without load holds still legitimately); minus infinity for capacitance.
-    pub stuck_floor_pf: f64,
-}
+pub type DetectorParams = kernel::Params<f64>;
 
-/// Per-element detector state.
-#[derive(Debug, Clone, Copy)]
-struct DetectorElement {
-    last: f64,
-    still: u32,
-    moved: f64,
-}
-
-impl Default for DetectorElement {
-    fn default() -> Self {
-        Self {
-            last: f64::NAN,
-            still: 0,
-            moved: 0.0,
-        }
-    }
+/// Where pass 2 finds a reading's validity.
+#[derive(Clone, Copy)]
+enum Validity<'a> {
+    /// In an array.
+    Given(&'a [bool]),
+    /// Code 0 in the codes it writes (which it merges: codes other than 0 and the `unset`
+    /// one stay).
+    InCodes(u8),
 }
 
 /// Streaming failure detector of N elements.
@@ -78,7 +45,7 @@ pub struct FailureDetector {
     jump: Vec<f64>,
     baseline: Option<Vec<f64>>,
     max: Option<Vec<f64>>,
-    elements: Vec<DetectorElement>,
+    elements: Vec<Element<f64>>,
 }
 
 /// Scratch of one batch: the change of every reading since the element's last finite one
@@ -106,19 +73,14 @@ impl FailureDetector {
         if let Some(m) = &max {
             check_len("max", m.len(), n)?;
         }
-        if params.stuck_frames < 2 || !(params.low_share > 0.0 && params.low_share < 1.0) {
-            return Err(CoreError::Parameter {
-                what: "detector",
-                why: "stuck_frames >= 2 and 0 < low_share < 1 needed".into(),
-            });
-        }
+        params.check()?;
         Ok(Self {
             params,
             neighbours,
             jump,
             baseline,
             max,
-            elements: vec![DetectorElement::default(); n],
+            elements: vec![Element::default(); n],
         })
     }
 
@@ -134,12 +96,56 @@ impl FailureDetector {
 
     /// Forget the history.
     pub fn reset(&mut self) {
-        self.elements.fill(DetectorElement::default());
+        self.elements.fill(Element::default());
+    }
+
+    /// The thresholds, the neighbours and the per-element limits (jump, unloaded, largest
+    /// expected reading).
+    #[allow(clippy::type_complexity)]
+    pub fn parts(
+        &self,
+    ) -> (
+        &DetectorParams,
+        &Neighbours,
+        &[f64],
+        Option<&[f64]>,
+        Option<&[f64]>,
+    ) {
+        (
+            &self.params,
+            &self.neighbours,
+            &self.jump,
+            self.baseline.as_deref(),
+            self.max.as_deref(),
+        )
+    }
+
+    /// Every element's state into a snapshot.
+    pub(crate) fn save(&self, w: &mut Writer) {
+        w.u32(self.len() as u32);
+        for e in &self.elements {
+            w.f64(e.last);
+            w.u32(e.still);
+            w.f64(e.moved);
+        }
+    }
+
+    /// Every element's state from a snapshot of a detector of the same size.
+    pub(crate) fn load(&mut self, r: &mut Reader<'_>) -> Result<(), CoreError> {
+        r.expect("detector elements", self.len())?;
+        for e in &mut self.elements {
+            *e = Element {
+                last: r.f64()?,
+                still: r.u32()?,
+                moved: r.f64()?,
+            };
+        }
+        Ok(())
     }
 
     /// Bytes of state per element.
     pub fn state_bytes_per_element(&self) -> usize {
-        std::mem::size_of::<DetectorElement>()
+        std::mem::size_of::<Element<f64>>()
     }
 
     /// Codes (T x N) of a batch of readings (T x N) with the converter's validity.
@@ -161,7 +167,37 @@ impl FailureDetector {
         scratch.delta.resize(t * n, 0.0);
         let par = parallel(t, n);
         self.changes(readings, &mut scratch.delta, par);
-        self.codes(readings, valid, &scratch.delta, codes, par);
+        self.codes(readings, Validity::Given(valid), &scratch.delta, codes, par);
+        Ok(())
+    }
+
+    /// [`FailureDetector::run`] in a chain: a reading is valid when its code is 0 (`codes`
+    /// in), and the detector's code replaces the codes 0 and `unset` (a reading invalid on
+    /// input that no detect stage has coded yet); other codes stay (`codes` out).
+    pub fn run_on_codes(
+        &mut self,
+        readings: &[f64],
+        codes: &mut [u8],
+        unset: u8,
+        scratch: &mut Changes,
+    ) -> Result<(), CoreError> {
+        let n = self.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let t = readings.len() / n;
+        check_len("readings", readings.len(), t * n)?;
+        check_len("codes", codes.len(), t * n)?;
+        scratch.delta.resize(t * n, 0.0);
+        let par = parallel(t, n);
+        self.changes(readings, &mut scratch.delta, par);
+        self.codes(
+            readings,
+            Validity::InCodes(unset),
+            &scratch.delta,
+            codes,
+            par,
+        );
         Ok(())
     }
 
@@ -177,11 +213,7 @@ impl FailureDetector {
                 let row = r * n + start;
                 let out = o.row(r);
                 for (li, el) in block.iter_mut().enumerate() {
-                    let c = readings[row + li];
-                    out[li] = (c - el.last).abs();
-                    if c.is_finite() {
-                        el.last = c;
-                    }
+                    out[li] = kernel::change(el, readings[row + li]);
                 }
             }
         });
@@ -191,21 +223,13 @@ impl FailureDetector {
     fn codes(
         &mut self,
         readings: &[f64],
-        valid: &[bool],
+        valid: Validity<'_>,
         delta: &[f64],
         codes: &mut [u8],
         par: bool,
     ) {
         let n = self.len();
         let t = readings.len() / n;
-        let moved = |idx: usize| {
-            let d = delta[idx];
-            if d.is_nan() {
-                0.0
-            } else {
-                d
-            }
-        };
         // the elements' states leave `self` for the pass, which reads the rest of it
         let mut elements = std::mem::take(&mut self.elements);
         let this = &*self;
@@ -222,84 +246,34 @@ impl FailureDetector {
                     let i = start + li;
                     let nbs = this.neighbours.of(i);
                     let nb_move = if nbs.len() <= few.len() {
-                        for (f, &j) in few.iter_mut().zip(nbs) {
-                            *f = moved(row + j as usize);
-                        }
-                        median(&mut few[..nbs.len()])
+                        kernel::neighbour_move(nbs, delta, row, &mut few)
                     } else {
-                        wide.clear();
-                        wide.extend(nbs.iter().map(|&j| moved(row + j as usize)));
-                        median(&mut wide)
+                        wide.resize(nbs.len(), 0.0);
+                        kernel::neighbour_move(nbs, delta, row, &mut wide)
                     };
-                    let is_first = delta[row + i].is_nan();
-                    let d = moved(row + i);
-                    let c = readings[row + i];
-                    let still = d <= p.stuck_pf && !is_first && c > p.stuck_floor_pf;
-                    if still {
-                        el.still += 1;
-                        el.moved += nb_move;
-                    } else {
-                        el.still = 0;
-                        el.moved = 0.0;
+                    let lim = Limits {
+                        jump: this.jump[i],
+                        baseline: this.baseline.as_ref().map(|b| b[i]),
+                        max: this.max.as_ref().map(|m| m[i]),
+                    };
+                    let (c, d) = (readings[row + i], delta[row + i]);
+                    let has_nbs = !nbs.is_empty();
+                    match valid {
+                        Validity::Given(v) => {
+                            out[li] = kernel::code(p, el, lim, c, v[row + i], d, nb_move, has_nbs);
+                        }
+                        Validity::InCodes(unset) => {
+                            let was = out[li];
+                            let k = kernel::code(p, el, lim, c, was == 0, d, nb_move, has_nbs);
+                            if was == 0 || was == unset {
+                                out[li] = k;
+                            }
+                        }
                     }
-                    let mut k = code::OK;
-                    if el.still >= p.stuck_frames
-                        && el.moved > p.neighbour_change_pf
-                        && !nbs.is_empty()
-                    {
-                        k = code::STUCK;
-                    }
-                    if !is_first && d > this.jump[i] {
-                        k = code::JUMP;
-                    }
-                    let high = !valid[row + i]
-                        || this.max.as_ref().is_some_and(|m| c > p.high_share * m[i]);
-                    if high {
-                        k = code::OUT_OF_RANGE;
-                    }
-                    let low = !c.is_finite()
-                        || c <= p.min_pf
-                        || this
-                            .baseline
-                            .as_ref()
-                            .is_some_and(|b| c < p.low_share * b[i]);
-                    if low {
-                        k = code::SHORT_OR_BREAK;
-                    }
-                    out[li] = k;
                 }
             }
         });
         self.elements = elements;
-    }
-}
-
-/// Median of a few values (0 for none): the mean of the two middle ones of an even count.
-/// Up to four values (a grid's neighbours) by comparisons that select rather than branch.
-#[inline]
-fn median(v: &mut [f64]) -> f64 {
-    match *v {
-        [] => 0.0,
-        [a] => a,
-        [a, b] => 0.5 * (a + b),
-        [a, b, c] => a.min(b).max(a.max(b).min(c)),
-        [a, b, c, d] => {
-            // the middle two of four: the larger of the pairs' minima and the smaller of
-            // the pairs' maxima, for the pairs (a, b) and (c, d)
-            0.5 * (a.min(b).max(c.min(d)) + a.max(b).min(c.max(d)))
-        }
-        _ => {
-            // insertion sort: a handful of neighbours
-            for i in 1..v.len() {
-                let mut j = i;
-                while j > 0 && v[j - 1] > v[j] {
-                    v.swap(j - 1, j);
-                    j -= 1;
-                }
-            }
-            let len = v.len();
-            0.5 * (v[(len - 1) / 2] + v[len / 2])
-        }
     }
 }
 
@@ -386,7 +360,8 @@ mod tests {
 
     #[test]
     fn median_of_even_and_odd_counts() {
-        assert_eq!(median(&mut []), 0.0);
+        use texsense_kernels::detect::median;
+        assert_eq!(median::<f64>(&mut []), 0.0);
         assert_eq!(median(&mut [3.0]), 3.0);
         assert_eq!(median(&mut [4.0, 1.0, 3.0]), 3.0);
         assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);

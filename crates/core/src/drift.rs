@@ -13,8 +13,11 @@
 //! same machinery runs any non-negative Prony series (a fitted kernel where the logarithm does
 //! not hold).
 
+use texsense_kernels::drift::{self as kernel, Element, Settings};
+
 use crate::error::{check_len, CoreError};
 use crate::par::{block_size, run_frames, FrameBlock};
+use crate::snapshot::{Reader, Writer};
 
 /// A kernel `k(t) = Σ_j c_j (1 - exp(-t / τ_j))` (c_j >= 0, τ_j > 0).
 #[derive(Debug, Clone, PartialEq)]
@@ -53,6 +56,16 @@ impl Kernel {
             .sum()
     }
 
+    /// The weights c_j.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The time constants τ_j (s).
+    pub fn taus(&self) -> &[f64] {
+        &self.taus
+    }
+
     /// Number of terms K.
     pub fn len(&self) -> usize {
         self.weights.len()
@@ -64,21 +77,11 @@ impl Kernel {
     }
 }
 
-/// The scalar drift state of one element.
-#[derive(Debug, Clone, Copy, Default)]
-struct DriftElement {
-    total: f64,
-    last_h: f64,
-    smooth: f64,
-    started: bool,
-}
-
 /// The clock and kernel settings shared by all elements of a bank.
 #[derive(Debug, Clone)]
 struct DriftSettings {
     kernel: Kernel,
     gamma: f64,
-    weight_sum: f64,
     rest_rate: f64,
     rest_window: f64,
     gamma_time: f64,
@@ -87,16 +90,13 @@ struct DriftSettings {
 }
 
 impl DriftSettings {
-    /// The level whose steps the kernel superposes: the hysteresis output itself (`q = 1`,
-    /// eq. 5.8), or its `q`-th power (Schapery's nonlinear superposition, the step
-    /// responses scaling as `h^q`; below zero the level is 0).
-    #[inline]
-    fn level(&self, h: f64) -> f64 {
-        if self.exponent == 1.0 {
-            h
-        } else {
-            h.max(0.0).powf(self.exponent)
-        }
+    /// The kernels' view (checked when the bank was built).
+    fn view(&self) -> Settings<'_, f64> {
+        Settings::new(&self.kernel.weights, &self.kernel.taus, self.gamma)
+            .and_then(|s| s.with_rest_rate(self.rest_rate, self.rest_window))
+            .and_then(|s| s.with_time_component(self.gamma_time))
+            .and_then(|s| s.with_exponent(self.exponent))
+            .expect("drift settings checked when set")
     }
 }
 
@@ -104,7 +104,7 @@ impl DriftSettings {
 #[derive(Debug, Clone)]
 pub struct DriftBank {
     settings: DriftSettings,
-    elements: Vec<DriftElement>,
+    elements: Vec<Element<f64>>,
     /// K states per element, element-major (`[N][K]`).
     z: Vec<f64>,
     /// The time clock's K states per element when two clocks run (else empty).
@@ -113,8 +113,8 @@ pub struct DriftBank {
 
 /// The elements of one block of a bank, for a parallel batch.
 pub struct DriftBlock<'a> {
-    settings: &'a DriftSettings,
-    elements: &'a mut [DriftElement],
+    settings: Settings<'a, f64>,
+    elements: &'a mut [Element<f64>],
     z: &'a mut [f64],
     z_time: &'a mut [f64],
     decay: Vec<f64>,
@@ -124,60 +124,69 @@ impl DriftBlock<'_> {
     /// Start a frame `dt` seconds after the previous one (once per frame, before `step`).
     #[inline]
     pub fn frame(&mut self, dt: f64) {
-        for (d, tau) in self.decay.iter_mut().zip(&self.settings.kernel.taus) {
-            *d = (-dt / tau).exp();
-        }
+        kernel::frame(&mut self.decay, self.settings.taus(), dt);
     }
 
     /// Element `i` of the block, in the frame started by [`DriftBlock::frame`] with `dt`:
     /// hysteresis output `h` in, drift-corrected output out (eq. 5.8); NaN or invalid inputs
     /// keep the state (time still passes for it) and give NaN.
-    #[inline]
+    #[inline(always)]
     pub fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
-        let s = self.settings;
-        let k = s.kernel.len();
-        let zs = &mut self.z[i * k..(i + 1) * k];
-        // the second clock only runs beside the rest clock
-        let two_clocks = !self.z_time.is_empty() && s.rest_rate > 0.0;
-        if !(valid && h.is_finite()) {
-            // time still passes for the element's states (at rest: nothing is known)
-            for (zj, d) in zs.iter_mut().zip(&self.decay) {
-                *zj *= d;
-            }
-            if two_clocks {
-                for (zj, d) in self.z_time[i * k..(i + 1) * k].iter_mut().zip(&self.decay) {
-                    *zj *= d;
-                }
-            }
-            return f64::NAN;
-        }
-        let el = &mut self.elements[i];
-        let x = s.level(h);
-        let change = if el.started { x - el.last_h } else { x };
-        el.started = true;
-        el.last_h = x;
-        el.total += change;
-        // Σ w_j (H - z_j) = H Σ w_j - Σ w_j z_j
-        let weighted = if s.rest_rate > 0.0 && dt > 0.0 {
-            // this element's clock: slowed by its own (averaged) rate of change
-            el.smooth += (change / dt - el.smooth) * (1.0 - (-dt / s.rest_window).exp());
-            let clock = dt / (1.0 + el.smooth.abs() / s.rest_rate);
-            for (zj, tau) in zs.iter_mut().zip(&s.kernel.taus) {
-                *zj = *zj * (-clock / tau).exp() + change;
-            }
-            dot(&s.kernel.weights, zs)
-        } else {
-            decay_and_add(zs, &self.decay, change);
-            dot(&s.kernel.weights, zs)
-        };
-        let mut out = h + s.gamma * (el.total * s.weight_sum - weighted);
-        if two_clocks {
-            let zt = &mut self.z_time[i * k..(i + 1) * k];
-            decay_and_add(zt, &self.decay, change);
-            out += s.gamma_time * (el.total * s.weight_sum - dot(&s.kernel.weights, zt));
-        }
-        out
+        let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
+        kernel::step(
+            &self.settings,
+            &mut self.elements[i],
+            z,
+            z_time,
+            &self.decay,
+            dt,
+            h,
+            valid,
+        )
     }
+
+    /// The drift of the elastic response `level(u)` of the hysteresis stage's input `u`,
+    /// added to its output `h` (QLV; `ok`: the validity after the hysteresis stage).
+    #[inline]
+    pub fn step_on_level(
+        &mut self,
+        i: usize,
+        dt: f64,
+        level: &texsense_kernels::convert::Curve<'_, f64>,
+        u: f64,
+        h: f64,
+        ok: bool,
+    ) -> (f64, bool) {
+        let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
+        texsense_kernels::stage::drift_on_level(
+            &self.settings,
+            &mut self.elements[i],
+            z,
+            z_time,
+            &self.decay,
+            dt,
+            level,
+            u,
+            h,
+            ok,
+        )
+    }
+}
+
+/// Element `i`'s K states and (with two clocks) the time clock's K states (empty without).
+#[inline]
+fn states<'b>(
+    z: &'b mut [f64],
+    z_time: &'b mut [f64],
+    k: usize,
+    i: usize,
+) -> (&'b mut [f64], &'b mut [f64]) {
+    let z_time: &mut [f64] = if z_time.is_empty() {
+        &mut []
+    } else {
+        &mut z_time[i * k..(i + 1) * k]
+    };
+    (&mut z[i * k..(i + 1) * k], z_time)
 }
 
 impl FrameBlock for DriftBlock<'_> {
@@ -204,7 +213,6 @@ impl DriftBank {
         let k = kernel.len();
         Ok(Self {
             settings: DriftSettings {
-                weight_sum: kernel.weights.iter().sum(),
                 kernel,
                 gamma,
                 rest_rate: 0.0,
@@ -212,7 +220,7 @@ impl DriftBank {
                 gamma_time: 0.0,
                 exponent: 1.0,
             },
-            elements: vec![DriftElement::default(); n],
+            elements: vec![Element::default(); n],
             z: vec![0.0; n * k],
             z_time: Vec::new(),
         })
@@ -284,6 +292,56 @@ impl DriftBank {
         self.elements.len()
     }
 
+    /// The kernel's weights and time constants.
+    pub fn kernel(&self) -> &Kernel {
+        &self.settings.kernel
+    }
+
+    /// γ, the rest clock's rate and window, the time clock's γ and the level power.
+    pub fn options(&self) -> (f64, f64, f64, f64, f64) {
+        let s = &self.settings;
+        (
+            s.gamma,
+            s.rest_rate,
+            s.rest_window,
+            s.gamma_time,
+            s.exponent,
+        )
+    }
+
+    /// Every element's state into a snapshot.
+    pub(crate) fn save(&self, w: &mut Writer) {
+        w.u32(self.len() as u32);
+        w.u32(self.settings.kernel.len() as u32);
+        w.u32(u32::from(!self.z_time.is_empty()));
+        for e in &self.elements {
+            w.f64(e.total);
+            w.f64(e.last_h);
+            w.f64(e.smooth);
+            w.u32(e.started);
+        }
+        w.f64s(&self.z);
+        w.f64s(&self.z_time);
+    }
+
+    /// Every element's state from a snapshot of a bank of the same shape.
+    pub(crate) fn load(&mut self, r: &mut Reader<'_>) -> Result<(), CoreError> {
+        r.expect("drift elements", self.len())?;
+        r.expect("drift kernel terms", self.settings.kernel.len())?;
+        r.expect("drift clocks", usize::from(!self.z_time.is_empty()))?;
+        for e in &mut self.elements {
+            *e = Element {
+                total: r.f64()?,
+                last_h: r.f64()?,
+                smooth: r.f64()?,
+                started: r.u32()?.min(1),
+            };
+        }
+        r.f64s(&mut self.z)?;
+        r.f64s(&mut self.z_time)?;
+        Ok(())
+    }
+
     /// True without elements.
     pub fn is_empty(&self) -> bool {
         self.elements.is_empty()
@@ -293,12 +351,12 @@ impl DriftBank {
     pub fn state_bytes_per_element(&self) -> usize {
         let k = self.settings.kernel.len();
         let clocks = if self.z_time.is_empty() { 1 } else { 2 };
-        std::mem::size_of::<DriftElement>() + clocks * k * std::mem::size_of::<f64>()
+        std::mem::size_of::<Element<f64>>() + clocks * k * std::mem::size_of::<f64>()
     }
 
     /// Forget the history (the next input is the starting level, with no drift).
     pub fn reset(&mut self) {
-        self.elements.fill(DriftElement::default());
+        self.elements.fill(Element::default());
         self.z.fill(0.0);
         self.z_time.fill(0.0);
     }
@@ -306,7 +364,7 @@ impl DriftBank {
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
     pub fn blocks(&mut self) -> Vec<DriftBlock<'_>> {
         let k = self.settings.kernel.len();
-        let settings = &self.settings;
+        let settings = self.settings.view();
         let size = block_size(self.len());
         let mut z_time = self.z_time.chunks_mut(size * k);
         self.elements
@@ -357,30 +415,6 @@ impl DriftBank {
     }
 }
 
-/// `z_j <- z_j d_j + change` for every term.
-#[inline]
-fn decay_and_add(z: &mut [f64], decay: &[f64], change: f64) {
-    for (zj, d) in z.iter_mut().zip(decay) {
-        *zj = *zj * d + change;
-    }
-}
-
-/// `Σ w_j z_j` in four independent partial sums (the terms are added in a tree, not one
-/// long chain of dependent additions).
-#[inline]
-fn dot(w: &[f64], z: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (wc, zc) = (w.chunks_exact(4), z.chunks_exact(4));
-    let (wr, zr) = (wc.remainder(), zc.remainder());
-    for (a, b) in wc.zip(zc) {
-        for q in 0..4 {
-            acc[q] += a[q] * b[q];
-        }
-    }
-    let tail: f64 = wr.iter().zip(zr).map(|(a, b)| a * b).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
-}
-
 /// Time steps must be >= 0 (and not NaN).
 pub(crate) fn check_time_steps(dt: &[f64]) -> Result<(), CoreError> {
     match dt.iter().find(|d| d.is_nan() || **d < 0.0) {
@@ -393,208 +427,4 @@ pub(crate) fn check_time_steps(dt: &[f64]) -> Result<(), CoreError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn log_kernel() -> Kernel {
-        // a crude 2-per-decade approximation is enough for the exactness tests below,
-        // which compare against the same kernel summed directly
-        let taus: Vec<f64> = (0..14).map(|k| 0.1 * 10f64.powf(k as f64 / 2.0)).collect();
-        Kernel::new(vec![0.4; 14], taus).unwrap()
-    }
-
-    #[test]
-    fn recursive_equals_direct_superposition() {
-        let kernel = log_kernel();
-        let mut bank = DriftBank::new(kernel.clone(), -0.025, 1).unwrap();
-        let hs = [0.0, 2.0, 2.0, 5.0, 5.0, 1.0, 1.0, 1.0];
-        let dts = [0.0, 1.0, 10.0, 3.0, 100.0, 7.0, 1000.0, 5000.0];
-        let mut t = 0.0;
-        let mut steps: Vec<(f64, f64)> = Vec::new();
-        let mut prev = 0.0;
-        let mut out = [0.0];
-        for (&h, &dt) in hs.iter().zip(&dts) {
-            t += dt;
-            if h != prev {
-                steps.push((t, h - prev));
-                prev = h;
-            }
-            bank.step(dt, &[h], &[true], &mut out).unwrap();
-            let direct: f64 = h - 0.025
-                * steps
-                    .iter()
-                    .map(|(ti, dh)| dh * kernel.value(t - ti))
-                    .sum::<f64>();
-            assert!((out[0] - direct).abs() < 1e-12, "{} vs {direct}", out[0]);
-        }
-    }
-
-    #[test]
-    fn linear_in_the_steps_and_invalid_keeps_state() {
-        let mut a = DriftBank::new(log_kernel(), -0.025, 2).unwrap();
-        let mut out = [0.0; 2];
-        a.step(0.0, &[1.0, 2.0], &[true, true], &mut out).unwrap();
-        a.step(100.0, &[1.0, 2.0], &[true, true], &mut out).unwrap();
-        // doubling the steps doubles the drift
-        assert!(((out[1] - 2.0) - 2.0 * (out[0] - 1.0)).abs() < 1e-12);
-        a.step(10.0, &[f64::NAN, 2.0], &[true, false], &mut out)
-            .unwrap();
-        assert!(out[0].is_nan() && out[1].is_nan());
-        assert!(Kernel::new(vec![-1.0], vec![1.0]).is_err());
-        assert!(DriftBank::new(log_kernel(), f64::NAN, 1).is_err());
-        assert!(a.step(-1.0, &[1.0, 1.0], &[true, true], &mut out).is_err());
-    }
-
-    #[test]
-    fn exponent_superposes_the_powered_level() {
-        // q = 2: the drift of a held level h is that of a held level h² with q = 1
-        let (h, q) = (1.5_f64, 2.0);
-        let mut powered = DriftBank::new(log_kernel(), -0.025, 1)
-            .unwrap()
-            .with_exponent(q)
-            .unwrap();
-        let mut linear = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
-        let (mut a, mut b) = ([0.0], [0.0]);
-        for dt in [0.0, 1.0, 10.0, 100.0] {
-            powered.step(dt, &[h], &[true], &mut a).unwrap();
-            linear.step(dt, &[h.powf(q)], &[true], &mut b).unwrap();
-            assert!(((a[0] - h) - (b[0] - h.powf(q))).abs() < 1e-12);
-        }
-        assert!((a[0] - h).abs() > 1e-3, "a held level drifts");
-        // below zero the level is 0: no drift from a negative reading
-        let mut neg = DriftBank::new(log_kernel(), -0.025, 1)
-            .unwrap()
-            .with_exponent(q)
-            .unwrap();
-        neg.step(0.0, &[-0.3], &[true], &mut a).unwrap();
-        neg.step(100.0, &[-0.3], &[true], &mut a).unwrap();
-        assert_eq!(a[0], -0.3);
-        for bad in [0.0, -1.0, f64::NAN, 9.0] {
-            assert!(DriftBank::new(log_kernel(), -0.025, 1)
-                .unwrap()
-                .with_exponent(bad)
-                .is_err());
-        }
-    }
-
-    /// The drift (output - input) at the end of `path` ((dt, h) pairs) for one element.
-    fn final_drift(kernel: Kernel, rest: f64, path: &[(f64, f64)]) -> f64 {
-        let mut b = DriftBank::new(kernel, -0.025, 1)
-            .unwrap()
-            .with_rest_rate(rest, 2.0)
-            .unwrap();
-        let mut out = [0.0];
-        for &(dt, h) in path {
-            b.step(dt, &[h], &[true], &mut out).unwrap();
-        }
-        out[0] - path.last().unwrap().1
-    }
-
-    #[test]
-    fn rest_clock_runs_at_rest_and_stops_while_moving() {
-        let run = |rest: f64, path: &[(f64, f64)]| final_drift(log_kernel(), rest, path);
-        // a step then a long hold: the clock is slowed for a few windows after the step,
-        // then runs with time, so after 1000 s the two clocks differ by a few seconds' worth
-        let hold: Vec<(f64, f64)> = [(0.0, 0.0), (1e-3, 2.0)]
-            .into_iter()
-            .chain((0..1000).map(|_| (1.0, 2.0)))
-            .collect();
-        let (time, rest) = (run(0.0, &hold), run(0.1, &hold));
-        assert!(
-            rest < 0.0 && (time - rest).abs() < 0.05 * time.abs(),
-            "{time} vs {rest}"
-        );
-        // a steady triangle wave at 10 units/s: the rest clock is the time clock run with every
-        // step slowed by the averaged velocity v, dt / (1 + |v| / rest_rate)
-        let wave: Vec<(f64, f64)> = (0..4000)
-            .map(|k| {
-                let x = (k % 200) as f64;
-                (0.1, if (k / 200) % 2 == 0 { x } else { 200.0 - x })
-            })
-            .collect();
-        let (mut v, mut prev) = (0.0, 0.0);
-        let slowed: Vec<(f64, f64)> = wave
-            .iter()
-            .map(|&(dt, h)| {
-                let d: f64 = if dt > 0.0 {
-                    v += ((h - prev) / dt - v) * (1.0 - (-dt / 2.0f64).exp());
-                    dt / (1.0 + v.abs() / 0.1)
-                } else {
-                    dt
-                };
-                prev = h;
-                (d, h)
-            })
-            .collect();
-        let (wr, ws) = (run(0.1, &wave), run(0.0, &slowed));
-        assert!((wr - ws).abs() < 1e-9, "rest {wr} vs slowed time {ws}");
-        // with a kernel of slow terms (10 s .. 10^6 s) the moving element hardly drifts
-        let slow = |rest: f64, path: &[(f64, f64)]| {
-            let taus: Vec<f64> = (2..13).map(|k| 10f64.powf(k as f64 / 2.0)).collect();
-            final_drift(Kernel::new(vec![0.4; 11], taus).unwrap(), rest, path)
-        };
-        let (st, sr) = (slow(0.0, &wave), slow(0.1, &wave));
-        assert!(sr.abs() < 0.3 * st.abs(), "rest {sr} vs time {st}");
-        // noise on a hold does not stop the clock
-        let noisy: Vec<(f64, f64)> = hold
-            .iter()
-            .enumerate()
-            .map(|(k, &(dt, h))| {
-                (
-                    dt,
-                    if k > 1 {
-                        h + 0.002 * ((k * 7919 % 13) as f64 - 6.0) / 6.0
-                    } else {
-                        h
-                    },
-                )
-            })
-            .collect();
-        let rn = run(0.1, &noisy);
-        assert!(
-            (rn - rest).abs() < 0.05 * rest.abs(),
-            "noisy {rn} vs clean {rest}"
-        );
-        let b = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
-        assert!(b.clone().with_rest_rate(-1.0, 2.0).is_err());
-        assert!(b.with_rest_rate(0.1, 0.0).is_err());
-    }
-
-    #[test]
-    fn two_clocks_add_the_two_superpositions() {
-        let path: Vec<(f64, f64)> = (0..600)
-            .map(|k| {
-                (
-                    0.5,
-                    if (k / 40) % 3 == 0 {
-                        2.0
-                    } else {
-                        (k % 17) as f64 * 0.3
-                    },
-                )
-            })
-            .collect();
-        let run = |bank: DriftBank| {
-            let mut b = bank;
-            let mut out = [0.0];
-            path.iter()
-                .map(|&(dt, h)| {
-                    b.step(dt, &[h], &[true], &mut out).unwrap();
-                    out[0] - h
-                })
-                .collect::<Vec<f64>>()
-        };
-        let base = || DriftBank::new(log_kernel(), -0.02, 1).unwrap();
-        let rest = run(base().with_rest_rate(0.1, 0.5).unwrap());
-        let time = run(DriftBank::new(log_kernel(), -0.01, 1).unwrap());
-        let both = run(base()
-            .with_rest_rate(0.1, 0.5)
-            .unwrap()
-            .with_time_component(-0.01)
-            .unwrap());
-        for k in 0..path.len() {
-            assert!((both[k] - rest[k] - time[k]).abs() < 1e-12, "sample {k}");
-        }
-        assert!(base().with_time_component(f64::NAN).is_err());
-    }
-}
+mod tests;

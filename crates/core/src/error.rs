@@ -52,6 +52,15 @@ impl fmt::Display for CoreError {
 
 impl std::error::Error for CoreError {}
 
+impl From<texsense_kernels::KernelError> for CoreError {
+    fn from(e: texsense_kernels::KernelError) -> Self {
+        CoreError::Parameter {
+            what: e.what,
+            why: e.why.into(),
+        }
+    }
+}
+
 /// Check that a slice has the expected length.
 pub(crate) fn check_len(what: &'static str, len: usize, expected: usize) -> Result<(), CoreError> {
     if len == expected {

@@ -6,15 +6,17 @@
 //! interpolated bilinearly; in the cells on the diagonal, whose upper half lies outside the
 //! Preisach triangle, linearly on the lower triangle, so that `F(u, u) = 0` holds exactly.
 
+use texsense_kernels::everett::{self as kernel, prepare_table};
+
 use crate::error::{check_len, CoreError};
 
-/// An Everett function on a uniform grid.
+/// An Everett function on a uniform grid (its table owned; the kernel is
+/// `texsense_kernels::everett`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Everett {
     pub(crate) k: usize,
     pub(crate) u_min: f64,
     pub(crate) u_max: f64,
-    pub(crate) inv_step: f64,
     pub(crate) table: Vec<f64>,
 }
 
@@ -36,26 +38,35 @@ impl Everett {
             });
         }
         let mut table = table;
-        for i in 0..k {
-            for j in 0..k {
-                let v = table[i * k + j];
-                if j > i || i == j {
-                    table[i * k + j] = 0.0;
-                } else if !v.is_finite() {
-                    return Err(CoreError::Parameter {
-                        what: "everett table",
-                        why: format!("entry ({i}, {j}) is not finite"),
-                    });
-                }
-            }
+        if let Some(q) = (0..k * k).find(|&q| q / k > q % k && !table[q].is_finite()) {
+            return Err(CoreError::Parameter {
+                what: "everett table",
+                why: format!("entry ({}, {}) is not finite", q / k, q % k),
+            });
         }
+        prepare_table(k, &mut table)?;
+        Self::view_of(k, u_min, u_max, &table)?;
         Ok(Self {
             k,
             u_min,
             u_max,
-            inv_step: (k - 1) as f64 / (u_max - u_min),
             table,
         })
+    }
+
+    fn view_of(
+        k: usize,
+        u_min: f64,
+        u_max: f64,
+        table: &[f64],
+    ) -> Result<kernel::Everett<'_, f64>, CoreError> {
+        Ok(kernel::Everett::new(k, u_min, u_max, table)?)
+    }
+
+    /// The kernels' view (checked when the table was built).
+    #[inline]
+    pub fn view(&self) -> kernel::Everett<'_, f64> {
+        Self::view_of(self.k, self.u_min, self.u_max, &self.table).expect("checked when built")
     }
 
     /// Grid size K.
@@ -73,48 +84,15 @@ impl Everett {
         self.u_max
     }
 
-    /// `F(α, β)` for `u_min <= β <= α <= u_max` (interpolated).
-    ///
-    /// Branch-free: both the bilinear and the diagonal-cell formula are computed and the
-    /// right one selected, since on a real input which cell is hit is unpredictable (a
-    /// mispredicted branch costs more than the few extra multiplications).
-    #[inline]
-    pub fn value(&self, alpha: f64, beta: f64) -> f64 {
-        if alpha.is_nan() || beta.is_nan() {
-            return f64::NAN;
-        }
-        self.value_of_numbers(alpha, beta)
+    /// The table (row α, column β; zero on and above the diagonal).
+    pub fn table(&self) -> &[f64] {
+        &self.table
     }
 
-    /// [`Everett::value`] for inputs that are numbers (not NaN; infinities are clamped).
-    #[inline(always)]
-    pub(crate) fn value_of_numbers(&self, alpha: f64, beta: f64) -> f64 {
-        let last = (self.k - 1) as f64;
-        let a = ((alpha - self.u_min) * self.inv_step).clamp(0.0, last);
-        let b = ((beta - self.u_min) * self.inv_step).clamp(0.0, last);
-        // SAFETY: a and b are in [0, k - 1] (clamped, not NaN), so the truncation is a floor
-        // that fits in u32 (k is at most the table's side)
-        let (ia, ib) = unsafe { (a.to_int_unchecked::<u32>(), b.to_int_unchecked::<u32>()) };
-        let top = (self.k - 2) as u32;
-        let (i0, j0) = (ia.min(top) as usize, ib.min(top) as usize);
-        let wa = a - i0 as f64;
-        let wb = b - j0 as f64;
-        let q = i0 * self.k + j0;
-        // SAFETY: i0, j0 <= k - 2, so q + 1 and q + k + 1 are below k * k = table.len()
-        let (f00, f01, f10, f11) = unsafe {
-            let t = self.table.as_ptr().add(q);
-            (*t, *t.add(1), *t.add(self.k), *t.add(self.k + 1))
-        };
-        let bilinear =
-            (1.0 - wa) * ((1.0 - wb) * f00 + wb * f01) + wa * ((1.0 - wb) * f10 + wb * f11);
-        // diagonal cell: linear on the lower triangle, F = 0 on the diagonal
-        let diagonal = (wa - wb) * f10;
-        let v = if i0 == j0 { diagonal } else { bilinear };
-        if b >= a {
-            0.0
-        } else {
-            v
-        }
+    /// `F(α, β)` for `u_min <= β <= α <= u_max` (interpolated; NaN for NaN).
+    #[inline]
+    pub fn value(&self, alpha: f64, beta: f64) -> f64 {
+        self.view().value(alpha, beta)
     }
 }
 

@@ -28,14 +28,16 @@ pub mod detect;
 pub mod drift;
 pub mod error;
 pub mod everett;
+pub mod mcu;
 pub mod par;
 pub mod preisach;
 pub mod repair;
+mod snapshot;
 pub mod spacer;
 pub mod topology;
 
 pub use bouc_wen::{BoucWenBank, BoucWenParams};
-pub use chain::{Chain, Response};
+pub use chain::{Chain, Stage as ChainStage};
 pub use compensation::Compensation;
 pub use convert::{Converter, Curve};
 pub use drift::{DriftBank, Kernel};

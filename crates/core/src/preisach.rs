@@ -27,22 +27,24 @@
 
 use std::sync::Arc;
 
+use texsense_kernels::everett::Everett as EverettView;
+use texsense_kernels::preisach::{self as kernel, Head, Output, Prepared, CLAMPED};
+
 use crate::error::{check_len, frames_of, CoreError};
 pub use crate::everett::{everett_terms, Everett, EverettTerms};
 use crate::par::{block_size, for_blocks, parallel, FrameBlock};
+use crate::snapshot::{Reader, Writer};
 
 /// Extrema an element holds in place. A deeper stack (ever-shrinking nested oscillations;
 /// the deepest seen on real and simulated records is 13) moves to the heap, up to the bank's
 /// capacity, and back in place once it is shallow again.
 pub const INLINE_EXTREMA: usize = 12;
 
-/// The state of one element: its extremum stack (input and output at each extremum) and the
-/// last input and output.
+/// The state of one element: the kernel's head (depth, last input and output), its
+/// extremum stack (input and output at each extremum) and its counters.
 #[derive(Debug, Clone)]
 struct Element {
-    len: u32,
-    last_u: f64,
-    last_h: f64,
+    head: Head<f64>,
     clamped: u64,
     forgotten: u64,
     inline: [[f64; 2]; INLINE_EXTREMA + 1],
@@ -51,17 +53,15 @@ struct Element {
 
 impl Element {
     fn new(u_min: f64) -> Self {
-        let mut inline = [[0.0; 2]; INLINE_EXTREMA + 1];
-        inline[0] = [u_min, 0.0];
-        Self {
-            len: 1,
-            last_u: u_min,
-            last_h: 0.0,
+        let mut el = Self {
+            head: Head::new(u_min),
             clamped: 0,
             forgotten: 0,
-            inline,
+            inline: [[0.0; 2]; INLINE_EXTREMA + 1],
             spill: None,
-        }
+        };
+        kernel::start(&mut el.head, &mut el.inline, u_min);
+        el
     }
 
     #[inline]
@@ -72,18 +72,10 @@ impl Element {
         }
     }
 
-    #[inline]
-    fn stack_mut(&mut self) -> &mut [[f64; 2]] {
-        match &mut self.spill {
-            Some(s) => s,
-            None => &mut self.inline,
-        }
-    }
-
     /// Give the stack room for `room` extrema on the heap (plus the spare slot).
     #[cold]
     fn grow_to(&mut self, room: usize) {
-        let len = self.len as usize;
+        let len = self.head.len as usize;
         let mut s = vec![[0.0; 2]; room + 1].into_boxed_slice();
         s[..len].copy_from_slice(&self.stack()[..len]);
         self.spill = Some(s);
@@ -93,97 +85,110 @@ impl Element {
     #[cold]
     fn unspill(&mut self) {
         if let Some(s) = self.spill.take() {
-            let len = self.len as usize;
+            let len = self.head.len as usize;
             self.inline[..len].copy_from_slice(&s[..len]);
         }
     }
 
-    /// One valid input (eq. 4.16-4.22). Written so that the outcomes that are unpredictable
-    /// on a real input (rising or falling, turning or not) select values instead of branching.
+    /// One valid input (eq. 4.16-4.22): the kernel's step (`prepare`, then `finish`) on
+    /// this element's stack, which grows on the heap up to the capacity.
     #[inline]
-    fn step(&mut self, e: &Everett, capacity: usize, u_in: f64) -> f64 {
-        let u = u_in.clamp(e.u_min, e.u_max);
-        self.clamped += u64::from(u != u_in);
-        let prev = self.last_u;
-        if u == prev {
-            return self.last_h;
-        }
-        let mut len = self.len as usize;
-        let rising = u > prev;
-        // the top is a minimum when len is odd (stack = m0, M1, m1, ...); a turn at `prev`
-        // pushes it as a new extremum
-        let turned = rising != (len % 2 == 1);
-        if len == self.room(capacity) {
+    fn step(&mut self, e: &EverettView<'_, f64>, capacity: usize, u_in: f64) -> f64 {
+        let (prepared, flags) = kernel::prepare(&self.head, e, u_in);
+        self.clamped += u64::from(flags & CLAMPED != 0);
+        let (u, rising, turned) = match prepared {
+            Prepared::Same(h) => return h,
+            Prepared::Moves { u, rising, turned } => (u, rising, turned),
+        };
+        if self.head.len as usize == (self.stack().len() - 1).min(capacity) {
             // rare; `turned` is tested inside, out of line, so that the compiler cannot
             // test it first (it is as unpredictable as a coin on a real input)
-            self.make_room(capacity, turned, &mut len);
+            self.make_room(capacity, turned);
         }
         let Element {
+            head,
             inline,
             spill,
-            last_h,
-            last_u,
-            len: stored_len,
             ..
         } = self;
         let s: &mut [[f64; 2]] = match spill {
             Some(b) => b,
             None => inline,
         };
-        s[len] = [prev, *last_h]; // written always, kept only on a turn
-        len += usize::from(turned);
-        // wiping-out: the new input passes the extremum before the top
-        let dir = if rising { 1.0 } else { -1.0 };
-        // the first level without a branch (whether a step wipes out one loop is as
-        // unpredictable as a coin on a real input); deeper levels are rare
-        let wipes = (len >= 3) & ((u - s[len.max(2) - 2][0]) * dir >= 0.0);
-        len = std::hint::select_unpredictable(wipes, len.wrapping_sub(2), len);
-        while wipes && len >= 3 && (u - s[len - 2][0]) * dir >= 0.0 {
-            len -= 2;
-        }
-        if len == 2 && u <= s[0][0] {
-            len = 1; // back at lower saturation (only a falling input gets here)
-        }
-        let [top, x] = s[len - 1];
-        // rising after a minimum: x + 2 F(u, m); falling after a maximum: x - 2 F(M, u)
-        let odd = len % 2 == 1;
-        let (alpha, beta) = if odd { (u, top) } else { (top, u) };
-        let sign = if odd { 2.0 } else { -2.0 };
-        let h = x + sign * e.value_of_numbers(alpha, beta);
-        *stored_len = len as u32;
-        *last_u = u;
-        *last_h = h;
-        if len <= INLINE_EXTREMA / 2 && spill.is_some() {
+        let h = kernel::finish(head, s, e, u, rising, turned);
+        if head.len as usize <= INLINE_EXTREMA / 2 && spill.is_some() {
             self.unspill();
         }
         h
     }
 
-    /// Extrema the stack may hold; one more slot always exists (the unconditional write of
-    /// a possible turning point).
-    #[inline]
-    fn room(&self, capacity: usize) -> usize {
-        (self.stack().len() - 1).min(capacity)
-    }
-
     /// The stack is full: if the input turned, grow it on the heap (doubling) while below
-    /// `capacity`, else forget the most recent completed minor loop (the two entries below
-    /// the top).
+    /// the capacity, else forget the innermost loop (the kernel's `forget`).
     #[cold]
     #[inline(never)]
-    fn make_room(&mut self, capacity: usize, turned: bool, len: &mut usize) {
+    fn make_room(&mut self, capacity: usize, turned: bool) {
         if !turned {
             return;
         }
         let room = self.stack().len() - 1;
         if room < capacity {
             self.grow_to((2 * room).min(capacity));
-        } else {
-            let s = self.stack_mut();
-            s[*len - 3] = s[*len - 1];
-            *len -= 2;
-            self.forgotten += 1;
+            return;
         }
+        let Element {
+            head,
+            inline,
+            spill,
+            forgotten,
+            ..
+        } = self;
+        let s: &mut [[f64; 2]] = match spill {
+            Some(b) => b,
+            None => inline,
+        };
+        kernel::forget(head, s);
+        *forgotten += 1;
+    }
+
+    /// The element's state in a snapshot: head, counters, the extrema on the stack.
+    fn save(&self, w: &mut Writer) {
+        let len = self.head.len as usize;
+        w.u32(self.head.len);
+        w.f64(self.head.last_u);
+        w.f64(self.head.last_h);
+        w.u64(self.clamped);
+        w.u64(self.forgotten);
+        for &[u, h] in &self.stack()[..len] {
+            w.f64(u);
+            w.f64(h);
+        }
+    }
+
+    /// An element from a snapshot ([`Element::save`]) of a bank with `capacity`.
+    fn load(r: &mut Reader<'_>, u_min: f64, capacity: usize) -> Result<Self, CoreError> {
+        let mut el = Self::new(u_min);
+        let len = r.u32()? as usize;
+        if len == 0 || len > capacity {
+            return Err(r.error("a Preisach stack is deeper than the capacity"));
+        }
+        el.head = Head {
+            len: len as u32,
+            last_u: r.f64()?,
+            last_h: r.f64()?,
+        };
+        el.clamped = r.u64()?;
+        el.forgotten = r.u64()?;
+        if len > INLINE_EXTREMA {
+            el.grow_to(len.next_power_of_two().min(capacity));
+        }
+        let s: &mut [[f64; 2]] = match &mut el.spill {
+            Some(b) => b,
+            None => &mut el.inline,
+        };
+        for slot in &mut s[..len] {
+            *slot = [r.f64()?, r.f64()?];
+        }
+        Ok(el)
     }
 }
 
@@ -207,45 +212,25 @@ pub struct PreisachBank {
     everett: Arc<Everett>,
     capacity: usize,
     elements: Vec<Element>,
-    output: Output,
-}
-
-/// `sign (h + offset)`: the model's output from the Preisach sum `h`.
-#[derive(Debug, Clone, Copy)]
-struct Output {
-    offset: f64,
-    sign: f64,
-}
-
-impl Output {
-    #[inline]
-    fn of(self, h: f64) -> f64 {
-        self.sign * (h + self.offset)
-    }
-
-    /// The Preisach sum that gives the output `y` (the sign is +1 or -1).
-    #[inline]
-    fn sum_for(self, y: f64) -> f64 {
-        self.sign * y - self.offset
-    }
+    output: Output<f64>,
 }
 
 /// The elements `start .. start + len` of a bank, for a parallel batch.
 pub struct PreisachBlock<'a> {
-    everett: &'a Everett,
+    everett: EverettView<'a, f64>,
     capacity: usize,
     elements: &'a mut [Element],
-    output: Output,
+    output: Output<f64>,
 }
 
 impl PreisachBlock<'_> {
     /// Element `i` of the block reads `u`: the model's output (skipped, NaN out, when
     /// invalid or not finite).
-    #[inline]
+    #[inline(always)]
     pub fn step(&mut self, i: usize, u: f64, valid: bool) -> f64 {
         if valid && u.is_finite() {
             self.output
-                .of(self.elements[i].step(self.everett, self.capacity, u))
+                .of(self.elements[i].step(&self.everett, self.capacity, u))
         } else {
             f64::NAN
         }
@@ -283,10 +268,7 @@ impl PreisachBank {
             elements: vec![Element::new(everett.u_min); n],
             capacity,
             everett: Arc::new(everett),
-            output: Output {
-                offset: 0.0,
-                sign: 1.0,
-            },
+            output: Output::identity(),
         })
     }
 
@@ -323,6 +305,37 @@ impl PreisachBank {
         self.elements.iter_mut().for_each(|e| *e = fresh.clone());
     }
 
+    /// Turning points an element keeps at most.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// The output's offset and sign.
+    pub fn output(&self) -> (f64, f64) {
+        (self.output.offset, self.output.sign)
+    }
+
+    /// Every element's state into a snapshot.
+    pub(crate) fn save(&self, w: &mut Writer) {
+        w.u32(self.len() as u32);
+        w.u32(self.capacity as u32);
+        for e in &self.elements {
+            e.save(w);
+        }
+    }
+
+    /// Every element's state from a snapshot of a bank of the same size and capacity.
+    pub(crate) fn load(&mut self, r: &mut Reader<'_>) -> Result<(), CoreError> {
+        r.expect("Preisach elements", self.len())?;
+        r.expect("Preisach capacity", self.capacity)?;
+        let u_min = self.everett.u_min;
+        let elements = (0..self.len())
+            .map(|_| Element::load(r, u_min, self.capacity))
+            .collect::<Result<Vec<_>, _>>()?;
+        self.elements = elements;
+        Ok(())
+    }
+
     /// Samples clamped into the input range, per element.
     pub fn clamped(&self) -> Vec<u64> {
         self.elements.iter().map(|e| e.clamped).collect()
@@ -335,14 +348,14 @@ impl PreisachBank {
 
     /// Current depth of every element's stack.
     pub fn depth(&self) -> Vec<usize> {
-        self.elements.iter().map(|e| e.len as usize).collect()
+        self.elements.iter().map(|e| e.head.len as usize).collect()
     }
 
     /// Last output of every element.
     pub fn last_outputs(&self) -> Vec<f64> {
         self.elements
             .iter()
-            .map(|e| self.output.of(e.last_h))
+            .map(|e| self.output.of(e.head.last_h))
             .collect()
     }
 
@@ -368,57 +381,18 @@ impl PreisachBank {
         out.of(self.set_sum(i, u, out.sum_for(target)))
     }
 
-    /// [`PreisachBank::set_state`] for the Preisach sum `h` itself.
+    /// [`PreisachBank::set_state`] for the Preisach sum `h` itself (the kernel's
+    /// `set_sum`).
     fn set_sum(&mut self, i: usize, u: f64, target: f64) -> f64 {
-        let e = &*self.everett;
-        let u = u.clamp(e.u_min, e.u_max);
-        // output at u after rising to M and falling back: 2 F(M, m0) - 2 F(M, u)
-        let after = |m: f64| 2.0 * e.value(m, e.u_min) - 2.0 * e.value(m, u);
-        let rising = after(u);
-        let major = after(e.u_max);
-        let (lo_val, hi_val) = (rising.min(major), rising.max(major));
-        let want = if target.is_nan() {
-            rising
-        } else {
-            target.clamp(lo_val, hi_val)
-        };
-        let m = if (want - rising).abs() <= f64::EPSILON * rising.abs().max(1.0) {
-            u
-        } else if (want - major).abs() <= f64::EPSILON * major.abs().max(1.0) {
-            e.u_max
-        } else {
-            // after(M) runs monotonically from `rising` (M = u) to `major` (M = u_max)
-            let up = major > rising;
-            let (mut lo, mut hi) = (u, e.u_max);
-            for _ in 0..100 {
-                let mid = 0.5 * (lo + hi);
-                if (after(mid) < want) == up {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            0.5 * (lo + hi)
-        };
-        let mut el = Element::new(e.u_min);
-        el.clamped = self.elements[i].clamped;
-        el.forgotten = self.elements[i].forgotten;
-        el.last_u = u;
-        let h = if m <= u {
-            rising
-        } else {
-            el.inline[1] = [m, 2.0 * e.value(m, e.u_min)];
-            el.len = 2;
-            after(m)
-        };
-        el.last_h = h;
-        self.elements[i] = el;
-        h
+        let e = self.everett.view();
+        let el = &mut self.elements[i];
+        el.spill = None;
+        kernel::set_sum(&mut el.head, &mut el.inline, &e, u, target)
     }
 
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
     pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
-        let (everett, capacity, output) = (&*self.everett, self.capacity, self.output);
+        let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
         let size = block_size(self.len());
         self.elements
             .chunks_mut(size)
@@ -471,7 +445,7 @@ impl PreisachBank {
         check_len("valid", valid.len(), inputs.len())?;
         check_len("out", out.len(), inputs.len())?;
         if schedule == Schedule::FrameOrder {
-            let (everett, capacity, output) = (&*self.everett, self.capacity, self.output);
+            let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
             for ((f, v), o) in inputs
                 .chunks_exact(n)
                 .zip(valid.chunks_exact(n))
@@ -479,7 +453,7 @@ impl PreisachBank {
             {
                 for (i, el) in self.elements.iter_mut().enumerate() {
                     o[i] = if v[i] && f[i].is_finite() {
-                        output.of(el.step(everett, capacity, f[i]))
+                        output.of(el.step(&everett, capacity, f[i]))
                     } else {
                         f64::NAN
                     };

@@ -17,7 +17,10 @@
 //! computed from its readings as they came in and written after them, so no fill sees
 //! another.
 
+use texsense_kernels::repair::{self as kernel, repair_frame};
+
 use crate::error::{check_len, frames_of, CoreError};
+use crate::snapshot::{Reader, Writer};
 use crate::topology::Neighbours;
 
 /// What happened to one reading.
@@ -53,6 +56,8 @@ pub enum Method {
 pub struct LocalRepair {
     method: Method,
     last: Vec<f64>,
+    /// The fills of a frame until all are known (scratch).
+    fills: Vec<f64>,
 }
 
 impl LocalRepair {
@@ -76,6 +81,7 @@ impl LocalRepair {
         Ok(Self {
             method,
             last: vec![f64::NAN; n],
+            fills: vec![0.0; n],
         })
     }
 
@@ -104,12 +110,40 @@ impl LocalRepair {
         std::mem::size_of::<f64>()
     }
 
+    /// The method.
+    pub fn method(&self) -> &Method {
+        &self.method
+    }
+
+    /// The kernels' view of the method.
+    pub fn view(&self) -> kernel::Method<'_, f64> {
+        match &self.method {
+            Method::Zero => kernel::Method::Zero,
+            Method::LastValue => kernel::Method::LastValue,
+            Method::NeighbourMean(nb) => kernel::Method::NeighbourMean(nb.graph()),
+            Method::Weighted(nb, w) => kernel::Method::Weighted(nb.graph(), w),
+        }
+    }
+
+    /// Every element's state into a snapshot.
+    pub(crate) fn save(&self, w: &mut Writer) {
+        w.u32(self.len() as u32);
+        w.f64s(&self.last);
+    }
+
+    /// Every element's state from a snapshot of a repair of the same size.
+    pub(crate) fn load(&mut self, r: &mut Reader<'_>) -> Result<(), CoreError> {
+        r.expect("repair elements", self.len())?;
+        r.f64s(&mut self.last)
+    }
+
     /// Repair a batch (T x N, row-major) in place: a reading is available when `ok(index)`
     /// and it is a number; the others are filled. `outcome` (T x N), when given, gets a
     /// [`RepairOutcome`] per reading.
     ///
-    /// Frame after frame over all elements; the fills of a frame are written once all of them
-    /// are known, so a fill reads only the readings as they came in.
+    /// Frame after frame over all elements (the kernel's `repair_frame`); the fills of a
+    /// frame are written once all of them are known, so a fill reads only the readings as
+    /// they came in.
     pub fn run<F>(
         &mut self,
         values: &mut [f64],
@@ -123,79 +157,27 @@ impl LocalRepair {
         if n == 0 {
             return Ok(());
         }
-        let t = frames_of("values", values.len(), n)?;
-        if let Some(o) = outcome.as_deref_mut() {
+        frames_of("values", values.len(), n)?;
+        if let Some(o) = outcome.as_deref() {
             check_len("outcome", o.len(), values.len())?;
-            o.fill(RepairOutcome::Measured as u8);
         }
-        let mut fills: Vec<(usize, f64, RepairOutcome)> = Vec::new();
-        for r in 0..t {
+        let Self {
+            method,
+            last,
+            fills,
+        } = self;
+        let method = match method {
+            Method::Zero => kernel::Method::Zero,
+            Method::LastValue => kernel::Method::LastValue,
+            Method::NeighbourMean(nb) => kernel::Method::NeighbourMean(nb.graph()),
+            Method::Weighted(nb, w) => kernel::Method::Weighted(nb.graph(), w),
+        };
+        for (r, frame) in values.chunks_exact_mut(n).enumerate() {
             let row = r * n;
-            let frame = &values[row..row + n];
-            let available = |j: usize| {
-                let v = frame[j];
-                (ok(row + j) && v.is_finite()).then_some(v)
-            };
-            // the fills of the frame, from its readings as they came in
-            fills.clear();
-            for (i, last) in self.last.iter_mut().enumerate() {
-                if let Some(v) = available(i) {
-                    *last = v;
-                    continue;
-                }
-                let (v, how) = fill(&self.method, i, *last, &available);
-                if v.is_finite() {
-                    *last = v;
-                }
-                fills.push((i, v, how));
-            }
-            for &(i, v, how) in &fills {
-                values[row + i] = v;
-                if let Some(o) = outcome.as_deref_mut() {
-                    o[row + i] = how as u8;
-                }
-            }
+            let o = outcome.as_deref_mut().map(|o| &mut o[row..row + n]);
+            repair_frame(&method, last, frame, |j| ok(row + j), fills, o);
         }
         Ok(())
-    }
-}
-
-/// The fill of element `i` of a frame, with its last value `last`: the method's value from the
-/// readings of the frame that are `available` (their value, or None), else the last value.
-#[inline]
-fn fill(
-    method: &Method,
-    i: usize,
-    last: f64,
-    available: &impl Fn(usize) -> Option<f64>,
-) -> (f64, RepairOutcome) {
-    let mean = match method {
-        Method::Zero => Some(0.0),
-        Method::LastValue => None,
-        Method::NeighbourMean(nb) => {
-            let (mut sum, mut count) = (0.0, 0u32);
-            for v in nb.of(i).iter().filter_map(|&j| available(j as usize)) {
-                sum += v;
-                count += 1;
-            }
-            (count > 0).then(|| sum / f64::from(count))
-        }
-        Method::Weighted(nb, w) => {
-            let (mut num, mut den) = (0.0, 0.0);
-            let lo = nb.start(i);
-            for (q, &j) in nb.of(i).iter().enumerate() {
-                if let Some(v) = available(j as usize) {
-                    num += w[lo + q] * v;
-                    den += w[lo + q];
-                }
-            }
-            (den > 0.0).then(|| num / den)
-        }
-    };
-    match mean {
-        Some(v) => (v, RepairOutcome::Filled),
-        None if last.is_finite() => (last, RepairOutcome::LastValue),
-        None => (f64::NAN, RepairOutcome::Missing),
     }
 }
 

@@ -4,12 +4,14 @@
 //! the up to four elements left, right, above and below that exist (thesis eq. 6.14 uses
 //! exactly these four).
 
+use texsense_kernels::graph::Graph;
+
 use crate::error::CoreError;
 
-/// Neighbour lists of `n` elements.
+/// Neighbour lists of `n` elements (the kernels' [`Graph`] owned).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Neighbours {
-    indptr: Vec<usize>,
+    indptr: Vec<u32>,
     indices: Vec<u32>,
 }
 
@@ -17,7 +19,8 @@ impl Neighbours {
     /// Build and validate a CSR neighbour graph.
     ///
     /// `indptr` must have `n + 1` non-decreasing entries starting at 0 and ending at
-    /// `indices.len()`; every index must be `< n` and differ from its own element.
+    /// `indices.len()` (below 2^32); every index must be `< n` and differ from its own
+    /// element.
     pub fn new(indptr: Vec<usize>, indices: Vec<u32>) -> Result<Self, CoreError> {
         if indptr.is_empty() || indptr[0] != 0 {
             return Err(CoreError::Parameter {
@@ -60,6 +63,13 @@ impl Neighbours {
                 }
             }
         }
+        if indices.len() > u32::MAX as usize {
+            return Err(CoreError::Parameter {
+                what: "indices",
+                why: "more than 2^32 neighbour pairs".into(),
+            });
+        }
+        let indptr = indptr.into_iter().map(|v| v as u32).collect();
         Ok(Self { indptr, indices })
     }
 
@@ -73,7 +83,7 @@ impl Neighbours {
 
     /// The 4-neighbour graph of a full `rows x cols` grid, elements numbered row-major.
     pub fn grid4(rows: usize, cols: usize) -> Self {
-        let mut indptr = Vec::with_capacity(rows * cols + 1);
+        let mut indptr: Vec<u32> = Vec::with_capacity(rows * cols + 1);
         let mut indices = Vec::with_capacity(rows * cols * 4);
         indptr.push(0);
         for r in 0..rows {
@@ -90,7 +100,7 @@ impl Neighbours {
                 if r + 1 < rows {
                     indices.push(((r + 1) * cols + c) as u32);
                 }
-                indptr.push(indices.len());
+                indptr.push(indices.len() as u32);
             }
         }
         Self { indptr, indices }
@@ -111,20 +121,36 @@ impl Neighbours {
     /// The neighbours of element `i`.
     #[inline]
     pub fn of(&self, i: usize) -> &[u32] {
-        &self.indices[self.indptr[i]..self.indptr[i + 1]]
+        &self.indices[self.indptr[i] as usize..self.indptr[i + 1] as usize]
     }
 
     /// Position of element `i`'s first neighbour in the flat list (for values stored
     /// parallel to the indices, such as weights).
     #[inline]
     pub fn start(&self, i: usize) -> usize {
-        self.indptr[i]
+        self.indptr[i] as usize
     }
 
     /// Number of (directed) neighbour pairs.
     #[inline]
     pub fn nnz(&self) -> usize {
         self.indices.len()
+    }
+
+    /// The kernels' view of the graph (checked when it was built).
+    #[inline]
+    pub fn graph(&self) -> Graph<'_> {
+        Graph::new_trusted(&self.indptr, &self.indices)
+    }
+
+    /// The row pointer.
+    pub fn indptr(&self) -> &[u32] {
+        &self.indptr
+    }
+
+    /// The flat neighbour list.
+    pub fn indices(&self) -> &[u32] {
+        &self.indices
     }
 }
 

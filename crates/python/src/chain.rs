@@ -1,20 +1,53 @@
-//! `Chain`: the whole chain of a mat in one compiled pass, assembled from the kernels of its
-//! stages.
+//! `Chain`: a mat's chain of stages compiled, assembled from the kernels of its stages in
+//! order; its state as bytes; its model blob for a microcontroller.
 
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use texsense_core::{Chain, CoreError, Response};
+use pyo3::types::PyBytes;
+use texsense_core::{Chain, ChainStage, CoreError};
 
 use crate::arrays::{run_detached, to_2d, Batch};
 use crate::compensation::PyCompensation;
 use crate::convert::{PyConverter, PyCurve};
 use crate::detect::PyFailureDetector;
+use crate::drift::PyDriftBank;
 use crate::errors::to_py;
 use crate::repair::PyLocalRepair;
 
-/// detect -> convert -> Preisach + drift (`compensation`), the first-loading curve
-/// (`loading`) or neither (a linear calibration) -> local repair. The chain copies the
-/// kernels it is given (their state as it is).
+/// A stage of a chain from one of the binding's kernels: a `FailureDetector` (detect), a
+/// `Converter` (convert or linear), a `Compensation` (hysteresis, with the drift right after
+/// it), a `DriftBank` (a drift on its own), a `Curve` (the first-loading curve) or a
+/// `LocalRepair` (repair).
+fn stage_of(item: &Bound<'_, PyAny>, position: usize) -> PyResult<ChainStage> {
+    if let Ok(d) = item.cast::<PyFailureDetector>() {
+        return Ok(ChainStage::Detect(d.borrow().inner.clone()));
+    }
+    if let Ok(c) = item.cast::<PyConverter>() {
+        return Ok(ChainStage::Convert(c.borrow().inner.clone()));
+    }
+    if let Ok(c) = item.cast::<PyCompensation>() {
+        return Ok(ChainStage::Compensation(c.borrow().inner.clone()));
+    }
+    if let Ok(d) = item.cast::<PyDriftBank>() {
+        return Ok(ChainStage::Drift(d.borrow().inner.clone()));
+    }
+    if let Ok(c) = item.cast::<PyCurve>() {
+        return Ok(ChainStage::Loading(c.borrow().inner.clone()));
+    }
+    if let Ok(r) = item.cast::<PyLocalRepair>() {
+        return Ok(ChainStage::Repair(r.borrow().inner.clone()));
+    }
+    Err(to_py(CoreError::Parameter {
+        what: "chain",
+        why: format!(
+            "stage {position} is a {}, not a kernel of the chain",
+            item.get_type().name()?
+        ),
+    }))
+}
+
+/// A mat's compiled chain: `stages`, kernels of `n_elements` elements in the order they run
+/// (copied, their state as it is).
 #[pyclass(name = "Chain", module = "texsense._core")]
 pub(crate) struct PyChain {
     inner: Chain,
@@ -23,32 +56,13 @@ pub(crate) struct PyChain {
 #[pymethods]
 impl PyChain {
     #[new]
-    #[pyo3(signature = (converter, *, detector=None, compensation=None, loading=None, repair=None))]
-    fn new(
-        converter: PyRef<'_, PyConverter>,
-        detector: Option<PyRef<'_, PyFailureDetector>>,
-        compensation: Option<PyRef<'_, PyCompensation>>,
-        loading: Option<PyRef<'_, PyCurve>>,
-        repair: Option<PyRef<'_, PyLocalRepair>>,
-    ) -> PyResult<Self> {
-        let response = match (compensation, loading) {
-            (Some(c), None) => Response::Compensation(c.inner.clone()),
-            (None, Some(curve)) => Response::Loading(curve.inner.clone()),
-            (None, None) => Response::Direct,
-            _ => {
-                return Err(to_py(CoreError::Parameter {
-                    what: "chain",
-                    why: "give at most one of compensation and loading".into(),
-                }))
-            }
-        };
-        let inner = Chain::new(
-            detector.map(|d| d.inner.clone()),
-            converter.inner.clone(),
-            response,
-            repair.map(|r| r.inner.clone()),
-        )
-        .map_err(to_py)?;
+    fn new(n_elements: usize, stages: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
+        let stages = stages
+            .iter()
+            .enumerate()
+            .map(|(k, s)| stage_of(s, k + 1))
+            .collect::<PyResult<Vec<_>>>()?;
+        let inner = Chain::new(n_elements, stages).map_err(to_py)?;
         Ok(Self { inner })
     }
 
@@ -56,6 +70,12 @@ impl PyChain {
     #[getter]
     fn n_elements(&self) -> usize {
         self.inner.len()
+    }
+
+    /// The stages' names in order.
+    #[getter]
+    fn stage_names(&self) -> Vec<&'static str> {
+        self.inner.stages().iter().map(ChainStage::name).collect()
     }
 
     /// Every stage back to its initial state.
@@ -85,4 +105,82 @@ impl PyChain {
         })?;
         Ok((out, to_2d(py, codes, b.t, b.n)?))
     }
+
+    /// The state of every stage as bytes (versioned).
+    fn snapshot<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.inner.snapshot())
+    }
+
+    /// Continue from a snapshot of a chain of the same stages and sizes (all or nothing).
+    fn restore(&mut self, state: &[u8]) -> PyResult<()> {
+        self.inner.restore(state).map_err(to_py)
+    }
+
+    /// The chain as the model blob of a microcontroller (f32; each element keeps as many
+    /// Preisach turning points as here).
+    fn mcu_blob<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let blob = self.inner.mcu_blob().map_err(to_py)?;
+        Ok(PyBytes::new(py, &blob))
+    }
+}
+
+/// What a model blob holds, checked as the C side checks it: (elements, stage names, bytes
+/// of memory in all, state bytes per element, scratch bytes per element, fixed bytes); a
+/// damaged or foreign blob raises a ParameterError naming why.
+#[pyfunction]
+#[pyo3(name = "mcu_blob_info")]
+#[allow(clippy::type_complexity)]
+pub(crate) fn py_mcu_blob_info(
+    blob: &[u8],
+) -> PyResult<(usize, Vec<&'static str>, usize, usize, usize, usize)> {
+    use texsense_kernels::blob::{BlobError, Model, StageView};
+    // the C side reads a 4-byte aligned blob: copy it into words
+    let mut words = vec![0u32; blob.len().div_ceil(4)];
+    for (w, c) in words.iter_mut().zip(blob.chunks(4)) {
+        let mut b = [0u8; 4];
+        b[..c.len()].copy_from_slice(c);
+        *w = u32::from_le_bytes(b);
+    }
+    // SAFETY: `words` is alive and holds at least blob.len() bytes, 4-byte aligned
+    let aligned = unsafe { std::slice::from_raw_parts(words.as_ptr().cast::<u8>(), blob.len()) };
+    let why = |e: BlobError| {
+        to_py(CoreError::Parameter {
+            what: "model blob",
+            why: match e {
+                BlobError::Magic => "not a texsense model blob".into(),
+                BlobError::Version(v) => format!(
+                    "format version {v}; this build reads version {}",
+                    texsense_kernels::blob::VERSION
+                ),
+                BlobError::Length => "not as long as its header says (cut short?)".into(),
+                BlobError::Checksum => "the checksum does not match: the blob is damaged".into(),
+                BlobError::Format(k) => format!("{}: {}", k.what, k.why),
+                BlobError::Alignment => "not 4-byte aligned".into(),
+            },
+        })
+    };
+    let model = Model::parse(aligned).map_err(why)?;
+    let names = model
+        .stages()
+        .map(|s| match s {
+            Ok(StageView::Detect { .. }) => "detect",
+            Ok(StageView::Convert { curve: Some(_), .. }) => "convert",
+            Ok(StageView::Convert { curve: None, .. }) => "linear",
+            Ok(StageView::Loading(_)) => "loading curve",
+            Ok(StageView::Hysteresis { .. }) => "hysteresis",
+            Ok(StageView::Drift { level: Some(_), .. }) => "drift (QLV)",
+            Ok(StageView::Drift { .. }) => "drift",
+            Ok(StageView::Repair(_)) => "repair",
+            Err(_) => "?",
+        })
+        .collect();
+    let m = texsense_mcu::memory(&model);
+    Ok((
+        model.n_elements(),
+        names,
+        m.total(),
+        m.state_per_element,
+        m.scratch_per_element,
+        m.fixed,
+    ))
 }

@@ -30,7 +30,8 @@ impl PyCurve {
         py: Python<'py>,
         values: PyReadonlyArrayDyn<'py, f64>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let out = values.as_array().mapv(|v| self.inner.at(v));
+        let curve = self.inner.view();
+        let out = values.as_array().mapv(|v| curve.at(v));
         Ok(out.into_pyarray(py))
     }
 }

@@ -31,6 +31,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<repair::PyLocalRepair>()?;
     m.add_class::<chain::PyChain>()?;
     m.add_function(wrap_pyfunction!(preisach::py_everett_terms, m)?)?;
+    m.add_function(wrap_pyfunction!(chain::py_mcu_blob_info, m)?)?;
     let py = m.py();
     m.add("ShapeError", py.get_type::<errors::ShapeError>())?;
     m.add(

@@ -53,6 +53,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "a PDF or HTML report of a recording (maps, charts, regions, events, health)",
     ),
     "record": ("record", "record raw frames from a mat (no calibration needed)"),
+    "export": (
+        "export",
+        "export a calibration for a mat's own microcontroller (a model blob or a C array)",
+    ),
     "rehash": (
         "models",
         "accept a deliberate edit of a model file (write the hash of its content)",

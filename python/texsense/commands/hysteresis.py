@@ -14,7 +14,7 @@ from texsense.commands.drift import add_clock_arguments, load_model, rest_rate_o
 from texsense.compensation.drift import DriftModel, read_steps
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis.plots import model_figure, validation_report_figure
-from texsense.compensation.hysteresis.sampling import check_sampling
+from texsense.compensation.hysteresis.sampling import check_sampling, is_row_count
 from texsense.compensation.hysteresis.validation import validate
 from texsense.compensation.stages import Drift, Hysteresis, StageChain
 from texsense.exceptions import FormatError
@@ -148,7 +148,7 @@ def error_summary(
 
 def run_fit(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis fit``."""
-    cols = read_columns(args.calibration)
+    cols = read_columns(args.calibration, required=(args.input, args.output))
     u = _column(cols, args.input, args.calibration)
     y = _column(cols, args.output, args.calibration)
     model = HysteresisModel(
@@ -193,34 +193,7 @@ def run_fit(args: argparse.Namespace) -> int:
             f"{args.input} {model.u_min_:.4g}..{model.u_max_:.4g}; "
             f"fit RMSE {summary['fit']['rmse']:.4g}"
         )
-        if model.validation_rmse_ is not None:
-            d = model.details_
-            if "alpha_cells" in d:
-                setting = f"{d['alpha_cells']} x {d['d_cells']} cells, smoothing {d['smoothing']:g}"
-            elif "nodes" in d:
-                setting = f"{len(d['nodes'])} nodes placed by the record, ridge {d['ridge']:g}"
-            else:
-                setting = "the thesis's interpolation (no gain of least squares beyond one SE)"
-            print(
-                f"  chosen by {d['validation_folds']}-fold cross-validation on held-out reversal "
-                f"curves: {setting}; validation RMSE {model.validation_rmse_:.4g}"
-            )
-        elif "members" in model.details_:
-            d = model.details_
-            folds = [d.get("thesis_fold_mse"), d.get("lsq_fold_mse")]
-            cv = ", ".join(
-                f"{name} {np.sqrt(np.mean(f)):.4g}"
-                for name, f in zip(("thesis", "least squares"), folds, strict=True)
-                if f is not None
-            )
-            print(
-                "  the mean of the thesis table and least squares: neither is clearly better "
-                f"on held-out reversal curves (validation RMSE {cv})"
-            )
-        elif model.method_ == "thesis" and model.method == "auto":
-            print("  the thesis method: too few reversal curves for least squares to show a gain")
-        elif model.method_ != "thesis":
-            print("  too few reversal curves to hold any out: settings not cross-validated")
+        _print_choice(model)
         diag = summary["diagnosis"]
         held = diag["validation_rmse"]
         print(
@@ -240,15 +213,58 @@ def run_fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_choice(model: HysteresisModel) -> None:
+    """What the identification chose and on what evidence (held-out reversal curves)."""
+    if model.validation_rmse_ is not None:
+        d = model.details_
+        if "alpha_cells" in d:
+            setting = f"{d['alpha_cells']} x {d['d_cells']} cells, smoothing {d['smoothing']:g}"
+        elif "nodes" in d:
+            setting = f"{len(d['nodes'])} nodes placed by the record, ridge {d['ridge']:g}"
+        else:
+            setting = "the thesis's interpolation"
+        print(
+            f"  chosen by {d['validation_folds']}-fold cross-validation on held-out reversal "
+            f"curves: {setting}; validation RMSE {model.validation_rmse_:.4g}"
+        )
+        if d.get("chosen_by") == "tail":
+            tails = d["held_out_p95"]
+            mine = tails["thesis" if model.method_ == "thesis" else "lsq"]
+            print(
+                f"  over the thesis/lsq average, whose RMSE is not clearly different: its "
+                f"95th-percentile held-out error {mine:.4g} against the average's "
+                f"{tails['average']:.4g}"
+            )
+    elif "members" in model.details_:
+        d = model.details_
+        folds = [d.get("thesis_fold_mse"), d.get("lsq_fold_mse")]
+        cv = ", ".join(
+            f"{name} {np.sqrt(np.mean(f)):.4g}"
+            for name, f in zip(("thesis", "least squares"), folds, strict=True)
+            if f is not None
+        )
+        print(
+            "  the mean of the thesis table and least squares: neither is clearly better "
+            f"on held-out reversal curves (validation RMSE {cv})"
+        )
+    elif model.method_ == "thesis" and model.method == "auto":
+        print("  the thesis method: too few reversal curves for least squares to show a gain")
+    elif model.method_ != "thesis":
+        print("  too few reversal curves to hold any out: settings not cross-validated")
+
+
 def _model_and_record(
-    args: argparse.Namespace,
+    args: argparse.Namespace, need_output: bool
 ) -> tuple[HysteresisModel, DriftModel | None, dict[str, np.ndarray], str, str, np.ndarray]:
     """The model and its drift stage, the record's columns, the input and output names (the
     model's unless given) and the input column, with its unit checked against the model's."""
     model, drift = load_model(args.model)
-    cols = read_columns(args.data)
     in_name = args.input or model.input_name
     out_name = args.output or model.output_name
+    # the columns named (validate needs the measured output too; apply compares when it is
+    # there): a CSV whose header holds them is a column table
+    named = (in_name, out_name) if need_output else (in_name,)
+    cols = read_columns(args.data, required=named)
     u = _column(cols, in_name, args.data)
     if args.input and _unit_of(in_name) != "1":
         model.check_units(_unit_of(in_name))
@@ -258,7 +274,7 @@ def _model_and_record(
 
 def run_apply(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis apply``."""
-    model, drift, cols, _, out_name, u = _model_and_record(args)
+    model, drift, cols, _, out_name, u = _model_and_record(args, False)
     st = model.state(1)
     modelled = st.run(u)
     clamped = int(st.clamped[0])
@@ -297,9 +313,11 @@ def run_apply(args: argparse.Namespace) -> int:
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``texsense hysteresis validate``."""
-    model, drift, cols, in_name, out_name, u = _model_and_record(args)
+    model, drift, cols, in_name, out_name, u = _model_and_record(args, True)
     y = _column(cols, out_name, args.data)
     times = cols.get("time_s")
+    if times is not None and drift is None and is_row_count(times):
+        times = None  # row numbers, not a clock: the worst places are named by sample alone
     report = validate(model, u, y, times_s=times, drift=drift)
     if args.plot:
         validation_report_figure(

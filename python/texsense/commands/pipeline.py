@@ -312,7 +312,7 @@ def run_health(args: argparse.Namespace) -> int:
         if cal.reads[0] != "capacitance":
             raise ParameterError("health reads capacitance: give a mat calibration")
         # the detector the pipeline would run with this calibration
-        detector = Pipeline(cal, raw.layout, repair=None).detector
+        detector = Pipeline(cal, raw.layout, repair=None).detector or detector
     frames = raw.frames if raw.unit == "pF" else raw.to_unit("pF").frames
     codes = detector.detect(frames, raw.valid)
     report = health_report(codes, raw.times, raw.layout)

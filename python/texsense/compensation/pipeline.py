@@ -1,30 +1,39 @@
 """From raw capacitance frames to pressure maps: a mat's chain of stages
-(:class:`~texsense.compensation.stages.StageChain`) compiled into one pass of the Rust core,
+(:class:`~texsense.compensation.stages.StageChain`) compiled into passes of the Rust core,
 streaming frame by frame or in batch over a recording.
 
-- **detect** (:class:`~texsense.compensation.health.FailureDetector`): the chain's detect stage, or
-  the detector its conversion implies (the expected capacitance range of every element);
-- **convert** (:class:`~texsense.compensation.stages.Convert`): capacitance -> compression per
-  element (eq. 2.1, zeroed and equilibrated), or a linear calibration
-  (:class:`~texsense.compensation.stages.Linear`);
-- **hysteresis + drift** (:class:`~texsense.compensation.stages.Hysteresis`,
-  :class:`~texsense.compensation.stages.Drift`) in one pass (eq. 4.15-4.22, eq. 5.8). A failed
-  reading is skipped: the element's Preisach and drift states stay frozen until it reads again.
-  Without the hysteresis stage the compression is converted with the first-loading curve (what an
-  uncompensated system does);
-- **repair** (:class:`~texsense.compensation.repair.Repair`): failed elements are filled (eq. 6.14
-  or a better method) and stay marked False in the output's ``valid`` mask.
+The pipeline runs the chain **as written**, stage after stage, each with the compiled kernel
+its Python stage runs (``crates/core/src/chain.rs``):
 
-The compiled chain (``crates/core/src/chain.rs``) runs the stages' own kernels one after the
-other over the whole block of frames, in parallel over blocks of elements; the harmonic
-repairs solve a sparse system per frame in scipy afterwards. ``chain.run(rec)`` (the stages
-in Python, float64 between them) gives the same numbers (tested, to the bit), and so do
-batch and streaming: ``step`` is the same code with one frame.
+- **detect** (:class:`~texsense.compensation.health.FailureDetector`): every detect stage of
+  the chain; a chain without one gets the detector its conversion implies (the expected capacitance
+  range of every element), right before the conversion;
+- **convert** (:class:`~texsense.compensation.stages.Convert`,
+  :class:`~texsense.compensation.stages.Linear`):
+  eq. 2.1 per element;
+- **hysteresis** and **drift** (:class:`~texsense.compensation.stages.Hysteresis`,
+  :class:`~texsense.compensation.stages.Drift`, eq. 4.15-4.22 and 5.8; a drift right after a
+  hysteresis stage runs in the same pass, QLV included). A failed reading is skipped: the
+  element's Preisach and drift states stay frozen until it reads again;
+- **repair** (:class:`~texsense.compensation.repair.Repair`): the chain's repair stages where they
+  stand; a chain without one gets the method of ``repair=`` after its last stage. Failed
+  elements are filled and stay marked False in the output's ``valid`` mask.
+
+Any order the stage contract allows runs; a stage without a compiled kernel is refused in
+one line naming it. The local repairs run in the compiled pass; the harmonic ones solve a
+sparse system per frame in scipy between compiled passes. ``chain.run(rec)`` (the stages in
+Python, float64 between them) gives the same numbers (tested, to the bit, on chains of every
+allowed shape), and so do batch and streaming: ``step`` is the same code with one frame.
+:meth:`Pipeline.snapshot` and :meth:`Pipeline.restore` carry the whole state (every
+element's detector, Preisach memory, drift history and last repaired value, and the time of
+the last frame) to another process.
 """
 
 from __future__ import annotations
 
 import inspect
+import json
+import struct
 from typing import Any
 
 import numpy as np
@@ -32,8 +41,9 @@ import numpy.typing as npt
 
 from texsense._core import Chain, Compensation, __version__
 from texsense.compensation.health import FailureDetector
+from texsense.compensation.hysteresis import DEFAULT_CAPACITY
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
-from texsense.compensation.stage import time_steps
+from texsense.compensation.stage import Stage, time_steps
 from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, StageChain
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
@@ -60,22 +70,44 @@ def layout_mismatch(expected: Layout, given: Layout) -> str | None:
     return None
 
 
+#: The first bytes of a pipeline's state (:meth:`Pipeline.snapshot`).
+STATE_MAGIC = b"TXSNPIPE"
+#: The version of that format this build writes and reads.
+STATE_VERSION = 1
+
+
+class _Loading:
+    """The first-loading curve in place of a hysteresis stage (``hysteresis=False``)."""
+
+    name = "loading"
+
+    def __init__(self, hysteresis: Hysteresis) -> None:
+        self.hysteresis = hysteresis
+
+
 class Pipeline:
     """The capacitance-to-pressure chain of one mat, compiled.
 
     Parameters
     ----------
     chain : StageChain
-        The mat's calibration: a conversion stage (convert or linear), the spacer's stages
-        (hysteresis, optionally drift) and optionally a detect stage.
+        The mat's calibration, run as written (see the module documentation).
     layout : Layout
         The mat's elements (neighbours for detection and repair).
     detect, hysteresis, drift : bool
-        Switch stages off to see what each contributes (``hysteresis=False``: the
-        first-loading curve).
+        Switch stages off to see what each contributes (``detect=False``: no detect stage,
+        the chain's included; ``hysteresis=False``: the first-loading curve in place of the
+        hysteresis stage, and no drift).
     repair : str or None
-        A method of :data:`texsense.compensation.repair.METHODS`, or None to leave failed elements
-        NaN (an unknown name raises :class:`ParameterError`).
+        A method of :data:`texsense.compensation.repair.METHODS` added after the last stage of
+        a chain that holds no repair stage (a chain's own repair stages run where they stand);
+        None: no repair at all, failed elements stay NaN (an unknown name raises
+        :class:`ParameterError`).
+    capacity : int
+        Preisach turning points each element keeps (eq. 4.18-4.22); when a stack is full the
+        innermost minor loop is forgotten. The default holds every loop seen on real and
+        simulated records; a microcontroller keeps fewer (``texsense export mcu
+        --capacity``), and the same value here gives its numbers in float64.
     """
 
     def __init__(
@@ -87,13 +119,11 @@ class Pipeline:
         hysteresis: bool = True,
         drift: bool = True,
         repair: str | None = "harmonic",
+        capacity: int = DEFAULT_CAPACITY,
     ) -> None:
         if not isinstance(chain, StageChain):
             raise ParameterError(f"a Pipeline compiles a StageChain, not {type(chain).__name__}")
-        conversion = chain.conversion
-        if conversion is None:
-            raise ParameterError(f"the chain {chain.names} has no convert or linear stage")
-        if chain.n_elements != layout.n_elements:
+        if chain.n_elements not in (None, layout.n_elements):
             raise ParameterError(
                 f"the calibration is for {chain.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
@@ -105,25 +135,23 @@ class Pipeline:
                 raise ParameterError(f"the calibration was made for another mat: {why}")
         if repair is not None and repair not in METHODS:
             raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
-        if isinstance(conversion, Convert) and "hysteresis" not in chain:
-            raise ParameterError("the calibration has no spacer model (compression -> pressure)")
         self.chain = chain
         self.layout = layout
         self.detect, self.hysteresis, self.drift, self.repair = detect, hysteresis, drift, repair
+        if not 4 <= capacity <= 1 << 16:
+            raise ParameterError(f"capacity must be 4 ..= 65536 turning points, got {capacity}")
+        self.capacity = int(capacity)
         self.calibration_id = chain.id
-        linear = isinstance(conversion, Linear)
-        self.stages = {
-            "detect": detect,
-            "hysteresis": hysteresis and not linear,
-            "drift": drift and hysteresis and "drift" in chain,
-        }
-        self.detector: FailureDetector = chain.find(FailureDetector) or conversion.detector(layout)
-        self._repair = None
-        if repair is not None and repair in GLOBAL_METHODS:
-            self._repair = Repair(layout, repair).fit()
-        self._chain = self._compile(conversion)
-        self._chain.reset()  # the kernels' copies start a stream of their own
-        self._last_t: float | None = None
+        #: the stages the pipeline runs, in order (the chain's, switched, plus what it adds)
+        self.plan: list[Stage | _Loading] = self._plan()
+        found = next((s for s in self.plan if isinstance(s, FailureDetector)), None)
+        conversion = chain.conversion
+        #: the (first) detector the pipeline runs (or the one the conversion implies)
+        self.detector: FailureDetector | None = found or (
+            conversion.detector(layout) if conversion is not None else None
+        )
+        self._parts = self._compile()
+        self.reset()
         self._dt1 = np.zeros(1)
         self._all_valid = np.ones(layout.n_elements, bool)
         #: the failure codes of the last frames (0: measured)
@@ -144,50 +172,121 @@ class Pipeline:
         """(quantity, unit) of the values the pipeline gives."""
         return self.chain.gives
 
-    def _compile(self, conversion: Convert | Linear) -> Chain:
-        """The compiled chain: the stages' own kernels, one after the other."""
-        n = self.layout.n_elements
-        response: dict[str, Any] = {}
-        hyst = self.chain.find(Hysteresis)
-        if hyst is not None and isinstance(conversion, Convert):
-            if self.stages["hysteresis"]:
-                drift = self.chain.find(Drift) if self.stages["drift"] else None
-                bank = None if drift is None else drift.bank(n)
-                level = None if drift is None else drift.model_.level_curve()
-                response["compensation"] = Compensation(hyst.bank(n), bank, level)
+    # ------------------------------------------------------------------ compiling
+    def _plan(self) -> list[Stage | _Loading]:
+        """The stages to run: the chain's in order, switched off where asked, the implied
+        detector before the conversion of a chain without a detect stage, and the repair
+        after the last stage of a chain without a repair stage."""
+        stages = self.chain.stages
+        has_detect = any(isinstance(s, FailureDetector) for s in stages)
+        has_repair = any(isinstance(s, Repair) for s in stages)
+        plan: list[Stage | _Loading] = []
+        for k, s in enumerate(stages, 1):
+            if isinstance(s, FailureDetector):
+                if self.detect:
+                    plan.append(s)
+            elif isinstance(s, Convert | Linear):
+                if self.detect and not has_detect:
+                    plan.append(s.detector(self.layout))
+                    has_detect = True
+                plan.append(s)
+            elif isinstance(s, Hysteresis):
+                plan.append(s if self.hysteresis else _Loading(s))
+            elif isinstance(s, Drift):
+                if self.drift and self.hysteresis:
+                    plan.append(s)
+            elif isinstance(s, Repair):
+                if self.repair is not None:
+                    plan.append(s)
             else:
-                response["loading"] = hyst.loading_curve()
-        method = self.repair
-        local = method is not None and method not in GLOBAL_METHODS
-        return Chain(
-            conversion.kernel(),
-            detector=self.detector.core if self.stages["detect"] else None,
-            repair=local_repair(self.layout, method) if local and method else None,
-            **response,
-        )
+                raise ParameterError(
+                    f"stage {k} of the chain {self.chain.names} ({s.name}, "
+                    f"{type(s).__name__}) has no compiled kernel: run it stage by stage "
+                    "(chain.run)"
+                )
+        if self.repair is not None and not has_repair:
+            plan.append(Repair(self.layout, self.repair).fit())
+        return plan
 
+    def _compile(self) -> list[Chain | Repair]:
+        """The plan as passes: compiled chains of kernels, and the harmonic repairs (scipy)
+        between them."""
+        n = self.layout.n_elements
+        parts: list[Chain | Repair] = []
+        kernels: list[Any] = []
+        plan = self.plan
+        k = 0
+        while k < len(plan):
+            s = plan[k]
+            if isinstance(s, FailureDetector):
+                kernels.append(s.core)
+            elif isinstance(s, Convert | Linear):
+                kernels.append(s.kernel())
+            elif isinstance(s, _Loading):
+                kernels.append(s.hysteresis.loading_curve())
+            elif isinstance(s, Hysteresis):
+                after = plan[k + 1] if k + 1 < len(plan) else None
+                if isinstance(after, Drift):  # one pass: Preisach, then its drift (QLV too)
+                    bank, level = after.bank(n), after.model_.level_curve()
+                    kernels.append(Compensation(s.bank(n, self.capacity), bank, level))
+                    k += 1
+                else:
+                    kernels.append(Compensation(s.bank(n, self.capacity)))
+            elif isinstance(s, Drift):
+                if s.needs_inputs:
+                    raise ParameterError(
+                        "a drift stage on the elastic response (QLV) must follow its "
+                        "hysteresis stage directly"
+                    )
+                kernels.append(s.bank(n))
+            elif isinstance(s, Repair) and s.method in GLOBAL_METHODS:
+                if kernels or not parts:  # a compiled pass first: it codes the validity
+                    parts.append(Chain(n, kernels))
+                    kernels = []
+                parts.append(Repair(s.layout, s.method).fit())
+            elif isinstance(s, Repair):
+                kernels.append(local_repair(s.layout, s.method))
+            k += 1
+        if kernels or not parts:
+            parts.append(Chain(n, kernels))
+        return parts
+
+    def stage_names(self) -> list[str]:
+        """The stages run, in order (a repair with its method, the first-loading curve as
+        ``loading``)."""
+        return [f"repair:{s.method}" if isinstance(s, Repair) else s.name for s in self.plan]
+
+    def compiled(self) -> Chain:
+        """The whole pipeline as one compiled chain (its model blob is what a
+        microcontroller runs: :meth:`texsense._core.Chain.mcu_blob`); a pipeline with a
+        harmonic repair has none (the repair solves in scipy)."""
+        if len(self._parts) != 1 or not isinstance(self._parts[0], Chain):
+            raise ParameterError(
+                f"the pipeline {self.stage_names()} is not one compiled pass: the harmonic "
+                "repairs solve in scipy (use a local repair: zero, last-value, "
+                "neighbour-mean, idw8)"
+            )
+        return self._parts[0]
+
+    # ------------------------------------------------------------------ the stream
     def reset(self) -> Pipeline:
         """Start over: unloaded spacer states, no history."""
-        self._chain.reset()
-        if self._repair is not None:
-            self._repair.reset()
-        self._last_t = None
+        for p in self._parts:
+            p.reset()
+        self._last_t: float | None = None
         return self
 
     def state_bytes_per_element(self) -> int:
         """Bytes of streaming state per element (all compiled stages, with the per-element
         parameters they read)."""
-        return int(self._chain.state_bytes_per_element())
+        return sum(int(p.state_bytes_per_element()) for p in self._parts if isinstance(p, Chain))
 
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
-        convert = "convert:linear" if "linear" in self.chain else "convert"
         return {
             "calibration_id": self.calibration_id,
             "software": f"texsense {__version__}",
-            "stages": [k for k, v in self.stages.items() if v]
-            + [convert]
-            + ([f"repair:{self.repair}"] if self.repair else []),
+            "stages": self.stage_names(),
         }
 
     def process(
@@ -215,13 +314,18 @@ class Pipeline:
     def _pass(
         self, dt: np.ndarray, cap: np.ndarray, valid: np.ndarray, last_t: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The compiled chain (and a harmonic repair) over checked arrays: what ``process``
-        and ``step`` share."""
-        values, codes = self._chain.run(dt, cap, valid)
+        """The passes over checked arrays: what ``process`` and ``step`` share."""
+        values, ok = cap, valid
+        codes: np.ndarray | None = None
+        for p in self._parts:
+            if isinstance(p, Chain):
+                values, found = p.run(dt, values, np.ascontiguousarray(ok))
+                codes = found if codes is None else np.where(codes != 0, codes, found)
+                ok = codes == 0
+            else:
+                values, _ = p._block(values, ok & np.isfinite(values), dt)
+        assert codes is not None  # a compiled pass always runs (_compile)
         self._last_t = last_t
-        ok = codes == 0
-        if self._repair is not None:
-            values, _ = self._repair._block(values, ok & np.isfinite(values), dt)
         self.codes_ = codes
         return values, ok, codes
 
@@ -253,7 +357,7 @@ class Pipeline:
         calibration) with the validity mask (False where a value was repaired or is
         missing), the failure codes in ``codes_`` and the provenance in ``meta``."""
         quantity, unit = self.input_quantity
-        if rec.quantity != quantity:
+        if quantity and rec.quantity != quantity:
             raise ParameterError(f"the pipeline reads {quantity}, not {rec.quantity}")
         if rec.n_elements != self.layout.n_elements:
             raise ParameterError(
@@ -263,8 +367,106 @@ class Pipeline:
         why = layout_mismatch(self.layout, rec.layout)
         if why:
             raise ParameterError(f"the recording is of another mat than the pipeline's: {why}")
-        values = rec.to_unit(unit).frames if rec.unit != unit else rec.frames
+        values = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
         p, ok, _ = self.process(values, rec.times, rec.valid)
         meta = {**rec.meta, **self.provenance()}
         out_quantity, out_unit = self.output_quantity
-        return rec._with(frames=p, valid=ok, quantity=out_quantity, unit=out_unit, meta=meta)
+        return rec._with(
+            frames=p,
+            valid=ok,
+            quantity=out_quantity or rec.quantity,
+            unit=out_unit or rec.unit,
+            meta=meta,
+        )
+
+    # ------------------------------------------------------------------ state
+    def snapshot(self) -> bytes:
+        """The whole streaming state as bytes (versioned): every element's detector,
+        Preisach memory, drift history and last repaired value, the harmonic repairs' last
+        frames and the time of the last frame. :meth:`restore` in a pipeline of the same
+        calibration (in any process) continues the stream exactly where it stopped."""
+        sections = [p.snapshot() if isinstance(p, Chain) else _repair_state(p) for p in self._parts]
+        head = json.dumps(
+            {
+                "calibration_id": self.calibration_id,
+                "stages": self.stage_names(),
+                "last_t": self._last_t,
+                "sections": [len(s) for s in sections],
+            }
+        ).encode()
+        size = struct.pack("<II", STATE_VERSION, len(head))
+        return b"".join([STATE_MAGIC, size, head, *sections])
+
+    def restore(self, state: bytes) -> Pipeline:
+        """Continue from a :meth:`snapshot` of a pipeline of the same calibration and stages
+        (all or nothing: a snapshot that does not fit raises :class:`ParameterError` naming
+        why and leaves the state as it was)."""
+        head, sections = _read_state(bytes(state))
+        if head.get("calibration_id") != self.calibration_id:
+            raise ParameterError(
+                f"the state is of calibration {head.get('calibration_id')}, this pipeline's is "
+                f"{self.calibration_id}"
+            )
+        if head.get("stages") != self.stage_names() or len(sections) != len(self._parts):
+            raise ParameterError(
+                f"the state is of the stages {head.get('stages')}, this pipeline runs "
+                f"{self.stage_names()}"
+            )
+        last_t = head.get("last_t")
+        if last_t is not None and not isinstance(last_t, int | float):
+            raise ParameterError("the state's last frame time is not a number")
+        before = [p.snapshot() if isinstance(p, Chain) else _repair_state(p) for p in self._parts]
+        try:
+            for p, s in zip(self._parts, sections, strict=True):
+                if isinstance(p, Chain):
+                    p.restore(s)
+                else:
+                    _restore_repair(p, s)
+        except ValueError as e:  # the core's errors are ValueErrors
+            for p, s in zip(self._parts, before, strict=True):
+                if isinstance(p, Chain):
+                    p.restore(s)
+                else:
+                    _restore_repair(p, s)
+            raise ParameterError(f"the state does not fit this pipeline: {e}") from None
+        self._last_t = None if last_t is None else float(last_t)
+        self.codes_ = np.zeros((0, self.layout.n_elements), np.uint8)
+        return self
+
+
+def _repair_state(r: Repair) -> bytes:
+    """A harmonic repair's state: its last value and its previous frame, per element."""
+    return np.concatenate([r._last, r._prev]).astype("<f8").tobytes()
+
+
+def _restore_repair(r: Repair, s: bytes) -> None:
+    n = r.layout.n_elements
+    if len(s) != 16 * n:
+        raise ValueError(f"a harmonic repair's state needs {16 * n} bytes, got {len(s)}")
+    a = np.frombuffer(s, "<f8").astype(np.float64)
+    r._last, r._prev = a[:n].copy(), a[n:].copy()
+
+
+def _read_state(state: bytes) -> tuple[dict[str, Any], list[bytes]]:
+    """The header and the sections of a pipeline's state; anything else is one
+    ParameterError saying what."""
+    k = len(STATE_MAGIC)
+    if state[:k] != STATE_MAGIC or len(state) < k + 8:
+        raise ParameterError("not a texsense pipeline state")
+    version, size = struct.unpack_from("<II", state, k)
+    if version != STATE_VERSION:
+        raise ParameterError(
+            f"a pipeline state of version {version}; this build reads version {STATE_VERSION}"
+        )
+    try:
+        head = json.loads(state[k + 8 : k + 8 + size])
+        lengths = [int(x) for x in head["sections"]]
+    except (ValueError, KeyError, TypeError):
+        raise ParameterError("the pipeline state's header is damaged") from None
+    pos, sections = k + 8 + size, []
+    for length in lengths:
+        sections.append(state[pos : pos + length])
+        pos += length
+    if pos != len(state) or any(x < 0 for x in lengths):
+        raise ParameterError("the pipeline state is cut short or has bytes left over")
+    return head, sections

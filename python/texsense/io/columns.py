@@ -95,7 +95,10 @@ def read_columns(
     path : str or Path
         A column CSV, or a recording of one element in any format texsense reads.
     required : sequence of str
-        Columns that must be there (the first missing one is named in the error).
+        Columns that must be there (the first missing one is named in the error). A CSV
+        whose header holds all of them is read as a column table: the caller named its
+        columns (:func:`is_columns_csv`), so a first column ``time_s`` followed by names
+        without a unit (``field_oe``) does not make it a wide CSV.
     accept_truncated : bool
         Read a file cut short up to its last complete row or frame, with a warning.
 
@@ -108,7 +111,7 @@ def read_columns(
     path = Path(path)
     if path.is_dir():
         raise FormatError(path, f"a folder: expected {WHAT}")
-    if is_columns_csv(path):
+    if is_columns_csv(path, required):
         return read_columns_csv(path, required, accept_truncated=accept_truncated)
     try:
         sniff_format(path)

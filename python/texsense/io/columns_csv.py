@@ -94,23 +94,28 @@ def _header(path: Path) -> tuple[list[str], list[str]]:
     return comments, names
 
 
-def is_columns_csv(path: str | Path) -> bool:
+def is_columns_csv(path: str | Path, names: Sequence[str] = ()) -> bool:
     """Whether ``path`` is a column table rather than a recording: texsense's ``# rows:``
-    line, or a header of names that does not start with ``time_s`` followed by element
-    columns (a wide CSV), or whose every other column names a unit (``force_n``)."""
+    line; a header that holds every column the caller ``names`` (``--input field_oe
+    --output moment_emu``: whoever names columns reads a table, whatever else the header
+    holds); or a header of names that does not start with ``time_s`` followed by element
+    columns (a wide CSV), or whose every other column names a unit (``force_n``). A file
+    that says it is a texsense wide CSV is one."""
     path = Path(path)
     if not path.is_file():
         return False
-    comments, names = _header(path)
+    comments, header = _header(path)
     if any(c.startswith("# rows:") for c in comments):
         return True
-    if any(c.startswith("# texsense wide-csv") for c in comments) or len(names) < 2:
+    if any(c.startswith("# texsense wide-csv") for c in comments) or len(header) < 2:
         return False
-    if any(is_number(n) for n in names):
+    if any(is_number(n) for n in header):
         return False  # numbers, not names: a PMD or other data line
-    if names[0] != "time_s":
+    if names and all(n in header for n in names):
         return True
-    return all(unit_of_column(n) is not None for n in names[1:])
+    if header[0] != "time_s":
+        return True
+    return all(unit_of_column(n) is not None for n in header[1:])
 
 
 def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) -> Path:

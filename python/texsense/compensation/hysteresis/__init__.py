@@ -9,6 +9,7 @@ saved as versioned JSON.
 """
 
 from texsense.compensation.hysteresis._model import (
+    DEFAULT_CAPACITY,
     MODEL_FORMAT,
     MODEL_VERSION,
     HysteresisModel,
@@ -16,4 +17,11 @@ from texsense.compensation.hysteresis._model import (
     scale_hysteresis,
 )
 
-__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "HysteresisModel", "PreisachState", "scale_hysteresis"]
+__all__ = [
+    "DEFAULT_CAPACITY",
+    "MODEL_FORMAT",
+    "MODEL_VERSION",
+    "HysteresisModel",
+    "PreisachState",
+    "scale_hysteresis",
+]

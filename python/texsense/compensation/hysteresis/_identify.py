@@ -31,7 +31,8 @@ branch, which a non-negative density cannot produce).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -52,7 +53,8 @@ from texsense.exceptions import ParameterError
 __all__ = [
     "Identified",
     "find_thesis_curves",
-    "fold_errors_of_table",
+    "fold_mse",
+    "held_out_of_table",
     "identify_lsq",
     "identify_relay",
     "identify_thesis",
@@ -69,7 +71,10 @@ class Identified:
     u_max: float
     offset: float
     method: str
-    details: dict
+    details: dict[str, Any]
+    #: prediction of every held-out sample by the identification without its fold (NaN for
+    #: samples that always train): what the default compares candidates on; not saved
+    held_out: npt.NDArray[np.float64] | None = field(default=None, repr=False)
 
 
 def make_monotone(table: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -88,13 +93,35 @@ def find_thesis_curves(
     tolerance: float,
     reach: float = 0.8,
     exclude: npt.NDArray[np.bool_] | None = None,
+    outputs: npt.NDArray[np.float64] | None = None,
 ) -> tuple[Branch, list[Branch]] | None:
     """The designed curves in a record: a rising curve over the whole range (within 3 % at
     both ends) and falling curves from at least two different maxima (5 % of the range
     apart; the first curve from each) that go down to within ``1 - reach`` of the bottom (a
-    spacer stops carrying load a little above zero compression). None if absent —
-    ascending first-order reversal curves, which all fall from the top, are not the
-    thesis's protocol. Falling curves that touch a sample in ``exclude`` are left out."""
+    spacer stops carrying load a little above zero compression). Where the whole record
+    holds no such curves, with ``outputs``, falling curves that go down to the record's
+    lowest output (within 3 % of its range: the machine unloads to zero load, which a spacer
+    with a large set reaches while still compressed). None if absent — ascending first-order
+    reversal curves, which all fall from the top, are not the thesis's protocol. Falling
+    curves that touch a sample in ``exclude`` are left out (the criterion is the whole
+    record's, so that a fold does not change it)."""
+    by_output = (
+        outputs is not None
+        and np.ptp(outputs) > 0
+        and _thesis_curves(u, tolerance, reach, None, None) is None
+    )
+    return _thesis_curves(u, tolerance, reach, exclude, outputs if by_output else None)
+
+
+def _thesis_curves(
+    u: npt.NDArray[np.float64],
+    tolerance: float,
+    reach: float,
+    exclude: npt.NDArray[np.bool_] | None,
+    outputs: npt.NDArray[np.float64] | None,
+) -> tuple[Branch, list[Branch]] | None:
+    """:func:`find_thesis_curves` with falls that end low in the input, or (``outputs``
+    given) in the input or the output."""
     lo, hi = float(u.min()), float(u.max())
     span = hi - lo
     branches = split_branches(u, tolerance)
@@ -103,7 +130,15 @@ def find_thesis_curves(
         for b in branches
         if b.rising and u[b.start] - lo < 0.03 * span and hi - u[b.stop] < 0.03 * span
     ]
-    falling = [b for b in branches if not b.rising and u[b.stop] - lo < (1 - reach) * span]
+
+    def down(b: Branch) -> bool:
+        if u[b.stop] - lo < (1 - reach) * span:
+            return True
+        if outputs is None:
+            return False
+        return bool(outputs[b.stop] - outputs.min() < 0.03 * np.ptp(outputs))
+
+    falling = [b for b in branches if not b.rising and down(b)]
     if exclude is not None:  # held-out curves (cross-validation) are not used
         falling = [b for b in falling if not exclude[b.start + 1 : b.stop].any()]
     # the thesis's curves fall from *different* maxima (100, 70, 30 %); first-order reversal
@@ -129,7 +164,7 @@ def identify_thesis(
     u = np.asarray(u, dtype=np.float64)
     p = np.asarray(p, dtype=np.float64)
     tol = 0.01 * np.ptp(u) if tolerance is None else tolerance
-    found = find_thesis_curves(u, tol, exclude=exclude)
+    found = find_thesis_curves(u, tol, exclude=exclude, outputs=p)
     if found is None:
         raise ParameterError(
             "the record does not hold the thesis's calibration curves (a rising curve over "
@@ -280,6 +315,7 @@ def identify_lsq(
             "prior": "thesis" if weight else None,
             "cv": [{**c.as_dict(), "rmse": r} for c, r in res.scores],
         },
+        res.held_out,
     )
 
 
@@ -371,18 +407,18 @@ def _beats(challenger: np.ndarray, incumbent: np.ndarray) -> bool:
     return bool(d.mean() < -se) and bool(d.mean() < 0)
 
 
-def fold_errors_of_table(
+def held_out_of_table(
     u: np.ndarray,
-    p: np.ndarray,
     fold: np.ndarray,
     table_of: Callable[[np.ndarray], tuple[np.ndarray, float] | None],
 ) -> np.ndarray | None:
-    """Held-out mean squared error of every fold for an identification given as
-    ``table_of(held_out_mask) -> (Everett table, offset)`` (None if it cannot), the table
-    evaluated by the Rust core over the whole input history."""
+    """Prediction of every held-out sample by an identification given as
+    ``table_of(held_out_mask) -> (Everett table, offset)`` (None if it cannot) without that
+    sample's fold, the table evaluated by the Rust core over the whole input history; NaN
+    for samples that always train. None if the identification cannot do without some fold."""
     n_folds = int(fold.max()) + 1
     u_min, u_max = float(u.min()), float(u.max())
-    out = []
+    out = np.full(u.size, np.nan)
     for f in range(n_folds):
         held = fold == f
         got = table_of(held)
@@ -391,5 +427,12 @@ def fold_errors_of_table(
         table, offset = got
         bank = PreisachBank(u_min, u_max, np.ascontiguousarray(table), 1, 256, offset, 1.0)
         pred = bank.run(np.ascontiguousarray(u[:, None]), np.ones((u.size, 1), bool))[:, 0]
-        out.append(float(np.mean((pred[held] - p[held]) ** 2)))
-    return np.asarray(out)
+        out[held] = pred[held]
+    return out
+
+
+def fold_mse(pred: np.ndarray, p: np.ndarray, fold: np.ndarray) -> np.ndarray:
+    """Held-out mean squared error of every fold from held-out predictions."""
+    return np.asarray(
+        [float(np.mean((pred[fold == f] - p[fold == f]) ** 2)) for f in range(int(fold.max()) + 1)]
+    )

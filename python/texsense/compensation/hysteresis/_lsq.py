@@ -87,6 +87,9 @@ class LsqResult:
     fit_rmse: float
     folds: int
     fold_mse: list[float] | None = None  # held-out MSE of every fold, chosen setting
+    #: the chosen setting's prediction of every held-out sample by the fit without its fold
+    #: (NaN for samples that always train); None when nothing was held out
+    held_out: npt.NDArray[np.float64] | None = None
 
 
 def _lower_index(k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -339,6 +342,7 @@ class _Problem:
                 self.priors[f] = None if table is None else table[i, j]
         self._cache: dict[tuple[int, int, float], _System] = {}
         self.fold_mse: dict[Candidate, list[float]] = {}
+        self.held_out: dict[Candidate, np.ndarray] = {}
 
     def system(self, alpha_cells: int, d_cells: int, spacing: float) -> _System:
         key = (alpha_cells, d_cells, spacing)
@@ -405,14 +409,17 @@ class _Problem:
 
     def cv_rmse(self, c: Candidate) -> float:
         A = self.system(c.alpha_cells, c.d_cells, c.spacing).design
+        pred = np.full(self.u.size, np.nan)
 
         def one(f: int) -> tuple[float, int]:
             x = self.solve(c, f, tol=1e-6)
             rows = np.nonzero(self.fold == f)[0]
-            return float(np.sum((A[rows] @ x - self.p[rows]) ** 2)), rows.size
+            pred[rows] = A[rows] @ x
+            return float(np.sum((pred[rows] - self.p[rows]) ** 2)), rows.size
 
         parts = [one(f) for f in range(self.n_folds)]
         self.fold_mse[c] = [s / max(n, 1) for s, n in parts]
+        self.held_out[c] = pred
         sse = sum(s for s, _ in parts)
         return float(np.sqrt(sse / np.count_nonzero(self.fold >= 0)))
 
@@ -509,4 +516,5 @@ def fit_everett_lsq(
         fit_rmse,
         max(problem.n_folds, 0),
         problem.fold_mse.get(chosen),
+        problem.held_out.get(chosen),
     )

@@ -17,7 +17,8 @@ from texsense.compensation.hysteresis._identify import (
     Identified,
     _beats,
     find_thesis_curves,
-    fold_errors_of_table,
+    fold_mse,
+    held_out_of_table,
     identify_lsq,
     identify_relay,
     identify_thesis,
@@ -44,6 +45,28 @@ def _clearly_beats(challenger: Any, incumbent: Any) -> bool:
     """One standard error over folds and at least :data:`CLEAR_GAIN` lower pooled RMSE."""
     c, i = np.asarray(challenger, float), np.asarray(incumbent, float)
     return _beats(c, i) and np.sqrt(c.mean()) <= (1 - CLEAR_GAIN) * np.sqrt(i.mean())
+
+
+#: The quantile of the absolute held-out error that stands for a candidate's tail.
+TAIL_QUANTILE = 95.0
+
+
+def _tails(pred: np.ndarray, p: np.ndarray, fold: np.ndarray) -> tuple[np.ndarray, float]:
+    """The :data:`TAIL_QUANTILE` percentile of the absolute held-out error in every fold, and
+    over all held-out samples."""
+    err = np.abs(pred - p)
+    per_fold = np.asarray(
+        [np.percentile(err[fold == f], TAIL_QUANTILE) for f in range(int(fold.max()) + 1)]
+    )
+    return per_fold, float(np.percentile(err[fold >= 0], TAIL_QUANTILE))
+
+
+def _clearly_smaller_tail(
+    challenger: tuple[np.ndarray, float], incumbent: tuple[np.ndarray, float]
+) -> bool:
+    """The tail (:func:`_tails`) smaller by more than one standard error over the folds and
+    by at least :data:`CLEAR_GAIN` over all held-out samples."""
+    return _beats(challenger[0], incumbent[0]) and challenger[1] <= (1 - CLEAR_GAIN) * incumbent[1]
 
 
 def _orientation(ident: Identified) -> float:
@@ -239,13 +262,14 @@ class HysteresisModel:
 
         - **The thesis protocol** (the thesis's curves, at most :data:`FEW_BRANCHES`
           monotone branches): the thesis method (§4.4.2) and least squares with the thesis
-          table as a prior are compared; without a clear winner the default is their
-          average (the two tables' mean: a model average, monotone like both). A few falling
-          curves leave the folds too small to trust the cross-validation alone — the
-          average was never more than 4 % (relative) worse than the better of the two on
-          the textile and foam spacers in the generalisation benchmark, where either alone
-          lost by up to 12 %. When least squares cannot hold any curve out, nothing speaks
-          against the structured prior: the thesis method.
+          table as a prior are compared; without a clear winner in RMSE the default is their
+          average (the two tables' mean: a model average, monotone like both), unless one of
+          them has a clearly smaller *tail* on the held-out curves than the average (the 95th
+          percentile of the absolute error, :func:`_clearly_smaller_tail`): a few falling
+          curves give two or three folds, whose RMSE may not tell the two apart while one of
+          them errs far more often — and averaging with it costs the tail of the other
+          (:meth:`_thesis_protocol`). When least squares cannot hold any curve out, nothing
+          speaks against the structured prior: the thesis method.
         - **Any other record**: least squares (with the thesis prior where the record holds
           the thesis's curves), against the non-negative relay grid on nodes placed by the
           record — only for counter-clockwise loops (least squares' own major loop says
@@ -253,7 +277,7 @@ class HysteresisModel:
           already wins and the folds ask for it (interacting magnetic systems).
         """
         tol = 0.01 * float(np.ptp(u))
-        thesis_found = find_thesis_curves(u, tol) is not None
+        thesis_found = find_thesis_curves(u, tol, outputs=p) is not None
         lsq = identify_lsq(
             u, p, grid=self.grid, cells=self.cells, smoothing=self.smoothing,
             folds=self.folds, thesis_prior=thesis_found,
@@ -285,38 +309,69 @@ class HysteresisModel:
                 return None
             return t.everett, t.offset
 
-        thesis_err = fold_errors_of_table(u, p, fold, thesis_fold) if fold.max() >= 1 else None
+        thesis_pred = held_out_of_table(u, fold, thesis_fold) if fold.max() >= 1 else None
+        thesis.held_out = thesis_pred
+        thesis_err = None if thesis_pred is None else fold_mse(thesis_pred, p, fold)
         lsq_err = lsq.details.get("fold_mse")
-        comparison = {
+        comparison: dict[str, Any] = {
             "thesis_fold_mse": None if thesis_err is None else thesis_err.tolist(),
             "lsq_fold_mse": lsq_err,
         }
         if lsq_err is None:  # nothing held out: no evidence against the structured prior
             thesis.details.update(comparison, chosen_over=lsq.method)
             return thesis
-        if thesis_err is not None:
-            if _clearly_beats(lsq_err, thesis_err):
-                lsq.details.update(comparison, chosen_over="thesis")
-                return lsq
-            if _clearly_beats(thesis_err, lsq_err):
-                thesis.details.update(comparison, chosen_over=lsq.method)
-                thesis.details["validation_rmse"] = float(np.sqrt(np.mean(thesis_err)))
-                thesis.details["validation_folds"] = int(thesis_err.size)
-                return thesis
-        details = {
-            "grid": self.grid,
-            "members": {"thesis": thesis.details, lsq.method: lsq.details},
-            **comparison,
-            "validation_rmse": None,
-        }
-        return Identified(
+        average = Identified(
             0.5 * (thesis.everett + lsq.everett),
             thesis.u_min,
             thesis.u_max,
             0.5 * (thesis.offset + lsq.offset),
             "thesis/lsq average",
-            details,
+            {"grid": self.grid, "members": {"thesis": thesis.details, lsq.method: lsq.details}},
         )
+        if thesis_err is None or thesis_pred is None or lsq.held_out is None:
+            average.details.update(comparison, validation_rmse=None)
+            return average
+        # the model's output is linear in (table, offset): the average's held-out prediction
+        # is the mean of its members'
+        average.held_out = 0.5 * (thesis_pred + lsq.held_out)
+        tails = {
+            name: _tails(ident.held_out, p, fold)
+            for name, ident in (("thesis", thesis), ("lsq", lsq), ("average", average))
+            if ident.held_out is not None
+        }
+        comparison["held_out_p95"] = {k: v[1] for k, v in tails.items()}
+        if _clearly_beats(lsq_err, thesis_err):
+            lsq.details.update(comparison, chosen_over="thesis", chosen_by="rmse")
+            return lsq
+        if _clearly_beats(thesis_err, lsq_err):
+            return self._thesis_chosen(thesis, thesis_err, comparison, lsq.method, "rmse")
+        smaller = [
+            k for k in ("thesis", "lsq") if _clearly_smaller_tail(tails[k], tails["average"])
+        ]
+        if smaller:  # the average would cost this member's tail
+            best = min(smaller, key=lambda k: tails[k][1])
+            if best == "thesis":
+                return self._thesis_chosen(
+                    thesis, thesis_err, comparison, "thesis/lsq average", "tail"
+                )
+            lsq.details.update(comparison, chosen_over="thesis/lsq average", chosen_by="tail")
+            return lsq
+        average.details.update(comparison, validation_rmse=None)
+        return average
+
+    @staticmethod
+    def _thesis_chosen(
+        thesis: Identified,
+        err: np.ndarray,
+        comparison: dict[str, Any],
+        over: str,
+        by: str,
+    ) -> Identified:
+        """The thesis method, with what it was chosen over and by which criterion."""
+        thesis.details.update(comparison, chosen_over=over, chosen_by=by)
+        thesis.details["validation_rmse"] = float(np.sqrt(np.mean(err)))
+        thesis.details["validation_folds"] = int(err.size)
+        return thesis
 
     @property
     def validation_rmse_(self) -> float | None:

@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from texsense._core import Curve, DriftBank, PreisachBank
 from texsense.compensation.drift import DriftModel, StepFit
-from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis import DEFAULT_CAPACITY, HysteresisModel
 from texsense.compensation.stage import Stage
 from texsense.data.modelfile import Fields
 from texsense.exceptions import ParameterError
@@ -73,10 +73,11 @@ class Hysteresis(Stage):
     def _reset_stream(self) -> None:
         self._bank: PreisachBank | None = None
 
-    def bank(self, n_elements: int) -> PreisachBank:
-        """A fresh compiled Preisach bank of ``n_elements`` (lower saturation)."""
+    def bank(self, n_elements: int, capacity: int = DEFAULT_CAPACITY) -> PreisachBank:
+        """A fresh compiled Preisach bank of ``n_elements`` (lower saturation), each element
+        keeping at most ``capacity`` turning points."""
         self._check_fitted()
-        return self.model_.bank(n_elements)
+        return self.model_.bank(n_elements, capacity)
 
     def loading_curve(self) -> Curve:
         """The first-loading curve compression -> pressure (what an uncompensated system

@@ -1,0 +1,205 @@
+//! Tests of the drift module.
+
+use super::*;
+
+fn log_kernel() -> Kernel {
+    // a crude 2-per-decade approximation is enough for the exactness tests below,
+    // which compare against the same kernel summed directly
+    let taus: Vec<f64> = (0..14).map(|k| 0.1 * 10f64.powf(k as f64 / 2.0)).collect();
+    Kernel::new(vec![0.4; 14], taus).unwrap()
+}
+
+#[test]
+fn recursive_equals_direct_superposition() {
+    let kernel = log_kernel();
+    let mut bank = DriftBank::new(kernel.clone(), -0.025, 1).unwrap();
+    let hs = [0.0, 2.0, 2.0, 5.0, 5.0, 1.0, 1.0, 1.0];
+    let dts = [0.0, 1.0, 10.0, 3.0, 100.0, 7.0, 1000.0, 5000.0];
+    let mut t = 0.0;
+    let mut steps: Vec<(f64, f64)> = Vec::new();
+    let mut prev = 0.0;
+    let mut out = [0.0];
+    for (&h, &dt) in hs.iter().zip(&dts) {
+        t += dt;
+        if h != prev {
+            steps.push((t, h - prev));
+            prev = h;
+        }
+        bank.step(dt, &[h], &[true], &mut out).unwrap();
+        let direct: f64 = h - 0.025
+            * steps
+                .iter()
+                .map(|(ti, dh)| dh * kernel.value(t - ti))
+                .sum::<f64>();
+        assert!((out[0] - direct).abs() < 1e-12, "{} vs {direct}", out[0]);
+    }
+}
+
+#[test]
+fn linear_in_the_steps_and_invalid_keeps_state() {
+    let mut a = DriftBank::new(log_kernel(), -0.025, 2).unwrap();
+    let mut out = [0.0; 2];
+    a.step(0.0, &[1.0, 2.0], &[true, true], &mut out).unwrap();
+    a.step(100.0, &[1.0, 2.0], &[true, true], &mut out).unwrap();
+    // doubling the steps doubles the drift
+    assert!(((out[1] - 2.0) - 2.0 * (out[0] - 1.0)).abs() < 1e-12);
+    a.step(10.0, &[f64::NAN, 2.0], &[true, false], &mut out)
+        .unwrap();
+    assert!(out[0].is_nan() && out[1].is_nan());
+    assert!(Kernel::new(vec![-1.0], vec![1.0]).is_err());
+    assert!(DriftBank::new(log_kernel(), f64::NAN, 1).is_err());
+    assert!(a.step(-1.0, &[1.0, 1.0], &[true, true], &mut out).is_err());
+}
+
+#[test]
+fn exponent_superposes_the_powered_level() {
+    // q = 2: the drift of a held level h is that of a held level h² with q = 1
+    let (h, q) = (1.5_f64, 2.0);
+    let mut powered = DriftBank::new(log_kernel(), -0.025, 1)
+        .unwrap()
+        .with_exponent(q)
+        .unwrap();
+    let mut linear = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
+    let (mut a, mut b) = ([0.0], [0.0]);
+    for dt in [0.0, 1.0, 10.0, 100.0] {
+        powered.step(dt, &[h], &[true], &mut a).unwrap();
+        linear.step(dt, &[h.powf(q)], &[true], &mut b).unwrap();
+        assert!(((a[0] - h) - (b[0] - h.powf(q))).abs() < 1e-12);
+    }
+    assert!((a[0] - h).abs() > 1e-3, "a held level drifts");
+    // below zero the level is 0: no drift from a negative reading
+    let mut neg = DriftBank::new(log_kernel(), -0.025, 1)
+        .unwrap()
+        .with_exponent(q)
+        .unwrap();
+    neg.step(0.0, &[-0.3], &[true], &mut a).unwrap();
+    neg.step(100.0, &[-0.3], &[true], &mut a).unwrap();
+    assert_eq!(a[0], -0.3);
+    for bad in [0.0, -1.0, f64::NAN, 9.0] {
+        assert!(DriftBank::new(log_kernel(), -0.025, 1)
+            .unwrap()
+            .with_exponent(bad)
+            .is_err());
+    }
+}
+
+/// The drift (output - input) at the end of `path` ((dt, h) pairs) for one element.
+fn final_drift(kernel: Kernel, rest: f64, path: &[(f64, f64)]) -> f64 {
+    let mut b = DriftBank::new(kernel, -0.025, 1)
+        .unwrap()
+        .with_rest_rate(rest, 2.0)
+        .unwrap();
+    let mut out = [0.0];
+    for &(dt, h) in path {
+        b.step(dt, &[h], &[true], &mut out).unwrap();
+    }
+    out[0] - path.last().unwrap().1
+}
+
+#[test]
+fn rest_clock_runs_at_rest_and_stops_while_moving() {
+    let run = |rest: f64, path: &[(f64, f64)]| final_drift(log_kernel(), rest, path);
+    // a step then a long hold: the clock is slowed for a few windows after the step,
+    // then runs with time, so after 1000 s the two clocks differ by a few seconds' worth
+    let hold: Vec<(f64, f64)> = [(0.0, 0.0), (1e-3, 2.0)]
+        .into_iter()
+        .chain((0..1000).map(|_| (1.0, 2.0)))
+        .collect();
+    let (time, rest) = (run(0.0, &hold), run(0.1, &hold));
+    assert!(
+        rest < 0.0 && (time - rest).abs() < 0.05 * time.abs(),
+        "{time} vs {rest}"
+    );
+    // a steady triangle wave at 10 units/s: the rest clock is the time clock run with every
+    // step slowed by the averaged velocity v, dt / (1 + |v| / rest_rate)
+    let wave: Vec<(f64, f64)> = (0..4000)
+        .map(|k| {
+            let x = (k % 200) as f64;
+            (0.1, if (k / 200) % 2 == 0 { x } else { 200.0 - x })
+        })
+        .collect();
+    let (mut v, mut prev) = (0.0, 0.0);
+    let slowed: Vec<(f64, f64)> = wave
+        .iter()
+        .map(|&(dt, h)| {
+            let d: f64 = if dt > 0.0 {
+                v += ((h - prev) / dt - v) * (1.0 - (-dt / 2.0f64).exp());
+                dt / (1.0 + v.abs() / 0.1)
+            } else {
+                dt
+            };
+            prev = h;
+            (d, h)
+        })
+        .collect();
+    let (wr, ws) = (run(0.1, &wave), run(0.0, &slowed));
+    assert!((wr - ws).abs() < 1e-9, "rest {wr} vs slowed time {ws}");
+    // with a kernel of slow terms (10 s .. 10^6 s) the moving element hardly drifts
+    let slow = |rest: f64, path: &[(f64, f64)]| {
+        let taus: Vec<f64> = (2..13).map(|k| 10f64.powf(k as f64 / 2.0)).collect();
+        final_drift(Kernel::new(vec![0.4; 11], taus).unwrap(), rest, path)
+    };
+    let (st, sr) = (slow(0.0, &wave), slow(0.1, &wave));
+    assert!(sr.abs() < 0.3 * st.abs(), "rest {sr} vs time {st}");
+    // noise on a hold does not stop the clock
+    let noisy: Vec<(f64, f64)> = hold
+        .iter()
+        .enumerate()
+        .map(|(k, &(dt, h))| {
+            (
+                dt,
+                if k > 1 {
+                    h + 0.002 * ((k * 7919 % 13) as f64 - 6.0) / 6.0
+                } else {
+                    h
+                },
+            )
+        })
+        .collect();
+    let rn = run(0.1, &noisy);
+    assert!(
+        (rn - rest).abs() < 0.05 * rest.abs(),
+        "noisy {rn} vs clean {rest}"
+    );
+    let b = DriftBank::new(log_kernel(), -0.025, 1).unwrap();
+    assert!(b.clone().with_rest_rate(-1.0, 2.0).is_err());
+    assert!(b.with_rest_rate(0.1, 0.0).is_err());
+}
+
+#[test]
+fn two_clocks_add_the_two_superpositions() {
+    let path: Vec<(f64, f64)> = (0..600)
+        .map(|k| {
+            (
+                0.5,
+                if (k / 40) % 3 == 0 {
+                    2.0
+                } else {
+                    (k % 17) as f64 * 0.3
+                },
+            )
+        })
+        .collect();
+    let run = |bank: DriftBank| {
+        let mut b = bank;
+        let mut out = [0.0];
+        path.iter()
+            .map(|&(dt, h)| {
+                b.step(dt, &[h], &[true], &mut out).unwrap();
+                out[0] - h
+            })
+            .collect::<Vec<f64>>()
+    };
+    let base = || DriftBank::new(log_kernel(), -0.02, 1).unwrap();
+    let rest = run(base().with_rest_rate(0.1, 0.5).unwrap());
+    let time = run(DriftBank::new(log_kernel(), -0.01, 1).unwrap());
+    let both = run(base()
+        .with_rest_rate(0.1, 0.5)
+        .unwrap()
+        .with_time_component(-0.01)
+        .unwrap());
+    for k in 0..path.len() {
+        assert!((both[k] - rest[k] - time[k]).abs() < 1e-12, "sample {k}");
+    }
+    assert!(base().with_time_component(f64::NAN).is_err());
+}
