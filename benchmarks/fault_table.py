@@ -2,10 +2,10 @@
 families of issue 32 (each with the cases its tests generate and their outcomes), then one row
 per case (area, case, outcome), then the totals.
 
-    .venv/bin/python benchmarks/fault_table.py [PYTEST OPTIONS]
+    .venv/bin/python benchmarks/fault_table.py [TEST FILES] [PYTEST OPTIONS]
 
-Options after the script go to pytest (``--durations=15``); pytest's own report of them is
-printed to stderr, the tables to stdout.
+Test files (default: all of ``tests/faults``) and options after the script go to pytest
+(``--durations=15``); pytest's own report is then printed to stderr, the tables to stdout.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def main() -> int:
                 "-q",
                 "-p",
                 "no:cacheprovider",
-                "tests/faults",
+                *([] if any(Path(a).exists() for a in sys.argv[1:]) else ["tests/faults"]),
                 *sys.argv[1:],
             ],
             cwd=ROOT,

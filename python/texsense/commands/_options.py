@@ -91,6 +91,7 @@ RANGES: dict[str, Range] = {
     # recordings, processing, plots
     "--frame": Range(0, 2**62),
     "--chunk-frames": _COUNT,
+    "export mcu --capacity": Range(4, 1 << 16),  # Preisach turning points (Pipeline's range)
     "--workers": Range(1, 1024),
     "--every": Range(1, 1_000_000),
     "stocking report --every": Range(0.0, 24 * 365, lo_open=True),
