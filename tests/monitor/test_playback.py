@@ -161,10 +161,15 @@ def test_regions_are_saved_beside_the_recording(client, folder):
 
 
 def test_report_download(client, folder):
-    r = client.get("/api/playback/tiny.h5/report?format=pdf")
+    # a GET writes nothing: before a POST made it, there is no report
+    assert client.get("/api/playback/tiny.h5/report?format=pdf").status_code == 404
+    assert not (folder / "reports").exists()
+    r = client.post("/api/playback/tiny.h5/report?format=pdf")
     assert r.status_code == 200 and r.content.startswith(b"%PDF")
     assert (folder / "reports" / "tiny.h5-report.pdf").is_file()
-    html = client.get("/api/playback/walk.asf/report?format=html")
+    again = client.get("/api/playback/tiny.h5/report?format=pdf")
+    assert again.status_code == 200 and again.content == r.content
+    html = client.post("/api/playback/walk.asf/report?format=html")
     assert html.status_code == 200 and "Pressure report: walk.asf" in html.text
 
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
+from texsense.data.files import check_writable
 from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
@@ -463,6 +464,9 @@ def run_monitor(args: argparse.Namespace) -> int:
 
     access = web_access(args, "monitor")
     check_port_free(args.host, args.port)
+    check_writable(args.record_dir, "--record-dir", folder=True)  # now, not at the first recording
+    if not str(args.db).startswith(("postgresql://", "postgres://")):
+        check_writable(args.db, "--db")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     with stop_on_sigterm():  # SIGTERM before the server runs: like Ctrl-C
         monitor = build_monitor(args)

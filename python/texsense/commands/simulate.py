@@ -14,7 +14,7 @@ import numpy as np
 
 from texsense._progress import progress
 from texsense.commands import HELP
-from texsense.data.files import check_not_input
+from texsense.data.files import check_not_input, make_folder, real_path
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     args.spacer = args.spacer or "textile-6mm"
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
-    if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
+    if args.output and args.csv and real_path(args.output) == real_path(args.csv):
         raise ParameterError(f"-o and --csv name the same file {args.output}")
     options: dict[str, Any] = {}
     for flag, keyword in _OPTIONS.items():
@@ -271,7 +271,7 @@ def run_sessions(args: argparse.Namespace) -> int:
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")
-    args.output.mkdir(parents=True, exist_ok=True)
+    make_folder(args.output)
     cal = seat_calibration(mat_seed=args.mat_seed)
     cal.save(args.output / "calibration.json")
     frames = 0

@@ -35,7 +35,14 @@ import numpy as np
 from texsense._progress import progress
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.files import atomic_path, check_not_input
+from texsense.data.files import (
+    atomic_path,
+    check_not_input,
+    make_folder,
+    open_regular,
+    real_path,
+    regular_files,
+)
 from texsense.data.layout import Layout
 from texsense.data.modelfile import content_hash
 from texsense.exceptions import FormatError, ParameterError
@@ -107,7 +114,7 @@ class FileReport:
 def input_hash(path: str | Path) -> str:
     """SHA-256 of a file's bytes (read in 1 MiB blocks)."""
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -124,13 +131,13 @@ def _output_matches(
     ``stages``, of the same stages)."""
     if not dst.is_file():
         return False
-    import h5py
+    from texsense.io.policy import open_hdf5  # the one HDF5 policy (loads h5py)
 
     try:
-        with h5py.File(dst, "r") as f:
+        with open_hdf5(dst) as f:
             meta = json.loads(f.attrs.get("meta", "{}"))
             complete = not int(f.attrs.get("open", 1))
-    except (OSError, ValueError):
+    except (OSError, ValueError, TypeError):  # FormatError among them: not an output of ours
         return False
     return (
         complete
@@ -178,7 +185,7 @@ def process_file(
         meta = {**head.meta, **pipe.provenance(), "source": src.name, "input_sha256": digest}
         if opts.interval is not None:
             meta["interval"] = {"level": opts.interval, "method": "split conformal (issue 37)"}
-        dst.parent.mkdir(parents=True, exist_ok=True)
+        make_folder(dst.parent)
         frames, failed = 0, 0
         with (
             atomic_path(dst) as tmp,
@@ -236,7 +243,9 @@ def archive_jobs(
     for spec in map(str, inputs):
         path = Path(spec)
         if path.is_dir():
-            for p in sorted(q for q in path.rglob("*") if q.is_file()):
+            found, passed = regular_files(path, recursive=True)  # no link out, FIFO, device
+            ignored += [p for p, _ in passed]
+            for p in found:
                 try:
                     sniff_format(p)
                 except FormatError:
@@ -254,13 +263,13 @@ def archive_jobs(
         else:
             raise ParameterError(f"{spec}: no such file or folder, and not a glob pattern")
     seen: dict[Path, Path] = {}
-    sources = {src.resolve(): src for src, _ in jobs}
+    sources = {real_path(src): src for src, _ in jobs}
     for src, dst in jobs:
         if dst in seen and seen[dst] != src:
             raise ParameterError(f"{seen[dst]} and {src} would both be written to {dst}")
         seen[dst] = src
-        if dst.resolve() in sources:  # the output would replace an input
-            check_not_input(dst, [sources[dst.resolve()]])
+        if real_path(dst) in sources:  # the output would replace an input
+            check_not_input(dst, [sources[real_path(dst)]])
     if not jobs:
         raise ParameterError(f"no recordings found in {', '.join(map(str, inputs))}")
     return jobs, ignored

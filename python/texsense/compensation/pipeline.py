@@ -56,7 +56,26 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
-__all__ = ["Pipeline"]
+__all__ = ["Pipeline", "layout_mismatch"]
+
+
+def layout_mismatch(expected: Layout, given: Layout) -> str | None:
+    """How the elements of ``given`` differ from those of ``expected`` (None: the same
+    elements): their count, the grid's shape, the cells they sit in; a calibration per element
+    applied to elements in other places would put each element's curve on another."""
+    if expected.n_elements != given.n_elements:
+        return f"{expected.n_elements} elements, not {given.n_elements}"
+    if (expected.shape is None) != (given.shape is None):
+        return f"a {expected.kind} layout, not a {given.kind} layout"
+    if expected.shape is not None and expected.shape != given.shape:
+        (r, c), (gr, gc) = expected.shape, given.shape  # type: ignore[misc]
+        return f"a grid of {r} x {c}, not {gr} x {gc}"
+    if expected.cells is not None and (
+        given.cells is None or not np.array_equal(expected.cells, given.cells)
+    ):
+        return "the same grid with its elements in other cells"
+    return None
+
 
 #: The first bytes of a pipeline's state (:meth:`Pipeline.snapshot`).
 STATE_MAGIC = b"TXSNPIPE"
@@ -138,6 +157,11 @@ class Pipeline:
                 f"the calibration is for {chain.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
             )
+        for stage in chain.stages:
+            made_for = getattr(stage, "layout", None)
+            why = layout_mismatch(made_for, layout) if isinstance(made_for, Layout) else None
+            if why:
+                raise ParameterError(f"the calibration was made for another mat: {why}")
         if repair is not None and repair not in METHODS:
             raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
         self.chain = chain
@@ -465,6 +489,9 @@ class Pipeline:
                 f"the recording has {rec.n_elements} elements, the pipeline "
                 f"{self.layout.n_elements}"
             )
+        why = layout_mismatch(self.layout, rec.layout)
+        if why:
+            raise ParameterError(f"the recording is of another mat than the pipeline's: {why}")
         values = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
         p, ok, _ = self.process(values, rec.times, rec.valid)
         meta = {**rec.meta, **self.provenance()}

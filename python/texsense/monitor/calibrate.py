@@ -38,12 +38,13 @@ from texsense.calibration.checks import edge_of_press, parse_pressure, typical_r
 from texsense.calibration.session import CHECK_TOLERANCE, CalibrationSession, CheckReport
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Convert, StageChain
-from texsense.data.files import unused_name
+from texsense.data.files import make_folder, unused_name
 from texsense.data.layout import orientation_toward
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
+from texsense.monitor.sources import blocking
 from texsense.sensor.materials import PRESETS as SPACER_PRESETS
 
 __all__ = ["DEFAULT_FRAMES", "MAX_FRAMES", "STEPS", "PageCalibration", "StepError"]
@@ -338,7 +339,7 @@ class PageCalibration:
 
         self.busy, self.material = "material", material
         try:
-            await asyncio.to_thread(make)
+            await blocking(make)
         except ParameterError as e:
             self.refused = str(e)
             raise
@@ -364,7 +365,7 @@ class PageCalibration:
             self.busy = None
 
     async def _check_in_thread(self) -> None:
-        await asyncio.to_thread(self._check)
+        await blocking(self._check)
 
     async def save(self) -> dict[str, Any]:
         """Step 5: write the chain and the step recordings (new names in the monitor's
@@ -384,7 +385,7 @@ class PageCalibration:
         )
         self.busy = "save"
         try:
-            paths = await asyncio.to_thread(_write, folder, stem, chain, self.recordings)
+            paths = await blocking(_write, folder, stem, chain, self.recordings)
             pipeline = Pipeline(chain, self.monitor.layout)
         finally:
             self.busy = None
@@ -414,7 +415,7 @@ def _write(
     folder: Path, stem: str, chain: StageChain, recordings: dict[str, Recording]
 ) -> dict[str, Path]:
     """The step recordings and then the chain (atomic writes: texsense.data.files)."""
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder, "recordings folder")
     out: dict[str, Path] = {}
     for step, rec in recordings.items():
         out[step] = rec.save(unused_name(folder / f"{stem}-{step}.h5"))

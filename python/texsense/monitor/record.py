@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, encode_events
-from texsense.data.files import unused_name
+from texsense.data.files import make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock
@@ -256,7 +256,7 @@ class Recorder:
     ) -> None:
         from texsense.io.hdf5 import RecordingWriter
 
-        folder.mkdir(parents=True, exist_ok=True)
+        make_folder(folder, "recordings folder")
         lay = source.layout
         self.paths = recording_paths(folder, name, source.quantity, calibrated)
         taken = [p.name for p in self.paths if p.exists()]
