@@ -2,7 +2,7 @@
 which it copies the same array (``np.multiply(x, 1.0, out=y)``), measured in the same run,
 on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd``).
 
-Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--quick]
+Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|cpu] [--quick]
 
 - Preisach batch: the Rust ``PreisachBank`` behind ``HysteresisModel.predict`` on a
   4000 x 4096 random walk (one thread, frame order; one thread, element blocks; all threads)
@@ -22,26 +22,33 @@ stated in. Both paths give the same numbers bit for bit (tests/test_simd.py).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import best_of
 from texsense import Layout, Recording, _core
 from texsense.calibration.workflows import seat_calibration
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Convert, StageChain
 
+CLOCK = time.perf_counter
+
+
+def timed(fn: Callable[[], object], repeat: int = 3) -> float:
+    """The shortest of ``repeat`` runs of ``fn`` on the chosen clock (s)."""
+    best = float("inf")
+    for _ in range(repeat):
+        start = CLOCK()
+        fn()
+        best = min(best, CLOCK() - start)
+    return best
+
 
 def copy_rate(shape: tuple[int, int]) -> float:
     x = np.random.default_rng(0).random(shape)
     y = np.empty_like(x)
-    t, _ = best_of(lambda: np.multiply(x, 1.0, out=y), repeat=7)
-    return x.size / t
+    return x.size / timed(lambda: np.multiply(x, 1.0, out=y), repeat=7)
 
 
 def random_walk(model: object, frames: int, n: int, seed: int = 0) -> np.ndarray:
@@ -91,9 +98,9 @@ def step_latency(pipe: Pipeline, cap: np.ndarray, times: np.ndarray) -> np.ndarr
     pipe.reset()
     lat = np.empty(len(cap))
     for k in range(len(cap)):
-        s = time.perf_counter()
+        s = CLOCK()
         pipe.step(cap[k], None, float(times[k]))
-        lat[k] = time.perf_counter() - s
+        lat[k] = CLOCK() - s
     return lat[100:]
 
 
@@ -137,7 +144,17 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="smaller sizes (a smoke test)")
     ap.add_argument("--repeat", type=int, default=3, help="repetitions of the whole set")
+    ap.add_argument(
+        "--clock",
+        choices=("wall", "cpu"),
+        default="wall",
+        help="cpu: this process's CPU time (on a loaded machine, where time slices of other "
+        "processes fall into wall-clock timings; rows on several threads then give the rate "
+        "per core)",
+    )
     args = ap.parse_args()
+    global CLOCK
+    CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     frames = 400 if args.quick else 4000
     _, best = _core.simd_path()
     paths = ["scalar", best] if best != "scalar" else ["scalar"]
@@ -163,7 +180,7 @@ def main() -> None:
             for label, run, size in batch:
                 for p in paths:
                     _core.set_simd(p != "scalar")
-                    t, _ = best_of(run)
+                    t = timed(run)
                     rates[label, p].append(size / t)
                     shares[label, p].append(size / t / copy)
             for p in paths:
@@ -175,7 +192,8 @@ def main() -> None:
         _core.set_simd(True)
     print(
         f"copy rate of a ({frames}, 4096) float64 array: {median_row(copies) / 1e6:.0f} M "
-        f"element-samples/s (median of {args.repeat}); SIMD path of this processor: {best}"
+        f"element-samples/s (median of {args.repeat}, {args.clock} clock); "
+        f"SIMD path of this processor: {best}"
     )
     print()
     head = " | ".join(f"{p}: rate | {p}: share of the copy rate" for p in paths)

@@ -167,6 +167,125 @@ unsafe fn everett(c: &Consts, table: *const f64, alpha: __m256d, beta: __m256d) 
     _mm256_blendv_pd(v, zero, _mm256_cmp_pd::<_CMP_GE_OQ>(b, a))
 }
 
+/// The four lanes of a group at the start of a step (prepare: clamped input, moving,
+/// rising, turning).
+struct Lanes {
+    /// Each lane's stack (in place or on the heap).
+    stacks: [*mut f64; LANES],
+    /// Lane 0's stack: the gathers' base.
+    base: *const f64,
+    /// Each lane's stack from `base`, in f64 steps.
+    off: __m256i,
+    len0: __m256i,
+    last_u: __m256d,
+    last_h: __m256d,
+    /// The input clamped into the range (`u_min` where not live).
+    uc: __m256d,
+    /// Valid and finite.
+    live: __m256d,
+    /// Live, and not the last input again.
+    moving: __m256d,
+    rising: __m256d,
+    turned: __m256i,
+    was_clamped: __m256d,
+}
+
+/// Read four elements' heads and inputs into lanes (the kernel's `prepare`).
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn load(c: &Consts, els: &mut [Element], u: &[f64], ok: &[bool]) -> Lanes {
+    let one_i = _mm256_set1_epi64x(1);
+    let mut stacks = [std::ptr::null_mut::<f64>(); LANES];
+    for (p, el) in stacks.iter_mut().zip(els.iter_mut()) {
+        *p = match &mut el.spill {
+            Some(b) => b.as_mut_ptr().cast::<f64>(),
+            None => el.inline.as_mut_ptr().cast::<f64>(),
+        };
+    }
+    let base = stacks[0] as *const f64;
+    let rel = |l: usize| (stacks[l] as isize - base as isize) as i64 / 8;
+    let h = |l: usize| &els[l].head;
+    let len0 = _mm256_set_epi64x(
+        h(3).len as i64,
+        h(2).len as i64,
+        h(1).len as i64,
+        h(0).len as i64,
+    );
+    let last_u = _mm256_set_pd(h(3).last_u, h(2).last_u, h(1).last_u, h(0).last_u);
+    let last_h = _mm256_set_pd(h(3).last_h, h(2).last_h, h(1).last_h, h(0).last_h);
+    let u_in = _mm256_loadu_pd(u.as_ptr());
+    let m = |b: bool| -i64::from(b);
+    let ok_m = _mm256_castsi256_pd(_mm256_set_epi64x(m(ok[3]), m(ok[2]), m(ok[1]), m(ok[0])));
+    // valid and finite (x - x is 0 for a finite x, NaN otherwise)
+    let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(u_in, u_in), _mm256_setzero_pd());
+    let live = _mm256_and_pd(ok_m, finite);
+    let clamped = clamp(u_in, c.u_min, c.u_max);
+    let uc = _mm256_blendv_pd(c.u_min, clamped, live);
+    let rising = _mm256_cmp_pd::<_CMP_GT_OQ>(uc, last_u);
+    let odd0 = _mm256_cmpeq_epi64(_mm256_and_si256(len0, one_i), one_i);
+    Lanes {
+        stacks,
+        base,
+        off: _mm256_set_epi64x(rel(3), rel(2), rel(1), rel(0)),
+        len0,
+        last_u,
+        last_h,
+        uc,
+        live,
+        moving: _mm256_andnot_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(uc, last_u), live),
+        rising,
+        turned: _mm256_xor_si256(_mm256_castpd_si256(rising), odd0),
+        was_clamped: _mm256_and_pd(_mm256_cmp_pd::<_CMP_NEQ_UQ>(clamped, u_in), live),
+    }
+}
+
+/// Slot `s` (an extremum's index) of every lane's stack as an index from `base`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn slot(l: &Lanes, s: __m256i) -> __m256i {
+    _mm256_add_epi64(_mm256_add_epi64(s, s), l.off)
+}
+
+/// The depth after pushing the turning point and wiping out the loops the input passes
+/// (and back at lower saturation), per lane (the kernel's `finish`, up to the top).
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn wipe_out(l: &Lanes) -> __m256i {
+    let zero = _mm256_setzero_pd();
+    let (one_i, two_i) = (_mm256_set1_epi64x(1), _mm256_set1_epi64x(2));
+    let mut len = _mm256_sub_epi64(l.len0, l.turned);
+    let dir = _mm256_blendv_pd(_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0), l.rising);
+    let passes = |s: __m256d| {
+        let d = _mm256_mul_pd(_mm256_sub_pd(l.uc, s), dir);
+        _mm256_castpd_si256(_mm256_cmp_pd::<_CMP_GE_OQ>(d, zero))
+    };
+    // the extremum below the top: slot max(len, 2) - 2
+    let at_least_3 = _mm256_cmpgt_epi64(len, two_i);
+    let below = _mm256_blendv_epi8(len, two_i, _mm256_cmpgt_epi64(two_i, len));
+    let s_below = _mm256_i64gather_pd::<8>(l.base, slot(l, _mm256_sub_epi64(below, two_i)));
+    let mut wipes = _mm256_and_si256(at_least_3, passes(s_below));
+    len = _mm256_add_epi64(len, _mm256_add_epi64(wipes, wipes));
+    // deeper levels (rare): while any moving lane still passes the extremum below its top
+    wipes = _mm256_and_si256(wipes, _mm256_castpd_si256(l.moving));
+    loop {
+        let can = _mm256_and_si256(wipes, _mm256_cmpgt_epi64(len, two_i));
+        if _mm256_testz_si256(can, can) != 0 {
+            break;
+        }
+        let at = slot(l, _mm256_sub_epi64(len, two_i));
+        let s = _mm256_mask_i64gather_pd::<8>(zero, l.base, at, _mm256_castsi256_pd(can));
+        wipes = _mm256_and_si256(can, passes(s));
+        len = _mm256_add_epi64(len, _mm256_add_epi64(wipes, wipes));
+    }
+    // back at lower saturation
+    let s0 = _mm256_i64gather_pd::<8>(l.base, l.off);
+    let at_sat = _mm256_and_si256(
+        _mm256_cmpeq_epi64(len, two_i),
+        _mm256_castpd_si256(_mm256_cmp_pd::<_CMP_LE_OQ>(l.uc, s0)),
+    );
+    _mm256_blendv_epi8(len, one_i, at_sat)
+}
+
 /// Four elements whose stacks all have room for a turning point.
 #[target_feature(enable = "avx2")]
 unsafe fn group(
@@ -177,143 +296,62 @@ unsafe fn group(
     ok: &[bool],
     out: &mut [f64],
 ) {
-    let zero = _mm256_setzero_pd();
-    let (one_i, two_i) = (_mm256_set1_epi64x(1), _mm256_set1_epi64x(2));
-    // each lane's stack (in place or on the heap), addressed from lane 0's in f64 steps
-    let mut stacks = [std::ptr::null_mut::<f64>(); LANES];
-    for (p, el) in stacks.iter_mut().zip(els.iter_mut()) {
-        *p = match &mut el.spill {
-            Some(b) => b.as_mut_ptr().cast::<f64>(),
-            None => el.inline.as_mut_ptr().cast::<f64>(),
-        };
-    }
-    let base = stacks[0] as *const f64;
-    let rel = |l: usize| (stacks[l] as isize - base as isize) as i64 / 8;
-    let off = _mm256_set_epi64x(rel(3), rel(2), rel(1), rel(0));
-    let head = |l: usize| &els[l].head;
-    let len0 = _mm256_set_epi64x(
-        head(3).len as i64,
-        head(2).len as i64,
-        head(1).len as i64,
-        head(0).len as i64,
-    );
-    let last_u = _mm256_set_pd(
-        head(3).last_u,
-        head(2).last_u,
-        head(1).last_u,
-        head(0).last_u,
-    );
-    let last_h = _mm256_set_pd(
-        head(3).last_h,
-        head(2).last_h,
-        head(1).last_h,
-        head(0).last_h,
-    );
-    let u_in = _mm256_loadu_pd(u.as_ptr());
-    let mask = |b: bool| -i64::from(b);
-    let ok_m = _mm256_castsi256_pd(_mm256_set_epi64x(
-        mask(ok[3]),
-        mask(ok[2]),
-        mask(ok[1]),
-        mask(ok[0]),
-    ));
-    // valid and finite (x - x is 0 for a finite x, NaN otherwise)
-    let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(u_in, u_in), zero);
-    let live = _mm256_and_pd(ok_m, finite);
-    // prepare: clamp into the range, same input or moving, rising, turning
-    let clamped = clamp(u_in, c.u_min, c.u_max);
-    let was_clamped = _mm256_and_pd(_mm256_cmp_pd::<_CMP_NEQ_UQ>(clamped, u_in), live);
-    let uc = _mm256_blendv_pd(c.u_min, clamped, live);
-    let same = _mm256_cmp_pd::<_CMP_EQ_OQ>(uc, last_u);
-    let moving = _mm256_andnot_pd(same, live);
-    let rising = _mm256_cmp_pd::<_CMP_GT_OQ>(uc, last_u);
-    let odd0 = _mm256_cmpeq_epi64(_mm256_and_si256(len0, one_i), one_i);
-    let turned = _mm256_xor_si256(_mm256_castpd_si256(rising), odd0);
-    // finish: the last input and output go into the slot above the top (kept on a turn);
-    // they are written after the last gather (a gather cannot take a value from a store
-    // still in flight): a lane whose new top is that slot takes them from the registers
-    let mut len = _mm256_sub_epi64(len0, turned);
-    let dir = _mm256_blendv_pd(_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0), rising);
-    let passes = |s: __m256d| {
-        _mm256_castpd_si256(_mm256_cmp_pd::<_CMP_GE_OQ>(
-            _mm256_mul_pd(_mm256_sub_pd(uc, s), dir),
-            zero,
-        ))
-    };
-    // the extremum below the top: slot max(len, 2) - 2
-    let at_least_3 = _mm256_cmpgt_epi64(len, two_i);
-    let below = _mm256_blendv_epi8(len, two_i, _mm256_cmpgt_epi64(two_i, len));
-    let slot = |s: __m256i| _mm256_add_epi64(_mm256_add_epi64(s, s), off);
-    let s_below = _mm256_i64gather_pd::<8>(base, slot(_mm256_sub_epi64(below, two_i)));
-    let mut wipes = _mm256_and_si256(at_least_3, passes(s_below));
-    len = _mm256_add_epi64(len, _mm256_add_epi64(wipes, wipes));
-    // deeper levels (rare): while any moving lane still passes the extremum below its top
-    wipes = _mm256_and_si256(wipes, _mm256_castpd_si256(moving));
-    loop {
-        let can = _mm256_and_si256(wipes, _mm256_cmpgt_epi64(len, two_i));
-        if _mm256_testz_si256(can, can) != 0 {
-            break;
-        }
-        let s = _mm256_mask_i64gather_pd::<8>(
-            zero,
-            base,
-            slot(_mm256_sub_epi64(len, two_i)),
-            _mm256_castsi256_pd(can),
-        );
-        wipes = _mm256_and_si256(can, passes(s));
-        len = _mm256_add_epi64(len, _mm256_add_epi64(wipes, wipes));
-    }
-    // back at lower saturation
-    let s0 = _mm256_i64gather_pd::<8>(base, off);
-    let at_sat = _mm256_and_si256(
-        _mm256_cmpeq_epi64(len, two_i),
-        _mm256_castpd_si256(_mm256_cmp_pd::<_CMP_LE_OQ>(uc, s0)),
-    );
-    len = _mm256_blendv_epi8(len, one_i, at_sat);
-    // the top: x + 2 F(u, m) after a minimum, x - 2 F(M, u) after a maximum
-    let top_slot = slot(_mm256_sub_epi64(len, one_i));
-    let pushed = _mm256_castsi256_pd(_mm256_cmpeq_epi64(len, _mm256_add_epi64(len0, one_i)));
+    let one_i = _mm256_set1_epi64x(1);
+    let l = load(c, els, u, ok);
+    let len = wipe_out(&l);
+    // the top: x + 2 F(u, m) after a minimum, x - 2 F(M, u) after a maximum. The last
+    // input and output go into the slot above the old top (kept on a turn) after the last
+    // gather (a gather cannot take a value from a store still in flight): a lane whose new
+    // top is that slot takes them from the registers.
+    let top_slot = slot(&l, _mm256_sub_epi64(len, one_i));
+    let pushed = _mm256_castsi256_pd(_mm256_cmpeq_epi64(len, _mm256_add_epi64(l.len0, one_i)));
     let stored = _mm256_andnot_pd(pushed, _mm256_castsi256_pd(_mm256_set1_epi64x(-1)));
-    let top = _mm256_mask_i64gather_pd::<8>(last_u, base, top_slot, stored);
-    let x = _mm256_mask_i64gather_pd::<8>(last_h, base, _mm256_add_epi64(top_slot, one_i), stored);
+    let top = _mm256_mask_i64gather_pd::<8>(l.last_u, l.base, top_slot, stored);
+    let x_slot = _mm256_add_epi64(top_slot, one_i);
+    let x = _mm256_mask_i64gather_pd::<8>(l.last_h, l.base, x_slot, stored);
     let odd = _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(len, one_i), one_i));
-    let alpha = _mm256_blendv_pd(top, uc, odd);
-    let beta = _mm256_blendv_pd(uc, top, odd);
+    let alpha = _mm256_blendv_pd(top, l.uc, odd);
+    let beta = _mm256_blendv_pd(l.uc, top, odd);
     let sign = _mm256_blendv_pd(_mm256_set1_pd(-2.0), _mm256_set1_pd(2.0), odd);
     let f = everett(c, e.table().as_ptr(), alpha, beta);
     let h = _mm256_add_pd(x, _mm256_mul_pd(sign, f));
-    let sum = _mm256_blendv_pd(last_h, h, moving);
+    let sum = _mm256_blendv_pd(l.last_h, h, l.moving);
     let y = _mm256_mul_pd(c.sign, _mm256_add_pd(sum, c.offset));
-    _mm256_storeu_pd(
-        out.as_mut_ptr(),
-        _mm256_blendv_pd(_mm256_set1_pd(f64::NAN), y, live),
-    );
+    let nan = _mm256_set1_pd(f64::NAN);
+    _mm256_storeu_pd(out.as_mut_ptr(), _mm256_blendv_pd(nan, y, l.live));
+    store(&l, els, len, h);
+}
+
+/// The pushed slots, the moving lanes' heads, the counters, a stack back in place once
+/// shallow.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn store(l: &Lanes, els: &mut [Element], len: __m256i, h: __m256d) {
     let mut lens = [0i64; LANES];
-    _mm256_storeu_si256(lens.as_mut_ptr().cast(), len0);
+    _mm256_storeu_si256(lens.as_mut_ptr().cast(), l.len0);
     let (mut lu, mut lh) = ([0.0; LANES], [0.0; LANES]);
-    _mm256_storeu_pd(lu.as_mut_ptr(), last_u);
-    _mm256_storeu_pd(lh.as_mut_ptr(), last_h);
-    for l in 0..LANES {
+    _mm256_storeu_pd(lu.as_mut_ptr(), l.last_u);
+    _mm256_storeu_pd(lh.as_mut_ptr(), l.last_h);
+    for k in 0..LANES {
         // SAFETY: a stack has room + 1 >= len + 1 slots (len <= room, the bank's invariant)
         unsafe {
-            *stacks[l].add(2 * lens[l] as usize) = lu[l];
-            *stacks[l].add(2 * lens[l] as usize + 1) = lh[l];
+            *l.stacks[k].add(2 * lens[k] as usize) = lu[k];
+            *l.stacks[k].add(2 * lens[k] as usize + 1) = lh[k];
         }
     }
-    // the moving lanes' heads, the counters, a stack back in place once shallow
     let (mut hs, mut us) = ([0.0; LANES], [0.0; LANES]);
     _mm256_storeu_pd(hs.as_mut_ptr(), h);
-    _mm256_storeu_pd(us.as_mut_ptr(), uc);
+    _mm256_storeu_pd(us.as_mut_ptr(), l.uc);
     _mm256_storeu_si256(lens.as_mut_ptr().cast(), len);
-    let moved = _mm256_movemask_pd(moving);
-    let clamps = _mm256_movemask_pd(was_clamped);
-    for (l, el) in els.iter_mut().enumerate() {
-        el.clamped += u64::from(clamps >> l & 1 != 0);
-        if moved >> l & 1 != 0 {
-            el.head.len = lens[l] as u32;
-            el.head.last_u = us[l];
-            el.head.last_h = hs[l];
-            if lens[l] as usize <= INLINE_EXTREMA / 2 && el.spill.is_some() {
+    let moved = _mm256_movemask_pd(l.moving);
+    let clamps = _mm256_movemask_pd(l.was_clamped);
+    for (k, el) in els.iter_mut().enumerate() {
+        el.clamped += u64::from(clamps >> k & 1 != 0);
+        if moved >> k & 1 != 0 {
+            el.head.len = lens[k] as u32;
+            el.head.last_u = us[k];
+            el.head.last_h = hs[k];
+            if lens[k] as usize <= INLINE_EXTREMA / 2 && el.spill.is_some() {
                 el.unspill();
             }
         }

@@ -285,7 +285,7 @@ pub(crate) fn hostile_history(
 ) -> (Vec<f64>, Vec<bool>) {
     let span = hi - lo;
     let mut x: Vec<f64> = (0..n).map(|_| lo + rng.unit() * span).collect();
-    let nested: Vec<bool> = (0..n).map(|_| rng.next() % 3 == 0).collect();
+    let nested: Vec<bool> = (0..n).map(|_| rng.next().is_multiple_of(3)).collect();
     let (mut u, mut ok) = (Vec::with_capacity(t * n), Vec::with_capacity(t * n));
     for r in 0..t {
         for i in 0..n {
@@ -311,7 +311,7 @@ pub(crate) fn hostile_history(
                 }
             };
             u.push(v);
-            ok.push(rng.next() % 25 != 0);
+            ok.push(!rng.next().is_multiple_of(25));
         }
     }
     (u, ok)
