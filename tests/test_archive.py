@@ -43,7 +43,8 @@ def test_one_file_in_blocks_equals_the_whole_recording(sessions, tmp_path):
     root, cal = sessions
     src = root / "sessions" / "s0.h5"
     rec = load(src)
-    expected = Pipeline(cal, rec.layout, repair="neighbour-mean").run(rec)
+    # in blocks as a whole, the in-use drift correction (on by default in process) included
+    expected = Pipeline(cal, rec.layout, repair="neighbour-mean", in_use=True).run(rec)
     report = process_file(
         src, cal, tmp_path / "p.h5", ProcessOptions(repair="neighbour-mean", chunk_frames=37)
     )

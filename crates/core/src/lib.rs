@@ -36,6 +36,7 @@ pub mod repair;
 pub mod simd;
 mod snapshot;
 pub mod spacer;
+pub mod spacer_batch;
 pub mod topology;
 
 pub use bouc_wen::{BoucWenBank, BoucWenParams};
@@ -48,4 +49,5 @@ pub use everett::{everett_terms, Everett, EverettTerms};
 pub use preisach::PreisachBank;
 pub use repair::{LocalRepair, Method as RepairMethod};
 pub use spacer::{SpacerBank, SpacerLaw, SpacerParams};
+pub use spacer_batch::SpacerBatch;
 pub use topology::Neighbours;

@@ -81,6 +81,10 @@ class Alert:
     #: where, in words: the regions the mode knows, else rows and columns (the monitor
     #: names them; :func:`texsense.apps.views.place_names`)
     where: list[str] = field(default_factory=list)
+    #: with bounds: "confident" (above the threshold with the bounds' confidence: the lower
+    #: bound is above it) or "possible" (only the upper bound is; counted only when the user
+    #: chose so); None without bounds
+    certainty: str | None = None
 
     @property
     def active(self) -> bool:
@@ -98,6 +102,7 @@ class Alert:
             "cleared_t": self.cleared_t,
             "active": self.active,
             "where": self.where,
+            "certainty": self.certainty,
         }
 
 
@@ -125,6 +130,10 @@ class ExposureTracker:
         None: no such events (a foot sensor, loaded at every step).
     occupancy_hold_s : float
         A change of occupancy is reported once it has held this long (default 0: at once).
+    count_possible : bool
+        With bounds (:meth:`step` ``lower``/``upper``): count an element that is only
+        *possibly* above the threshold (its upper bound is, its lower bound is not) toward the
+        reposition alert too (default: only those above it with the bounds' confidence).
     """
 
     def __init__(
@@ -138,6 +147,7 @@ class ExposureTracker:
         regions: dict[str, npt.ArrayLike] | None = None,
         occupancy: tuple[str, str] | None = ("seated", "left"),
         occupancy_hold_s: float = 0.0,
+        count_possible: bool = False,
     ) -> None:
         if not units.is_pressure_unit(unit):
             raise ParameterError(f"threshold unit {unit!r} is not a pressure unit")
@@ -174,6 +184,11 @@ class ExposureTracker:
         self.occupancy = occupancy
         self.occupancy_hold_s = float(occupancy_hold_s)
         self._occupancy_since: float | None = None  # when the load last changed state
+        self.count_possible = bool(count_possible)
+        #: with bounds, per element (or region) of the last frame: above the threshold with
+        #: the bounds' confidence, and only possibly above it
+        self.confident = np.zeros(n, bool)
+        self.possible = np.zeros(n, bool)
 
     @property
     def open_alert(self) -> Alert | None:
@@ -200,10 +215,18 @@ class ExposureTracker:
             return p
         return np.array([p[g].mean() for g in self._groups])
 
-    def step(self, pressure_ncm2: npt.ArrayLike, t: float) -> list[Event]:
+    def step(
+        self,
+        pressure_ncm2: npt.ArrayLike,
+        t: float,
+        lower: npt.ArrayLike | None = None,
+        upper: npt.ArrayLike | None = None,
+    ) -> list[Event]:
         """Advance to time ``t`` (s) with the pressure (N/cm²) of every element; returns the
-        events this frame caused. A missing (NaN) reading counts as unloaded. (Time last, as
-        a stage's ``step(values, valid, t)``.)"""
+        events this frame caused. A missing (NaN) reading counts as unloaded. (Time after the
+        values, as a stage's ``step(values, valid, t)``.) With the bounds ``lower`` and
+        ``upper`` (issue 37) an element is above the threshold when its lower bound is,
+        *possibly* above when only its upper bound is (counted with ``count_possible``)."""
         t = frame_time(t)
         p = np.asarray(pressure_ncm2, dtype=np.float64)
         if p.shape != (self.layout.n_elements,):
@@ -216,6 +239,12 @@ class ExposureTracker:
         self._last_t = t
         events: list[Event] = []
         loaded = self._values(p) > self.threshold_ncm2
+        if lower is not None and upper is not None:
+            self.confident = self._values(np.asarray(lower, np.float64)) > self.threshold_ncm2
+            self.possible = (
+                self._values(np.asarray(upper, np.float64)) > self.threshold_ncm2
+            ) & ~self.confident
+            loaded = self.confident | (self.possible & self.count_possible)
         # exposure grows while loaded; relief time grows while not; a long relief resets
         self.exposure_s[loaded] += dt
         self._relief_s[loaded] = 0.0
@@ -227,9 +256,12 @@ class ExposureTracker:
             over = np.flatnonzero(self.exposure_s >= self.reposition_s)
             if over.size:
                 alert = Alert(next(self._ids), t, over.tolist(), float(self.exposure_s.max()))
+                detail: dict[str, Any] = {"where": [self.names[i] for i in over]}
+                if lower is not None and upper is not None:
+                    alert.certainty = "confident" if self.confident[over].any() else "possible"
+                    detail["certainty"] = alert.certainty
                 self.alerts.append(alert)
-                names = [self.names[i] for i in over]
-                events.append(Event("reposition", t, alert.id, {"where": names}))
+                events.append(Event("reposition", t, alert.id, detail))
         else:
             alert.peak_exposure_s = max(alert.peak_exposure_s, float(self.exposure_s.max()))
             if not np.any(self.exposure_s[alert.elements] > 0):

@@ -68,6 +68,9 @@ class Review:
     #: (T, N) True where a pressure reading was flagged invalid but carries a repaired value
     #: (it counts, as it does live); None when nothing was repaired
     repaired: np.ndarray | None = None
+    #: (lower, upper) (T, N) in the stored unit: the bounds of a processed recording that has
+    #: them (``process --interval``, a monitor recording with bounds); None otherwise
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def pressure(self) -> bool:
@@ -253,6 +256,12 @@ def open_review(
     review.events, review.sides = recompute_events(review, model)
     review.health = element_health(original)
     review.repaired = None if rec is original else ~original.valid
+    if rec.quantity == "pressure" and not isinstance(source, Recording):
+        path = Path(source)
+        if path.is_file() and path.suffix.lower() in (".h5", ".hdf5"):
+            from texsense.io.hdf5 import read_bounds
+
+            review.bounds = read_bounds(path)
     return review
 
 

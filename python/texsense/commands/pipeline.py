@@ -119,6 +119,21 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-hysteresis", action="store_true", help="first-loading curve only")
     p.add_argument("--no-drift", action="store_true", help="skip the drift stage")
     p.add_argument(
+        "--in-use-drift",
+        choices=("on", "off"),
+        default="on",
+        help="on (default): correct the drift from the mat in use (stillness, an empty mat) "
+        "instead of with the calibration's drift stage, where the calibration has a spacer "
+        "model; off: the laboratory drift stage only (docs/drift.md)",
+    )
+    p.add_argument(
+        "--interval",
+        type=float,
+        metavar="LEVEL",
+        help="give every value a bound at this level (e.g. 0.95): lower and upper maps beside "
+        "the frames of an HDF5 output (docs/data-model.md, docs/drift.md)",
+    )
+    p.add_argument(
         "--chunk-frames",
         type=int,
         help="frames per block (default: about 2^18 element-samples, 256 frames of 1024)",
@@ -233,6 +248,8 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
         drift=not args.no_drift,
         chunk_frames=args.chunk_frames,
         accept_truncated=args.accept_truncated,
+        in_use=args.in_use_drift == "on",
+        interval=args.interval,
     )
 
 
@@ -257,6 +274,8 @@ def run_process(args: argparse.Namespace) -> int:
                     f"wrote {args.output}: {report.frames} frames; "
                     f"{report.failed_share:.1%} of readings failed"
                 )
+                if report.in_use is not None:
+                    print(in_use_line(report.in_use))
             return 0
         return _process_in_memory(src, cal, args.output, options)
     jobs, ignored = archive_jobs(args.inputs, args.output)
@@ -280,6 +299,8 @@ def run_process(args: argparse.Namespace) -> int:
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
     check_not_input(output, [src])
+    if options.interval is not None:
+        raise ParameterError("--interval stores lower and upper maps: write an HDF5 output (.h5)")
     raw = load(src, accept_truncated=options.accept_truncated)
     pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)
@@ -290,7 +311,24 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
         f"{', '.join(out.meta['stages'])}; {failed.mean():.1%} of readings failed, "
         f"{int(failed.any(axis=0).sum())} elements failed at least once"
     )
+    if options.in_use:
+        print(in_use_line(pipe.in_use_status()))
     return 0
+
+
+def in_use_line(status: dict[str, Any]) -> str:
+    """The in-use drift correction in one line (``process``, the report)."""
+    if status["state"] == "off":
+        return f"in-use drift correction off: {status['why']}"
+    if status["state"] != "correcting":
+        return "in-use drift correction: no still period seen, nothing corrected"
+    z = status["zeroed"]
+    zeros = {0: "never", 1: "once", 2: "twice"}.get(z, f"{z} times")
+    return (
+        f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
+        f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
+        f"zero taken {zeros}"
+    )
 
 
 def run_repair(args: argparse.Namespace) -> int:

@@ -10,13 +10,17 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from texsense._progress import progress
 from texsense.commands import HELP
+from texsense.data.files import check_not_input
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
 from texsense.sensor.materials import PRESETS
 from texsense.sim.device import VirtualDevice
+from texsense.sim.night import virtual_night
 from texsense.sim.protocols import PROTOCOLS, run_protocol
 from texsense.sim.seated import Subject, simulate_session
 
@@ -55,10 +59,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "protocol",
-        choices=[*sorted(PROTOCOLS), "device"],
-        help="protocol to run; 'device': a virtual mat behind a serial line (--mat, --link)",
+        choices=[*sorted(PROTOCOLS), "device", "night"],
+        help="protocol to run; 'device': a virtual mat behind a serial line (--mat, --link); "
+        "'night': a person's night on the virtual bed mat (--hours, --truth, --calibration)",
     )
-    p.add_argument("--spacer", default="textile-6mm", choices=sorted(PRESETS), help="spacer preset")
+    p.add_argument(
+        "--spacer",
+        choices=sorted(PRESETS),
+        help="spacer preset (default textile-6mm; a night: textile-3mm, the bed mat's)",
+    )
     p.add_argument("--seed", type=int, default=0, help="specimen and noise seed (default 0)")
     p.add_argument("-o", "--output", type=Path, help="HDF5 file to write")
     p.add_argument("--csv", type=Path, help="CSV file to write")
@@ -87,7 +96,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--failures", action="store_true", help="device: elements fail at the thesis's rates"
     )
     device.add_argument(
-        "--truth", type=Path, help="device: record the true pressure of every frame (HDF5)"
+        "--truth", type=Path, help="device, night: the true pressure of every frame (HDF5)"
+    )
+    night = p.add_argument_group("night (texsense simulate night -o night.h5 --truth truth.h5)")
+    night.add_argument("--hours", type=float, default=8.0, help="night: its length (8 h)")
+    night.add_argument(
+        "--calibration",
+        type=Path,
+        help="night: write the mat's calibration (zero, 1 N/cm², the spacer's preset) here",
     )
     p.set_defaults(run=run)
     register_sessions(sub)
@@ -97,6 +113,11 @@ def run(args: argparse.Namespace) -> int:
     """Run ``texsense simulate``."""
     if args.protocol == "device":
         return run_device(args)
+    if args.protocol == "night":
+        return run_night(args)
+    if args.calibration is not None or args.hours != 8.0:
+        raise ParameterError("--calibration and --hours are for 'simulate night'")
+    args.spacer = args.spacer or "textile-6mm"
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
     if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
@@ -168,6 +189,46 @@ def run_device(args: argparse.Namespace) -> int:
         flush=True,
     )
     return 0
+
+
+def run_night(args: argparse.Namespace) -> int:
+    """Run ``texsense simulate night``: the raw night, its truth and the mat's calibration."""
+    from texsense.calibration.night import night_calibration
+
+    if args.output is None:
+        raise ParameterError("simulate night needs -o NIGHT.h5 (the raw capacitance)")
+    if args.csv is not None:
+        raise ParameterError("simulate night writes recordings: -o, --truth, --calibration")
+    outputs = [p for p in (args.output, args.truth, args.calibration) if p is not None]
+    if len({p.resolve() for p in outputs}) < len(outputs):
+        raise ParameterError("-o, --truth and --calibration must name different files")
+    spacer = args.spacer or "textile-3mm"
+    for path in outputs:
+        check_not_input(path, [])
+    night = virtual_night(spacer, args.hours, args.seed)
+    save(night.raw, args.output)
+    print(f"wrote {args.output}")
+    if args.truth is not None:
+        save(night.truth, args.truth)
+        print(f"wrote {args.truth}")
+    if args.calibration is not None:
+        chain = night_calibration(spacer)
+        chain.save(args.calibration)
+        print(f"wrote {args.calibration}")
+    sides = night.truth.labels["side"]
+    turns = int(np.count_nonzero((sides[1:] == "transition") & (sides[:-1] != "transition")))
+    outs = int(np.count_nonzero((sides[1:] == "out") & (sides[:-1] != "out")))
+    print(
+        f"night of {night.sleeper.name} ({night.sleeper.weight_kg:.0f} kg) on the {spacer} bed "
+        f"mat: {night.raw.n_frames} frames over {args.hours:g} h, empty at first, "
+        f"{turns} turn{'' if turns == 1 else 's'}, out of bed {_times(outs)}"
+    )
+    return 0
+
+
+def _times(n: int) -> str:
+    """never, once, twice, 3 times."""
+    return {0: "never", 1: "once", 2: "twice"}.get(n, f"{n} times")
 
 
 def _loads_from_stdin(device: VirtualDevice) -> None:

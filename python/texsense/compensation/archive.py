@@ -63,11 +63,23 @@ class ProcessOptions:
     #: Read an input cut short up to its last complete frame (with a warning) instead of
     #: refusing it (``--accept-truncated``).
     accept_truncated: bool = False
+    #: Correct the drift in use (stillness, an empty mat) instead of with the calibration's
+    #: drift stage, where the calibration allows it (``--in-use-drift off``: laboratory only).
+    in_use: bool = True
+    #: Give every value a bound at this level (``--interval 0.95``): lower and upper maps
+    #: beside the frames (docs/data-model.md).
+    interval: float | None = None
 
     def pipeline(self, chain: StageChain, layout: Layout) -> Pipeline:
         """The compiled pipeline of ``chain`` for ``layout`` with these settings."""
         return Pipeline(
-            chain, layout, hysteresis=self.hysteresis, drift=self.drift, repair=self.repair
+            chain,
+            layout,
+            hysteresis=self.hysteresis,
+            drift=self.drift,
+            repair=self.repair,
+            in_use=self.in_use and self.drift,
+            interval=self.interval,
         )
 
     def frames_per_block(self, n_elements: int) -> int:
@@ -88,6 +100,8 @@ class FileReport:
     frames: int = 0
     failed_share: float = 0.0
     error: str = ""
+    #: the in-use drift correction at the end (:meth:`Pipeline.in_use_status`), if it ran
+    in_use: dict[str, Any] | None = None
 
 
 def input_hash(path: str | Path) -> str:
@@ -99,8 +113,15 @@ def input_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
-    """True when ``dst`` is a complete output of the same calibration and input."""
+def _output_matches(
+    dst: Path,
+    calibration_id: str,
+    digest: str,
+    stages: list[str] | None = None,
+    interval: float | None = None,
+) -> bool:
+    """True when ``dst`` is a complete output of the same calibration and input (and, given
+    ``stages``, of the same stages)."""
     if not dst.is_file():
         return False
     import h5py
@@ -115,6 +136,8 @@ def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
         complete
         and meta.get("calibration_id") == calibration_id
         and meta.get("input_sha256") == digest
+        and (stages is None or meta.get("stages") == stages)
+        and (meta.get("interval") or {}).get("level") == interval
     )
 
 
@@ -143,16 +166,18 @@ def process_file(
     check_not_input(dst, [src])
     cal = load_chain(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
-    if _output_matches(dst, cal.id, digest):
-        return FileReport(str(src), str(dst), "skipped")
     with open_reader(src, accept_truncated=opts.accept_truncated) as reader:
         head = reader.header
         pipe = opts.pipeline(cal, head.layout)
+        if _output_matches(dst, cal.id, digest, pipe.provenance()["stages"], opts.interval):
+            return FileReport(str(src), str(dst), "skipped")
         quantity, unit = pipe.input_quantity
         if head.quantity != quantity:
             raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
         out_quantity, out_unit = pipe.output_quantity
         meta = {**head.meta, **pipe.provenance(), "source": src.name, "input_sha256": digest}
+        if opts.interval is not None:
+            meta["interval"] = {"level": opts.interval, "method": "split conformal (issue 37)"}
         dst.parent.mkdir(parents=True, exist_ok=True)
         frames, failed = 0, 0
         with (
@@ -166,24 +191,31 @@ def process_file(
                 element_times=head.element_times,
                 compress=True,
                 live=False,
+                bounds=opts.interval is not None,
             ) as writer,
         ):
             for block in reader.blocks(opts.frames_per_block(head.layout.n_elements)):
                 values = block.to_unit(unit).frames if block.unit != unit else block.frames
                 p, ok, codes = pipe.process(values, block.times, block.valid)
+                lo, hi = pipe.bounds_ if pipe.bounds_ is not None else (None, None)
                 writer.append(
                     p,
                     block.times,
                     valid=ok,
                     element_times=block.element_times,
                     labels=block.labels or None,
+                    lower=lo,
+                    upper=hi,
                 )
                 frames += block.n_frames
                 failed += int(np.count_nonzero(codes))
             if frames == 0:
                 raise FormatError(src, "the recording has no frames")
+            if pipe.in_use:
+                writer.update_meta({"in_use_drift": pipe.in_use_status()})
     share = failed / max(1, frames * head.layout.n_elements)
-    return FileReport(str(src), str(dst), "done", frames, share)
+    status = pipe.in_use_status() if pipe.in_use else None
+    return FileReport(str(src), str(dst), "done", frames, share, in_use=status)
 
 
 def archive_jobs(

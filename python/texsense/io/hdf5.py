@@ -9,6 +9,7 @@ The schema is documented in ``docs/data-model.md`` so that h5py alone can read a
     /times                 float64 (T,), s
     /valid                 bool (T, N)
     /element_times         float64 (T, N), s                         (only if present)
+    /lower, /upper         float32 (T, N): the bound of every value   (only with bounds)
     /labels/<name>         (T,) numbers or UTF-8 strings
     /layout                attrs: kind ("grid" | "points"), rows, cols, pitch_cm (grid only)
     /layout/xy_cm          float64 (N, 2)
@@ -59,6 +60,7 @@ __all__ = [
     "FORMAT_VERSION",
     "HDF5Reader",
     "RecordingWriter",
+    "read_bounds",
     "write_hdf5",
 ]
 
@@ -190,6 +192,7 @@ class RecordingWriter:
         flush_interval_s: float = 0.0,
         compress: bool = False,
         live: bool = True,
+        bounds: bool = False,
     ) -> None:
         # Validate quantity/unit/meta by building an empty recording.
         probe = Recording(
@@ -203,6 +206,10 @@ class RecordingWriter:
         try:
             self._file = h5py.File(self._guard, "w")
             self._create(layout, probe, element_times, compress, live)
+            if bounds:  # the lower and upper maps of every value (issue 37)
+                for name in ("lower", "upper"):
+                    self._file.create_dataset(name, (0, self.n_elements), np.float32,
+                                              **self._grow)  # fmt: skip
         except BaseException:
             self.close()
             raise
@@ -224,6 +231,7 @@ class RecordingWriter:
         rows = _chunk_rows(n)
         comp = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
         grow = {"maxshape": (None, n), "chunks": (rows, max(n, 1))}
+        self._grow = {**grow, **comp}
         f.create_dataset("frames", (0, n), np.float32, **grow, **comp)
         f.create_dataset("times", (0,), np.float64, maxshape=(None,), chunks=(max(rows, 256),))
         f.create_dataset("valid", (0, n), bool, **grow, **comp)
@@ -245,8 +253,11 @@ class RecordingWriter:
         valid: npt.ArrayLike | None = None,
         element_times: npt.ArrayLike | None = None,
         labels: Mapping[str, npt.ArrayLike] | None = None,
+        lower: npt.ArrayLike | None = None,
+        upper: npt.ArrayLike | None = None,
     ) -> None:
-        """Append one frame (N,) or a block of frames (k, N) with their time stamps."""
+        """Append one frame (N,) or a block of frames (k, N) with their time stamps (and,
+        for a writer with ``bounds``, the lower and upper maps)."""
         f = self._file
         fr = np.asarray(frames, dtype=np.float32)
         if fr.ndim == 1:
@@ -268,7 +279,14 @@ class RecordingWriter:
                 "with element_times=True"
             )
         start, stop = self.n_frames, self.n_frames + k
+        if ("lower" in f) != (lower is not None and upper is not None):
+            raise ParameterError("append: lower and upper go with a writer opened with bounds")
         self._append_labels(labels or {}, start, stop)
+        if lower is not None and upper is not None:
+            for name, data in (("lower", lower), ("upper", upper)):
+                ds = f[name]
+                ds.resize(stop, axis=0)
+                ds[start:stop] = np.asarray(data, dtype=np.float32).reshape(k, self.n_elements)
         for name, data in (("frames", fr), ("valid", v), ("times", t)):
             ds = f[name]
             ds.resize(stop, axis=0)
@@ -298,6 +316,13 @@ class RecordingWriter:
             ds.resize((stop,))
             ds[start:stop] = arr.astype(object) if arr.dtype.kind == "U" else arr
 
+    def update_meta(self, extra: Mapping[str, Any]) -> None:
+        """Add ``extra`` to the file's ``meta`` (e.g. a state known only at the end: the
+        in-use drift correction)."""
+        meta = json.loads(self._file.attrs["meta"])
+        meta.update(extra)
+        self._file.attrs["meta"] = json.dumps(meta)
+
     def flush(self) -> None:
         """Write everything appended so far to disk."""
         self._file.flush()
@@ -321,6 +346,22 @@ class RecordingWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def read_bounds(
+    path: str | Path, frames: slice | None = None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The lower and upper maps of a processed recording (``process --interval``), or None
+    when it has none; ``frames`` picks some of them."""
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        if "lower" not in f or "upper" not in f:
+            return None
+        sel = slice(None) if frames is None else frames
+        n = f["times"].shape[0]
+        if f["lower"].shape[0] != n or f["upper"].shape[0] != n:
+            raise FormatError(path, "the lower and upper maps do not cover every frame")
+        return np.asarray(f["lower"][sel], np.float32), np.asarray(f["upper"][sel], np.float32)
 
 
 @writer("hdf5", what="texsense recording (exact round trip)", suffixes=(".h5", ".hdf5"))

@@ -124,6 +124,7 @@ class Recorder:
         meta: dict[str, Any],
         *,
         calibrated: bool = True,
+        bounds: bool = False,
     ) -> None:
         from texsense.io.hdf5 import RecordingWriter
 
@@ -152,11 +153,19 @@ class Recorder:
                 meta=meta,
                 element_times=True,
                 flush_interval_s=FLUSH_S,
+                bounds=bounds,
             )
         self.frames = 0
 
-    def append(self, frame: Frame, pressure: np.ndarray, measured: np.ndarray) -> None:
-        """Append one frame (raw values and pressure)."""
+    def append(
+        self,
+        frame: Frame,
+        pressure: np.ndarray,
+        measured: np.ndarray,
+        bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """Append one frame (raw values and pressure, and its bounds for a recorder made
+        with ``bounds``)."""
         t = [frame.t]
         et = frame.element_times[None, :]
         valid = np.isfinite(frame.values)[None, :]
@@ -164,13 +173,24 @@ class Recorder:
             np.nan_to_num(frame.values)[None, :], times=t, valid=valid, element_times=et
         )
         if self._pressure is not None:
+            lo, hi = (None, None) if bounds is None else (bounds[0][None, :], bounds[1][None, :])
             self._pressure.append(
-                np.nan_to_num(pressure)[None, :], times=t, valid=measured[None, :], element_times=et
+                np.nan_to_num(pressure)[None, :],
+                times=t,
+                valid=measured[None, :],
+                element_times=et,
+                lower=None if lo is None else np.nan_to_num(lo),
+                upper=None if hi is None else np.nan_to_num(hi),
             )
         self.frames += 1
 
-    def close(self) -> None:
-        """Finish the files."""
+    def close(self, extra_meta: dict[str, Any] | None = None) -> None:
+        """Finish the files (``extra_meta``: what is known only at the end, e.g. the in-use
+        drift correction's state)."""
+        if extra_meta:
+            self._raw.update_meta(extra_meta)
+            if self._pressure is not None:
+                self._pressure.update_meta(extra_meta)
         self._raw.close()
         if self._pressure is not None:
             self._pressure.close()
@@ -327,10 +347,14 @@ class Monitor:
                 "turn_every_min": self.bed.schedule.interval_s / 60 if self.bed else 120.0,
             },
         }
+        bounds = False
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
+            bounds = getattr(self.pipeline, "interval", None) is not None
+            if bounds:
+                meta["interval"] = {"level": self.pipeline.interval}
         self.recorder = Recorder(
-            self.record_dir, name, self.source, meta, calibrated=not self.raw_only
+            self.record_dir, name, self.source, meta, calibrated=not self.raw_only, bounds=bounds
         )
         self.changes += 1
         paths = [str(p) for p in self.recorder.paths]
@@ -342,7 +366,10 @@ class Monitor:
         if self.recorder is None:
             raise ParameterError("not recording")
         n = self.recorder.frames
-        self.recorder.close()
+        extra = None
+        if self.pipeline is not None and getattr(self.pipeline, "in_use", False):
+            extra = {"in_use_drift": self.pipeline.in_use_status()}
+        self.recorder.close(extra)
         self.recorder = None
         self.changes += 1
         return n
@@ -433,12 +460,14 @@ class Monitor:
         for tap in self.taps:
             tap(frame)
         pressure, measured, codes = self._pressure_of(frame)
+        bounds = self._bounds_of()
         if self._t_first is None:
             self._t_first = frame.t
         alerts = self.mode.alerts and not self.raw_only
-        exposure_events = self.tracker.step(pressure, frame.t) if alerts else []
+        lo, hi = (None, None) if bounds is None else bounds
+        exposure_events = self.tracker.step(pressure, frame.t, lo, hi) if alerts else []
         if self.recorder is not None:
-            self.recorder.append(frame, pressure, measured)
+            self.recorder.append(frame, pressure, measured, bounds)
         frame_stats, load = self._stats_of(frame.t, pressure)
         posture = self._posture_of(frame.t, pressure, load)
         bed = None
@@ -447,6 +476,8 @@ class Monitor:
                 pressure, posture["label"] if posture else None, frame.t
             )
             bed = self.bed.status(frame.t)
+            if bounds is not None:
+                self._bound_regions(bed["regions"], pressure, bounds)
         for e in exposure_events:  # name the places (the bed's regions are this frame's)
             if e.kind == "reposition" and e.alert_id is not None:
                 raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
@@ -484,6 +515,7 @@ class Monitor:
             "source": self.source.info(),
             "received_at": received_at,  # wall clock (Unix s) when the frame arrived
             "processed_ms": round(1e3 * (time.time() - received_at), 3),
+            **self._certainty(bounds),
         }
         self._latest = snap
         self._latest_text = None  # serialised when somebody asks (no viewer: no cost)
@@ -506,6 +538,39 @@ class Monitor:
         pressure = units.convert(raw, frame.unit, "N/cm2")
         measured = np.isfinite(pressure)
         return pressure, measured, np.where(measured, 0, 2)
+
+    def _bounds_of(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last frame's bounds (lower, upper N/cm²) when the pipeline gives them."""
+        b = getattr(self.pipeline, "bounds_", None) if self.pipeline is not None else None
+        if b is None or self.source.quantity != "capacitance":
+            return None
+        return b[0][-1], b[1][-1]
+
+    def _certainty(self, bounds: tuple[np.ndarray, np.ndarray] | None) -> dict[str, Any]:
+        """What the snapshot says of the bounds and the in-use drift correction: the lower
+        and upper maps, the elements only possibly above the threshold, the state."""
+        out: dict[str, Any] = {"in_use": None, "interval": None}
+        if self.pipeline is not None and getattr(self.pipeline, "in_use", False):
+            out["in_use"] = self.pipeline.in_use_status()
+        if bounds is not None and self.pipeline is not None:
+            out["interval"] = self.pipeline.interval
+            out["lower"], out["upper"] = _rounded(bounds[0]), _rounded(bounds[1])
+            out["possible"] = np.flatnonzero(self.tracker.possible).tolist()
+            out["count_possible"] = self.tracker.count_possible
+        return out
+
+    @staticmethod
+    def _bound_regions(
+        regions: list[dict[str, Any]], pressure: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]
+    ) -> None:
+        """Each at-risk region's peak with its bounds (the region table shows value ± bound)."""
+        for r in regions:
+            els = np.asarray(r["elements"], dtype=np.intp)
+            if els.size == 0:
+                continue
+            k = els[int(np.nanargmax(np.nan_to_num(pressure[els], nan=-np.inf)))]
+            r["peak_lo_ncm2"] = round(float(bounds[0][k]), 3)
+            r["peak_hi_ncm2"] = round(float(bounds[1][k]), 3)
 
     def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
         """The frame's statistics for the snapshot (null for a mat with no calibration) and

@@ -151,6 +151,7 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
         "events": review.events[:2000],
         "sides": review.sides,
         "rois": load_rois(path),
+        "interval": (review.rec.meta.get("interval") or {}).get("level"),
     }
 
 
@@ -303,9 +304,18 @@ def playback_router(monitor: Monitor) -> APIRouter:
 
     @router.get("/api/playback/{name}/frames/{i}")
     async def frame(name: str, i: int) -> dict[str, Any]:
-        """Frame ``i``: its time, values (N/cm² for pressure; null: no value) and the
-        elements whose values are repairs."""
-        return _frame((await folder.review_of(name))[1], i)
+        """Frame ``i``: its time, values (N/cm² for pressure; null: no value), the elements
+        whose values are repairs, and the bounds of a recording that has them."""
+        path, review = await folder.review_of(name)
+        out = _frame(review, i)
+        if review.pressure and path.suffix.lower() in (".h5", ".hdf5"):
+            from texsense.io.hdf5 import read_bounds
+
+            b = read_bounds(path, slice(i, i + 1))
+            if b is not None:
+                out["lower"] = _rounded(b[0][0] * review.factor, 4)
+                out["upper"] = _rounded(b[1][0] * review.factor, 4)
+        return out
 
     @router.get("/api/playback/{name}/rois")
     async def get_rois(name: str) -> list[dict[str, Any]]:

@@ -132,7 +132,11 @@ def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: P
     if config.quantity == "capacitance":
         if config.calibration is None:
             raise ParameterError(f"mat {config.id}: a capacitance mat needs a calibration")
-        pipeline = Pipeline(config.calibration, config.layout)
+        # the drift corrected in use, and bounds where the calibration has held-out residuals
+        try:
+            pipeline = Pipeline(config.calibration, config.layout, in_use=True, interval=0.95)
+        except ParameterError:
+            pipeline = Pipeline(config.calibration, config.layout, in_use=True)
     tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
     bed = None
     if config.bed:

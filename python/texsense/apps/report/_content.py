@@ -128,8 +128,47 @@ def _identity(review: Review) -> Table:
                 "unreliable (not in the maps and statistics)",
             ]
         )
+    rows += _certainty_rows(review)
     rows.append(["made by", f"texsense {__version__}, {_dt.datetime.now():%Y-%m-%d %H:%M}"])
     return Table("Recording", ["", ""], rows, align="ll")
+
+
+def _certainty_rows(review: Review) -> list[list[str]]:
+    """How far the numbers can be trusted (issue 37): the bounds and the in-use drift
+    correction the recording declares."""
+    meta, rows = review.rec.meta, []
+    level = (meta.get("interval") or {}).get("level")
+    if review.bounds is not None and level:
+        rows.append(["bounds", f"{100 * level:g} % (split conformal; every value ± its bound)"])
+    iu = meta.get("in_use_drift")
+    if isinstance(iu, dict):
+        if iu.get("state") == "correcting":
+            text = (
+                f"load {100 * iu.get('load_correction', 0):+.1f} % at the end, from "
+                f"{format_duration(iu.get('still_s', 0))} still since "
+                f"{format_duration(iu.get('since_t') or 0)} into the data; zero taken "
+                f"{iu.get('zeroed', 0)} times"
+            )
+        elif iu.get("state") == "off":
+            text = f"off: {iu.get('why', '')}"
+        else:
+            text = "no still period: nothing corrected"
+        rows.append(["drift corrected in use", text])
+    return rows
+
+
+def _peak_with_bound(review: Review) -> str:
+    """The highest peak, ± its bound where the recording has bounds."""
+    s, nd, u = review.series, _digits(review), review.unit
+    peak = float(np.nanmax(s["peak"], initial=np.nan))
+    if review.bounds is None or not np.isfinite(peak):
+        return _fmt(peak, u, nd)
+    k = int(np.nanargmax(s["peak"]))
+    i = int(np.nanargmax(np.nan_to_num(review.frame(k), nan=-np.inf)))
+    lo, hi = (float(b[k, i]) * review.factor for b in review.bounds)
+    level = (review.rec.meta.get("interval") or {}).get("level")
+    pct = f" ({100 * level:g} %)" if level else ""
+    return f"{peak:.{nd}f} ± {0.5 * (hi - lo):.{nd}f} {u}{pct}"
 
 
 def _summary(review: Review) -> Table:
@@ -137,7 +176,7 @@ def _summary(review: Review) -> Table:
     dt = _frame_seconds(review.rec.times)
     loaded = (s["area_cm2"] > 0) & review.use
     rows = [
-        ["highest peak", _fmt(float(np.nanmax(s["peak"], initial=np.nan)), u, nd)],
+        ["highest peak", _peak_with_bound(review)],
         [
             "median peak while loaded",
             _fmt(float(np.nanmedian(s["peak"][loaded])) if loaded.any() else None, u, nd),

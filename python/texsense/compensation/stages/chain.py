@@ -157,9 +157,18 @@ class StageChain(Stream):
         """The calibration of a mat: convert (zeroing, equilibration, eq. 2.1), hysteresis
         from the material record (eq. 4.15-4.22), drift from held steps (eq. 5.8) if given
         (or a fitted ``drift`` stage), and detection with the expected range of every
-        element."""
+        element. A material record with ``held_out_compression_mm`` and
+        ``held_out_pressure_ncm2`` (a record the hysteresis is not fitted on) gives the
+        hysteresis model its held-out residuals, the scale of the bounds
+        (:mod:`texsense.compensation.intervals`)."""
         convert = Convert(thickness_mm, uniform_pressure_ncm2).fit(material, baseline, uniform)
         hyst = Hysteresis().fit(material["compression_mm"], material["pressure_ncm2"])
+        if "held_out_compression_mm" in material:  # a record not fitted on: the bounds' scale
+            hyst.model_.hold_out(
+                material["held_out_compression_mm"],
+                material["held_out_pressure_ncm2"],
+                "held-out record of the material",
+            )
         lo, hi = convert.expected_range_pF()
         stages: list[Stage] = [FailureDetector(baseline.layout).fit(lo, hi), convert, hyst]
         if steps is not None and drift is not None:

@@ -96,7 +96,8 @@ function render() {
   $("map-title").textContent = title;
   map.draw(values, { scale: sc, cmap: $("cmap").value, threshold: thr,
     repaired: pb ? PB.frame.repaired || [] : mode !== "raw" ? last.repaired : [], trace: pb ? [] : last.cof_trace,
-    bedRegions: !pb && last.bed ? last.bed.regions : null, rois: ROI.list, draft: ROI.draft });
+    bedRegions: !pb && last.bed ? last.bed.regions : null, rois: ROI.list, draft: ROI.draft,
+    possible: !pb && last.possible ? last.possible : [] });
   $("heatmap").dataset.frame = pb ? PB.i : last.frames;
   drawLegend($("scale"), $("cmap").value, sc[0], sc[1], thr);
   $("scale-lo").textContent = fmt(sc[0], vd);
@@ -171,3 +172,29 @@ function renderCharts(f) {
     roiChart.draw(PB.info.series.t, [{ label: "regions: peak", zero: true, lines: roiStats.filter((r) => r.peak).map((r, j) => ({ values: r.peak.map((v) => (v === null ? null : v * k)), colour: colours[j % 5] })) }], cursor, []);
   }
 }
+
+// the value under the pointer with its bound (issue 37): "83 ± 9 mmHg (95 %)"
+function hoverText(i) {
+  if (i < 0) return "point at an element for its value and bound";
+  const f = FACTOR[unit], d = digits(), pb = PB.active && PB.frame;
+  const v = pb ? PB.frame.values[i] : last && last.pressure ? last.pressure[i] : null;
+  const lo = pb ? (PB.frame.lower || [])[i] : last && last.lower ? last.lower[i] : undefined;
+  const hi = pb ? (PB.frame.upper || [])[i] : last && last.upper ? last.upper[i] : undefined;
+  const level = pb ? PB.info.interval : last ? last.interval : null;
+  const rep = (pb ? PB.frame.repaired || [] : last ? last.repaired : []).includes(i);
+  const name = `element ${i}`;
+  if (v === null || v === undefined || !pressureShown()) return `${name}: –`;
+  let text = `${name}: ${fmt(v * f, d)} ${LABEL[unit]}`;
+  if (lo !== undefined && lo !== null && hi !== undefined && hi !== null) {
+    const half = 0.5 * (hi - lo) * f;
+    text += Math.abs(v - 0.5 * (lo + hi)) * f < 0.05 * half
+      ? ` ± ${fmt(half, d)}` : ` (${fmt(lo * f, d)} … ${fmt(hi * f, d)})`;
+    text += ` ${LABEL[unit]} (${fmt(100 * level, 0)} %)`;
+  }
+  return rep ? `${text}, repaired from its neighbours` : text;
+}
+$("heatmap").addEventListener("mousemove", (e) => {
+  const r = $("heatmap").getBoundingClientRect(), k = $("heatmap").width / r.width;
+  $("hover").textContent = hoverText(map.elementAt((e.clientX - r.left) * k, (e.clientY - r.top) * k));
+});
+$("heatmap").addEventListener("mouseleave", () => { $("hover").textContent = hoverText(-1); });

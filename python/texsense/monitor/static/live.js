@@ -27,6 +27,7 @@ function renderLive(f) {
     ? `simulated person: ${last.source.true_posture === null ? "away" : last.source.true_posture}` : "";
   renderBed(last.bed, f);
   renderAlert(last.alert, f);
+  $("in-use").textContent = inUseText(last.in_use);
   $("record").classList.toggle("on", last.recording);
   $("record").textContent = last.recording ? "■ stop recording" : "● record";
   const src = last.source;
@@ -48,8 +49,11 @@ function renderAlert(a, f) {
   const where = a.where && a.where.length ? ` at ${a.where.slice(0, 4).join(", ")}${a.where.length > 4 ? ` and ${a.where.length - 4} more` : ""}` : "";
   const head = m.action.charAt(0).toUpperCase() + m.action.slice(1);
   $("alert").classList.toggle("acked", !a.active);
+  $("alert").classList.toggle("possible", a.certainty === "possible");
+  const sure = a.certainty === "confident" ? `above ${thr} with ${fmt(100 * last.interval, 0)} % confidence`
+    : a.certainty === "possible" ? `possibly above ${thr} (not certain at ${fmt(100 * last.interval, 0)} %)` : `above ${thr}`;
   $("alert-text").textContent = a.active
-    ? `${head}: pressure above ${thr} for ${duration(a.peak_exposure_s)}${where} — ${m.advice}.`
+    ? `${head}: pressure ${sure} for ${duration(a.peak_exposure_s)}${where} — ${m.advice}.`
     : `${head} alert acknowledged (${duration(a.peak_exposure_s)}${where}); it clears once the skin is offloaded.`;
   $("ack").hidden = !a.active;
   $("ack").dataset.id = a.id;
@@ -76,9 +80,21 @@ function renderBed(bed, f) {
   }));
   $("regions").replaceChildren(...bed.regions.map((r) => {
     const li = document.createElement("li"); li.className = r.at_risk ? "risk" : "";
-    li.textContent = `${r.name}: ${fmt(r.peak_ncm2 * f, digits())} ${LABEL[unit]}`;
+    const bound = r.peak_lo_ncm2 !== undefined ? ` ± ${fmt(0.5 * (r.peak_hi_ncm2 - r.peak_lo_ncm2) * f, digits())}` : "";
+    li.textContent = `${r.name}: ${fmt(r.peak_ncm2 * f, digits())}${bound} ${LABEL[unit]}`;
+    if (bound && view && view.threshold_ncm2 && r.peak_lo_ncm2 <= view.threshold_ncm2 && r.peak_hi_ncm2 > view.threshold_ncm2) {
+      li.className = "possible"; li.textContent += " (possibly above the threshold)";
+    }
     return li;
   }));
+}
+
+function inUseText(s) {  // the in-use drift correction's state (issue 37)
+  if (!s) return "";
+  if (s.state === "off") return `drift corrected in use: off (${s.why})`;
+  if (s.state !== "correcting") return "drift corrected in use: waiting for a still moment";
+  const pct = fmt(100 * s.load_correction, 1);
+  return `drift corrected in use: load ${s.load_correction >= 0 ? "+" : ""}${pct} %, since ${duration(s.since_t)} into the data, from ${duration(s.still_s)} still; zero taken ${s.zeroed} ×`;
 }
 
 async function api(path, method = "GET", body = undefined) {

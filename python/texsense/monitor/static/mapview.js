@@ -42,6 +42,9 @@ class MapView {
   }
 
   toCm(px, py) { return [(px - this.t.ox) / this.t.kx, (py - this.t.oy) / this.t.ky]; }
+  elementAt(px, py) {  // the element under a point of the canvas, or -1
+    return this.rects.findIndex(([x, y, w, h]) => px >= x && px < x + w && py >= y && py < y + h);
+  }
   fromCm(x, y) { return [this.t.ox + x * this.t.kx, this.t.oy + y * this.t.ky]; }
   centre(i) { const r = this.rects[i]; return [r[0] + r[2] / 2, r[1] + r[3] / 2]; }
 
@@ -61,6 +64,7 @@ class MapView {
     });
     if (o.threshold !== null && o.threshold !== undefined) this.contour(ctx, values, o.threshold);
     this.marks(ctx, o);
+    this.possible(ctx, o.possible || []);
     if (o.bedRegions) this.bedRegions(ctx, o.bedRegions);
     for (const roi of o.rois || []) this.roi(ctx, roi, false);
     if (o.draft) this.roi(ctx, o.draft, true);
@@ -84,6 +88,13 @@ class MapView {
     ctx.lineCap = "square";
     ctx.strokeStyle = "#000"; ctx.lineWidth = 3; ctx.stroke(path);
     ctx.strokeStyle = "#fff"; ctx.lineWidth = 1.4; ctx.stroke(path);
+  }
+
+  // elements only possibly above the threshold (the upper bound is, the lower is not): dotted
+  possible(ctx, elements) {
+    ctx.save(); ctx.setLineDash([2, 2]); ctx.strokeStyle = "#b45309"; ctx.lineWidth = 1.5;
+    for (const i of elements) { const [x, y, w, h] = this.rects[i]; ctx.strokeRect(x + 1, y + 1, w - 2, h - 2); }
+    ctx.restore();
   }
 
   marks(ctx, o) {
