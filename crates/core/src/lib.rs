@@ -17,6 +17,7 @@
 //! - [`compensation`]: Preisach then drift in one pass;
 //! - [`chain`]: detect -> convert -> compensation -> repair, the whole mat in one pass;
 //! - [`par`]: the one parallel loop over blocks of elements;
+//! - [`simd`]: runtime choice between the scalar kernels and their AVX2 paths;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep);
 //! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep).
 
@@ -32,6 +33,7 @@ pub mod mcu;
 pub mod par;
 pub mod preisach;
 pub mod repair;
+pub mod simd;
 mod snapshot;
 pub mod spacer;
 pub mod spacer_batch;

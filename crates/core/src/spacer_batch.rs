@@ -113,11 +113,11 @@ mod tests {
         let mut batched = bank(n);
         batched.run_displacement(&dt, &e, &mut p, &mut s).unwrap();
         let mut single = bank(n);
-        for k in 0..t {
+        for (k, &d) in dt.iter().enumerate() {
             let (mut pk, mut sk) = (vec![0.0; n], vec![0.0; n]);
             let r = k * n..(k + 1) * n;
             single
-                .step_displacement(dt[k], &e[r.clone()], &mut pk, &mut sk)
+                .step_displacement(d, &e[r.clone()], &mut pk, &mut sk)
                 .unwrap();
             assert_eq!(&p[r.clone()], &pk[..]);
             assert_eq!(&s[r], &sk[..]);
