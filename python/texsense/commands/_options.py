@@ -159,6 +159,7 @@ RANGES: dict[str, Range] = {
     "--pool": Range(1, 256),
     "--window": Range(0.0, 3.2e7, lo_open=True),
     "--range": _POSITIVE,
+    "--interval": Range(0.0, 1.0, lo_open=True, hi_open=True),  # a bound's level (issue 37)
     # devices
     "--sampling-frequency": Range(0.0, 1e7, lo_open=True),
     "--capdac-pf": Range(0.0, 1e4),
