@@ -16,11 +16,14 @@ import os
 import signal
 import sys
 from collections.abc import Collection, Iterator, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from texsense._core import __version__
 from texsense.commands import COMMANDS
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 __all__ = ["build_parser", "main"]
 
@@ -133,23 +136,69 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the program is, so that its clean-up runs as for Ctrl-C."""
 
 
+#: the module whose frames are h5py's callbacks into a Python file object: a stop raised there
+#: is lost (h5py reports it as unraisable) and can leave HDF5 half-written (a crash at exit)
+_CALLBACK_MODULES = frozenset({"texsense.io._guarded"})
+
+
+_deferred: set[int] = set()  # signals to be delivered again (a timer is on its way)
+
+
+def _later(sig: int) -> None:
+    """Deliver ``sig`` again in a few milliseconds (from a helper thread; the main thread's
+    handler runs at its next Python line); once, however often it is asked meanwhile."""
+    if sig in _deferred:
+        return
+    _deferred.add(sig)
+    import threading
+
+    def again() -> None:
+        _deferred.discard(sig)
+        signal.raise_signal(sig)
+
+    timer = threading.Timer(0.005, again)
+    timer.daemon = True
+    timer.start()
+
+
+def _in_callback(frame: FrameType | None) -> bool:
+    """Whether the main thread is inside a callback whose exceptions cannot propagate (a
+    frame of :data:`_CALLBACK_MODULES` anywhere on its stack)."""
+    while frame is not None:
+        if frame.f_globals.get("__name__") in _CALLBACK_MODULES:
+            return True
+        frame = frame.f_back
+    return False
+
+
 @contextlib.contextmanager
 def _terminate_as_interrupt() -> Iterator[None]:
-    def stop(_sig: int, _frame: object) -> None:
-        raise Terminated
+    """SIGTERM raises :class:`Terminated` and SIGINT ``KeyboardInterrupt`` where the program
+    is, except inside h5py's callbacks into a file object, where a stop is delivered again
+    a moment later (raised there it would be lost, or crash HDF5)."""
+
+    def stop(sig: int, frame: FrameType | None) -> None:
+        if _in_callback(frame):
+            _later(sig)
+            return
+        raise Terminated if sig == signal.SIGTERM else KeyboardInterrupt
 
     def lost(unraisable: Any) -> None:
         """A stop raised where Python cannot raise (a weakref callback during garbage
         collection: "Exception ignored in ..."): deliver the signal again, so that it is raised
-        at the next line of the program instead of being lost."""
+        at a later line of the program instead of being lost."""
         exc = unraisable.exc_value
         if isinstance(exc, KeyboardInterrupt):
-            signal.raise_signal(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+            _later(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
             return
         hook(unraisable)
 
-    try:
-        previous = signal.signal(signal.SIGTERM, stop)
+    try:  # (a SIGINT that the shell set to be ignored, as for `texsense ... &`, stays so)
+        previous = {
+            sig: signal.signal(sig, stop)
+            for sig in (signal.SIGTERM, signal.SIGINT)
+            if signal.getsignal(sig) is not signal.SIG_IGN
+        }
     except ValueError:  # not the main thread (texsense.cli.main called by a program)
         yield
         return
@@ -157,7 +206,8 @@ def _terminate_as_interrupt() -> Iterator[None]:
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         sys.unraisablehook = hook
 
 

@@ -49,8 +49,9 @@ def add_accept_truncated(p: argparse.ArgumentParser) -> None:
 
 def refuse_replacing(path: Path, replace: bool) -> None:
     """A calibration file is not written over without ``--replace`` (a monitor may be using
-    it; the mat's readings would change without a word)."""
-    if path.exists() and not replace:
+    it; the mat's readings would change without a word). Only a calibration *file* is kept
+    so: a folder or a device in the way is the writer's one-line error."""
+    if path.is_file() and not replace:
         raise ParameterError(
             f"{path} exists: a calibration is not replaced without --replace "
             "(or write it to another name)"
