@@ -15,11 +15,13 @@ import logging
 import os
 import signal
 import sys
+import threading
 from collections.abc import Collection, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from texsense._core import __version__
 from texsense.commands import COMMANDS
+from texsense.commands._options import check_numbers
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 
 if TYPE_CHECKING:
@@ -58,8 +60,6 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
             importlib.import_module(f"texsense.commands.{module}").register(sub)
             registered.add(module)
     if wanted:
-        from texsense.commands._options import check_numbers
-
         check_numbers(parser)  # every numeric option refuses what lies outside its range
     return parser
 
@@ -87,8 +87,6 @@ def _leave_busy_workers(code: int) -> None:
     interpreter's teardown would share the processor with them for seconds. Once the command
     has cleaned up, end the process at once instead (only then, and only when ``main`` runs
     as the program: called with arguments by a program, it returns)."""
-    import threading
-
     busy = [t for t in threading.enumerate() if t.daemon and t.name.startswith("texsense-")]
     if busy and threading.current_thread() is threading.main_thread():
         sys.stdout.flush()
@@ -150,7 +148,6 @@ def _later(sig: int) -> None:
     if sig in _deferred:
         return
     _deferred.add(sig)
-    import threading
 
     def again() -> None:
         _deferred.discard(sig)

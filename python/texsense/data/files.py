@@ -42,13 +42,16 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import signal
 import stat
 import tempfile
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any
 
+from texsense.data import budget
 from texsense.exceptions import FormatError, ParameterError, WriteError
 
 if TYPE_CHECKING:
@@ -446,8 +449,6 @@ def read_regular(path: str | Path, what: str) -> bytes:
     FIFO, a device or a file larger than the budget is a
     :class:`~texsense.exceptions.FormatError` naming it (``what`` says what it should have
     been)."""
-    from texsense.data import budget
-
     p = Path(path)
     with open_regular(p) as f:
         size = os.fstat(f.fileno()).st_size
@@ -478,9 +479,6 @@ def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:
 def _signals_held() -> Iterator[Callable[[], None]]:
     """Hold SIGINT and SIGTERM (in the main thread) until the block calls ``release()`` or
     ends; a signal that came meanwhile takes effect at the release."""
-    import signal
-    import threading
-
     held = {signal.SIGINT, signal.SIGTERM}
     main = threading.current_thread() is threading.main_thread()
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if main else None

@@ -62,6 +62,7 @@ from urllib.parse import parse_qs, urlsplit
 from texsense._progress import STOPPING, StoppingError, check_stopping
 from texsense.data.files import read_small_text, real_path
 from texsense.exceptions import ParameterError
+from texsense.monitor.sources import blocking
 
 __all__ = [
     "MAX_BODY",
@@ -465,8 +466,6 @@ class Lane:
     async def run(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         """``fn(*args, **kwargs)`` in a daemon thread of this lane; its result or error."""
         from fastapi import HTTPException
-
-        from texsense.monitor.sources import blocking
 
         if self._slots is None:
             self._slots = asyncio.Semaphore(self.workers)

@@ -23,11 +23,13 @@ True
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import contextlib
 import ctypes
 import hashlib
 import json
+import logging
 import os
 import pwd
 import re
@@ -46,6 +48,7 @@ from urllib.parse import unquote, urlsplit
 
 from texsense.data.files import atomic_path, read_regular
 from texsense.exceptions import FormatError, ParameterError
+from texsense.monitor.sources import blocking
 
 __all__ = [
     "STATION_USER",
@@ -301,11 +304,6 @@ class Broker:
         """Restart the process whenever it dies (same port, users and rights: the clients
         reconnect and nothing else changes), until cancelled; one line each time, and waits
         that grow (to 30 s) while it will not start."""
-        import asyncio
-        import logging
-
-        from texsense.monitor.sources import blocking
-
         log = logging.getLogger("texsense.station")
         wait = every_s
         while True:

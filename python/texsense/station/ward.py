@@ -171,10 +171,10 @@ class MatEntry:
     def handle(self, payload: bytes, now: float) -> bool:
         """One message; True when it gave a frame. Its length is checked first: an oversized
         payload is never parsed."""
+        self.messages += 1  # every message that came, the ignored ones too
         if self.refused is not None:
             self.ignored += 1
             return False
-        self.messages += 1
         try:
             frame = parse_mqtt_payload(payload, self.config.layout.n_elements, self.max_bytes)
         except PayloadSizeError as e:
