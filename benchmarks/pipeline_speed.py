@@ -1,41 +1,54 @@
 """Speed of the compiled pipeline against the physical yardstick of this machine: the rate at
-which it copies the same array (``np.multiply(x, 1.0, out=y)``), measured in the same run.
+which it copies the same array (``np.multiply(x, 1.0, out=y)``), measured in the same run,
+on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd``).
 
-Run:  .venv/bin/python benchmarks/pipeline_speed.py [--threads N]
+Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|cpu] [--quick]
 
-- Preisach batch: ``HysteresisModel.predict`` on a 4000 x 4096 random walk, step by step
-  (one thread, frame order; one thread, element blocks; all threads);
+- Preisach batch: the Rust ``PreisachBank`` behind ``HysteresisModel.predict`` on a
+  4000 x 4096 random walk (one thread, frame order; one thread, element blocks; all threads)
+  and ``predict`` itself;
 - the whole pipeline (detect -> convert -> Preisach + drift -> eq. 6.14 repair) at 96, 1024 and
   4096 elements with 2 % failed readings;
 - ``Pipeline.step`` latency on a real stream (every frame different), median and p99;
 - the state kept per element.
 
-The machine is shared and noisy: every rate is also given as a share of the copy rate of the
-same run, which is what the targets of issue 19 are stated in.
+Every path runs on both kernel paths, scalar and SIMD, back to back; the whole set is
+repeated ``--repeat`` times (each repetition measures the copy rate anew) and the table gives
+the medians over the repetitions. The machine is shared and noisy: every rate is also given as
+a share of the copy rate of its repetition, which is what the targets of issues 19 and 34 are
+stated in. Both paths give the same numbers bit for bit (tests/test_simd.py).
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
+from collections.abc import Callable
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import best_of
-from texsense import Layout, Recording
+from texsense import Layout, Recording, _core
 from texsense.calibration.workflows import seat_calibration
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Convert, StageChain
+
+CLOCK = time.perf_counter
+
+
+def timed(fn: Callable[[], object], repeat: int = 3) -> float:
+    """The shortest of ``repeat`` runs of ``fn`` on the chosen clock (s)."""
+    best = float("inf")
+    for _ in range(repeat):
+        start = CLOCK()
+        fn()
+        best = min(best, CLOCK() - start)
+    return best
 
 
 def copy_rate(shape: tuple[int, int]) -> float:
     x = np.random.default_rng(0).random(shape)
     y = np.empty_like(x)
-    t, _ = best_of(lambda: np.multiply(x, 1.0, out=y), repeat=7)
-    return x.size / t
+    return x.size / timed(lambda: np.multiply(x, 1.0, out=y), repeat=7)
 
 
 def random_walk(model: object, frames: int, n: int, seed: int = 0) -> np.ndarray:
@@ -77,58 +90,133 @@ def mat_case(cal: StageChain, rows: int, cols: int, frames: int, seed: int = 1):
     return c, lay, Recording(cap, t, lay, "capacitance", "pF")
 
 
-def share(rate: float, copy: float) -> str:
-    return f"{rate / 1e6:.1f} M/s | {100 * rate / copy:.2f} %"
+def median_row(values: list[float]) -> float:
+    return float(np.median(values))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true", help="smaller sizes (a smoke test)")
-    args = ap.parse_args()
-    frames = 400 if args.quick else 4000
-    cal = seat_calibration(mat_seed=5)
+def step_latency(pipe: Pipeline, cap: np.ndarray, times: np.ndarray) -> np.ndarray:
+    pipe.reset()
+    lat = np.empty(len(cap))
+    for k in range(len(cap)):
+        s = CLOCK()
+        pipe.step(cap[k], None, float(times[k]))
+        lat[k] = CLOCK() - s
+    return lat[100:]
+
+
+def cases(
+    cal: StageChain, frames: int, walk: np.ndarray
+) -> list[tuple[str, Callable[[], object], int]]:
+    """(label, run, element-samples) of every batch path."""
     model = cal["hysteresis"].model_
-    walk = random_walk(model, frames, 4096)
-    copy = copy_rate(walk.shape)
-    print(f"copy rate of a ({frames}, 4096) float64 array: {copy / 1e6:.0f} M element-samples/s")
-    print()
-    print("| path | rate | share of the copy rate |")
-    print("|---|---:|---:|")
     bank = model.bank(walk.shape[1])  # the Rust PreisachBank behind predict
     ok = np.ones(walk.shape, bool)
+    out: list[tuple[str, Callable[[], object], int]] = []
     for label, schedule in (
         ("one thread, frame after frame", "frames"),
         ("one thread, blocks of 128 elements through all frames", "blocks"),
         ("blocks in parallel (all cores)", "parallel"),
     ):
-        t, _ = best_of(lambda s=schedule: (bank.reset(), bank.run(walk, ok, schedule=s)))
-        print(f"| Preisach kernel, {label} | {share(walk.size / t, copy)} |")
-    t, _ = best_of(lambda: model.predict(walk))
-    print(f"| Preisach `HysteresisModel.predict` | {share(walk.size / t, copy)} |")
+        out.append(
+            (
+                f"Preisach kernel, {label}",
+                lambda s=schedule: (bank.reset(), bank.run(walk, ok, schedule=s)),
+                walk.size,
+            )
+        )
+    out.append(("Preisach `HysteresisModel.predict`", lambda: model.predict(walk), walk.size))
     for rows, cols in ((8, 12), (32, 32), (64, 64)):
         n = rows * cols
         nf = max(200, min(frames, 4_000_000 // n))
         c, lay, rec = mat_case(cal, rows, cols, nf)
         pipe = Pipeline(c, lay, repair="neighbour-mean")
-        t, _ = best_of(lambda pipe=pipe, rec=rec: pipe.reset().run(rec))
-        print(
-            f"| pipeline `run`, {n} elements x {nf} frames | {share(rec.frames.size / t, copy)} |"
+        out.append(
+            (
+                f"pipeline `run`, {n} elements x {nf} frames",
+                lambda pipe=pipe, rec=rec: pipe.reset().run(rec),
+                rec.frames.size,
+            )
         )
-    print()
-    # step latency on a real stream: 1024 elements, every frame different
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="smaller sizes (a smoke test)")
+    ap.add_argument("--repeat", type=int, default=3, help="repetitions of the whole set")
+    ap.add_argument(
+        "--clock",
+        choices=("wall", "cpu"),
+        default="wall",
+        help="cpu: this process's CPU time (on a loaded machine, where time slices of other "
+        "processes fall into wall-clock timings; rows on several threads then give the rate "
+        "per core)",
+    )
+    args = ap.parse_args()
+    global CLOCK
+    CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
+    frames = 400 if args.quick else 4000
+    _, best = _core.simd_path()
+    paths = ["scalar", best] if best != "scalar" else ["scalar"]
+    cal = seat_calibration(mat_seed=5)
+    walk = random_walk(cal["hysteresis"].model_, frames, 4096)
+    batch = cases(cal, frames, walk)
     c, lay, rec = mat_case(cal, 32, 32, 2000, seed=3)
-    pipe = Pipeline(c, lay, repair="neighbour-mean")
+    step_pipe = Pipeline(c, lay, repair="neighbour-mean")
     cap = np.ascontiguousarray(rec.frames, dtype=np.float64)
-    lat = np.empty(rec.n_frames)
-    for k in range(rec.n_frames):
-        s = time.perf_counter()
-        pipe.step(cap[k], None, float(rec.times[k]))
-        lat[k] = time.perf_counter() - s
-    lat = lat[100:]
+    copies: list[float] = []
+    rates: dict[tuple[str, str], list[float]] = {
+        (label, p): [] for label, _, _ in batch for p in paths
+    }
+    shares: dict[tuple[str, str], list[float]] = {
+        (label, p): [] for label, _, _ in batch for p in paths
+    }
+    lat_med: dict[str, list[float]] = {p: [] for p in paths}
+    lat_p99: dict[str, list[float]] = {p: [] for p in paths}
+    try:
+        for _ in range(args.repeat):
+            copy = copy_rate(walk.shape)
+            copies.append(copy)
+            for label, run, size in batch:
+                for p in paths:
+                    _core.set_simd(p != "scalar")
+                    t = timed(run)
+                    rates[label, p].append(size / t)
+                    shares[label, p].append(size / t / copy)
+            for p in paths:
+                _core.set_simd(p != "scalar")
+                lat = step_latency(step_pipe, cap, rec.times)
+                lat_med[p].append(float(np.median(lat)))
+                lat_p99[p].append(float(np.percentile(lat, 99)))
+    finally:
+        _core.set_simd(True)
+    print(
+        f"copy rate of a ({frames}, 4096) float64 array: {median_row(copies) / 1e6:.0f} M "
+        f"element-samples/s (median of {args.repeat}, {args.clock} clock); "
+        f"SIMD path of this processor: {best}"
+    )
+    print()
+    head = " | ".join(f"{p}: rate | {p}: share of the copy rate" for p in paths)
+    print(f"| path | {head} |" + (" SIMD / scalar |" if len(paths) > 1 else ""))
+    print("|---|" + "---:|---:|" * len(paths) + ("---:|" if len(paths) > 1 else ""))
+    for label, _, _ in batch:
+        cells = " | ".join(
+            f"{median_row(rates[label, p]) / 1e6:.1f} M/s | "
+            f"{100 * median_row(shares[label, p]):.2f} %"
+            for p in paths
+        )
+        ratio = ""
+        if len(paths) > 1:
+            r = [b / a for a, b in zip(rates[label, "scalar"], rates[label, paths[1]], strict=True)]
+            ratio = f" {median_row(r):.2f} x |"
+        print(f"| {label} | {cells} |{ratio}")
+    print()
     print("| `Pipeline.step`, 1024 elements, changing frames | median | p99 |")
     print("|---|---:|---:|")
-    print(f"| latency | {np.median(lat) * 1e6:.0f} µs | {np.percentile(lat, 99) * 1e6:.0f} µs |")
-    state = getattr(pipe, "state_bytes_per_element", None)
+    for p in paths:
+        med, p99 = median_row(lat_med[p]) * 1e6, median_row(lat_p99[p]) * 1e6
+        print(f"| {p} | {med:.0f} µs | {p99:.0f} µs |")
+    state = getattr(step_pipe, "state_bytes_per_element", None)
     if state is not None:
         print()
         print(f"state per element: {state()} bytes")

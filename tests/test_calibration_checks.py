@@ -66,7 +66,8 @@ def test_recordings_checked_for_length_swaps_silent_elements_and_settling():
     two_silent = loaded.copy()
     two_silent[[5, 9]] = 3.05
     (found,) = check_recordings(zero, _mat(two_silent))
-    assert found.level == "warn" and "2 of 16" in found.text and "e5 (r1c1)" in found.text
+    assert found.level == "warn" and "2 of 16" in found.text
+    assert "e5 (row 2, column 2)" in found.text
     half = loaded.copy()
     half[:8] = 3.0
     (found,) = check_recordings(zero, _mat(half))
@@ -78,3 +79,18 @@ def test_recordings_checked_for_length_swaps_silent_elements_and_settling():
 def test_gains_far_from_one_are_said():
     assert check_gains(np.full(8, 1.1), "x") == []
     assert "2.30 x" in check_gains(np.full(8, 2.3), "x")[0].text
+
+
+def test_the_edge_a_hand_presses_on():
+    """The orientation step of the wizard and the page: a press near an edge names it."""
+    from texsense.calibration.checks import edge_of_press
+
+    lay = Layout.grid(10, 6, pitch_cm=2.0)
+    zero = np.full(lay.n_elements, 3.0)
+    for (row, col), edge in (((0, 3), "top"), ((9, 2), "bottom"), ((5, 0), "left"),
+                             ((4, 5), "right")):  # fmt: skip
+        press = zero.copy()
+        press[lay.element_at(row, col)] += 1.5
+        assert edge_of_press(press, zero, lay) == edge
+    with pytest.raises(ParameterError, match="no element rose"):
+        edge_of_press(zero, zero, lay)

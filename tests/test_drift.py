@@ -337,8 +337,10 @@ def test_cli_clock_choice_and_bad_rest_rate(tmp_path, capsys):
     for thesis in ("thesis", "time"):  # eq. 5.8 as printed
         assert main(["drift", "fit", str(steps), "--clock", thesis, "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["clock"] == "time"
-    assert main(["drift", "fit", str(steps), "--rest-rate", "0"]) == 1
-    assert "rest-rate" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:  # the option's declared range (argparse: exit 2)
+        main(["drift", "fit", str(steps), "--rest-rate", "0"])
+    assert stopped.value.code == 2
+    assert "--rest-rate: the value must be > 0, got 0" in capsys.readouterr().err
 
 
 def test_joint_fit_recovers_both_clocks_and_the_cli_names_its_limits(tmp_path, capsys):

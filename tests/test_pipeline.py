@@ -320,6 +320,7 @@ def test_the_pipeline_follows_the_streaming_contract(mat_setup):
     params = pipe.get_params()
     assert list(params) == [
         "chain", "layout", "detect", "hysteresis", "drift", "repair", "capacity",
+        "in_use", "in_use_options", "interval",
     ]  # fmt: skip
     assert params["repair"] == "idw8" and params["drift"] is False
     step = inspect.signature(Pipeline.step).parameters

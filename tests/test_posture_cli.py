@@ -129,8 +129,10 @@ def test_c_option_and_its_errors(labelled, capsys):
     assert json.loads(capsys.readouterr().out)["classifier"] == "linear-svm C=0.5"
     assert main([*base, "--classifier", "naive-bayes", "--c", "0.5"]) != 0
     assert "naive-bayes has no regularisation C" in capsys.readouterr().err
-    assert main([*base, "--classifier", "logistic", "--c", "0"]) != 0
-    assert "C must be > 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:  # the option's declared range (argparse: exit 2)
+        main([*base, "--classifier", "logistic", "--c", "0"])
+    assert stopped.value.code == 2
+    assert "--c: the value must be > 0, got 0" in capsys.readouterr().err
 
 
 def test_mirror_is_on_by_default_where_the_recording_declares_it(tmp_path, capsys):

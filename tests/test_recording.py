@@ -47,7 +47,9 @@ def test_hdf5_round_trip_is_exact(tmp_path):
     rec.frames[0, 0] = np.nan
     path = rec.save(tmp_path / "r.h5")
     back = texsense.load(path)
-    assert back.equals(rec)
+    # exact, but a NaN is no reading: every reader marks it invalid, whatever the file says
+    assert back.frames.tobytes() == rec.frames.tobytes()
+    assert not back.valid[0, 0] and back._with(valid=rec.valid).equals(rec)
     assert back.labels["subject"].dtype.kind == "U"
 
 

@@ -11,6 +11,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from report_layout import check_layout
 from texsense import Layout, Recording, load
 from texsense.apps.report import write_report
 from texsense.apps.review import open_review
@@ -47,7 +48,7 @@ def test_report_of_a_pmd_subject(shared_data, tmp_path):
     out = tmp_path / "s2.pdf"
     assert main(["report", str(subject), "-o", str(out)]) == 0
     text = pdf_text(out)
-    assert pages(out) >= 4
+    assert check_layout(out, tmp_path) == pages(out) == 3  # as docs/report.md says
     for words in ("Pressure report: S2", "Vista Medical FSA SoftFlex 2048", "raw in count",
                   "head (assumed)", "Time per side", "posture_class", "Sensor health"):  # fmt: skip
         assert words in text, words
@@ -81,6 +82,7 @@ def test_report_of_a_virtual_night_with_regions(night, tmp_path):
     out = tmp_path / "night.pdf"
     assert main(["report", str(night), "-o", str(out)]) == 0
     text = pdf_text(out)
+    assert check_layout(out, tmp_path) == pages(out)
     review = open_review(night)
     assert "my heel box" in text and "region(s) of interest drawn by the user" in text
     assert "calibration id" in text and load(night).meta["calibration_id"] in text
@@ -90,6 +92,11 @@ def test_report_of_a_virtual_night_with_regions(night, tmp_path):
         assert e["text"].split(":")[0] in text
     alerts = [e for e in review.events if e["kind"] == "reposition"]
     assert alerts and all(e["detail"]["where"] for e in alerts)
+    # regions in the alert's words, the grid positions on a details line under it (issue 33)
+    assert not any(re.search(r"\b(row|column)s? \d", e["text"]) for e in alerts)
+    placed = [e["places"] for e in alerts if e["places"]]
+    assert placed and all(p.startswith("also row") for p in placed)
+    assert placed[0][: placed[0].index(",")] in text
     assert review.sides["turns"] >= 1 and f"{review.sides['turns']} turn(s)" in text
     # per side, the at-risk regions found on that side's mean map
     sides = [s for s in review.sides["time_per_side_s"] if s != "transition"]
@@ -122,15 +129,67 @@ def test_report_refuses_to_replace_its_input(night, tmp_path, capsys):
     assert copy.read_bytes() == before
 
 
+def live_seat_recording(folder):
+    """20 min of the virtual seat's person through the monitor (reposition after 5 min), the
+    recording started once an alert had been raised: what a nurse records."""
+    import asyncio
+
+    from texsense.apps.alerts import ExposureTracker
+    from texsense.calibration.workflows import seat_calibration
+    from texsense.compensation.pipeline import Pipeline
+    from texsense.monitor import Monitor
+    from texsense.monitor.virtual import VirtualSeatSource
+
+    source = VirtualSeatSource(speed=0, hold_s=300.0)
+    tracker = ExposureTracker(source.layout, reposition_min=5)
+    pipeline = Pipeline(seat_calibration(), source.layout)
+    m = Monitor(source, pipeline=pipeline, tracker=tracker, record_dir=folder)
+    wall = 1_767_250_800.0  # 2026-01-01 07:00 (UTC): the wall clock of a real mat
+
+    async def run() -> list[str]:
+        paths: list[str] = []
+        async for frame in source.frames():
+            m.process(frame, wall=wall + frame.t)
+            if not paths and m.tracker.open_alert is not None:
+                paths = m.start_recording("seat")
+            if frame.t > 20 * 60:
+                m.stop_recording()
+                return paths
+        return paths
+
+    return asyncio.run(run())[-1]
+
+
 @pytest.mark.skipif(os.environ.get("TEXSENSE_REPORT_PAGES") is None, reason="docs images only")
-def test_render_report_pages_for_the_docs(night, shared_data):
-    """TEXSENSE_REPORT_PAGES=docs/img renders the first pages of two reports as PNG."""
+def test_render_report_pages_for_the_docs(night, shared_data, tmp_path):
+    """TEXSENSE_REPORT_PAGES=docs/img renders the first pages of three reports as PNG."""
     target = os.environ["TEXSENSE_REPORT_PAGES"]
-    for name, src in (("night", night), ("pmd", shared_data / "pmd/experiment-i/S2")):
+    seat = live_seat_recording(tmp_path)
+    for name, src in (("night", night), ("pmd", shared_data / "pmd/experiment-i/S2"),
+                      ("seat", seat)):  # fmt: skip
         out = f"/tmp/report-{name}.pdf"
         write_report(src, out)
         subprocess.run(["pdftoppm", "-r", "70", "-png", "-f", "1", "-l", "3", out,
                         f"{target}/report_{name}"], check=True)  # fmt: skip
+
+
+def test_tables_run_on_with_their_title_and_head_and_never_onto_an_empty_page():
+    from texsense.apps.report._pdf import _LINE, _paginate
+
+    rows = [("row", f"r{i}") for i in range(30)]
+    lines = [("title", "A"), ("head", "h"), *rows, ("row", ""), ("title", "B"), ("head", "hb"),
+             ("row", "x"), ("row", "")]  # fmt: skip
+    pages = _paginate(lines, 10.5 * _LINE, 25 * _LINE)
+    assert [p[:2] for p in pages] == [
+        [("title", "A"), ("head", "h")],
+        *[[("title", "A (continued)"), ("head", "h")]] * 2,
+    ]
+    assert sum(p.count(("title", "B")) for p in pages) == 1
+    assert sum(p.count(r) for p in pages for r in rows) == 30  # every row once
+    assert pages[-1][-1] == ("row", "x")  # no blank line ends the report, no page of it
+    # a title with too little room under it for its head and a row starts the next page
+    pages = _paginate(lines[33:], 3.5 * _LINE, 25 * _LINE)
+    assert pages[0] == [] and pages[1][0] == ("title", "B")
 
 
 def test_health_finds_a_dead_element_inside_the_load_not_the_edges():

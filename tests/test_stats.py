@@ -39,10 +39,15 @@ def test_centre_of_force_of_known_maps():
     assert np.isnan(empty).all()
 
 
-def test_units_are_converted_to_ncm2():
+def test_the_load_is_in_newton_and_the_values_in_the_recordings_unit():
+    """Issue 33: ``peak_pressure(rec.to_unit("mmHg"))`` returned N/cm²."""
     m = np.full((1, 2, 2), 10.0)  # kPa = 1 N/cm²
     assert stats.total_load(grid_rec(m, unit="kPa"))[0] == pytest.approx(4.0)
-    assert stats.peak_pressure(grid_rec(m, unit="kPa"))[0] == pytest.approx(1.0)
+    assert stats.peak_pressure(grid_rec(m, unit="kPa"))[0] == pytest.approx(10.0)
+    in_mmhg = grid_rec(np.full((1, 2, 2), 1.0)).to_unit("mmHg")
+    assert stats.peak_pressure(in_mmhg)[0] == pytest.approx(75.006, abs=1e-3)
+    assert stats.peak_pressure_index(in_mmhg)[0] == pytest.approx(75.006, abs=1e-3)
+    assert stats.contact_area(in_mmhg, threshold=70.0)[0] == pytest.approx(4.0)
 
 
 def test_invalid_readings_are_left_out():

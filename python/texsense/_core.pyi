@@ -29,6 +29,8 @@ __all__ = [
     "__version__",
     "everett_terms",
     "mcu_blob_info",
+    "set_simd",
+    "simd_path",
 ]
 
 __version__: str
@@ -228,6 +230,12 @@ class Chain:
 def mcu_blob_info(blob: bytes) -> tuple[int, list[str], int, int, int, int]:
     """(elements, stage names, memory bytes, state bytes per element, scratch bytes per
     element, fixed bytes) of a model blob, checked as the C side checks it."""
+
+def simd_path() -> tuple[str, str]:
+    """(path in use, best path of this processor): "avx2" or "scalar" each."""
+
+def set_simd(enabled: bool) -> None:
+    """Allow (True, the default) or forbid the SIMD kernels process-wide (same numbers)."""
 
 def everett_terms(inputs: _F64, u_min: float, u_max: float) -> tuple[_U64, _F64, _F64, _F64]:
     """The Everett terms (indptr, alpha, beta, coef) of every sample of an input history."""

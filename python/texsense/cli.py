@@ -9,15 +9,23 @@ Exit codes: 0 ok, 1 failed (bad file, bad data), 2 bad usage.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
+import signal
 import sys
-from collections.abc import Collection, Sequence
+import threading
+from collections.abc import Collection, Iterator, Sequence
+from typing import TYPE_CHECKING, Any
 
 from texsense._core import __version__
 from texsense.commands import COMMANDS
+from texsense.commands._options import check_numbers
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 __all__ = ["build_parser", "main"]
 
@@ -51,11 +59,14 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
         elif module not in registered:
             importlib.import_module(f"texsense.commands.{module}").register(sub)
             registered.add(module)
+    if wanted:
+        check_numbers(parser)  # every numeric option refuses what lies outside its range
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    from_command_line = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     # matplotlib's own housekeeping (a font cache it cannot save, e.g. on a full disk) is
     # not the user's concern: the command's one line says what went wrong
@@ -63,11 +74,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = _command_of(argv)
     parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)
+    with _terminate_as_interrupt():
+        code = _run(args)
+    if from_command_line:
+        _leave_busy_workers(code)
+    return code
+
+
+def _leave_busy_workers(code: int) -> None:
+    """A server stopped while its workers still read (a recording that takes long to read,
+    a file that does not answer): they are daemon threads nobody waits for, but the
+    interpreter's teardown would share the processor with them for seconds. Once the command
+    has cleaned up, end the process at once instead (only then, and only when ``main`` runs
+    as the program: called with arguments by a program, it returns)."""
+    busy = [t for t in threading.enumerate() if t.daemon and t.name.startswith("texsense-")]
+    if busy and threading.current_thread() is threading.main_thread():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run a parsed command: every failure is one line on stderr and exit 1 (one clean way
+    out: a bad file or option, an output place that cannot be written, a database that cannot
+    be opened, the memory budget); SIGTERM and Ctrl-C clean up as they stop."""
     try:
         return int(args.run(args) or 0)
-    except (FormatError, ParameterError, UnitError, WriteError, FileNotFoundError) as e:
+    except (FormatError, ParameterError, UnitError, WriteError) as e:
         print(f"texsense {args.command}: error: {e}", file=sys.stderr)
         return 1
+    except Terminated:
+        print(f"texsense {args.command}: stopped (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print(f"texsense {args.command}: interrupted", file=sys.stderr)
         return 1
@@ -75,6 +113,106 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as e:  # an output place: no permission, a folder or a file in the way
+        print(f"texsense {args.command}: error: {_os_error(e)}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(
+            f"texsense {args.command}: error: out of memory; set the memory budget "
+            "$TEXSENSE_MAX_MEMORY below what the machine has (docs/reliability.md)",
+            file=sys.stderr,
+        )
+        return 1
+    except Exception as e:
+        if type(e).__module__.split(".")[0] not in ("sqlite3", "psycopg"):
+            raise
+        print(f"texsense {args.command}: error: the event store: {e}", file=sys.stderr)
+        return 1
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that its clean-up runs as for Ctrl-C."""
+
+
+#: the module whose frames are h5py's callbacks into a Python file object: a stop raised there
+#: is lost (h5py reports it as unraisable) and can leave HDF5 half-written (a crash at exit)
+_CALLBACK_MODULES = frozenset({"texsense.io._guarded"})
+
+
+_deferred: set[int] = set()  # signals to be delivered again (a timer is on its way)
+
+
+def _later(sig: int) -> None:
+    """Deliver ``sig`` again in a few milliseconds (from a helper thread; the main thread's
+    handler runs at its next Python line); once, however often it is asked meanwhile."""
+    if sig in _deferred:
+        return
+    _deferred.add(sig)
+
+    def again() -> None:
+        _deferred.discard(sig)
+        signal.raise_signal(sig)
+
+    timer = threading.Timer(0.005, again)
+    timer.daemon = True
+    timer.start()
+
+
+def _in_callback(frame: FrameType | None) -> bool:
+    """Whether the main thread is inside a callback whose exceptions cannot propagate (a
+    frame of :data:`_CALLBACK_MODULES` anywhere on its stack)."""
+    while frame is not None:
+        if frame.f_globals.get("__name__") in _CALLBACK_MODULES:
+            return True
+        frame = frame.f_back
+    return False
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises :class:`Terminated` and SIGINT ``KeyboardInterrupt`` where the program
+    is, except inside h5py's callbacks into a file object, where a stop is delivered again
+    a moment later (raised there it would be lost, or crash HDF5)."""
+
+    def stop(sig: int, frame: FrameType | None) -> None:
+        if _in_callback(frame):
+            _later(sig)
+            return
+        raise Terminated if sig == signal.SIGTERM else KeyboardInterrupt
+
+    def lost(unraisable: Any) -> None:
+        """A stop raised where Python cannot raise (a weakref callback during garbage
+        collection: "Exception ignored in ..."): deliver the signal again, so that it is raised
+        at a later line of the program instead of being lost."""
+        exc = unraisable.exc_value
+        if isinstance(exc, KeyboardInterrupt):
+            _later(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+            return
+        hook(unraisable)
+
+    try:  # (a SIGINT that the shell set to be ignored, as for `texsense ... &`, stays so)
+        previous = {
+            sig: signal.signal(sig, stop)
+            for sig in (signal.SIGTERM, signal.SIGINT)
+            if signal.getsignal(sig) is not signal.SIG_IGN
+        }
+    except ValueError:  # not the main thread (texsense.cli.main called by a program)
+        yield
+        return
+    hook, sys.unraisablehook = sys.unraisablehook, lost
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        sys.unraisablehook = hook
+
+
+def _os_error(e: OSError) -> str:
+    """One line for an OSError: the path(s) and the reason."""
+    reason = e.strerror or str(e) or type(e).__name__
+    paths = [str(p) for p in (e.filename, e.filename2) if p is not None]
+    return f"{' -> '.join(paths)}: {reason}" if paths else reason
 
 
 if __name__ == "__main__":

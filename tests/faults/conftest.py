@@ -37,8 +37,10 @@ def fault_row():
     """Record a checked case: ``fault_row("HDF5", "datasets of different length", "clear
     error")``."""
 
-    def record(area: str, case: str, outcome: str, detail: str = "") -> None:
-        _ROWS.append({"area": area, "case": case, "outcome": outcome, "detail": detail})
+    def record(area: str, case: str, outcome: str, detail: str = "", cases: int = 1) -> None:
+        """``cases``: how many generated cases the row stands for (issue 32's families)."""
+        _ROWS.append({"area": area, "case": case, "outcome": outcome, "detail": detail,
+                      "cases": int(cases)})  # fmt: skip
 
     return record
 

@@ -111,9 +111,13 @@ def test_a_failed_write_keeps_the_previous_calibration(mat_files, fault_row):
     previous = mat_files / "mat.json"
     previous.write_text('{"the": "previous calibration"}')
     limit = lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))  # noqa: E731
-    rc, _, err = run_cli("calibrate", "mat", "--baseline", "zero.h5", "--uniform", "one.h5",
-                         "--material", "textile-3mm", "--pressure", "1", "-o", "mat.json",
-                         cwd=mat_files, preexec=limit)  # fmt: skip
+    args = ("calibrate", "mat", "--baseline", "zero.h5", "--uniform", "one.h5", "--material",
+            "textile-3mm", "--pressure", "1", "-o", "mat.json")  # fmt: skip
+    # without --replace a calibration is not written over at all (issue 33), with it the
+    # failed write leaves the previous one
+    rc, _, err = run_cli(*args, cwd=mat_files)
+    assert_clear_error(rc, err, "mat.json", "--replace")
+    rc, _, err = run_cli(*args, "--replace", cwd=mat_files, preexec=limit)
     assert_clear_error(rc, err, "mat.json", "File too large")
     assert previous.read_text() == '{"the": "previous calibration"}'
     assert sorted(p.name for p in mat_files.iterdir() if p.name.startswith(".")) == []

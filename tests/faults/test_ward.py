@@ -63,6 +63,7 @@ class WardStation:
                 stdout=out, stderr=subprocess.STDOUT, cwd=folder, env=env,
             )  # fmt: skip
         self.seq: dict[str, int] = {}
+        self.sent: dict[str, int] = {}  # messages published per mat
         self.offset: dict[str, float] = {}  # s added to a mat's frame times
         self.clients: dict[str, object] = {}
         self.client_answers: dict[str, list] = {}
@@ -141,6 +142,8 @@ class WardStation:
 
     def raw(self, mat: str, payload: bytes, as_mat: str | None = None) -> None:
         who = as_mat or mat
+        if who == mat and len(payload) < 256_000:  # what the broker lets through to the mat
+            self.sent[mat] = self.sent.get(mat, 0) + 1
         if who not in self.clients:
             self.clients[who], self.client_answers[who] = self.client(who)
         info = self.clients[who].publish(f"texsense/{mat}/frames", payload)
@@ -157,8 +160,11 @@ class WardStation:
         self.raw(mat, json.dumps(body).encode())
 
     def live_after_glitch(self, mat: str, frames: int = 1) -> dict:
-        """Publish ``frames`` good frames; the mat must process every one of them."""
-        before = self.mat(mat)["frames"]
+        """Publish ``frames`` good frames; the mat must process every one of them (counted
+        once every message sent so far has been handled: the station handles its inbox in
+        slices, so some may still wait)."""
+        sent = self.sent.get(mat, 0)
+        before = self.until(lambda: self.mat(mat), lambda m: m["messages"] >= sent)["frames"]
         for _ in range(frames):
             self.frame(mat)
         return self.until(lambda: self.mat(mat), lambda m: m["frames"] == before + frames)

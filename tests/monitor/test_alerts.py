@@ -95,3 +95,16 @@ def test_event_store_keeps_sessions_and_events(tmp_path):
     assert s["source"] == "test" and s["recordings"] == ["a.h5"] and s["ended"] is not None
     assert again.events(kind="reposition")[0]["detail"] == {"where": ["3"]}
     assert again.events(kind="cleared") == []
+
+
+def test_possibly_above_counts_only_when_the_user_chooses_so():
+    # element 0: lower bound above 32 mmHg (confident); element 1: only its upper bound is
+    lay = Layout.grid(1, 3)
+    p, lo, hi = np.array([0.6, 0.4, 0.1]), np.array([0.5, 0.3, 0.0]), np.array([0.7, 0.5, 0.2])
+    for count, expected in ((False, [50.0, 0.0, 0.0]), (True, [50.0, 50.0, 0.0])):
+        tr = ExposureTracker(lay, reposition_min=5, count_possible=count)
+        for k in range(6):
+            tr.step(p, 10.0 * k, lo, hi)
+        assert tr.confident.tolist() == [True, False, False]
+        assert tr.possible.tolist() == [False, True, False]
+        np.testing.assert_allclose(tr.exposure_s, expected)

@@ -104,6 +104,15 @@ def test_the_steps_calibrate_the_running_monitor(page, tmp_path):
     assert s["available"] and not s["calibrated"] and s["done"] == []
     assert s["default_material"] == "textile-3mm"  # what the device announced
     assert "foam-7mm" in s["presets"]
+    # the device announces how the mat lies on its serial line: the maps name its edges
+    assert page.mon.get("api/view")["orientation"]["top"] == "front"
+    assert s["orientation"]["top"] == "front"
+    # a person says the seat lies the other way round: the live map follows at once
+    status, s = page.post("api/calibration/orientation", {"kind": "seat", "edge": "bottom"})
+    assert status == 200 and s["orientation"]["top"] == "back", s
+    assert page.mon.get("api/view")["orientation"]["left"] == "right"
+    status, body = page.post("api/calibration/orientation", {"kind": "seat", "edge": "press"})
+    assert status == 409 and "empty mat (step 1)" in body["detail"]
 
     s = page.step("zero")
     assert s["recordings"]["zero"]["frames"] == 10 and s["recording"] is None
@@ -140,6 +149,7 @@ def test_the_steps_calibrate_the_running_monitor(page, tmp_path):
     cal = Path(saved["calibration"])
     assert cal.parent == tmp_path / "rec" and cal.name.startswith("calibration-")
     assert load_chain(cal).id == saved["calibration_id"] and saved["checked"]
+    assert load_chain(cal).orientation["top"] == "back"  # how the mat lies, kept with it
     for step in ("zero", "uniform", "check"):
         r = load(saved["recordings"][step])
         assert r.n_frames == 10 and r.unit == "pF" and r.meta["spacer"] == "textile-3mm"
@@ -156,6 +166,12 @@ def test_the_steps_calibrate_the_running_monitor(page, tmp_path):
     events = page.mon.get("api/events?kind=calibrated")
     assert len(events) == 1 and events[0]["detail"]["file"] == str(cal)
     assert "now showing pressure" in page.mon.log()
+    # the check load still lies on the mat: nobody sat down (issue 33); the mat emptied,
+    # then a person: that is a sitter
+    assert page.mon.get("api/events?kind=seated") == []
+    page.put("empty")
+    page.put("uniform:1.0")
+    page.mon.until(lambda: page.mon.get("api/events?kind=seated"), lambda e: len(e) == 1, 30)
 
 
 def test_a_second_calibration_takes_a_new_name(page, tmp_path):
@@ -192,6 +208,14 @@ def test_the_panel_in_headless_chromium(page, tmp_path):
         expect(web.locator("#cal-material")).to_have_value("textile-3mm")
         expect(web.locator("#cal-uniform")).to_be_disabled()
         web.fill("#cal-frames", "8")
+        # how the mat lies: announced by the device, shown, and set on the panel
+        expect(web.locator("#cal-orient-status")).to_contain_text("top front")
+        web.select_option("#cal-edge", "bottom")
+        web.click("#cal-orient")
+        expect(web.locator("#cal-orient-status")).to_contain_text("top back", timeout=10_000)
+        web.select_option("#cal-edge", "top")
+        web.click("#cal-orient")
+        expect(web.locator("#cal-orient-status")).to_contain_text("top front", timeout=10_000)
 
         web.click("#cal-zero")  # the load is still on: a wrong "empty" mat
         expect(web.locator("#cal-zero-status")).to_contain_text("8 frames", timeout=30_000)
@@ -278,6 +302,11 @@ def test_a_page_without_calibration_shows_no_pressure(page, tmp_path):
         expect(web.locator("#ppi")).to_have_text("–")
         expect(web.locator("#raw-cards-note")).to_contain_text("calibrate to see pressure")
         expect(web.locator("#unit")).to_be_hidden()  # no pressure unit to choose
+        # no "compensated" toggle that does nothing; the map knows how the mat lies (its
+        # device announces it on the serial line) and names its edges
+        expect(web.locator("#data-toggle")).to_be_hidden()
+        edges = web.evaluate("() => [map.orientation.top, map.orientation.left]")
+        assert edges == ["front", "left"], edges
         expect(web.locator("#exposure-panel")).to_be_hidden()
         expect(web.locator("#threshold-note")).to_have_text("")
         options = "os => os.map(o => o.textContent)"

@@ -74,7 +74,15 @@ def test_alerts_name_the_place_in_words(tmp_path, caplog):
     p = np.zeros(36)
     p[[grid.element_at(2, 3), grid.element_at(3, 3)]] = 1.0
     feed(g, p, 301)
-    assert g.tracker.open_alert.where == ["rows 3-4, column 4"]
+    # no anatomy on a generic mat: the alert names no region, its details line the cells
+    assert g.tracker.open_alert.where == []
+    assert g.tracker.open_alert.details == ["rows 3-4, column 4"]
+    # the same seat with no orientation declared (a mat on a serial line that says none):
+    # its front cannot be told from its back, so no zone and no left or right is named
+    bare = monitor_of(seat.with_orientation(None), tmp_path, mode="seat")
+    feed(bare, np.where(np.arange(seat.n_elements) == left_it, 1.0, 0.0), 301)
+    assert bare.tracker.open_alert.where == []
+    assert bare.tracker.open_alert.details[0].startswith("row")
 
 
 @pytest.fixture()
@@ -94,6 +102,7 @@ def folder(tmp_path, shared_data):
     save(rec, rec_dir / "tiny.h5")
     shutil.copyfile(shared_data / "vendor-formats" / "fscan_testL.asf", rec_dir / "walk.asf")
     (rec_dir / "notes.txt").write_text("not a recording\n")
+    (rec_dir / "calibration-1.json").write_text('{"format": "texsense.chain"}\n')
     (tmp_path / "secret.h5").write_bytes((rec_dir / "tiny.h5").read_bytes())
     return rec_dir
 
@@ -108,7 +117,8 @@ def client(folder):
 
 def test_recordings_are_listed_and_played(client):
     names = [r["name"] for r in client.get("/api/playback").json()]
-    assert sorted(names) == ["notes.txt", "tiny.h5", "walk.asf"]
+    # only recordings are listed: not a note, not a calibration file (issue 33)
+    assert sorted(names) == ["tiny.h5", "walk.asf"]
     info = client.get("/api/playback/tiny.h5").json()
     assert info["frames"] == 5 and info["mode"]["name"] == "seat" and info["unit"] == "N/cm2"
     assert info["orientation"]["top"] == "front" and info["times"] == [0, 60, 120, 180, 240]
@@ -151,10 +161,15 @@ def test_regions_are_saved_beside_the_recording(client, folder):
 
 
 def test_report_download(client, folder):
-    r = client.get("/api/playback/tiny.h5/report?format=pdf")
+    # a GET writes nothing: before a POST made it, there is no report
+    assert client.get("/api/playback/tiny.h5/report?format=pdf").status_code == 404
+    assert not (folder / "reports").exists()
+    r = client.post("/api/playback/tiny.h5/report?format=pdf")
     assert r.status_code == 200 and r.content.startswith(b"%PDF")
     assert (folder / "reports" / "tiny.h5-report.pdf").is_file()
-    html = client.get("/api/playback/walk.asf/report?format=html")
+    again = client.get("/api/playback/tiny.h5/report?format=pdf")
+    assert again.status_code == 200 and again.content == r.content
+    html = client.post("/api/playback/walk.asf/report?format=html")
     assert html.status_code == 200 and "Pressure report: walk.asf" in html.text
 
 

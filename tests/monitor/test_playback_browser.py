@@ -34,19 +34,32 @@ def tiny_recording(path):
     frames[:, idx["B"]] = np.arange(40)
     frames[:, idx["P"]] = 50 + 5 * np.arange(40)
     meta = {"mode": "seat", "orientation": lay.orientation}
-    save(Recording(frames / MMHG, np.arange(40.0), lay, meta=meta), path)
+    posture = np.where(np.arange(40) < 20, "upright", "leaning left")
+    save(Recording(frames / MMHG, np.arange(40.0), lay, meta=meta, labels={"posture": posture}),
+         path)  # fmt: skip
     return idx
 
 
-@pytest.fixture()
-def tiny(monitor_process, tmp_path):
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """One monitor replaying the tiny recording for the module's tests (the region test,
+    which saves regions beside it, comes last)."""
+    from conftest import MonitorProcess
+
+    tmp_path = tmp_path_factory.mktemp("tiny")
     rec_dir = tmp_path / "rec"
     rec_dir.mkdir()
     idx = tiny_recording(rec_dir / "tiny.h5")
-    m = monitor_process("--source", f"replay:{rec_dir / 'tiny.h5'}", "--speed", "1",
-                        "--record-dir", str(rec_dir))  # fmt: skip
-    m.wait_for_frames(1, timeout=60)
-    return m, rec_dir, idx
+    # a calibration beside the recordings (not one of them), and a recording that is broken
+    (rec_dir / "calibration-1.json").write_text('{"format": "texsense.chain"}\n')
+    (rec_dir / "person1.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 600)
+    m = MonitorProcess(tmp_path, "--source", f"replay:{rec_dir / 'tiny.h5'}", "--speed", "1",
+                       "--record-dir", str(rec_dir))  # fmt: skip
+    try:
+        m.wait_for_frames(1, timeout=60)
+        yield m, rec_dir, idx
+    finally:
+        m.stop()
 
 
 def pixel(page, element):
@@ -83,13 +96,29 @@ def scrub(page, frame):
 
 @pytest.mark.slow
 def test_scrub_to_a_frame_shows_that_frame(tiny):
+    from playwright.sync_api import expect
+
     m, _, idx = tiny
     with open_page(m.url, 1280, 1000) as (page, errors):
         page.select_option("#unit", "mmHg")
+        # a replay of pressure: no "compensated" and no raw toggle (issue 33)
+        expect(page.locator("#map-title")).to_have_text("pressure")
+        expect(page.locator("#data-toggle")).to_be_hidden()
+        # only recordings are listed; one that does not open says why on the page, and the
+        # next opens (the header is not left on "opening person1.h5…")
+        expect(page.locator("button.rec-open")).to_have_count(2)
+        page.click('button.rec-open[data-name="person1.h5"]')
+        expect(page.locator("#pb-message")).to_contain_text("person1.h5 does not open:")
         open_recording(page, "tiny.h5")
+        expect(page.locator("#pb-message")).to_be_hidden()
+        expect(page.locator("#source")).to_have_text("playing back tiny.h5 · 40 frames")
         for k in (17, 3, 39):
             scrub(page, k)
             assert pixel(page, idx["B"]) == expected(page, k), f"frame {k}"
+        # what the recording says of the frame: its posture label and its PPI
+        expect(page.locator("#posture")).to_have_text("leaning left")
+        expect(page.locator("#posture-truth")).to_have_text("from the recording's label posture")
+        expect(page.locator("#ppi")).to_contain_text("mmHg")
         assert errors == [], errors
 
 
@@ -192,9 +221,35 @@ def test_a_night_played_back_jumps_to_its_alerts(monitor_process, tmp_path):
         page.click("#roi-save")
         expect(page.locator("#roi-save")).to_have_text("saved ✓", timeout=20_000)
         page.wait_for_timeout(300)
+        # the header stays on the recording (a live render used to put the live source back)
+        expect(page.locator("#source")).to_have_text("playing back night.h5 · 241 frames")
         shot = tmp_path / "playback.png"
         page.screenshot(path=str(shot), full_page=True)
         assert shot.stat().st_size > 20_000
         if os.environ.get("TEXSENSE_SCREENSHOT_PLAYBACK"):
             shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_PLAYBACK"])
+        assert errors == [], errors
+
+
+@pytest.mark.slow
+def test_a_foot_replay_shows_only_the_controls_that_apply(monitor_process, shared_data):
+    """A Tekscan F-Scan export replayed live (foot mode): no "compensated" title or raw
+    toggle, no threshold in the legend, no posture card, and a chart whose time axis says
+    seconds (it read 0:00 - 0:00 on a few seconds)."""
+    from playwright.sync_api import expect
+
+    walk = shared_data / "vendor-formats" / "fscan_testL.asf"
+    m = monitor_process("--source", f"replay:{walk}", "--speed", "1")
+    m.wait_for_frames(1, timeout=60)
+    with open_page(m.url, 1280, 900) as (page, errors):
+        expect(page.locator("#frames")).not_to_have_text("0", timeout=20_000)
+        expect(page.locator("#map-title")).to_have_text("pressure")
+        expect(page.locator("#data-toggle")).to_be_hidden()
+        expect(page.locator("#threshold-mark")).to_be_hidden()
+        expect(page.locator("#exposure-panel")).to_be_hidden()
+        expect(page.locator("#posture")).to_be_hidden()  # no model, no posture on a foot
+        labels = page.evaluate("() => charts.labels")
+        assert labels[0] == "0.0 s" and labels[1].endswith(" s") and labels[1] != "0.0 s", labels
+        if os.environ.get("TEXSENSE_SCREENSHOT_FOOT"):  # to look at, not in the docs
+            page.screenshot(path=os.environ["TEXSENSE_SCREENSHOT_FOOT"], full_page=True)
         assert errors == [], errors

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import time
@@ -284,6 +285,16 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         refused.locator("button.admit").click()  # admitted again: it waits for frames
         expect(refused).to_have_attribute("data-state", "waiting", timeout=5_000)
         expect(page.locator("#broker")).to_contain_text("connected")
+        # a tile says what its numbers are: "above 32 mmHg for ... min", the peak in mmHg;
+        # a bed is drawn as a bed (taller than wide), with what lies beyond its edges
+        seat = page.locator('.tile[data-id="vmat-01"]')
+        bed = page.locator('.tile[data-id="vmat-02"]')
+        expect(seat.locator(".above")).to_have_text("above 32 mmHg for")
+        expect(seat.locator(".peak")).to_contain_text(re.compile(r"peak \d+ mmHg"))
+        assert page.evaluate("() => { const c = document.querySelector('.tile[data-id=\"vmat-02\"] "
+                             "canvas'); return c.height > c.width; }")  # fmt: skip
+        expect(bed.locator(".bed-line")).to_contain_text(re.compile("turn (now|due in)"))
+        assert st.get("api/mats/vmat-02")["orientation"]["top"] == "head"
         # 5 min of exposure at 60x: an alert within seconds, on top of the ward
         alert = page.locator(".tile.is-alert").first
         expect(alert).to_be_visible(timeout=60_000)

@@ -6,6 +6,7 @@ from conftest import check_recording
 from texsense import Layout, Recording
 from texsense.exceptions import FormatError
 from texsense.io import read_wide_csv, write_wide_csv
+from texsense.io._base import plausible
 
 
 def test_round_trip_is_exact(tmp_path):
@@ -18,7 +19,9 @@ def test_round_trip_is_exact(tmp_path):
     times = np.cumsum(rng.random(9)) / 3
     rec = Recording(frames, times, lay, "capacitance", "pF", meta={"device": "AD7746", "n": 1})
     back = read_wide_csv(write_wide_csv(rec, tmp_path / "w.csv"))
-    assert back.equals(rec)
+    # what is read is what was written, but a negative capacitance is no reading (every
+    # reader marks it invalid, whatever the file says)
+    assert back.equals(rec._with(valid=rec.valid & plausible(rec.frames, "capacitance")))
     check_recording(back, tmp_path)
 
 

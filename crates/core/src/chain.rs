@@ -25,7 +25,7 @@ use crate::convert::{Converter, ConverterView, Curve};
 use crate::detect::{code, Changes, FailureDetector};
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, run_frames, FrameBlock};
+use crate::par::{block_size, run_frames, FrameBlock, MAX_BLOCK};
 use crate::repair::LocalRepair;
 use crate::snapshot::{Reader, Writer};
 use texsense_kernels::blob::kind;
@@ -486,6 +486,18 @@ impl FrameBlock for UsualBlock<'_> {
     fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64 {
         let (x, ok) = self.conv.stage(self.start + i, x, valid);
         self.comp.stage(i, dt, x, ok).0
+    }
+
+    /// The frame's row of the block through conversion, then the compensation's row (its
+    /// Preisach step across elements in SIMD lanes where the processor has them).
+    fn row(&mut self, dt: f64, x: &[f64], valid: &[bool], out: &mut [f64]) {
+        let w = out.len();
+        let (mut c, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
+        let (c, ok) = (&mut c[..w], &mut ok[..w]);
+        for i in 0..w {
+            (c[i], ok[i]) = self.conv.stage(self.start + i, x[i], valid[i]);
+        }
+        self.comp.row(dt, c, ok, out);
     }
 }
 

@@ -4,7 +4,7 @@
 use crate::convert::Curve;
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
-use crate::par::{run_frames, FrameBlock};
+use crate::par::{run_frames, FrameBlock, MAX_BLOCK};
 use crate::preisach::{PreisachBank, PreisachBlock};
 
 /// The Preisach model's output (its offset and sign included), followed by an optional drift
@@ -65,6 +65,28 @@ impl CompensationBlock<'_> {
             (None, _) => (h, ok),
         }
     }
+
+    /// One frame of the block, stage after stage over the row (values only): the Preisach
+    /// row ([`PreisachBlock::row`], SIMD across elements where the processor has it), then
+    /// the drift row; the same values as [`CompensationBlock::stage`] per element.
+    pub fn row(&mut self, dt: f64, u: &[f64], valid: &[bool], out: &mut [f64]) {
+        let w = out.len();
+        let (mut h, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
+        let (h, ok) = (&mut h[..w], &mut ok[..w]);
+        self.preisach.row(u, valid, h);
+        for (o, v) in ok.iter_mut().zip(h.iter()) {
+            *o = v.is_finite();
+        }
+        match (&mut self.drift, &self.level) {
+            (Some(d), Some(curve)) => {
+                for (i, slot) in out.iter_mut().enumerate() {
+                    *slot = d.step_on_level(i, dt, curve, u[i], h[i], ok[i]).0;
+                }
+            }
+            (Some(d), None) => d.row(dt, h, ok, out),
+            (None, _) => out.copy_from_slice(h),
+        }
+    }
 }
 
 impl FrameBlock for CompensationBlock<'_> {
@@ -76,6 +98,10 @@ impl FrameBlock for CompensationBlock<'_> {
     #[inline]
     fn step(&mut self, i: usize, dt: f64, u: f64, valid: bool) -> f64 {
         CompensationBlock::step(self, i, dt, u, valid)
+    }
+
+    fn row(&mut self, dt: f64, x: &[f64], ok: &[bool], out: &mut [f64]) {
+        CompensationBlock::row(self, dt, x, ok, out);
     }
 }
 
@@ -262,5 +288,38 @@ mod tests {
         assert!(Compensation::new(preisach, None)
             .and_then(|c| c.with_level(curve))
             .is_err());
+    }
+
+    #[test]
+    fn simd_and_scalar_paths_give_the_same_bits_with_and_without_a_level() {
+        let _guard = crate::simd::testing::lock();
+        let mut rng = crate::preisach::tests::Rng(11);
+        let kernel = Kernel::new(vec![0.3, 0.5, 0.2], vec![0.5, 10.0, 300.0]).unwrap();
+        let curve = Curve::new(vec![0.0, 0.4, 1.0], vec![0.0, 1.0, 3.0]).unwrap();
+        for case in 0..12 {
+            let n = 1 + (rng.next() % 60) as usize;
+            let t = 1 + (rng.next() % 50) as usize;
+            let preisach = PreisachBank::new(crate::everett::quadratic(17, 1.0), n, 8)
+                .and_then(|p| p.with_output(0.1, -1.0))
+                .unwrap();
+            let drift = DriftBank::new(kernel.clone(), -0.025, n).unwrap();
+            let mut comp = Compensation::new(preisach, Some(drift)).unwrap();
+            if case % 2 == 1 {
+                comp = comp.with_level(curve.clone()).unwrap();
+            }
+            let (u, ok) = crate::preisach::tests::hostile_history(&mut rng, t, n, 0.0, 1.0);
+            let dt: Vec<f64> = (0..t).map(|_| rng.unit()).collect();
+            let run = |simd: bool| {
+                crate::simd::set_enabled(simd);
+                let mut c = comp.clone();
+                let mut out = vec![0.0; u.len()];
+                c.run(&dt, &u, &ok, &mut out).unwrap();
+                crate::simd::set_enabled(true);
+                let mut w = crate::snapshot::Writer::default();
+                c.save(&mut w);
+                (out.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), w.buf)
+            };
+            assert_eq!(run(false), run(true), "case {case}");
+        }
     }
 }

@@ -145,6 +145,36 @@ impl DriftBlock<'_> {
         )
     }
 
+    /// One frame of the block: element `i` reads `h[i]` (`ok[i]` false: skipped) into
+    /// `out[i]`; on AVX2 the kernel compiled for it ([`crate::simd`]: its K terms four at a
+    /// time; the same operations in the same order, so the same bits).
+    pub fn row(&mut self, dt: f64, h: &[f64], ok: &[bool], out: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2() {
+            // SAFETY: the processor has AVX2 (detected by `simd::avx2`)
+            unsafe { self.row_avx2(dt, h, ok, out) };
+            return;
+        }
+        self.row_scalar(dt, h, ok, out);
+    }
+
+    #[inline(always)]
+    fn row_scalar(&mut self, dt: f64, h: &[f64], ok: &[bool], out: &mut [f64]) {
+        for (i, slot) in out.iter_mut().enumerate() {
+            *slot = self.step(i, dt, h[i], ok[i]);
+        }
+    }
+
+    /// [`DriftBlock::row`] compiled for AVX2.
+    ///
+    /// # Safety
+    /// The processor must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn row_avx2(&mut self, dt: f64, h: &[f64], ok: &[bool], out: &mut [f64]) {
+        self.row_scalar(dt, h, ok, out);
+    }
+
     /// The drift of the elastic response `level(u)` of the hysteresis stage's input `u`,
     /// added to its output `h` (QLV; `ok`: the validity after the hysteresis stage).
     #[inline]
@@ -198,6 +228,10 @@ impl FrameBlock for DriftBlock<'_> {
     #[inline]
     fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
         DriftBlock::step(self, i, dt, h, valid)
+    }
+
+    fn row(&mut self, dt: f64, x: &[f64], ok: &[bool], out: &mut [f64]) {
+        DriftBlock::row(self, dt, x, ok, out);
     }
 }
 

@@ -17,6 +17,7 @@
 //! - [`compensation`]: Preisach then drift in one pass;
 //! - [`chain`]: detect -> convert -> compensation -> repair, the whole mat in one pass;
 //! - [`par`]: the one parallel loop over blocks of elements;
+//! - [`simd`]: runtime choice between the scalar kernels and their AVX2 paths;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep);
 //! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep).
 
@@ -32,8 +33,10 @@ pub mod mcu;
 pub mod par;
 pub mod preisach;
 pub mod repair;
+pub mod simd;
 mod snapshot;
 pub mod spacer;
+pub mod spacer_batch;
 pub mod topology;
 
 pub use bouc_wen::{BoucWenBank, BoucWenParams};
@@ -46,4 +49,5 @@ pub use everett::{everett_terms, Everett, EverettTerms};
 pub use preisach::PreisachBank;
 pub use repair::{LocalRepair, Method as RepairMethod};
 pub use spacer::{SpacerBank, SpacerLaw, SpacerParams};
+pub use spacer_batch::SpacerBatch;
 pub use topology::Neighbours;

@@ -154,6 +154,15 @@ pub trait FrameBlock: Send {
 
     /// Element `i` of the block reads `x` (`valid` false: skipped, NaN out, state kept).
     fn step(&mut self, i: usize, dt: f64, x: f64, valid: bool) -> f64;
+
+    /// The whole frame of the block: element `i` reads `x[i]` (`ok[i]` false: skipped, its
+    /// `x[i]` NaN) into `out[i]`; the stages fused per block override it to run each stage
+    /// over the frame's row (on SIMD where the processor has it, [`crate::simd`]).
+    fn row(&mut self, dt: f64, x: &[f64], ok: &[bool], out: &mut [f64]) {
+        for (i, slot) in out.iter_mut().enumerate() {
+            *slot = self.step(i, dt, x[i], ok[i]);
+        }
+    }
 }
 
 /// The frames `dt` (T,) of a batch through blocks of a bank ([`for_blocks`]): element `i`
@@ -166,16 +175,19 @@ where
 {
     let par = parallel(dt.len(), n);
     for_blocks(out, n, blocks, par, |mut block, o| {
-        let start = o.start();
+        let (start, width) = (o.start(), o.width());
+        let (mut x, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
+        let (x, ok) = (&mut x[..width], &mut ok[..width]);
         for (r, &d) in dt.iter().enumerate() {
             block.frame(d);
             let row = r * n + start;
-            for (li, slot) in o.row(r).iter_mut().enumerate() {
-                *slot = match input(row + li, start + li) {
-                    Some(x) => block.step(li, d, x, true),
-                    None => block.step(li, d, f64::NAN, false),
+            for li in 0..width {
+                (x[li], ok[li]) = match input(row + li, start + li) {
+                    Some(v) => (v, true),
+                    None => (f64::NAN, false),
                 };
             }
+            block.row(d, x, ok, o.row(r));
         }
     });
 }

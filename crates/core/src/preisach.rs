@@ -35,6 +35,9 @@ pub use crate::everett::{everett_terms, Everett, EverettTerms};
 use crate::par::{block_size, for_blocks, parallel, FrameBlock};
 use crate::snapshot::{Reader, Writer};
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+
 /// Extrema an element holds in place. A deeper stack (ever-shrinking nested oscillations;
 /// the deepest seen on real and simulated records is 13) moves to the heap, up to the bank's
 /// capacity, and back in place once it is shallow again.
@@ -236,6 +239,39 @@ impl PreisachBlock<'_> {
         }
     }
 
+    /// One frame of the block: inputs `u` and their validity `ok` (one per element) ->
+    /// outputs `out` (NaN where skipped); on AVX2 four elements at a time
+    /// ([`crate::simd`]), with the scalar kernel's results bit for bit.
+    ///
+    /// # Panics
+    /// When a slice does not hold one value per element.
+    pub fn row(&mut self, u: &[f64], ok: &[bool], out: &mut [f64]) {
+        let n = self.elements.len();
+        assert!(
+            u.len() == n && ok.len() == n && out.len() == n,
+            "one per element"
+        );
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2() {
+            // SAFETY: the processor has AVX2 (detected by `simd::avx2`); lengths checked
+            unsafe {
+                avx2::row(
+                    &self.everett,
+                    self.capacity,
+                    self.output,
+                    self.elements,
+                    u,
+                    ok,
+                    out,
+                )
+            };
+            return;
+        }
+        for (i, slot) in out.iter_mut().enumerate() {
+            *slot = self.step(i, u[i], ok[i]);
+        }
+    }
+
     /// Number of elements in the block.
     pub fn len(&self) -> usize {
         self.elements.len()
@@ -251,6 +287,10 @@ impl FrameBlock for PreisachBlock<'_> {
     #[inline]
     fn step(&mut self, i: usize, _dt: f64, u: f64, valid: bool) -> f64 {
         PreisachBlock::step(self, i, u, valid)
+    }
+
+    fn row(&mut self, _dt: f64, u: &[f64], ok: &[bool], out: &mut [f64]) {
+        PreisachBlock::row(self, u, ok, out);
     }
 }
 
@@ -445,30 +485,28 @@ impl PreisachBank {
         check_len("valid", valid.len(), inputs.len())?;
         check_len("out", out.len(), inputs.len())?;
         if schedule == Schedule::FrameOrder {
-            let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
+            // the whole bank as one block, frame after frame
+            let mut all = PreisachBlock {
+                everett: self.everett.view(),
+                capacity: self.capacity,
+                elements: &mut self.elements,
+                output: self.output,
+            };
             for ((f, v), o) in inputs
                 .chunks_exact(n)
                 .zip(valid.chunks_exact(n))
                 .zip(out.chunks_exact_mut(n))
             {
-                for (i, el) in self.elements.iter_mut().enumerate() {
-                    o[i] = if v[i] && f[i].is_finite() {
-                        output.of(el.step(&everett, capacity, f[i]))
-                    } else {
-                        f64::NAN
-                    };
-                }
+                all.row(f, v, o);
             }
             return Ok(());
         }
         let par = schedule == Schedule::Parallel && parallel(t, n);
         for_blocks(out, n, self.blocks(), par, |mut block, o| {
-            let start = o.start();
+            let (start, width) = (o.start(), o.width());
             for r in 0..t {
-                let row = r * n + start;
-                for (li, slot) in o.row(r).iter_mut().enumerate() {
-                    *slot = block.step(li, inputs[row + li], valid[row + li]);
-                }
+                let row = r * n + start..r * n + start + width;
+                block.row(&inputs[row.clone()], &valid[row], o.row(r));
             }
         });
         Ok(())
@@ -476,4 +514,4 @@ impl PreisachBank {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

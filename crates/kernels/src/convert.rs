@@ -85,27 +85,13 @@ impl<'a, T: Real> Curve<'a, T> {
         bucket_start: &'a [u32],
         inv_width: T,
     ) -> Result<Self, KernelError> {
-        let n = x.len();
-        ensure(n >= 2 && y.len() == n, "curve", "needs >= 2 points")?;
-        ensure(slope.len() == n - 1, "curve slopes", "need one per segment")?;
-        ensure(!bucket_start.is_empty(), "curve buckets", "none")?;
+        let curve = Self::new_trusted(x, y, slope, bucket_start, inv_width)?;
         ensure(
-            bucket_start.iter().all(|&b| (b as usize) < n - 1),
+            bucket_start.iter().all(|&b| (b as usize) < x.len() - 1),
             "curve buckets",
             "a bucket points past the last segment",
         )?;
-        ensure(
-            inv_width.is_finite() && inv_width > T::ZERO,
-            "curve",
-            "bucket width must be finite and > 0",
-        )?;
-        Ok(Self {
-            x,
-            y,
-            slope,
-            bucket_start,
-            inv_width,
-        })
+        Ok(curve)
     }
 
     /// View a curve whose tables [`Curve::new`] accepted before, without the pass over its

@@ -88,6 +88,11 @@ impl<'a, T: Real> Everett<'a, T> {
         self.u_max
     }
 
+    /// `(K - 1) / (u_max - u_min)`: grid steps per unit of input.
+    pub fn inv_step(&self) -> T {
+        self.inv_step
+    }
+
     /// The table.
     pub fn table(&self) -> &'a [T] {
         self.table

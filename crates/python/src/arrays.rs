@@ -1,11 +1,39 @@
-//! Array conversion shared by the classes of the binding: shapes of batches, outputs as
-//! numpy arrays, a neighbour graph from CSR arrays.
+//! What the classes of the binding share: the methods every element bank has
+//! ([`element_bank!`]), shapes of batches, outputs as numpy arrays, a neighbour graph from CSR
+//! arrays.
 
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use texsense_core::{CoreError, Neighbours};
 
 use crate::errors::{to_py, ShapeError};
+
+/// The `#[pymethods]` block of an element bank (a class whose `inner` has `len()`): the
+/// `n_elements` getter and, given `reset = "doc"`, a `reset` documented so, then the class's
+/// own methods. Each class writes only what is its own.
+macro_rules! element_bank {
+    ($class:ty, reset = $reset_doc:literal, { $($own:tt)* }) => {
+        $crate::arrays::element_bank!($class, {
+            #[doc = $reset_doc]
+            fn reset(&mut self) {
+                self.inner.reset();
+            }
+            $($own)*
+        });
+    };
+    ($class:ty, { $($own:tt)* }) => {
+        #[pyo3::pymethods]
+        impl $class {
+            /// Number of elements.
+            #[getter]
+            fn n_elements(&self) -> usize {
+                self.inner.len()
+            }
+            $($own)*
+        }
+    };
+}
+pub(crate) use element_bank;
 
 pub(crate) fn neighbours_from(
     indptr: PyReadonlyArray1<'_, i64>,
@@ -54,11 +82,11 @@ fn batch_shape(
     what: &'static str,
     n: usize,
     values: &[usize],
-    valid: &[usize],
+    valid: Option<&[usize]>,
     dt: Option<usize>,
 ) -> PyResult<(usize, usize)> {
     let ok = values.len() == 2
-        && valid == values
+        && valid.is_none_or(|v| v == values)
         && values[1] == n
         && dt.is_none_or(|len| len == values[0]);
     if !ok {
@@ -66,17 +94,27 @@ fn batch_shape(
         return Err(to_py(CoreError::Shape {
             what,
             expected: format!(
-                "{}values (T, {n}) with a valid mask of the same shape ({n} elements per frame)",
-                if dt.is_some() { "dt (T,), " } else { "" }
+                "{}values (T, {n}){} ({n} elements per frame)",
+                if dt.is_some() { "dt (T,), " } else { "" },
+                if valid.is_some() {
+                    " with a valid mask of the same shape"
+                } else {
+                    ""
+                }
             ),
-            got: format!("{}values {values:?}, valid {valid:?}", dt_txt(dt)),
+            got: format!(
+                "{}values {values:?}{}",
+                dt_txt(dt),
+                valid.map_or(String::new(), |v| format!(", valid {v:?}"))
+            ),
         }));
     }
     Ok((values[0], values[1]))
 }
 
 /// The slices of a batch checked against a bank of `n` elements: values (T, N), a valid mask
-/// of the same shape and, for stages that take time steps, `dt` (T,) (else empty).
+/// of the same shape (empty for [`Batch::unmasked`]) and, for stages that take time steps,
+/// `dt` (T,) (else empty).
 pub(crate) struct Batch<'a> {
     pub(crate) t: usize,
     pub(crate) n: usize,
@@ -93,7 +131,13 @@ impl<'a> Batch<'a> {
         values: &'a PyReadonlyArray2<'_, f64>,
         valid: &'a PyReadonlyArray2<'_, bool>,
     ) -> PyResult<Self> {
-        let (t, n) = batch_shape(what, n, values.shape(), valid.shape(), dt.map(|d| d.len()))?;
+        let (t, n) = batch_shape(
+            what,
+            n,
+            values.shape(),
+            Some(valid.shape()),
+            dt.map(|d| d.len()),
+        )?;
         Ok(Self {
             t,
             n,
@@ -103,6 +147,25 @@ impl<'a> Batch<'a> {
             },
             values: values.as_slice()?,
             valid: valid.as_slice()?,
+        })
+    }
+}
+
+impl<'a> Batch<'a> {
+    /// A batch of time steps `dt` (T,) and values (T, N) without a validity mask.
+    pub(crate) fn unmasked(
+        what: &'static str,
+        n: usize,
+        dt: &'a PyReadonlyArray1<'_, f64>,
+        values: &'a PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<Self> {
+        let (t, n) = batch_shape(what, n, values.shape(), None, Some(dt.len()))?;
+        Ok(Self {
+            t,
+            n,
+            dt: dt.as_slice()?,
+            values: values.as_slice()?,
+            valid: &[],
         })
     }
 }

@@ -6,7 +6,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use texsense_core::{Chain, ChainStage, CoreError};
 
-use crate::arrays::{run_detached, to_2d, Batch};
+use crate::arrays::{element_bank, run_detached, to_2d, Batch};
 use crate::compensation::PyCompensation;
 use crate::convert::{PyConverter, PyCurve};
 use crate::detect::PyFailureDetector;
@@ -53,8 +53,7 @@ pub(crate) struct PyChain {
     inner: Chain,
 }
 
-#[pymethods]
-impl PyChain {
+element_bank!(PyChain, reset = "Every stage back to its initial state.", {
     #[new]
     fn new(n_elements: usize, stages: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
         let stages = stages
@@ -66,21 +65,10 @@ impl PyChain {
         Ok(Self { inner })
     }
 
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
     /// The stages' names in order.
     #[getter]
     fn stage_names(&self) -> Vec<&'static str> {
         self.inner.stages().iter().map(ChainStage::name).collect()
-    }
-
-    /// Every stage back to its initial state.
-    fn reset(&mut self) {
-        self.inner.reset();
     }
 
     /// Bytes of state per element (all stages, per-element parameters included).
@@ -122,7 +110,7 @@ impl PyChain {
         let blob = self.inner.mcu_blob().map_err(to_py)?;
         Ok(PyBytes::new(py, &blob))
     }
-}
+});
 
 /// What a model blob holds, checked as the C side checks it: (elements, stage names, bytes
 /// of memory in all, state bytes per element, scratch bytes per element, fixed bytes); a

@@ -6,7 +6,7 @@ use numpy::{
 use pyo3::prelude::*;
 use texsense_core::{Converter, Curve};
 
-use crate::arrays::{run_detached, Batch};
+use crate::arrays::{element_bank, run_detached, Batch};
 use crate::errors::to_py;
 
 /// A piecewise-linear curve y(x) over strictly increasing x, held at its ends (what
@@ -44,8 +44,7 @@ pub(crate) struct PyConverter {
     pub(crate) inner: Converter,
 }
 
-#[pymethods]
-impl PyConverter {
+element_bank!(PyConverter, {
     #[new]
     #[pyo3(signature = (offset, gain, curve=None))]
     fn new(
@@ -62,12 +61,6 @@ impl PyConverter {
         Ok(Self { inner })
     }
 
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
     /// Batch: readings (T, N), valid (T, N) -> converted values (T, N), NaN where a reading
     /// is invalid or not a number.
     fn run<'py>(
@@ -80,4 +73,4 @@ impl PyConverter {
         let inner = &self.inner;
         run_detached(py, b.t, b.n, |out| inner.run(b.values, b.valid, out))
     }
-}
+});

@@ -4,7 +4,7 @@ use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::detect::{Changes, DetectorParams, FailureDetector};
 
-use crate::arrays::{neighbours_from, to_2d, Batch};
+use crate::arrays::{element_bank, neighbours_from, to_2d, Batch};
 use crate::errors::to_py;
 
 /// Failure detection on raw capacitance (thesis §6.5.2.5): codes 0 ok, 1 short/break,
@@ -16,8 +16,7 @@ pub(crate) struct PyFailureDetector {
     changes: Changes,
 }
 
-#[pymethods]
-impl PyFailureDetector {
+element_bank!(PyFailureDetector, reset = "Forget the history.", {
     #[new]
     #[pyo3(signature = (indptr, indices, jump_pf, baseline_pf, max_pf, min_pf, low_share, high_share, stuck_frames, stuck_pf, neighbour_change_pf, stuck_floor_pf=f64::NEG_INFINITY))]
     #[allow(clippy::too_many_arguments)]
@@ -61,17 +60,6 @@ impl PyFailureDetector {
         })
     }
 
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
-    /// Forget the history.
-    fn reset(&mut self) {
-        self.inner.reset();
-    }
-
     /// Codes (T, N) uint8 of readings (T, N) with the converter's validity (T, N).
     fn run<'py>(
         &mut self,
@@ -87,4 +75,4 @@ impl PyFailureDetector {
             .map_err(to_py)?;
         to_2d(py, codes, t, n)
     }
-}
+});

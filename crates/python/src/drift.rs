@@ -4,7 +4,7 @@ use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::{DriftBank, Kernel};
 
-use crate::arrays::{run_detached, Batch};
+use crate::arrays::{element_bank, run_detached, Batch};
 use crate::errors::to_py;
 
 /// Recursive drift superposition for N elements (thesis eq. 5.4/5.8).
@@ -13,8 +13,7 @@ pub(crate) struct PyDriftBank {
     pub(crate) inner: DriftBank,
 }
 
-#[pymethods]
-impl PyDriftBank {
+element_bank!(PyDriftBank, reset = "Forget the history.", {
     #[new]
     #[allow(clippy::too_many_arguments)] // the Python constructor's keyword arguments
     #[pyo3(signature = (weights, taus, gamma, n_elements, rest_rate=0.0, rest_window=0.5, gamma_time=0.0, exponent=1.0))]
@@ -38,17 +37,6 @@ impl PyDriftBank {
         Ok(Self { inner })
     }
 
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
-    /// Forget the history.
-    fn reset(&mut self) {
-        self.inner.reset();
-    }
-
     /// Batch: time steps dt (T,), hysteresis outputs h (T, N), valid (T, N) -> (T, N).
     fn run<'py>(
         &mut self,
@@ -61,4 +49,4 @@ impl PyDriftBank {
         let inner = &mut self.inner;
         run_detached(py, b.t, b.n, |out| inner.run(b.dt, b.values, b.valid, out))
     }
-}
+});

@@ -15,6 +15,7 @@ mod drift;
 mod errors;
 mod preisach;
 mod repair;
+mod simd;
 mod spacer;
 
 /// The compiled core of texsense.
@@ -32,6 +33,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<chain::PyChain>()?;
     m.add_function(wrap_pyfunction!(preisach::py_everett_terms, m)?)?;
     m.add_function(wrap_pyfunction!(chain::py_mcu_blob_info, m)?)?;
+    m.add_function(wrap_pyfunction!(simd::py_simd_path, m)?)?;
+    m.add_function(wrap_pyfunction!(simd::py_set_simd, m)?)?;
     let py = m.py();
     m.add("ShapeError", py.get_type::<errors::ShapeError>())?;
     m.add(

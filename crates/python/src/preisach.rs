@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use texsense_core::preisach::Schedule;
 use texsense_core::{everett_terms, CoreError, Everett, PreisachBank};
 
-use crate::arrays::{run_detached, Batch};
+use crate::arrays::{element_bank, run_detached, Batch};
 use crate::errors::to_py;
 
 /// Preisach stacks of N elements over one Everett table (thesis eq. 4.15-4.22).
@@ -16,8 +16,7 @@ pub(crate) struct PyPreisachBank {
     pub(crate) inner: PreisachBank,
 }
 
-#[pymethods]
-impl PyPreisachBank {
+element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
     /// The model's output is `sign (h + offset)` with `h` the Preisach sum (sign +1 or -1).
     #[new]
     #[pyo3(signature = (u_min, u_max, table, n_elements, capacity, offset=0.0, sign=1.0))]
@@ -44,17 +43,6 @@ impl PyPreisachBank {
             .and_then(|b| b.with_output(offset, sign))
             .map_err(to_py)?;
         Ok(Self { inner })
-    }
-
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
-    /// Back to lower saturation.
-    fn reset(&mut self) {
-        self.inner.reset();
     }
 
     /// Everett function F(alpha, beta) at points (same-shape 1-D arrays), in the units of
@@ -154,7 +142,7 @@ impl PyPreisachBank {
     fn outputs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         self.inner.last_outputs().into_pyarray(py)
     }
-}
+});
 
 /// The Everett terms of an input history (identification): (indptr, alpha, beta, coef).
 #[pyfunction(name = "everett_terms")]

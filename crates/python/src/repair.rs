@@ -4,7 +4,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2}
 use pyo3::prelude::*;
 use texsense_core::{CoreError, LocalRepair, RepairMethod};
 
-use crate::arrays::{neighbours_from, to_2d, Batch};
+use crate::arrays::{element_bank, neighbours_from, to_2d, Batch};
 use crate::errors::to_py;
 
 /// A local repair with its state (the last value of every element). `method`: "zero",
@@ -15,8 +15,7 @@ pub(crate) struct PyLocalRepair {
     pub(crate) inner: LocalRepair,
 }
 
-#[pymethods]
-impl PyLocalRepair {
+element_bank!(PyLocalRepair, reset = "Forget all last values.", {
     #[new]
     #[pyo3(signature = (method, n_elements, indptr=None, indices=None, weights=None))]
     fn new(
@@ -57,20 +56,9 @@ impl PyLocalRepair {
         Ok(Self { inner })
     }
 
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
     /// Last value (real or repaired) per element, NaN where none was seen yet.
     fn last_values<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         self.inner.last_values().to_vec().into_pyarray(py)
-    }
-
-    /// Forget all last values.
-    fn reset(&mut self) {
-        self.inner.reset();
     }
 
     /// Batch: values (T, N), valid (T, N) -> (repaired (T, N), outcome (T, N) uint8) with
@@ -90,4 +78,4 @@ impl PyLocalRepair {
             .map_err(to_py)?;
         Ok((to_2d(py, out, b.t, b.n)?, to_2d(py, outcome, b.t, b.n)?))
     }
-}
+});

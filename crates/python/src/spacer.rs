@@ -1,12 +1,12 @@
 //! `SpacerBank`: the virtual sensor's spacer mechanics (texsense.sim.spacer).
 
-use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use texsense_core::{BoucWenBank, BoucWenParams, CoreError, SpacerBank, SpacerLaw, SpacerParams};
+use texsense_core::{
+    BoucWenBank, BoucWenParams, CoreError, SpacerBank, SpacerBatch, SpacerLaw, SpacerParams,
+};
 
-use crate::arrays::{pairs, to_2d};
+use crate::arrays::{element_bank, pairs, to_2d, Batch};
 use crate::errors::to_py;
 
 /// N spacer elements of one material (the virtual sensor's mechanics), stepped together by
@@ -26,8 +26,7 @@ type Ramp<'py> = (
     bool,
 );
 
-#[pymethods]
-impl PySpacerBank {
+element_bank!(PySpacerBank, {
     #[new]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -107,12 +106,6 @@ impl PySpacerBank {
         })
     }
 
-    /// Number of elements.
-    #[getter]
-    fn n_elements(&self) -> usize {
-        self.inner.len()
-    }
-
     /// Backbone stress (N/cm²) at compression fractions `e`.
     fn backbone<'py>(
         &self,
@@ -140,20 +133,12 @@ impl PySpacerBank {
         dt: PyReadonlyArray1<'py, f64>,
         compression: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Pair<'py>> {
-        let (t, n) = self.batch_shape(&dt, &compression)?;
-        let dts = dt.as_slice()?;
-        let e = compression.as_slice()?;
-        let mut p = vec![0.0; t * n];
-        let mut s = vec![0.0; t * n];
+        let b = Batch::unmasked("compression", self.inner.len(), &dt, &compression)?;
+        let (t, n) = (b.t, b.n);
+        let (mut p, mut s) = (vec![0.0; t * n], vec![0.0; t * n]);
         let inner = &mut self.inner;
-        py.detach(|| {
-            for (k, &dt) in dts.iter().enumerate() {
-                let r = k * n..(k + 1) * n;
-                inner.step_displacement(dt, &e[r.clone()], &mut p[r.clone()], &mut s[r])?;
-            }
-            Ok::<(), CoreError>(())
-        })
-        .map_err(to_py)?;
+        py.detach(|| inner.run_displacement(b.dt, b.values, &mut p, &mut s))
+            .map_err(to_py)?;
         Ok((to_2d(py, p, t, n)?, to_2d(py, s, t, n)?))
     }
 
@@ -187,23 +172,15 @@ impl PySpacerBank {
         dt: PyReadonlyArray1<'py, f64>,
         pressure: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Pair<'py>> {
-        let (t, n) = self.batch_shape(&dt, &pressure)?;
-        let dts = dt.as_slice()?;
-        let p = pressure.as_slice()?;
-        let mut e = vec![0.0; t * n];
-        let mut reached = vec![0.0; t * n];
+        let b = Batch::unmasked("pressure", self.inner.len(), &dt, &pressure)?;
+        let (t, n) = (b.t, b.n);
+        let (mut e, mut reached) = (vec![0.0; t * n], vec![0.0; t * n]);
         let inner = &mut self.inner;
-        py.detach(|| {
-            for (k, &dt) in dts.iter().enumerate() {
-                let r = k * n..(k + 1) * n;
-                inner.step_pressure(dt, &p[r.clone()], &mut e[r.clone()], &mut reached[r])?;
-            }
-            Ok::<(), CoreError>(())
-        })
-        .map_err(to_py)?;
+        py.detach(|| inner.run_pressure(b.dt, b.values, &mut e, &mut reached))
+            .map_err(to_py)?;
         Ok((to_2d(py, e, t, n)?, to_2d(py, reached, t, n)?))
     }
-}
+});
 
 impl PySpacerBank {
     /// Test-machine ramp of a one-element bank; see the Rust docs of `ramp_until`.
@@ -219,21 +196,5 @@ impl PySpacerBank {
             .inner
             .ramp_until(dt, rate, target, max_steps, &mut e, &mut p, &mut s)?;
         Ok((e, p, s, done))
-    }
-
-    fn batch_shape(
-        &self,
-        dt: &PyReadonlyArray1<'_, f64>,
-        values: &PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<(usize, usize)> {
-        let shape = values.shape();
-        if shape[1] != self.inner.len() || dt.len() != shape[0] {
-            return Err(to_py(CoreError::Shape {
-                what: "batch",
-                expected: format!("dt (T,) and values (T, {})", self.inner.len()),
-                got: format!("dt ({},) and values {shape:?}", dt.len()),
-            }));
-        }
-        Ok((shape[0], shape[1]))
     }
 }

@@ -10,9 +10,12 @@ exposed element has been offloaded (then it is *cleared*); acknowledging it sile
 does not clear it, and no second reposition alert opens while one is open.
 
 A tracker's state (:meth:`ExposureTracker.state`: the exposure and relief of every exposed
-element, whether the mat is loaded, the open alert) is JSON-ready and small; another tracker
-of the same layout goes on from it (:meth:`ExposureTracker.restore`): what a station of a
-group hands over when it takes over a mat (docs/station.md, "A group of stations").
+element, whether the mat is loaded, the open alert) is JSON-ready and small: what a recording
+started on a live mat stores, so that its review goes on from where the monitor was, and what a
+station of a group hands over when it takes over a mat (docs/station.md, "A group of
+stations"); another tracker of the same layout goes on from it (:meth:`ExposureTracker.restore`);
+a turn on a bed hands the exposure to new skin (:meth:`ExposureTracker.turned`); a mat that still
+carries its calibration load is not a person (:meth:`ExposureTracker.wait_for_empty`).
 
 Examples
 --------
@@ -83,9 +86,19 @@ class Alert:
     peak_exposure_s: float
     acknowledged_t: float | None = None
     cleared_t: float | None = None
-    #: where, in words: the regions the mode knows, else rows and columns (the monitor
-    #: names them; :func:`texsense.apps.views.place_names`)
+    #: where, in words: the anatomical regions (or seat zones) the mode knows; empty when it
+    #: knows none (a mat whose orientation is unknown)
     where: list[str] = field(default_factory=list)
+    #: the places no region names, as rows and columns (the alert's details line)
+    details: list[str] = field(default_factory=list)
+    #: wall clock (Unix s) when it opened, when the monitor knows it
+    opened_wall: float | None = None
+    #: why it cleared: ``offloaded`` or ``turned``
+    cleared_by: str | None = None
+    #: with bounds: "confident" (above the threshold with the bounds' confidence: the lower
+    #: bound is above it) or "possible" (only the upper bound is; counted only when the user
+    #: chose so); None without bounds
+    certainty: str | None = None
 
     @property
     def active(self) -> bool:
@@ -103,11 +116,15 @@ class Alert:
             "cleared_t": self.cleared_t,
             "active": self.active,
             "where": self.where,
+            "details": self.details,
+            "opened_wall": self.opened_wall,
+            "cleared_by": self.cleared_by,
+            "certainty": self.certainty,
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Alert:
-        """The alert of :meth:`to_dict` (a stored state)."""
+        """The alert of :meth:`to_dict` (a recording's stored state)."""
         try:
             return cls(
                 int(d["id"]),
@@ -115,8 +132,11 @@ class Alert:
                 [int(i) for i in d["elements"]],
                 float(d["peak_exposure_s"]),
                 None if d.get("acknowledged_t") is None else float(d["acknowledged_t"]),
-                None if d.get("cleared_t") is None else float(d["cleared_t"]),
+                None,
                 [str(w) for w in d.get("where") or []],
+                [str(w) for w in d.get("details") or []],
+                None if d.get("opened_wall") is None else float(d["opened_wall"]),
+                certainty=None if d.get("certainty") is None else str(d["certainty"]),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise ParameterError(f"a stored alert lacks or mangles {e}") from None
@@ -146,6 +166,10 @@ class ExposureTracker:
         None: no such events (a foot sensor, loaded at every step).
     occupancy_hold_s : float
         A change of occupancy is reported once it has held this long (default 0: at once).
+    count_possible : bool
+        With bounds (:meth:`step` ``lower``/``upper``): count an element that is only
+        *possibly* above the threshold (its upper bound is, its lower bound is not) toward the
+        reposition alert too (default: only those above it with the bounds' confidence).
     """
 
     def __init__(
@@ -159,6 +183,7 @@ class ExposureTracker:
         regions: dict[str, npt.ArrayLike] | None = None,
         occupancy: tuple[str, str] | None = ("seated", "left"),
         occupancy_hold_s: float = 0.0,
+        count_possible: bool = False,
     ) -> None:
         if not units.is_pressure_unit(unit):
             raise ParameterError(f"threshold unit {unit!r} is not a pressure unit")
@@ -195,6 +220,13 @@ class ExposureTracker:
         self.occupancy = occupancy
         self.occupancy_hold_s = float(occupancy_hold_s)
         self._occupancy_since: float | None = None  # when the load last changed state
+        self.count_possible = bool(count_possible)
+        #: with bounds, per element (or region) of the last frame: above the threshold with
+        #: the bounds' confidence, and only possibly above it
+        self.confident = np.zeros(n, bool)
+        self.possible = np.zeros(n, bool)
+        self.waiting_empty = False  # a calibration load on the mat: nothing counts yet
+        self.hold = False  # no new alert this frame (a bed's turn is being confirmed)
 
     @property
     def open_alert(self) -> Alert | None:
@@ -221,10 +253,18 @@ class ExposureTracker:
             return p
         return np.array([p[g].mean() for g in self._groups])
 
-    def step(self, pressure_ncm2: npt.ArrayLike, t: float) -> list[Event]:
+    def step(
+        self,
+        pressure_ncm2: npt.ArrayLike,
+        t: float,
+        lower: npt.ArrayLike | None = None,
+        upper: npt.ArrayLike | None = None,
+    ) -> list[Event]:
         """Advance to time ``t`` (s) with the pressure (N/cm²) of every element; returns the
-        events this frame caused. A missing (NaN) reading counts as unloaded. (Time last, as
-        a stage's ``step(values, valid, t)``.)"""
+        events this frame caused. A missing (NaN) reading counts as unloaded. (Time after the
+        values, as a stage's ``step(values, valid, t)``.) With the bounds ``lower`` and
+        ``upper`` (issue 37) an element is above the threshold when its lower bound is,
+        *possibly* above when only its upper bound is (counted with ``count_possible``)."""
         t = frame_time(t)
         p = np.asarray(pressure_ncm2, dtype=np.float64)
         if p.shape != (self.layout.n_elements,):
@@ -237,6 +277,16 @@ class ExposureTracker:
         self._last_t = t
         events: list[Event] = []
         loaded = self._values(p) > self.threshold_ncm2
+        if self.waiting_empty:  # the calibration load: no person, no exposure, no events
+            if loaded.any():
+                return events
+            self.waiting_empty, self.seated = False, False
+        if lower is not None and upper is not None:
+            self.confident = self._values(np.asarray(lower, np.float64)) > self.threshold_ncm2
+            self.possible = (
+                self._values(np.asarray(upper, np.float64)) > self.threshold_ncm2
+            ) & ~self.confident
+            loaded = self.confident | (self.possible & self.count_possible)
         # exposure grows while loaded; relief time grows while not; a long relief resets
         self.exposure_s[loaded] += dt
         self._relief_s[loaded] = 0.0
@@ -246,17 +296,37 @@ class ExposureTracker:
         alert = self.open_alert
         if alert is None:
             over = np.flatnonzero(self.exposure_s >= self.reposition_s)
-            if over.size:
+            if over.size and not self.hold:
                 alert = Alert(next(self._ids), t, over.tolist(), float(self.exposure_s.max()))
+                detail: dict[str, Any] = {"where": [self.names[i] for i in over]}
+                if lower is not None and upper is not None:
+                    alert.certainty = "confident" if self.confident[over].any() else "possible"
+                    detail["certainty"] = alert.certainty
                 self.alerts.append(alert)
-                names = [self.names[i] for i in over]
-                events.append(Event("reposition", t, alert.id, {"where": names}))
+                events.append(Event("reposition", t, alert.id, detail))
         else:
             alert.peak_exposure_s = max(alert.peak_exposure_s, float(self.exposure_s.max()))
             if not np.any(self.exposure_s[alert.elements] > 0):
-                alert.cleared_t = t
-                events.append(Event("cleared", t, alert.id))
+                alert.cleared_t, alert.cleared_by = t, "offloaded"
+                events.append(Event("cleared", t, alert.id, {"by": "offloaded"}))
         return events
+
+    def turned(self, t: float, since_t: float) -> list[Event]:
+        """A bed's turn that began at ``since_t`` is confirmed at ``t``: other skin now lies on
+        the mat, so no element has been exposed longer than ``t - since_t``, and an open alert
+        clears (by the turn)."""
+        np.minimum(self.exposure_s, max(t - since_t, 0.0), out=self.exposure_s)
+        alert = self.open_alert
+        if alert is None:
+            return []
+        alert.cleared_t, alert.cleared_by = t, "turned"
+        return [Event("cleared", t, alert.id, {"by": "turned"})]
+
+    def wait_for_empty(self) -> None:
+        """Count nothing until the mat has been seen empty: what lies on it now is the load a
+        calibration was made with, not a person (no *seated*, no exposure)."""
+        self.waiting_empty = True
+        self.exposure_s[:] = 0.0
 
     def state(self) -> dict[str, Any]:
         """What the tracker knows now, JSON-ready and compact: the time of the last frame,
@@ -274,6 +344,7 @@ class ExposureTracker:
                 for i in exposed
             ],
             "loaded": self.seated,
+            "waiting_empty": self.waiting_empty,
             "alert": None if alert is None else alert.to_dict(),
             "next_id": max((a.id for a in self.alerts), default=0) + 1,
         }
@@ -299,6 +370,7 @@ class ExposureTracker:
         self._last_t = t
         self.seated = bool(state.get("loaded", False))
         self._occupancy_since = None
+        self.waiting_empty = bool(state.get("waiting_empty", False))
         self.alerts = []
         if isinstance(state.get("alert"), dict):
             self.alerts.append(Alert.from_dict(state["alert"]))

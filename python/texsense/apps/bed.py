@@ -11,8 +11,10 @@ offset across it, and each prominence is the highest maximum in its band (e.g. t
 the highest one between 35 % and 65 % of the length, within 7 cm of the centre line; a
 scapula: 12-32 % of the length, on its side of the line and at most 16 cm off it). A
 region is the prominence's elements within 4 cm that carry at least half its peak; it is
-*at risk* when its peak exceeds the exposure threshold (32 mmHg, §1.1). Sides ``-l`` / ``-r``
-are the mat's first / last column.
+*at risk* when its peak exceeds the exposure threshold (32 mmHg, §1.1). The head end is at
+row 0 unless the mat's orientation puts it at the bottom; ``-l`` / ``-r`` are the person's own
+left and right, named only when the orientation says which edge is which (a bed declaring
+none has a ``heel`` on each side, never a ``heel-l``; see :func:`side_names`).
 
 **Turning schedule** (:class:`TurningSchedule`). Care plans turn a bed-bound person every
 2 h (configurable). The schedule takes the side the person lies on frame by frame (from
@@ -44,7 +46,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from texsense.apps.alerts import Event, frame_time
+from texsense.apps.alerts import Event, ExposureTracker, frame_time
 from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
@@ -55,7 +57,10 @@ __all__ = [
     "Region",
     "TurningSchedule",
     "body_axis",
+    "exposure_with_turns",
     "find_regions",
+    "region_elements",
+    "side_names",
 ]
 
 #: Per side: prominence -> (band along the body as fractions of the loaded length, where
@@ -140,10 +145,11 @@ def _cell_xy(rows: np.ndarray, cols: np.ndarray, pitch: tuple[float, float]) -> 
 
 
 def _axis(
-    g: np.ndarray, pitch: tuple[float, float]
+    g: np.ndarray, pitch: tuple[float, float], head_top: bool = True
 ) -> tuple[np.ndarray, np.ndarray, float, float] | None:
-    """Centre, long axis (from the head end), head end (along the axis from the centre) and
-    length of the loaded cells of the map ``g``; None with fewer than 3 loaded cells."""
+    """Centre, long axis (from the head end: row 0, or the last row when not ``head_top``),
+    head end (along the axis from the centre) and length of the loaded cells of the map
+    ``g``; None with fewer than 3 loaded cells."""
     rows, cols = np.nonzero(g > max(_LOADED_NCM2, 0.03 * g.max()))
     if rows.size < 3:
         return None
@@ -151,7 +157,7 @@ def _axis(
     centre = xy.mean(axis=0)
     w, v = np.linalg.eigh(np.cov((xy - centre).T))
     axis = v[:, np.argmax(w)]
-    if axis[1] < 0:
+    if (axis[1] < 0) == head_top:
         axis = -axis
     u = (xy - centre) @ axis
     return centre, axis, float(u.min()), float(u.max() - u.min() + min(pitch))
@@ -165,6 +171,43 @@ def body_axis(
     nothing carries load (above 0.05 N/cm² and 3 % of the frame's peak)."""
     found = _axis(_grid(pressure, layout), layout.pitch_cm or (1.0, 1.0))
     return None if found is None else (found[0], found[1], found[3])
+
+
+def side_names(layout: Layout) -> tuple[bool, str | None, str | None]:
+    """How a bed mat lies, from its orientation: whether the head end is at row 0 (also when
+    nothing is declared: what every bed mat is assumed to be), and the person's side on the
+    mat's first and on its last column (``left``, ``right``, or None when not declared)."""
+    o = layout.orientation
+    head_top = o.get("bottom") != "head"
+    first, last = o.get("left"), o.get("right")
+    known = {"left", "right"}
+    if first not in known or last not in known or first == last:
+        return head_top, None, None
+    return head_top, first, last
+
+
+def _named(name: str, where: str, side: str, first: str | None, last: str | None) -> str:
+    """A prominence's name with the person's side (``heel-l``), or without it when the
+    orientation does not say which side is which (``heel``). Lying prone, the person's left
+    is on the other side of the mat from lying on the back."""
+    if where not in ("l", "r"):
+        return name
+    base = name[:-2]
+    body = first if where == "l" else last
+    if body is None:
+        return base
+    if side == "prone":
+        body = "right" if body == "left" else "left"
+    return f"{base}-{body[0]}"
+
+
+def region_elements(regions: dict[str, Region]) -> dict[str, list[int]]:
+    """Name -> elements of found regions (two regions of one name, e.g. both heels of a mat
+    whose sides are unknown, pooled)."""
+    out: dict[str, list[int]] = {}
+    for r in regions.values():
+        out.setdefault(r.name, []).extend(r.elements)
+    return out
 
 
 def find_regions(
@@ -186,7 +229,8 @@ def find_regions(
     limit = float(units.convert(threshold, unit, "N/cm2"))
     g = _grid(pressure, layout)
     pitch = layout.pitch_cm or (1.0, 1.0)
-    found_axis = _axis(g, pitch)
+    head_top, first, last = side_names(layout)
+    found_axis = _axis(g, pitch, head_top)
     if found_axis is None:
         return {}
     centre, axis, head_u, length = found_axis
@@ -218,7 +262,7 @@ def find_regions(
             continue
         vals = flat[near]
         regions[name] = Region(
-            name,
+            _named(name, where, side, first, last),
             float(x),
             float(y),
             tuple(int(i) for i in np.flatnonzero(near)),
@@ -312,6 +356,13 @@ class TurningSchedule:
                 "side": self.side, "since_s": round(t - self.since_t, 1)}))  # fmt: skip
         return events
 
+    @property
+    def turning(self) -> bool:
+        """A new side is being held but not yet for ``settle_s``: a turn may be under way."""
+        return (
+            self._candidate is not None and self.side is not None and self._candidate != self.side
+        )
+
     def state(self) -> dict[str, Any]:
         """What the schedule knows now, JSON-ready (see :meth:`restore`)."""
         return {
@@ -364,6 +415,29 @@ class TurningSchedule:
             "turns": self.turns,
             "turn_due": self.due_since is not None,
         }
+
+
+def exposure_with_turns(
+    tracker: ExposureTracker,
+    t: float,
+    pressure: npt.ArrayLike,
+    schedule: TurningSchedule | None = None,
+    schedule_events: list[Event] | None = None,
+    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+) -> list[Event]:
+    """The exposure tracker's step on a bed, after the schedule's step of the same frame
+    (``schedule_events``): a confirmed turn hands the exposure to new skin and clears an open
+    alert (:meth:`ExposureTracker.turned`), and no alert opens while a new side is being
+    held but not yet confirmed (a sleeper who turned right -> supine 24 s before the sacrum's
+    exposure reached its limit is not told to reposition). Returns the schedule's events and
+    the tracker's. The live monitor and a recording's review both run this; ``bounds``
+    (lower, upper) go to the tracker (issue 37: confident or only possible exceedances)."""
+    events = list(schedule_events or [])
+    tracker.hold = schedule is not None and schedule.turning
+    for turn in [e for e in events if e.kind == "turn"]:
+        events += tracker.turned(t, turn.t)
+    lo, hi = (None, None) if bounds is None else bounds
+    return events + tracker.step(np.asarray(pressure, dtype=np.float64), t, lo, hi)
 
 
 class BedWatch:

@@ -8,7 +8,11 @@ force), the events and alerts, the time per side and the turns of a bed, and per
 health. The events are **recomputed** from the frames with the monitor's own rules and the
 settings the recording declares (a monitor recording stores its threshold, reposition and
 turning intervals) — the same events for the same frames, whether the file came from the
-monitor, a vendor's software or a simulation.
+monitor, a vendor's software or a simulation. A recording made live carries its clinical
+state (:mod:`texsense.apps.clinical`): the recomputation starts from the state the monitor
+had when it started (an alert open before the first frame stays open), and the events shown
+are the ones the monitor raised, at their wall-clock times, with the recomputed ones it did
+not raise marked as such.
 
 Memory: the statistics are computed in blocks of frames, so a night of 27,000 frames of a
 2048-element mat needs a few blocks' worth, not a float64 copy of the whole recording.
@@ -24,10 +28,12 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.apps import stats
+from texsense.apps.clinical import frame_walls, live_events, start_state
 from texsense.apps.review_events import (
     BLOCK,
     EVENT_TEXT,
     element_health,
+    merge_events,
     recompute_events,
     side_labels,
 )
@@ -68,11 +74,40 @@ class Review:
     #: (T, N) True where a pressure reading was flagged invalid but carries a repaired value
     #: (it counts, as it does live); None when nothing was repaired
     repaired: np.ndarray | None = None
+    #: (lower, upper) (T, N) in the stored unit: the bounds of a processed recording that has
+    #: them (``process --interval``, a monitor recording with bounds); None otherwise
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
+    #: the clinical state the monitor had when the recording started (None: not recorded live)
+    start: dict[str, Any] | None = None
+    #: the wall clock of every frame (Unix s; None: the file does not say)
+    walls: np.ndarray | None = None
+    #: whether the events shown are the monitor's own (a live recording) or all recomputed
+    live: bool = False
+    #: what the review could not use (a start state that does not fit), in words
+    notes: list[str] = field(default_factory=list)
 
     @property
     def pressure(self) -> bool:
         """True when the recording holds pressure."""
         return self.rec.quantity == "pressure"
+
+    def wall_at(self, i: int) -> float | None:
+        """The wall clock (Unix s) of frame ``i``: its own, else the start + its frame time."""
+        if self.walls is not None:
+            return float(self.walls[i])
+        if self.started is None:
+            return None
+        return self.started + float(self.rec.times[i] - self.rec.times[0])
+
+    @property
+    def clock_rate(self) -> float:
+        """Frame seconds per wall-clock second over the recording (1 for a real mat; 20 for a
+        device simulated or replayed at 20x); 1 when the file does not say."""
+        if self.walls is None or self.rec.n_frames < 2:
+            return 1.0
+        wall = float(self.walls[-1] - self.walls[0])
+        frames = float(self.rec.times[-1] - self.rec.times[0])
+        return frames / wall if wall > 0 and frames > 0 else 1.0
 
     def frame(self, i: int) -> np.ndarray:
         """Frame ``i`` in the display unit, NaN where a reading is invalid."""
@@ -207,7 +242,7 @@ def open_review(
     from texsense.io import load
 
     original = source if isinstance(source, Recording) else load(source)
-    rec = _with_repairs(original)
+    rec = _oriented(_with_repairs(original))
     if rec.n_frames == 0:
         raise ParameterError("the recording has no frames")
     label = name or (Path(source).name if not isinstance(source, Recording) else "recording")
@@ -222,14 +257,7 @@ def open_review(
         reposition_min=reposition_min,
         turn_every_min=turn_every_min,
     )
-    if scale is None:
-        keep = rec.labels.get("reliable")  # PMD: the first and last 3 frames of a file
-        pick = (
-            np.flatnonzero(keep) if keep is not None and keep.dtype == bool and keep.any() else None
-        )
-        pick = np.arange(rec.n_frames) if pick is None else pick
-        sample = rec.frames[pick[:: max(1, pick.size // 400)]] * factor
-        scale = recording_scale(sample, shown, mode)
+    scale = _scale(rec, factor, shown, mode) if scale is None else scale
     if not (np.isfinite(scale[0]) and np.isfinite(scale[1]) and scale[1] > scale[0]):
         raise ParameterError(f"the colour scale must run from low to high, got {scale}")
     threshold = None
@@ -249,11 +277,59 @@ def open_review(
     )
     review.use = _usable(rec)
     review.series = _series(review)
-
-    review.events, review.sides = recompute_events(review, model)
+    _events(review, model)
     review.health = element_health(original)
     review.repaired = None if rec is original else ~original.valid
+    if rec.quantity == "pressure" and not isinstance(source, Recording):
+        path = Path(source)
+        if path.is_file() and path.suffix.lower() in (".h5", ".hdf5"):
+            from texsense.io.hdf5 import read_bounds
+
+            review.bounds = read_bounds(path)
     return review
+
+
+def _events(review: Review, model: Any) -> None:
+    """The events of a review: a live recording's own (:mod:`texsense.apps.clinical`: its
+    wall clock, the state it started in, the events the monitor raised) with the recomputed
+    ones it did not raise; else all recomputed."""
+    rec = review.rec
+    review.walls = frame_walls(rec)
+    if review.walls is not None:
+        review.started = float(review.walls[0])
+    try:
+        review.start = start_state(rec.meta)
+    except ParameterError as e:
+        review.notes.append(f"the clinical state at the start is not used ({e})")
+    recomputed, review.sides, notes = recompute_events(review, model)
+    review.notes += notes
+    live = live_events(rec)
+    review.live = live is not None
+    review.events = recomputed if live is None else merge_events(review, live, recomputed)
+
+
+def _scale(rec: Recording, factor: float, shown: str, mode: str) -> tuple[float, float]:
+    """The colour scale a recording gets when none is given: the mode's, or one from a sample
+    of at most ~400 of its reliable frames (PMD: all but the first and last 3 of a file)."""
+    pick = np.flatnonzero(_usable(rec))
+    sample = rec.frames[pick[:: max(1, pick.size // 400)]] * factor
+    return recording_scale(sample, shown, mode)
+
+
+def _oriented(rec: Recording) -> Recording:
+    """The recording with the orientation its metadata declares on its layout (a monitor's
+    recording keeps it in ``meta``, its HDF5 layout does not): its seat zones and a bed's
+    left and right are then named as they were live."""
+    declared = rec.meta.get("orientation")
+    if rec.layout.orientation or not isinstance(declared, dict) or not declared:
+        return rec
+    edges = {k: v for k, v in declared.items() if k in ("top", "bottom", "left", "right")}
+    try:
+        layout = rec.layout.with_orientation(edges or None)
+    except ParameterError:
+        return rec  # a mangled declaration: the map says what orientation_of finds
+    return Recording(rec.frames, rec.times, layout, rec.quantity, rec.unit, valid=rec.valid,
+                     element_times=rec.element_times, labels=rec.labels, meta=rec.meta)  # fmt: skip
 
 
 def _with_repairs(rec: Recording) -> Recording:

@@ -22,8 +22,15 @@ import numpy as np
 
 from texsense.apps import stats
 from texsense.apps.alerts import REPOSITION_RANGE_MIN, Event, ExposureTracker
-from texsense.apps.bed import BANDS, TurningSchedule, find_regions
-from texsense.apps.views import format_duration, place_names, seat_zones
+from texsense.apps.bed import (
+    BANDS,
+    TurningSchedule,
+    exposure_with_turns,
+    find_regions,
+    region_elements,
+)
+from texsense.apps.clinical import POSTURE_LABEL
+from texsense.apps.views import alert_places, format_duration, seat_zones
 from texsense.data import units
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
@@ -35,7 +42,10 @@ __all__ = [
     "BLOCK",
     "EVENT_TEXT",
     "element_health",
+    "event_places",
     "event_text",
+    "merge_events",
+    "open_at_start",
     "recompute_events",
     "side_labels",
 ]
@@ -54,6 +64,7 @@ EVENT_TEXT = {
     "reposition": "reposition alert",
     "acknowledged": "alert acknowledged",
     "cleared": "alert cleared (skin offloaded)",
+    "clock": "the mat's clock jumped (re-synchronised)",
     "turn": "turned",
     "turn-due": "turn due",
     "turn-done": "turn alert closed",
@@ -64,8 +75,8 @@ EVENT_TEXT = {
 def side_labels(rec: Recording, model: Any = None) -> tuple[np.ndarray | None, str]:
     """The side a person lies on in every frame of a bed recording (``None`` for an empty
     bed) and where it came from: a posture model of sides (``model``), else the recording's
-    label ``side`` (the virtual bed) or ``posture_class`` (PhysioNet PMD); (None, "") if
-    none of them is there."""
+    label ``side`` (the virtual bed), ``posture_class`` (PhysioNet PMD) or ``posture_live``
+    (the side the monitor showed while it recorded); (None, "") if none of them is there."""
 
     if model is not None:
         if model.layout != rec.layout:
@@ -75,7 +86,7 @@ def side_labels(rec: Recording, model: Any = None) -> tuple[np.ndarray | None, s
         if rec.quantity == "pressure":
             sides[stats.total_load(rec) < 50.0] = None  # under 5 kg: nobody
         return sides, "the posture model"
-    for name in ("side", "posture_class"):
+    for name in ("side", "posture_class", POSTURE_LABEL):
         if name in rec.labels:
             raw = np.asarray(rec.labels[name]).astype(str).astype(object)
             known = np.isin(raw, [*BANDS, "transition"])
@@ -96,28 +107,76 @@ def event_text(kind: str, detail: dict[str, Any]) -> str:
         text += f": {format_duration(detail.get('since_s'))} on {detail.get('side')}"
     elif kind == "out-of-bed" and detail.get("after_s") is not None:
         text += f" (for {format_duration(detail['after_s'])})"
+    elif kind == "cleared" and detail.get("by") == "turned":
+        text = "alert cleared (turned)"
+    if detail.get("open_at_start"):
+        text += " (open when the recording started)"
     if detail.get("where"):
         text += ": " + ", ".join(detail["where"])
     return text
 
 
-def _where(review: Review, elements: list[int], row: np.ndarray, side: Any) -> list[str]:
+def event_places(detail: dict[str, Any]) -> str:
+    """The details line of an event: the grid positions no region names (the text names
+    regions only, as the live alert band does: issue 33), or ``""``."""
+    if not detail.get("details"):
+        return ""
+    return ("also " if detail.get("where") else "where on the map: ") + ", ".join(detail["details"])
+
+
+def _places(
+    review: Review, elements: list[int], row: np.ndarray, side: Any
+) -> tuple[list[str], list[str]]:
 
     lay = review.rec.layout
     regions: dict[str, Any] = {}
     if review.mode.name == "bed" and side in BANDS and lay.shape is not None:
         found = find_regions(row, lay, str(side), threshold=review.settings["threshold_mmhg"])
-        regions = {r.name: list(r.elements) for r in found.values()}
+        regions = region_elements(found)
     elif review.mode.name == "seat" and lay.shape is not None:
         regions = seat_zones(lay)
-    return place_names(elements, lay, regions)
+    return alert_places(elements, lay, regions)
+
+
+def _seeded(
+    review: Review, tracker: ExposureTracker | None, schedule: TurningSchedule | None
+) -> list[str]:
+    """Seed the tracker and the schedule with the state the monitor had when the recording
+    started (:mod:`texsense.apps.clinical`); returns notes on what could not be used."""
+    state = review.start
+    notes: list[str] = []
+    if state is None:
+        return notes
+    if tracker is not None and state.get("exposure") is not None:
+        try:
+            tracker.restore(state["exposure"])
+        except ParameterError as e:
+            notes.append(f"the exposure at the start is not used ({e})")
+    if schedule is not None and state.get("bed") is not None:
+        try:
+            schedule.restore(state["bed"])
+        except ParameterError as e:
+            notes.append(f"the turning schedule at the start is not used ({e})")
+    return notes
+
+
+def _entry(
+    i: int, t_rel: float, e: Event | dict[str, Any], source: str, wall: float | None
+) -> dict[str, Any]:
+    kind = e.kind if isinstance(e, Event) else e["kind"]
+    alert = e.alert_id if isinstance(e, Event) else e.get("alert_id")
+    detail = dict(e.detail if isinstance(e, Event) else e.get("detail") or {})
+    return {"i": i, "t": round(t_rel, 3), "kind": kind, "alert": alert, "detail": detail,
+            "text": event_text(kind, detail), "places": event_places(detail),
+            "source": source, "wall": wall}  # fmt: skip
 
 
 def recompute_events(
     review: Review, model: Any = None
-) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
-    """The events of ``review``'s frames (see the module) and, for a bed with sides, the
-    time per side and the turns."""
+) -> tuple[list[dict[str, Any]], dict[str, Any] | None, list[str]]:
+    """The events of ``review``'s frames (see the module), seeded with the state the monitor
+    had when the recording started; for a bed with sides, the time per side and the turns;
+    and notes on the start state."""
 
     rec, mode, s = review.rec, review.mode, review.settings
     sides, origin = side_labels(rec, model) if mode.name == "bed" else (None, "")
@@ -134,6 +193,7 @@ def recompute_events(
             occupancy_hold_s=mode.occupancy_hold_s,
         )
     schedule = None if sides is None else TurningSchedule(interval_min=s["turn_every_min"])
+    notes = _seeded(review, tracker, schedule)
     to_ncm2 = units.factor(rec.unit, "N/cm2") if review.pressure else 1.0
     t0 = float(rec.times[0])
     out: list[dict[str, Any]] = []
@@ -145,29 +205,18 @@ def recompute_events(
             i = start + k
             t = float(rec.times[i])
             events: list[Event] = []
-            if tracker is not None:
-                events += tracker.step(row, t)
             if schedule is not None and sides is not None:
                 events += schedule.step(sides[i], t)
+            if tracker is not None:
+                events = exposure_with_turns(tracker, t, row, schedule, events)
             for e in events:
-                detail = dict(e.detail)
                 if e.kind == "reposition" and tracker is not None:
                     alert = next(a for a in tracker.alerts if a.id == e.alert_id)
-                    side = sides[i] if sides is not None else None
-                    detail = {
-                        "where": _where(review, alert.elements, row, side),
-                        "elements": alert.elements,
-                    }
-                out.append(
-                    {
-                        "i": i,
-                        "t": round(t - t0, 3),
-                        "kind": e.kind,
-                        "alert": e.alert_id,
-                        "detail": detail,
-                        "text": event_text(e.kind, detail),
-                    }
-                )
+                    where, details = _places(
+                        review, alert.elements, row, sides[i] if sides is not None else None
+                    )
+                    e.detail = {"where": where, "details": details, "elements": alert.elements}
+                out.append(_entry(i, t - t0, e, "recomputed", review.wall_at(i)))
     beds = None
     if schedule is not None:
         beds = {
@@ -176,7 +225,50 @@ def recompute_events(
             "turns": schedule.turns,
             "interval_min": s["turn_every_min"],
         }
-    return out, beds
+    return out, beds, notes
+
+
+def open_at_start(review: Review) -> list[dict[str, Any]]:
+    """The alerts open when the recording started (from its clinical state), as events
+    before its first frame: a reposition alert with its places, a turn that was due."""
+    state = review.start or {}
+    t0 = float(review.rec.times[0])
+    out = []
+    alert = (state.get("exposure") or {}).get("alert")
+    if isinstance(alert, dict) and review.pressure and review.mode.alerts:
+        detail = {k: alert.get(k) for k in ("where", "details", "elements")}
+        detail["open_at_start"] = True
+        e = {"kind": "reposition", "alert_id": alert.get("id"), "detail": detail}
+        t = float(alert.get("opened_t", t0))
+        out.append(_entry(0, t - t0, e, "before", alert.get("opened_wall")))
+    bed = state.get("bed") or {}
+    if bed.get("due_since") is not None and review.sides is not None:
+        since = float(bed.get("since_t") or bed["due_since"])
+        detail = {"side": bed.get("side"), "since_s": round(float(bed["due_since"]) - since, 1),
+                  "open_at_start": True}  # fmt: skip
+        e = {"kind": "turn-due", "detail": detail}
+        out.append(_entry(0, float(bed["due_since"]) - t0, e, "before", None))
+    return out
+
+
+def merge_events(
+    review: Review, live: list[dict[str, Any]], recomputed: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
+    """The events a report and playback show for a live recording: the alerts open when it
+    started, every event the monitor raised while it ran (``source`` ``live``, at its own
+    wall-clock time), and the recomputed events the monitor did not raise (``recomputed``:
+    a recomputed event matches a live one of the same kind within 2 frames)."""
+    t0 = float(review.rec.times[0])
+    shown = [_entry(e["i"], e["t"] - t0, e, "live", e.get("wall")) for e in live]
+    free = {k: [e["i"] for e in shown if e["kind"] == k] for k in {e["kind"] for e in shown}}
+    for e in recomputed:
+        near = [i for i in free.get(e["kind"], []) if abs(i - e["i"]) <= 2]
+        if near:
+            free[e["kind"]].remove(near[0])
+        else:
+            shown.append(e)
+    shown.sort(key=lambda e: (e["i"], e["source"] != "live"))
+    return [*open_at_start(review), *shown]
 
 
 def element_health(rec: Recording) -> dict[str, np.ndarray]:

@@ -23,13 +23,14 @@ Examples
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from texsense.data.files import write_text
+from texsense.data.files import read_regular, write_text
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 
@@ -131,12 +132,14 @@ def load_rois(recording: str | Path) -> list[dict[str, Any]]:
     """The regions saved with a recording (none when there is no sidecar); a broken sidecar
     raises :class:`ParameterError` naming it."""
     path = rois_path(recording)
-    if not path.is_file():
+    if not os.path.lexists(path):
         return []
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(read_regular(path, "a regions file").decode("utf-8"))
     except (ValueError, UnicodeDecodeError) as e:
         raise ParameterError(f"{path}: not a regions file ({e})") from None
+    except OSError as e:
+        raise ParameterError(f"{path}: cannot read the regions ({e.strerror or e})") from None
     if not isinstance(data, dict) or data.get("format") != "texsense.rois":
         raise ParameterError(f"{path}: not a texsense regions file")
     try:

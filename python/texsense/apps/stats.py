@@ -1,8 +1,10 @@
 """Frame statistics that pressure-mapping users expect.
 
-All functions take a :class:`~texsense.Recording` and return one value per frame. Pressures
-are taken in N/cm² (a recording in kPa or mmHg is converted first), forces are in N, areas in
-cm², positions in cm in the layout's coordinates. Readings flagged invalid are left out.
+All functions take a :class:`~texsense.Recording` and return one value per frame. Values
+(the peak, the PPI, a contact threshold) are in the recording's own unit:
+``peak_pressure(rec.to_unit("mmHg"))`` is in mmHg; forces are in N (the load converts the
+pressure to N/cm² first), areas in cm², positions in cm in the layout's coordinates.
+Readings flagged invalid are left out.
 
 - :func:`total_load`: sum of pressure x element area (N).
 - :func:`contact_area`: area of the elements whose value exceeds a threshold (cm²).
@@ -12,6 +14,7 @@ cm², positions in cm in the layout's coordinates. Readings flagged invalid are 
 - :func:`centre_of_force`: force-weighted mean of the element centres (x, y in cm).
 - :func:`coefficient_of_variation`: standard deviation / mean of the loaded elements.
 - :func:`region_stats`: load, mean, peak and contact area per named region.
+- :func:`raw_rise`: what a mat without a calibration can say of a frame (the live monitor's).
 
 Statistics other than the load also work on raw counts (``quantity="raw"``); the centre of
 force is then the centre of the raw values.
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +53,7 @@ __all__ = [
     "frame_stats",
     "peak_pressure",
     "peak_pressure_index",
+    "raw_rise",
     "region_stats",
     "total_load",
 ]
@@ -58,8 +63,9 @@ _BLOCK = 1024  # frames per block in the windowed statistics (bounds memory)
 
 
 def _values(rec: Recording, *, need_pressure: bool = False) -> _Array:
-    """Frames as float64 with invalid readings as NaN, pressure converted to N/cm²."""
-    if rec.quantity == "pressure":
+    """Frames as float64 with invalid readings as NaN; with ``need_pressure`` (the load),
+    pressure converted to N/cm²; otherwise in the recording's unit."""
+    if rec.quantity == "pressure" and need_pressure:
         f = units.factor(rec.unit, "N/cm2")
     elif need_pressure:
         raise ParameterError(
@@ -86,8 +92,8 @@ def total_load(rec: Recording) -> _Array:
 
 
 def contact_area(rec: Recording, threshold: float = 0.0) -> _Array:
-    """Area in cm² of the elements whose value is above ``threshold`` (same unit as the
-    statistic: N/cm² for pressure, counts for raw)."""
+    """Area in cm² of the elements whose value is above ``threshold`` (in the recording's
+    unit)."""
     v = _values(rec)
     with np.errstate(invalid="ignore"):
         loaded = v > threshold
@@ -95,7 +101,8 @@ def contact_area(rec: Recording, threshold: float = 0.0) -> _Array:
 
 
 def peak_pressure(rec: Recording) -> _Array:
-    """Highest valid element value per frame (N/cm² for pressure); NaN if none is valid."""
+    """Highest valid element value per frame, in the recording's unit; NaN if none is
+    valid."""
     v = _values(rec)
     out = np.full(rec.n_frames, np.nan)
     ok = np.isfinite(v).any(axis=1)
@@ -253,3 +260,29 @@ def region_stats(
             entry["load_N"] = _nan_if_empty(np.nansum(sub * area[idx], axis=1), count)
         out[name] = entry
     return out
+
+
+#: Without a calibration an element "responds" when it reads above its lowest reading so far
+#: by more than this fraction of the mat's typical (median) lowest reading (unit-free). On the
+#: virtual seat behind a serial line (`texsense simulate device`, 3.3-4.0 pF empty): 1 N/cm²
+#: on every element -> 96 of 96 respond (threshold 0.0125 pF, highest rise 2.5 pF); the mat
+#: emptied again -> 0 of 96 (highest rise 0.003 pF, what the spacer's hysteresis leaves).
+RESPOND_FRACTION = 0.005
+
+
+def raw_rise(raw: np.ndarray, floor: np.ndarray) -> dict[str, Any]:
+    """What a mat without a calibration can honestly say of a frame, in its raw unit: each
+    element's rise above its lowest reading so far (``floor``), the highest rise and how
+    many elements respond (rise above :data:`RESPOND_FRACTION` of the median floor)."""
+    rise = raw - floor
+    finite = np.isfinite(rise)
+    if not finite.any():
+        return {"peak_rise": None, "responding": 0, "working": 0, "respond_above": None}
+    typical = float(np.median(np.abs(floor[np.isfinite(floor)])))
+    above = RESPOND_FRACTION * typical
+    return {
+        "peak_rise": round(float(np.max(rise[finite])), 4),
+        "responding": int(np.count_nonzero(rise[finite] > above)),
+        "working": int(np.count_nonzero(finite)),
+        "respond_above": round(above, 4),
+    }

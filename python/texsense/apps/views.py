@@ -49,14 +49,17 @@ from texsense.exceptions import ParameterError
 __all__ = [
     "MODES",
     "Mode",
+    "alert_places",
     "format_clock",
     "format_duration",
     "guess_mode",
     "orientation_of",
+    "outline_segments",
     "place_names",
     "recording_scale",
     "seat_zones",
     "started_at",
+    "threshold_mask",
 ]
 
 
@@ -241,25 +244,41 @@ def seat_zones(layout: Layout) -> dict[str, np.ndarray]:
     """Zones of a seat by position (not found anatomy): with the front edge at the top, the
     back 18 % of the depth in the middle fifth is the ``sacrum`` (leaning back), the rest of
     the back half ``ischium-l`` / ``ischium-r``, the front half ``thigh-l`` / ``thigh-r``;
-    ``-l`` is the sitter's left (the first column with the seat orientation). A seat drawn
-    with its back at the top is turned round first."""
+    ``-l`` is the sitter's left. Only what the orientation declares is named: a seat whose
+    front is not declared has no zones (its back half cannot be told from its front), one
+    whose left and right are not declared has ``ischium`` and ``thigh`` without a side. A seat
+    drawn with its back at the top is turned round first.
+
+    >>> from texsense import Layout
+    >>> sorted(seat_zones(Layout.grid(10, 10, pitch_cm=4).with_orientation("seat")))
+    ['ischium-l', 'ischium-r', 'sacrum', 'thigh-l', 'thigh-r']
+    >>> seat_zones(Layout.grid(10, 10, pitch_cm=4))
+    {}
+    """
     o = layout.orientation
+    if {o.get("top"), o.get("bottom")} & {"front", "back"} == set():
+        return {}
     x0, x1, y0, y1 = layout.extent_cm
     fx = (layout.xy_cm[:, 0] - x0) / max(x1 - x0, 1e-9)
     fy = (layout.xy_cm[:, 1] - y0) / max(y1 - y0, 1e-9)
-    if o.get("top") == "back":
+    if o.get("top") == "back" or o.get("bottom") == "front":
         fy = 1 - fy
+    sides = {o.get("left"), o.get("right")} == {"left", "right"}
     if o.get("left") == "right":
         fx = 1 - fx
     back = fy >= 0.5
     mid = np.abs(fx - 0.5) <= 0.1
-    zones = {
-        "sacrum": back & mid & (fy >= 0.82),
-        "ischium-l": back & (fx < 0.5) & ~(mid & (fy >= 0.82)),
-        "ischium-r": back & (fx >= 0.5) & ~(mid & (fy >= 0.82)),
-        "thigh-l": ~back & (fx < 0.5),
-        "thigh-r": ~back & (fx >= 0.5),
-    }
+    sacrum = back & mid & (fy >= 0.82)
+    if not sides:
+        zones = {"sacrum": sacrum, "ischium": back & ~sacrum, "thigh": ~back}
+    else:
+        zones = {
+            "sacrum": sacrum,
+            "ischium-l": back & (fx < 0.5) & ~sacrum,
+            "ischium-r": back & (fx >= 0.5) & ~sacrum,
+            "thigh-l": ~back & (fx < 0.5),
+            "thigh-r": ~back & (fx >= 0.5),
+        }
     return {k: np.flatnonzero(v) for k, v in zones.items()}
 
 
@@ -305,6 +324,65 @@ def place_names(
             labels = layout.names or tuple(f"element {i}" for i in range(layout.n_elements))
             names += [labels[i] for i in left]
     return names
+
+
+def alert_places(
+    elements: Iterable[int],
+    layout: Layout,
+    regions: Mapping[str, npt.ArrayLike] | None = None,
+) -> tuple[list[str], list[str]]:
+    """Where an alert is, in two parts: the regions (anatomy, seat zones) its elements lie in
+    or near — what the alert says — and the rest as rows and columns — its details line.
+
+    >>> from texsense import Layout
+    >>> lay = Layout.grid(8, 8, pitch_cm=2)
+    >>> alert_places([0, 36, 37], lay, {"heel": [0, 1]})
+    (['heel'], ['row 5, columns 5-6'])
+    """
+    idx = np.unique(np.asarray(list(elements), dtype=np.int64))
+    named = [k for k, v in (regions or {}).items() if np.asarray(v).size]
+    names = place_names(idx, layout, regions)
+    return [n for n in names if n in named], [n for n in names if n not in named]
+
+
+def threshold_mask(grid: npt.ArrayLike, active: npt.ArrayLike, threshold: float) -> np.ndarray:
+    """The cells of a map (rows x cols) inside the region above ``threshold``: the elements
+    above it, and an empty cell (no element, ``active`` False: a checkerboard's gaps) when at
+    least half of the elements among its 4 neighbours, and at least two, are above — so that
+    the outline follows the loaded area rather than each cell of a checkerboard. The page
+    draws the same region (``aboveMask`` in mapview.js).
+
+    >>> active = np.indices((3, 3)).sum(axis=0) % 2 == 0     # a 3 x 3 checkerboard
+    >>> threshold_mask(np.where(active, 1.0, np.nan), active, 0.5).astype(int)
+    array([[1, 1, 1],
+           [1, 1, 1],
+           [1, 1, 1]])
+    """
+    g = np.asarray(grid, dtype=np.float64)
+    act = np.asarray(active, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        above = act & (np.nan_to_num(g, nan=-np.inf) > threshold)
+    padded_a = np.pad(above, 1).astype(int)
+    padded_n = np.pad(act, 1).astype(int)
+    up = padded_a[:-2, 1:-1] + padded_a[2:, 1:-1] + padded_a[1:-1, :-2] + padded_a[1:-1, 2:]
+    n = padded_n[:-2, 1:-1] + padded_n[2:, 1:-1] + padded_n[1:-1, :-2] + padded_n[1:-1, 2:]
+    return above | (~act & (up >= 2) & (2 * up >= n))
+
+
+def outline_segments(mask: npt.ArrayLike) -> np.ndarray:
+    """The boundary of a region of cells as line segments (K, 2, 2) of (column, row) corner
+    coordinates: the cell edges between a cell inside and one outside (or the map's edge)."""
+    m = np.pad(np.asarray(mask, dtype=bool), 1)
+    segs = []
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[:-2, 1:-1])  # top edges
+    segs += [((x, y), (x + 1, y)) for y, x in zip(r, c, strict=True)]
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[2:, 1:-1])  # bottom edges
+    segs += [((x, y + 1), (x + 1, y + 1)) for y, x in zip(r, c, strict=True)]
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[1:-1, :-2])  # left edges
+    segs += [((x, y), (x, y + 1)) for y, x in zip(r, c, strict=True)]
+    r, c = np.nonzero(m[1:-1, 1:-1] & ~m[1:-1, 2:])  # right edges
+    segs += [((x + 1, y), (x + 1, y + 1)) for y, x in zip(r, c, strict=True)]
+    return np.array(segs, dtype=np.float64).reshape(-1, 2, 2)
 
 
 # ---------------------------------------------------------------------------- scale

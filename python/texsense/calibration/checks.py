@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.data.units import UnitError, convert, quantity_of
 from texsense.exceptions import ParameterError
@@ -45,6 +46,7 @@ __all__ = [
     "check_gains",
     "check_material",
     "check_recordings",
+    "edge_of_press",
     "parse_pressure",
     "raise_if_refused",
     "record_thickness_mm",
@@ -166,6 +168,22 @@ def typical_reading(rec: Recording) -> np.ndarray:
     seen = np.isfinite(x).any(axis=0)
     out[seen] = np.nanmedian(x[:, seen], axis=0)
     return out
+
+
+def edge_of_press(values: np.ndarray, reference: np.ndarray, layout: Layout) -> str:
+    """The edge of the map (``top``: row 0, ``bottom``, ``left``: column 0, ``right``)
+    nearest to where a hand presses on the mat: the centroid of the readings' rise above the
+    empty mat (``reference``), weighted by the rise (the orientation step of the wizard and
+    the page: "press on the mat at its head end"). A press that raises nothing is a
+    :class:`ParameterError`."""
+    rise = np.clip(np.nan_to_num(np.asarray(values, np.float64) - reference), 0.0, None)
+    if rise.sum() <= 0:
+        raise ParameterError("no element rose above the empty mat: press harder, or type the edge")
+    x0, x1, y0, y1 = layout.extent_cm
+    fx = float(rise @ (layout.xy_cm[:, 0] - x0)) / rise.sum() / max(x1 - x0, 1e-9)
+    fy = float(rise @ (layout.xy_cm[:, 1] - y0)) / rise.sum() / max(y1 - y0, 1e-9)
+    gaps = {"top": fy, "bottom": 1 - fy, "left": fx, "right": 1 - fx}
+    return min(gaps, key=lambda k: gaps[k])
 
 
 def _settling(rec: Recording) -> float:

@@ -88,6 +88,9 @@ def material_preset(name: str) -> tuple[dict[str, np.ndarray], float, Drift]:
     drift = DriftModel.fit_history(
         predicted, cycles.labels["pressure_ncm2"][hour], cycles.times[hour]
     )
+    # the hour of cycles is held out from the hysteresis fit: the scale of the bounds
+    m["held_out_compression_mm"] = cycles.labels["compression_mm"][hour]
+    m["held_out_pressure_ncm2"] = cycles.labels["pressure_ncm2"][hour]
     return m, float(PRESETS[name].thickness_mm), Drift.of(drift)
 
 
@@ -103,7 +106,11 @@ def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChai
     m = protocols.run_protocol("calibration", "textile-3mm", seed=material_seed, sample_hz=None)
     st = protocols.run_protocol("steps", "textile-3mm", seed=material_seed, sample_hz=10)
     steps = split_steps(st.times, st.labels["pressure_ncm2"], st.labels["compression_mm"])
-    return calibrate_mat(material_record(m), base, uni, 1.0, 3.0, steps=steps)
+    record = material_record(m)
+    # the held steps are not in the hysteresis fit: the scale of the bounds
+    record["held_out_compression_mm"] = st.labels["compression_mm"]
+    record["held_out_pressure_ncm2"] = st.labels["pressure_ncm2"]
+    return calibrate_mat(record, base, uni, 1.0, 3.0, steps=steps)
 
 
 def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> StageChain:

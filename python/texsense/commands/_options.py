@@ -1,10 +1,38 @@
-"""Options that several commands share."""
+"""Options that several commands share, and the range of every numeric option.
+
+Every numeric option of every command has a declared range in :data:`RANGES` (by the
+option's name, or by ``"COMMAND --option"`` where one name means different things in
+different commands). :func:`check_numbers` gives each such option a type that refuses, with
+argparse's one line and exit 2, a value that is not a finite number or lies outside the
+range (``--refuse-after -5``, ``--frames nan``, ``--virtual-mats 1e9``); an option without a
+declared range is a programming error, found by the tests (tests/faults/test_families.py).
+
+Examples
+--------
+>>> RANGES["--reposition-min"].check(3.0, "--reposition-min")
+Traceback (most recent call last):
+...
+ValueError: --reposition-min must lie in 5..120, got 3
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
 
-__all__ = ["add_accept_truncated"]
+from texsense.exceptions import ParameterError
+
+__all__ = [
+    "RANGES",
+    "Range",
+    "add_accept_truncated",
+    "check_numbers",
+    "numeric_options",
+    "refuse_replacing",
+]
 
 ACCEPT_TRUNCATED_HELP = (
     "read a recording that holds less than it declares (an export cut short or closed early, "
@@ -17,3 +45,194 @@ def add_accept_truncated(p: argparse.ArgumentParser) -> None:
     """Add ``--accept-truncated`` (``args.accept_truncated``) to a command that reads
     recordings."""
     p.add_argument("--accept-truncated", action="store_true", help=ACCEPT_TRUNCATED_HELP)
+
+
+def refuse_replacing(path: Path, replace: bool) -> None:
+    """A calibration file is not written over without ``--replace`` (a monitor may be using
+    it; the mat's readings would change without a word). Only a calibration *file* is kept
+    so: a folder or a device in the way is the writer's one-line error."""
+    if path.is_file() and not replace:
+        raise ParameterError(
+            f"{path} exists: a calibration is not replaced without --replace "
+            "(or write it to another name)"
+        )
+
+
+@dataclass(frozen=True)
+class Range:
+    """Where a numeric option's values may lie: ``lo`` and ``hi`` (None: unbounded), each
+    included unless ``lo_open`` / ``hi_open``; ``nonzero`` excludes 0. Every value must also be
+    finite."""
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    nonzero: bool = False
+
+    def text(self) -> str:
+        """The range in words: ``> 0``, ``>= 1``, ``5..120``."""
+        if self.lo is not None and self.hi is not None and not (self.lo_open or self.hi_open):
+            return f"{self.lo:g}..{self.hi:g}" + (", not 0" if self.nonzero else "")
+        parts = []
+        if self.lo is not None:
+            parts.append(f"{'>' if self.lo_open else '>='} {self.lo:g}")
+        if self.hi is not None:
+            parts.append(f"{'<' if self.hi_open else '<='} {self.hi:g}")
+        if self.nonzero:
+            parts.append("not 0")
+        return " and ".join(parts) or "finite"
+
+    def holds(self, value: float) -> bool:
+        """Whether ``value`` lies in the range (and is finite)."""
+        if not math.isfinite(value) or (self.nonzero and value == 0):
+            return False
+        if self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo):
+            return False
+        return not (self.hi is not None and (value >= self.hi if self.hi_open else value > self.hi))
+
+    def check(self, value: float, name: str) -> float:
+        """``value`` if it lies in the range, else a ValueError naming ``name``."""
+        if not self.holds(value):
+            verb = "be" if self.text()[0] in "<>f" else "lie in"
+            raise ValueError(f"{name} must {verb} {self.text()}, got {value:g}")
+        return value
+
+
+_POSITIVE = Range(0.0, lo_open=True)
+_NON_NEGATIVE = Range(0.0)
+_COUNT = Range(1, 1_000_000)
+_SEED = Range(0, 2**32 - 1)
+_PORT = Range(1, 65535)
+_MINUTES = Range(0.0, 7 * 24 * 60, lo_open=True)  # up to a week
+
+#: The range of every numeric option: by name, or by "COMMAND --option" (sub-commands
+#: included: "hysteresis fit --grid").
+RANGES: dict[str, Range] = {
+    # recordings, processing, plots
+    "--frame": Range(0, 2**62),
+    "--chunk-frames": _COUNT,
+    "export mcu --capacity": Range(4, 1 << 16),  # Preisach turning points (Pipeline's range)
+    "--workers": Range(1, 1024),
+    "--every": Range(1, 1_000_000),
+    "stocking report --every": Range(0.0, 24 * 365, lo_open=True),
+    "--duration": Range(0.0, 3.2e7, lo_open=True),  # s, up to a year
+    "--frames": _COUNT,
+    "calibrate wizard --frames": Range(3, 100_000),
+    # the virtual sensor, the test machine, simulations
+    "--seed": _SEED,
+    "--mat-seed": _SEED,
+    "--sample-hz": Range(0.0, 1e6, lo_open=True),
+    "--speed": Range(0.0, 1e6),  # monitor, record, replay: 0 is "as fast as possible"
+    "simulate --speed": Range(0.0, 1e6, lo_open=True),  # platen mm/min, or times real time
+    "station --speed": Range(0.0, 1e6, lo_open=True),
+    "calibrate wizard --speed": Range(0.0, 1e6, lo_open=True),
+    "--max": Range(0.0, 1e4, lo_open=True),  # N/cm²
+    "--p3": Range(0.0, 1e4, lo_open=True),
+    "--cycles": Range(1, 100_000),
+    "--hold": Range(0.0, 3.2e7),
+    "--sessions": Range(1, 1000),
+    "--rounds": Range(1, 1000),
+    "--rest-s": Range(0.0, 3.2e7),
+    "--minutes": _MINUTES,
+    "--hours": Range(0.0, 24 * 365, lo_open=True),
+    # design rules
+    "--thickness-mm": Range(0.0, 100.0, lo_open=True),
+    "--electrode-cm": Range(0.0, 1000.0, lo_open=True),
+    "--target-pf": Range(0.0, 1e6, lo_open=True),
+    "--rows": Range(1, 4096),
+    "--cols": Range(1, 4096),
+    "--spacing-mm": Range(0.0, 1e4, lo_open=True),
+    "--line-distance-mm": Range(0.0, 1e4, lo_open=True),
+    "--update-hz": Range(0.0, 1e6, lo_open=True),
+    "--converters": Range(1, 4096),
+    # models and their fits
+    "--grid": Range(2, 2000),
+    "--cells": Range(1, 2000),
+    "--smoothing": _NON_NEGATIVE,
+    "--folds": Range(2, 100),
+    "--rest-rate": _POSITIVE,
+    "--drift-rest-rate": _POSITIVE,
+    "--offset": Range(-1e15, 1e15),
+    "--gain": Range(-1e15, 1e15, nonzero=True),
+    "--full-scale": _POSITIVE,
+    "--c": _POSITIVE,
+    "--pool": Range(1, 256),
+    "--window": Range(0.0, 3.2e7, lo_open=True),
+    "--range": _POSITIVE,
+    "--interval": Range(0.0, 1.0, lo_open=True, hi_open=True),  # a bound's level (issue 37)
+    # devices
+    "--sampling-frequency": Range(0.0, 1e7, lo_open=True),
+    "--capdac-pf": Range(0.0, 1e4),
+    "--wait-s": Range(0.0, 86400.0, lo_open=True),
+    # the monitor, the station, alerts
+    "--port": _PORT,
+    "--threshold": Range(0.0, 1e4, lo_open=True),  # mmHg (monitor, report)
+    "muscle detect --threshold": Range(0.0, 1e4, lo_open=True),  # N/cm²
+    "--reposition-min": Range(5.0, 120.0),  # texsense.apps.alerts.REPOSITION_RANGE_MIN
+    "--offload-min": Range(0.0, 7 * 24 * 60),
+    "--turn-every": _MINUTES,
+    "--virtual-mats": Range(0, 1000),
+    "--refuse-after": Range(0.0, 86400.0, lo_open=True),
+    "--virtual-beds": Range(0, 500),  # at most every second one of --virtual-mats
+    "--checkpoint-every": Range(0.0, 3600.0, lo_open=True),  # a group's checkpoints, s
+    "simulate --count": Range(1, 1000),  # simulate mats: as many as --virtual-mats
+    "simulate --beds": Range(0, 500),
+}
+
+
+def range_of(command: str, option: str) -> Range | None:
+    """The declared range of ``option`` in ``command`` (sub-command words included)."""
+    return RANGES.get(f"{command} {option}", RANGES.get(option))
+
+
+def numeric_options(
+    parser: argparse.ArgumentParser, command: str = ""
+) -> Iterator[tuple[str, argparse.Action]]:
+    """(command words, action) of every option of ``parser`` and its sub-commands that takes
+    a number (``type=int`` or ``type=float``, checked or not)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from numeric_options(sub, f"{command} {name}".strip())
+        elif action.type in (int, float) or isinstance(action.type, _Checked):
+            yield command, action
+
+
+class _Checked:
+    """An argparse type: a number of ``kind`` within ``allowed``."""
+
+    def __init__(self, kind: Callable[[str], float], allowed: Range, name: str) -> None:
+        self.kind, self.allowed, self.name = kind, allowed, name
+        self.__name__ = f"{kind.__name__} ({allowed.text()})"  # argparse's "invalid ... value"
+
+    def __call__(self, text: str) -> float:
+        try:
+            value = self.kind(text)
+        except (ValueError, OverflowError):
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if self.kind is int else 'a number'}, got {text!r}"
+            ) from None
+        try:
+            return self.allowed.check(value, "the value")
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def check_numbers(parser: argparse.ArgumentParser, command: str = "") -> None:
+    """Give every numeric option of ``parser`` (and its sub-commands) its declared range.
+
+    Raises
+    ------
+    LookupError
+        An option without a range in :data:`RANGES` (a programming error).
+    """
+    for cmd, action in numeric_options(parser, command):
+        if isinstance(action.type, _Checked):
+            continue
+        name = action.option_strings[-1] if action.option_strings else action.dest
+        allowed = range_of(cmd, name)
+        if allowed is None:
+            raise LookupError(f"texsense {cmd} {name}: no range declared in RANGES")
+        assert action.type is int or action.type is float  # (numeric_options chose it)
+        action.type = _Checked(action.type, allowed, name)

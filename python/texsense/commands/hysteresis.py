@@ -16,8 +16,9 @@ from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis.plots import model_figure, validation_report_figure
 from texsense.compensation.hysteresis.sampling import check_sampling, is_row_count
 from texsense.compensation.hysteresis.validation import validate
+from texsense.compensation.intervals import bounds, drift_share
 from texsense.compensation.stages import Drift, Hysteresis, StageChain
-from texsense.exceptions import FormatError
+from texsense.exceptions import FormatError, ParameterError
 from texsense.io.columns import read_columns, write_columns
 
 #: Pressure bands of the error summary (thesis §4.5), in the output's unit.
@@ -81,6 +82,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--folds", type=int, default=4, help="folds of held-out reversal curves (4)")
     f.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     f.add_argument("--drift-kind", choices=("log", "prony"), default="log")
+    f.add_argument(
+        "--held-out",
+        type=Path,
+        metavar="RECORD.csv",
+        help="a record the model is not fitted on (same columns): its residuals by band are "
+        "the scale of the bounds of 'apply --interval' (docs/drift.md, Bounds)",
+    )
     add_clock_arguments(f, "drift-")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
     f.set_defaults(run=run_fit)
@@ -96,6 +104,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--input", help="input column (default: the model's)")
     a.add_argument("--output", help="output column to compare with (default: the model's)")
     a.add_argument("--json", action="store_true", help="print the error summary as JSON")
+    a.add_argument(
+        "--interval",
+        type=float,
+        metavar="LEVEL",
+        help="add <output>_lo and <output>_hi: the bound of every value at this level (e.g. "
+        "0.95; needs a model fitted with --held-out)",
+    )
     a.set_defaults(run=run_apply)
     v = hs.add_parser(
         "validate",
@@ -163,6 +178,13 @@ def run_fit(args: argparse.Namespace) -> int:
         output_unit=_unit_of(args.output),
     )
     model.fit(u, y, provenance={"calibration": str(args.calibration)})
+    if args.held_out:
+        held = read_columns(args.held_out)
+        model.hold_out(
+            _column(held, args.input, args.held_out),
+            _column(held, args.output, args.held_out),
+            str(args.held_out),
+        )
     if args.drift:
         drift = DriftModel.fit_steps(
             read_steps(args.drift), kind=args.drift_kind, rest_rate=rest_rate_of(args, "drift-")
@@ -281,6 +303,9 @@ def run_apply(args: argparse.Namespace) -> int:
     if drift is not None:
         modelled = drift.apply(modelled, _column(cols, "time_s", args.data), inputs=u)
     cols[f"{out_name}_model"] = modelled
+    if args.interval is not None:
+        lo, hi = _apply_bounds(model, drift, u, modelled, cols.get("time_s"), args.interval)
+        cols[f"{out_name}_lo"], cols[f"{out_name}_hi"] = lo, hi
     write_columns(args.out, cols, values=f"{out_name}_model", unit=model.output_unit)
     summary: dict[str, Any] = {
         "out": str(args.out),
@@ -309,6 +334,36 @@ def run_apply(args: argparse.Namespace) -> int:
                     f"({b['samples']} samples)"
                 )
     return 0
+
+
+def _apply_bounds(
+    model: HysteresisModel,
+    drift: DriftModel | None,
+    u: np.ndarray,
+    modelled: np.ndarray,
+    times: np.ndarray | None,
+    level: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of ``hysteresis apply --interval`` (:mod:`texsense.compensation.intervals`,
+    context ``record``): the held-out scale by band, the drift share from the time since the
+    record began (the model taken as made just before), an input beyond the identified range
+    uncertain by how far it lies beyond."""
+    held = getattr(model, "held_out_", None)
+    if held is None:
+        raise ParameterError(
+            "--interval needs the model's held-out residuals: fit it with --held-out RECORD.csv "
+            "(a record it is not fitted on)"
+        )
+    hours = np.zeros(u.size) if times is None else (times - times[0]) / 3600.0
+    d = np.array([drift_share(h, None) for h in hours])
+    lo, hi = bounds(modelled, level, held, drift=d, context="record")
+    # beyond the identified range the input is clamped: the value is at least that of the
+    # edge and may lie beyond by the slope at the edge times how far (twice, to be safe)
+    span = model.u_max_ - model.u_min_
+    ends = np.asarray(model.predict(np.array([model.u_max_ - 0.02 * span, model.u_max_])), float)
+    slope = max(float(ends[1] - ends[0]) / (0.02 * span), 0.0)
+    over = np.clip(u - model.u_max_, 0.0, None)
+    return lo, hi + 2.0 * slope * over
 
 
 def run_validate(args: argparse.Namespace) -> int:

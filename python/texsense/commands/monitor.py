@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.layout import Layout
+from texsense.data.files import check_writable
+from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
 from texsense.monitor.sources import Source
@@ -80,6 +81,28 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(auto: bed for the virtual bed and --bed, from the file for a replay, else seat; "
         "foot raises no seated/left events and no exposure alerts)",
     )
+    p.add_argument(
+        "--in-use-drift",
+        choices=("on", "off"),
+        default="on",
+        help="on (default, except in foot mode: a foot is never still): correct the drift from "
+        "the mat in use — stillness, an empty mat (docs/drift.md); off: the calibration's "
+        "laboratory drift stage",
+    )
+    p.add_argument(
+        "--interval",
+        default="0.95",
+        metavar="LEVEL|off",
+        help="bounds of every value at this level (default 0.95; shown on hover, in the region "
+        "table, and an alert says whether the threshold is exceeded with that confidence); "
+        "off: none. Needs a calibration with held-out residuals (a spacer preset)",
+    )
+    p.add_argument(
+        "--count-possible",
+        action="store_true",
+        help="count elements only possibly above the threshold (their upper bound is, their "
+        "lower is not) toward the reposition alert too",
+    )
     p.add_argument("--record", action="store_true", help="record from the start")
     p.add_argument("--record-dir", type=Path, default=Path("recordings"))
     p.add_argument(
@@ -107,6 +130,14 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
         metavar="ROWSxCOLS",
         help="iio/mqtt: the sensor's grid (e.g. 15x16); serial: only for a device that does "
         "not announce its layout",
+    )
+    p.add_argument(
+        "--orientation",
+        default=None,
+        metavar="KIND[:EDGE]|EDGE=LABEL,...|none",
+        help="how the mat lies, if its device does not say: bed, seat or foot with its head, "
+        "front or toes at the top of the map (row 1), or e.g. bed:bottom for the head at the "
+        "last row; or top=head,bottom=foot,...; without it a mat names no left or right",
     )
     p.add_argument(
         "--sampling-frequency",
@@ -216,8 +247,14 @@ def default_calibration(source: str) -> StageChain | None:
 
 def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
     """The source named by ``--source`` (no calibration: what ``record`` and the wizard
-    need); a replay starts again at its end with ``loop``. The sources are those of the
-    registry (:func:`texsense.monitor.sources.open_source`)."""
+    need), turned as ``--orientation`` says; a replay starts again at its end with
+    ``loop``. The sources are those of the registry
+    (:func:`texsense.monitor.sources.open_source`)."""
+    given = getattr(args, "orientation", None)
+    try:
+        orientation = None if given is None else parse_orientation(given)
+    except ParameterError as e:
+        raise ParameterError(f"--{e}") from None
     options = sources.SourceOptions(
         speed=args.speed,
         grid=_grid(args),
@@ -226,7 +263,10 @@ def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
         capdac_pF=args.capdac_pf,
         loop=loop,
     )
-    return sources.open_source(args.source, options)
+    source = sources.open_source(args.source, options)
+    if orientation is not None:
+        source.layout = source.layout.with_orientation(orientation or None)
+    return source
 
 
 def build_monitor(args: argparse.Namespace) -> Monitor:
@@ -241,7 +281,7 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
         calibration = default_calibration(args.source)
     pipeline = None
     if source.quantity == "capacitance" and calibration is not None:
-        pipeline = Pipeline(calibration, source.layout)
+        pipeline = monitor_pipeline(args, calibration, source, _mode(args, source, None))
     raw_only = source.quantity == "capacitance" and pipeline is None
     if raw_only:
         logging.getLogger("texsense.monitor").warning(
@@ -255,6 +295,7 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
         unit=args.threshold_unit,
         reposition_min=args.reposition_min,
         offload_min=args.offload_min,
+        count_possible=getattr(args, "count_possible", False),
     )
     model = PostureModel.load(args.model) if args.model else None
     if raw_only and (model is not None or args.bed):
@@ -291,6 +332,37 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
     if args.record:
         monitor.start_recording()
     return monitor
+
+
+def monitor_pipeline(
+    args: argparse.Namespace, calibration: StageChain, source: Source, mode: str
+) -> Pipeline:
+    """The monitor's pipeline: the in-use drift correction where the mat's use allows it
+    (not in foot mode: never still), bounds where the calibration has held-out residuals;
+    the log says which and why not."""
+    log = logging.getLogger("texsense.monitor")
+    in_use = getattr(args, "in_use_drift", "on") == "on"
+    if in_use and mode == "foot":
+        log.warning("%s: in-use drift correction off: a foot sensor is loaded at every step and "
+                    "never still; the calibration's drift stage runs", source.name)  # fmt: skip
+        in_use = False
+    level = str(getattr(args, "interval", "0.95"))
+    interval = None
+    if level != "off":
+        try:
+            interval = float(level)
+        except ValueError:
+            raise ParameterError(f"--interval: a level (e.g. 0.95) or off, not {level!r}") from None
+    try:
+        pipeline = Pipeline(calibration, source.layout, in_use=in_use, interval=interval)
+    except ParameterError as e:
+        if interval is None or "held-out" not in str(e):
+            raise
+        log.warning("%s: no bounds: %s", source.name, e)
+        pipeline = Pipeline(calibration, source.layout, in_use=in_use)
+    if pipeline.in_use_note:
+        log.warning("%s: in-use drift correction off: %s", source.name, pipeline.in_use_note)
+    return pipeline
 
 
 def _mode(args: argparse.Namespace, source: Source, bed: BedWatch | None) -> str:
@@ -392,6 +464,9 @@ def run_monitor(args: argparse.Namespace) -> int:
 
     access = web_access(args, "monitor")
     check_port_free(args.host, args.port)
+    check_writable(args.record_dir, "--record-dir", folder=True)  # now, not at the first recording
+    if not str(args.db).startswith(("postgresql://", "postgres://")):
+        check_writable(args.db, "--db")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     with stop_on_sigterm():  # SIGTERM before the server runs: like Ctrl-C
         monitor = build_monitor(args)

@@ -11,7 +11,7 @@ import numpy as np
 
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
-from texsense.data.files import check_not_input, pyplot, save_figure, write_text
+from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
 from texsense.sim.muscle import session
 
 if TYPE_CHECKING:
@@ -49,7 +49,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from texsense.calibration.workflows import sleeve_calibration
     from texsense.io import save
 
-    args.output.mkdir(parents=True, exist_ok=True)
+    make_folder(args.output)
     s = session(args.minutes, seed=args.seed)
     save(s.scan.capacitance, args.output / "sleeve.h5")
     sleeve_calibration(seed=args.seed).save(args.output / "calibration.json")

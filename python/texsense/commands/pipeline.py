@@ -13,7 +13,7 @@ import numpy as np
 
 from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
-from texsense.commands._options import add_accept_truncated
+from texsense.commands._options import add_accept_truncated, refuse_replacing
 from texsense.commands._tables import text_table
 from texsense.commands.wizard import register_wizard
 from texsense.compensation.archive import (
@@ -27,6 +27,7 @@ from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.repair import METHODS, Repair
 from texsense.compensation.stages import Convert, Linear, StageChain, load_chain
 from texsense.data.files import check_not_input
+from texsense.data.layout import parse_orientation
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io import load, save
 
@@ -68,6 +69,14 @@ def _register_calibrate(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--thickness-mm", type=float, help="spacer thickness (a preset knows its own)")
     m.add_argument("--drift", type=Path, help="step-and-hold CSV: add a drift stage (eq. 5.8)")
     m.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    m.add_argument(
+        "--orientation",
+        metavar="KIND[:EDGE]|EDGE=LABEL,...",
+        help="how the mat lies (written into the calibration): bed, seat or foot with its "
+        "head, front or toes at the map's first row, or e.g. bed:bottom; the monitor then "
+        "names left and right",
+    )
+    m.add_argument("--replace", action="store_true", help="write over an existing file")
     add_accept_truncated(m)
     m.set_defaults(run=run_calibrate)
 
@@ -90,6 +99,7 @@ def _register_calibrate(sub: argparse._SubParsersAction) -> None:
     )
     lin.add_argument("--full-scale", type=float, help="readings beyond it are out of range")
     lin.add_argument("-o", "--output", type=Path, required=True, help="calibration file (JSON)")
+    lin.add_argument("--replace", action="store_true", help="write over an existing file")
     add_accept_truncated(lin)
     lin.set_defaults(run=run_calibrate_linear)
     register_wizard(cs)
@@ -118,6 +128,21 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--repair", choices=(*METHODS, "none"), default="harmonic")
     p.add_argument("--no-hysteresis", action="store_true", help="first-loading curve only")
     p.add_argument("--no-drift", action="store_true", help="skip the drift stage")
+    p.add_argument(
+        "--in-use-drift",
+        choices=("on", "off"),
+        default="on",
+        help="on (default): correct the drift from the mat in use (stillness, an empty mat) "
+        "instead of with the calibration's drift stage, where the calibration has a spacer "
+        "model; off: the laboratory drift stage only (docs/drift.md)",
+    )
+    p.add_argument(
+        "--interval",
+        type=float,
+        metavar="LEVEL",
+        help="give every value a bound at this level (e.g. 0.95): lower and upper maps beside "
+        "the frames of an HDF5 output (docs/data-model.md, docs/drift.md)",
+    )
     p.add_argument(
         "--chunk-frames",
         type=int,
@@ -183,12 +208,18 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if Path(args.material).exists():
         inputs.append(Path(args.material))
     check_not_input(args.output, inputs)
+    refuse_replacing(args.output, args.replace)
+    try:
+        orientation = parse_orientation(args.orientation)
+    except ParameterError as e:
+        raise ParameterError(f"--{e}") from None
     session = CalibrationSession(args.material, args.pressure, args.thickness_mm, args.drift)
     chain = session.fit(
         _capacitance(args.baseline, args.accept_truncated),
         _capacitance(args.uniform, args.accept_truncated),
         (str(args.baseline), str(args.uniform)),
     )
+    chain.orientation = orientation
     for f in session.findings:
         print(f, file=sys.stderr)
     chain.save(args.output)
@@ -207,6 +238,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 def run_calibrate_linear(args: argparse.Namespace) -> int:
     """Run ``texsense calibrate linear``."""
     check_not_input(args.output, [args.like])
+    refuse_replacing(args.output, args.replace)
     rec = load(args.like, accept_truncated=args.accept_truncated)
     quantity, unit = rec.quantity, rec.unit
     if args.to is not None:
@@ -233,6 +265,8 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
         drift=not args.no_drift,
         chunk_frames=args.chunk_frames,
         accept_truncated=args.accept_truncated,
+        in_use=args.in_use_drift == "on",
+        interval=args.interval,
     )
 
 
@@ -257,6 +291,8 @@ def run_process(args: argparse.Namespace) -> int:
                     f"wrote {args.output}: {report.frames} frames; "
                     f"{report.failed_share:.1%} of readings failed"
                 )
+                if report.in_use is not None:
+                    print(in_use_line(report.in_use))
             return 0
         return _process_in_memory(src, cal, args.output, options)
     jobs, ignored = archive_jobs(args.inputs, args.output)
@@ -280,6 +316,8 @@ def run_process(args: argparse.Namespace) -> int:
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
     check_not_input(output, [src])
+    if options.interval is not None:
+        raise ParameterError("--interval stores lower and upper maps: write an HDF5 output (.h5)")
     raw = load(src, accept_truncated=options.accept_truncated)
     pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)
@@ -290,7 +328,24 @@ def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOption
         f"{', '.join(out.meta['stages'])}; {failed.mean():.1%} of readings failed, "
         f"{int(failed.any(axis=0).sum())} elements failed at least once"
     )
+    if options.in_use:
+        print(in_use_line(pipe.in_use_status()))
     return 0
+
+
+def in_use_line(status: dict[str, Any]) -> str:
+    """The in-use drift correction in one line (``process``, the report)."""
+    if status["state"] == "off":
+        return f"in-use drift correction off: {status['why']}"
+    if status["state"] != "correcting":
+        return "in-use drift correction: no still period seen, nothing corrected"
+    z = status["zeroed"]
+    zeros = {0: "never", 1: "once", 2: "twice"}.get(z, f"{z} times")
+    return (
+        f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
+        f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
+        f"zero taken {zeros}"
+    )
 
 
 def run_repair(args: argparse.Namespace) -> int:

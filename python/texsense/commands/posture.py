@@ -20,7 +20,7 @@ from texsense.apps.posture.study import ErrorStudy, plot_study, sensor_hysteresi
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.commands._tables import confusion_lines, natural_key, text_table
-from texsense.data.files import check_not_input, pyplot, save_figure, write_text
+from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.io import load
@@ -303,7 +303,7 @@ def run_study(args: argparse.Namespace) -> int:
     study = ErrorStudy(refs, layout, classes.tolist(), hysteresis_model=sensor_hysteresis_model())
     results = study.run()
     out = args.output
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     fig = plot_study(results, f"{args.recording.name}: {classes.size} classes, modelled errors")
     try:
         save_figure(fig, out / "study.png", dpi=100)

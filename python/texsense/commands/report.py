@@ -10,7 +10,8 @@ from pathlib import Path
 from texsense.apps.report import write_report
 from texsense.apps.roi import parse_rois
 from texsense.commands import HELP
-from texsense.exceptions import ParameterError
+from texsense.data.files import read_regular
+from texsense.exceptions import FormatError, ParameterError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -55,7 +56,9 @@ def run_report(args: argparse.Namespace) -> int:
     rois = None
     if args.rois is not None:
         try:
-            data = json.loads(args.rois.read_text(encoding="utf-8"))
+            data = json.loads(read_regular(args.rois, "a regions file").decode("utf-8"))
+        except FormatError:
+            raise  # (names the file and what it is instead)
         except (OSError, ValueError) as e:
             raise ParameterError(f"{args.rois}: cannot read the regions ({e})") from None
         try:

@@ -13,13 +13,17 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from texsense._progress import progress
 from texsense.commands import HELP
+from texsense.data.files import check_not_input, make_folder, real_path
 from texsense.exceptions import ParameterError
 from texsense.io import save
 from texsense.io.columns_csv import write_columns_csv
 from texsense.sensor.materials import PRESETS
 from texsense.sim.device import VirtualDevice
+from texsense.sim.night import virtual_night
 from texsense.sim.protocols import PROTOCOLS, run_protocol
 from texsense.sim.seated import Subject, simulate_session
 from texsense.station.broker import parse_broker_url
@@ -60,11 +64,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "protocol",
-        choices=[*sorted(PROTOCOLS), "device", "mats"],
+        choices=[*sorted(PROTOCOLS), "device", "night", "mats"],
         help="protocol to run; 'device': a virtual mat behind a serial line (--mat, --link); "
+        "'night': a person's night on the virtual bed mat (--hours, --truth, --calibration); "
         "'mats': virtual mats publishing to a broker (--count, --broker)",
     )
-    p.add_argument("--spacer", default="textile-6mm", choices=sorted(PRESETS), help="spacer preset")
+    p.add_argument(
+        "--spacer",
+        choices=sorted(PRESETS),
+        help="spacer preset (default textile-6mm; a night: textile-3mm, the bed mat's)",
+    )
     p.add_argument("--seed", type=int, default=0, help="specimen and noise seed (default 0)")
     p.add_argument("-o", "--output", type=Path, help="HDF5 file to write")
     p.add_argument("--csv", type=Path, help="CSV file to write")
@@ -93,7 +102,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--failures", action="store_true", help="device: elements fail at the thesis's rates"
     )
     device.add_argument(
-        "--truth", type=Path, help="device: record the true pressure of every frame (HDF5)"
+        "--truth", type=Path, help="device, night: the true pressure of every frame (HDF5)"
+    )
+    night = p.add_argument_group("night (texsense simulate night -o night.h5 --truth truth.h5)")
+    night.add_argument("--hours", type=float, default=8.0, help="night: its length (8 h)")
+    night.add_argument(
+        "--calibration",
+        type=Path,
+        help="night: write the mat's calibration (zero, 1 N/cm², the spacer's preset) here",
     )
     mats = p.add_argument_group("mats (texsense simulate mats --count N --broker URL): the "
                                 "virtual mats of `texsense station --virtual-mats N`")  # fmt: skip
@@ -113,9 +129,14 @@ def run(args: argparse.Namespace) -> int:
         return run_device(args)
     if args.protocol == "mats":
         return run_mats(args)
+    if args.protocol == "night":
+        return run_night(args)
+    if args.calibration is not None or args.hours != 8.0:
+        raise ParameterError("--calibration and --hours are for 'simulate night'")
+    args.spacer = args.spacer or "textile-6mm"
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
-    if args.output and args.csv and Path(args.output).resolve() == Path(args.csv).resolve():
+    if args.output and args.csv and real_path(args.output) == real_path(args.csv):
         raise ParameterError(f"-o and --csv name the same file {args.output}")
     options: dict[str, Any] = {}
     for flag, keyword in _OPTIONS.items():
@@ -213,6 +234,46 @@ def run_mats(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_night(args: argparse.Namespace) -> int:
+    """Run ``texsense simulate night``: the raw night, its truth and the mat's calibration."""
+    from texsense.calibration.night import night_calibration
+
+    if args.output is None:
+        raise ParameterError("simulate night needs -o NIGHT.h5 (the raw capacitance)")
+    if args.csv is not None:
+        raise ParameterError("simulate night writes recordings: -o, --truth, --calibration")
+    outputs = [p for p in (args.output, args.truth, args.calibration) if p is not None]
+    if len({p.resolve() for p in outputs}) < len(outputs):
+        raise ParameterError("-o, --truth and --calibration must name different files")
+    spacer = args.spacer or "textile-3mm"
+    for path in outputs:
+        check_not_input(path, [])
+    night = virtual_night(spacer, args.hours, args.seed)
+    save(night.raw, args.output)
+    print(f"wrote {args.output}")
+    if args.truth is not None:
+        save(night.truth, args.truth)
+        print(f"wrote {args.truth}")
+    if args.calibration is not None:
+        chain = night_calibration(spacer)
+        chain.save(args.calibration)
+        print(f"wrote {args.calibration}")
+    sides = night.truth.labels["side"]
+    turns = int(np.count_nonzero((sides[1:] == "transition") & (sides[:-1] != "transition")))
+    outs = int(np.count_nonzero((sides[1:] == "out") & (sides[:-1] != "out")))
+    print(
+        f"night of {night.sleeper.name} ({night.sleeper.weight_kg:.0f} kg) on the {spacer} bed "
+        f"mat: {night.raw.n_frames} frames over {args.hours:g} h, empty at first, "
+        f"{turns} turn{'' if turns == 1 else 's'}, out of bed {_times(outs)}"
+    )
+    return 0
+
+
+def _times(n: int) -> str:
+    """never, once, twice, 3 times."""
+    return {0: "never", 1: "once", 2: "twice"}.get(n, f"{n} times")
+
+
 def _loads_from_stdin(device: VirtualDevice) -> None:
     """Change the device's load for every line typed on standard input (ends at its end)."""
     for line in sys.stdin:
@@ -253,7 +314,7 @@ def run_sessions(args: argparse.Namespace) -> int:
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")
-    args.output.mkdir(parents=True, exist_ok=True)
+    make_folder(args.output)
     cal = seat_calibration(mat_seed=args.mat_seed)
     cal.save(args.output / "calibration.json")
     frames = 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
 import os
 import signal
@@ -15,6 +16,7 @@ from typing import Any
 from texsense.apps.posture import PostureModel
 from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
+from texsense.commands._options import RANGES
 from texsense.commands.monitor import (
     add_web_options,
     check_port_free,
@@ -23,13 +25,15 @@ from texsense.commands.monitor import (
     web_access,
 )
 from texsense.compensation.stages import load_chain
-from texsense.data.layout import Layout
+from texsense.data import budget
+from texsense.data.files import check_writable, open_regular
+from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor import sources
 from texsense.monitor.store import open_store
 from texsense.monitor.web import resolve_token, stop_on_sigterm
-from texsense.station.broker import mat_topic, parse_broker_url, station_broker
+from texsense.station.broker import check_mat_id, mat_topic, parse_broker_url, station_broker
 from texsense.station.virtual import VirtualMats
 from texsense.station.ward import MatConfig, Station
 
@@ -117,6 +121,33 @@ def _layout(spec: Any, where: str) -> Any:
     raise ParameterError(f"{where}: layout must be 'grid:ROWSxCOLS' or a recording's path")
 
 
+#: The keys of a ``[[mat]]`` of a ward file and their TOML types.
+MAT_KEYS: dict[str, type | tuple[type, ...]] = {
+    "id": str, "layout": str, "calibration": str, "source": str, "bed": bool, "model": str,
+    "reposition_min": (int, float), "turn_every_min": (int, float),
+}  # fmt: skip
+
+
+def _known_keys(
+    path: Path, where: str, table: dict[str, Any], known: dict[str, type | tuple[type, ...]]
+) -> None:
+    """Refuse a key ``known`` does not name (saying the nearest known one) or a value of
+    another type: a misspelt key would otherwise be ignored without a word (``calibraton``:
+    the mat ran uncalibrated; ``Bed``: not as a bed)."""
+    for key, value in table.items():
+        if key not in known:
+            near = difflib.get_close_matches(key.lower(), list(known), n=1, cutoff=0.6)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise FormatError(
+                path, f"{where}: unknown key {key!r}{hint}; known: {', '.join(known)}"
+            )
+        kinds = known[key]
+        if not isinstance(value, kinds) or (isinstance(value, bool) and kinds == (int, float)):
+            want = kinds.__name__ if isinstance(kinds, type) else "a number"
+            want = {"str": "a text", "bool": "true or false", "list": "a list"}.get(want, want)
+            raise FormatError(path, f"{where}: {key} must be {want}, got {value!r}")
+
+
 def read_config(
     path: Path, reposition_min: float, turn_every_min: float = 120.0
 ) -> tuple[list[Any], dict[str, Any]]:
@@ -125,6 +156,8 @@ def read_config(
     [[mat]]
     id = "bed12"                      # the topic segment: <prefix>/bed12/frames
     layout = "grid:64x32"             # or the path of a recording of the mat
+    orientation = "bed"               # how it lies: bed, seat, foot, bed:bottom, top=head,...
+                                      # (default: the calibration's, else none declared)
     calibration = "bed12.json"        # omit for a mat that sends pressure
     source = "mqtt"                   # or "serial:/dev/ttyUSB0", "iio:DIR", "replay:FILE"
     bed = true                        # a bed: turning schedule and at-risk regions ...
@@ -132,11 +165,16 @@ def read_config(
     turn_every_min = 120              # default: --turn-every
     """
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        with open_regular(path) as f:  # a regular file only: no FIFO, no device
+            budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
+            doc = tomllib.loads(f.read().decode("utf-8"))
     except OSError as e:
         raise FormatError(path, f"cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
     except tomllib.TOMLDecodeError as e:
         raise FormatError(path, f"not TOML: {e}") from None
+    _known_keys(path, "the ward file", doc, {"mat": list})
     mats: list[Any] = []
     local: dict[str, sources.Source] = {}
     calibrations: dict[str, Any] = {}  # a file named by many mats is read once
@@ -144,6 +182,19 @@ def read_config(
         where = f"{path} [[mat]] #{k + 1}"
         if not isinstance(m, dict) or "id" not in m or "layout" not in m:
             raise FormatError(path, f"[[mat]] #{k + 1} needs an id and a layout")
+        _known_keys(path, f"[[mat]] #{k + 1}", m, MAT_KEYS)
+        for key, option in (
+            ("reposition_min", "--reposition-min"),
+            ("turn_every_min", "--turn-every"),
+        ):
+            try:
+                RANGES[option].check(float(m.get(key, 20.0)), key)  # as its option's
+            except ValueError as e:
+                raise FormatError(path, f"[[mat]] #{k + 1}: {e}") from None
+        try:
+            check_mat_id(m["id"])
+        except ParameterError as e:
+            raise FormatError(path, f"[[mat]] #{k + 1}: {e}") from None
         layout = _layout(m["layout"], where)
         cal = None
         if m.get("calibration"):
@@ -152,6 +203,13 @@ def read_config(
                 calibrations[key] = load_chain(key)
             cal = calibrations[key]
         quantity = "capacitance" if cal is not None else "pressure"
+        if m.get("orientation") is not None:
+            try:
+                layout = layout.with_orientation(parse_orientation(m["orientation"]) or None)
+            except ParameterError as e:
+                raise FormatError(path, f"[[mat]] #{k + 1}: {e}") from None
+        elif cal is not None and cal.orientation and not layout.orientation:
+            layout = layout.with_orientation(cal.orientation)
         spec = str(m.get("source", "mqtt"))
         if spec != "mqtt":  # a source of this machine, from the registry (docs/station.md)
             try:
@@ -189,7 +247,7 @@ def site_broker(args: argparse.Namespace) -> Any:
     url = parse_broker_url(args.broker)
     password = url.password
     if args.broker_password_file is not None:
-        password = resolve_token(None, args.broker_password_file, {})
+        password = resolve_token(None, args.broker_password_file, {}, "--broker-password-file")
     elif password is None and os.environ.get("TEXSENSE_BROKER_PASSWORD"):
         password = os.environ["TEXSENSE_BROKER_PASSWORD"]
     if password is not None and not url.username:
@@ -227,6 +285,9 @@ def run(args: argparse.Namespace) -> int:
 
     access = web_access(args, "ward")
     check_port_free(args.host, args.port)
+    check_writable(args.record_dir, "--record-dir", folder=True)  # now, not at the first recording
+    if not str(args.db).startswith(("postgresql://", "postgres://")):
+        check_writable(args.db, "--db")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     if args.virtual_mats < 0:
         raise ParameterError("--virtual-mats must be >= 0")
@@ -280,6 +341,8 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
         read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
     )
     if not mats and not args.virtual_mats:
+        if args.config:
+            raise FormatError(args.config, "no [[mat]]: a ward file names at least one mat")
         raise ParameterError("no mats: give --virtual-mats N and/or --config ward.toml")
     if args.group:
         check_group(args, local)
@@ -287,14 +350,15 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
     if args.virtual_mats:
         vm = VirtualMats(args.virtual_mats, None, prefix=args.virtual_prefix, speed=args.speed,
                          beds=args.virtual_beds)  # fmt: skip
+    background = []
     if args.broker:
         url = site_broker(args)
     else:
         broker, url, logins = own_broker(args, mats, local, vm)
         started.append(broker)
+        background.append(broker.supervise())  # restarted if it dies
         if vm is not None:
             vm.logins = logins
-    background = []
     if vm is not None:
         vm.broker = url
         beds, sides = None, None
@@ -307,7 +371,7 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
             print(f"texsense station: {args.virtual_mats} virtual mats, published by "
                   "`texsense simulate mats`", flush=True)  # fmt: skip
         else:
-            background.append(vm.run())
+            background.append(vm.run_apart())
     if args.group:
         station: Station = group_station(args, url, mats, access.token)
     else:

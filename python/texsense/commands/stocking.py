@@ -10,6 +10,7 @@ from pathlib import Path
 from texsense.apps.stocking import POINTS, report
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.data.files import make_folder
 from texsense.sim.stocking import LEGS, wear
 
 
@@ -46,7 +47,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from texsense.calibration.workflows import strip_calibration
     from texsense.io import save
 
-    args.output.mkdir(parents=True, exist_ok=True)
+    make_folder(args.output)
     _, truth, scan = wear(args.cls, LEGS[args.leg], hours=args.hours)
     labels = {f"true_{p}_ncm2": truth[:, k] for k, p in enumerate(POINTS)}
     rec = scan.capacitance.with_labels(labels)

@@ -10,6 +10,12 @@
 4. a check with another known load (``--check``, default 2 x P): every element's reading
    through the new calibration, the elements off by more than 10 % named.
 
+Between steps 1 and 2 the wizard learns how the mat lies (written into the calibration, so
+that the monitor names left and right): what the device announces, else ``--orientation``,
+else it asks which edge is the head (a bed), the front (a seat) or the toes (a foot) — typed,
+or found where a hand presses on the mat; with ``--yes`` and neither, none is declared (the
+maps then say "orientation unknown" and no left or right is named).
+
 Each step waits for Enter first; with ``--yes`` it starts at once and waits for the load by
 itself (what a script or a test rig needs). The step recordings are written next to the
 calibration (``mat-zero.h5``, ``mat-uniform.h5``, ``mat-check.h5``; never over a file).
@@ -28,10 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration.checks import parse_pressure, typical_reading
+from texsense.calibration.checks import edge_of_press, parse_pressure, typical_reading
 from texsense.calibration.session import CalibrationSession
+from texsense.commands._options import refuse_replacing
 from texsense.commands.monitor import add_source_options, open_source
 from texsense.data.files import unused_name
+from texsense.data.layout import ORIENTATIONS, orientation_toward
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
@@ -74,6 +82,7 @@ def register_wizard(cs: argparse._SubParsersAction) -> None:
     w.add_argument("--frames", type=int, default=10, help="frames recorded per step")
     w.add_argument("--wait-s", type=float, default=300.0, help="longest wait for a load, s")
     w.add_argument("--yes", action="store_true", help="no questions: for scripts")
+    w.add_argument("--replace", action="store_true", help="write over an existing calibration file")
     w.set_defaults(run=run_wizard)
 
 
@@ -193,6 +202,50 @@ async def _ask(question: str, yes: bool) -> str:
     return answer.strip()
 
 
+_ASK_EDGE = (
+    "which edge is the head (a bed), the front (a seat) or the toes (a foot)? Type the kind "
+    "and the edge of the map: top (the first row), bottom, left (the first column) or right, "
+    "e.g. 'bed top'; or the kind alone, then press on that edge of the mat; or 'none':"
+)
+
+
+async def _orientation(
+    args: argparse.Namespace, source: Any, feed: _Feed, zero: Recording, say: Any
+) -> dict[str, str]:
+    """How the mat lies: announced, given, typed or pressed (see the module)."""
+    declared = source.layout.orientation
+    if declared:
+        how = "--orientation" if args.orientation is not None else "announced by the device"
+        say(f"  orientation: {_edges(declared)} ({how})")
+        return dict(declared)
+    if args.orientation is not None or args.yes:  # --orientation none, or no questions
+        say("  orientation: not declared (--orientation bed|seat|foot[:EDGE] declares it): "
+            "the maps will name no left or right")  # fmt: skip
+        return {}
+    answer = (await _ask(_ASK_EDGE, False)).lower().split()
+    if not answer or answer[0] == "none":
+        return {}
+    if answer[0] not in ORIENTATIONS:
+        raise ParameterError(
+            f"the kind must be one of {', '.join(ORIENTATIONS)}, got {answer[0]!r}"
+        )
+    if len(answer) > 1:
+        edge = answer[1]
+    else:
+        await _ask(f"press firmly on the mat at its {ORIENTATIONS[answer[0]]['top']} end and "
+                   "hold, then press Enter", False)  # fmt: skip
+        frame = await feed.next_frame(time.monotonic() + args.wait_s)
+        edge = edge_of_press(frame.values, typical_reading(zero), source.layout)
+        say(f"  the press is nearest the {edge} edge")
+    found = orientation_toward(answer[0], edge)
+    say(f"  orientation: {_edges(found)}")
+    return found
+
+
+def _edges(o: dict[str, str]) -> str:
+    return ", ".join(f"{k}: {v}" for k, v in o.items())
+
+
 async def _wizard(args: argparse.Namespace, source: Any) -> int:
     say = lambda text: print(text, flush=True)  # noqa: E731
     stem = args.output.with_suffix("")
@@ -219,6 +272,7 @@ async def _wizard(args: argparse.Namespace, source: Any) -> int:
             "zero",
         )
         say(f"  recorded {zero.n_frames} frames -> {kept[-1]}")
+        orientation = await _orientation(args, source, feed, zero, say)
         material = args.material or (getattr(source, "announced", {}) or {}).get("spacer")
         if material is None:
             if args.yes:
@@ -243,6 +297,7 @@ async def _wizard(args: argparse.Namespace, source: Any) -> int:
         say(f"  recorded {uniform.n_frames} frames -> {kept[-1]}")
         say(f"step 3/4: calibrating with {session.material_name}")
         chain = session.fit(zero, uniform, (str(kept[0]), str(kept[1])))
+        chain.orientation = orientation
         for f in session.findings:
             say(f"  {f}")
         chain.save(args.output)
@@ -277,6 +332,7 @@ def run_wizard(args: argparse.Namespace) -> int:
         raise ParameterError(f"--frames must be >= 3, got {args.frames}")
     if not args.output.parent.is_dir():
         raise ParameterError(f"the folder {args.output.parent} does not exist")
+    refuse_replacing(args.output, args.replace)
     parse_pressure(args.pressure)
     source = open_source(args, loop=False)
     if source.quantity != "capacitance":

@@ -35,7 +35,14 @@ import numpy as np
 from texsense._progress import progress
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.files import atomic_path, check_not_input
+from texsense.data.files import (
+    atomic_path,
+    check_not_input,
+    make_folder,
+    open_regular,
+    real_path,
+    regular_files,
+)
 from texsense.data.layout import Layout
 from texsense.data.modelfile import content_hash
 from texsense.exceptions import FormatError, ParameterError
@@ -63,11 +70,23 @@ class ProcessOptions:
     #: Read an input cut short up to its last complete frame (with a warning) instead of
     #: refusing it (``--accept-truncated``).
     accept_truncated: bool = False
+    #: Correct the drift in use (stillness, an empty mat) instead of with the calibration's
+    #: drift stage, where the calibration allows it (``--in-use-drift off``: laboratory only).
+    in_use: bool = True
+    #: Give every value a bound at this level (``--interval 0.95``): lower and upper maps
+    #: beside the frames (docs/data-model.md).
+    interval: float | None = None
 
     def pipeline(self, chain: StageChain, layout: Layout) -> Pipeline:
         """The compiled pipeline of ``chain`` for ``layout`` with these settings."""
         return Pipeline(
-            chain, layout, hysteresis=self.hysteresis, drift=self.drift, repair=self.repair
+            chain,
+            layout,
+            hysteresis=self.hysteresis,
+            drift=self.drift,
+            repair=self.repair,
+            in_use=self.in_use and self.drift,
+            interval=self.interval,
         )
 
     def frames_per_block(self, n_elements: int) -> int:
@@ -88,33 +107,44 @@ class FileReport:
     frames: int = 0
     failed_share: float = 0.0
     error: str = ""
+    #: the in-use drift correction at the end (:meth:`Pipeline.in_use_status`), if it ran
+    in_use: dict[str, Any] | None = None
 
 
 def input_hash(path: str | Path) -> str:
     """SHA-256 of a file's bytes (read in 1 MiB blocks)."""
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
 
 
-def _output_matches(dst: Path, calibration_id: str, digest: str) -> bool:
-    """True when ``dst`` is a complete output of the same calibration and input."""
+def _output_matches(
+    dst: Path,
+    calibration_id: str,
+    digest: str,
+    stages: list[str] | None = None,
+    interval: float | None = None,
+) -> bool:
+    """True when ``dst`` is a complete output of the same calibration and input (and, given
+    ``stages``, of the same stages)."""
     if not dst.is_file():
         return False
-    import h5py
+    from texsense.io.policy import open_hdf5  # the one HDF5 policy (loads h5py)
 
     try:
-        with h5py.File(dst, "r") as f:
+        with open_hdf5(dst) as f:
             meta = json.loads(f.attrs.get("meta", "{}"))
             complete = not int(f.attrs.get("open", 1))
-    except (OSError, ValueError):
+    except (OSError, ValueError, TypeError):  # FormatError among them: not an output of ours
         return False
     return (
         complete
         and meta.get("calibration_id") == calibration_id
         and meta.get("input_sha256") == digest
+        and (stages is None or meta.get("stages") == stages)
+        and (meta.get("interval") or {}).get("level") == interval
     )
 
 
@@ -143,17 +173,19 @@ def process_file(
     check_not_input(dst, [src])
     cal = load_chain(calibration) if isinstance(calibration, str | Path) else calibration
     digest = input_hash(src)
-    if _output_matches(dst, cal.id, digest):
-        return FileReport(str(src), str(dst), "skipped")
     with open_reader(src, accept_truncated=opts.accept_truncated) as reader:
         head = reader.header
         pipe = opts.pipeline(cal, head.layout)
+        if _output_matches(dst, cal.id, digest, pipe.provenance()["stages"], opts.interval):
+            return FileReport(str(src), str(dst), "skipped")
         quantity, unit = pipe.input_quantity
         if head.quantity != quantity:
             raise FormatError(src, f"holds {head.quantity}, the calibration reads {quantity}")
         out_quantity, out_unit = pipe.output_quantity
         meta = {**head.meta, **pipe.provenance(), "source": src.name, "input_sha256": digest}
-        dst.parent.mkdir(parents=True, exist_ok=True)
+        if opts.interval is not None:
+            meta["interval"] = {"level": opts.interval, "method": "split conformal (issue 37)"}
+        make_folder(dst.parent)
         frames, failed = 0, 0
         with (
             atomic_path(dst) as tmp,
@@ -166,24 +198,31 @@ def process_file(
                 element_times=head.element_times,
                 compress=True,
                 live=False,
+                bounds=opts.interval is not None,
             ) as writer,
         ):
             for block in reader.blocks(opts.frames_per_block(head.layout.n_elements)):
                 values = block.to_unit(unit).frames if block.unit != unit else block.frames
                 p, ok, codes = pipe.process(values, block.times, block.valid)
+                lo, hi = pipe.bounds_ if pipe.bounds_ is not None else (None, None)
                 writer.append(
                     p,
                     block.times,
                     valid=ok,
                     element_times=block.element_times,
                     labels=block.labels or None,
+                    lower=lo,
+                    upper=hi,
                 )
                 frames += block.n_frames
                 failed += int(np.count_nonzero(codes))
             if frames == 0:
                 raise FormatError(src, "the recording has no frames")
+            if pipe.in_use:
+                writer.update_meta({"in_use_drift": pipe.in_use_status()})
     share = failed / max(1, frames * head.layout.n_elements)
-    return FileReport(str(src), str(dst), "done", frames, share)
+    status = pipe.in_use_status() if pipe.in_use else None
+    return FileReport(str(src), str(dst), "done", frames, share, in_use=status)
 
 
 def archive_jobs(
@@ -204,7 +243,9 @@ def archive_jobs(
     for spec in map(str, inputs):
         path = Path(spec)
         if path.is_dir():
-            for p in sorted(q for q in path.rglob("*") if q.is_file()):
+            found, passed = regular_files(path, recursive=True)  # no link out, FIFO, device
+            ignored += [p for p, _ in passed]
+            for p in found:
                 try:
                     sniff_format(p)
                 except FormatError:
@@ -222,13 +263,13 @@ def archive_jobs(
         else:
             raise ParameterError(f"{spec}: no such file or folder, and not a glob pattern")
     seen: dict[Path, Path] = {}
-    sources = {src.resolve(): src for src, _ in jobs}
+    sources = {real_path(src): src for src, _ in jobs}
     for src, dst in jobs:
         if dst in seen and seen[dst] != src:
             raise ParameterError(f"{seen[dst]} and {src} would both be written to {dst}")
         seen[dst] = src
-        if dst.resolve() in sources:  # the output would replace an input
-            check_not_input(dst, [sources[dst.resolve()]])
+        if real_path(dst) in sources:  # the output would replace an input
+            check_not_input(dst, [sources[real_path(dst)]])
     if not jobs:
         raise ParameterError(f"no recordings found in {', '.join(map(str, inputs))}")
     return jobs, ignored

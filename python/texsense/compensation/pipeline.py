@@ -17,7 +17,12 @@ its Python stage runs (``crates/core/src/chain.rs``):
   element's Preisach and drift states stay frozen until it reads again;
 - **repair** (:class:`~texsense.compensation.repair.Repair`): the chain's repair stages where they
   stand; a chain without one gets the method of ``repair=`` after its last stage. Failed
-  elements are filled and stay marked False in the output's ``valid`` mask.
+  elements are filled and stay marked False in the output's ``valid`` mask;
+- **in-use drift** (``in_use=True``, :class:`~texsense.compensation.inuse.InUseDrift`): the
+  drift read from the mat in use (stillness, an empty mat) right after the hysteresis stage, in
+  place of the laboratory drift stage; it needs a spacer model and says why when it cannot run
+  (:attr:`Pipeline.in_use_note`). With ``interval`` every value gets a bound
+  (:mod:`texsense.compensation.intervals`, ``bounds_``).
 
 Any order the stage contract allows runs; a stage without a compiled kernel is refused in
 one line naming it. The local repairs run in the compiled pass; the harmonic ones solve a
@@ -42,6 +47,8 @@ import numpy.typing as npt
 from texsense._core import Chain, Compensation, __version__
 from texsense.compensation.health import FailureDetector
 from texsense.compensation.hysteresis import DEFAULT_CAPACITY
+from texsense.compensation.intervals import bounds, drift_share, multiplier
+from texsense.compensation.inuse import InUseDrift, InUseState
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
 from texsense.compensation.stage import Stage, time_steps
 from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, StageChain
@@ -49,7 +56,26 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
-__all__ = ["Pipeline"]
+__all__ = ["Pipeline", "layout_mismatch"]
+
+
+def layout_mismatch(expected: Layout, given: Layout) -> str | None:
+    """How the elements of ``given`` differ from those of ``expected`` (None: the same
+    elements): their count, the grid's shape, the cells they sit in; a calibration per element
+    applied to elements in other places would put each element's curve on another."""
+    if expected.n_elements != given.n_elements:
+        return f"{expected.n_elements} elements, not {given.n_elements}"
+    if (expected.shape is None) != (given.shape is None):
+        return f"a {expected.kind} layout, not a {given.kind} layout"
+    if expected.shape is not None and expected.shape != given.shape:
+        (r, c), (gr, gc) = expected.shape, given.shape  # type: ignore[misc]
+        return f"a grid of {r} x {c}, not {gr} x {gc}"
+    if expected.cells is not None and (
+        given.cells is None or not np.array_equal(expected.cells, given.cells)
+    ):
+        return "the same grid with its elements in other cells"
+    return None
+
 
 #: The first bytes of a pipeline's state (:meth:`Pipeline.snapshot`).
 STATE_MAGIC = b"TXSNPIPE"
@@ -64,6 +90,15 @@ class _Loading:
 
     def __init__(self, hysteresis: Hysteresis) -> None:
         self.hysteresis = hysteresis
+
+
+class _InUse:
+    """The in-use drift estimator's place in the plan (right after the hysteresis stage)."""
+
+    name = "in-use drift"
+
+    def __init__(self, estimator: InUseDrift) -> None:
+        self.estimator = estimator
 
 
 class Pipeline:
@@ -89,6 +124,16 @@ class Pipeline:
         innermost minor loop is forgotten. The default holds every loop seen on real and
         simulated records; a microcontroller keeps fewer (``texsense export mcu
         --capacity``), and the same value here gives its numbers in float64.
+    in_use : bool
+        Correct the drift in use (:class:`~texsense.compensation.inuse.InUseDrift`) instead of
+        with the calibration's drift stage; where the calibration cannot (no spacer model, the
+        hysteresis stage off) the pipeline runs without it and :attr:`in_use_note` says why.
+    in_use_options : dict, optional
+        Settings of :class:`~texsense.compensation.inuse.InUseDrift`.
+    interval : float, optional
+        Give every value a bound at this level (e.g. 0.95; :mod:`texsense.compensation.intervals`):
+        ``bounds_`` holds the lower and upper maps of the last frames. The calibration's
+        hysteresis model needs held-out residuals (a preset's, or a held-out record).
     """
 
     def __init__(
@@ -101,6 +146,9 @@ class Pipeline:
         drift: bool = True,
         repair: str | None = "harmonic",
         capacity: int = DEFAULT_CAPACITY,
+        in_use: bool = False,
+        in_use_options: dict[str, Any] | None = None,
+        interval: float | None = None,
     ) -> None:
         if not isinstance(chain, StageChain):
             raise ParameterError(f"a Pipeline compiles a StageChain, not {type(chain).__name__}")
@@ -109,6 +157,11 @@ class Pipeline:
                 f"the calibration is for {chain.n_elements} elements, the layout has "
                 f"{layout.n_elements}"
             )
+        for stage in chain.stages:
+            made_for = getattr(stage, "layout", None)
+            why = layout_mismatch(made_for, layout) if isinstance(made_for, Layout) else None
+            if why:
+                raise ParameterError(f"the calibration was made for another mat: {why}")
         if repair is not None and repair not in METHODS:
             raise ParameterError(f"unknown repair method {repair!r}; known: {', '.join(METHODS)}")
         self.chain = chain
@@ -118,8 +171,9 @@ class Pipeline:
             raise ParameterError(f"capacity must be 4 ..= 65536 turning points, got {capacity}")
         self.capacity = int(capacity)
         self.calibration_id = chain.id
+        self._in_use_setup(in_use, in_use_options, interval)
         #: the stages the pipeline runs, in order (the chain's, switched, plus what it adds)
-        self.plan: list[Stage | _Loading] = self._plan()
+        self.plan: list[Stage | _Loading | _InUse] = self._plan()
         found = next((s for s in self.plan if isinstance(s, FailureDetector)), None)
         conversion = chain.conversion
         #: the (first) detector the pipeline runs (or the one the conversion implies)
@@ -132,6 +186,45 @@ class Pipeline:
         self._all_valid = np.ones(layout.n_elements, bool)
         #: the failure codes of the last frames (0: measured)
         self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
+
+    def _in_use_setup(
+        self, in_use: bool, options: dict[str, Any] | None, interval: float | None
+    ) -> None:
+        """The in-use drift estimator (or why not) and the bounds' held-out residuals."""
+        self.in_use, self.in_use_options = in_use, options
+        hyst, conversion = self.chain.find(Hysteresis), self.chain.conversion
+        #: why the in-use drift correction does not run although asked for (None: it runs)
+        self.in_use_note: str | None = None
+        self.estimator: InUseDrift | None = None
+        if in_use and (hyst is None or not isinstance(conversion, Convert)):
+            self.in_use_note = "the calibration has no spacer model (hysteresis stage)"
+        elif in_use and not self.hysteresis:
+            self.in_use_note = "the hysteresis stage is off"
+        elif in_use and hyst is not None and isinstance(conversion, Convert):
+            opts = {
+                "converter": conversion.kernel(),
+                "rest_input": float(conversion.curve_compression_mm_[0]),
+                **(options or {}),
+            }
+            self.estimator = InUseDrift(*hyst.loading_points(), self.layout, **opts)
+        self.interval = interval
+        self._held_out = None
+        self._range_max: float | None = None
+        if interval is not None:
+            self._held_out = None if hyst is None else getattr(hyst.model_, "held_out_", None)
+            if self._held_out is None:
+                raise ParameterError(
+                    "bounds need the calibration's held-out residuals: calibrate with a spacer "
+                    "preset, held steps or a held-out record (docs/drift.md, Bounds)"
+                )
+            multiplier(interval)  # the level is in range and its scores are calibrated
+            self._range_max = float(hyst.loading_points()[1][-1]) if hyst is not None else None
+        #: the conformal multiplier (None: the calibrated one of the level, ``SCORES``); 1
+        #: gives the score's scale σ (what ``benchmarks/night_drift.py --calibrate`` needs)
+        self.interval_multiplier: float | None = None
+        #: lower and upper maps of the last frames (with ``interval``)
+        self.bounds_: tuple[np.ndarray, np.ndarray] | None = None
+        self._t_first: float | None = None
 
     def get_params(self) -> dict[str, Any]:
         """The constructor's arguments, by name (as every stage has them)."""
@@ -149,14 +242,14 @@ class Pipeline:
         return self.chain.gives
 
     # ------------------------------------------------------------------ compiling
-    def _plan(self) -> list[Stage | _Loading]:
+    def _plan(self) -> list[Stage | _Loading | _InUse]:
         """The stages to run: the chain's in order, switched off where asked, the implied
         detector before the conversion of a chain without a detect stage, and the repair
         after the last stage of a chain without a repair stage."""
         stages = self.chain.stages
         has_detect = any(isinstance(s, FailureDetector) for s in stages)
         has_repair = any(isinstance(s, Repair) for s in stages)
-        plan: list[Stage | _Loading] = []
+        plan: list[Stage | _Loading | _InUse] = []
         for k, s in enumerate(stages, 1):
             if isinstance(s, FailureDetector):
                 if self.detect:
@@ -168,8 +261,10 @@ class Pipeline:
                 plan.append(s)
             elif isinstance(s, Hysteresis):
                 plan.append(s if self.hysteresis else _Loading(s))
+                if self.estimator is not None and self.hysteresis:
+                    plan.append(_InUse(self.estimator))
             elif isinstance(s, Drift):
-                if self.drift and self.hysteresis:
+                if self.drift and self.hysteresis and self.estimator is None:
                     plan.append(s)
             elif isinstance(s, Repair):
                 if self.repair is not None:
@@ -184,11 +279,11 @@ class Pipeline:
             plan.append(Repair(self.layout, self.repair).fit())
         return plan
 
-    def _compile(self) -> list[Chain | Repair]:
+    def _compile(self) -> list[Chain | Repair | InUseDrift]:
         """The plan as passes: compiled chains of kernels, and the harmonic repairs (scipy)
         between them."""
         n = self.layout.n_elements
-        parts: list[Chain | Repair] = []
+        parts: list[Chain | Repair | InUseDrift] = []
         kernels: list[Any] = []
         plan = self.plan
         k = 0
@@ -198,6 +293,10 @@ class Pipeline:
                 kernels.append(s.core)
             elif isinstance(s, Convert | Linear):
                 kernels.append(s.kernel())
+            elif isinstance(s, _InUse):  # between compiled passes, like a harmonic repair
+                parts.append(Chain(n, kernels))
+                kernels = []
+                parts.append(s.estimator)
             elif isinstance(s, _Loading):
                 kernels.append(s.hysteresis.loading_curve())
             elif isinstance(s, Hysteresis):
@@ -248,8 +347,12 @@ class Pipeline:
     def reset(self) -> Pipeline:
         """Start over: unloaded spacer states, no history."""
         for p in self._parts:
-            p.reset()
+            if isinstance(p, InUseDrift):
+                p.forget()
+            else:
+                p.reset()
         self._last_t: float | None = None
+        self._t_first = None
         return self
 
     def state_bytes_per_element(self) -> int:
@@ -259,11 +362,20 @@ class Pipeline:
 
     def provenance(self) -> dict[str, Any]:
         """What produced the output: calibration id, software version, stages."""
-        return {
+        out: dict[str, Any] = {
             "calibration_id": self.calibration_id,
             "software": f"texsense {__version__}",
             "stages": self.stage_names(),
         }
+        if self.in_use:
+            out["in_use_drift"] = self.in_use_status()
+        return out
+
+    def in_use_status(self) -> dict[str, Any]:
+        """The in-use drift correction now (:meth:`InUseState.status`), or why it is off."""
+        if self.estimator is None:
+            return {"state": "off", "why": self.in_use_note or "not asked for"}
+        return self.estimator.state.status()
 
     def process(
         self, frames_pF: npt.ArrayLike, times_s: npt.ArrayLike, valid: npt.ArrayLike | None = None
@@ -293,17 +405,54 @@ class Pipeline:
         """The passes over checked arrays: what ``process`` and ``step`` share."""
         values, ok = cap, valid
         codes: np.ndarray | None = None
+        times = None
+        if self.estimator is not None or self.interval is not None:  # the frames' times
+            after = np.concatenate([np.cumsum(dt[::-1])[::-1][1:], [0.0]])
+            times = last_t - after
         for p in self._parts:
             if isinstance(p, Chain):
                 values, found = p.run(dt, values, np.ascontiguousarray(ok))
                 codes = found if codes is None else np.where(codes != 0, codes, found)
                 ok = codes == 0
+            elif isinstance(p, InUseDrift):
+                assert times is not None  # set above when there is an estimator
+                values = p.run(values, ok, times, raw=cap)
             else:
                 values, _ = p._block(values, ok & np.isfinite(values), dt)
         assert codes is not None  # a compiled pass always runs (_compile)
         self._last_t = last_t
         self.codes_ = codes
+        if self.interval is not None and times is not None:
+            self.bounds_ = self._bounds(values, ok, times)
         return values, ok, codes
+
+    def _bounds(
+        self, values: np.ndarray, ok: np.ndarray, times: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds of a block (:func:`texsense.compensation.intervals.bounds`): the drift
+        share from the in-use correction of every frame, or from the time since the stream
+        began (the calibration taken as made just before)."""
+        assert self._held_out is not None and self.interval is not None
+        if self._t_first is None:
+            self._t_first = float(times[0])
+        hours = (np.asarray(times, dtype=np.float64) - self._t_first) / 3600.0
+        corr = (
+            self.estimator.corrections_
+            if self.estimator is not None
+            else np.full(hours.shape, np.nan)
+        )
+        d = np.array(
+            [drift_share(h, None if np.isnan(c) else c) for h, c in zip(hours, corr, strict=True)]
+        )
+        return bounds(
+            values,
+            self.interval,
+            self._held_out,
+            drift=d[:, None],
+            repaired=~ok,
+            range_max=self._range_max,
+            multiplier_value=self.interval_multiplier,
+        )
 
     def step(
         self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
@@ -340,6 +489,9 @@ class Pipeline:
                 f"the recording has {rec.n_elements} elements, the pipeline "
                 f"{self.layout.n_elements}"
             )
+        why = layout_mismatch(self.layout, rec.layout)
+        if why:
+            raise ParameterError(f"the recording is of another mat than the pipeline's: {why}")
         values = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
         p, ok, _ = self.process(values, rec.times, rec.valid)
         meta = {**rec.meta, **self.provenance()}
@@ -358,7 +510,7 @@ class Pipeline:
         Preisach memory, drift history and last repaired value, the harmonic repairs' last
         frames and the time of the last frame. :meth:`restore` in a pipeline of the same
         calibration (in any process) continues the stream exactly where it stopped."""
-        sections = [p.snapshot() if isinstance(p, Chain) else _repair_state(p) for p in self._parts]
+        sections = [_part_state(p) for p in self._parts]
         head = json.dumps(
             {
                 "calibration_id": self.calibration_id,
@@ -388,23 +540,40 @@ class Pipeline:
         last_t = head.get("last_t")
         if last_t is not None and not isinstance(last_t, int | float):
             raise ParameterError("the state's last frame time is not a number")
-        before = [p.snapshot() if isinstance(p, Chain) else _repair_state(p) for p in self._parts]
+        before = [_part_state(p) for p in self._parts]
         try:
             for p, s in zip(self._parts, sections, strict=True):
-                if isinstance(p, Chain):
-                    p.restore(s)
-                else:
-                    _restore_repair(p, s)
+                _restore_part(p, s)
         except ValueError as e:  # the core's errors are ValueErrors
             for p, s in zip(self._parts, before, strict=True):
-                if isinstance(p, Chain):
-                    p.restore(s)
-                else:
-                    _restore_repair(p, s)
+                _restore_part(p, s)
             raise ParameterError(f"the state does not fit this pipeline: {e}") from None
         self._last_t = None if last_t is None else float(last_t)
         self.codes_ = np.zeros((0, self.layout.n_elements), np.uint8)
         return self
+
+
+def _part_state(p: Chain | Repair | InUseDrift) -> bytes:
+    """One part's state: a compiled pass's, a harmonic repair's, the in-use state (JSON; a still
+    period under way starts again after a restore)."""
+    if isinstance(p, Chain):
+        return bytes(p.snapshot())
+    if isinstance(p, InUseDrift):
+        return json.dumps(p.state.to_dict()).encode()
+    return _repair_state(p)
+
+
+def _restore_part(p: Chain | Repair | InUseDrift, s: bytes) -> None:
+    if isinstance(p, Chain):
+        p.restore(s)
+    elif isinstance(p, InUseDrift):
+        try:
+            state = InUseState.from_dict(json.loads(s), p.layout.n_elements)
+        except (ParameterError, TypeError, KeyError) as e:
+            raise ValueError(f"the in-use drift state: {e}") from None
+        p.set_state(state)
+    else:
+        _restore_repair(p, s)
 
 
 def _repair_state(r: Repair) -> bytes:

@@ -11,6 +11,13 @@ previous file as it was and no half-written file under the target's name.
 - :func:`unused_name` gives a name that no file has yet (``session.h5``, ``session-2.h5``, ...)
   for recordings that must never overwrite an earlier one.
 
+And the one way a file is opened for reading: :func:`open_regular` (and :func:`check_regular`
+for a library that opens the file by its name itself, such as h5py) accepts a regular file
+only. A FIFO, a device, a socket, a dangling link or a loop of links is refused at once in one
+line naming the path, and nothing ever waits on a file that does not answer (the open does not
+block: a FIFO without a writer would hang a reader for ever); :func:`read_small_text` reads a
+small text file (a token, a password) and refuses one larger than it can be (``/dev/zero``).
+
 Examples
 --------
 >>> import os, tempfile
@@ -33,14 +40,19 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import signal
+import stat
 import tempfile
-from collections.abc import Iterable, Iterator
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any
 
-from texsense.exceptions import ParameterError, WriteError
+from texsense.data import budget
+from texsense.exceptions import FormatError, ParameterError, WriteError
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -49,6 +61,14 @@ __all__ = [
     "atomic_open",
     "atomic_path",
     "check_not_input",
+    "check_regular",
+    "check_writable",
+    "make_folder",
+    "open_regular",
+    "read_regular",
+    "read_small_text",
+    "real_path",
+    "regular_files",
     "save_figure",
     "unused_name",
     "write_bytes",
@@ -96,20 +116,35 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
-        raise WriteError(target, f"the folder {folder} does not exist")
+        where = f"{folder} is a file, not a folder" if folder.exists() else (
+            f"the folder {folder} does not exist")  # fmt: skip
+        raise WriteError(target, where)
     if target.is_dir():
         raise WriteError(target, "is a folder, expected a file name")
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=_TMP_PREFIX + target.name + ".",
-        suffix=target.suffix if suffix is None else suffix,
-        dir=folder,
-    )
-    # mkstemp makes the file private (0600): give it the mode the file had, or that a new
-    # file gets (0666 less the umask), so that writing safely does not change who may read
-    with contextlib.suppress(OSError):
-        os.fchmod(fd, _mode_of(target))
-    os.close(fd)
-    tmp = Path(tmp_name)
+    if target.exists() and not target.is_file():
+        raise WriteError(target, "is not a regular file (a device, a FIFO, ...): not replaced")
+    mode = _mode_of(target)
+    with _signals_held() as release:  # a stop signal between the file and the try: no leftover
+        try:
+            fd, tmp_name = tempfile.mkstemp(
+                prefix=_TMP_PREFIX + target.name[:80] + ".",
+                suffix=target.suffix if suffix is None else suffix,
+                dir=folder,
+            )
+        except OSError as e:
+            raise WriteError(target, _reason(e)) from None
+        tmp = Path(tmp_name)
+        try:
+            release()  # from here a signal's exception removes the temporary file
+            # mkstemp makes the file private (0600): give it the mode the file had, or that a
+            # new file gets (0666 less the umask): writing safely does not change who may read
+            with contextlib.suppress(OSError):
+                os.fchmod(fd, mode)
+            os.close(fd)
+        except BaseException:
+            os.close(fd)
+            _remove(tmp)
+            raise
     try:
         yield tmp
         _fsync_file(tmp)
@@ -163,6 +198,12 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def real_path(path: str | Path) -> Path:
+    """``path`` with every link followed; a loop of links is left as it is (``Path.resolve``
+    raises RuntimeError on one, which would be a traceback)."""
+    return Path(os.path.realpath(path))
+
+
 def check_not_input(
     output: str | Path, inputs: Iterable[str | Path], *, what: str = "output"
 ) -> None:
@@ -177,7 +218,7 @@ def check_not_input(
     out = Path(output)
     for item in inputs:
         src = Path(item)
-        if _same_file(out, src) or out.resolve() == src.resolve():
+        if _same_file(out, src) or real_path(out) == real_path(src):
             raise ParameterError(
                 f"the {what} {out} is also an input: writing it would destroy the input; "
                 "choose another name"
@@ -203,6 +244,256 @@ def unused_name(path: str | Path) -> Path:
         if not candidate.exists():
             return candidate
         k += 1
+
+
+_KINDS = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def _kind(mode: int) -> str:
+    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+def check_regular(path: str | Path, *, folder_ok: bool = False) -> os.stat_result:
+    """The status of ``path`` if it is a regular file (a folder too with ``folder_ok``),
+    following links; anything else is a :class:`~texsense.exceptions.FormatError` naming it.
+
+    Only the status is asked (``stat``), which never waits on the file itself.
+
+    >>> check_regular("/dev/null")
+    Traceback (most recent call last):
+    ...
+    texsense.exceptions.FormatError: /dev/null: not a regular file (a character device): ...
+    """
+
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        missing = "a link to nothing" if os.path.islink(p) else "no such file or folder"
+        raise FormatError(p, missing) from None
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise FormatError(p, "a loop of symbolic links") from None
+        raise FormatError(p, f"cannot be read ({e.strerror or e})") from None
+    if stat.S_ISDIR(st.st_mode):
+        if folder_ok:
+            return st
+        raise FormatError(p, "expected a file, found a folder")
+    if not stat.S_ISREG(st.st_mode):
+        raise FormatError(
+            p, f"not a regular file ({_kind(st.st_mode)}): texsense reads regular files only"
+        )
+    return st
+
+
+def open_regular(path: str | Path) -> IO[bytes]:
+    """Open a regular file for reading bytes without ever waiting on it (see
+    :func:`check_regular`): the open itself does not block (``O_NONBLOCK``), and the file
+    opened is checked again, so that a FIFO put in its place in between is refused too.
+
+    Raises
+    ------
+    FormatError
+        Naming the file: missing, a folder, a FIFO, a device, a dangling link, no permission.
+    """
+
+    p = Path(path)
+    check_regular(p)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    try:
+        fd = os.open(p, flags | getattr(os, "O_CLOEXEC", 0))
+    except OSError as e:
+        raise FormatError(p, f"cannot be read ({e.strerror or e})") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise FormatError(p, f"not a regular file ({_kind(mode)})")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def check_writable(path: str | Path, what: str, *, folder: bool = False) -> Path:
+    """Refuse now, in one :class:`~texsense.exceptions.WriteError` naming ``what``, a place
+    where a file (with ``folder``: a folder) cannot be made: a folder or a file in the way,
+    no permission, a read-only file system. For a server, which would otherwise find out
+    hours later, when it first writes (a recording, an event)."""
+    p = Path(path)
+    if folder and p.exists() and not p.is_dir():
+        raise WriteError(p, f"{what} is a file, expected a folder")
+    if not folder and p.is_dir():
+        raise WriteError(p, f"{what} is a folder, expected a file name")
+    nearest = p if folder and p.is_dir() else (p.parent if str(p.parent) else Path("."))
+    if not folder and not nearest.exists():
+        raise WriteError(p, f"{what}: the folder {nearest} does not exist")
+    while not nearest.exists() and nearest != nearest.parent:
+        nearest = nearest.parent
+    if not nearest.is_dir():
+        raise WriteError(p, f"{what}: {nearest} is a file, expected a folder")
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        reason = "a read-only file system" if _read_only(nearest) else "no permission"
+        raise WriteError(p, f"{what}: cannot write in {nearest} ({reason})")
+    return p
+
+
+def _read_only(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
+
+
+def make_folder(path: str | Path, what: str = "output folder") -> Path:
+    """Make the folder ``path`` (and its parents) if it is missing; one
+    :class:`~texsense.exceptions.WriteError` naming it when it cannot be (a file in the way,
+    no permission, a read-only file system).
+
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp(); f = write_text(os.path.join(d, "f"), "x")
+    >>> make_folder(os.path.join(d, "f", "sub"))
+    Traceback (most recent call last):
+    ...
+    texsense.exceptions.WriteError: .../f/sub: cannot make the output folder (.../f is a file)
+    """
+    p = Path(path)
+    if p.is_dir():
+        return p
+    blocking = next((q for q in [p, *p.parents] if q.exists() and not q.is_dir()), None)
+    if blocking is not None:
+        raise WriteError(p, f"cannot make the {what} ({blocking} is a file)")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise WriteError(p, f"cannot make the {what} ({e.strerror or e})") from None
+    return p
+
+
+def regular_files(
+    folder: str | Path, *, recursive: bool = False, folders: bool = False
+) -> tuple[list[Path], list[tuple[Path, str]]]:
+    """The regular files in ``folder`` (and its subfolders with ``recursive``; the subfolders
+    themselves with ``folders``), sorted, and what was passed over with why: links that lead
+    out of the folder, dangling links, loops of links, FIFOs, devices and sockets. Nothing is
+    opened (only the status of each entry is asked), so nothing can wait on an entry that
+    does not answer; a subfolder reached through a link is not entered.
+
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp(); _ = write_text(os.path.join(d, "a.csv"), "x")
+    >>> os.symlink("/etc/hostname", os.path.join(d, "out.csv")); os.mkfifo(os.path.join(d, "f"))
+    >>> files, skipped = regular_files(d)
+    >>> [p.name for p in files], sorted((p.name, why) for p, why in skipped)
+    (['a.csv'], [('f', 'a FIFO (named pipe)'), ('out.csv', 'a link out of the folder')])
+    """
+    root = Path(folder)
+    base = Path(os.path.realpath(root))
+    files: list[Path] = []
+    skipped: list[tuple[Path, str]] = []
+    pending = [root]
+    while pending:
+        current = pending.pop()
+        try:
+            entries = sorted(os.scandir(current), key=lambda e: e.name)
+        except OSError as e:
+            skipped.append((current, f"cannot be listed ({e.strerror or e})"))
+            continue
+        for entry in entries:
+            path = Path(entry.path)
+            why = _entry_problem(entry, path, base)
+            if why == "folder":
+                if recursive:
+                    pending.append(path)
+                if folders:
+                    files.append(path)
+            elif why:
+                skipped.append((path, why))
+            else:
+                files.append(path)
+    return sorted(files), skipped
+
+
+def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | None:
+    """None for a regular file inside ``base``, "folder" for a real subfolder, else why the
+    entry is passed over."""
+    try:
+        if entry.is_symlink():
+            real = Path(os.path.realpath(path))
+            if base != real and base not in real.parents:
+                return "a link out of the folder"
+            st = os.stat(path)
+            if stat.S_ISDIR(st.st_mode):
+                return "a link to a folder"
+        else:
+            st = entry.stat(follow_symlinks=False)
+    except FileNotFoundError:
+        return "a link to nothing"
+    except OSError as e:
+        return "a loop of symbolic links" if e.errno == errno.ELOOP else (e.strerror or str(e))
+    if stat.S_ISDIR(st.st_mode):
+        return "folder"
+    if not stat.S_ISREG(st.st_mode):
+        return _kind(st.st_mode)
+    return None
+
+
+def read_regular(path: str | Path, what: str) -> bytes:
+    """The bytes of a regular file that an option names (a model, a calibration, regions,
+    credentials), read without ever waiting on it (:func:`open_regular`) and only when its
+    size fits the memory budget (:func:`texsense.data.budget.check`): missing, a folder, a
+    FIFO, a device or a file larger than the budget is a
+    :class:`~texsense.exceptions.FormatError` naming it (``what`` says what it should have
+    been)."""
+    p = Path(path)
+    with open_regular(p) as f:
+        size = os.fstat(f.fileno()).st_size
+        budget.check(size, what, p)
+        return f.read(size + 1)
+
+
+def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:
+    """The text of a small UTF-8 file (a token, a password, a settings file) of at most
+    ``limit`` bytes; a larger file, a device (``/dev/zero``) or a FIFO is refused in one line
+    (``what`` names the option it came from)."""
+    p = Path(path)
+    try:
+        with open_regular(p) as f:
+            data = f.read(limit + 1)
+    except Exception as e:  # FormatError: one line that names the path
+        detail = getattr(e, "detail", str(e))
+        raise ParameterError(f"{what} {p}: {detail}") from None
+    if len(data) > limit:
+        raise ParameterError(f"{what} {p}: larger than {limit} bytes, not a small text file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ParameterError(f"{what} {p}: not UTF-8 text") from None
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[Callable[[], None]]:
+    """Hold SIGINT and SIGTERM (in the main thread) until the block calls ``release()`` or
+    ends; a signal that came meanwhile takes effect at the release."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if main else None
+    done = False
+
+    def release() -> None:
+        nonlocal done
+        if previous is not None and not done:
+            done = True
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+    try:
+        yield release
+    finally:
+        release()
 
 
 def _mode_of(target: Path) -> int:

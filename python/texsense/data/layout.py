@@ -40,47 +40,30 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense.data import budget
+from texsense.data.orientation import (
+    EDGES,
+    ORIENTATIONS,
+    _orientation,
+    orientation_toward,
+    parse_orientation,
+)
 from texsense.exceptions import ParameterError
 
-__all__ = ["EDGES", "ORIENTATIONS", "Layout"]
-
-#: The edges of a map as drawn: ``top`` is row 0 (small y), ``left`` is column 0 (small x).
-EDGES = ("top", "bottom", "left", "right")
-
-#: Orientation presets. ``left`` / ``right`` are the body's own left and right: the patient's
-#: lying on the back on a bed (head at the top), the sitter's on a seat (front edge at the top).
-#: A foot sensor declares toes and heel only (its sides depend on which foot it is).
-ORIENTATIONS: dict[str, dict[str, str]] = {
-    "bed": {"top": "head", "bottom": "foot", "left": "left", "right": "right"},
-    "seat": {"top": "front", "bottom": "back", "left": "left", "right": "right"},
-    "foot": {"top": "toes", "bottom": "heel"},
-}
-
-
-def _orientation(value: Mapping[str, str] | str | None) -> dict[str, str]:
-    """Check an orientation (a preset name or edge -> label) and return it as a dict."""
-    if value is None:
-        return {}
-    if isinstance(value, str):
-        if value not in ORIENTATIONS:
-            raise ParameterError(
-                f"orientation: unknown preset {value!r}; known: {', '.join(ORIENTATIONS)}"
-            )
-        return dict(ORIENTATIONS[value])
-    if not isinstance(value, Mapping):
-        raise ParameterError("orientation: expected a preset name or a mapping edge -> label")
-    out: dict[str, str] = {}
-    for edge, label in value.items():
-        if edge not in EDGES:
-            raise ParameterError(f"orientation: unknown edge {edge!r}; edges: {', '.join(EDGES)}")
-        if not isinstance(label, str) or not label.strip() or len(label) > 40:
-            raise ParameterError(f"orientation: the {edge} label must be a short text")
-        out[edge] = label.strip()
-    return out
-
+__all__ = ["EDGES", "ORIENTATIONS", "Layout", "orientation_toward", "parse_orientation"]
 
 _FloatArray = npt.NDArray[np.float64]
 _IntArray = npt.NDArray[np.int64]
+
+
+#: Memory per cell while :meth:`Layout.grid` builds a grid (centres, sizes, areas, cells,
+#: neighbours and the work arrays), for the memory budget (:mod:`texsense.data.budget`).
+BYTES_PER_CELL = 200
+#: A grid layout has at most this many cells per element, plus :data:`MAX_EMPTY_CELLS`: every
+#: map of it is a dense rows x cols array, so a few elements on a 100000 x 100000 grid would
+#: make each map 80 GB.
+SPARSE_FACTOR = 64
+MAX_EMPTY_CELLS = 1 << 20
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -215,6 +198,7 @@ class Layout:
         rows, cols = int(rows), int(cols)
         if rows < 1 or cols < 1:
             raise ParameterError(f"grid: rows and cols must be >= 1, got {rows} x {cols}")
+        budget.check(rows * cols * BYTES_PER_CELL, f"a grid of {rows} x {cols} elements")
         pitch = np.broadcast_to(np.asarray(pitch_cm, dtype=np.float64), (2,))
         py, px = float(pitch[0]), float(pitch[1])
         if not (py > 0 and px > 0):
@@ -237,28 +221,13 @@ class Layout:
         r, c = np.nonzero(mask)
         cells = r * cols + c
         xy = np.column_stack([(c + 0.5) * px, (r + 0.5) * py])
-        index = np.full(rows * cols, -1, dtype=np.int64)
-        index[cells] = np.arange(cells.size)
-        indptr = [0]
-        indices: list[int] = []
-        for ri, ci in zip(r, c, strict=True):
-            for dr, dc in ((0, -1), (0, 1), (-1, 0), (1, 0)):
-                for step in range(1, neighbour_gap + 2):
-                    rr, cc = ri + dr * step, ci + dc * step
-                    if not (0 <= rr < rows and 0 <= cc < cols):
-                        break
-                    j = index[rr * cols + cc]
-                    if j >= 0:
-                        indices.append(int(j))
-                        break
-            indptr.append(len(indices))
         return cls(
             xy,
             (sx, sy),
             shape=(rows, cols),
             cells=cells,
             pitch_cm=(py, px),
-            neighbours=(np.asarray(indptr), np.asarray(indices, dtype=np.int64)),
+            neighbours=_grid_neighbours(rows, cols, r, c, neighbour_gap),
             regions=regions,
         )
 
@@ -401,13 +370,15 @@ class Layout:
 
     def element_name(self, element: int) -> str:
         """How people name an element: its own name if the layout has names, else
-        ``e17 (r2c5)`` on a grid (index, row and column from 0), else ``e17``."""
+        ``e17 (row 3, column 6)`` on a grid (the index from 0, as ``texsense health`` and the
+        files count elements; row and column from 1 at the top left of the drawn map, as
+        ``texsense health``, the report and the pages count them), else ``e17``."""
         if self._names is not None:
             return self._names[element]
         if self._shape is None or self._cells is None:
             return f"e{element}"
         row, col = divmod(int(self._cells[element]), self._shape[1])
-        return f"e{element} (r{row}c{col})"
+        return f"e{element} (row {row + 1}, column {col + 1})"
 
     def to_grid(self, values: npt.ArrayLike, fill: float = np.nan) -> np.ndarray:
         """Arrange per-element values (..., N) as maps (..., rows, cols); empty cells = ``fill``."""
@@ -551,6 +522,32 @@ class Layout:
         return f"Layout.points({self.n_elements} elements, {len(self._regions)} regions)"
 
 
+def _grid_neighbours(
+    rows: int, cols: int, r: _IntArray, c: _IntArray, gap: int
+) -> tuple[_IntArray, _IntArray]:
+    """The 4-neighbour graph (CSR) of the elements at rows ``r``, columns ``c`` of a grid:
+    left, right, up, down in that order, each the nearest element at most ``gap`` empty cells
+    away (whole-grid shifts: millions of cells take a few array passes, not a Python loop)."""
+    n = r.size
+    index = np.full((rows, cols), -1, dtype=np.int64)
+    index[r, c] = np.arange(n)
+    found = np.empty((n, 4), dtype=np.int64)
+    for d, (dr, dc) in enumerate(((0, -1), (0, 1), (-1, 0), (1, 0))):
+        nearest = np.full((rows, cols), -1, dtype=np.int64)
+        for step in range(gap + 1, 0, -1):  # the farthest first: nearer ones overwrite
+            sr, sc = dr * step, dc * step
+            if abs(sr) >= rows or abs(sc) >= cols:
+                continue
+            # the cell (i, j) sees the element at (i + sr, j + sc)
+            src = index[max(sr, 0) : rows + min(sr, 0), max(sc, 0) : cols + min(sc, 0)]
+            dst = nearest[max(-sr, 0) : rows + min(-sr, 0), max(-sc, 0) : cols + min(-sc, 0)]
+            np.copyto(dst, src, where=src >= 0)
+        found[:, d] = nearest[r, c]
+    linked = found >= 0
+    indptr = np.concatenate(([0], np.cumsum(linked.sum(axis=1)))).astype(np.int64)
+    return indptr, found[linked]
+
+
 def _grid_of(
     n: int,
     shape: tuple[int, int] | None,
@@ -567,12 +564,18 @@ def _grid_of(
     rows, cols = (int(shape[0]), int(shape[1]))
     if rows < 1 or cols < 1:
         raise ParameterError(f"shape: rows and cols must be >= 1, got {shape}")
+    if rows * cols > MAX_EMPTY_CELLS + SPARSE_FACTOR * n:
+        raise ParameterError(
+            f"shape: a grid of {rows} x {cols} cells for {n} elements (a map of it would be "
+            f"mostly empty; at most {SPARSE_FACTOR} cells per element plus {MAX_EMPTY_CELLS})"
+        )
     c = np.asarray(cells, dtype=np.int64)
     if c.shape != (n,):
         raise ParameterError(f"cells: expected shape ({n},), got {c.shape}")
     if n and (c.min() < 0 or c.max() >= rows * cols):
         raise ParameterError(f"cells: indices must lie in 0..{rows * cols - 1}")
-    if len(np.unique(c)) != n:
+    ordered = np.sort(c)
+    if np.any(ordered[1:] == ordered[:-1]):
         raise ParameterError("cells: two elements share one grid cell")
     pitch = None
     if pitch_cm is not None:

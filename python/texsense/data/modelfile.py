@@ -50,7 +50,7 @@ import numpy as np
 
 from texsense._core import __version__
 from texsense.data import legacy
-from texsense.data.files import write_text
+from texsense.data.files import read_regular, write_text
 from texsense.exceptions import FormatError
 
 __all__ = [
@@ -120,9 +120,7 @@ def read_json(path: str | Path) -> Any:
     if path.is_dir():
         raise FormatError(path, "is a folder, expected a JSON model file")
     try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
+        raw = read_regular(path, "a JSON model file")
     except OSError as e:
         raise FormatError(path, f"cannot read: {e.strerror or e}") from None
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or (len(raw) > 1 and b"\x00" in raw[:2]):

@@ -17,7 +17,10 @@ reader that opens the port later), so that no ``--grid`` is needed::
              "active": "<hex>", "elements": 96, "spacer": "textile-3mm", ...}
 
 (one line; ``active`` is the hex bitmask of the active cells, row by row, omitted when every
-cell is active; further keys describe the device). A grid layout is all the announcement
+cell is active; ``orientation``, optional, what lies beyond each edge of the map, row 0 at the
+top: a preset of :data:`texsense.data.layout.ORIENTATIONS` such as ``"seat"``, one turned
+toward an edge such as ``"bed:bottom"``, or ``{"top": "head", ...}``; further keys describe
+the device). A grid layout is all the announcement
 carries (4-neighbours linked across one empty cell, as :meth:`Layout.grid` does).
 
 MQTT (topic ``texsense/<mat>/frames``), a JSON object per message::
@@ -55,7 +58,8 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.data import units
-from texsense.data.layout import Layout
+from texsense.data.layout import Layout, parse_orientation
+from texsense.exceptions import ParameterError
 
 if TYPE_CHECKING:
     from texsense.data.layout import Layout
@@ -309,6 +313,8 @@ def layout_announcement(layout: Layout, **info: Any) -> str:
         bits = np.packbits(np.asarray(active, dtype=bool).ravel())
         d["active"] = bits.tobytes().hex()
     d["elements"] = layout.n_elements
+    if layout.orientation:
+        d["orientation"] = layout.orientation
     d.update(info)
     line = ANNOUNCE + json.dumps(d)
     if len(line) > MAX_LINE:
@@ -349,6 +355,10 @@ def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | Non
             rows, cols, pitch_cm=(pitch[0], pitch[1]), active=active,
             element_size_cm=(element[0], element[1]),
         )  # fmt: skip
+        if d.get("orientation") is not None:
+            layout = layout.with_orientation(parse_orientation(d["orientation"]))
+    except ParameterError as e:
+        raise ProtocolError(f"layout announcement: {e}") from None
     except (KeyError, TypeError, ValueError) as e:
         what = f"lacks {e}" if isinstance(e, KeyError) else str(e)
         raise ProtocolError(f"layout announcement {what}") from None
@@ -356,5 +366,6 @@ def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | Non
         raise ProtocolError(
             f"layout announcement says {d['elements']} elements, its grid has {layout.n_elements}"
         )
-    info = {k: v for k, v in d.items() if k not in ("grid", "pitch_cm", "element_cm", "active")}
+    layout_keys = ("grid", "pitch_cm", "element_cm", "active", "orientation")
+    info = {k: v for k, v in d.items() if k not in layout_keys}
     return layout, info

@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from texsense._progress import logger
+from texsense.data.files import check_regular, regular_files
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import RecordingReader
@@ -84,8 +86,7 @@ def sniff_format(path: str | Path) -> str:
         If the file or folder matches no known format; the message lists what is known.
     """
     path = Path(path)
-    if not path.exists():
-        raise FormatError(path, "no such file or folder")
+    check_regular(path, folder_ok=True)  # no FIFO, device, dangling link: nothing waits
     if path.is_dir():
         probe = Probe(path)
     else:
@@ -255,7 +256,10 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
     if not folder.is_dir():
         raise FormatError(folder, "no such folder")
     files = []
-    for p in sorted((q for q in folder.rglob("*") if q.is_file()), key=_natural):
+    found, passed = regular_files(folder, recursive=True)  # no link out, FIFO, device
+    for p, why in passed:
+        logger.warning("warning: %s: passed over (%s)", p, why)
+    for p in sorted(found, key=_natural):
         try:
             sniff_format(p)
         except FormatError:
@@ -274,9 +278,10 @@ def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: 
             name = str(p.relative_to(folder))
             rec = rec.with_labels({**rec.labels, "file": np.full(rec.n_frames, name)})
         first = parts[0] if parts else rec
-        why = _differs(first, rec)
-        if why:
-            raise FormatError(p, f"{why} than {files[0].name}: a folder is read as one recording")
+        unlike = _differs(first, rec)
+        if unlike:
+            one = "a folder is read as one recording"
+            raise FormatError(p, f"{unlike} than {files[0].name}: {one}")
         if parts and rec.n_frames and parts[-1].n_frames:
             rec = _after(parts[-1], rec)
         parts.append(rec)

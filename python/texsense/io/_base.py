@@ -40,15 +40,16 @@ from typing import Any, ClassVar, NamedTuple, Self
 import numpy as np
 import numpy.typing as npt
 
-from texsense._progress import logger
-from texsense.data import units
-from texsense.data.layout import Layout
+from texsense._progress import check_stopping, logger
+from texsense.data import budget, units
+from texsense.data.layout import BYTES_PER_CELL, Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
 from texsense.io._registry import Probe, register_reader
 from texsense.io._text import Line, TextLines
 
 __all__ = [
+    "CEILING",
     "NON_NEGATIVE",
     "BlockReader",
     "FrameRow",
@@ -56,10 +57,19 @@ __all__ = [
     "Piece",
     "RecordingReader",
     "check_declared_size",
+    "impossible",
+    "plausible",
 ]
 
 #: Quantities whose readings cannot be negative: a negative reading is invalid.
 NON_NEGATIVE = frozenset({"pressure", "capacitance", "force", "resistance"})
+#: The largest magnitude a reading of a quantity can have, in texsense's unit (pressure in
+#: N/cm², capacitance in pF, force in N, resistance in ohm): orders of magnitude beyond any
+#: sensor (1 GPa, 1 mF, 10 MN), small enough that sums over a frame stay finite in float32.
+#: A larger reading is invalid ("beyond any sensor").
+CEILING = {"pressure": 1e5, "capacitance": 1e9, "force": 1e7, "resistance": 1e13}
+#: The ceiling of every other quantity (raw counts, lengths, ...).
+CEILING_OTHER = 1e15
 
 #: The hint every "cut short" error ends with.
 ACCEPT_HINT = "--accept-truncated (accept_truncated=True) reads the {n} complete {what}(s)"
@@ -122,12 +132,55 @@ class Piece:
     element_times: npt.NDArray[np.float64] | None = None
 
 
+def impossible(
+    values: npt.NDArray[np.floating[Any]], quantity: str, *, non_negative: bool = False
+) -> dict[str, npt.NDArray[np.bool_]]:
+    """The readings that cannot be real, by reason: not a number, infinite (or beyond
+    float32), negative for a quantity of :data:`NON_NEGATIVE` (or with ``non_negative``),
+    beyond the quantity's :data:`CEILING`. Every reader marks them invalid, whatever the file
+    says about them. The least and the greatest value (NaN if there is one) spare the masks
+    when all are plausible.
+
+    >>> import numpy as np
+    >>> {k: v.tolist() for k, v in impossible(np.array([1.0, -5, 3e38]), "pressure").items()}
+    {'negative': [False, True, False], 'beyond any sensor': [False, False, True]}
+    """
+    out: dict[str, npt.NDArray[np.bool_]] = {}
+    lo, hi = (values.min(), values.max()) if values.size else (0.0, 0.0)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        out["not a number"] = np.isnan(values)
+        out["infinite or beyond float32"] = np.isinf(values)
+    if (non_negative or quantity in NON_NEGATIVE) and not lo >= 0:
+        with np.errstate(invalid="ignore"):
+            out["negative"] = values < 0
+    ceiling = CEILING.get(quantity, CEILING_OTHER)
+    if not (-ceiling <= lo and hi <= ceiling):
+        with np.errstate(invalid="ignore"):
+            out["beyond any sensor"] = np.abs(values) > ceiling
+    return out
+
+
+def plausible(values: npt.NDArray[np.floating[Any]], quantity: str) -> npt.NDArray[np.bool_]:
+    """True where a reading of ``quantity`` can be real (see :func:`impossible`)."""
+    ok = np.ones(np.shape(values), dtype=bool)
+    for mask in impossible(values, quantity).values():
+        ok &= ~mask
+    return ok
+
+
 def check_declared_size(
-    path: Path, what: str, count: int, min_bytes_each: int, line: int | None = None
+    path: Path,
+    what: str,
+    count: int,
+    min_bytes_each: int,
+    line: int | None = None,
+    memory_each: int = BYTES_PER_CELL,
 ) -> None:
     """Refuse a header number that the file cannot hold (``Rows,1000000000`` in a 2 MB
-    file) before anything is allocated from it: ``what`` declares ``count`` values of at
-    least ``min_bytes_each`` bytes each."""
+    file) or that needs more memory than the budget (``ROWS 3000 COLS 3000``: a layout of 9 M
+    elements), before anything is allocated or parsed from it: ``what`` declares ``count``
+    values of at least ``min_bytes_each`` bytes each in the file and ``memory_each`` bytes
+    each in memory (by default a layout's element, :data:`texsense.data.layout.BYTES_PER_CELL`)."""
     size = path.stat().st_size
     if count < 0 or count * min_bytes_each > size:
         raise FormatError(
@@ -136,6 +189,7 @@ def check_declared_size(
             "(a damaged header?)",
             line,
         )
+    budget.check(count * memory_each, f"{what} (line {line})" if line else what, path)
 
 
 class BlockReader:
@@ -234,6 +288,9 @@ class RecordingReader(BlockReader):
 
     #: quantities whose readings this format cannot hold negative (in addition to NON_NEGATIVE)
     non_negative: ClassVar[frozenset[str]] = frozenset()
+    #: bytes of memory per value while a whole file is read (:meth:`read`): a text reader
+    #: parses float64 rows, stacks them and converts them to float32 with a validity mask
+    bytes_per_value: ClassVar[int] = 22
     #: what the format is, in a few words (the table of formats, help and errors)
     what: ClassVar[str] = ""
     #: when format detection asks this reader (lower first: a specific rule before a loose one)
@@ -258,6 +315,8 @@ class RecordingReader(BlockReader):
         self.invalid: collections.Counter[str] = collections.Counter()
         self._last_time = -np.inf
         self._block = 4096
+        #: the most frames :meth:`read` holds before the memory budget is exceeded
+        self._max_frames = 1 << 62
         try:
             self.header = h = self._read_header()
             # what the header says must make a recording (quantity, unit, meta)
@@ -285,7 +344,10 @@ class RecordingReader(BlockReader):
         """Blocks of frames; by default :meth:`_frames` grouped by the block length."""
         rows: list[FrameRow] = []
         for row in self._frames():
+            check_stopping()
             rows.append(row)
+            if len(rows) > self._max_frames:
+                self._over_budget(len(rows))
             if len(rows) == self._block:
                 yield self._stack(rows)
                 rows = []
@@ -305,15 +367,8 @@ class RecordingReader(BlockReader):
     def _impossible(self, values: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.bool_]]:
         """Readings that cannot be real, by reason (a format can add its own). The least and
         the greatest value (NaN if there is one) spare the masks when all are plausible."""
-        out: dict[str, npt.NDArray[np.bool_]] = {}
-        lo, hi = (values.min(), values.max()) if values.size else (0.0, 0.0)
-        if not (np.isfinite(lo) and np.isfinite(hi)):
-            out["not a number"] = np.isnan(values)
-            out["infinite or beyond float32"] = np.isinf(values)
-        if self.header.quantity in NON_NEGATIVE | self.non_negative and not lo >= 0:
-            with np.errstate(invalid="ignore"):
-                out["negative"] = values < 0
-        return out
+        quantity = self.header.quantity
+        return impossible(values, quantity, non_negative=quantity in self.non_negative)
 
     # ------------------------------------------------------------------ the base's work
     def _checked(self, piece: Piece) -> Piece:
@@ -322,15 +377,15 @@ class RecordingReader(BlockReader):
             if self._factor != 1.0:
                 values = values.astype(np.float64) * self._factor
             frames = np.ascontiguousarray(values, dtype=np.float32)
-        valid = piece.valid
-        if valid is None:
-            valid = np.ones(frames.shape, dtype=bool)
-            for reason, mask in self._impossible(frames).items():  # each reading counted once
-                new = mask & valid
-                count = int(np.count_nonzero(new))
-                if count:
-                    self.invalid[reason] += count
-                    valid &= ~new
+        # what the file marks valid (all, if it has no mask) less the impossible readings,
+        # which are invalid whatever the file says (an HDF5 frame of inf under valid = True)
+        valid = np.ones(frames.shape, bool) if piece.valid is None else piece.valid.astype(bool)
+        for reason, mask in self._impossible(frames).items():  # each reading counted once
+            new = mask & valid
+            count = int(np.count_nonzero(new))
+            if count:
+                self.invalid[reason] += count
+                valid &= ~new
         self._check_times(piece)
         return Piece(frames, piece.times, piece.labels, piece.lines, valid, piece.element_times)
 
@@ -385,8 +440,11 @@ class RecordingReader(BlockReader):
 
     def _checked_pieces(self) -> Iterator[Piece]:
         for piece in self._pieces():
+            check_stopping()
             checked = self._checked(piece)
             self.frames_read += checked.times.size
+            if self.frames_read > self._max_frames:  # read() holds them all
+                self._over_budget(self.frames_read)
             yield checked
 
     # ------------------------------------------------------------------ public
@@ -416,8 +474,39 @@ class RecordingReader(BlockReader):
         if count:
             yield self._recording(_join(held))
 
+    def _expected_frames(self) -> int | None:
+        """The frames :meth:`read` will read, if the file proves it before they are read
+        (HDF5: what every dataset holds); a text file's declared count is only a claim (a file
+        cut short is said as such), so text readers count the frames as they come."""
+        return None
+
+    def _frame_bytes(self) -> int:
+        """Memory per frame while :meth:`read` holds the whole file."""
+        h = self.header
+        n = h.layout.n_elements
+        per_value = self.bytes_per_value + (8 if h.element_times else 0)
+        return n * per_value + 8 * (1 + len(h.label_dtypes)) + 400  # + objects per frame
+
+    def _over_budget(self, frames: int) -> None:
+        n = self.header.layout.n_elements
+        budget.check(
+            frames * self._frame_bytes(), f"reading {frames} frames of {n} elements", self.path,
+            "a recording this long is read in blocks ('texsense process', texsense.io.open_reader)",
+        )  # fmt: skip
+
     def read(self) -> Recording:
-        """The whole recording (all frames in memory)."""
+        """The whole recording (all frames in memory).
+
+        Raises
+        ------
+        FormatError
+            Also when the frames (as declared, or as read so far) need more memory than the
+            budget (:mod:`texsense.data.budget`); :meth:`blocks` reads any length.
+        """
+        expected = self._expected_frames()
+        if expected:
+            self._over_budget(expected)
+        self._max_frames = max(1, budget.max_memory() // self._frame_bytes())
         self._block = 1 << 62  # one piece: no copy to join blocks
         pieces = list(self._checked_pieces())
         self._finish()

@@ -13,6 +13,7 @@ from typing import IO, NamedTuple
 
 import numpy as np
 
+from texsense.data.files import open_regular
 from texsense.exceptions import FormatError
 
 __all__ = [
@@ -43,16 +44,10 @@ class Line(NamedTuple):
 
 
 def open_binary(path: Path) -> IO[bytes]:
-    """Open ``path`` for reading bytes; a missing file, a folder or no permission is a
-    :class:`FormatError` naming the file."""
-    try:
-        return open(path, "rb")
-    except FileNotFoundError:
-        raise FormatError(path, "file not found") from None
-    except IsADirectoryError:
-        raise FormatError(path, "expected a file, found a folder") from None
-    except OSError as e:
-        raise FormatError(path, f"cannot be read ({e.strerror or e})") from None
+    """Open ``path`` for reading bytes (:func:`texsense.data.files.open_regular`: a regular
+    file only, without waiting on it); a missing file, a folder, a FIFO, a device, a dangling
+    link or no permission is a :class:`FormatError` naming the file."""
+    return open_regular(path)
 
 
 def decode_head(head: bytes) -> str:

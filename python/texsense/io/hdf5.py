@@ -9,15 +9,18 @@ The schema is documented in ``docs/data-model.md`` so that h5py alone can read a
     /times                 float64 (T,), s
     /valid                 bool (T, N)
     /element_times         float64 (T, N), s                         (only if present)
-    /labels/<name>         (T,) numbers or UTF-8 strings
-    /layout                attrs: kind ("grid" | "points"), rows, cols, pitch_cm (grid only)
+    /lower, /upper         float32 (T, N): the bound of every value   (only with bounds)
+    /labels/<name>         (T,) numbers or UTF-8 strings, attr name (as for regions)
+    /layout                attrs: kind ("grid" | "points"), rows, cols, pitch_cm (grid only),
+                                  orientation (JSON, edge -> label; only if declared)
     /layout/xy_cm          float64 (N, 2)
     /layout/size_cm        float64 (N, 2)
     /layout/area_cm2       float64 (N,)
     /layout/cells          int64 (N,)                                 (grid only)
     /layout/neighbours_indptr, /layout/neighbours_indices   int64
     /layout/names          UTF-8 strings (N,)                         (only if present)
-    /layout/regions/<name> int64 element indices
+    /layout/regions/<name> int64 element indices, attr name (a name HDF5 cannot hold as a
+                           link name, "left/heel", is stored as "#<k>" with its name here)
 
 :class:`RecordingWriter` appends frames while recording and flushes them to disk, so that a
 process that is killed leaves a readable file holding everything flushed before (``live``).
@@ -45,20 +48,22 @@ import numpy.typing as npt
 
 from texsense._core import __version__
 from texsense._progress import logger
-from texsense.data import units
+from texsense.data import budget, units
 from texsense.data.files import atomic_path
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
-from texsense.io._base import Header, Piece, RecordingReader
+from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
 from texsense.io._registry import Probe, writer
+from texsense.io.policy import check_text, link_name, named, open_hdf5
 
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "HDF5Reader",
     "RecordingWriter",
+    "read_bounds",
     "write_hdf5",
 ]
 
@@ -81,6 +86,8 @@ def _chunk_rows(n_elements: int) -> int:
 
 def _write_layout(group: h5py.Group, layout: Layout) -> None:
     group.attrs["kind"] = layout.kind
+    if layout.orientation:
+        group.attrs["orientation"] = json.dumps(layout.orientation)
     if layout.shape is not None and layout.cells is not None:
         group.attrs["rows"], group.attrs["cols"] = layout.shape
         group.create_dataset("cells", data=layout.cells)
@@ -95,8 +102,30 @@ def _write_layout(group: h5py.Group, layout: Layout) -> None:
     if layout.names is not None:
         group.create_dataset("names", data=np.array(layout.names, dtype=object), dtype=_STR)
     regions = group.create_group("regions")
-    for name, members in layout.regions.items():
-        regions.create_dataset(name, data=members)
+    for k, (name, members) in enumerate(layout.regions.items()):
+        ds = regions.create_dataset(link_name(name, k), data=members)
+        ds.attrs["name"] = name
+
+
+def _check_texts(layout: Layout, probe: Recording) -> None:
+    """Every text HDF5 is to keep, checked before the file is made (a writer that cannot
+    represent something refuses before writing)."""
+    for name in layout.names or ():
+        check_text(name, "element name")
+    for name in layout.regions:
+        check_text(name, "region name")
+    for value in (probe.quantity, probe.unit, json.dumps(probe.meta)):
+        check_text(value, "the recording's metadata")
+
+
+def _whole(ds: h5py.Dataset) -> Any:
+    """All of a dataset of the layout, once the memory budget has seen its declared size (a
+    few compressed bytes can declare gigabytes)."""
+    if not isinstance(ds, h5py.Dataset):
+        raise TypeError(f"{ds.name} is not a dataset")
+    itemsize = 64 if ds.dtype.kind == "O" else ds.dtype.itemsize
+    budget.check(ds.size * itemsize, f"the dataset {ds.name}", ds.file.filename)
+    return ds[()]
 
 
 def _read_layout(group: h5py.Group) -> Layout:
@@ -104,25 +133,35 @@ def _read_layout(group: h5py.Group) -> Layout:
     cells = None
     if group.attrs.get("kind") == "grid":
         shape = (int(group.attrs["rows"]), int(group.attrs["cols"]))
-        cells = group["cells"][()]
+        cells = _whole(group["cells"])
     pitch = None
     if "pitch_cm" in group.attrs:
         pitch = tuple(float(v) for v in group.attrs["pitch_cm"])
     names = None
     if "names" in group:
-        names = list(group["names"].asstr()[()])
-    regions = {k: v[()] for k, v in group["regions"].items()} if "regions" in group else {}
+        names = [_text(v) for v in _whole(group["names"]).ravel()]
+    regions = {}
+    for key, ds in group["regions"].items() if "regions" in group else ():
+        regions[_text(ds.attrs.get("name", key))] = _whole(ds)
+    orientation = None
+    if "orientation" in group.attrs:
+        orientation = json.loads(_text(group.attrs["orientation"]))
     return Layout(
-        group["xy_cm"][()],
-        group["size_cm"][()],
-        area_cm2=group["area_cm2"][()],
+        _whole(group["xy_cm"]),
+        _whole(group["size_cm"]),
+        area_cm2=_whole(group["area_cm2"]),
         shape=shape,
         cells=cells,
         pitch_cm=pitch,  # type: ignore[arg-type]
-        neighbours=(group["neighbours_indptr"][()], group["neighbours_indices"][()]),
+        neighbours=(_whole(group["neighbours_indptr"]), _whole(group["neighbours_indices"])),
         names=names,
         regions=regions,
+        orientation=orientation,
     )
+
+
+def _text(value: Any) -> str:
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
 
 
 def _label_dtype(values: np.ndarray) -> Any:
@@ -131,6 +170,9 @@ def _label_dtype(values: np.ndarray) -> Any:
 
 class RecordingWriter:
     """Append frames to an HDF5 recording while it is being made.
+
+    Readings that every reader finds impossible (not a number, infinite, a negative pressure,
+    beyond any sensor: :func:`texsense.io._base.impossible`) are written as invalid.
 
     Every :meth:`append` writes the frames into growable datasets; the file is flushed to disk
     at most ``flush_interval_s`` after the last flush (0: after every append), so a killed
@@ -190,6 +232,7 @@ class RecordingWriter:
         flush_interval_s: float = 0.0,
         compress: bool = False,
         live: bool = True,
+        bounds: bool = False,
     ) -> None:
         # Validate quantity/unit/meta by building an empty recording.
         probe = Recording(
@@ -197,12 +240,19 @@ class RecordingWriter:
         )
         self.path = Path(path)
         self.n_elements = layout.n_elements
+        self.quantity = probe.quantity
         self.flush_interval_s = float(flush_interval_s)
         self._last_flush = time.monotonic()
+        _check_texts(layout, probe)
+        self._label_keys: dict[str, str] = {}
         self._guard = GuardedFile(self.path)
         try:
             self._file = h5py.File(self._guard, "w")
             self._create(layout, probe, element_times, compress, live)
+            if bounds:  # the lower and upper maps of every value (issue 37)
+                for name in ("lower", "upper"):
+                    self._file.create_dataset(name, (0, self.n_elements), np.float32,
+                                              **self._grow)  # fmt: skip
         except BaseException:
             self.close()
             raise
@@ -224,6 +274,7 @@ class RecordingWriter:
         rows = _chunk_rows(n)
         comp = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
         grow = {"maxshape": (None, n), "chunks": (rows, max(n, 1))}
+        self._grow = {**grow, **comp}
         f.create_dataset("frames", (0, n), np.float32, **grow, **comp)
         f.create_dataset("times", (0,), np.float64, maxshape=(None,), chunks=(max(rows, 256),))
         f.create_dataset("valid", (0, n), bool, **grow, **comp)
@@ -245,8 +296,11 @@ class RecordingWriter:
         valid: npt.ArrayLike | None = None,
         element_times: npt.ArrayLike | None = None,
         labels: Mapping[str, npt.ArrayLike] | None = None,
+        lower: npt.ArrayLike | None = None,
+        upper: npt.ArrayLike | None = None,
     ) -> None:
-        """Append one frame (N,) or a block of frames (k, N) with their time stamps."""
+        """Append one frame (N,) or a block of frames (k, N) with their time stamps (and,
+        for a writer with ``bounds``, the lower and upper maps)."""
         f = self._file
         fr = np.asarray(frames, dtype=np.float32)
         if fr.ndim == 1:
@@ -260,7 +314,9 @@ class RecordingWriter:
         if t.shape != (k,):
             raise ParameterError(f"append: expected {k} time stamps, got {t.shape}")
         v = np.ones_like(fr, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
-        v = v.reshape(k, self.n_elements)
+        # what every reader will find impossible is written as invalid (a compensated
+        # pressure below zero, say): the file says what it holds, and reading it warns of nothing
+        v = v.reshape(k, self.n_elements) & plausible(fr, self.quantity)
         has_et = "element_times" in f
         if has_et != (element_times is not None):
             raise ParameterError(
@@ -268,7 +324,14 @@ class RecordingWriter:
                 "with element_times=True"
             )
         start, stop = self.n_frames, self.n_frames + k
+        if ("lower" in f) != (lower is not None and upper is not None):
+            raise ParameterError("append: lower and upper go with a writer opened with bounds")
         self._append_labels(labels or {}, start, stop)
+        if lower is not None and upper is not None:
+            for name, data in (("lower", lower), ("upper", upper)):
+                ds = f[name]
+                ds.resize(stop, axis=0)
+                ds[start:stop] = np.asarray(data, dtype=np.float32).reshape(k, self.n_elements)
         for name, data in (("frames", fr), ("valid", v), ("times", t)):
             ds = f[name]
             ds.resize(stop, axis=0)
@@ -283,20 +346,40 @@ class RecordingWriter:
         self._check()
 
     def _append_labels(self, labels: Mapping[str, npt.ArrayLike], start: int, stop: int) -> None:
-        group = self._file["labels"]
-        if self.n_frames > 0 and set(labels) != set(group):
+        keys = self._label_keys
+        if self.n_frames > 0 and set(labels) != set(keys):
             raise ParameterError(
-                f"append: labels {sorted(labels)} differ from the first append's {sorted(group)}"
+                f"append: labels {sorted(labels)} differ from the first append's {sorted(keys)}"
             )
-        for name, values in labels.items():
-            arr = np.atleast_1d(np.asarray(values))
+        arrays = {name: np.atleast_1d(np.asarray(values)) for name, values in labels.items()}
+        for name, arr in arrays.items():
             if arr.shape != (stop - start,):
                 raise ParameterError(f"append: label {name!r} needs {stop - start} values")
-            if name not in group:
-                group.create_dataset(name, (0,), _label_dtype(arr), maxshape=(None,), chunks=(256,))
-            ds = group[name]
+            check_text(name, "label name")
+            if arr.dtype.kind == "U":
+                for value in np.unique(arr):
+                    check_text(str(value), f"a value of the label {name!r}")
+        for name, arr in arrays.items():
+            if name not in keys:
+                self.add_label(name, arr.dtype)
+            ds = self._file["labels"][keys[name]]
             ds.resize((stop,))
             ds[start:stop] = arr.astype(object) if arr.dtype.kind == "U" else arr
+
+    def update_meta(self, extra: Mapping[str, Any]) -> None:
+        """Add ``extra`` to the file's ``meta`` (e.g. a state known only at the end: the
+        in-use drift correction)."""
+        meta = json.loads(self._file.attrs["meta"])
+        meta.update(extra)
+        self._file.attrs["meta"] = json.dumps(meta)
+
+    def add_label(self, name: str, dtype: Any) -> None:
+        """Create the (empty) label ``name`` of ``dtype`` (strings: a numpy ``U`` dtype)."""
+        check_text(name, "label name")
+        key = self._label_keys[name] = link_name(name, len(self._label_keys))
+        h5type = _STR if np.dtype(dtype).kind == "U" else dtype
+        ds = self._file["labels"].create_dataset(key, (0,), h5type, maxshape=(None,), chunks=(256,))
+        ds.attrs["name"] = name
 
     def flush(self) -> None:
         """Write everything appended so far to disk."""
@@ -321,6 +404,22 @@ class RecordingWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def read_bounds(
+    path: str | Path, frames: slice | None = None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The lower and upper maps of a processed recording (``process --interval``), or None
+    when it has none; ``frames`` picks some of them."""
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        if "lower" not in f or "upper" not in f:
+            return None
+        sel = slice(None) if frames is None else frames
+        n = f["times"].shape[0]
+        if f["lower"].shape[0] != n or f["upper"].shape[0] != n:
+            raise FormatError(path, "the lower and upper maps do not cover every frame")
+        return np.asarray(f["lower"][sel], np.float32), np.asarray(f["upper"][sel], np.float32)
 
 
 @writer("hdf5", what="texsense recording (exact round trip)", suffixes=(".h5", ".hdf5"))
@@ -355,25 +454,13 @@ def write_hdf5(rec: Recording, path: str | Path) -> Path:
             )
         else:
             for name, values in rec.labels.items():
-                w._file["labels"].create_dataset(
-                    name, (0,), _label_dtype(values), maxshape=(None,), chunks=(256,)
-                )
+                w.add_label(name, values.dtype)
     return path
 
 
-def _open(path: Path) -> h5py.File:
-    if path.is_dir():
-        raise FormatError(path, "expected a file, found a folder")
-    try:
-        return h5py.File(path, "r")
-    except OSError as e:
-        if "already open for write" in str(e):
-            # A writer was killed while the file was in SWMR mode: the data are consistent,
-            # only the "open for writing" flag is left. Reading in SWMR mode is safe.
-            return h5py.File(path, "r", libver="latest", swmr=True)
-        raise FormatError(path, f"not a readable HDF5 file ({e})") from None
-    except Exception as e:  # h5py raises others for some damaged files
-        raise FormatError(path, f"not a readable HDF5 file ({type(e).__name__}: {e})") from None
+#: What each dataset of a recording may hold (numpy kinds).
+_KINDS = {"frames": "iuf", "times": "iuf", "element_times": "iuf", "valid": "biu"}
+_KIND_WORDS = {"iuf": "real numbers", "biu": "booleans"}
 
 
 def _readable_rows(ds: h5py.Dataset, n: int) -> int:
@@ -409,12 +496,10 @@ def _held_rows(ds: h5py.Dataset) -> int | None:
 
 def _labels(group: h5py.Group, a: int, b: int) -> dict[str, np.ndarray]:
     labels = {}
-    for name, ds in group.items():
+    for name, ds in named(group).items():
         values = ds[a:b]
         labels[name] = (
-            np.array([v.decode() if isinstance(v, bytes) else v for v in values], dtype=str)
-            if ds.dtype.kind == "O"
-            else values
+            np.array([_text(v) for v in values], dtype=str) if ds.dtype.kind in "OS" else values
         )
     return labels
 
@@ -446,8 +531,14 @@ class HDF5Reader(RecordingReader):
         """HDF5's signature."""
         return probe.head.startswith(HDF5_SIGNATURE)
 
+    #: the frames as stored (up to float64) and as float32, their validity, a mask
+    bytes_per_value = 15
+
+    def _expected_frames(self) -> int | None:
+        return self.n_frames  # what every dataset holds (a shortfall is refused before)
+
     def _read_header(self) -> Header:
-        self._file = _open(self.path)
+        self._file = open_hdf5(self.path)
         try:
             return self._header(self._file)
         except (KeyError, OSError, ValueError, TypeError) as e:
@@ -492,17 +583,23 @@ class HDF5Reader(RecordingReader):
             meta,
             declared_frames=max(ds.shape[0] for ds in self._sets.values()),
             label_dtypes={
-                k: (str if ds.dtype.kind == "O" else ds.dtype) for k, ds in f["labels"].items()
+                k: (str if ds.dtype.kind in "OS" else ds.dtype)
+                for k, ds in named(f["labels"]).items()
             },
             element_times="element_times" in f,
         )
 
     def _datasets(self, f: h5py.File, n: int) -> dict[str, h5py.Dataset]:
         sets = {k: f[k] for k in ("frames", "times", "valid", "element_times") if k in f}
-        sets.update({f"labels/{k}": v for k, v in f["labels"].items()})
+        sets.update({f"labels/{k}": v for k, v in named(f["labels"]).items()})
         for key, ds in sets.items():
             if not isinstance(ds, h5py.Dataset):
                 raise FormatError(self.path, f"/{key} is not a dataset")
+            kinds = _KINDS.get(key)
+            if kinds is not None and ds.dtype.kind not in kinds:
+                raise FormatError(
+                    self.path, f"/{key} holds {ds.dtype} values, expected {_KIND_WORDS[kinds]}"
+                )
             per_frame = (n,) if key in ("frames", "valid", "element_times") else ()
             if ds.shape[1:] != per_frame or not ds.shape:
                 raise FormatError(

@@ -28,11 +28,12 @@ from typing import Any
 import numpy as np
 
 from texsense._progress import progress
+from texsense.data.files import real_path
 from texsense.data.layout import Layout
 from texsense.exceptions import FormatError
 from texsense.io._base import FrameRow, Header, RecordingReader
 from texsense.io._registry import Probe
-from texsense.io._text import TextLines, is_number
+from texsense.io._text import TextLines, is_number, open_binary
 
 __all__ = [
     "MIRROR_CLASS",
@@ -157,7 +158,7 @@ def _jobs(path: Path) -> tuple[list[tuple[str, Path]], Path | None]:
 def published_sums(path: Path) -> tuple[Path | None, dict[Path, str]]:
     """The publisher's ``SHA256SUMS.txt`` in ``path``'s folder or up to three folders above,
     as {resolved file: hex digest}."""
-    here = path.resolve()
+    here = real_path(path)
     for folder in [here, *here.parents][:5]:
         sums = folder / "SHA256SUMS.txt"
         if sums.is_file():
@@ -166,14 +167,14 @@ def published_sums(path: Path) -> tuple[Path | None, dict[Path, str]]:
                 for line in lines:
                     parts = line.text.split(None, 1)
                     if len(parts) == 2 and len(parts[0]) == 64:
-                        table[(folder / parts[1].strip().lstrip("*")).resolve()] = parts[0].lower()
+                        table[real_path(folder / parts[1].strip().lstrip("*"))] = parts[0].lower()
             return sums, table
     return None, {}
 
 
 def _sha256(path: Path) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_binary(path) as f:  # a regular file only: nothing waits on a FIFO
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -238,7 +239,7 @@ class PMDReader(RecordingReader):
         listed = {
             p for p in self.sums if _POSTURE_FILE.match(p.name) and self._under_read_folder(p)
         }
-        missing = sorted(listed - {f.resolve() for _, f in self.jobs})
+        missing = sorted(listed - {real_path(f) for _, f in self.jobs})
         if missing and self.path.is_dir():
             names = ", ".join(str(p.relative_to(self.sums_file.parent)) for p in missing[:3])  # type: ignore[union-attr]
             more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
@@ -279,7 +280,7 @@ class PMDReader(RecordingReader):
         )
 
     def _under_read_folder(self, p: Path) -> bool:
-        root = self.path.resolve()
+        root = real_path(self.path)
         return self.path.is_dir() and root in p.parents
 
     def _name(self, f: Path) -> str:
@@ -307,7 +308,7 @@ class PMDReader(RecordingReader):
         t = 0
         jobs = self.jobs
         for subject, f in progress(jobs, total=len(jobs), desc="reading PMD", unit="file"):
-            expected = self.sums.get(f.resolve())
+            expected = self.sums.get(real_path(f))
             if expected is not None and _sha256(f) != expected:
                 self._note(
                     f"{self._name(f)} does not match its SHA-256 in {self.sums_file} (truncated "

@@ -329,6 +329,11 @@ def write_tekscan(rec: Recording, path: str | Path, *, unit: str | None = None) 
         raise ParameterError("write_tekscan: needs a grid layout (Tekscan maps are matrices)")
     if rec.quantity not in ("pressure", "raw", "force"):
         raise ParameterError(f"write_tekscan: cannot write {rec.quantity} (pressure, force, raw)")
+    if rec.n_frames == 0:
+        raise ParameterError(
+            "write_tekscan: a Tekscan export cannot hold a recording without frames (its "
+            "readers take the grid's empty cells from the first frame)"
+        )
     if unit is None:
         unit = {"pressure": "kPa", "raw": "count", "force": "N"}[rec.quantity]
     unit = units.canonical(unit)

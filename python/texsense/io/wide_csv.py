@@ -37,7 +37,7 @@ from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.io._base import FrameRow, Header, RecordingReader
+from texsense.io._base import FrameRow, Header, RecordingReader, plausible
 from texsense.io._registry import Probe, writer
 from texsense.io._text import Line, TextLines, format_float, is_number
 
@@ -263,8 +263,10 @@ def write_wide_csv(rec: Recording, path: str | Path) -> Path:
     """Write ``rec`` as a wide CSV that :func:`read_wide_csv` reads back exactly.
 
     Written exactly: frames (shortest float32 text), times (shortest float64 text), the
-    validity mask, quantity, unit, layout and meta. Not written: labels, per-element times.
-    The file is written to a temporary name and renamed (:mod:`texsense.data.files`).
+    validity mask (with the readings no reader accepts marked invalid: not a number, infinite,
+    negative pressure, beyond any sensor), quantity, unit, layout and meta. Not written:
+    labels, per-element times. The file is written to a temporary name and renamed
+    (:mod:`texsense.data.files`).
     """
     path = Path(path)
     names = [f"e{k}" for k in range(rec.n_elements)]
@@ -279,7 +281,9 @@ def write_wide_csv(rec: Recording, path: str | Path) -> Path:
     ]
     with atomic_open(path, "w", encoding="utf-8") as out:
         out.write("\n".join(head) + "\n")
-        for t, frame, valid in zip(rec.times.tolist(), rec.frames, rec.valid, strict=True):
+        # what every reader finds impossible is written as invalid (see texsense.io._base)
+        marked = rec.valid & plausible(rec.frames, rec.quantity)
+        for t, frame, valid in zip(rec.times.tolist(), rec.frames, marked, strict=True):
             invalid = " ".join(map(str, np.flatnonzero(~valid).tolist()))
             out.write(repr(t) + "," + ",".join(format_float(v) for v in frame) + f",{invalid}\n")
     return path

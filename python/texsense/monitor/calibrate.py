@@ -14,6 +14,11 @@ the steps of ``texsense calibrate wizard`` on the live stream of a running monit
    over an existing one), the step recordings as HDF5 beside it, and the running monitor
    switches to calibrated pressure (:meth:`Monitor.use_calibration`).
 
+Besides the steps, **how the mat lies** (:meth:`PageCalibration.set_orientation`): a bed, a
+seat or a foot sensor with its head, front or toes at an edge of the map — chosen, or found
+where a hand presses on the mat after step 1. It applies to the live map at once and is
+written into the calibration (the monitor names left and right only when it is known).
+
 :class:`PageCalibration` holds the steps; it taps the monitor's frames (after the mat's clock,
 so a glitching time stamp never enters a step recording). Steps must come in order; doing a
 step again discards the steps after it. The routes are :mod:`texsense.monitor.routes.calibration`.
@@ -29,15 +34,17 @@ from typing import Any
 
 import numpy as np
 
-from texsense.calibration.checks import parse_pressure
+from texsense.calibration.checks import edge_of_press, parse_pressure, typical_reading
 from texsense.calibration.session import CHECK_TOLERANCE, CalibrationSession, CheckReport
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Convert, StageChain
-from texsense.data.files import unused_name
+from texsense.data.files import make_folder, unused_name
+from texsense.data.layout import orientation_toward
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
+from texsense.monitor.sources import blocking
 from texsense.sensor.materials import PRESETS as SPACER_PRESETS
 
 __all__ = ["DEFAULT_FRAMES", "MAX_FRAMES", "STEPS", "PageCalibration", "StepError"]
@@ -138,6 +145,30 @@ class PageCalibration:
         spacer = announced.get("spacer")
         return str(spacer) if spacer in SPACER_PRESETS else None
 
+    def set_orientation(self, kind: str, edge: str = "top") -> dict[str, str]:
+        """How the mat lies: ``kind`` ``bed``, ``seat`` or ``foot`` (``none``: unknown) with
+        its head, front or toes at ``edge`` (``top``, ``bottom``, ``left``, ``right``, or
+        ``press``: the edge nearest to where a hand presses now, against the empty mat of
+        step 1). Applies to the live map now and to the calibration when it is saved."""
+        if kind == "none":
+            found: dict[str, str] = {}
+        else:
+            if edge == "press":
+                zero = self.recordings.get("zero")
+                latest = self.monitor.latest
+                if zero is None or latest is None:
+                    raise StepError(
+                        "finding the edge by a press needs the empty mat (step 1) first"
+                    )
+                raw = np.array([np.nan if v is None else v for v in latest["raw"]], np.float64)
+                edge = edge_of_press(raw, typical_reading(zero), self.monitor.layout)
+            found = orientation_toward(kind, edge)
+        self.monitor.set_orientation(found)
+        chain = None if self.session is None else self.session.chain
+        if chain is not None:
+            chain.orientation = found
+        return found
+
     def done(self) -> list[str]:
         """The steps done so far, in order."""
         out: list[str] = [s for s in ("zero", "uniform") if s in self.recordings]
@@ -171,6 +202,7 @@ class PageCalibration:
                 }
                 for k, r in self.recordings.items()
             },
+            "orientation": self.monitor.layout.orientation,
             "presets": list(SPACER_PRESETS),
             "default_material": self.default_material(),
             "material": self.material,
@@ -307,7 +339,7 @@ class PageCalibration:
 
         self.busy, self.material = "material", material
         try:
-            await asyncio.to_thread(make)
+            await blocking(make)
         except ParameterError as e:
             self.refused = str(e)
             raise
@@ -333,7 +365,7 @@ class PageCalibration:
             self.busy = None
 
     async def _check_in_thread(self) -> None:
-        await asyncio.to_thread(self._check)
+        await blocking(self._check)
 
     async def save(self) -> dict[str, Any]:
         """Step 5: write the chain and the step recordings (new names in the monitor's
@@ -346,13 +378,14 @@ class PageCalibration:
         session = self.session
         assert session is not None and session.chain is not None  # _need checked the fit
         chain = session.chain
+        chain.orientation = self.monitor.layout.orientation  # how the mat lies, if known
         folder = self.monitor.record_dir
         stem = _unused_stem(
             folder, f"calibration-{time.strftime('%Y%m%d-%H%M%S')}", self.recordings
         )
         self.busy = "save"
         try:
-            paths = await asyncio.to_thread(_write, folder, stem, chain, self.recordings)
+            paths = await blocking(_write, folder, stem, chain, self.recordings)
             pipeline = Pipeline(chain, self.monitor.layout)
         finally:
             self.busy = None
@@ -382,7 +415,7 @@ def _write(
     folder: Path, stem: str, chain: StageChain, recordings: dict[str, Recording]
 ) -> dict[str, Path]:
     """The step recordings and then the chain (atomic writes: texsense.data.files)."""
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder, "recordings folder")
     out: dict[str, Path] = {}
     for step, rec in recordings.items():
         out[step] = rec.save(unused_name(folder / f"{stem}-{step}.h5"))

@@ -19,6 +19,7 @@ import asyncio
 import json
 import logging
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,15 +29,17 @@ import numpy.typing as npt
 
 from texsense.apps import stats
 from texsense.apps.alerts import Event, ExposureTracker
-from texsense.apps.bed import BANDS
+from texsense.apps.bed import BANDS, exposure_with_turns, region_elements
+from texsense.apps.clinical import clinical_state
 from texsense.apps.posture.smoothing import WindowVote
-from texsense.apps.views import MODES, format_duration, orientation_of, place_names, seat_zones
+from texsense.apps.stats import raw_rise
+from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
 from texsense.data import units
-from texsense.data.files import unused_name
 from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock, Quiet
+from texsense.monitor.record import Recorder, unused_recording_name
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 
@@ -45,41 +48,18 @@ if TYPE_CHECKING:  # the calibration and models come from the caller; their modu
     from texsense.apps.posture.model import PostureModel
     from texsense.compensation.pipeline import Pipeline
 
-__all__ = ["Monitor", "Recorder"]
+__all__ = ["Monitor", "Recorder", "raw_rise"]
 
 log = logging.getLogger("texsense.monitor")
 
-#: Longest time between two flushes of a live recording: a killed monitor loses at most this.
-FLUSH_S = 0.5
+#: Frames of statistics the monitor keeps for the page's charts (a page opened late still
+#: draws what came before it: ``GET /api/history``).
+HISTORY = 1200
 #: The posture shown live is the vote over this many seconds of frame-by-frame predictions
 #: (``posture.frame_label`` in the snapshot is the present frame's own).
 POSTURE_WINDOW_S = 5.0
 #: A source that has sent nothing for this long is said to be silent (console and page).
 SILENT_S = 10.0
-#: Without a calibration an element "responds" when it reads above its lowest reading so far
-#: by more than this fraction of the mat's typical (median) lowest reading (unit-free). On the
-#: virtual seat behind a serial line (`texsense simulate device`, 3.3-4.0 pF empty): 1 N/cm²
-#: on every element -> 96 of 96 respond (threshold 0.0125 pF, highest rise 2.5 pF); the mat
-#: emptied again -> 0 of 96 (highest rise 0.003 pF, what the spacer's hysteresis leaves).
-RESPOND_FRACTION = 0.005
-
-
-def raw_rise(raw: np.ndarray, floor: np.ndarray) -> dict[str, Any]:
-    """What a mat without a calibration can honestly say of a frame, in its raw unit: each
-    element's rise above its lowest reading so far (``floor``), the highest rise and how
-    many elements respond (rise above :data:`RESPOND_FRACTION` of the median floor)."""
-    rise = raw - floor
-    finite = np.isfinite(rise)
-    if not finite.any():
-        return {"peak_rise": None, "responding": 0, "working": 0, "respond_above": None}
-    typical = float(np.median(np.abs(floor[np.isfinite(floor)])))
-    above = RESPOND_FRACTION * typical
-    return {
-        "peak_rise": round(float(np.max(rise[finite])), 4),
-        "responding": int(np.count_nonzero(rise[finite] > above)),
-        "working": int(np.count_nonzero(finite)),
-        "respond_above": round(above, 4),
-    }
 
 
 def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
@@ -88,92 +68,6 @@ def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
     out = np.round(a, nd).astype(object)
     out[~np.isfinite(a)] = None
     return out.tolist()
-
-
-def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = True) -> list[Path]:
-    """The files of a recording named ``name``: ``<name>-raw.h5`` and, for capacitance
-    through a calibration, the pressure ``<name>.h5``."""
-    paths = [folder / f"{name}-raw.h5"]
-    if quantity == "capacitance" and calibrated:
-        return [*paths, folder / f"{name}.h5"]
-    return paths
-
-
-def unused_recording_name(folder: Path, name: str, quantity: str, calibrated: bool = True) -> str:
-    """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
-    (:func:`texsense.data.files.unused_name` on each file of the recording)."""
-    k = 1
-    while True:
-        candidate = name if k == 1 else f"{name}-{k}"
-        paths = recording_paths(folder, candidate, quantity, calibrated)
-        if all(unused_name(p) == p for p in paths):
-            return candidate
-        k += 1
-
-
-class Recorder:
-    """Crash-safe HDF5 recording of one session: the source's readings (``<name>-raw.h5``,
-    re-processable) and, for capacitance sources through a calibration, the pressure
-    (``<name>.h5``), both flushed at least every :data:`FLUSH_S` s."""
-
-    def __init__(
-        self,
-        folder: Path,
-        name: str,
-        source: Source,
-        meta: dict[str, Any],
-        *,
-        calibrated: bool = True,
-    ) -> None:
-        from texsense.io.hdf5 import RecordingWriter
-
-        folder.mkdir(parents=True, exist_ok=True)
-        lay = source.layout
-        self.paths = recording_paths(folder, name, source.quantity, calibrated)
-        taken = [p.name for p in self.paths if p.exists()]
-        if taken:  # never write over an earlier recording
-            raise ParameterError(f"a recording named {name!r} exists already ({taken[0]})")
-        self._raw = RecordingWriter(
-            self.paths[0],
-            lay,
-            source.quantity,
-            source.unit,
-            meta=meta,
-            element_times=True,
-            flush_interval_s=FLUSH_S,
-        )
-        self._pressure = None
-        if len(self.paths) > 1:
-            self._pressure = RecordingWriter(
-                self.paths[1],
-                lay,
-                "pressure",
-                "N/cm2",
-                meta=meta,
-                element_times=True,
-                flush_interval_s=FLUSH_S,
-            )
-        self.frames = 0
-
-    def append(self, frame: Frame, pressure: np.ndarray, measured: np.ndarray) -> None:
-        """Append one frame (raw values and pressure)."""
-        t = [frame.t]
-        et = frame.element_times[None, :]
-        valid = np.isfinite(frame.values)[None, :]
-        self._raw.append(
-            np.nan_to_num(frame.values)[None, :], times=t, valid=valid, element_times=et
-        )
-        if self._pressure is not None:
-            self._pressure.append(
-                np.nan_to_num(pressure)[None, :], times=t, valid=measured[None, :], element_times=et
-            )
-        self.frames += 1
-
-    def close(self) -> None:
-        """Finish the files."""
-        self._raw.close()
-        if self._pressure is not None:
-            self._pressure.close()
 
 
 class Monitor:
@@ -272,6 +166,10 @@ class Monitor:
         self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
+        #: the statistics of the last :data:`HISTORY` frames (the page's charts)
+        self.history: deque[list[Any]] = deque(maxlen=HISTORY)
+        self.calibrated_wall: float | None = None  # when the calibration came into use
+        self._adopt_orientation(pipeline)
         #: called with every frame on the mat's clock, before it is processed (the page's
         #: calibration steps record the live stream this way)
         self.taps: list[Callable[[Frame], None]] = []
@@ -318,6 +216,7 @@ class Monitor:
             "mode": self.mode.name,
             "started_at": time.time(),
             "orientation": orientation_of(self.layout, mode=self.mode.name),
+            "clinical": self.clinical_state(),
             "alerts": {
                 "threshold_mmhg": round(
                     units.convert(self.tracker.threshold_ncm2, "N/cm2", "mmHg"), 3
@@ -327,25 +226,68 @@ class Monitor:
                 "turn_every_min": self.bed.schedule.interval_s / 60 if self.bed else 120.0,
             },
         }
+        bounds = False
         if self.pipeline is not None:
             meta.update(self.pipeline.provenance())
+            bounds = getattr(self.pipeline, "interval", None) is not None
+            if bounds:
+                meta["interval"] = {"level": self.pipeline.interval}
         self.recorder = Recorder(
-            self.record_dir, name, self.source, meta, calibrated=not self.raw_only
+            self.record_dir,
+            name,
+            self.source,
+            meta,
+            calibrated=not self.raw_only,
+            posture=self.posture_model is not None,
+            bounds=bounds,
         )
         self.changes += 1
         paths = [str(p) for p in self.recorder.paths]
         self.store.set_recording(self.session_id, paths)
         return paths
 
+    def clinical_state(self) -> dict[str, Any]:
+        """What the monitor knows now, for a recording that starts now
+        (:func:`texsense.apps.clinical.clinical_state`)."""
+        alerts = self.mode.alerts and not self.raw_only
+        return clinical_state(
+            t=self.clock.last_t,
+            wall=self.last_wall,
+            exposure=self.tracker.state() if alerts else None,
+            bed=self.bed.schedule.state() if self.bed is not None else None,
+            calibration_id=None if self.pipeline is None else self.pipeline.calibration_id,
+            calibrated_wall=self.calibrated_wall,
+        )
+
     def stop_recording(self) -> int:
         """Stop recording; returns the number of frames written."""
         if self.recorder is None:
             raise ParameterError("not recording")
         n = self.recorder.frames
-        self.recorder.close()
+        extra = None
+        if self.pipeline is not None and getattr(self.pipeline, "in_use", False):
+            extra = {"in_use_drift": self.pipeline.in_use_status()}
+        self.recorder.close(extra)
         self.recorder = None
         self.changes += 1
         return n
+
+    def set_orientation(self, orientation: dict[str, str]) -> None:
+        """How the mat lies (what lies beyond each edge of its map; {}: unknown): the maps'
+        labels, the seat's zones and the bed's sides follow from the next frame on."""
+        self.layout = self.layout.with_orientation(orientation or None)
+        self.source.layout = self.source.layout.with_orientation(orientation or None)
+        if self.bed is not None:
+            self.bed.layout = self.layout
+        self.tracker.layout = self.layout
+        self.changes += 1
+
+    def _adopt_orientation(self, pipeline: Pipeline | None) -> None:
+        """A mat that does not declare its orientation takes its calibration's (declared when
+        it was calibrated: the wizard, the page's panel)."""
+        declared = pipeline.chain.orientation if pipeline is not None else {}
+        if declared and not self.layout.orientation:
+            self.set_orientation(dict(declared))
 
     def use_calibration(self, pipeline: Pipeline, path: Path | str | None = None) -> None:
         """Show pressure through ``pipeline`` from the next frame on (a calibration just made
@@ -357,7 +299,11 @@ class Monitor:
         if pipeline.layout.n_elements != self.layout.n_elements:
             raise ParameterError("the pipeline and the source have different element counts")
         self.pipeline = pipeline
+        self._adopt_orientation(pipeline)
         self.raw_only = False
+        self.calibrated_wall = time.time()
+        # the load the calibration was made with may still lie on the mat: not a person
+        self.tracker.wait_for_empty()
         self.changes += 1
         t = self._latest["t"] if self._latest else 0.0
         detail = {
@@ -369,10 +315,13 @@ class Monitor:
                     path or pipeline.calibration_id)  # fmt: skip
 
     # ------------------------------------------------------------------ processing
-    def _events(self, events: list[Event]) -> None:
-
+    def _events(self, events: list[Event], wall: float | None = None) -> None:
+        """Store and log events (and keep them for the recording's next frame)."""
+        wall = time.time() if wall is None else wall
         for e in events:
             self.store.add_event(self.session_id, e)
+            if self.recorder is not None:
+                self.recorder.pending.append({**e.to_dict(), "wall": wall})
             log.info(
                 "%s: %s %s into the session %s",
                 self.source.name,
@@ -381,18 +330,19 @@ class Monitor:
                 e.detail or "",
             )
 
-    def _where(self, elements: list[int]) -> list[str]:
-        """Where elements lie, in words: the bed's at-risk regions or the seat's zones, else
-        rows and columns (:func:`texsense.apps.views.place_names`)."""
+    def _where(self, elements: list[int]) -> tuple[list[str], list[str]]:
+        """Where elements lie, in words: the bed's at-risk regions or the seat's zones (as
+        far as the mat's orientation names them), and the rest as rows and columns for the
+        details line (:func:`texsense.apps.views.alert_places`)."""
 
         if self.tracker.by_region:
-            return [self.tracker.names[i] for i in elements]
+            return [self.tracker.names[i] for i in elements], []
         regions: dict[str, Any] = {}
         if self.bed is not None:
-            regions = {r.name: list(r.elements) for r in self.bed.regions.values()}
+            regions = region_elements(self.bed.regions)
         elif self.mode.name == "seat" and self.layout.shape is not None:
             regions = seat_zones(self.layout)
-        return place_names(elements, self.layout, regions)
+        return alert_places(elements, self.layout, regions)
 
     def acknowledge(self, alert_id: int) -> Event:
         """Acknowledge an alert."""
@@ -433,26 +383,19 @@ class Monitor:
         for tap in self.taps:
             tap(frame)
         pressure, measured, codes = self._pressure_of(frame)
+        bounds = self._bounds_of()
         if self._t_first is None:
             self._t_first = frame.t
-        alerts = self.mode.alerts and not self.raw_only
-        exposure_events = self.tracker.step(pressure, frame.t) if alerts else []
-        if self.recorder is not None:
-            self.recorder.append(frame, pressure, measured)
         frame_stats, load = self._stats_of(frame.t, pressure)
         posture = self._posture_of(frame.t, pressure, load)
-        bed = None
-        if self.bed is not None:
-            exposure_events += self.bed.step(
-                pressure, posture["label"] if posture else None, frame.t
-            )
-            bed = self.bed.status(frame.t)
-        for e in exposure_events:  # name the places (the bed's regions are this frame's)
-            if e.kind == "reposition" and e.alert_id is not None:
-                raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
-                raised.where = self._where(raised.elements)
-                e.detail = {"where": raised.where, "elements": raised.elements}
-        self._events(exposure_events)
+        events = self._exposure(frame.t, pressure, posture, received_at, bounds)
+        bed = self.bed.status(frame.t) if self.bed is not None else None
+        if bed is not None and bounds is not None:
+            self._bound_regions(bed["regions"], pressure, bounds)
+        self._events(events, received_at)
+        if self.recorder is not None:
+            label = posture["label"] if posture else None
+            self.recorder.append(frame, pressure, measured, received_at, label, bounds)
         self.frames += 1
         self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
@@ -462,6 +405,7 @@ class Monitor:
             floor = self._raw_floor
             self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
             raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
+        self._remember(frame.t, frame_stats, raw_stats)
         alert = self.tracker.open_alert
         snap = {
             "seq": frame.seq,
@@ -484,12 +428,42 @@ class Monitor:
             "source": self.source.info(),
             "received_at": received_at,  # wall clock (Unix s) when the frame arrived
             "processed_ms": round(1e3 * (time.time() - received_at), 3),
+            **self._certainty(bounds),
         }
         self._latest = snap
         self._latest_text = None  # serialised when somebody asks (no viewer: no cost)
         if self._subscribers:
             self._publish(self.latest_text)
         return snap
+
+    def _exposure(
+        self,
+        t: float,
+        pressure: np.ndarray,
+        posture: dict[str, Any] | None,
+        wall: float,
+        bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> list[Event]:
+        """The bed's schedule and the exposure tracker on one frame: a turn hands the
+        exposure to new skin (and clears an open alert), no alert opens while a turn is being
+        confirmed; a new alert is named by the places of this frame. With ``bounds`` (lower,
+        upper) the tracker tells confident from possible exceedances (issue 37)."""
+        events: list[Event] = []
+        schedule = None
+        if self.bed is not None:
+            events += self.bed.step(pressure, posture["label"] if posture else None, t)
+            schedule = self.bed.schedule
+        if not (self.mode.alerts and not self.raw_only):
+            return events
+        events = exposure_with_turns(self.tracker, t, pressure, schedule, events, bounds)
+        for e in events:
+            if e.kind == "reposition" and e.alert_id is not None:
+                raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
+                raised.where, raised.details = self._where(raised.elements)
+                raised.opened_wall = wall
+                e.detail = {"where": raised.where, "details": raised.details,
+                            "elements": raised.elements}  # fmt: skip
+        return events
 
     def _pressure_of(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A frame's pressure (N/cm², NaN where unknown), which elements were measured, and
@@ -506,6 +480,48 @@ class Monitor:
         pressure = units.convert(raw, frame.unit, "N/cm2")
         measured = np.isfinite(pressure)
         return pressure, measured, np.where(measured, 0, 2)
+
+    def _bounds_of(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last frame's bounds (lower, upper N/cm²) when the pipeline gives them."""
+        b = getattr(self.pipeline, "bounds_", None) if self.pipeline is not None else None
+        if b is None or self.source.quantity != "capacitance":
+            return None
+        return b[0][-1], b[1][-1]
+
+    def _certainty(self, bounds: tuple[np.ndarray, np.ndarray] | None) -> dict[str, Any]:
+        """What the snapshot says of the bounds and the in-use drift correction: the lower
+        and upper maps, the elements only possibly above the threshold, the state."""
+        out: dict[str, Any] = {"in_use": None, "interval": None}
+        if self.pipeline is not None and getattr(self.pipeline, "in_use", False):
+            out["in_use"] = self.pipeline.in_use_status()
+        if bounds is not None and self.pipeline is not None:
+            out["interval"] = self.pipeline.interval
+            out["lower"], out["upper"] = _rounded(bounds[0]), _rounded(bounds[1])
+            out["possible"] = np.flatnonzero(self.tracker.possible).tolist()
+            out["count_possible"] = self.tracker.count_possible
+        return out
+
+    @staticmethod
+    def _bound_regions(
+        regions: list[dict[str, Any]], pressure: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]
+    ) -> None:
+        """Each at-risk region's peak with its bounds (the region table shows value ± bound)."""
+        for r in regions:
+            els = np.asarray(r["elements"], dtype=np.intp)
+            if els.size == 0:
+                continue
+            k = els[int(np.nanargmax(np.nan_to_num(pressure[els], nan=-np.inf)))]
+            r["peak_lo_ncm2"] = round(float(bounds[0][k]), 3)
+            r["peak_hi_ncm2"] = round(float(bounds[1][k]), 3)
+
+    def _remember(self, t: float, st: dict[str, Any], raw: dict[str, Any] | None) -> None:
+        """One row of the charts' history: t, load, peak, area, centre of force x and y,
+        and without a calibration the peak rise and the elements responding."""
+        cof = st.get("cof_cm") or [None, None]
+        rise = raw or {}
+        self.history.append([round(t, 3), st.get("load_N"), st.get("peak_ncm2"),
+                             st.get("contact_area_cm2"), cof[0], cof[1],
+                             rise.get("peak_rise"), rise.get("responding")])  # fmt: skip
 
     def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
         """The frame's statistics for the snapshot (null for a mat with no calibration) and

@@ -7,7 +7,9 @@ Routes (an :class:`fastapi.APIRouter`; :func:`playback_router`):
 
 - ``GET /api/view``: the live mode (seat, bed, foot, generic), its words, fixed colour scale
   (N/cm²), threshold and orientation.
-- ``GET /api/playback``: the recordings in the monitor's folder (newest first).
+- ``GET /api/playback``: the recordings in the monitor's folder (newest first): the files and
+  folders texsense reads as a recording (a calibration file, a report, a regions sidecar
+  are not listed).
 - ``GET /api/playback/{name}``: one recording: frames, times, layout, mode, scale, the
   statistics per frame (load, peak, contact area, centre of force; at most
   :data:`MAX_POINTS` points, each the max or mean of its frames), events, time per side,
@@ -16,18 +18,28 @@ Routes (an :class:`fastapi.APIRouter`; :func:`playback_router`):
   snapshot; other quantities in their unit).
 - ``GET`` / ``PUT /api/playback/{name}/rois``: the regions of interest (sidecar
   ``<name>.rois.json``); a PUT answers with their statistics over time.
-- ``GET /api/playback/{name}/report?format=pdf|html``: the report (:mod:`texsense.apps.report`),
-  also kept in ``<folder>/reports/``.
+- ``POST /api/playback/{name}/report?format=pdf|html``: make the report
+  (:mod:`texsense.apps.report`), kept in ``<folder>/reports/``, and answer with it. It writes
+  a file, so it is a POST behind the same guard as every other write (a page of another site
+  cannot have it made); ``GET`` of the same address answers with the report made last, if any.
 
 A name is a plain file or folder name inside the recordings folder: anything with a path
-separator, a leading dot, or that resolves elsewhere is 404, whatever its encoding. A file
-texsense cannot read is a 422 with the reader's one-line message, a frame out of range 404.
+separator, a leading dot, or that resolves elsewhere is 404, whatever its encoding; so is an
+entry that is not a regular file or a folder (a FIFO, a device, a dangling link, a loop of
+links), which the listing leaves out too (said once in the log). A file texsense cannot read
+is a 422 with the reader's one-line message, a frame out of range 404.
+
+Nothing here can starve the rest of the server: recordings are read and reports made in the
+playback's own :class:`~texsense.monitor.web.Lane` (two at once, daemon threads, more are
+refused with 503), never in the threads the calibration panel uses, and a stop does not wait
+for them. The recordings kept in memory (:class:`_Reviews`) hold at most half of the memory
+budget (:mod:`texsense.data.budget`), and the next one is read within what is left.
 """
 
 from __future__ import annotations
 
-import asyncio
 import json
+import logging
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -38,16 +50,21 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 
 from texsense.apps import stats
+from texsense.apps.clinical import POSTURE_LABEL
 from texsense.apps.report import write_report
 from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
-from texsense.data import units
-from texsense.exceptions import FormatError, ParameterError, UnitError
+from texsense.data import budget, units
+from texsense.data.files import check_regular, make_folder, real_path, regular_files
+from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
+from texsense.monitor.web import Lane
 
 if TYPE_CHECKING:
     from texsense.apps.review import Review
     from texsense.monitor.live import Monitor
 
 __all__ = ["MAX_POINTS", "playback_router", "resolve_recording"]
+
+log = logging.getLogger("texsense.web")
 
 #: The longest series sent to the page (longer recordings are reduced, max or mean per bin).
 MAX_POINTS = 2000
@@ -67,9 +84,13 @@ def resolve_recording(folder: Path, name: str) -> Path | None:
         or name.endswith(".rois.json")
     ):
         return None
-    base = folder.resolve()
-    path = (base / name).resolve()
-    if path.parent != base or not path.exists():
+    base = real_path(folder)
+    path = real_path(base / name)
+    if path.parent != base:
+        return None
+    try:
+        check_regular(path, folder_ok=True)  # a status only: nothing waits on a FIFO
+    except FormatError:
         return None
     return path
 
@@ -81,12 +102,28 @@ def _rounded(v: np.ndarray, nd: int = 3) -> list[Any]:
     return list(out.tolist())
 
 
+def _nbytes(review: Review) -> int:
+    """The memory a review holds (its recording's arrays and what was computed from them)."""
+    rec = review.rec
+    arrays = [rec.frames, rec.valid, rec.times, rec.element_times, review.repaired,
+              *rec.labels.values(), *review.series.values(), *review.health.values()]  # fmt: skip
+    return sum(a.nbytes for a in arrays if a is not None)
+
+
 class _Reviews:
-    """A small cache of :class:`Review` objects keyed by path, size and modification time."""
+    """A small cache of :class:`Review` objects keyed by path, size and modification time:
+    at most :data:`CACHE` of them, holding at most half of the memory budget together. One
+    recording is read at a time, within the budget less what the cache holds."""
 
     def __init__(self) -> None:
-        self._items: OrderedDict[tuple[str, int, float], Review] = OrderedDict()
+        self._items: OrderedDict[tuple[str, int, float], tuple[Review, int]] = OrderedDict()
         self._lock = threading.Lock()
+        self._reading = threading.Lock()
+
+    def held(self) -> int:
+        """Bytes the cached reviews hold."""
+        with self._lock:
+            return sum(size for _, size in self._items.values())
 
     def get(self, path: Path) -> Review:
         from texsense.apps.review import open_review
@@ -97,16 +134,28 @@ class _Reviews:
         with self._lock:
             if key in self._items:
                 self._items.move_to_end(key)
-                return self._items[key]
-        rec = load(path)
-        # the page converts pressure from N/cm², as for the live frames
-        unit = "N/cm2" if rec.quantity == "pressure" else None
-        review = open_review(rec, unit=unit, name=path.name)
+                return self._items[key][0]
+        with self._reading:  # one at a time: their memory does not add up
+            self._shrink(budget.max_memory() // 2)
+            with budget.share(budget.max_memory() - self.held()):
+                rec = load(path)
+                # the page converts pressure from N/cm², as for the live frames
+                unit = "N/cm2" if rec.quantity == "pressure" else None
+                review = open_review(rec, unit=unit, name=path.name)
         with self._lock:
-            self._items[key] = review
-            while len(self._items) > CACHE:
-                self._items.popitem(last=False)
+            self._items[key] = (review, _nbytes(review))
+        self._shrink(budget.max_memory() // 2, keep=key)
         return review
+
+    def _shrink(self, limit: int, keep: Any = None) -> None:
+        """Forget the oldest reviews (but ``keep``) until at most :data:`CACHE` hold at most
+        ``limit`` bytes."""
+        with self._lock:
+            for key in list(self._items):
+                size = sum(s for _, s in self._items.values())
+                if key == keep or (len(self._items) <= CACHE and size <= limit):
+                    continue
+                del self._items[key]
 
 
 def _series(review: Review) -> dict[str, Any]:
@@ -133,6 +182,9 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
         "frames": rec.n_frames,
         "duration_s": round(rec.duration_s, 3),
         "started_at": review.started,
+        "clock_rate": round(review.clock_rate, 6),  # frame s per wall-clock s (1: a real mat)
+        "live": review.live,
+        "notes": review.notes,
         "quantity": rec.quantity,
         "unit": review.unit,
         "mode": review.mode.to_dict(),
@@ -151,6 +203,7 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
         "events": review.events[:2000],
         "sides": review.sides,
         "rois": load_rois(path),
+        "interval": (review.rec.meta.get("interval") or {}).get("level"),
     }
 
 
@@ -183,12 +236,31 @@ def _status_of(e: Exception) -> HTTPException:
 
 
 class _Folder:
-    """The monitor's recordings folder: names resolved inside it, reviews cached."""
+    """The monitor's recordings folder: names resolved inside it, reviews cached, read in
+    the playback's own lane."""
 
     def __init__(self, monitor: Monitor) -> None:
         self.monitor = monitor
         self.path = Path(monitor.record_dir)
         self.reviews = _Reviews()
+        self.lane = Lane("playback", workers=2, waiting=8)
+        self._said: set[tuple[str, str]] = set()
+        self._kinds: dict[tuple[str, int, float], bool] = {}  # (name, size, mtime) -> readable
+
+    def is_recording(self, p: Path, size: int, mtime: float) -> bool:
+        """Whether texsense reads ``p`` as a recording (by its content, as ``load`` would;
+        remembered while the file is unchanged)."""
+        from texsense.io import sniff_format
+
+        key = (p.name, size, mtime)
+        if key not in self._kinds:
+            try:
+                self._kinds[key] = sniff_format(p) != "folder"
+            except (FormatError, OSError):
+                self._kinds[key] = False
+            if len(self._kinds) > 4096:
+                self._kinds.clear()
+        return self._kinds[key]
 
     def path_of(self, name: str) -> Path:
         path = resolve_recording(self.path, name) if self.path.is_dir() else None
@@ -199,20 +271,32 @@ class _Folder:
     async def review_of(self, name: str) -> tuple[Path, Review]:
         path = self.path_of(name)
         try:
-            return path, await asyncio.to_thread(self.reviews.get, path)
+            return path, await self.lane.run(self.reviews.get, path)
         except (FormatError, ParameterError, UnitError, OSError) as e:
             raise _status_of(e) from None
 
     def listing(self) -> list[dict[str, Any]]:
+        """The regular files and real subfolders of the folder (no link out of it, no
+        dangling link, loop, FIFO or device: each said once in the log)."""
         if not self.path.is_dir():
             return []
         rec = self.monitor.recorder
         now = {Path(p).name for p in (rec.paths if rec else [])}
+        entries, passed = regular_files(self.path, folders=True)
+        for p, why in passed:
+            if (p.name, why) not in self._said:
+                self._said.add((p.name, why))
+                log.warning("playback: %s is not listed (%s)", p, why)
         rows = []
-        for p in self.path.iterdir():
+        for p in entries:
             if p.name.startswith(".") or p.name.endswith(".rois.json") or p.name == "reports":
                 continue
-            st = p.stat()
+            try:
+                st = p.stat()
+            except OSError:  # gone in between
+                continue
+            if p.name not in now and not self.is_recording(p, st.st_size, st.st_mtime):
+                continue
             rows.append({"name": p.name, "bytes": st.st_size, "modified": st.st_mtime,
                          "folder": p.is_dir(), "recording": p.name in now})  # fmt: skip
         return sorted(rows, key=lambda r: -r["modified"])
@@ -235,12 +319,28 @@ def _view(monitor: Monitor) -> dict[str, Any]:
     }
 
 
+#: The per-frame labels that say a frame's posture or side, most telling first: what the
+#: monitor showed live, a simulation's side, PMD's posture class, a recorded posture.
+POSTURE_LABELS = (POSTURE_LABEL, "side", "posture_class", "posture")
+
+
 def _frame(review: Review, i: int) -> dict[str, Any]:
     if not 0 <= i < review.rec.n_frames:
         raise HTTPException(404, f"frame {i} is out of range 0..{review.rec.n_frames - 1}")
+    rec = review.rec
     repaired = [] if review.repaired is None else np.flatnonzero(review.repaired[i]).tolist()
-    return {"i": i, "t": round(float(review.series["t"][i]), 3),
-            "values": _rounded(review.frame(i), 4), "repaired": repaired}  # fmt: skip
+    out = {"i": i, "t": round(float(review.series["t"][i]), 3),
+           "values": _rounded(review.frame(i), 4), "repaired": repaired}  # fmt: skip
+    if review.pressure:  # the frame's peak pressure index, N/cm² (as the live snapshot's)
+        one = rec.select(slice(i, i + 1)).to_unit("N/cm2")
+        ppi = float(stats.peak_pressure_index(one)[0])
+        out["ppi_ncm2"] = round(ppi, 4) if np.isfinite(ppi) else None
+    for name in POSTURE_LABELS:
+        if name in rec.labels:
+            value = str(rec.labels[name][i])
+            out["posture"] = {"label": value or None, "from": name}
+            break
+    return out
 
 
 async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, Any]:
@@ -258,21 +358,30 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
     except ParameterError as e:
         raise _status_of(e) from None
     save_rois(path, rois)
-    return {"rois": rois, "stats": await asyncio.to_thread(_roi_stats, review, rois)}
+    return {"rois": rois, "stats": await folder.lane.run(_roi_stats, review, rois)}
 
 
-async def _report(folder: _Folder, name: str, format: str) -> Any:
-
+def _report_path(folder: _Folder, name: str, format: str) -> Path:
     if format not in ("pdf", "html"):
         raise HTTPException(422, "format must be pdf or html")
+    return folder.path / "reports" / f"{folder.path_of(name).name}-report.{format}"
+
+
+async def _make_report(folder: _Folder, name: str, format: str) -> Any:
+    out = _report_path(folder, name, format)
     path, review = await folder.review_of(name)
-    out = folder.path / "reports" / f"{path.name}-report.{format}"
     try:
         rois = load_rois(path)
-        out.parent.mkdir(exist_ok=True)
-        await asyncio.to_thread(write_report, review.rec, out, name=path.name, rois=rois)
+        make_folder(out.parent, "reports folder")
+        await folder.lane.run(write_report, review.rec, out, name=path.name, rois=rois)
     except (FormatError, ParameterError, UnitError) as e:
         raise _status_of(e) from None
+    except (OSError, WriteError) as e:
+        raise HTTPException(507, f"cannot write the report: {e}") from None
+    return _report_file(out, format)
+
+
+def _report_file(out: Path, format: str) -> Any:
     media = "application/pdf" if format == "pdf" else "text/html"
     return FileResponse(out, media_type=media, filename=out.name)
 
@@ -303,9 +412,18 @@ def playback_router(monitor: Monitor) -> APIRouter:
 
     @router.get("/api/playback/{name}/frames/{i}")
     async def frame(name: str, i: int) -> dict[str, Any]:
-        """Frame ``i``: its time, values (N/cm² for pressure; null: no value) and the
-        elements whose values are repairs."""
-        return _frame((await folder.review_of(name))[1], i)
+        """Frame ``i``: its time, values (N/cm² for pressure; null: no value), the elements
+        whose values are repairs, and the bounds of a recording that has them."""
+        path, review = await folder.review_of(name)
+        out = _frame(review, i)
+        if review.pressure and path.suffix.lower() in (".h5", ".hdf5"):
+            from texsense.io.hdf5 import read_bounds
+
+            b = read_bounds(path, slice(i, i + 1))
+            if b is not None:
+                out["lower"] = _rounded(b[0][0] * review.factor, 4)
+                out["upper"] = _rounded(b[1][0] * review.factor, 4)
+        return out
 
     @router.get("/api/playback/{name}/rois")
     async def get_rois(name: str) -> list[dict[str, Any]]:
@@ -322,9 +440,18 @@ def playback_router(monitor: Monitor) -> APIRouter:
         their elements and statistics over time."""
         return await _put_rois(folder, name, request)
 
+    @router.post("/api/playback/{name}/report")
+    async def make_report(name: str, format: str = "pdf") -> Any:
+        """Make the report of the recording (PDF or HTML), keep it in the folder
+        ``reports`` and answer with it."""
+        return await _make_report(folder, name, format)
+
     @router.get("/api/playback/{name}/report")
     async def report(name: str, format: str = "pdf") -> Any:
-        """The report of the recording (PDF or HTML), kept in the folder ``reports``."""
-        return await _report(folder, name, format)
+        """The report made last (``POST`` makes it; nothing is written here)."""
+        out = _report_path(folder, name, format)
+        if not out.is_file():
+            raise HTTPException(404, "no report made yet: POST to this address makes it")
+        return _report_file(out, format)
 
     return router

@@ -1,5 +1,7 @@
 """Recording raw frames from any live source, with no calibration (``texsense record``,
-docs/calibration.md): what zeroing, equilibration and a check of a new mat need.
+docs/calibration.md): what zeroing, equilibration and a check of a new mat need; and the
+monitor's recorder (:class:`Recorder`: the source's readings, the pressure, and the clinical
+labels of :mod:`texsense.apps.clinical`).
 
 :func:`record` reads a :class:`~texsense.monitor.sources.Source` until ``duration_s`` of
 frame time or ``max_frames`` frames, or until it is stopped, and appends every frame to a
@@ -20,11 +22,21 @@ from typing import Any
 
 import numpy as np
 
+from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, encode_events
+from texsense.data.files import make_folder, unused_name
+from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock
 from texsense.monitor.sources import Source
 
-__all__ = ["FLUSH_S", "RecordStats", "record"]
+__all__ = [
+    "FLUSH_S",
+    "RecordStats",
+    "Recorder",
+    "record",
+    "recording_paths",
+    "unused_recording_name",
+]
 
 #: Longest time between two flushes: a killed recorder loses at most this.
 FLUSH_S = 0.5
@@ -203,3 +215,128 @@ async def _consume(
             return
         if duration_s is not None and stats.span_s >= duration_s:
             return
+
+
+def recording_paths(folder: Path, name: str, quantity: str, calibrated: bool = True) -> list[Path]:
+    """The files of a recording named ``name``: ``<name>-raw.h5`` and, for capacitance
+    through a calibration, the pressure ``<name>.h5``."""
+    paths = [folder / f"{name}-raw.h5"]
+    if quantity == "capacitance" and calibrated:
+        return [*paths, folder / f"{name}.h5"]
+    return paths
+
+
+def unused_recording_name(folder: Path, name: str, quantity: str, calibrated: bool = True) -> str:
+    """``name``, or the first ``name-2``, ``name-3``, ... none of whose files exist
+    (:func:`texsense.data.files.unused_name` on each file of the recording)."""
+    k = 1
+    while True:
+        candidate = name if k == 1 else f"{name}-{k}"
+        paths = recording_paths(folder, candidate, quantity, calibrated)
+        if all(unused_name(p) == p for p in paths):
+            return candidate
+        k += 1
+
+
+class Recorder:
+    """Crash-safe HDF5 recording of one session: the source's readings (``<name>-raw.h5``,
+    re-processable) and, for capacitance sources through a calibration, the pressure
+    (``<name>.h5``), both flushed at least every :data:`FLUSH_S` s."""
+
+    def __init__(
+        self,
+        folder: Path,
+        name: str,
+        source: Source,
+        meta: dict[str, Any],
+        *,
+        calibrated: bool = True,
+        posture: bool = False,
+        bounds: bool = False,
+    ) -> None:
+        from texsense.io.hdf5 import RecordingWriter
+
+        make_folder(folder, "recordings folder")
+        lay = source.layout
+        self.paths = recording_paths(folder, name, source.quantity, calibrated)
+        taken = [p.name for p in self.paths if p.exists()]
+        if taken:  # never write over an earlier recording
+            raise ParameterError(f"a recording named {name!r} exists already ({taken[0]})")
+        self._raw = RecordingWriter(
+            self.paths[0],
+            lay,
+            source.quantity,
+            source.unit,
+            meta=meta,
+            element_times=True,
+            flush_interval_s=FLUSH_S,
+        )
+        self._pressure = None
+        if len(self.paths) > 1:
+            self._pressure = RecordingWriter(
+                self.paths[1],
+                lay,
+                "pressure",
+                "N/cm2",
+                meta=meta,
+                element_times=True,
+                flush_interval_s=FLUSH_S,
+                bounds=bounds,
+            )
+        self.frames = 0
+        self.posture = posture
+        #: events raised since the last frame was written: they go with the next one
+        self.pending: list[dict[str, Any]] = []
+
+    def append(
+        self,
+        frame: Frame,
+        pressure: np.ndarray,
+        measured: np.ndarray,
+        wall: float,
+        posture: str | None = None,
+        bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """Append one frame (raw values and pressure) with its labels: the wall clock when it
+        arrived, the events raised since the last frame, the posture shown
+        (:mod:`texsense.apps.clinical`), and its bounds (lower, upper) for a recorder made
+        with ``bounds``."""
+        t = [frame.t]
+        et = frame.element_times[None, :]
+        valid = np.isfinite(frame.values)[None, :]
+        labels: dict[str, Any] = {
+            WALL_LABEL: [wall],
+            EVENTS_LABEL: np.array([encode_events(self.pending)], dtype=object).astype(str),
+        }
+        if self.posture:
+            labels[POSTURE_LABEL] = np.array([posture or ""]).astype(str)
+        self._raw.append(
+            np.nan_to_num(frame.values)[None, :],
+            times=t,
+            valid=valid,
+            element_times=et,
+            labels=labels,
+        )
+        if self._pressure is not None:
+            self._pressure.append(
+                np.nan_to_num(pressure)[None, :],
+                times=t,
+                valid=measured[None, :],
+                element_times=et,
+                labels=labels,
+                lower=None if bounds is None else np.nan_to_num(bounds[0])[None, :],
+                upper=None if bounds is None else np.nan_to_num(bounds[1])[None, :],
+            )
+        self.pending = []
+        self.frames += 1
+
+    def close(self, extra_meta: dict[str, Any] | None = None) -> None:
+        """Finish the files (``extra_meta``: what is known only at the end, e.g. the in-use
+        drift correction's state)."""
+        if extra_meta:
+            self._raw.update_meta(extra_meta)
+            if self._pressure is not None:
+                self._pressure.update_meta(extra_meta)
+        self._raw.close()
+        if self._pressure is not None:
+            self._pressure.close()

@@ -23,7 +23,7 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.live import Monitor
 from texsense.monitor.routes import ROUTERS
 from texsense.monitor.routes.static import STATIC
-from texsense.monitor.web import Access, Guard, finish, is_loopback, serve_app
+from texsense.monitor.web import Access, Guard, finish, is_loopback, plain_errors, serve_app
 
 __all__ = ["STATIC", "create_app", "is_loopback", "serve"]
 
@@ -71,7 +71,7 @@ def create_app(
         if not task.cancelled() and task.exception() is not None:
             log.error("%s stopped: %s", monitor.source.name, task.exception())
 
-    app = FastAPI(title="texsense monitor", version="1", lifespan=lifespan)
+    app = plain_errors(FastAPI(title="texsense monitor", version="1", lifespan=lifespan))
     for make in routers:
         app.include_router(make(monitor))
     if guarded:

@@ -82,7 +82,8 @@ async def blocking(fn: Callable[..., Any], *args: Any) -> Any:
         with contextlib.suppress(RuntimeError):  # a closed loop: nobody waits any more
             loop.call_soon_threadsafe(settle, *result)
 
-    threading.Thread(target=work, daemon=True, name=f"texsense-{fn.__name__}").start()
+    name = getattr(fn, "__name__", None) or getattr(getattr(fn, "func", None), "__name__", "work")
+    threading.Thread(target=work, daemon=True, name=f"texsense-{name}").start()
     return await future
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.apps.alerts import Event
-from texsense.exceptions import ParameterError
+from texsense.exceptions import ParameterError, WriteError
 
 __all__ = ["EventStore", "PostgresEventStore", "open_store"]
 
@@ -185,4 +185,15 @@ def open_store(where: str | Path) -> EventStore:
     text = str(where)
     if text.startswith(("postgresql://", "postgres://")):
         return PostgresEventStore(text)
-    return EventStore(text)
+    if text != ":memory:":
+        path = Path(text)
+        if path.is_dir():
+            raise WriteError(path, "--db is a folder, expected a SQLite file")
+        if path.exists() and not path.is_file():
+            raise WriteError(path, "--db is not a regular file (a device, a FIFO, ...)")
+        if not (path.parent if str(path.parent) else Path(".")).is_dir():
+            raise WriteError(path, f"--db: the folder {path.parent} does not exist")
+    try:
+        return EventStore(text)
+    except sqlite3.Error as e:
+        raise WriteError(Path(text), f"cannot open the event store ({e})") from None

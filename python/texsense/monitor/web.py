@@ -17,6 +17,8 @@ forget them), and adds the security headers to every response:
 - **Token**: with a token, every request carries it (``Authorization: Bearer``, header
   ``X-Texsense-Token`` or ``?token=``), else 401. :func:`resolve_token` takes it from
   ``--token``, ``--token-file`` or the environment variable ``TEXSENSE_TOKEN``.
+- **Bodies**: a request body larger than :data:`MAX_BODY` is refused (413) before it is read:
+  by its ``Content-Length``, or, sent in chunks, as soon as it passes the limit.
 - **Headers**: a Content-Security-Policy that allows scripts, styles and connections of this
   origin only and no framing (``frame-ancestors 'none'``, ``X-Frame-Options: DENY``),
   ``Referrer-Policy: no-referrer`` (a token in the address never leaks to another site),
@@ -41,6 +43,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import gc
 import hmac
 import ipaddress
@@ -56,13 +59,19 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from texsense._progress import STOPPING, StoppingError, check_stopping
+from texsense.data.files import read_small_text, real_path
 from texsense.exceptions import ParameterError
+from texsense.monitor.sources import blocking
 
 __all__ = [
+    "MAX_BODY",
     "Access",
     "Guard",
+    "Lane",
     "finish",
     "is_loopback",
+    "plain_errors",
     "resolve_token",
     "safe_file",
     "serve_app",
@@ -79,6 +88,9 @@ TOKEN_ENV = "TEXSENSE_TOKEN"
 UNSAFE_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 #: Longest a server waits for open requests when told to stop, s.
 SHUTDOWN_S = 1.0
+#: The largest request body any route takes, bytes (the regions of a recording are the
+#: largest, 256 KiB); larger bodies are refused before they are read.
+MAX_BODY = 1 << 20
 
 _CSP = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
@@ -141,18 +153,23 @@ def safe_file(folder: Path, name: str) -> Path | None:
     """``folder / name`` if it is a plain file inside ``folder`` (no traversal), else None."""
     if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
         return None
-    base = folder.resolve()
-    path = (base / name).resolve()
+    base = real_path(folder)
+    path = real_path(base / name)
     if path.parent != base or not path.is_file():
         return None
     return path
 
 
 def resolve_token(
-    token: str | None = None, token_file: str | Path | None = None, env: Any = None
+    token: str | None = None,
+    token_file: str | Path | None = None,
+    env: Any = None,
+    option: str = "--token-file",
 ) -> str | None:
     """The token from ``--token``, else ``--token-file`` (its first line), else the
-    environment variable :data:`TOKEN_ENV`; None when none is given.
+    environment variable :data:`TOKEN_ENV`; None when none is given. ``option`` names the
+    file's option in the errors (the station's ``--broker-password-file`` reads its password
+    the same way).
 
     Raises
     ------
@@ -166,13 +183,9 @@ def resolve_token(
     where = "--token"
     if token_file is not None:
         path = Path(token_file)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as e:
-            reason = getattr(e, "strerror", None) or "not UTF-8 text"
-            raise ParameterError(f"--token-file {path}: cannot read it ({reason})") from None
+        text = read_small_text(path, option, limit=4096)  # not /dev/zero, nor a FIFO
         token = text.strip().splitlines()[0].strip() if text.strip() else ""
-        where = f"--token-file {path}"
+        where = f"{option} {path}"
     elif token is None and env.get(TOKEN_ENV):
         token, where = env[TOKEN_ENV].strip(), f"${TOKEN_ENV}"
     if token is None:
@@ -286,6 +299,9 @@ class Guard:
         if kind == "websocket":
             await self.app(scope, receive, send)
             return
+        receive = await self._bounded(headers, receive, send)
+        if receive is None:
+            return
         policy = _csp(scope.get("path", ""), headers.get("host", ""))
 
         async def send_with_headers(message: dict[str, Any]) -> None:
@@ -294,6 +310,42 @@ class Guard:
             await send(message)
 
         await self.app(scope, receive, send_with_headers)
+
+    async def _bounded(self, headers: dict[str, str], receive: Any, send: Any) -> Any:
+        """``receive`` for a body within :data:`MAX_BODY` (read here when it comes in chunks,
+        then handed on), or None once a larger one is refused (413)."""
+        too_big = (413, f"the request body is larger than {MAX_BODY // 1024} KiB")
+        length = headers.get("content-length")
+        if length is not None:
+            if not length.strip().isdigit() or int(length) > MAX_BODY:
+                await self._refuse(send, too_big, headers.get("host", ""))
+                return None
+            return receive
+        if "chunked" not in headers.get("transfer-encoding", ""):
+            return receive
+        chunks, size = [], 0
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":
+                break
+            chunks.append(message.get("body", b""))
+            size += len(chunks[-1])
+            if size > MAX_BODY:
+                await self._refuse(send, too_big, headers.get("host", ""))
+                return None
+            if not message.get("more_body", False):
+                break
+        body = b"".join(chunks)
+        done = False
+
+        async def replay() -> dict[str, Any]:
+            nonlocal done
+            if done:
+                return await receive()
+            done = True
+            return {"type": "http.request", "body": body, "more_body": False}
+
+        return replay
 
     async def _refuse(self, send: Any, refused: tuple[int, str], host: str) -> None:
         status, reason = refused
@@ -371,8 +423,78 @@ async def _until_disconnect(websocket: Any) -> None:
             return
 
 
+def plain_errors(app: Any) -> Any:
+    """Answer a request whose parameters or body do not validate with 422 and one line (where
+    and what), never echoing the input: FastAPI's own answer repeats it and fails on a value
+    JSON cannot hold (``{"frames": NaN}`` was a 500). Every app of both servers calls this."""
+    from fastapi.exceptions import RequestValidationError
+    from fastapi.responses import JSONResponse
+
+    async def invalid(_request: Any, exc: Exception) -> Any:
+        errors = exc.errors() if isinstance(exc, RequestValidationError) else []
+        first = errors[0] if errors else {}
+        where = ".".join(str(p) for p in first.get("loc", ()) if p != "body") or "body"
+        text = str(first.get("msg", "invalid request"))[:200]
+        return JSONResponse({"detail": f"{where}: {text}"}, status_code=422)
+
+    app.add_exception_handler(RequestValidationError, invalid)
+    return app
+
+
+class Lane:
+    """Where a server runs one kind of slow work (reading a recording for playback, fitting a
+    calibration): at most ``workers`` calls at once, each in a daemon thread, and at most
+    ``waiting`` more queued; beyond that a call is refused at once (503) instead of waiting.
+    A call that never returns (a file that does not answer) holds its own lane only: the
+    live feed, the other lanes and a stop (SIGTERM: daemon threads are not waited for) go on.
+
+    Parameters
+    ----------
+    name : str
+        What the lane does, for the refusal (``playback``).
+    workers, waiting : int
+        Calls at once, and queued.
+    """
+
+    def __init__(self, name: str, workers: int = 2, waiting: int = 8) -> None:
+        self.name = name
+        self.workers = workers
+        self.waiting = waiting
+        self._slots: asyncio.Semaphore | None = None
+        self._queued = 0
+
+    async def run(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """``fn(*args, **kwargs)`` in a daemon thread of this lane; its result or error."""
+        from fastapi import HTTPException
+
+        if self._slots is None:
+            self._slots = asyncio.Semaphore(self.workers)
+        if STOPPING.is_set():
+            raise HTTPException(503, "the server is stopping")
+        if self._queued >= self.workers + self.waiting:
+            raise HTTPException(503, f"{self.name} is busy: try again in a moment")
+        self._queued += 1
+        try:
+            async with self._slots:
+                check_stopping()  # waited while the server was told to stop
+                return await blocking(functools.partial(fn, *args, **kwargs))
+        except StoppingError:  # the server stops: the work was dropped (texsense._progress)
+            raise HTTPException(503, "the server is stopping") from None
+        finally:
+            self._queued -= 1
+
+
+def _cut_short(record: logging.LogRecord) -> bool:
+    """False for uvicorn's report of a request it cancelled because the server stops (a
+    request still waiting when the grace period ends): an expected end, not an error."""
+    exc = record.exc_info[1] if record.exc_info else None
+    return not isinstance(exc, asyncio.CancelledError)
+
+
 def _server_class() -> Any:
     import uvicorn
+
+    logging.getLogger("uvicorn.error").addFilter(_cut_short)
 
     class Server(uvicorn.Server):
         """uvicorn's server, but a signal only stops it (uvicorn would re-raise SIGTERM
@@ -385,6 +507,7 @@ def _server_class() -> Any:
         def capture_signals(self) -> Iterator[None]:
             def stop(sig: int, _frame: Any) -> None:
                 self.signal_received = sig
+                STOPPING.set()  # the workers' long loops end (texsense._progress)
                 if self.should_exit:
                     # a second Ctrl-C: stop waiting for anything, and say so in one line
                     # instead of the tracebacks of the tasks uvicorn then cancels

@@ -23,11 +23,13 @@ True
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import contextlib
 import ctypes
 import hashlib
 import json
+import logging
 import os
 import pwd
 import re
@@ -44,8 +46,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
-from texsense.data.files import atomic_path
+from texsense.data.files import atomic_path, read_regular
 from texsense.exceptions import FormatError, ParameterError
+from texsense.monitor.sources import blocking
 
 __all__ = [
     "STATION_USER",
@@ -61,6 +64,9 @@ __all__ = [
 
 #: The station's own user on its own broker.
 STATION_USER = "texsense-station"
+#: Names no mat may have: the station's user (a mat of that name would replace the station's
+#: password and read every mat's frames).
+RESERVED_IDS = frozenset({STATION_USER})
 #: What a mat id (and so an MQTT user name, a topic segment, a URL segment and a folder name)
 #: may be.
 MAT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
@@ -134,8 +140,11 @@ def mqtt_client(broker: BrokerURL, name: str) -> Any:
 def _die_with_parent() -> None:
     """In the child before exec (Linux): end with the parent, even one that is killed. (As
     root, Mosquitto drops to its own user at start, which clears this: a station killed with
-    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.)"""
+    SIGKILL then leaves its broker running; Ctrl-C and SIGTERM stop it either way.) The child
+    gets a process group of its own: a Ctrl-C on the terminal reaches the station alone,
+    which disconnects first and then stops its broker (no "lost the broker" on a clean stop)."""
 
+    os.setpgid(0, 0)
     with contextlib.suppress(OSError):  # not Linux: the parent's stop() is the only way
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
@@ -208,8 +217,10 @@ class Broker:
             rules = "".join(f"user {u}\ntopic {a} {t}\n" for u, a, t in acl or [])
             (self._dir / "passwd").write_text(passwd, encoding="utf-8")
             (self._dir / "acl").write_text(rules, encoding="utf-8")
+            # a client is known by its user name only: a mat that connects with another
+            # mat's client id gets its own user's id (it cannot disconnect the other mat)
             lines += ["allow_anonymous false", f"password_file {self._dir / 'passwd'}",
-                      f"acl_file {self._dir / 'acl'}"]  # fmt: skip
+                      f"acl_file {self._dir / 'acl'}", "use_username_as_clientid true"]  # fmt: skip
         self.config.write_text("\n".join(lines) + "\n", encoding="utf-8")
         self._own_files()
         self._proc: subprocess.Popen[bytes] | None = None
@@ -258,14 +269,14 @@ class Broker:
         while time.monotonic() < deadline:
             if self._proc.poll() is not None:
                 text = errors.read_text(errors="replace").strip()[:300]
-                self.stop()
+                self.pause()
                 raise ParameterError(f"mosquitto exited at start: {text}")
             try:
                 with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
                     return self
             except OSError:
                 time.sleep(0.05)
-        self.stop()
+        self.pause()
         raise ParameterError(f"mosquitto did not accept connections on port {self.port}")
 
     @property
@@ -289,8 +300,34 @@ class Broker:
         self.pause()
         shutil.rmtree(self._dir, ignore_errors=True)
 
+    async def supervise(self, every_s: float = 0.25) -> None:
+        """Restart the process whenever it dies (same port, users and rights: the clients
+        reconnect and nothing else changes), until cancelled; one line each time, and waits
+        that grow (to 30 s) while it will not start."""
+        log = logging.getLogger("texsense.station")
+        wait = every_s
+        while True:
+            await asyncio.sleep(wait)
+            if self.running or not self._dir.is_dir():
+                wait = every_s
+                continue
+            code = self._proc.returncode if self._proc is not None else None
+            log.warning("the station's broker stopped (exit %s); restarting it", code)
+            self._proc = None
+            try:
+                await blocking(self.start)
+                log.warning("the station's broker runs again on port %d", self.port)
+                wait = every_s
+            except ParameterError as e:
+                wait = min(30.0, max(1.0, wait * 2))
+                log.warning("the station's broker did not start (%s); next try in %.0f s", e, wait)
+
     def __enter__(self) -> Broker:
-        return self.start()
+        try:
+            return self.start()
+        except BaseException:
+            self.stop()
+            raise
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
@@ -319,11 +356,13 @@ def mat_id_of(topic: str) -> str | None:
 def check_mat_id(mat_id: str) -> str:
     """``mat_id`` if it may be a mat id: letters, digits, ``.``, ``_``, ``-`` (at most 64,
     not starting with a sign)."""
-    if not MAT_ID.match(mat_id):
+    if not isinstance(mat_id, str) or not MAT_ID.match(mat_id):
         raise ParameterError(
-            f"mat id {mat_id[:80]!r}: use letters, digits, '.', '_' and '-' only (at most 64, "
-            "starting with a letter or digit)"
+            f"mat id {str(mat_id)[:80]!r}: use letters, digits, '.', '_' and '-' only (at most "
+            "64, starting with a letter or digit)"
         )
+    if mat_id.lower() in RESERVED_IDS:
+        raise ParameterError(f"mat id {mat_id!r} is the station's own name on its broker")
     return mat_id
 
 
@@ -331,10 +370,10 @@ def read_mat_credentials(path: Path) -> dict[str, str]:
     """The mats' passwords in ``path`` (TOML: ``[mats]`` ``id = "password"``); empty when the
     file does not exist yet."""
 
-    if not path.exists():
+    if not os.path.lexists(path):
         return {}
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(read_regular(path, "the mats' credentials").decode("utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise FormatError(path, f"cannot read the mats' credentials: {e}") from None
     mats = doc.get("mats", {})
@@ -395,6 +434,11 @@ def station_broker(
     passwords |= {m: secrets.token_urlsafe(18) for m in virtual}
     acl = [(STATION_USER, "read", topic_filter)]
     acl += [(m, "write", t) for m, t in {**mats, **virtual}.items()]
-    broker = Broker(users=passwords, acl=acl, max_packet_bytes=max_packet_bytes).start()
+    broker = Broker(users=passwords, acl=acl, max_packet_bytes=max_packet_bytes)
+    try:
+        broker.start()
+    except BaseException:
+        broker.stop()  # the folder with it
+        raise
     logins = {m: broker.url.login(m, passwords[m]) for m in [*mats, *virtual]}
     return broker, broker.url.login(STATION_USER, passwords[STATION_USER]), logins

@@ -31,7 +31,15 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.routes.static import STATIC as MONITOR_STATIC
 from texsense.monitor.routes.static import pages
 from texsense.monitor.server import create_app
-from texsense.monitor.web import Access, Guard, finish, is_loopback, serve_app, stream
+from texsense.monitor.web import (
+    Access,
+    Guard,
+    finish,
+    is_loopback,
+    plain_errors,
+    serve_app,
+    stream,
+)
 from texsense.station.tiles import WardFeed
 from texsense.station.ward import MatEntry, Station
 
@@ -110,7 +118,7 @@ def create_ward_app(
         await finish(tasks)
         station.stop()
 
-    app = FastAPI(title="texsense ward station", version="1", lifespan=lifespan)
+    app = plain_errors(FastAPI(title="texsense ward station", version="1", lifespan=lifespan))
     app.include_router(pages(STATIC / "ward.html", STATIC, MONITOR_STATIC))
     app.include_router(_api(station))
     for mat_id, entry in station.mats.items():

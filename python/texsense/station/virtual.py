@@ -1,11 +1,22 @@
 """Virtual mats for the station: simulated people on virtual seats who publish their frames
-through the broker, so that a ward can be seen and load-tested without hardware."""
+through the broker, so that a ward can be seen and load-tested without hardware.
+
+``texsense station --virtual-mats N`` runs them in a process of their own
+(:meth:`VirtualMats.run_apart`), as real mats are devices of their own: simulating 20 mats
+in the station's event loop held it for seconds at a time, and the ward page waited behind
+them (issue 33: 40 s before its first tile under 20 mats at 10x on a shared 2-core machine).
+"""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import ctypes
 import json
+import logging
 import math
+import multiprocessing
+import signal
 from typing import TYPE_CHECKING, Any
 
 from texsense.data.protocol import Frame
@@ -13,13 +24,15 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.sources import Source
 from texsense.monitor.virtual import VirtualBedSource, VirtualSeatSource
 from texsense.station.broker import BrokerURL, mqtt_client
-from texsense.station.ward import MatConfig
+from texsense.station.config import MatConfig
 
 if TYPE_CHECKING:
     from texsense.apps.posture import PostureModel
     from texsense.compensation.stages import StageChain
 
 __all__ = ["VirtualMats", "frame_payload"]
+
+log = logging.getLogger("texsense.station")
 
 
 def frame_payload(frame: Frame) -> bytes:
@@ -71,6 +84,7 @@ class VirtualMats:
         beds: int | None = None,
     ) -> None:
         self.broker = broker
+        self.n, self.speed, self.seed, self.hold_s = n, speed, seed, hold_s
         self.prefix = prefix.strip("/")
         self.ids = [f"vmat-{k + 1:02d}" for k in range(n)]
         beds = n // 2 if beds is None else beds
@@ -143,3 +157,49 @@ class VirtualMats:
             for c in set(clients.values()):
                 c.disconnect()
                 c.loop_stop()
+
+    async def run_apart(self) -> None:
+        """:meth:`run` in a process of its own (see the module), until cancelled; it ends
+        with the station (also one killed: the child asks the kernel for that)."""
+        ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no loop, no threads
+        args = (self.n, self.broker, self.logins, self.prefix, self.speed, self.seed, self.hold_s,
+                self.beds)  # fmt: skip
+        proc = ctx.Process(target=_publish_apart, args=args, daemon=True,
+                           name="texsense-virtual-mats")  # fmt: skip
+        # the child starts with Ctrl-C ignored (Python keeps an ignored SIGINT ignored): a
+        # Ctrl-C on the terminal is the station's, which then stops the child itself; one
+        # arriving while the child still imports would print a traceback
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            proc.start()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        try:
+            while proc.is_alive():
+                await asyncio.sleep(0.5)
+            log.warning("the virtual mats stopped (exit code %s)", proc.exitcode)
+        finally:
+            if proc.is_alive():
+                proc.terminate()
+                await asyncio.to_thread(proc.join, 5.0)
+
+
+def _publish_apart(
+    n: int,
+    broker: BrokerURL | None,
+    logins: dict[str, BrokerURL] | None,
+    prefix: str,
+    speed: float,
+    seed: int,
+    hold_s: float,
+    beds: int,
+) -> None:
+    """The virtual mats' process: publish until the station ends it (Ctrl-C is the
+    station's: it stops this process itself)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(OSError, AttributeError):  # Linux: end with the station
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    vm = VirtualMats(n, broker, prefix=prefix, speed=speed, seed=seed, hold_s=hold_s, beds=beds)
+    vm.logins = logins
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(vm.run())

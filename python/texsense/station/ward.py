@@ -25,19 +25,19 @@ any coordination of their own: the broker routes). Every mat is a
 - **unknown topics**: counted, at most :data:`UNKNOWN_MAX` of them, each forgotten
   :data:`UNKNOWN_TTL_S` after its last message;
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
-  back, and subscribes again.
+  back, and subscribes again;
+- **the pages stay served under load**: messages are handled in slices of the event loop
+  (:mod:`texsense.station.inbox`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 import time
 from collections import OrderedDict
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,7 +46,6 @@ import numpy as np
 from texsense.apps.alerts import Event, ExposureTracker
 from texsense.apps.bed import BedWatch
 from texsense.data import units
-from texsense.data.layout import Layout
 from texsense.data.protocol import (
     CountError,
     Frame,
@@ -61,11 +60,12 @@ from texsense.monitor.live import SILENT_S, Monitor
 from texsense.monitor.sources import Source
 from texsense.monitor.store import EventStore
 from texsense.station.broker import BrokerURL, check_mat_id, mat_id_of, mqtt_client
+from texsense.station.config import MatConfig
+from texsense.station.inbox import Inbox
 from texsense.station.tiles import BlockMap
 
 if TYPE_CHECKING:
-    from texsense.apps.posture.model import PostureModel
-    from texsense.compensation.stages import StageChain
+    pass
 
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
@@ -79,27 +79,6 @@ REFUSE_AFTER_N = 10
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
 UNKNOWN_TTL_S = 600.0
-
-
-@dataclass
-class MatConfig:
-    """One mat of the ward: its id (the topic segment before ``/frames``), layout, calibration
-    (a stage chain or mat calibration; None for a mat that sends pressure), where its
-    frames come from (``mqtt``, or a local source built by the command line) and, for a bed,
-    its side model and turning schedule."""
-
-    id: str
-    layout: Layout
-    calibration: StageChain | None = None
-    quantity: str = "capacitance"
-    source: str = "mqtt"
-    reposition_min: float = 20.0
-    extra: dict[str, Any] = field(default_factory=dict)
-    #: A bed mat: the turning schedule on the side ``posture_model`` reports, and at-risk
-    #: regions (:class:`texsense.apps.bed.BedWatch`); the model's labels must be sides.
-    bed: bool = False
-    posture_model: PostureModel | None = None
-    turn_every_min: float = 120.0
 
 
 class _FedSource(Source):
@@ -124,7 +103,11 @@ def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: P
     if config.quantity == "capacitance":
         if config.calibration is None:
             raise ParameterError(f"mat {config.id}: a capacitance mat needs a calibration")
-        pipeline = Pipeline(config.calibration, config.layout)
+        # the drift corrected in use, and bounds where the calibration has held-out residuals
+        try:
+            pipeline = Pipeline(config.calibration, config.layout, in_use=True, interval=0.95)
+        except ParameterError:
+            pipeline = Pipeline(config.calibration, config.layout, in_use=True)
     tracker = ExposureTracker(config.layout, reposition_min=config.reposition_min)
     bed = None
     if config.bed:
@@ -188,10 +171,10 @@ class MatEntry:
     def handle(self, payload: bytes, now: float) -> bool:
         """One message; True when it gave a frame. Its length is checked first: an oversized
         payload is never parsed."""
+        self.messages += 1  # every message that came, the ignored ones too
         if self.refused is not None:
             self.ignored += 1
             return False
-        self.messages += 1
         try:
             frame = parse_mqtt_payload(payload, self.config.layout.n_elements, self.max_bytes)
         except PayloadSizeError as e:
@@ -335,8 +318,11 @@ class MatEntry:
         bed = latest.get("bed") if latest and state != "stale" else None
         if bed is not None:
             bed = {"side": bed["side"], "since_turn_s": bed["since_turn_s"],
-                   "turn_due": bed["turn_due"], "interval_s": bed["interval_s"]}  # fmt: skip
+                   "turn_due": bed["turn_due"], "interval_s": bed["interval_s"],
+                   "due_in_s": bed["due_in_s"]}  # fmt: skip
         exposure = self.monitor.tracker.exposure_s
+        mmhg = float(units.factor("N/cm2", "mmHg"))
+        peak = stats["peak_ncm2"] if stats else None
         return {
             "id": self.id,
             "source": self.config.source,
@@ -356,6 +342,12 @@ class MatEntry:
             "refused": self.refused,
             "occupied": bool(stats and (stats["load_N"] or 0.0) > 5.0),  # null: no calibration
             "minutes_since_reposition": round(float(np.max(exposure, initial=0.0)) / 60.0, 1),
+            # what the tile says: "above 32 mmHg for 8.6 min", "peak 45 mmHg"
+            "threshold_mmhg": round(self.monitor.tracker.threshold_ncm2 * mmhg, 1),
+            "peak_mmhg": None if peak is None else round(peak * mmhg, 1),
+            "action": self.monitor.mode.action,
+            "mode": self.monitor.mode.name,  # a bed's tile is drawn as a bed, stale or not
+            "orientation": self.monitor.layout.orientation,
             "alert": alert.to_dict() if alert is not None else None,
             "urgency": urgency,
             "bed": bed,
@@ -443,7 +435,8 @@ class Station:
         self.refusal: str | None = None  # why the broker refused the station, if it did
         self.started = time.time()
         self._client: Any = None
-        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stopping = False
+        self._inbox: Inbox | None = None  # MQTT messages waiting for the loop
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
@@ -466,14 +459,13 @@ class Station:
         log.info("connected to %s, subscribed to %s", self.broker, self.topic)
 
     def _on_disconnect(self, *_args: Any) -> None:
-        if self.connected:
+        if self.connected and not self._stopping:  # a stop is no loss
             log.warning("lost the broker %s; reconnecting", self.broker)
         self.connected = False
 
     def _on_message(self, _client: Any, _u: Any, msg: Any) -> None:
-        if self._loop is not None:
-            with contextlib.suppress(RuntimeError):  # the loop has closed: the station stops
-                self._loop.call_soon_threadsafe(self.handle, msg.topic, msg.payload, time.time())
+        if self._inbox is not None:  # paho's thread: into the inbox, handled on the loop
+            self._inbox.put(msg.topic, msg.payload)
 
     def handle(self, topic: str, payload: bytes, now: float | None = None) -> None:
         """One MQTT message (in the event loop)."""
@@ -517,7 +509,7 @@ class Station:
         """Connect (in paho's network thread) from within the running event loop."""
         if self.broker is None:
             return
-        self._loop = asyncio.get_running_loop()
+        self._inbox = Inbox(asyncio.get_running_loop(), self.handle, self.quiet)
         client = mqtt_client(self.broker, f"texsense-station-{id(self)}")
         client.on_connect = self._on_connect
         client.on_subscribe = self._on_subscribe
@@ -528,6 +520,7 @@ class Station:
 
     def stop(self) -> None:
         """Disconnect and end every mat's session (in one write)."""
+        self._stopping = True
         if self._client is not None:
             self._client.disconnect()
             self._client.loop_stop()
@@ -593,6 +586,7 @@ class Station:
             "unknown": {k: int(v[0]) for k, v in busiest},
             "unknown_topics": len(self.unknown),
             "unknown_forgotten": self.unknown_forgotten,
+            "dropped": 0 if self._inbox is None else self._inbox.dropped,
         }
 
     def ward(self) -> dict[str, Any]:

@@ -203,3 +203,50 @@ fn two_clocks_add_the_two_superpositions() {
     }
     assert!(base().with_time_component(f64::NAN).is_err());
 }
+
+/// Outputs and state bytes of a batch of a bank on the path asked (AVX2 or scalar).
+fn on_path(simd: bool, bank: &DriftBank, dt: &[f64], h: &[f64], ok: &[bool]) -> Vec<u8> {
+    crate::simd::set_enabled(simd);
+    let mut b = bank.clone();
+    let mut out = vec![0.0; h.len()];
+    b.run(dt, h, ok, &mut out).unwrap();
+    crate::simd::set_enabled(true);
+    let mut w = Writer::default();
+    b.save(&mut w);
+    out.iter()
+        .flat_map(|v| v.to_le_bytes())
+        .chain(w.buf)
+        .collect()
+}
+
+#[test]
+fn the_avx2_build_of_the_kernel_equals_the_scalar_one_bit_for_bit() {
+    let _guard = crate::simd::testing::lock();
+    let mut rng = crate::preisach::tests::Rng(7);
+    for case in 0..24 {
+        let terms = 1 + case % 17;
+        let weights: Vec<f64> = (0..terms).map(|_| rng.unit()).collect();
+        let taus: Vec<f64> = (0..terms).map(|_| 0.01 + 100.0 * rng.unit()).collect();
+        let n = 1 + (rng.next() % 70) as usize;
+        let t = 1 + (rng.next() % 60) as usize;
+        let mut bank = DriftBank::new(Kernel::new(weights, taus).unwrap(), -0.03, n).unwrap();
+        if case % 3 >= 1 {
+            bank = bank.with_rest_rate(0.5, 0.4).unwrap();
+        }
+        if case % 3 == 2 {
+            bank = bank.with_time_component(0.01).unwrap();
+        }
+        if case % 4 == 3 {
+            bank = bank.with_exponent(1.7).unwrap();
+        }
+        let (h, ok) = crate::preisach::tests::hostile_history(&mut rng, t, n, -1.0, 4.0);
+        let dt: Vec<f64> = (0..t)
+            .map(|r| if r % 7 == 3 { 0.0 } else { 2.0 * rng.unit() })
+            .collect();
+        assert_eq!(
+            on_path(false, &bank, &dt, &h, &ok),
+            on_path(true, &bank, &dt, &h, &ok),
+            "case {case}"
+        );
+    }
+}

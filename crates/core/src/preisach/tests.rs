@@ -254,3 +254,126 @@ fn everett_terms_reject_nan_and_bad_ranges() {
     assert!(everett_terms(&[0.1, f64::NAN], 0.0, 1.0).is_err());
     assert!(everett_terms(&[0.1], 1.0, 1.0).is_err());
 }
+
+/// A small deterministic generator for the SIMD property tests (splitmix64).
+pub(crate) struct Rng(pub(crate) u64);
+
+impl Rng {
+    pub(crate) fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub(crate) fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// `t` frames of `n` elements over [lo, hi]: random walks, nested shrinking oscillations
+/// (deep stacks: forgetting and the heap), repeats, values out of the range and at its ends,
+/// -0.0, NaN, infinities and readings flagged invalid.
+pub(crate) fn hostile_history(
+    rng: &mut Rng,
+    t: usize,
+    n: usize,
+    lo: f64,
+    hi: f64,
+) -> (Vec<f64>, Vec<bool>) {
+    let span = hi - lo;
+    let mut x: Vec<f64> = (0..n).map(|_| lo + rng.unit() * span).collect();
+    let nested: Vec<bool> = (0..n).map(|_| rng.next().is_multiple_of(3)).collect();
+    let (mut u, mut ok) = (Vec::with_capacity(t * n), Vec::with_capacity(t * n));
+    for r in 0..t {
+        for i in 0..n {
+            let v = if nested[i] {
+                let k = (r / 2) as f64;
+                let amp = 0.5 * span * 0.93f64.powf(k);
+                lo + 0.5 * span + if r % 2 == 0 { amp } else { -amp }
+            } else {
+                match rng.next() % 40 {
+                    0 => f64::NAN,
+                    1 => f64::INFINITY,
+                    2 => f64::NEG_INFINITY,
+                    3 => lo - rng.unit() * span,
+                    4 => hi + rng.unit() * span,
+                    5 => lo,
+                    6 => hi,
+                    7 => -0.0,
+                    8..=11 => x[i], // the same input again
+                    _ => {
+                        x[i] = (x[i] + (rng.unit() - 0.5) * 0.3 * span).clamp(lo, hi);
+                        x[i]
+                    }
+                }
+            };
+            u.push(v);
+            ok.push(!rng.next().is_multiple_of(25));
+        }
+    }
+    (u, ok)
+}
+
+/// A random Everett table over [lo, hi] (non-negative, not symmetric in any way).
+fn random_everett(rng: &mut Rng, k: usize, lo: f64, hi: f64) -> Everett {
+    let t: Vec<f64> = (0..k * k).map(|_| rng.unit() * 3.0).collect();
+    Everett::new(k, lo, hi, t).unwrap()
+}
+
+/// Outputs, counters and the state's bytes of a bank after a batch (on the path asked).
+fn simd_run(
+    simd: bool,
+    bank: &PreisachBank,
+    u: &[f64],
+    ok: &[bool],
+    schedule: Schedule,
+) -> (Vec<u64>, Vec<u64>, Vec<u64>, Vec<u8>) {
+    crate::simd::set_enabled(simd);
+    let mut b = bank.clone();
+    let mut out = vec![0.0; u.len()];
+    b.run_scheduled(u, ok, &mut out, schedule).unwrap();
+    crate::simd::set_enabled(true);
+    let mut w = Writer::default();
+    b.save(&mut w);
+    let bits = out.iter().map(|v| v.to_bits()).collect();
+    (bits, b.clamped(), b.forgotten(), w.buf)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    #[test]
+    fn simd_path_equals_the_scalar_kernel_bit_for_bit(
+        seed in any::<u64>(),
+        n in 1usize..70,
+        t in 1usize..90,
+        k in 2usize..40,
+        capacity in prop::sample::select(vec![4usize, 5, 9, 13, 64]),
+        sign in prop::sample::select(vec![1.0f64, -1.0]),
+    ) {
+        let _guard = crate::simd::testing::lock();
+        let mut rng = Rng(seed);
+        let (lo, hi) = (-0.3 + rng.unit(), 1.0 + 2.0 * rng.unit());
+        let bank = PreisachBank::new(random_everett(&mut rng, k, lo, hi), n, capacity)
+            .and_then(|b| b.with_output(rng.unit() - 0.5, sign))
+            .unwrap();
+        let (u, ok) = hostile_history(&mut rng, t, n, lo, hi);
+        let scalar = simd_run(false, &bank, &u, &ok, Schedule::Blocks);
+        let simd = simd_run(true, &bank, &u, &ok, Schedule::Blocks);
+        prop_assert!(scalar == simd, "outputs, counters or states differ");
+        // and both are the frame-order kernel's
+        let frames = simd_run(false, &bank, &u, &ok, Schedule::FrameOrder);
+        prop_assert!(frames == simd);
+        prop_assert!(simd_run(true, &bank, &u, &ok, Schedule::FrameOrder) == simd);
+    }
+}
+
+#[test]
+fn this_machine_runs_the_avx2_path_when_it_has_avx2() {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        assert_eq!(crate::simd::detected(), crate::simd::Path::Avx2);
+    }
+}

@@ -32,6 +32,7 @@ from sklearn.base import BaseEstimator
 from texsense import __version__
 from texsense.apps.posture.evaluate import make_classifier, takes_groups
 from texsense.apps.posture.features import FeatureSet, mirror_samples
+from texsense.data.files import open_regular
 from texsense.data.layout import Layout
 from texsense.exceptions import FormatError, ParameterError
 
@@ -123,12 +124,15 @@ class PostureModel:
     ) -> tuple[np.ndarray, np.ndarray]:
         """The posture of every frame and the classifier's probability for it (NaN for a
         classifier without probabilities)."""
-        label = self.predict(frames, back)
+        if self.classes_ is None:
+            raise ParameterError("the posture model is not trained: call fit() first")
+        X = self.features_of(frames, back)  # once for both (a live bed frame: 25 ms each)
+        label = self.estimator.predict(X)
         proba = getattr(self.estimator, "predict_proba", None)
         if proba is None:
             return label, np.full(label.shape, np.nan)
         try:
-            p = proba(self.features_of(frames, back))
+            p = proba(X)
         except AttributeError:  # e.g. an SVC trained without probability=True
             return label, np.full(label.shape, np.nan)
         return label, p.max(axis=1)
@@ -161,10 +165,11 @@ class PostureModel:
         import joblib
 
         path = Path(path)
-        if not path.is_file():
-            raise FormatError(path, "no such file")
         try:
-            d = joblib.load(path)
+            with open_regular(path) as f:  # (a FIFO or a device is refused, never waited on)
+                d = joblib.load(f)
+        except FormatError:
+            raise
         except Exception as e:  # joblib raises many kinds for a file that is not its own
             raise FormatError(path, f"not a texsense posture model ({type(e).__name__})") from None
         if not isinstance(d, dict) or d.get("format") != FORMAT:

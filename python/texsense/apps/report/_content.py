@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from texsense import __version__
-from texsense.apps.bed import BANDS, find_regions
+from texsense.apps.bed import BANDS, find_regions, region_elements
 from texsense.apps.review import BLOCK, Review, side_labels
 from texsense.apps.roi import roi_elements
 from texsense.apps.views import format_clock, format_duration, place_names, seat_zones
@@ -73,13 +73,20 @@ def _frame_seconds(times: np.ndarray) -> np.ndarray:
 def _identity(review: Review) -> Table:
     rec, meta = review.rec, review.rec.meta
     o = review.orientation
-    start = review.started
     span = f"{format_duration(rec.duration_s)} ({rec.n_frames} frames"
     period = rec.frame_period_s
     span += f", one every {period:.3g} s)" if np.isfinite(period) else ")"
-    if start is not None:
-        end = _dt.datetime.fromtimestamp(start + float(rec.times[-1] - rec.times[0]))
-        span = f"{_dt.datetime.fromtimestamp(start):%Y-%m-%d %H:%M:%S} to {end:%H:%M:%S}, " + span
+    first, last = review.wall_at(0), review.wall_at(rec.n_frames - 1)
+    if first is not None and last is not None:
+        a, b = _dt.datetime.fromtimestamp(first), _dt.datetime.fromtimestamp(last)
+        to = f"{b:%H:%M:%S}" if a.date() == b.date() else f"{b:%Y-%m-%d %H:%M:%S}"
+        span = f"{a:%Y-%m-%d %H:%M:%S} to {to}, " + span
+    rate = review.clock_rate
+    if abs(rate - 1.0) > 0.05:
+        span += (
+            f"; the device's clock ran {rate:.3g} x the wall clock (simulated or replayed): "
+            "the clock times are the wall clock's, durations the device's"
+        )
     cal = meta.get("calibration_id") or meta.get("calibration", {}) or "none declared"
     if isinstance(cal, dict):
         cal = cal.get("id", "none declared")
@@ -97,17 +104,8 @@ def _identity(review: Review) -> Table:
             + (f", {rec.layout.shape[0]} x {rec.layout.shape[1]} grid" if rec.layout.shape else ""),
         ],
         ["mode", review.mode.name],
-        [
-            "orientation",
-            ", ".join(f"{k}: {v}" for k, v in o.items() if k != "assumed")
-            + (" (assumed)" if o.get("assumed") else "")
-            if o
-            else "not declared",
-        ],
-        [
-            "colour scale",
-            f"{_fmt(review.scale[0], '', 0)}-{_fmt(review.scale[1], review.unit, 0)} (fixed)",
-        ],
+        ["orientation", _orientation_text(o)],
+        ["colour scale", _scale_text(review)],
     ]
     if review.threshold is not None:
         s = review.settings
@@ -128,8 +126,81 @@ def _identity(review: Review) -> Table:
                 "unreliable (not in the maps and statistics)",
             ]
         )
+    rows += _certainty_rows(review)
+    rows.append(["events", _events_origin(review)])
+    rows += [["note", n] for n in review.notes]
     rows.append(["made by", f"texsense {__version__}, {_dt.datetime.now():%Y-%m-%d %H:%M}"])
     return Table("Recording", ["", ""], rows, align="ll")
+
+
+def _certainty_rows(review: Review) -> list[list[str]]:
+    """How far the numbers can be trusted (issue 37): the bounds and the in-use drift
+    correction the recording declares."""
+    meta, rows = review.rec.meta, []
+    level = (meta.get("interval") or {}).get("level")
+    if review.bounds is not None and level:
+        rows.append(["bounds", f"{100 * level:g} % (split conformal; every value ± its bound)"])
+    iu = meta.get("in_use_drift")
+    if isinstance(iu, dict):
+        if iu.get("state") == "correcting":
+            text = (
+                f"load {100 * iu.get('load_correction', 0):+.1f} % at the end, from "
+                f"{format_duration(iu.get('still_s', 0))} still since "
+                f"{format_duration(iu.get('since_t') or 0)} into the data; zero taken "
+                f"{iu.get('zeroed', 0)} times"
+            )
+        elif iu.get("state") == "off":
+            text = f"off: {iu.get('why', '')}"
+        else:
+            text = "no still period: nothing corrected"
+        rows.append(["drift corrected in use", text])
+    return rows
+
+
+def _peak_with_bound(review: Review) -> str:
+    """The highest peak, ± its bound where the recording has bounds."""
+    s, nd, u = review.series, _digits(review), review.unit
+    peak = float(np.nanmax(s["peak"], initial=np.nan))
+    if review.bounds is None or not np.isfinite(peak):
+        return _fmt(peak, u, nd)
+    k = int(np.nanargmax(s["peak"]))
+    i = int(np.nanargmax(np.nan_to_num(review.frame(k), nan=-np.inf)))
+    lo, hi = (float(b[k, i]) * review.factor for b in review.bounds)
+    level = (review.rec.meta.get("interval") or {}).get("level")
+    pct = f" ({100 * level:g} %)" if level else ""
+    return f"{peak:.{nd}f} ± {0.5 * (hi - lo):.{nd}f} {u}{pct}"
+
+
+def _scale_text(review: Review) -> str:
+    """The maps' colour scale: the mode's fixed one for pressure, the data's otherwise."""
+    if review.pressure:
+        return f"{_fmt(review.scale[0], '', 0)}-{_fmt(review.scale[1], review.unit, 0)} (fixed)"
+    return (
+        f"from the data ({review.rec.quantity}, not pressure): each map from 0 to its highest "
+        "value, rounded up"
+    )
+
+
+def _orientation_text(o: dict[str, Any]) -> str:
+    """The orientation row: the edges, and whether left and right are known."""
+    if not o:
+        return "unknown (not declared): no left or right is named"
+    edges = ", ".join(f"{k}: {v}" for k, v in o.items() if k in ("top", "bottom", "left", "right"))
+    text = edges + (" (assumed)" if o.get("assumed") else "")
+    if "left" not in o and "right" not in o:
+        text += "; left and right not declared: no side is named"
+    return text
+
+
+def _events_origin(review: Review) -> str:
+    """Where the events come from, in words."""
+    if not review.live:
+        return "recomputed from the frames with the monitor's rules (the file holds none)"
+    state = "the state when the recording started" if review.start else "the first frame"
+    return (
+        "as the monitor raised them while it recorded (live); events it did not raise are "
+        f"recomputed from the frames with its rules, from {state}"
+    )
 
 
 def _summary(review: Review) -> Table:
@@ -137,7 +208,7 @@ def _summary(review: Review) -> Table:
     dt = _frame_seconds(review.rec.times)
     loaded = (s["area_cm2"] > 0) & review.use
     rows = [
-        ["highest peak", _fmt(float(np.nanmax(s["peak"], initial=np.nan)), u, nd)],
+        ["highest peak", _peak_with_bound(review)],
         [
             "median peak while loaded",
             _fmt(float(np.nanmedian(s["peak"][loaded])) if loaded.any() else None, u, nd),
@@ -154,13 +225,23 @@ def _summary(review: Review) -> Table:
                 format_duration(float(dt[above].sum())),
             ]
         )
-    kinds = [e["kind"] for e in review.events]
-    rows.append(
-        ["alerts", f"{kinds.count('reposition')} reposition, {kinds.count('turn-due')} turn due"]
-    )
+    rows.append(["alerts", _alert_count(review)])
     if review.sides is not None:
         rows.append(["turns", str(review.sides["turns"])])
     return Table("Summary", ["", ""], rows, align="ll")
+
+
+def _alert_count(review: Review) -> str:
+    """``1 reposition (open when the recording started), 0 turn due``."""
+    parts = []
+    for kind, word in (("reposition", "reposition"), ("turn-due", "turn due")):
+        found = [e for e in review.events if e["kind"] == kind]
+        before = sum(e["source"] == "before" for e in found)
+        text = f"{len(found)} {word}"
+        if before:
+            text += f" ({before} open when the recording started)"
+        parts.append(text)
+    return ", ".join(parts)
 
 
 def _regions(review: Review, rois: list[dict[str, Any]]) -> tuple[dict[str, Any], str]:
@@ -173,10 +254,13 @@ def _regions(review: Review, rois: list[dict[str, Any]]) -> tuple[dict[str, Any]
         notes.append(f"{len(rois)} region(s) of interest drawn by the user")
     for k, v in lay.regions.items():
         out.setdefault(k, (np.asarray(v), None))
-    if review.mode.name == "seat" and lay.shape is not None:
-        for k, v in seat_zones(lay).items():
-            out.setdefault(f"{k} (zone)", (v, None))
+    zones = seat_zones(lay) if review.mode.name == "seat" and lay.shape is not None else {}
+    for k, v in zones.items():
+        out.setdefault(f"{k} (zone)", (v, None))
+    if zones:
         notes.append("seat zones by position on the seat, not found anatomy")
+    elif review.mode.name == "seat":
+        notes.append("no seat zones: the seat's orientation is not declared")
     if review.sides is not None and lay.shape is not None:
         out.update(_bed_regions(review))
         notes.append("bed regions: found on the mean map of each side's frames")
@@ -196,8 +280,9 @@ def _bed_regions(review: Review) -> dict[str, Any]:
         frames = rec.frames[mask].astype(np.float64) * review.factor * to_ncm2
         mean = np.nanmean(np.where(rec.valid[mask], frames, np.nan), axis=0)
         thr = review.settings["threshold_mmhg"] if review.pressure else 1e9
-        for r in find_regions(np.nan_to_num(mean), rec.layout, side, threshold=thr).values():
-            out[f"{r.name} ({side})"] = (np.asarray(r.elements), mask)
+        found = find_regions(np.nan_to_num(mean), rec.layout, side, threshold=thr)
+        for name, elements in region_elements(found).items():
+            out[f"{name} ({side})"] = (np.asarray(elements), mask)
     return out
 
 
@@ -237,13 +322,30 @@ def _region_table(review: Review, rois: list[dict[str, Any]]) -> Table:
     return Table("Regions", cols, rows, note=note)
 
 
+#: How an event came about, in the report's words.
+_ORIGIN = {"live": "live", "recomputed": "recomputed", "before": "open at start"}
+
+
 def _event_table(review: Review, limit: int = 300) -> Table:
-    start = review.started
     rows = []
     for e in review.events[:limit]:
-        when = format_clock(start, e["t"])
-        rows.append([when, format_duration(e["t"]), e["text"]])
-    note = "clock time (start of the recording + time)" if start else "time since the start"
+        wall = e.get("wall")
+        if wall is None and e["source"] != "before":
+            wall = review.wall_at(e["i"])
+        when = format_clock(None, e["t"]) if wall is None else format_clock(wall, 0.0)
+        into = format_duration(e["t"]) if e["t"] >= 0 else f"{format_duration(-e['t'])} before"
+        rows.append([when, into, _ORIGIN.get(e["source"], e["source"]), e["text"]])
+        if e.get("places"):  # the grid positions on a line of their own, under the regions
+            rows.append(["", "", "", f"  {e['places']}"])
+    note = "clock time: the wall clock" if review.wall_at(0) else "time since the start"
+    if review.live:
+        note += (
+            "; live: raised by the monitor while it recorded; recomputed: found from the frames "
+            "with the monitor's rules, not raised live; open at start: open when the recording "
+            "started (from its clinical state)"
+        )
+    else:
+        note += "; recomputed from the frames with the monitor's rules"
     if len(review.events) > limit:
         note += f"; the first {limit} of {len(review.events)} events"
     if not rows:
@@ -252,8 +354,9 @@ def _event_table(review: Review, limit: int = 300) -> Table:
             if review.pressure or review.sides
             else "the recording holds no pressure (no exposure alerts) and no sides"
         )
-    title = "Events and alerts (recomputed from the frames with the monitor's rules)"
-    return Table(title, ["at", "into the recording", "what"], rows, note=note, align="rrl")
+    title = "Events and alerts"
+    cols = ["at", "into the recording", "how", "what"]
+    return Table(title, cols, rows, note=note, align="rrll")
 
 
 def _health_table(review: Review) -> Table:

@@ -23,6 +23,30 @@ CMAP = "viridis"
 SMALL, NORMAL = 7.5, 9
 
 
+def nice_top(values: np.ndarray) -> float:
+    """The top of a colour scale from the data: the largest finite value rounded up to 1, 2,
+    2.5 or 5 times a power of ten (1 when there is nothing above 0)."""
+    v = np.asarray(values, dtype=np.float64)
+    top = float(np.nanmax(np.where(np.isfinite(v), v, np.nan), initial=0.0)) if v.size else 0.0
+    if not top > 0:
+        return 1.0
+    step = 10 ** np.floor(np.log10(top))
+    return float(next(k * step for k in (1, 2, 2.5, 5, 10) if k * step >= top))
+
+
+def grid_extent(layout: Layout) -> tuple[float, float, float, float]:
+    """The extent (x0, x1, y0, y1, cm) of a grid layout's whole grid, empty rows and columns
+    included (the seat's first three rows hold no element: its elements' extent would
+    stretch the map over them)."""
+    assert layout.shape is not None and layout.cells is not None
+    rows, cols = layout.shape
+    py, px = layout.pitch_cm or (1.0, 1.0)
+    r, c = divmod(int(layout.cells[0]), cols)
+    x0 = float(layout.xy_cm[0, 0]) - (c + 0.5) * px
+    y0 = float(layout.xy_cm[0, 1]) - (r + 0.5) * py
+    return x0, x0 + cols * px, y0, y0 + rows * py
+
+
 def draw_values(
     ax: Axes,
     layout: Layout,
@@ -34,11 +58,14 @@ def draw_values(
     orientation: dict[str, Any] | None = None,
 ) -> Any:
     """Per-element ``values`` on ``ax`` on the fixed ``scale`` (cells of a grid, squares of a
-    points layout; NaN blank), the ``threshold`` as a white contour, the orientation's labels
-    outside the edges. Returns the mappable for a colour bar."""
+    points layout; NaN blank), the region above ``threshold`` outlined (white over black, the
+    page's rule: :func:`texsense.apps.views.threshold_mask`), the axes in cm and the
+    orientation's labels outside the edges ("orientation unknown" when none is declared).
+    Returns the mappable for a colour bar."""
     x0, x1, y0, y1 = layout.extent_cm
     img: Any
     if layout.shape is not None:
+        x0, x1, y0, y1 = grid_extent(layout)
         grid = layout.to_grid(values)
         img = ax.imshow(
             np.ma.masked_invalid(grid),
@@ -49,12 +76,7 @@ def draw_values(
             interpolation="nearest",
         )
         if threshold is not None and np.nanmax(grid, initial=-np.inf) > threshold:
-            py, px = layout.pitch_cm or (1.0, 1.0)
-            xs = x0 + (np.arange(grid.shape[1]) + 0.5) * px
-            ys = y0 + (np.arange(grid.shape[0]) + 0.5) * py
-            ax.contour(
-                xs, ys, np.nan_to_num(grid), levels=[threshold], colors="white", linewidths=0.9
-            )
+            _outline(ax, layout, grid, threshold)
     else:
         from matplotlib.collections import PatchCollection
         from matplotlib.patches import Rectangle
@@ -72,57 +94,120 @@ def draw_values(
         ax.set_ylim(y1, y0)
     ax.set_aspect("equal")
     ax.tick_params(labelsize=SMALL)
+    ax.set_xlabel("x [cm]", fontsize=SMALL, labelpad=1)
+    ax.set_ylabel("y [cm]", fontsize=SMALL, labelpad=1)
     _orientation(ax, orientation or {})
     return img
 
 
+def _outline(ax: Axes, layout: Layout, grid: np.ndarray, threshold: float) -> None:
+    """The outline of the region above ``threshold`` along the cells' edges."""
+    from matplotlib.collections import LineCollection
+
+    from texsense.apps.views import outline_segments, threshold_mask
+
+    active = np.zeros(grid.shape, bool)
+    assert layout.cells is not None
+    active.ravel()[layout.cells] = True
+    segs = outline_segments(threshold_mask(grid, active, threshold))
+    x0, x1, y0, y1 = grid_extent(layout)  # the image's extent: grid.shape cells across it
+    cell = np.array([(x1 - x0) / grid.shape[1], (y1 - y0) / grid.shape[0]])
+    xy = segs * cell + np.array([x0, y0])
+    for colour, width in (("black", 2.2), ("white", 1.0)):
+        ax.add_collection(LineCollection(list(xy), colors=colour, linewidths=width))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y1, y0)
+
+
+#: Where each edge's label goes: (x, y) in axes fraction, offset in points past the tick
+#: labels and axis labels, alignment and rotation.
+_EDGE_PLACES = {
+    "top": ((0.5, 1.0), (0, 2), "center", "bottom", 0),
+    "bottom": ((0.5, 0.0), (0, -27), "center", "top", 0),
+    "left": ((0.0, 0.5), (-33, 0), "right", "center", 90),
+    "right": ((1.0, 0.5), (3, 0), "left", "center", 90),
+}
+
+
 def _orientation(ax: Axes, o: dict[str, Any]) -> None:
-    style: dict[str, Any] = {"fontsize": SMALL, "color": "#444", "transform": ax.transAxes}
-    mark = " (assumed)" if o.get("assumed") else ""
-    if "top" in o:
-        ax.text(0.5, 1.01, o["top"] + mark, ha="center", va="bottom", **style)
-    if "bottom" in o:
-        ax.text(0.5, -0.07, o["bottom"], ha="center", va="top", **style)
-    if "left" in o:
-        ax.text(-0.13, 0.5, o["left"], ha="right", va="center", rotation=90, **style)
-    if "right" in o:
-        ax.text(1.02, 0.5, o["right"], ha="left", va="center", rotation=90, **style)
+    """What lies beyond each edge, outside the ticks and axis labels."""
+    style: dict[str, Any] = {"fontsize": SMALL, "color": "#444", "xycoords": "axes fraction",
+                             "textcoords": "offset points", "annotation_clip": False}  # fmt: skip
+    labels = {k: str(o[k]) for k in _EDGE_PLACES if o.get(k)}
+    if not labels:
+        labels, style["style"] = {"top": "orientation unknown"}, "italic"
+    elif o.get("assumed") and "top" in labels:
+        labels["top"] += " (assumed)"
+    for edge, text in labels.items():
+        xy, offset, ha, va, rotation = _EDGE_PLACES[edge]
+        ax.annotate(text, xy, xytext=offset, ha=ha, va=va, rotation=rotation, **style)
 
 
-def colour_bar(fig: Figure, img: Any, ax: Axes, label: str, threshold: float | None) -> None:
-    """A colour bar with the threshold marked."""
-    bar = fig.colorbar(img, ax=ax, shrink=0.8, pad=0.08)
+def colour_bar(fig: Figure, img: Any, cax: Axes, label: str, threshold: float | None) -> None:
+    """A colour bar in ``cax`` (as tall as its map) with the threshold marked."""
+    bar = fig.colorbar(img, cax=cax)
     bar.set_label(label, fontsize=SMALL)
     bar.ax.tick_params(labelsize=SMALL)
     if threshold is not None:
         bar.ax.axhline(threshold, color="white", lw=2)
         bar.ax.axhline(threshold, color="black", lw=0.8, ls="--")
-        bar.ax.text(
-            1.6,
-            threshold,
-            f" {threshold:g}",
-            transform=bar.ax.get_yaxis_transform(),
-            va="center",
-            fontsize=SMALL,
-        )
+
+
+Box = tuple[float, float, float, float]
+
+
+def map_boxes(
+    fig: Figure, rect: tuple[float, float, float, float], aspect: float, n: int = 2
+) -> list[tuple[Box, Box]]:
+    """Where ``n`` maps of height/width ``aspect`` go inside ``rect`` (figure fraction), each
+    with its colour bar beside it, as large as they fit: side by side or one above the other,
+    whichever gives the larger maps, at the top of ``rect``. Returns (map box,
+    colour bar box) per map. Each map leaves room for its axis labels and edge labels."""
+    fw, fh = fig.get_size_inches()
+    left, bottom, width, height = rect
+    W, H = width * fw, height * fh  # inches
+    # inches: tick labels, axis label and edge label on the left; edge label, colour bar
+    # with its ticks and label on the right; title and edge labels above and below
+    pad_l, pad_r, pad_v, bar, gap = 0.62, 0.78, 0.48, 0.14, 0.2
+
+    def size(cols: int, rows: int) -> float:  # the map's width in inches
+        cell_w, cell_h = W / cols - pad_l - pad_r, H / rows - 2 * pad_v
+        return max(0.0, min(cell_w, cell_h / aspect))
+
+    cols, rows = max(((n, 1), (1, n)), key=lambda cr: size(*cr))
+    w = size(cols, rows)
+    h = w * aspect
+    cell_w = W / cols
+    y_top = H  # at the top of the space: whatever is left over is below them
+    boxes: list[tuple[Box, Box]] = []
+    for k in range(n):
+        c, r = (k, 0) if cols == n else (0, k)
+        x = c * cell_w + (cell_w - (pad_l + w + pad_r)) / 2 + pad_l
+        y = y_top - r * (h + 2 * pad_v) - pad_v - h
+        box = (float(left + x / fw), float(bottom + y / fh), float(w / fw), float(h / fh))
+        cbar = (float(left + (x + w + gap) / fw), box[1], float(bar / fw), box[3])
+        boxes.append((box, cbar))
+    return boxes
 
 
 def maps_figure(fig: Figure, rect: tuple[float, float, float, float], c: ReportContent) -> None:
-    """The peak and mean maps side by side inside ``rect`` (figure fraction)."""
+    """The peak and mean maps inside ``rect`` (figure fraction), as large as they fit, each
+    with a colour bar as tall as the map: pressure on the mode's fixed scale with the
+    threshold; other quantities (raw counts) each on a scale from its own data (a peak map on
+    the scale of the typical frame would saturate)."""
     r = c.review
     lay = r.rec.layout
-    left, bottom, width, height = rect
+    x0, x1, y0, y1 = grid_extent(lay) if lay.shape is not None else lay.extent_cm
     label = f"{r.rec.quantity} [{r.unit}]"
-    for k, (title, values) in enumerate(
-        (("peak over the recording", c.peak_map), ("mean while loaded", c.mean_map))
+    maps = (("peak over the recording", c.peak_map), ("mean while loaded", c.mean_map))
+    for (title, values), (box, cbox) in zip(
+        maps, map_boxes(fig, rect, (y1 - y0) / max(x1 - x0, 1e-9)), strict=True
     ):
-        ax = fig.add_axes((left + k * width / 2 + 0.05, bottom, width / 2 - 0.08, height))
-        img = draw_values(
-            ax, lay, values, r.scale, threshold=r.threshold, orientation=r.orientation
-        )
-        ax.set_title(title, fontsize=NORMAL, pad=14)
-        ax.set_xlabel("x [cm]", fontsize=SMALL)
-        colour_bar(fig, img, ax, label, r.threshold)
+        scale = r.scale if r.pressure else (0.0, nice_top(values))
+        ax = fig.add_axes(box)
+        img = draw_values(ax, lay, values, scale, threshold=r.threshold, orientation=r.orientation)
+        ax.set_title(title, fontsize=NORMAL, pad=12)
+        colour_bar(fig, img, fig.add_axes(cbox), label, r.threshold)
 
 
 def series_figure(fig: Figure, c: ReportContent) -> None:
@@ -170,18 +255,21 @@ def series_figure(fig: Figure, c: ReportContent) -> None:
     axes[0].set_title("Over time (red lines: alerts; dotted: turns)", fontsize=NORMAL)
 
 
-def health_figure(ax: Axes, c: ReportContent) -> None:
-    """Share of frames each element was invalid; silent elements crossed."""
+def health_figure(fig: Figure, rect: tuple[float, float, float, float], c: ReportContent) -> None:
+    """Share of frames each element was invalid; silent elements crossed; inside ``rect``."""
     r = c.review
     lay = r.rec.layout
+    x0, x1, y0, y1 = grid_extent(lay) if lay.shape is not None else lay.extent_cm
+    ((box, cbox),) = map_boxes(fig, rect, (y1 - y0) / max(x1 - x0, 1e-9), n=1)
+    ax = fig.add_axes(box)
     share = 100 * c.review.health["invalid_share"]
     img = draw_values(ax, lay, share, (0.0, 100.0), cmap="magma_r", orientation=r.orientation)
     silent = np.flatnonzero(c.review.health["silent"])
     if silent.size:
         ax.plot(*lay.xy_cm[silent].T, "x", color="#0ea5e9", ms=5, mew=1.2, label="silent")
         ax.legend(fontsize=SMALL, loc="lower right")
-    ax.set_title("failed elements: % of frames invalid", fontsize=NORMAL, pad=14)
-    bar = ax.figure.colorbar(img, ax=ax, shrink=0.8, pad=0.08)
+    ax.set_title("failed elements: % of frames invalid", fontsize=NORMAL, pad=12)
+    bar = fig.colorbar(img, cax=fig.add_axes(cbox))
     bar.ax.tick_params(labelsize=SMALL)
 
 

@@ -76,7 +76,7 @@ def write_html(c: ReportContent, out: Path) -> Path:
     series = plt.figure(figsize=(9.5, 8), layout="constrained")
     series_figure(series, c)
     health = plt.figure(figsize=(9.5, 5.5))
-    health_figure(health.add_axes((0.05, 0.08, 0.5, 0.82)), c)
+    health_figure(health, (0.0, 0.02, 0.62, 0.93), c)
     if c.sides is not None:
         sides_figure(health.add_axes((0.68, 0.25, 0.28, 0.5)), c)
     parts = [

@@ -26,6 +26,7 @@ from texsense.compensation.hysteresis._identify import (
 from texsense.compensation.hysteresis._lsq import branch_folds
 from texsense.compensation.hysteresis._relay import loop_orientation
 from texsense.compensation.hysteresis._segments import split_branches
+from texsense.compensation.intervals import HeldOut
 from texsense.data import modelfile, units
 from texsense.data.modelfile import Fields
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
@@ -251,6 +252,7 @@ class HysteresisModel:
         self.sign_ = sign
         self.method_ = ident.method
         self.details_ = ident.details
+        self.held_out_: HeldOut | None = None  # residuals on a record not fitted on (bounds)
         self.provenance_ = dict(provenance or {})
         return self
 
@@ -456,10 +458,18 @@ class HysteresisModel:
         b = np.ascontiguousarray(np.broadcast_to(np.asarray(beta, np.float64), a.shape).ravel())
         return st._bank.everett(a, b)
 
+    def hold_out(self, inputs: npt.ArrayLike, outputs: npt.ArrayLike, source: str = "") -> HeldOut:
+        """Keep the residuals of a record the model was not fitted on (by band of the
+        predicted output), the scale of its bounds (:mod:`texsense.compensation.intervals`)."""
+        self._check_fitted()
+        self.held_out_ = HeldOut.from_residuals(self.predict(inputs), outputs, source=source)
+        return self.held_out_
+
     # ------------------------------------------------------------------ files
     def to_content(self) -> dict[str, Any]:
         """The content of the model file (JSON-able)."""
         self._check_fitted()
+        held: HeldOut | None = getattr(self, "held_out_", None)
         return {
             "method": self.method_,
             "params": {
@@ -485,6 +495,7 @@ class HysteresisModel:
             "everett": self.everett_.tolist(),
             "details": self.details_,
             "provenance": dict(self.provenance_),
+            **({} if held is None else {"held_out": held.to_dict()}),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -528,6 +539,12 @@ class HysteresisModel:
         if not isinstance(details, dict) or not isinstance(provenance, dict):
             raise FormatError(f.source, "fields 'details' and 'provenance' must be objects")
         model.details_, model.provenance_ = dict(details), dict(provenance)
+        model.held_out_ = None  # files before issue 37: no held-out residuals, no bounds
+        if f.get("held_out", None) is not None:
+            try:
+                model.held_out_ = HeldOut.from_dict(f.get("held_out"))
+            except ParameterError as e:
+                raise f.error("held_out", str(e)) from None
         return model
 
     @classmethod

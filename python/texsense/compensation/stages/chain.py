@@ -15,7 +15,7 @@ from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.stage import STAGES, Stage, Stream, time_steps
 from texsense.compensation.stages.convert import Convert, Linear
 from texsense.compensation.stages.spacer import Drift, Hysteresis
-from texsense.data.layout import Layout
+from texsense.data.layout import Layout, parse_orientation
 from texsense.data.modelfile import Fields, content_hash, load, unpack, write
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, NotFittedError, ParameterError
@@ -49,7 +49,9 @@ class StageChain(Stream):
     one compiled pass and gives the same numbers.
     """
 
-    def __init__(self, stages: Sequence[Stage]) -> None:
+    def __init__(
+        self, stages: Sequence[Stage], orientation: Mapping[str, str] | str | None = None
+    ) -> None:
         stages = list(stages)
         if not stages:
             raise ParameterError("a chain needs at least one stage")
@@ -72,6 +74,10 @@ class StageChain(Stream):
                     f"hysteresis stage directly (chain {[x.name for x in stages]})"
                 )
         self.stages = stages
+        #: how the mat lies (what lies beyond each edge of its map), declared when it was
+        #: calibrated (``texsense calibrate wizard``, the monitor's calibration panel); {}
+        #: when not declared. Not part of :attr:`id`: it describes the mat, not the fit.
+        self.orientation = parse_orientation(orientation)
         self._last_t: float | None = None
 
     def __getitem__(self, name: str) -> Stage:
@@ -135,11 +141,11 @@ class StageChain(Stream):
     def id(self) -> str:
         """Content hash of every stage's parameters and learned state (the first 16 hex
         digits of the file's sha256), written into the provenance of every output."""
-        return content_hash(self.to_dict())[:16]
+        return content_hash({"stages": self.to_dict()["stages"]})[:16]
 
     def without(self, *names: str) -> StageChain:
         """The chain without the stages named (e.g. ``"drift"``)."""
-        return StageChain([s for s in self.stages if s.name not in names])
+        return StageChain([s for s in self.stages if s.name not in names], self.orientation)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -157,9 +163,18 @@ class StageChain(Stream):
         """The calibration of a mat: convert (zeroing, equilibration, eq. 2.1), hysteresis
         from the material record (eq. 4.15-4.22), drift from held steps (eq. 5.8) if given
         (or a fitted ``drift`` stage), and detection with the expected range of every
-        element."""
+        element. A material record with ``held_out_compression_mm`` and
+        ``held_out_pressure_ncm2`` (a record the hysteresis is not fitted on) gives the
+        hysteresis model its held-out residuals, the scale of the bounds
+        (:mod:`texsense.compensation.intervals`)."""
         convert = Convert(thickness_mm, uniform_pressure_ncm2).fit(material, baseline, uniform)
         hyst = Hysteresis().fit(material["compression_mm"], material["pressure_ncm2"])
+        if "held_out_compression_mm" in material:  # a record not fitted on: the bounds' scale
+            hyst.model_.hold_out(
+                material["held_out_compression_mm"],
+                material["held_out_pressure_ncm2"],
+                "held-out record of the material",
+            )
         lo, hi = convert.expected_range_pF()
         stages: list[Stage] = [FailureDetector(baseline.layout).fit(lo, hi), convert, hyst]
         if steps is not None and drift is not None:
@@ -210,8 +225,12 @@ class StageChain(Stream):
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict[str, Any]:
-        """The content of the chain file: the stages in order."""
-        return {"stages": [s.to_dict() for s in self.stages]}
+        """The content of the chain file: the stages in order (and the mat's orientation
+        when declared)."""
+        out: dict[str, Any] = {"stages": [s.to_dict() for s in self.stages]}
+        if self.orientation:
+            out["orientation"] = dict(self.orientation)
+        return out
 
     def save(self, path: str | Path) -> Path:
         """Write the chain file (``texsense.chain``), atomically."""
@@ -225,7 +244,7 @@ class StageChain(Stream):
             raise FormatError(source, "field 'stages': expected a list")
         built = [stage_from_dict(s, source) for s in stages]
         try:
-            return cls(built)
+            return cls(built, Fields(content, source).get("orientation", None))
         except (ParameterError, NotFittedError) as e:
             raise FormatError(source, str(e)) from None
 

@@ -79,13 +79,18 @@ class Hysteresis(Stage):
         self._check_fitted()
         return self.model_.bank(n_elements, capacity)
 
+    def loading_points(self, points: int = 400) -> tuple[np.ndarray, np.ndarray]:
+        """The first-loading curve as arrays (compression, pressure): the model's output on a
+        rise from lower saturation, made non-decreasing."""
+        m = self.model_
+        e = np.linspace(m.u_min_, m.u_max_, points)
+        p = np.maximum.accumulate(m.predict(e))
+        return np.ascontiguousarray(e), np.ascontiguousarray(p, dtype=np.float64)
+
     def loading_curve(self) -> Curve:
         """The first-loading curve compression -> pressure (what an uncompensated system
-        does): the model's output on a rise from lower saturation, made non-decreasing."""
-        m = self.model_
-        e = np.linspace(m.u_min_, m.u_max_, 400)
-        p = np.maximum.accumulate(m.predict(e))
-        return Curve(np.ascontiguousarray(e), np.ascontiguousarray(p, dtype=np.float64))
+        does), :meth:`loading_points` as the core's curve."""
+        return Curve(*self.loading_points())
 
     @property
     def clamped(self) -> np.ndarray:

@@ -2,7 +2,8 @@
 ``GET /api/calibration`` (the steps' state), ``POST /api/calibration/record/{step}`` (``zero``,
 ``uniform``, ``check``: keep the next frames; ``?wait=true``: answer when they are kept),
 ``POST /api/calibration/fit`` (the material), ``POST /api/calibration/save`` (write and use),
-``POST /api/calibration/cancel`` and ``POST /api/calibration/reset``.
+``POST /api/calibration/orientation`` (how the mat lies), ``POST /api/calibration/cancel`` and
+``POST /api/calibration/reset``.
 
 Like every state-changing route they pass :class:`texsense.monitor.web.Guard` first: a page of
 another origin or site cannot run them. Errors: 409 for a step out of order or while another
@@ -40,6 +41,14 @@ class FitBody(BaseModel):
     """The material step: a spacer preset (default: the one the device announced)."""
 
     material: str | None = None
+
+
+class OrientationBody(BaseModel):
+    """How the mat lies: ``bed``, ``seat``, ``foot`` or ``none``, and the edge of its head,
+    front or toes (``top``, ``bottom``, ``left``, ``right``, or ``press``)."""
+
+    kind: str
+    edge: str = "top"
 
 
 def _http(e: ParameterError) -> HTTPException:
@@ -82,6 +91,15 @@ def router(monitor: Monitor) -> APIRouter:
             raise HTTPException(422, "choose the spacer's material (the device announced none)")
         try:
             await cal.fit(material)
+        except ParameterError as e:
+            raise _http(e) from None
+        return cal.state()
+
+    @r.post("/api/calibration/orientation")
+    async def orientation(body: OrientationBody) -> dict[str, Any]:
+        """Set how the mat lies (the live map at once, the calibration when saved)."""
+        try:
+            cal.set_orientation(body.kind, body.edge)
         except ParameterError as e:
             raise _http(e) from None
         return cal.state()

@@ -1,4 +1,5 @@
-"""Frames and status: ``GET /api/status``, ``GET /api/frame/latest``, ``WS /ws``."""
+"""Frames and status: ``GET /api/status``, ``GET /api/frame/latest``, ``GET /api/history``,
+``WS /ws``."""
 
 from __future__ import annotations
 
@@ -57,6 +58,17 @@ def router(monitor: Monitor) -> APIRouter:
         if monitor.latest is None:
             raise HTTPException(503, "no frame yet")
         return Response(monitor.latest_text, media_type="application/json")
+
+    @r.get("/api/history")
+    async def history() -> dict[str, Any]:
+        """The statistics of the last frames the monitor holds (at most
+        :data:`texsense.monitor.live.HISTORY`), oldest first, for the page's charts: a page
+        opened late draws what came before it."""
+        return {
+            "columns": ["t", "load_N", "peak_ncm2", "contact_area_cm2", "cof_x_cm", "cof_y_cm",
+                        "peak_rise", "responding"],
+            "rows": list(monitor.history),
+        }  # fmt: skip
 
     @r.websocket("/ws")
     async def ws(websocket: WebSocket) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, HTTPException
-from fastapi.responses import FileResponse
+from fastapi.responses import Response
 
 from texsense.monitor.live import Monitor
 from texsense.monitor.web import safe_file
@@ -24,13 +24,16 @@ TYPES = {
 }
 
 
-def file_response(name: str, *folders: Path) -> FileResponse:
+def file_response(name: str, *folders: Path) -> Response:
     """The file ``name`` of the first of ``folders`` that has it (by name only, of a served
-    type), else 404."""
+    type), else 404. The page's files are small (tens of kB): read at once in the event
+    loop, not through a worker thread, which on a busy station (every core taken by frames)
+    waited seconds for its turn at each step (issue 33: the ward page's files took 4-6 s each
+    under 20 virtual mats, a JSON route 1 s)."""
     for folder in folders:
         path = safe_file(folder, name)
         if path is not None and path.suffix in TYPES:
-            return FileResponse(path, media_type=TYPES[path.suffix])
+            return Response(path.read_bytes(), media_type=TYPES[path.suffix])
     raise HTTPException(404, "no such file")
 
 
@@ -40,7 +43,7 @@ def pages(index: Path, *folders: Path) -> APIRouter:
 
     @r.get("/")
     async def page() -> Any:
-        return FileResponse(index, media_type="text/html")
+        return Response(index.read_bytes(), media_type="text/html")
 
     @r.get("/static/{name}")
     async def static(name: str) -> Any:

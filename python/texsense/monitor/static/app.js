@@ -32,6 +32,8 @@ const digits = () => (unit === "mmHg" || unit === "kPa" ? 0 : 2);
 const rawOnly = () => !PB.active && (last ? last.calibrated === false : !!status && status.calibrated === false);
 // what the page shows carries no pressure at all: no unit choice, no threshold, no load
 const noPressure = () => (PB.active ? PB.info.quantity !== "pressure" : rawOnly());
+// live pressure that a calibration computes from capacitance (what the raw toggle contrasts)
+const compensates = () => !!status && status.source.quantity === "capacitance" && !rawOnly();
 const rawDigits = (v) => { const a = Math.abs(v); return a >= 100 ? 0 : a >= 10 ? 1 : a >= 1 ? 2 : 3; };
 // a live frame's raw readings above its lowest one (the map of a mat in its raw unit)
 function rawAboveLowest(raw) {
@@ -71,7 +73,9 @@ function frameStats(ncm2) {  // load (N), peak, contact area of one frame (N/cm�
 
 function render() {
   const pb = PB.active && PB.frame;
-  if (!pb && !last) return;
+  // nothing live is drawn while a recording opens (its first frame not yet here): a live
+  // render then put the live source back into the header over "playing back ..."
+  if ((!pb && !last) || (PB.active && !PB.frame)) return;
   const f = FACTOR[unit], pressure = pressureShown();
   let values, ncm2 = null, thr = null, shownUnit, title, st;
   if (pb) {
@@ -87,16 +91,22 @@ function render() {
     shownUnit = `${last.raw_unit} above ${fmt(shown.lo, rawDigits(shown.lo))}`; title = "raw readings"; st = last.stats;
   } else {
     ncm2 = last.pressure; values = ncm2.map((v) => (v === null ? null : v * f));
-    shownUnit = LABEL[unit]; title = "pressure (compensated)"; st = last.stats;
+    // "compensated" only where a calibration compensates: a mat that sends pressure is shown as it is
+    shownUnit = LABEL[unit]; title = compensates() ? "pressure (compensated)" : "pressure"; st = last.stats;
     thr = view && view.threshold_ncm2 !== null ? view.threshold_ncm2 * f : null;
   }
+  // only the controls that apply: the raw/compensated toggle for a calibrated capacitance
+  // mat live, the threshold's mark where there is a threshold
+  $("data-toggle").hidden = PB.active || !compensates();
+  $("threshold-mark").hidden = thr === null;
   const sc = scale(values), vd = pressure ? digits() : rawDigits(sc[1] - sc[0]);
   $("unit-label").hidden = noPressure();  // nothing in a pressure unit to choose
   $("pressure-marks").hidden = noPressure();
   $("map-title").textContent = title;
   map.draw(values, { scale: sc, cmap: $("cmap").value, threshold: thr,
     repaired: pb ? PB.frame.repaired || [] : mode !== "raw" ? last.repaired : [], trace: pb ? [] : last.cof_trace,
-    bedRegions: !pb && last.bed ? last.bed.regions : null, rois: ROI.list, draft: ROI.draft });
+    bedRegions: !pb && last.bed ? last.bed.regions : null, rois: ROI.list, draft: ROI.draft,
+    possible: !pb && last.possible ? last.possible : [] });
   $("heatmap").dataset.frame = pb ? PB.i : last.frames;
   drawLegend($("scale"), $("cmap").value, sc[0], sc[1], thr);
   $("scale-lo").textContent = fmt(sc[0], vd);
@@ -127,8 +137,13 @@ function renderCards(st, f, pb) {
   $("load").textContent = st && st.load_N !== null ? `${fmt(st.load_N, 0)} N` : "–";
   $("area").textContent = st && st.contact_area_cm2 !== null ? `${fmt(st.contact_area_cm2, 0)} cm²` : "–";
   $("peak").textContent = st && st.peak_ncm2 !== null ? `${fmt(st.peak_ncm2 * f, d)} ${LABEL[unit]}` : "–";
-  $("ppi").textContent = st && st.ppi_ncm2 !== null ? `${fmt(st.ppi_ncm2 * f, d)} ${LABEL[unit]}` : "–";
-  if (pb) { $("posture").textContent = "–"; $("posture-truth").textContent = ""; }
+  const ppi = pb ? PB.frame.ppi_ncm2 : st ? st.ppi_ncm2 : null;
+  $("ppi").textContent = ppi !== null && ppi !== undefined ? `${fmt(ppi * f, d)} ${LABEL[unit]}` : "–";
+  if (pb) {  // what the recording says of the frame's posture: the monitor's live vote, a side label
+    const p = PB.frame.posture;
+    $("posture").textContent = p ? (p.label || "nobody") : "not recorded";
+    $("posture-truth").textContent = p ? `from the recording's label ${p.from}` : "";
+  }
 }
 
 function renderCharts(f) {
@@ -171,3 +186,29 @@ function renderCharts(f) {
     roiChart.draw(PB.info.series.t, [{ label: "regions: peak", zero: true, lines: roiStats.filter((r) => r.peak).map((r, j) => ({ values: r.peak.map((v) => (v === null ? null : v * k)), colour: colours[j % 5] })) }], cursor, []);
   }
 }
+
+// the value under the pointer with its bound (issue 37): "83 ± 9 mmHg (95 %)"
+function hoverText(i) {
+  if (i < 0) return "point at an element for its value and bound";
+  const f = FACTOR[unit], d = digits(), pb = PB.active && PB.frame;
+  const v = pb ? PB.frame.values[i] : last && last.pressure ? last.pressure[i] : null;
+  const lo = pb ? (PB.frame.lower || [])[i] : last && last.lower ? last.lower[i] : undefined;
+  const hi = pb ? (PB.frame.upper || [])[i] : last && last.upper ? last.upper[i] : undefined;
+  const level = pb ? PB.info.interval : last ? last.interval : null;
+  const rep = (pb ? PB.frame.repaired || [] : last ? last.repaired : []).includes(i);
+  const name = `element ${i}`;
+  if (v === null || v === undefined || !pressureShown()) return `${name}: –`;
+  let text = `${name}: ${fmt(v * f, d)} ${LABEL[unit]}`;
+  if (lo !== undefined && lo !== null && hi !== undefined && hi !== null) {
+    const half = 0.5 * (hi - lo) * f;
+    text += Math.abs(v - 0.5 * (lo + hi)) * f < 0.05 * half
+      ? ` ± ${fmt(half, d)}` : ` (${fmt(lo * f, d)} … ${fmt(hi * f, d)})`;
+    text += ` ${LABEL[unit]} (${fmt(100 * level, 0)} %)`;
+  }
+  return rep ? `${text}, repaired from its neighbours` : text;
+}
+$("heatmap").addEventListener("mousemove", (e) => {
+  const r = $("heatmap").getBoundingClientRect(), k = $("heatmap").width / r.width;
+  $("hover").textContent = hoverText(map.elementAt((e.clientX - r.left) * k, (e.clientY - r.top) * k));
+});
+$("heatmap").addEventListener("mouseleave", () => { $("hover").textContent = hoverText(-1); });

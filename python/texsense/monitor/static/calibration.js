@@ -66,6 +66,10 @@ const CAL = {
     }
     this.findings(s);
     this.report(s.check);
+    const kind = $("cal-kind");  // the kind of mat: the monitor's mode until a person chooses
+    if (!kind.dataset.chosen && view && [...kind.options].some((x) => x.value === view.mode.name)) kind.value = view.mode.name;
+    const o = s.orientation || {}, edges = ["top", "bottom", "left", "right"].filter((k) => o[k]);
+    $("cal-orient-status").textContent = edges.length ? `now: ${edges.map((k) => `${k} ${o[k]}`).join(", ")}` : "now: unknown (no left or right is named)";
     $("cal-saved").textContent = s.saved ? `✓ in use: ${s.saved.calibration}${s.saved.checked ? "" : " (not checked)"}` : "";
     clearTimeout(this.timer);
     this.timer = waiting ? setTimeout(() => this.refresh(), 300) : null;
@@ -113,6 +117,10 @@ const CAL = {
     $("cal-fit").onclick = () => this.run("/api/calibration/fit", { material: $("cal-material").value });
     $("cal-check").onclick = () => this.run("/api/calibration/record/check", { frames: frames(), pressure: $("cal-check-pressure").value });
     $("cal-save").onclick = () => this.run("/api/calibration/save");
+    const orient = async (kind) => { await this.run("/api/calibration/orientation", { kind, edge: $("cal-edge").value }); refreshView(); };
+    $("cal-orient").onclick = () => orient($("cal-kind").value);
+    $("cal-kind").onchange = () => { $("cal-kind").dataset.chosen = "1"; };
+    $("cal-orient-none").onclick = () => orient("none");
   },
 };
 

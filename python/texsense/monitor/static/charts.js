@@ -55,8 +55,12 @@ class Charts {
         ctx.stroke();
       }
     });
-    ctx.fillStyle = "#677189"; ctx.textAlign = "left"; ctx.fillText(clockOf(t0), left, H - 3);
-    ctx.textAlign = "right"; ctx.fillText(clockOf(this.frame.t1), W - right, H - 3); ctx.textAlign = "left";
+    // the time axis: m:ss, or seconds with a decimal for a span under a minute (a short
+    // recording otherwise reads 0:00 - 0:00)
+    const short = this.frame.t1 - t0 < 60, label = (v) => (short ? `${v.toFixed(1)} s` : clockOf(v));
+    this.labels = [label(t0), label(this.frame.t1)];
+    ctx.fillStyle = "#677189"; ctx.textAlign = "left"; ctx.fillText(label(t0), left, H - 3);
+    ctx.textAlign = "right"; ctx.fillText(label(this.frame.t1), W - right, H - 3); ctx.textAlign = "left";
     if (cursor !== null && cursor !== undefined) { ctx.fillStyle = "#e11d48"; ctx.fillRect(X(cursor) - 1, top, 2, H - top - bottom); }
   }
 }

@@ -22,11 +22,14 @@ function renderLive(f) {
   drawExposure(exp, limit);
   $("exposure-max").textContent = duration(limit);
   $("posture").textContent = last.posture ? `${last.posture.label} (${fmt(100 * last.posture.confidence, 0)} %)` : (status && status.posture_model ? "nobody" : "no model");
+  // a foot or other mode without a posture model has no posture to show (issue 33: only what applies)
+  $("posture").closest(".card").hidden = !PB.active && !last.posture && !(status && status.posture_model) && !!view && !view.mode.alerts;
   $("posture").title = last.posture ? `vote over ${last.posture.window_s} s; this frame alone: ${last.posture.frame_label}` : "";
   $("posture-truth").textContent = last.source.true_posture !== undefined
     ? `simulated person: ${last.source.true_posture === null ? "away" : last.source.true_posture}` : "";
   renderBed(last.bed, f);
   renderAlert(last.alert, f);
+  $("in-use").textContent = inUseText(last.in_use);
   $("record").classList.toggle("on", last.recording);
   $("record").textContent = last.recording ? "■ stop recording" : "● record";
   const src = last.source;
@@ -40,31 +43,55 @@ function drawExposure(exp, limit) {  // time above the threshold, white to dark 
   exp.forEach((v, i) => { const [x, y, w, h] = exposure.rects[i]; ctx.fillStyle = heat(v / limit); ctx.fillRect(x, y, w, h); });
 }
 
+// the words of an alert, one vocabulary on every page: "Turn now" (a bed), "Reposition now"
+// (a seat), "Offload now"; the places it names are regions only, the rest in its details line
+function alertHead(m) { return `${m.action.charAt(0).toUpperCase()}${m.action.slice(1)} now`; }
+function alertWhere(a) {
+  const w = a.where || [];
+  return w.length ? `${w.slice(0, 4).join(", ")}${w.length > 4 ? ` and ${w.length - 4} more` : ""}` : "";
+}
+// how far above the threshold: one phrase, qualified by the bounds (issue 37): above with the
+// bounds' confidence, or only possibly above
+function aboveText(a, thr) {
+  const pct = last && last.interval ? `${fmt(100 * last.interval, 0)} %` : "";
+  if (a.certainty === "confident") return `above ${thr} with ${pct} confidence`;
+  if (a.certainty === "possible") return `possibly above ${thr} (not certain at ${pct})`;
+  return `above ${thr}`;
+}
+
 function renderAlert(a, f) {
   $("alert").hidden = !a;
   if (!a) return;
   const m = view ? view.mode : { action: "reposition", advice: "shift weight or stand up" };
   const thr = view && view.threshold_ncm2 ? `${fmt(view.threshold_ncm2 * f, digits())} ${LABEL[unit]}` : "the threshold";
-  const where = a.where && a.where.length ? ` at ${a.where.slice(0, 4).join(", ")}${a.where.length > 4 ? ` and ${a.where.length - 4} more` : ""}` : "";
-  const head = m.action.charAt(0).toUpperCase() + m.action.slice(1);
+  const where = alertWhere(a), what = `${where || "pressure"} ${aboveText(a, thr)} for ${duration(a.peak_exposure_s)}`;
+  const schedule = last.bed && last.bed.turn_due ? "; the turning schedule's turn is due too" : "";
   $("alert").classList.toggle("acked", !a.active);
+  $("alert").classList.toggle("possible", a.certainty === "possible");
   $("alert-text").textContent = a.active
-    ? `${head}: pressure above ${thr} for ${duration(a.peak_exposure_s)}${where} — ${m.advice}.`
-    : `${head} alert acknowledged (${duration(a.peak_exposure_s)}${where}); it clears once the skin is offloaded.`;
+    ? `${alertHead(m)}: ${what} — ${m.advice}${schedule}.`
+    : `${alertHead(m).replace(" now", "")} alert acknowledged (${what}); it clears once the skin is offloaded${m.action === "turn" ? " or the patient has turned" : ""}.`;
+  const details = a.details || [];
+  $("alert-details").hidden = !details.length;
+  $("alert-details").textContent = details.length ? `${where ? "also " : "where on the map: "}${details.slice(0, 3).join("; ")}${details.length > 3 ? ` and ${details.length - 3} more places` : ""}` : "";
   $("ack").hidden = !a.active;
   $("ack").dataset.id = a.id;
 }
 
 function renderBed(bed, f) {
   $("bed").hidden = !bed;
-  $("turn-alert").hidden = !(bed && bed.turn_due);
-  if (!bed) return;
+  if (!bed) { $("turn-alert").hidden = true; return; }
+  const pressed = last.alert && last.alert.cleared_t === null;  // an exposure alert asks to turn too
+  // the schedule's own band only when the pressure alert is not already asking to turn
+  $("turn-alert").hidden = !bed.turn_due || (pressed && last.alert.active);
   $("since-turn").textContent = bed.since_turn_s === null ? "out of bed" : `${duration(bed.since_turn_s)} ${bed.side}`;
-  const overdue = bed.due_in_s !== null && bed.due_in_s < 0;
-  $("due-label").textContent = overdue ? "turn overdue by" : "next turn due in";
-  $("due-in").textContent = bed.due_in_s === null ? "–" : duration(Math.abs(bed.due_in_s));
-  $("due-in").classList.toggle("overdue", overdue);
-  if (bed.turn_due) $("turn-alert-text").textContent = `Turn due: ${duration(bed.since_turn_s)} on the ${bed.side} side (schedule: every ${duration(bed.interval_s)}).`;
+  const now = bed.turn_due || pressed;
+  $("due-label").textContent = now ? "turn" : "turn due in";
+  $("due-in").textContent = now ? "now" : bed.due_in_s === null ? "–" : duration(bed.due_in_s);
+  $("due-in").classList.toggle("overdue", now);
+  $("due-why").textContent = bed.turn_due ? `schedule: due ${duration(-bed.due_in_s)} ago`
+    : pressed ? `pressure alert${alertWhere(last.alert) ? ": " + alertWhere(last.alert) : ""}` : "";
+  if (bed.turn_due) $("turn-alert-text").textContent = `Turn now: ${duration(bed.since_turn_s)} on the ${bed.side} side (schedule: every ${duration(bed.interval_s)}).`;
   const total = Object.values(bed.time_per_side_s).reduce((a, b) => a + b, 0) || 1;
   $("sides").replaceChildren(...Object.entries(bed.time_per_side_s).map(([side, s]) => {
     const row = document.createElement("div"); row.className = "side-row";
@@ -76,9 +103,21 @@ function renderBed(bed, f) {
   }));
   $("regions").replaceChildren(...bed.regions.map((r) => {
     const li = document.createElement("li"); li.className = r.at_risk ? "risk" : "";
-    li.textContent = `${r.name}: ${fmt(r.peak_ncm2 * f, digits())} ${LABEL[unit]}`;
+    const bound = r.peak_lo_ncm2 !== undefined ? ` ± ${fmt(0.5 * (r.peak_hi_ncm2 - r.peak_lo_ncm2) * f, digits())}` : "";
+    li.textContent = `${r.name}: ${fmt(r.peak_ncm2 * f, digits())}${bound} ${LABEL[unit]}`;
+    if (bound && view && view.threshold_ncm2 && r.peak_lo_ncm2 <= view.threshold_ncm2 && r.peak_hi_ncm2 > view.threshold_ncm2) {
+      li.className = "possible"; li.textContent += " (possibly above the threshold)";
+    }
     return li;
   }));
+}
+
+function inUseText(s) {  // the in-use drift correction's state (issue 37)
+  if (!s) return "";
+  if (s.state === "off") return `drift corrected in use: off (${s.why})`;
+  if (s.state !== "correcting") return "drift corrected in use: waiting for a still moment";
+  const pct = fmt(100 * s.load_correction, 1);
+  return `drift corrected in use: load ${s.load_correction >= 0 ? "+" : ""}${pct} %, since ${duration(s.since_t)} into the data, from ${duration(s.still_s)} still; zero taken ${s.zeroed} ×`;
 }
 
 async function api(path, method = "GET", body = undefined) {
@@ -104,7 +143,10 @@ async function refreshEvents() {
       const what = document.createElement("span"); what.className = e.kind;
       let text = EVENT_TEXT[e.kind] || e.kind;
       if (e.kind === "turn") text += ` ${e.detail.from} → ${e.detail.to} after ${duration(e.detail.after_s)}`;
-      if (e.detail && Array.isArray(e.detail.where) && e.detail.where.length) text += `: ${e.detail.where.slice(0, 4).join(", ")}`;
+      if (e.kind === "cleared" && e.detail && e.detail.by === "turned") text = "alert cleared (turned)";
+      const where = e.detail && Array.isArray(e.detail.where) ? e.detail.where : [], more = e.detail && Array.isArray(e.detail.details) ? e.detail.details : [];
+      if (where.length) text += `: ${where.slice(0, 4).join(", ")}`;
+      else if (more.length) text += `: ${more.slice(0, 2).join("; ")}`;
       what.textContent = text;
       li.append(when, what);
       return li;
@@ -138,6 +180,20 @@ function connect() {
   const ws = new WebSocket(withToken(`${proto}://${location.host}${BASE}/ws`));
   ws.onmessage = (m) => onSnapshot(JSON.parse(m.data));
   ws.onclose = () => { $("source").textContent = "disconnected — retrying…"; setTimeout(connect, 1000); };
+}
+
+// the statistics the monitor holds from before the page was opened: the charts start full
+async function loadHistory() {
+  try {
+    const h = await api("/api/history");
+    if (live.length || !h.rows.length) return;
+    const t0 = h.rows[0][0];
+    for (const [t, load, peak, area, x, y, rise, responding] of h.rows) live.push({ t: t - t0, t0, load, peak, area, x, y, rise, responding });
+  } catch (err) { /* the charts fill from the live frames */ }
+}
+// the live mode and orientation again (how the mat lies changed on the calibration panel)
+async function refreshView() {
+  try { view = await api("/api/view"); if (!PB.active) { layoutMaps(); render(); } } catch (err) { /* next time */ }
 }
 
 function layoutMaps() {  // the map of the live mat or of the recording open
@@ -217,7 +273,7 @@ async function start() {
   });
   PB.init(onPlayback);
   const open = PB.open.bind(PB);
-  PB.open = async (name) => { PB.opened = false; await open(name); $("roi-save").hidden = false; };
+  PB.open = async (name) => { PB.opened = false; await open(name); $("roi-save").hidden = !PB.active; };
   $("cmap").value = saved.get("cmap", "viridis");
   try {
     [status, view] = await Promise.all([api("/api/status"), api("/api/view")]);
@@ -226,6 +282,7 @@ async function start() {
   $("unit").value = unit;
   ROI.list = saved.get("rois.live", []);
   layoutMaps(); syncRange(); updateThreshold();
+  await loadHistory();
   connect(); refreshEvents(); PB.list();
   setInterval(refreshEvents, 2000);
   setInterval(() => PB.list(), 10000);

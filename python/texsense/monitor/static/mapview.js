@@ -42,6 +42,9 @@ class MapView {
   }
 
   toCm(px, py) { return [(px - this.t.ox) / this.t.kx, (py - this.t.oy) / this.t.ky]; }
+  elementAt(px, py) {  // the element under a point of the canvas, or -1
+    return this.rects.findIndex(([x, y, w, h]) => px >= x && px < x + w && py >= y && py < y + h);
+  }
   fromCm(x, y) { return [this.t.ox + x * this.t.kx, this.t.oy + y * this.t.ky]; }
   centre(i) { const r = this.rects[i]; return [r[0] + r[2] / 2, r[1] + r[3] / 2]; }
 
@@ -61,29 +64,40 @@ class MapView {
     });
     if (o.threshold !== null && o.threshold !== undefined) this.contour(ctx, values, o.threshold);
     this.marks(ctx, o);
+    this.possible(ctx, o.possible || []);
     if (o.bedRegions) this.bedRegions(ctx, o.bedRegions);
     for (const roi of o.rois || []) this.roi(ctx, roi, false);
     if (o.draft) this.roi(ctx, o.draft, true);
     this.edges(ctx);
   }
 
-  // the threshold as the outline of the cells above it (black under white: visible on any colour)
+  // the threshold as the outline of the region above it (black under white: visible on any
+  // colour); an empty cell of a checkerboard counts as above when half or more of its
+  // neighbours are, so the outline follows the loaded area, not each cell on its own
   contour(ctx, values, thr) {
     if (!this.cellIndex) return;
-    const [rows, cols] = this.layout.shape, s = this.t.s, idx = this.cellIndex;
-    const above = (r, c) => r >= 0 && c >= 0 && r < rows && c < cols && idx[r * cols + c] >= 0 && values[idx[r * cols + c]] > thr;
+    const [rows, cols] = this.layout.shape, s = this.t.s;
+    const mask = aboveMask(this.cellIndex, rows, cols, values, thr);
+    const on = (r, c) => r >= 0 && c >= 0 && r < rows && c < cols && mask[r * cols + c];
     const path = new Path2D();
-    this.layout.cells.forEach((cell, i) => {
-      if (!(values[i] > thr)) return;
-      const r = Math.floor(cell / cols), c = cell % cols, x = this.t.ox + c * s, y = this.t.oy + r * s;
-      if (!above(r - 1, c)) { path.moveTo(x, y); path.lineTo(x + s, y); }
-      if (!above(r + 1, c)) { path.moveTo(x, y + s); path.lineTo(x + s, y + s); }
-      if (!above(r, c - 1)) { path.moveTo(x, y); path.lineTo(x, y + s); }
-      if (!above(r, c + 1)) { path.moveTo(x + s, y); path.lineTo(x + s, y + s); }
-    });
+    for (let r = 0; r < rows; r++) for (let c = 0; c < cols; c++) {
+      if (!mask[r * cols + c]) continue;
+      const x = this.t.ox + c * s, y = this.t.oy + r * s;
+      if (!on(r - 1, c)) { path.moveTo(x, y); path.lineTo(x + s, y); }
+      if (!on(r + 1, c)) { path.moveTo(x, y + s); path.lineTo(x + s, y + s); }
+      if (!on(r, c - 1)) { path.moveTo(x, y); path.lineTo(x, y + s); }
+      if (!on(r, c + 1)) { path.moveTo(x + s, y); path.lineTo(x + s, y + s); }
+    }
     ctx.lineCap = "square";
     ctx.strokeStyle = "#000"; ctx.lineWidth = 3; ctx.stroke(path);
     ctx.strokeStyle = "#fff"; ctx.lineWidth = 1.4; ctx.stroke(path);
+  }
+
+  // elements only possibly above the threshold (the upper bound is, the lower is not): dotted
+  possible(ctx, elements) {
+    ctx.save(); ctx.setLineDash([2, 2]); ctx.strokeStyle = "#b45309"; ctx.lineWidth = 1.5;
+    for (const i of elements) { const [x, y, w, h] = this.rects[i]; ctx.strokeRect(x + 1, y + 1, w - 2, h - 2); }
+    ctx.restore();
   }
 
   marks(ctx, o) {
@@ -147,6 +161,9 @@ class MapView {
     const o = this.orientation, c = this.canvas;
     ctx.font = "11px system-ui, sans-serif"; ctx.fillStyle = "#4b5563"; ctx.textAlign = "center";
     const note = o.assumed ? " (assumed)" : "";
+    if (!o.top && !o.bottom && !o.left && !o.right) {  // nobody said how the mat lies
+      ctx.font = "italic 11px system-ui, sans-serif"; ctx.fillText("orientation unknown", c.width / 2, 13);
+    }
     if (o.top) ctx.fillText(o.top + note, c.width / 2, 13);
     if (o.bottom) ctx.fillText(o.bottom, c.width / 2, c.height - 5);
     for (const [side, x, angle] of [["left", 13, -Math.PI / 2], ["right", c.width - 13, Math.PI / 2]]) {
@@ -155,6 +172,27 @@ class MapView {
     }
     ctx.textAlign = "start";
   }
+}
+
+// cells above the threshold (row-major, rows x cols), an empty cell (no element) counting as
+// above when at least half of its elements among the 4 neighbours, and at least two, are
+// (as texsense.apps.views.threshold_mask)
+function aboveMask(cellIndex, rows, cols, values, thr) {
+  const mask = new Uint8Array(rows * cols);
+  const above = (k) => cellIndex[k] >= 0 && values[cellIndex[k]] > thr;
+  for (let k = 0; k < rows * cols; k++) mask[k] = above(k) ? 1 : 0;
+  for (let r = 0; r < rows; r++) for (let c = 0; c < cols; c++) {
+    const k = r * cols + c;
+    if (cellIndex[k] >= 0) continue;
+    let n = 0, up = 0;
+    for (const [dr, dc] of [[-1, 0], [1, 0], [0, -1], [0, 1]]) {
+      const rr = r + dr, cc = c + dc;
+      if (rr < 0 || cc < 0 || rr >= rows || cc >= cols || cellIndex[rr * cols + cc] < 0) continue;
+      n++; if (above(rr * cols + cc)) up++;
+    }
+    mask[k] = up >= 2 && 2 * up >= n ? 1 : 0;
+  }
+  return mask;
 }
 
 function hatch(ctx, x, y, w, h) {  // a failed element without a value

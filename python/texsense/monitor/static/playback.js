@@ -14,6 +14,26 @@ const PB = {
     $("pb-prev-event").onclick = () => this.jumpEvent(-1);
     $("pb-next-event").onclick = () => this.jumpEvent(1);
     $("pb-live").onclick = () => this.close();
+    $("pb-report").onclick = (e) => { e.preventDefault(); this.report(); };
+  },
+
+  // The report is made by a POST (it writes a file, so it passes the server's guard for
+  // writes), then downloaded from the answer.
+  async report() {
+    const link = $("pb-report"), name = this.name, label = link.textContent;
+    link.textContent = "making the report…";
+    try {
+      const r = await fetch(this.url("/report?format=pdf"), { method: "POST" });
+      if (!r.ok) { const d = await r.json().catch(() => ({})); throw new Error(d.detail || r.status); }
+      const url = URL.createObjectURL(await r.blob());
+      const a = document.createElement("a");
+      a.href = url; a.download = `${name}-report.pdf`; document.body.append(a); a.click(); a.remove();
+      setTimeout(() => URL.revokeObjectURL(url), 10000);
+      link.textContent = label;
+    } catch (err) {
+      link.textContent = `report: ${err.message}`;
+      setTimeout(() => { link.textContent = label; }, 5000);
+    }
   },
 
   url(path) { return withToken(`${BASE}/api/playback/${encodeURIComponent(this.name)}${path}`); },
@@ -34,25 +54,37 @@ const PB = {
     }));
   },
 
+  // a line on the page (never only the console): a recording that does not open, a frame that
+  // does not come
+  say(text) { $("pb-message").hidden = !text; $("pb-message").textContent = text || ""; },
+
   async open(name) {
     this.pause();
+    const before = $("source").textContent, was = this.name;
     this.name = name; this.cache.clear();
-    $("source").textContent = `opening ${name}…`;
-    const r = await fetch(this.url(""));
-    if (!r.ok) { const d = await r.json().catch(() => ({})); $("source").textContent = `${name}: ${d.detail || r.status}`; this.name = null; return; }
+    this.say(`opening ${name}…`);
+    let r;
+    try { r = await fetch(this.url("")); } catch (err) { r = { ok: false, status: String(err), json: async () => ({}) }; }
+    if (!r.ok) {
+      const d = await r.json().catch(() => ({}));
+      this.say(`${name} does not open: ${d.detail || `HTTP ${r.status}`}`);
+      $("source").textContent = before; this.name = this.active ? was : null;
+      return;
+    }
     this.info = await r.json();
+    this.say("");
     this.active = true;
+    $("source").textContent = `playing back ${name} · ${this.info.frames} frames`;
     $("playback").hidden = false;
     $("pb-name").textContent = name;
     $("pb-scrub").max = this.info.frames - 1;
     $("pb-frames").textContent = this.info.frames - 1;
-    $("pb-report").href = this.url("/report?format=pdf");
-    $("pb-report").download = `${name}-report.pdf`;
     await this.seek(0);
   },
 
   close() {
     this.pause();
+    this.say("");
     this.active = false; this.info = null; this.frame = null; this.name = null;
     $("playback").hidden = true;
     this.onChange("close");
@@ -86,7 +118,7 @@ const PB = {
         this.onChange("frame");
       }
     } catch (err) {
-      $("source").textContent = String(err);
+      this.say(`${this.name}: ${err.message}`);
     } finally { this.loading = false; }
   },
 
@@ -96,8 +128,10 @@ const PB = {
     while (lo < hi) { const mid = (lo + hi + 1) >> 1; if (ts[mid] <= t) lo = mid; else hi = mid - 1; }
     return lo;
   },
+  // the wall-clock time of a time t into the recording (a device at 20x: t / 20 wall seconds)
   clock(t) {
-    return this.info && this.info.started_at ? new Date((this.info.started_at + t) * 1000).toLocaleTimeString() : "+" + clockOf(t);
+    const i = this.info;
+    return i && i.started_at ? new Date((i.started_at + t / (i.clock_rate || 1)) * 1000).toLocaleTimeString() : "+" + clockOf(t);
   },
 
   play() {
@@ -132,9 +166,15 @@ const PB = {
       const when = document.createElement("button"); when.className = "when jump"; when.textContent = this.clock(e.t);
       when.title = `frame ${e.i}, ${duration(e.t)} into the recording`;
       when.onclick = () => { this.pause(); this.seek(e.i); };
-      const what = document.createElement("span"); what.className = e.kind; what.textContent = e.text;
+      const what = document.createElement("span"); what.className = e.kind;
+      what.textContent = e.text + (e.source === "recomputed" && this.info.live ? " (recomputed)" : "");
+      if (e.wall) when.textContent = new Date(e.wall * 1000).toLocaleTimeString();
       li.classList.toggle("current", e.i === this.i);
       li.append(when, what);
+      if (e.places) {  // the grid positions no region names, on a line of their own
+        const places = document.createElement("div"); places.className = "places"; places.textContent = e.places;
+        what.append(places);
+      }
       return li;
     }));
   },

@@ -5,28 +5,50 @@
 const token = new URLSearchParams(location.search).get("token");
 const withToken = (url) => token ? url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token) : url;
 const $ = (id) => document.getElementById(id);
-const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "reposition!", acknowledged: "acknowledged", stale: "no data", refused: "refused", unwatched: "NOT WATCHED" };
+const STATE_TEXT = { waiting: "waiting", live: "ok", alert: "now!", acknowledged: "acknowledged", stale: "no data", refused: "refused", unwatched: "NOT WATCHED" };
 const TOP_MMHG = 100;  // one fixed scale on every tile, 0-100 mmHg (the dashboards' preset)
 const NO_READING = 254, NO_ELEMENT = 255;
 const mats = new Map();   // id -> the latest tile data
 const tiles = new Map();  // id -> its element
 let wall = 0;             // the station's clock at the latest message
 let member = null;        // this station's name in its group (none: not in a group)
-function drawMini(canvas, map) {
-  const ctx = canvas.getContext("2d");
-  ctx.clearRect(0, 0, canvas.width, canvas.height);
+// the tile's map, drawn the same way up as the mat's dashboard (row 1 at the top) with what
+// lies beyond each edge; whole pixels per block (no seams); a bed drawn as a bed: its
+// mattress with the headboard at the head end
+function drawMini(canvas, map, mat) {
+  const o = mat.orientation || {}, bed = !!mat.bed || mat.mode === "bed", m = 12;  // m: room for the edge labels
+  if (map) {  // the canvas takes the mat's shape: a bed is tall, a seat square
+    const want = Math.round(Math.min(230, Math.max(100, 150 * map.rows / map.cols + 2 * m)));
+    if (canvas.height !== want) canvas.height = want;
+  }
+  const ctx = canvas.getContext("2d"), W = canvas.width, H = canvas.height;
+  ctx.clearRect(0, 0, W, H);
   if (!map) return;
   const bytes = Uint8Array.from(atob(map.b64), (ch) => ch.charCodeAt(0));
-  const s = Math.min(canvas.width / map.cols, canvas.height / map.rows);
-  const ox = (canvas.width - s * map.cols) / 2, oy = (canvas.height - s * map.rows) / 2;
+  const s = Math.max(1, Math.floor(Math.min((W - 2 * m) / map.cols, (H - 2 * m) / map.rows)));
+  const ox = Math.floor((W - s * map.cols) / 2), oy = Math.floor((H - s * map.rows) / 2);
+  if (bed) {  // the mattress, and the headboard at the head end (row 1 unless it says otherwise)
+    ctx.fillStyle = "#e5e7eb"; ctx.fillRect(ox - 3, oy - 3, s * map.cols + 6, s * map.rows + 6);
+    const head = o.bottom === "head" ? oy + s * map.rows + 1 : oy - 6;
+    ctx.fillStyle = "#6b7280"; ctx.fillRect(ox - 3, head, s * map.cols + 6, 5);
+  }
   // one colour is one pressure on every mat of the ward (each byte: the block's peak, mmHg)
   bytes.forEach((v, k) => {
     if (v === NO_ELEMENT) return;
     const r = Math.floor(k / map.cols), c = k % map.cols;
     ctx.fillStyle = v === NO_READING ? "#d1d5db" : colourOf("viridis", v / TOP_MMHG);
-    ctx.fillRect(ox + c * s, oy + r * s, Math.ceil(s), Math.ceil(s));
+    ctx.fillRect(ox + c * s, oy + r * s, s, s);
   });
+  ctx.font = "9px system-ui, sans-serif"; ctx.fillStyle = "#4b5563"; ctx.textAlign = "center";
+  if (!o.top && !o.bottom && !o.left && !o.right) { ctx.fillText("orientation unknown", W / 2, 9); return; }
+  if (o.top) ctx.fillText(o.top, W / 2, bed ? oy - 8 : 9);
+  if (o.bottom) ctx.fillText(o.bottom, W / 2, H - 2);
+  for (const [side, x, angle] of [["left", 8, -Math.PI / 2], ["right", W - 8, Math.PI / 2]]) {
+    if (!o[side]) continue;
+    ctx.save(); ctx.translate(x, H / 2); ctx.rotate(angle); ctx.fillText(o[side], 0, 3); ctx.restore();
+  }
 }
+const hm = (s) => { const m = Math.floor(Math.abs(s) / 60); return `${Math.floor(m / 60)}:${String(m % 60).padStart(2, "0")} h`; };
 function ago(mat) {
   return mat.last_frame_wall === null ? "no frame yet" : `${Math.max(0, wall - mat.last_frame_wall).toFixed(1)} s ago`;
 }
@@ -36,25 +58,29 @@ async function post(url) {
 }
 function tile(mat) {
   const el = document.createElement("div");
-  el.className = `tile is-${mat.state}`;  // not the monitor's .alert band style
+  el.className = `tile is-${mat.state}${mat.bed || mat.mode === "bed" ? " is-bed" : ""}`;  // not the monitor's .alert band style
   el.dataset.id = mat.id;
   el.setAttribute("data-state", mat.state);
   const skipped = mat.malformed + mat.skipped;
   el.innerHTML = `
     <div class="top"><span class="id"></span><span class="state"></span></div>
-    <canvas width="160" height="110"></canvas>
-    <div class="line"><span>${mat.occupied ? "occupied" : "empty"}</span><span><span class="big">${mat.minutes_since_reposition.toFixed(1)}</span> min</span></div>
+    <canvas width="160" height="120"></canvas>
+    <div class="line"><span class="occupancy"></span><span class="peak"></span></div>
+    <div class="line exposure"><span class="above"></span><span><span class="big"></span> min</span></div>
     <div class="line bed-line" hidden></div>
     <div class="line problem" hidden></div>
     <div class="line holder" hidden></div>
     <div class="line"><span>${mat.frames} frames · <span class="ago"></span></span><span>${skipped ? skipped + " skipped" : ""}</span></div>`;
-  if (mat.bed) {  // a bed: its side and the turning schedule
-    const line = el.querySelector(".bed-line");
-    const mins = mat.bed.since_turn_s === null ? null : Math.floor(mat.bed.since_turn_s / 60);
+  el.querySelector(".occupancy").textContent = mat.occupied ? "occupied" : "empty";
+  el.querySelector(".peak").textContent = mat.peak_mmhg === null ? "" : `peak ${Math.round(mat.peak_mmhg)} mmHg`;
+  el.querySelector(".above").textContent = `above ${mat.threshold_mmhg} mmHg for`;
+  el.querySelector(".big").textContent = mat.minutes_since_reposition.toFixed(1);
+  if (mat.bed) {  // a bed: its side and the turning schedule, in the dashboard's words
+    const line = el.querySelector(".bed-line"), b = mat.bed, now = b.turn_due || mat.state === "alert";
     line.hidden = false;
-    line.classList.toggle("turn-due", mat.bed.turn_due);
-    line.textContent = mat.bed.side === null ? "out of bed"
-      : `${mat.bed.side} ${Math.floor(mins / 60)}:${String(mins % 60).padStart(2, "0")} h${mat.bed.turn_due ? " · turn due" : ""}`;
+    line.classList.toggle("turn-due", now);
+    line.textContent = b.side === null ? "out of bed"
+      : `${b.side} for ${hm(b.since_turn_s)} · ${now ? "turn now" : `turn due in ${hm(b.due_in_s)}`}`;
   }
   const trouble = mat.refused || mat.problem;
   if (trouble) {  // a refused mat, a missing or silent device: said on the tile
@@ -69,9 +95,9 @@ function tile(mat) {
     line.textContent = mat.holder === null ? "no station watches it" : `watched by ${mat.holder}${mat.holder === member ? " (here)" : ""}`;
   }
   el.querySelector(".id").textContent = mat.id;
-  el.querySelector(".state").textContent = STATE_TEXT[mat.state] || mat.state;
+  el.querySelector(".state").textContent = mat.state === "alert" ? `${mat.action} now!` : STATE_TEXT[mat.state] || mat.state;
   el.querySelector(".ago").textContent = ago(mat);
-  drawMini(el.querySelector("canvas"), mat.map);
+  drawMini(el.querySelector("canvas"), mat.map, mat);
   const button = (text, cls, url) => {
     const b = document.createElement("button");
     b.textContent = text;

@@ -1,0 +1,535 @@
+"""Drift corrected in use (issue 37, docs/drift.md "Drift corrected in use").
+
+The laboratory cannot identify the drift a mat will show in use (docs/drift.md: the γ of held
+steps or of cycles does not transfer to a person lying still), but use itself tells two
+things the laboratory cannot:
+
+- **stillness**: while a person lies (or sits) still, the load on every part of the mat stays
+  what it is — a change of the reading is drift (the thesis's "shift of the hysteresis during
+  longer pressure", §5);
+- **an empty mat** carries zero load — the compression it still reads is the spacer's set.
+
+:class:`InUseDrift` follows both, frame by frame, on the hysteresis stage's output (eq.
+4.15-4.22; it replaces the laboratory drift stage of eq. 5.8 when it runs). Its model of the
+drift is the spacer's creep: under a held load the spacer keeps compressing, so an element
+reads more than it carries; the creep stays in the spacer after the load changes (a set).
+Each element keeps a *creep* ``du`` in the units of the hysteresis stage's input (mm of
+compression) and reads ``F(F⁻¹(h) - du)``, ``F`` the calibration's first-loading curve (the
+compression that the reading ``h`` means, less the creep). While the mat is still, every
+loaded element's creep grows by what keeps its reading at the value it had when the stillness
+began (read every ``update_s`` from the mean over that time); it is never changed while
+anything moves. Creep also gathers where it cannot be read — under loads too light for the
+reading to show it, and in elements loaded only after the stillness began — so at the start of
+every still period the elements never read get the creep that a law fitted on the read ones
+gives for their load history (``a · exposure^b``, exposure = ∫ pressure dt). When the mat has
+been empty for ``settle_s``, the compression every element still reads (the conversion of
+eq. 2.1 on its raw capacitance: a true zero load) is the set the spacer kept, which the
+pressure cannot show (on a descending branch of the hysteresis every set reads about zero);
+it becomes the creep of the elements whose creep was never read while loaded.
+
+Stillness and emptiness are read from the frames: the map's change between frames summed
+over small blocks of elements (so that breathing, a common factor, is not movement and a
+turn, a shift of load, is), relative to the load; a frame is still when it changes by less
+than ``motion`` of the load, and the mat is still from ``settle_s`` after the last movement.
+A turn, getting up, a second load put on the mat are movements: the creep is not touched by
+them (a load change is never taken for drift; tests/test_inuse.py). A still mat whose load
+changes faster than ``max_rate`` per hour is not drifting either (a slow load change): that
+still period starts again; an element whose own reading changes that fast (a person slowly
+sliding shifts load between elements, the total stays) is left out of the period.
+
+Everything it knows is a small object (:class:`InUseState`, ``to_dict``/``from_dict``), shown
+on the dashboard, kept in recordings' metadata and in the report.
+
+Examples
+--------
+>>> import numpy as np
+>>> from texsense import Layout
+>>> lay = Layout.grid(4, 4)
+>>> est = InUseDrift(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 4.0]), lay)
+>>> for t in range(0, 1200, 10):  # a still load whose reading creeps by 0.1 % per 10 s
+...     out = est.step(np.full(16, 1.0 + 0.001 * t / 10), np.ones(16, bool), float(t))
+>>> float(out[0]) < 1.02 < 1.0 + 0.001 * 119, est.state.status()["state"]
+(True, 'correcting')
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from texsense.data.layout import Layout
+from texsense.exceptions import ParameterError
+
+__all__ = ["MOTION_BLOCK", "InUseDrift", "InUseState", "motion_blocks"]
+
+#: Size (elements) of the blocks whose load change tells movement from stillness.
+MOTION_BLOCK = 4
+#: What a still mat's load (an element's reading) may change by in a still period beyond
+#: ``max_rate`` per hour before it counts as a load change, not drift. Chosen on the textile
+#: nights of seed 0: wider (0.08, 0.15) also takes the first minutes' fast creep after a load
+#: is taken (up to 8 %), which the spacer gives back, and over-corrected by 3-9 points.
+LOAD_SLACK, ELEMENT_SLACK = 0.03, 0.05
+
+
+def motion_blocks(layout: Layout, size: int = 4) -> np.ndarray:
+    """A block index per element: ``size`` x ``size`` cells of a grid, one block per element
+    of a points layout."""
+    if layout.cells is None or layout.shape is None:
+        return np.arange(layout.n_elements)
+    rows, cols = np.divmod(np.asarray(layout.cells), layout.shape[1])
+    per_row = (layout.shape[1] + size - 1) // size
+    blocks = (rows // size) * per_row + cols // size
+    _, index = np.unique(blocks, return_inverse=True)
+    return np.asarray(index, dtype=np.intp)
+
+
+@dataclass
+class InUseState:
+    """What the in-use estimator knows: the creep of every element and how it
+    came to them (small: two numbers per element; ``to_dict``/``from_dict`` for checkpoints)."""
+
+    creep: np.ndarray  # (N,) in the hysteresis stage's input unit (mm)
+    still_s: float = 0.0  # still time the creep was read from (s)
+    first_t: float | None = None  # when the creep was first changed
+    last_t: float | None = None  # when the creep was last changed
+    zeroed_t: float | None = None  # when an empty mat last gave the creep
+    zeroed: int = 0  # how many empty periods gave the creep
+    refused: int = 0  # still periods refused (their load changed faster than drift can)
+    load_correction: float = 0.0  # the correction of the present load (share, -0.12: 12 % less)
+    exposure: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) ∫ p dt, N/cm² s
+    read: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (N,) creep was read
+    law: tuple[float, ...] | None = None  # creep = a · exposure^b fitted on the read ones
+    at_read: np.ndarray = field(default_factory=lambda: np.zeros(0))  # exposure when last set
+
+    def __post_init__(self) -> None:
+        n = self.creep.size
+        if self.exposure.size != n:
+            self.exposure = np.zeros(n)
+        if self.read.size != n:
+            self.read = np.zeros(n, bool)
+        if self.at_read.size != n:
+            self.at_read = np.zeros(n)
+
+    def status(self, t: float | None = None) -> dict[str, Any]:
+        """The state in words and numbers (dashboard, metadata, report)."""
+        state = "waiting for stillness" if self.first_t is None else "correcting"
+        return {
+            "state": state,
+            "load_correction": round(float(self.load_correction), 4),
+            "since_t": self.first_t,
+            "last_t": self.last_t,
+            "still_s": round(float(self.still_s), 1),
+            "zeroed": self.zeroed,
+            "zeroed_t": self.zeroed_t,
+            "refused": self.refused,
+            "max_creep_mm": round(float(np.max(np.abs(self.creep), initial=0.0)), 4),
+            "read_elements": int(np.count_nonzero(self.read)),
+            "creep_law": None if self.law is None else [round(v, 5) for v in self.law],
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able."""
+        return {
+            "creep": np.asarray(self.creep, float).tolist(),
+            "still_s": self.still_s,
+            "first_t": self.first_t,
+            "last_t": self.last_t,
+            "zeroed_t": self.zeroed_t,
+            "zeroed": self.zeroed,
+            "refused": self.refused,
+            "load_correction": self.load_correction,
+            "exposure": np.asarray(self.exposure, float).tolist(),
+            "read": np.asarray(self.read, bool).tolist(),
+            "at_read": np.asarray(self.at_read, float).tolist(),
+            "law": None if self.law is None else list(self.law),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], n_elements: int | None = None) -> InUseState:
+        """Inverse of :meth:`to_dict`; ``n_elements`` checks the size."""
+        try:
+            creep = np.asarray(d["creep"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError) as e:
+            raise ParameterError(f"in-use drift state: the creep: {e}") from None
+        if creep.ndim != 1:
+            raise ParameterError("in-use drift state: creep must be a list of numbers")
+        if n_elements is not None and creep.size != n_elements:
+            raise ParameterError(
+                f"in-use drift state of {creep.size} elements, the mat has {n_elements}"
+            )
+        if not np.all(np.isfinite(creep)):
+            raise ParameterError("in-use drift state: creep must be numbers")
+        opt = {k: d.get(k) for k in ("first_t", "last_t", "zeroed_t")}
+        exposure = np.asarray(d.get("exposure", np.zeros(creep.size)), dtype=np.float64)
+        read = np.asarray(d.get("read", np.zeros(creep.size, bool)), dtype=bool)
+        at_read = np.asarray(d.get("at_read", np.zeros(creep.size)), dtype=np.float64)
+        law = d.get("law")
+        if not exposure.shape == read.shape == at_read.shape == creep.shape:
+            raise ParameterError("in-use drift state: exposure and read need one value per element")
+        return cls(
+            creep,
+            float(d.get("still_s", 0.0)),
+            zeroed=int(d.get("zeroed", 0)),
+            refused=int(d.get("refused", 0)),
+            load_correction=float(d.get("load_correction", 0.0)),
+            exposure=exposure,
+            read=read,
+            at_read=at_read,
+            law=None if law is None else (float(law[0]), float(law[1])),
+            **{k: None if v is None else float(v) for k, v in opt.items()},
+        )
+
+
+class InUseDrift:
+    """The in-use drift estimator of one mat (see the module documentation).
+
+    Parameters
+    ----------
+    curve_input, curve_output : array_like
+        The first-loading curve of the calibration (hysteresis stage input -> pressure,
+        N/cm², non-decreasing): ``F`` of the module documentation.
+    layout : Layout
+        The mat's elements (areas; blocks for the movement test).
+    settle_s : float
+        Still (or empty) this long before the drift (or the zero) is read (default 60 s).
+    motion : float
+        A frame moves when the map changes by more than this share of the load (0.05),
+        summed over blocks of :data:`MOTION_BLOCK` x :data:`MOTION_BLOCK` elements.
+    loaded_ncm2 : float
+        An element's creep is read above this (0.05 N/cm², about 4 mmHg).
+    empty_ncm2 : float
+        The mat is empty when at most 0.2 % of its elements (at least 2) read above this
+        (0.1 N/cm², about 7.5 mmHg).
+    update_s : float
+        The creep is read from the mean over this much still time (30 s).
+    max_rate : float
+        Largest drift a still mat (or element) may show, share of its load per hour (0.5);
+        faster is a load change.
+    max_creep_mm : float
+        Largest creep of an element, in the hysteresis stage's input unit (1.5).
+    predict : bool
+        Give elements whose creep was never read the creep law's (module documentation).
+    zero : bool
+        Take the compression an empty mat reads as the creep (needs ``converter``).
+    converter : Converter, optional
+        The calibration's conversion (capacitance -> compression, eq. 2.1,
+        ``Convert.kernel()``): with it, :meth:`run` given the raw frames reads the set of an
+        empty mat.
+    rest_input : float, optional
+        What ``converter`` gives for a rested, unloaded element (its lowest compression; default
+        the loading curve's first input).
+    """
+
+    def __init__(
+        self,
+        curve_input: npt.ArrayLike,
+        curve_output: npt.ArrayLike,
+        layout: Layout,
+        *,
+        settle_s: float = 60.0,
+        motion: float = 0.05,
+        loaded_ncm2: float = 0.05,
+        empty_ncm2: float = 0.1,
+        update_s: float = 30.0,
+        max_rate: float = 0.5,
+        max_creep_mm: float = 1.5,
+        predict: bool = True,
+        zero: bool = True,
+        converter: Any = None,
+        rest_input: float | None = None,
+    ) -> None:
+        u = np.asarray(curve_input, dtype=np.float64)
+        p = np.asarray(curve_output, dtype=np.float64)
+        if u.ndim != 1 or u.shape != p.shape or u.size < 2:
+            raise ParameterError("the loading curve needs >= 2 points (input, pressure)")
+        keep = np.concatenate([[True], np.diff(p) > 1e-12])  # strictly increasing for F⁻¹
+        self._u, self._p = u[keep], p[keep]
+        if self._u.size < 2:
+            raise ParameterError("the loading curve does not rise")
+        # the compression an unloaded, rested spacer reads (the conversion's floor): an empty
+        # mat's set is what it reads beyond this
+        self._u_rest = float(self._u[0]) if rest_input is None else float(rest_input)
+        for name, v in (("settle_s", settle_s), ("motion", motion), ("update_s", update_s),
+                        ("max_rate", max_rate), ("max_creep_mm", max_creep_mm)):  # fmt: skip
+            if not (np.isfinite(v) and v > 0):
+                raise ParameterError(f"{name} must be > 0, got {v}")
+        if not 0 <= loaded_ncm2 < empty_ncm2:
+            raise ParameterError("need 0 <= loaded_ncm2 < empty_ncm2")
+        self.layout = layout
+        self.settle_s, self.motion, self.update_s = float(settle_s), float(motion), float(update_s)
+        self.loaded_ncm2, self.empty_ncm2 = float(loaded_ncm2), float(empty_ncm2)
+        self.max_rate, self.max_creep_mm = float(max_rate) / 3600.0, float(max_creep_mm)
+        self.predict, self.zero, self.converter = bool(predict), bool(zero), converter
+        n = layout.n_elements
+        self.area = np.asarray(layout.area_cm2, dtype=np.float64)
+        self._blocks = motion_blocks(layout, MOTION_BLOCK)
+        self._n_blocks = int(self._blocks.max()) + 1
+        self._empty_count = max(2, int(0.002 * n))
+        # the smallest load a movement is judged against: 20 elements at the empty threshold
+        self._floor_n = 20.0 * float(np.mean(self.area)) * self.empty_ncm2
+        self.forget()
+
+    # ------------------------------------------------------------------ the stream
+    def reset(self) -> InUseDrift:
+        """Start a new stream (the state — the creep — stays)."""
+        n = self.layout.n_elements
+        self._last_t: float | None = None
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None  # last map, block loads
+        self._still_since: float | None = None
+        self._period: dict[str, Any] | None = None  # the present still period
+        self._empty_since: float | None = None
+        self._zeroing = False
+        self._gain = np.ones(n)  # c = x * gain: the creep at the last refresh
+        self._set: np.ndarray | None = None  # an empty mat's compression, smoothed
+        return self
+
+    def forget(self) -> InUseDrift:
+        """A new mat state (no creep) and a new stream."""
+        n = self.layout.n_elements
+        self.state = InUseState(np.zeros(n))
+        return self.reset()
+
+    def set_state(self, state: InUseState) -> InUseDrift:
+        """Continue from a saved state (a checkpoint)."""
+        if state.creep.shape != (self.layout.n_elements,):
+            raise ParameterError("the state is of another mat (element count)")
+        self.state = state
+        return self.reset()
+
+    def corrected(self, x0: np.ndarray) -> np.ndarray:
+        """``F(F⁻¹(x0) - creep)`` where an element reads above zero and has creep; else
+        ``x0`` (exact: what the per-frame gain approximates between refreshes)."""
+        out = np.array(x0, dtype=np.float64)
+        sel = (out > 0) & (self.state.creep != 0)
+        if sel.any():
+            u = np.interp(out[sel], self._p, self._u) - self.state.creep[sel]
+            out[sel] = np.interp(np.maximum(u, self._u[0]), self._u, self._p)
+        return out
+
+    def _refresh(self, x0: np.ndarray) -> np.ndarray:
+        """The gain of every element at the readings ``x0`` (the creep changed, or the load
+        did); returns the corrected frame."""
+        c = self.corrected(x0)
+        big = x0 > 1e-6
+        self._gain = np.where(big, c / np.where(big, x0, 1.0), 1.0)
+        return c
+
+    def _slope(self, c: np.ndarray) -> np.ndarray:
+        """dF/du at the readings ``c`` (N/cm² per input unit)."""
+        u = np.interp(c, self._p, self._u)
+        du = 1e-3 * (self._u[-1] - self._u[0])
+        hi = np.interp(u + du, self._u, self._p)
+        lo = np.interp(u - du, self._u, self._p)
+        span = np.minimum(u + du, self._u[-1]) - np.maximum(u - du, self._u[0])
+        return np.maximum((hi - lo) / np.maximum(span, 1e-12), 1e-9)
+
+    def step(
+        self,
+        values: npt.ArrayLike,
+        valid: npt.ArrayLike,
+        t: float,
+        raw: npt.ArrayLike | None = None,
+    ) -> np.ndarray:
+        """One frame of hysteresis outputs (N/cm²) with the mask of measured elements at ``t``
+        (s) -> the corrected frame (elements not measured keep their value, corrected);
+        ``raw``: the frame's raw readings, for the zero of an empty mat (with ``converter``)."""
+        x = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        ok = np.asarray(valid, dtype=bool)
+        t = float(t)
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        if dt < 0:
+            raise ParameterError("frame times must not decrease")
+        self._last_t = t
+        c = x * self._gain
+        if np.count_nonzero((c > self.empty_ncm2) & ok) <= self._empty_count:
+            self._empty(ok, dt, t, raw)
+            return c
+        if self._zeroing:  # the mat was empty and is loaded again: the set read is the creep
+            self._take_zero()
+        self._empty_since, self._zeroing = None, False
+        if self._moved(c, ok):
+            self._still_since, self._period = None, None
+            return c
+        if self._still_since is None:  # the first still frame: the gains at this load
+            self._still_since = t
+            c = self._refresh(x)
+        if t - self._still_since >= self.settle_s:
+            c = self._still(x, c, ok, t)
+        return c
+
+    def _empty(self, ok: np.ndarray, dt: float, t: float, raw: npt.ArrayLike | None) -> None:
+        """An empty mat: nothing moves; settled, the compression it reads (its set) is
+        smoothed over ``update_s``."""
+        self._still_since, self._period, self._prev = None, None, None
+        self._empty_since = t if self._empty_since is None else self._empty_since
+        if not (self.zero and self.converter is not None and raw is not None):
+            return
+        if t - self._empty_since < self.settle_s:
+            return
+        r = np.ascontiguousarray(np.asarray(raw, dtype=np.float64).reshape(1, -1))
+        u = self.converter.run(r, np.ascontiguousarray(ok.reshape(1, -1)))[0] - self._u_rest
+        good = ok & np.isfinite(u)
+        if self._set is None or not self._zeroing:
+            self._set = np.where(good, u, np.nan)
+            self._zeroing = True
+        else:
+            a = 1.0 - np.exp(-dt / self.update_s) if dt > 0 else 0.0
+            fresh = good & np.isnan(self._set)
+            self._set[fresh] = u[fresh]
+            keep = good & ~fresh
+            self._set[keep] += a * (u[keep] - self._set[keep])
+        self.state.zeroed_t = t
+
+    def _take_zero(self) -> None:
+        """The set an empty mat showed becomes every measured element's creep."""
+        st = self.state
+        got = np.isfinite(self._set) if self._set is not None else None
+        if got is None or not got.any():
+            return
+        # an element whose creep was read while loaded keeps it: the set an unloaded spacer
+        # keeps is not the creep it shows loaded again (on the textile law taking it made
+        # hours 5-8 of a night worse by 10-20 points, docs/drift.md)
+        got &= ~st.read
+        assert self._set is not None
+        st.creep[got] = np.clip(self._set[got], -self.max_creep_mm, self.max_creep_mm)
+        st.read[got] = True
+        st.at_read[got] = st.exposure[got]
+        st.zeroed += 1
+        self._set = None
+        self._gain[:] = 1.0
+        self._still_since = None
+
+    def _moved(self, c: np.ndarray, ok: np.ndarray) -> bool:
+        """Whether the load moved since the previous frame by more than ``motion`` of it,
+        summed over small blocks (an element not measured keeps its last value)."""
+        if self._prev is not None:
+            c = np.where(ok, c, self._prev[0])
+        blocks = np.bincount(self._blocks, weights=self.area * c, minlength=self._n_blocks)
+        moved = True
+        if self._prev is not None:
+            scale = max(float(np.abs(blocks).sum()), self._floor_n)
+            moved = float(np.abs(blocks - self._prev[1]).sum()) > self.motion * scale
+        self._prev = (c, blocks)
+        return moved
+
+    def _still(self, x0: np.ndarray, c: np.ndarray, ok: np.ndarray, t: float) -> np.ndarray:
+        """A settled still frame: sum it up; every ``update_s`` read the creep."""
+        per = self._period
+        if per is None:  # the period's reference: the loaded elements and their values
+            if self.predict and self._predict_unread(x0, ok):
+                c = self._refresh(x0)
+            loaded = ok & (c > self.loaded_ncm2)
+            self._period = {
+                "loaded": loaded,
+                "ref": np.where(loaded, c, 0.0),
+                "t": t,
+                "last": t,
+                "sum": np.zeros(c.size),
+                "n": np.zeros(c.size),
+                "moved": 0.0,
+                "cum": np.zeros(c.size),
+                "creep0": self.state.creep.copy(),
+                "still0": self.state.still_s,
+            }
+            return c
+        per["sum"] += np.where(ok, c, 0.0)
+        per["n"] += ok
+        if t - per["last"] < self.update_s:
+            return c
+        return self._read_creep(x0, c, ok, t)
+
+    def _read_creep(self, x0: np.ndarray, c: np.ndarray, ok: np.ndarray, t: float) -> np.ndarray:
+        """The creep of the period's loaded elements from the mean since the last reading."""
+        per = self._period
+        assert per is not None
+        seen = per["n"] > 0
+        mean = np.where(seen, per["sum"] / np.where(seen, per["n"], 1), 0.0)
+        mask = per["loaded"] & seen
+        ref = per["ref"]
+        elapsed = t - per["last"]
+        self.state.exposure += np.clip(mean, 0.0, None) * elapsed
+        total_ref = float(self.area[mask] @ ref[mask])
+        change = float(self.area[mask] @ (mean[mask] - ref[mask])) / max(total_ref, 1e-12)
+        per["moved"] += change
+        per["last"], per["sum"][:], per["n"][:] = t, 0.0, 0
+        if abs(per["moved"]) > self.max_rate * (t - per["t"]) + LOAD_SLACK:
+            # faster than drift: a load change, also what was read of it; start again
+            self.state.refused += 1
+            self.state.creep[:] = per["creep0"]
+            self.state.still_s = per["still0"]
+            self._period = None
+            return self._refresh(x0)
+        rel = np.where(mask, mean / np.where(mask, ref, 1.0) - 1.0, 0.0)
+        per["cum"] += rel  # an element changing faster than drift is not drifting
+        fast = np.abs(per["cum"]) > self.max_rate * (t - per["t"]) + ELEMENT_SLACK
+        per["loaded"] &= ~fast
+        mask &= ~fast
+        st = self.state
+        shift = rel[mask] * ref[mask] / self._slope(mean[mask])
+        st.creep[mask] = np.clip(st.creep[mask] + shift, -self.max_creep_mm, self.max_creep_mm)
+        st.read[mask] = True
+        st.at_read[mask] = st.exposure[mask]
+        st.still_s += elapsed
+        st.first_t = t if st.first_t is None else st.first_t
+        st.last_t = t
+        out = self._refresh(x0)
+        pos = ok & (x0 > 0)
+        before = float(self.area[pos] @ x0[pos])
+        if before > 0:
+            st.load_correction = float(self.area[pos] @ out[pos]) / before - 1.0
+        return out
+
+    def _predict_unread(self, x0: np.ndarray, ok: np.ndarray) -> bool:
+        """At the start of a still period: the creep of elements never read (module
+        documentation), from ``creep = a · exposure^b`` fitted on the read ones (b from 0.25,
+        0.5, 0.75, 1 by least squares, a >= 0); read elements gain the law's growth since
+        their last reading. True when a creep changed."""
+        st = self.state
+        fit = st.read & (st.creep > 1e-4)
+        if np.count_nonzero(fit) < 20:
+            return False
+        e_r, y = st.at_read[fit], st.creep[fit]
+        best: tuple[float, float, float] | None = None
+        for b in (0.25, 0.5, 0.75, 1.0):
+            xb = e_r**b
+            a = max(float(xb @ y) / max(float(xb @ xb), 1e-300), 0.0)
+            res = float(np.sum((y - a * xb) ** 2))
+            if best is None or res < best[0]:
+                best = (res, a, b)
+        assert best is not None
+        _, a, b = best
+        st.law = (a, b)
+        now = a * st.exposure**b
+        grow = st.read & ok
+        st.creep[grow] += np.maximum(now[grow] - a * st.at_read[grow] ** b, 0.0)
+        new = ok & ~st.read & (x0 > self.loaded_ncm2)
+        st.creep[new] = now[new]
+        changed = grow | new
+        np.clip(st.creep, -self.max_creep_mm, self.max_creep_mm, out=st.creep)
+        st.at_read[changed] = st.exposure[changed]
+        return bool(changed.any())
+
+    def run(
+        self,
+        frames: npt.ArrayLike,
+        valid: npt.ArrayLike,
+        times: npt.ArrayLike,
+        raw: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Frames (T, N) with their validity at ``times`` (and the raw readings, for the zero
+        of an empty mat) -> corrected frames (continues the stream); ``corrections_`` holds the
+        load correction after every frame."""
+        x = np.asarray(frames, dtype=np.float64)
+        ok = np.asarray(valid, dtype=bool)
+        t = np.asarray(times, dtype=np.float64)
+        out = np.empty_like(x)
+        #: the load correction after every frame of the last run (NaN: not correcting yet)
+        self.corrections_ = np.full(x.shape[0], np.nan)
+        for k in range(x.shape[0]):
+            out[k] = self.step(x[k], ok[k], float(t[k]), None if raw is None else raw[k])
+            if self.state.first_t is not None:
+                self.corrections_[k] = self.state.load_correction
+        return out

@@ -1,0 +1,111 @@
+"""The SIMD paths of the compiled core (issue 34) against its scalar kernels, through the
+binding: the Preisach bank and the whole pipeline give the same numbers bit for bit on both
+paths, on histories with NaN, infinities, readings out of range and readings flagged invalid
+(the Rust property tests in crates/core cover the kernels on random tables and stacks)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from texsense import Layout, _core
+from texsense.calibration.workflows import seat_calibration
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import Convert, StageChain
+
+_, BEST = _core.simd_path()
+pytestmark = pytest.mark.skipif(BEST == "scalar", reason="this processor has no SIMD path")
+
+
+@pytest.fixture(scope="module")
+def cal():
+    return seat_calibration(mat_seed=5)
+
+
+@pytest.fixture(autouse=True)
+def simd_back_on() -> Iterator[None]:
+    yield
+    _core.set_simd(True)
+
+
+def both_paths(run: Callable[[], Any]) -> tuple[Any, Any]:
+    """``run()`` on the scalar kernels, then on the SIMD path."""
+    _core.set_simd(False)
+    assert _core.simd_path()[0] == "scalar"
+    scalar = run()
+    _core.set_simd(True)
+    assert _core.simd_path()[0] == BEST
+    return scalar, run()
+
+
+def spoil(x: np.ndarray, rng: np.random.Generator, lo: float, hi: float) -> np.ndarray:
+    """Readings with NaN, infinities, values beyond both ends of the range and repeats."""
+    x = x.copy()
+    kind = rng.integers(0, 12, x.shape)
+    x[kind == 0] = np.nan
+    x[kind == 1] = np.inf
+    x[kind == 2] = -np.inf
+    x[kind == 3] = lo - 1.0
+    x[kind == 4] = hi + 1.0
+    x[kind == 5] = lo
+    rep = kind == 6
+    rep[0] = False
+    x[rep] = np.roll(x, 1, axis=0)[rep]
+    return x
+
+
+def test_preisach_bank_same_bits_on_both_paths(cal):
+    model = cal["hysteresis"].model_
+    lo, hi = model.u_min_, model.u_max_
+    rng = np.random.default_rng(4)
+    walk = lo + np.abs(np.cumsum(rng.normal(0, 0.05, (300, 203)), axis=0)) % (hi - lo)
+    walk = spoil(walk, rng, lo, hi)
+    ok = rng.random(walk.shape) > 0.05
+
+    def run() -> tuple[np.ndarray, ...]:
+        bank = model.bank(walk.shape[1])
+        out = bank.run(walk, ok, schedule="blocks")
+        return out, bank.clamped(), bank.depth(), bank.outputs()
+
+    scalar, simd = both_paths(run)
+    assert np.isnan(scalar[0]).any() and np.isfinite(scalar[0]).mean() > 0.5
+    for a, b in zip(scalar, simd, strict=True):
+        np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+def test_pipeline_same_bits_on_both_paths_in_batches_and_steps(cal):
+    conv = cal["convert"]
+    lay = Layout.grid(12, 17, pitch_cm=1.0)  # 204 elements: blocks not a multiple of 4
+    n = lay.n_elements
+    rng = np.random.default_rng(9)
+    chain = StageChain([
+        Convert(3.0).set_fitted(
+            curve_compression_mm=conv.curve_compression_mm_,
+            curve_capacitance_pF=conv.curve_capacitance_pF_,
+            offset_pF=rng.normal(0, 0.05, n), gain=rng.normal(1, 0.03, n),
+        ),
+        *cal.without("detect", "convert").stages,
+    ])  # fmt: skip
+    t = np.arange(120) * 0.05
+    e = 1.1 + 0.9 * np.sin(t[:, None] / 2 + np.arange(lay.n_elements)[None, :] / 9)
+    e += rng.normal(0, 0.05, e.shape)
+    cap = np.interp(e, conv.curve_compression_mm_, conv.curve_capacitance_pF_)
+    cap = spoil(cap, rng, 0.0, float(conv.curve_capacitance_pF_[-1]))
+    valid = rng.random(cap.shape) > 0.03
+
+    def run() -> tuple[np.ndarray, ...]:
+        pipe = Pipeline(chain, lay, repair="neighbour-mean")
+        batch = pipe.process(cap, t, valid)
+        stream = Pipeline(chain, lay, repair="neighbour-mean")
+        steps = [stream.step(cap[k], valid[k], t[k])[0] for k in range(40)]
+        return (*batch, np.array(steps))
+
+    scalar, simd = both_paths(run)
+    values = scalar[0]
+    assert np.isfinite(values).mean() > 0.5 and (~scalar[1]).any()
+    for a, b in zip(scalar, simd, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(values.view(np.uint64), simd[0].view(np.uint64))
