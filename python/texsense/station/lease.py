@@ -52,6 +52,7 @@ import psycopg
 
 from texsense.apps.alerts import Event
 from texsense.exceptions import ParameterError
+from texsense.station.checkpoint import Taken
 
 __all__ = [
     "BEAT_S",
@@ -500,10 +501,16 @@ class _Checkpoint:
     epoch: int
     session: int
     t: float | None
-    often: bytes
-    rarely: bytes | None
+    often: bytes | Taken
+    rarely: bytes | Taken | None
     release: bool = False
     skip: bool = False
+
+
+def _packed(blob: bytes | Taken | None) -> bytes | None:
+    """A checkpoint's bytes: a :class:`~texsense.station.checkpoint.Taken` state is packed
+    (compressed) here, in the journal's thread, not on the event loop that took it."""
+    return blob.pack() if isinstance(blob, Taken) else blob
 
 
 class Journal(threading.Thread):
@@ -539,10 +546,12 @@ class Journal(threading.Thread):
         with self.cond:
             self.last_event[session] = max(self.last_event.get(session, 0), last_event)
 
-    def checkpoint(self, mat: str, epoch: int, session: int, t: float | None, often: bytes,
-                   rarely: bytes | None = None, release: bool = False) -> None:  # fmt: skip
-        """Write a mat's checkpoint (``release``: then give up its lease). A checkpoint of
-        the mat still waiting is replaced (its sensor part kept when this one has none)."""
+    def checkpoint(self, mat: str, epoch: int, session: int, t: float | None,
+                   often: bytes | Taken, rarely: bytes | Taken | None = None,
+                   release: bool = False) -> None:  # fmt: skip
+        """Write a mat's checkpoint (``release``: then give up its lease): bytes, or a state
+        taken and packed here in the journal's thread. A checkpoint of the mat still waiting
+        is replaced (its sensor part kept when this one has none)."""
         op = _Checkpoint(mat, epoch, session, t, often, rarely, release)
         with self.cond:
             old = self.latest.get(mat)
@@ -673,7 +682,7 @@ class Journal(threading.Thread):
                    rarely_saved = coalesce(EXCLUDED.rarely_saved, c.rarely_saved)""",
             {"grp": self.group, "mat": op.mat, "epoch": op.epoch, "me": self.member, "t": op.t,
              "session": op.session, "last": self.last_event.get(op.session, 0),
-             "often": op.often, "rarely": op.rarely},
+             "often": _packed(op.often), "rarely": _packed(op.rarely)},
         )  # fmt: skip
         if op.release:
             conn.execute(
