@@ -31,14 +31,17 @@ class Cluster:
     simulated seconds per second, in ``folder``. The members share one folder of the virtual
     mats' calibrations (``--virtual-calibrations``: the first member calibrates, ~5 s of a
     core, the others read its file). No beds by default (their side model is one more thing
-    to train or read at the start)."""
+    to train or read at the start). A mat is stale after 2 s without a frame at the least
+    (``--stale-after 2``: at 4x two frame periods are 0.8 s, less than a loaded machine's
+    hiccups)."""
 
     def __init__(self, folder: Path, members: list[str], mats: int, *, speed: float = 1.0,
                  reposition_min: float = 20.0, beds: int = 0,
                  extra: tuple[str, ...] = ()) -> None:  # fmt: skip
         self.folder, self.mats, self.speed = folder, mats, speed
         self.extra = ("--reposition-min", str(reposition_min), "--virtual-beds", str(beds),
-                      "--virtual-calibrations", str(folder / "calibrations"), *extra)  # fmt: skip
+                      "--virtual-calibrations", str(folder / "calibrations"),
+                      "--stale-after", "2", *extra)  # fmt: skip
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.ports: dict[str, int] = {}
         self.groups: dict[str, str] = {}

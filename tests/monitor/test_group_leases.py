@@ -189,3 +189,26 @@ def test_the_journal_fences_checkpoints_and_keeps_events_in_order(db, quick):
     assert (bytes(often), bytes(rarely), last) == (b"often-2", b"rarely-1", eid)
     assert lost == [MATS[1]]
     j.stop()
+
+
+def test_the_journal_waits_while_the_server_is_away():
+    """A server that refuses connections (down, restarting) is a wait, not the journal's end:
+    the writes stay in memory and the thread tries again (found by the fault test's
+    PostgreSQL restart: 'the database system is shutting down' ended the thread)."""
+    from conftest import free_port
+
+    j = Journal(f"postgresql://nobody@127.0.0.1:{free_port()}/none", "ward", "a", print)
+    j.start()
+    try:
+        j.event(1, Event("reposition", 300.0, 1, {}))
+        deadline = time.monotonic() + 10
+        while j.down is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert j.down and "cannot connect to PostgreSQL" in j.down
+        time.sleep(0.2)
+        assert j.is_alive() and len(j.ops) == 1  # kept, to be written when it is back
+    finally:
+        with j.cond:
+            j._halt = True
+            j.cond.notify_all()
+        j.join(5)

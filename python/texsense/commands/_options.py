@@ -174,6 +174,7 @@ RANGES: dict[str, Range] = {
     "--turn-every": _MINUTES,
     "--virtual-mats": Range(0, 1000),
     "--refuse-after": Range(0.0, 86400.0, lo_open=True),
+    "--stale-after": Range(0.0, 3600.0),  # s: the station's floor before a mat is stale
     "--virtual-beds": Range(0, 500),  # at most every second one of --virtual-mats
     "--checkpoint-every": Range(0.0, 3600.0, lo_open=True),  # a group's checkpoints, s
     "simulate --count": Range(1, 1000),  # simulate mats: as many as --virtual-mats

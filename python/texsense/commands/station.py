@@ -80,6 +80,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mat-credentials", type=Path, default=Path("mat-credentials.toml"),
                    metavar="FILE", help="own broker: the MQTT mats' passwords, made when "
                    "missing (mode 0600; default mat-credentials.toml)")  # fmt: skip
+    p.add_argument("--stale-after", type=float, default=0.0, metavar="S",
+                   help="a mat is stale after two of its frame periods without a frame, and "
+                   "not before S s (default 0: no floor; a floor for jittery links or a "
+                   "loaded machine)")  # fmt: skip
     p.add_argument("--refuse-after", type=float, default=10.0, metavar="S",
                    help="refuse a mat whose frames have had another element count for this "
                    "long (and 10 messages in a row; default 10 s)")  # fmt: skip
@@ -356,7 +360,8 @@ def group_station(
     station = GroupStation(url, mats, group=args.group, member=member, db=args.db,
                            page=f"http://{host}:{args.port}/", topic=args.mats,
                            record_dir=args.record_dir, checkpoint_s=args.checkpoint_every,
-                           refuse_after_s=args.refuse_after, token=token)  # fmt: skip
+                           min_stale_s=args.stale_after, refuse_after_s=args.refuse_after,
+                           token=token)  # fmt: skip
     print(f"texsense station: member {member!r} of the group {args.group!r}", flush=True)
     return station
 
@@ -404,7 +409,8 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
         station: Station = group_station(args, url, mats, access.token)
     else:
         station = Station(url, mats, topic=args.mats, store=open_store(args.db),
-                          record_dir=args.record_dir, refuse_after_s=args.refuse_after)  # fmt: skip
+                          record_dir=args.record_dir, min_stale_s=args.stale_after,
+                          refuse_after_s=args.refuse_after)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]
     print(f"texsense station: {len(mats)} mats -> {page_url(args, access.token)}", flush=True)
     stopped: int | None = serve_ward(station, host=args.host, port=args.port, access=access,

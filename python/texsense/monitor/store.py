@@ -147,6 +147,10 @@ CREATE INDEX IF NOT EXISTS events_session ON events(session);
 """
 
 
+#: The lock (``pg_advisory_xact_lock``) under which the event store's tables are made.
+PG_SCHEMA_LOCK = 0x74657875  # "texu"
+
+
 class PostgresEventStore(EventStore):
     """The same store on a PostgreSQL server (``postgresql://user:password@host/db``), with
     psycopg 3; the tables are created when missing. For a ward whose events several systems
@@ -165,7 +169,12 @@ class PostgresEventStore(EventStore):
             raise ParameterError(f"cannot connect to PostgreSQL at {where}: {e}") from None
 
     def _init_schema(self) -> None:
-        with self._lock:
+        """The tables, once however many stations start at the same time: ``IF NOT EXISTS``
+        alone is not safe against a concurrent creation (two stations of a group started
+        together: "duplicate key ... pg_class_relname_nsp_index"), so under a lock of the
+        server held to the end of the transaction."""
+        with self._lock, self._db.transaction():
+            self._db.execute("SELECT pg_advisory_xact_lock(%s)", (PG_SCHEMA_LOCK,))
             for statement in filter(str.strip, _PG_SCHEMA.split(";")):
                 self._db.execute(statement)
 

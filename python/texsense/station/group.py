@@ -12,7 +12,7 @@ its mats that changed, once a second, in one message per 200 kB to
 ``<prefix>/_group/<group>/<member>`` (a mat id never starts with ``_``), and reads the
 others'. A mat is shown with the member that holds it; a mat that no alive member holds is
 shown as *unwatched* (red, on top of the ward), and one whose holder has sent no word for
-:data:`SILENT_S` as stale.
+:data:`~texsense.station.group_view.SILENT_S` as stale.
 """
 
 from __future__ import annotations
@@ -35,8 +35,9 @@ from texsense.exceptions import ParameterError
 from texsense.monitor.store import PostgresEventStore
 from texsense.station import checkpoint
 from texsense.station.broker import BrokerURL, mat_topic
+from texsense.station.group_view import Elsewhere, GroupMatEntry
 from texsense.station.lease import BEAT_S, LEASE_S, Grant, Journal, Membership, View
-from texsense.station.ward import URGENCY, MatConfig, MatEntry, Station, mat_id_of
+from texsense.station.ward import MatConfig, MatEntry, Station, mat_id_of
 
 __all__ = ["GroupMatEntry", "GroupStation", "GroupStore", "ward_digest"]
 
@@ -46,12 +47,8 @@ log = logging.getLogger("texsense.station")
 TILE_S = 1.0
 #: A message of tiles holds at most this many bytes (a site broker's packet limit is 256 kB).
 TILE_BATCH_BYTES = 200_000
-#: A mat whose holder has sent no word of it for this long is shown stale, s.
-SILENT_S = 5.0
 #: The sensor's state (the ``rarely`` parts) goes with every this many checkpoints.
 SENSOR_EVERY = 15
-#: The ward page's order for a mat nobody watches: above an alert.
-UNWATCHED = 5
 #: First full checkpoints (the sensor's state) of mats just taken, at most this many a second
 #: (a member that takes 300 mats does not copy 300 pipelines in one turn of its loop).
 FULL_PER_S = 20.0
@@ -105,72 +102,6 @@ def _restored(entry: MatEntry, g: Grant) -> dict[str, Any]:
     return {"checkpoint_from": g.source, "checkpoint_age_s": round(g.age_s or 0, 2),
             "parts": info["parts"], "refused": info["refused"],
             "events_after": replayed}  # fmt: skip
-
-
-class GroupMatEntry(MatEntry):
-    """A mat of a group: processed here while held, else shown from its holder's tiles."""
-
-    held = False
-    group: GroupStation
-
-    def remote(self) -> tuple[dict[str, Any] | None, str | None, float]:
-        """The holder's latest tile of this mat (parsed), its text, and when it came."""
-        return self.group.remote_tile(self.id)
-
-    def _away(self) -> tuple[dict[str, Any], str]:
-        """The mat as shown when another member holds it, or nobody."""
-        tile, text, wall = self.remote()
-        holder = self.group.view.holders.get(self.id) if self.group.view else None
-        url = self.group.member_url(holder)
-        now = time.time()
-        if holder is None:
-            base = dict(tile or self._blank())
-            since = self.group.unwatched_since(self.id)
-            problem = f"no station watches this mat (for {now - since:.0f} s)"
-            base.update(state="unwatched", urgency=UNWATCHED, holder=None, holder_url=None,
-                        problem=problem)  # fmt: skip
-            return base, ""
-        if tile is None or tile.get("holder") != holder or now - wall > SILENT_S:
-            base = dict(tile or self._blank())
-            base.update(state="stale", urgency=URGENCY["stale"], holder=holder, holder_url=url,
-                        problem=f"no word from {holder} for {now - wall:.0f} s"
-                        if tile is not None else f"waiting for word from {holder}")  # fmt: skip
-            return base, ""
-        return tile, text or ""
-
-    def _blank(self) -> dict[str, Any]:
-        return {"id": self.id, "source": self.config.source, "quantity": self.config.quantity,
-                "elements": self.config.layout.n_elements, "frames": 0, "messages": 0,
-                "malformed": 0, "skipped": 0, "failed": 0, "ignored": 0, "last_error": None,
-                "problem": None, "last_frame_wall": None, "period_s": None, "refused": None,
-                "occupied": False, "minutes_since_reposition": 0.0, "alert": None,
-                "bed": None, "map": None}  # fmt: skip
-
-    def view_state(self) -> tuple[str, int]:
-        if self.held:
-            return super().view_state()
-        tile, _ = self._away()
-        return str(tile["state"]), int(tile["urgency"])
-
-    def status(self) -> dict[str, Any]:
-        if self.held:
-            return {**super().status(), "holder": self.group.member, "holder_url": self.group.page}
-        tile, _ = self._away()
-        return {k: v for k, v in tile.items() if k != "map"}
-
-    def summary(self, now: float) -> dict[str, Any]:
-        if self.held:
-            return super().summary(now)
-        return {**self.status(), "pressure": None, "seconds_since_frame": None}
-
-    def tile(self) -> str:
-        if self.held:
-            return super().tile()
-        tile, text = self._away()
-        return text or json.dumps(tile, separators=(",", ":"))
-
-    def check(self, now: float) -> bool:
-        return super().check(now) if self.held else False
 
 
 class GroupStation(Station):
@@ -275,6 +206,8 @@ class GroupStation(Station):
         """Mats this member now holds: each is restored (its checkpoint, the events after
         it) in the worker thread while the event loop goes on with the others, then held
         (:meth:`_hold`)."""
+        if self._stopping:  # the station stops: the leases lapse, the others take them
+            return
         for g in grants:
             self._restoring[g.mat] = g.epoch
             self.journal.adopt(g.session, g.last_event)
@@ -541,6 +474,7 @@ class GroupStation(Station):
     def stop(self) -> None:
         """Hand every held mat over (a last checkpoint each, the leases released), say that
         this member left, then stop as a station does (the sessions go on elsewhere)."""
+        self._stopping = True  # no more grants
         held = dict(self.held)
         for m in self._unhold(list(held)):
             self._write(m, held[m], rarely=True, release=True)
@@ -604,36 +538,3 @@ class GroupStation(Station):
             "unwatched": sum(1 for h in (view.holders.values() if view else []) if h is None),
             "database": self.membership.down or self.journal.down,
         }
-
-
-class Elsewhere:
-    """ASGI middleware: the dashboard of a mat held by another member is that member's
-    (``307`` to the same path there); of a mat nobody watches, ``503`` saying so."""
-
-    def __init__(self, app: Any, station: GroupStation) -> None:
-        self.app, self.station = app, station
-
-    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
-        path = scope.get("path", "")
-        parts = path.split("/")
-        mat = parts[2] if scope["type"] in ("http", "websocket") and len(parts) > 2 and \
-            parts[1] == "mats" else None  # fmt: skip
-        if mat is None or mat not in self.station.mats or mat in self.station.held:
-            await self.app(scope, receive, send)
-            return
-        holder, url = self.station.holder_of(mat)
-        why = f"no station watches mat {mat} at the moment"
-        if holder == self.station.member:  # its state is being restored here
-            holder, url, why = None, None, f"mat {mat} is being taken over here; try again"
-        if scope["type"] == "websocket":
-            await send({"type": "websocket.close", "code": 4307 if holder else 4503})
-            return
-        if holder is not None and url is not None:
-            query = scope.get("query_string", b"").decode()
-            where = url.rstrip("/") + path + (f"?{query}" if query else "")
-            status, headers, body = 307, [(b"location", where.encode())], b""
-        else:
-            status, headers = 503, [(b"content-type", b"text/plain; charset=utf-8")]
-            body = why.encode()
-        await send({"type": "http.response.start", "status": status, "headers": headers})
-        await send({"type": "http.response.body", "body": body})

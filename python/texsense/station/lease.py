@@ -604,7 +604,7 @@ class Journal(threading.Thread):
                 if self.down is not None:
                     log.warning("the journal writes to PostgreSQL again")
                 self.down = None
-            except psycopg.Error as e:
+            except (psycopg.Error, ParameterError) as e:  # ParameterError: cannot connect
                 self._failed(e, batch)
                 continue
             finally:

@@ -342,6 +342,8 @@ class MatEntry:
             "refused": self.refused,
             "occupied": bool(stats and (stats["load_N"] or 0.0) > 5.0),  # null: no calibration
             "minutes_since_reposition": round(float(np.max(exposure, initial=0.0)) / 60.0, 1),
+            "exposure_s": round(float(np.max(exposure, initial=0.0)), 1),  # the same, finer
+            "frame_t": self.monitor.clock.last_t,  # the time of the frame it is at (its clock)
             # what the tile says: "above 32 mmHg for 8.6 min", "peak 45 mmHg"
             "threshold_mmhg": round(self.monitor.tracker.threshold_ncm2 * mmhg, 1),
             "peak_mmhg": None if peak is None else round(peak * mmhg, 1),
