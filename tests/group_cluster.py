@@ -37,7 +37,7 @@ class Cluster:
 
     def __init__(self, folder: Path, members: list[str], mats: int, *, speed: float = 1.0,
                  reposition_min: float = 20.0, beds: int = 0,
-                 extra: tuple[str, ...] = ()) -> None:  # fmt: skip
+                 extra: tuple[str, ...] = (), publish: bool = True) -> None:  # fmt: skip
         self.folder, self.mats, self.speed = folder, mats, speed
         self.extra = ("--reposition-min", str(reposition_min), "--virtual-beds", str(beds),
                       "--virtual-calibrations", str(folder / "calibrations"),
@@ -49,12 +49,20 @@ class Cluster:
         self.broker = Broker()
         self.broker.start()
         self.broker_url = f"mqtt://127.0.0.1:{self.broker.port}"
-        self.publisher = self._spawn("simulate", ["simulate", "mats", "--count", str(mats),
-                                                  "--broker", self.broker_url,
-                                                  "--speed", str(speed),
-                                                  "--beds", str(beds)])  # fmt: skip
+        self.beds = beds
+        self.publisher: subprocess.Popen[bytes] | None = None
+        if publish:
+            self.publish()
         for m in members:
             self.start(m)
+
+    def publish(self) -> None:
+        """Start `texsense simulate mats` (``publish=False``: the stations can be started
+        first, so that all of them read the mats from their first frame)."""
+        self.publisher = self._spawn("simulate", ["simulate", "mats", "--count", str(self.mats),
+                                                  "--broker", self.broker_url,
+                                                  "--speed", str(self.speed),
+                                                  "--beds", str(self.beds)])  # fmt: skip
 
     def _spawn(self, name: str, args: list[str]) -> subprocess.Popen[bytes]:
         with (self.folder / f"{name}.log").open("ab") as out:
@@ -134,10 +142,11 @@ class Cluster:
         return path.read_text(errors="replace") if path.exists() else ""
 
     def close(self) -> None:
-        for proc in [*self.procs.values(), self.publisher]:
+        procs = [*self.procs.values(), *([self.publisher] if self.publisher else [])]
+        for proc in procs:
             with contextlib.suppress(ProcessLookupError):
                 proc.send_signal(signal.SIGTERM)
-        for proc in [*self.procs.values(), self.publisher]:
+        for proc in procs:
             try:
                 proc.wait(timeout=15)
             except subprocess.TimeoutExpired:
