@@ -109,7 +109,9 @@ def test_virtual_mats_through_the_broker(broker, station):
     st = station(
         "--virtual-mats", "3", "--speed", "8", "--broker", f"mqtt://127.0.0.1:{broker.port}"
     )
-    first = st.until(st.mats, lambda m: len(m) == 3 and all(v["frames"] >= 3 for v in m.values()))
+    # the start calibrates the virtual seat and bed: 30 s at a load average of 16
+    first = st.until(st.mats, lambda m: len(m) == 3 and all(v["frames"] >= 3 for v in m.values()),
+                     120)  # fmt: skip
     later = st.until(st.mats, lambda m: all(m[k]["frames"] > first[k]["frames"] + 3 for k in first))
     assert set(later) == {"vmat-01", "vmat-02", "vmat-03"}
     assert all(m["state"] == "live" and m["malformed"] == 0 for m in later.values())
