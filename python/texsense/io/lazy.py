@@ -48,9 +48,10 @@ __all__ = ["CACHE", "CACHE_SHARE", "FrameCache", "LazyRecording", "open_recordin
 
 #: The share of the memory budget that the cache of frames may hold.
 CACHE_SHARE = 0.25
-#: Bytes per frame a player holds besides the labels: the times, and what a review computes
-#: per frame (load, peak, contact area, centre of force, wall clock, usable).
-TIMELINE_BYTES = 96
+#: Bytes per frame a player holds besides the labels: the times, what a review computes per
+#: frame (load, peak, contact area, centre of force, wall clock, usable: 96 bytes) and the
+#: page's copy of the times while it is sent (a number in JSON and as a Python float).
+TIMELINE_BYTES = 160
 #: Frames of times and labels read at a time while opening.
 _TIMELINE_BLOCK = 1 << 16
 #: A cache block holds at most this share of the cache (a seek reads one or two blocks).

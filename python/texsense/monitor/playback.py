@@ -371,7 +371,11 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
     except ParameterError as e:
         raise _status_of(e) from None
     save_rois(path, rois)
-    return {"rois": rois, "stats": await folder.lane.run(_roi_stats, review, rois)}
+    try:  # a recording read on demand: a damaged chunk is said, not a 500
+        stats_ = await folder.lane.run(_roi_stats, review, rois)
+    except (FormatError, ParameterError) as e:
+        raise _status_of(e) from None
+    return {"rois": rois, "stats": stats_}
 
 
 def _report_path(folder: _Folder, name: str, format: str) -> Path:
@@ -430,7 +434,10 @@ def playback_router(monitor: Monitor) -> APIRouter:
         """Frame ``i``: its time, values (N/cm² for pressure; null: no value), the elements
         whose values are repairs, and the bounds of a recording that has them."""
         path, review = await folder.review_of(name)
-        out = _frame(review, i)
+        try:  # read on demand: a damaged chunk is a 422 naming the file
+            out = _frame(review, i)
+        except (FormatError, ParameterError) as e:
+            raise _status_of(e) from None
         if review.pressure and path.suffix.lower() in (".h5", ".hdf5"):
             from texsense.io.hdf5 import read_bounds
 
