@@ -95,6 +95,13 @@ class Review:
     notes: list[str] = field(default_factory=list)
 
     @property
+    def on_demand(self) -> bool:
+        """True when the frames are read as they are needed (:mod:`texsense.io.lazy`)."""
+        from texsense.io import LazyRecording
+
+        return isinstance(self.rec, LazyRecording)
+
+    @property
     def pressure(self) -> bool:
         """True when the recording holds pressure."""
         return self.rec.quantity == "pressure"
@@ -262,8 +269,7 @@ def open_review(
         Read a texsense HDF5 recording's frames when they are needed, not whole
         (:mod:`texsense.io.lazy`: any length plays; other formats are read whole).
     """
-    from texsense.io import load
-    from texsense.io.lazy import open_recording
+    from texsense.io import load, open_recording
 
     if isinstance(source, Recording):
         original = source
@@ -313,7 +319,7 @@ def open_review(
 def _repairs_and_bounds(review: Review, original: Recording, path: str | Path | None) -> None:
     """Where the review's readings are repairs and, for an HDF5 file read whole, its bounds
     (a recording read on demand keeps neither: they are read with each frame)."""
-    from texsense.io.lazy import LazyRecording
+    from texsense.io import LazyRecording
 
     if isinstance(original, LazyRecording):
         if review.pressure:  # its repairs: read with each frame (Review.repaired_at)
@@ -370,7 +376,7 @@ def _oriented(rec: Recording) -> Recording:
         layout = rec.layout.with_orientation(edges or None)
     except ParameterError:
         return rec  # a mangled declaration: the map says what orientation_of finds
-    from texsense.io.lazy import LazyRecording
+    from texsense.io import LazyRecording
 
     if isinstance(rec, LazyRecording):
         return rec.with_layout(layout)
@@ -383,7 +389,7 @@ def _with_repairs(rec: Recording) -> Recording:
     process`` flag a repaired element invalid but keep its estimate (eq. 6.14), and the live
     map, statistics and alerts use that estimate; the report and playback do the same.
     Other quantities keep their flags."""
-    from texsense.io.lazy import LazyRecording
+    from texsense.io import LazyRecording
 
     if rec.quantity != "pressure":
         return rec

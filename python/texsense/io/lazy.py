@@ -2,7 +2,8 @@
 budget, opened as a :class:`~texsense.Recording` whose frames stay in the file until they are
 indexed (what the monitor's playback plays, docs/monitor.md "Playback").
 
-:func:`open_recording` opens a texsense recording (``.h5``) as a :class:`LazyRecording`: its
+:func:`texsense.io.open_recording` opens a texsense recording (``.h5``) as a
+:class:`LazyRecording`: its
 header, its times and its labels are read (one per frame: the timeline a player needs), its
 frames and validity are not. ``rec.frames[i]``, ``rec.frames[a:b]``, ``rec.select(...)`` read
 the frames asked for (HDF5 reads the chunks that hold them) with the reader's own checks
@@ -14,13 +15,13 @@ file and checked against the budget first. What needs all frames at once
 refuses in one line naming the file otherwise.
 
 The text formats (Tekscan, XSENSOR, pliance, CSV, PMD) are read from their start only: for
-them :func:`open_recording` reads the whole file, within the budget (one line refuses a file
-beyond it).
+them :func:`texsense.io.open_recording` reads the whole file, within the budget (one line
+refuses a file beyond it).
 
 Examples
 --------
 >>> import numpy as np, texsense
->>> from texsense.io.lazy import open_recording
+>>> from texsense.io import open_recording
 >>> path = texsense.Recording(np.arange(12.0).reshape(4, 3), [0, 1, 2, 3],
 ...                           texsense.Layout.grid(1, 3)).save(getfixture("tmp_path") / "a.h5")
 >>> rec = open_recording(path)
@@ -44,7 +45,7 @@ from texsense.data.recording import Recording
 from texsense.exceptions import FormatError
 from texsense.io._base import Piece
 
-__all__ = ["CACHE", "CACHE_SHARE", "FrameCache", "LazyRecording", "open_recording"]
+__all__ = ["CACHE", "CACHE_SHARE", "FrameCache", "LazyRecording"]
 
 #: The share of the memory budget that the cache of frames may hold.
 CACHE_SHARE = 0.25
@@ -321,14 +322,3 @@ class LazyRecording(Recording):
     def close(self) -> None:
         """Close the file and forget the cached frames (they are read again if asked for)."""
         self._source.close()
-
-
-def open_recording(path: str | Path) -> Recording:
-    """A recording to play: a texsense HDF5 recording as a :class:`LazyRecording` (any
-    length), any other format read whole (within the memory budget: a file beyond it is
-    refused in one line, since text formats are read from their start only)."""
-    from texsense.io import load, sniff_format
-
-    if sniff_format(path) == "hdf5":
-        return LazyRecording.open(path)
-    return load(path)

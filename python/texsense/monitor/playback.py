@@ -64,7 +64,6 @@ from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.data import budget, units
 from texsense.data.files import check_regular, make_folder, real_path, regular_files
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
-from texsense.io.lazy import LazyRecording
 from texsense.monitor.web import Lane
 
 if TYPE_CHECKING:
@@ -136,7 +135,7 @@ class _Reviews:
 
     def get(self, path: Path) -> Review:
         from texsense.apps.review import open_review
-        from texsense.io.lazy import open_recording
+        from texsense.io import open_recording
 
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
@@ -391,7 +390,7 @@ async def _make_report(folder: _Folder, name: str, format: str) -> Any:
         rois = load_rois(path)
         make_folder(out.parent, "reports folder")
         # a recording read on demand is read whole for its report, within the memory budget
-        source = path if isinstance(review.rec, LazyRecording) else review.rec
+        source = path if review.on_demand else review.rec
         await folder.lane.run(write_report, source, out, name=path.name, rois=rois)
     except (FormatError, ParameterError, UnitError) as e:
         raise _status_of(e) from None
