@@ -15,13 +15,20 @@ ground truth that these workflows and the compensation are graded against.
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import logging
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 
 from texsense.compensation.drift import DriftModel, split_steps
 from texsense.compensation.pipeline import Pipeline
-from texsense.compensation.stages import Drift, Hysteresis, StageChain
+from texsense.compensation.stages import Drift, Hysteresis, StageChain, load_chain
+from texsense.data.files import cache_folder
 from texsense.data.recording import Recording
-from texsense.exceptions import ParameterError
+from texsense.exceptions import FormatError, ParameterError, WriteError
 from texsense.sensor.materials import PRESETS
 from texsense.sim import protocols
 from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
@@ -113,18 +120,58 @@ def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChai
     return calibrate_mat(record, base, uni, 1.0, 3.0, steps=steps)
 
 
+@functools.cache
+def code_digest() -> str:
+    """A digest of this texsense's code (every Python file of the package and the compiled
+    core): a virtual mat's calibration cached by one version is read by that version only."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted([*root.rglob("*.py"), *root.glob("_core*.so"), *root.glob("_core*.pyd")]):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _cached(name: str, fit: Callable[[], StageChain]) -> StageChain:
+    """The calibration ``fit()`` makes (seconds of Preisach identification, the same every
+    time for the same code), read from the cache (:func:`texsense.data.files.cache_folder`)
+    when this version of the code made it before; a cache that cannot be read is fitted
+    again and a cache that cannot be written is skipped, each said in the log."""
+    path = cache_folder() / f"calibration-{name}-{code_digest()}.json"
+    log = logging.getLogger("texsense.calibration")
+    if path.is_file():
+        try:
+            return load_chain(path)
+        except FormatError as e:
+            log.warning("fitting again: %s", e)
+    chain = fit()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        chain.save(path)
+    except (OSError, WriteError) as e:
+        log.warning("not cached (%s): %s", path, e)
+    return chain
+
+
 def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> StageChain:
     """Calibrate the virtual seat as a user would (docs/pipeline.md): zeroing + 1 N/cm²
     equilibration of a mat with the same ``mat_seed`` (the same elements), the spacer model
     from a test-machine record of another specimen (``material_seed``) with γ from its held
-    steps."""
-    return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
+    steps. Cached (:func:`_cached`)."""
+    return _cached(
+        f"seat-{mat_seed}-{material_seed}",
+        lambda: calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed),
+    )
 
 
 def bed_calibration(material_seed: int = 11) -> StageChain:
     """Calibrate the virtual 64 x 32 bed mat (:class:`texsense.monitor.virtual.VirtualBedSource`
-    and the station's virtual beds: the same physical mat) as a user would."""
-    return calibrate_virtual_mat(bed_mat(failures=False), material_seed)
+    and the station's virtual beds: the same physical mat) as a user would. Cached
+    (:func:`_cached`)."""
+    return _cached(
+        f"bed-{material_seed}",
+        lambda: calibrate_virtual_mat(bed_mat(failures=False), material_seed),
+    )
 
 
 def strip_calibration(seed: int = 0, material_seed: int = 11) -> StageChain:
