@@ -1,15 +1,19 @@
 """How long the ward page takes to show its mats when the station is busy (issue 33: under
-20 virtual mats at 10x the page said "connecting…" for about 16 s).
+20 virtual mats at 10x the page said "connecting…" for about 16 s, and later showed 17 of 20
+tiles "no data").
 
 A real ``texsense station --virtual-mats 20 --speed 10`` (its own broker; the mats simulated
-in the same process, as on a test ward) is started and given time to get going; then the ward
-page is opened in Debian's headless Chromium (Playwright) ``--opens`` times, and the time from
-the request to the first tile drawn and to all 20 is taken. The baseline of the same run is a
-quiet station (one virtual seat at 1x): what the machine and Chromium take anyway. With
-``--before DIR`` the busy station of another checkout is measured too (its ``python`` folder
-first on PYTHONPATH), e.g. the commit before the station drained its messages in slices.
+in a process of their own, as on a test ward) is started and given time to get going; then the
+ward page is opened in Debian's headless Chromium (Playwright) ``--opens`` times, and the time
+from the request to the first tile drawn, to all 20, and to every tile showing data (live,
+alert or acknowledged: none "waiting" or "no data") is taken. The baseline of the same run is
+a quiet station (one virtual seat at 1x): what the machine and Chromium take anyway. Beside
+it, what the stations did meanwhile (``GET /api/ward``): messages received and frames
+processed per second, frames skipped to keep up, how far behind they read, and the age of the
+tiles' data. With ``--before DIR`` the busy station of another checkout is measured too (its
+``python`` folder first on PYTHONPATH).
 
-    .venv/bin/python benchmarks/ward_open.py --before /tmp/before
+    .venv/bin/python benchmarks/ward_open.py --screenshot /tmp/ward.png
 """
 
 from __future__ import annotations
@@ -38,6 +42,18 @@ def free_port() -> int:
 def mats(url: str) -> list[dict]:
     with urllib.request.urlopen(url + "api/mats", timeout=30) as r:
         return list(json.load(r))
+
+
+def ward(url: str) -> dict:
+    with urllib.request.urlopen(url + "api/ward", timeout=30) as r:
+        return dict(json.load(r))
+
+
+#: Every tile on the page shows data: none waiting for its first frame or without data.
+ALL_SHOW_DATA = (
+    "n => { const t = [...document.querySelectorAll('.tile')]; return t.length >= n && "
+    "t.every(e => ['live', 'alert', 'acknowledged'].includes(e.dataset.state)); }"
+)
 
 
 def measure(
@@ -73,7 +89,8 @@ def measure(
             assert proc.poll() is None and time.monotonic() < deadline, "the station did not start"
             time.sleep(1.0)
         time.sleep(warm_s)
-        first, every = [], []
+        w0, t_w0 = ward(url), time.monotonic()
+        first, every, data, ages, behind, shown = [], [], [], [], [], []
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
             for _ in range(opens):
@@ -85,13 +102,24 @@ def measure(
                 page.wait_for_function(f"document.querySelectorAll('.tile').length >= {n_mats}",
                                        timeout=120_000)  # fmt: skip
                 every.append(time.monotonic() - t0)
+                page.wait_for_function(ALL_SHOW_DATA, arg=n_mats, timeout=120_000)
+                data.append(time.monotonic() - t0)
+                w = ward(url)
+                behind.append(w.get("behind_s", 0.0))
+                ages += [w["wall"] - m["last_frame_wall"] for m in w["mats"]]
                 if screenshot is not None:
                     page.wait_for_timeout(1500)
                     page.screenshot(path=str(screenshot))
+                    states = page.eval_on_selector_all(".tile", "t => t.map(e => e.dataset.state)")
+                    shown.append(sum(s in ("live", "alert", "acknowledged") for s in states))
                 page.close()
                 time.sleep(2.0)
             browser.close()
-        return {"first": first, "every": every}
+        w1, span = ward(url), time.monotonic() - t_w0
+        count = {k: sum(m.get(k, 0) for m in w1["mats"]) - sum(m.get(k, 0) for m in w0["mats"])
+                 for k in ("messages", "frames", "behind")}  # fmt: skip
+        return {"first": first, "every": every, "data": data, "ages": ages, "behind": behind,
+                "shown": shown, "rates": {k: v / span for k, v in count.items()}}  # fmt: skip
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -116,11 +144,10 @@ def main() -> None:
     load = os.getloadavg()[0]
     print(f"the ward page opened {args.opens} times per station; load average {load:.1f} on "
           f"{os.cpu_count()} cores\n")  # fmt: skip
-    print(
-        "| station | first tile: median | max | all tiles: median | max | first tile / baseline |"
-    )
-    print("|---|---:|---:|---:|---:|---:|")
-    base = None
+    print("| station | first tile: median | max | all tiles: median | max | every tile showing "
+          "data: median | max | first tile / baseline |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    base, load = None, []
     for k, (name, path, n, speed) in enumerate(runs):
         shot = args.screenshot if k == 1 else None
         r = measure(path, n, speed, args.opens, args.warm_s, shot)
@@ -128,7 +155,22 @@ def main() -> None:
         base = base or first
         print(f"| {name} | {first:.2f} s | {max(r['first']):.2f} s | "
               f"{statistics.median(r['every']):.2f} s | {max(r['every']):.2f} s | "
+              f"{statistics.median(r['data']):.2f} s | {max(r['data']):.2f} s | "
               f"{first / base:.1f} |", flush=True)  # fmt: skip
+        load.append((name, r))
+    print("\n| station | messages received/s | frames processed/s | skipped to keep up/s | "
+          "read behind: median | max | tiles' data age: median | max |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    for name, r in load:
+        q, a = r["rates"], r["ages"]
+        print(f"| {name} | {q['messages']:.1f} | {q['frames']:.1f} | {q['behind']:.1f} | "
+              f"{statistics.median(r['behind']):.2f} s | {max(r['behind']):.2f} s | "
+              f"{statistics.median(a):.1f} s | {max(a):.1f} s |")  # fmt: skip
+    if args.screenshot:
+        shown = load[1][1]["shown"]
+        print(f"\n{args.screenshot}: tiles showing data 1.5 s after they all did, per open: "
+              f"{shown} of {args.mats}")  # fmt: skip
+    print(f"\nload average after the run: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

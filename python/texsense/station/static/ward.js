@@ -125,7 +125,9 @@ function render(msg) {
   const alerts = all.filter((m) => m.state === "alert").length;
   const stale = all.filter((m) => m.state === "stale" || m.state === "refused").length;
   const unknown = h.unknown_topics ? ` · ${h.unknown_topics} unknown topic(s)` : "";
-  $("counts").textContent = `${all.length} mats · ${alerts} alert(s) · ${stale} without data${unknown}`;
+  // a station that cannot keep up reads the newest frames and skips older ones: said here
+  const busy = h.skipped ? ` · ${h.skipped} frames skipped to keep up (${h.behind_s.toFixed(1)} s behind)` : "";
+  $("counts").textContent = `${all.length} mats · ${alerts} alert(s) · ${stale} without data${unknown}${busy}`;
 }
 function connect() {
   const proto = location.protocol === "https:" ? "wss" : "ws";
