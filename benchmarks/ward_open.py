@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import socket
 import statistics
@@ -49,6 +50,8 @@ def ward(url: str) -> dict:
         return dict(json.load(r))
 
 
+#: How long to wait for every tile to show data, s.
+DATA_WAIT_S = 60.0
 #: Every tile on the page shows data: none waiting for its first frame or without data.
 ALL_SHOW_DATA = (
     "n => { const t = [...document.querySelectorAll('.tile')]; return t.length >= n && "
@@ -63,8 +66,10 @@ def measure(
     opens: int,
     warm_s: float,
     screenshot: Path | None = None,
+    extra: tuple[str, ...] = (),
 ) -> dict:
     """Start a station, let it run ``warm_s`` after every mat has sent, open the page."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
     from playwright.sync_api import sync_playwright
 
     port = free_port()
@@ -74,7 +79,7 @@ def measure(
     work = tempfile.mkdtemp(prefix="ward-open-")
     cmd = [sys.executable, "-m", "texsense.cli", "station", "--virtual-mats", str(n_mats),
            "--speed", str(speed), "--port", str(port), "--record-dir", work,
-           "--db", f"{work}/events.sqlite"]  # fmt: skip
+           "--db", f"{work}/events.sqlite", *extra]  # fmt: skip
     proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
     url = f"http://127.0.0.1:{port}/"
@@ -102,14 +107,17 @@ def measure(
                 page.wait_for_function(f"document.querySelectorAll('.tile').length >= {n_mats}",
                                        timeout=120_000)  # fmt: skip
                 every.append(time.monotonic() - t0)
-                page.wait_for_function(ALL_SHOW_DATA, arg=n_mats, timeout=120_000)
-                data.append(time.monotonic() - t0)
+                try:  # (the station before issue 33's fix never got there)
+                    page.wait_for_function(ALL_SHOW_DATA, arg=n_mats, timeout=DATA_WAIT_S * 1e3)
+                    data.append(time.monotonic() - t0)
+                except PlaywrightTimeout:
+                    data.append(math.inf)
                 w = ward(url)
                 behind.append(w.get("behind_s", 0.0))
-                ages += [w["wall"] - m["last_frame_wall"] for m in w["mats"]]
+                ages += [w["wall"] - m["last_frame_wall"] for m in w["mats"] if m["frames"]]
                 if screenshot is not None:
                     page.wait_for_timeout(1500)
-                    page.screenshot(path=str(screenshot))
+                    page.screenshot(path=str(screenshot), full_page=True)
                     states = page.eval_on_selector_all(".tile", "t => t.map(e => e.dataset.state)")
                     shown.append(sum(s in ("live", "alert", "acknowledged") for s in states))
                 page.close()
@@ -125,6 +133,10 @@ def measure(
         proc.wait(timeout=30)
 
 
+def seconds(s: float) -> str:
+    return f"{s:.2f} s" if math.isfinite(s) else f"never ({DATA_WAIT_S:g} s)"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", type=Path, help="another checkout (its python folder is used)")
@@ -133,6 +145,7 @@ def main() -> None:
     ap.add_argument("--opens", type=int, default=5)
     ap.add_argument("--warm-s", type=float, default=20.0)
     ap.add_argument("--screenshot", type=Path, help="save the busy ward page here (PNG)")
+    ap.add_argument("--turn-every", type=float, help="the busy station's --turn-every (min)")
     args = ap.parse_args()
     runs = [
         ("quiet: 1 mat at 1x (baseline)", None, 1, 1.0),
@@ -150,12 +163,13 @@ def main() -> None:
     base, load = None, []
     for k, (name, path, n, speed) in enumerate(runs):
         shot = args.screenshot if k == 1 else None
-        r = measure(path, n, speed, args.opens, args.warm_s, shot)
+        extra = ("--turn-every", f"{args.turn_every:g}") if args.turn_every and k else ()
+        r = measure(path, n, speed, args.opens, args.warm_s, shot, extra)
         first = statistics.median(r["first"])
         base = base or first
         print(f"| {name} | {first:.2f} s | {max(r['first']):.2f} s | "
               f"{statistics.median(r['every']):.2f} s | {max(r['every']):.2f} s | "
-              f"{statistics.median(r['data']):.2f} s | {max(r['data']):.2f} s | "
+              f"{seconds(statistics.median(r['data']))} | {seconds(max(r['data']))} | "
               f"{first / base:.1f} |", flush=True)  # fmt: skip
         load.append((name, r))
     print("\n| station | messages received/s | frames processed/s | skipped to keep up/s | "

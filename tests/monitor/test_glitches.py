@@ -248,6 +248,7 @@ def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatc
         monkeypatch.setattr(entry.monitor, "process", busy)
     sent = {"bed1": 0, "bed2": 0}
     lags: list[float] = []
+    ages: list[float] = []  # how old the frame each mat shows is
 
     async def run() -> None:
         inbox = st.open_inbox()
@@ -264,12 +265,15 @@ def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatc
         sender = threading.Thread(target=mats)
         sender.start()
         while sender.is_alive() or inbox.waiting:
-            lags.append(time.time() - inbox.read_until(time.time()))
+            now = time.time()
+            lags.append(now - inbox.read_until(now))
+            ages.extend(now - e.last_wall for e in st.mats.values() if e.last_wall is not None)
             await asyncio.sleep(0.01)
         watch.cancel()
 
     asyncio.run(run())
     assert max(lags) < 0.6, f"the station fell {max(lags):.2f} s behind"
+    assert max(ages) < 0.8, f"a mat showed a frame {max(ages):.2f} s old"
     assert not st.store.events(kind="stale"), "a mat that kept sending was called silent"
     for m, entry in st.mats.items():
         assert entry.state == "live" and entry.messages == sent[m] == 150
@@ -316,3 +320,51 @@ def test_a_busy_station_keeps_a_skipped_burst_on_the_clock_and_every_recorded_fr
     assert bed1.monitor.tracker.exposure_s.max() == pytest.approx(20.0)  # 0.5 N/cm² is above
     assert (bed2.behind, bed2.monitor.frames, recorder.seqs) == (0, 21, list(range(21)))
     assert bed1.messages == bed2.messages == 21
+
+
+def test_the_inbox_lets_pages_go_first_for_a_while():
+    """While a page is being served the inbox waits (each step of a request would otherwise
+    wait behind a slice of frames), but never more than max_defer_s at a time."""
+    from texsense.monitor.clock import Quiet
+    from texsense.station.inbox import Inbox
+
+    handled: list[float] = []
+    serving = [True]
+
+    async def run() -> None:
+        inbox = Inbox(asyncio.get_running_loop(), lambda *_a: handled.append(time.monotonic()),
+                      Quiet(logging.getLogger("test")), defer=lambda: serving[0],
+                      max_defer_s=0.3)  # fmt: skip
+        inbox.put("texsense/bed1/frames", b"{}")
+        await asyncio.sleep(0.1)
+        assert not handled  # a page is being served: the frame waits
+        serving[0] = False
+        await asyncio.sleep(0.05)
+        assert len(handled) == 1  # ... and is read once it is out
+        serving[0] = True
+        put = time.monotonic()
+        inbox.put("texsense/bed1/frames", b"{}")
+        while len(handled) < 2:
+            await asyncio.sleep(0.01)
+        assert 0.3 <= handled[1] - put < 1.0  # a page that takes long: read after 0.3 s
+
+    asyncio.run(run())
+
+
+def test_the_station_counts_the_pages_it_is_serving(monkeypatch):
+    """What the inbox waits for: a request while it is served, a viewer until its first
+    message (then it waits like the frames)."""
+    from fastapi.testclient import TestClient
+
+    from texsense.station.server import create_ward_app
+
+    st = station("bed1")
+    during: list[int] = []
+    real = st.ward
+    monkeypatch.setattr(st, "ward", lambda: during.append(st.serving) or real())
+    with TestClient(create_ward_app(st), base_url="http://127.0.0.1:8766") as client:
+        assert client.get("/api/ward").status_code == 200
+        with client.websocket_connect("ws://127.0.0.1:8766/ws/ward") as ws:
+            assert json.loads(ws.receive_text())["type"] == "ward"
+            assert st.serving == 0  # the viewer has its first message
+    assert during == [1] and st.serving == 0

@@ -463,6 +463,7 @@ class Station:
         self._client: Any = None
         self._stopping = False
         self._inbox: Inbox | None = None  # MQTT messages waiting for the loop
+        self.serving = 0  # page requests and new viewers being served (they go first)
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
@@ -534,7 +535,7 @@ class Station:
     def open_inbox(self) -> Inbox:
         """The inbox of MQTT messages, handled on the running event loop."""
         self._inbox = Inbox(asyncio.get_running_loop(), self.handle, self.quiet,
-                            skip=self.skip)  # fmt: skip
+                            skip=self.skip, defer=lambda: self.serving > 0)  # fmt: skip
         return self._inbox
 
     def skip(self, topic: str, payload: bytes, arrived: float) -> bool:

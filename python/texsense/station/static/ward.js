@@ -77,8 +77,10 @@ function tile(mat) {
     const line = el.querySelector(".bed-line"), b = mat.bed, now = b.turn_due || mat.state === "alert";
     line.hidden = false;
     line.classList.toggle("turn-due", now);
-    line.textContent = b.side === null ? "out of bed"
-      : `${b.side} for ${hm(b.since_turn_s)} · ${now ? "turn now" : `turn due in ${hm(b.due_in_s)}`}`;
+    // two parts that never break inside ("turn due in 1:56 h" whole on the next line)
+    const parts = b.side === null ? ["out of bed"]
+      : [`${b.side} for ${hm(b.since_turn_s)}`, now ? "turn now" : `turn due in ${hm(b.due_in_s)}`];
+    line.replaceChildren(...parts.map((text) => Object.assign(document.createElement("span"), { textContent: text })));
   }
   const trouble = mat.refused || mat.problem;
   if (trouble) {  // a refused mat, a missing or silent device: said on the tile
