@@ -367,4 +367,4 @@ def test_the_station_counts_the_pages_it_is_serving(monkeypatch):
         with client.websocket_connect("ws://127.0.0.1:8766/ws/ward") as ws:
             assert json.loads(ws.receive_text())["type"] == "ward"
             assert st.serving == 0  # the viewer has its first message
-    assert during == [1] and st.serving == 0
+    assert during == [1] and st.serving == 0 and st.served_at > 0  # pages first a while after

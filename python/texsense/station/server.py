@@ -116,6 +116,7 @@ class Serving:
             if counted[0]:
                 counted[0] = False
                 station.serving -= 1
+                station.served_at = time.monotonic()
 
         async def sending(message: dict[str, Any]) -> None:
             if message["type"] == "websocket.send":

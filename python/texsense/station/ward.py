@@ -78,6 +78,8 @@ log = logging.getLogger("texsense.station")
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
 #: Messages in a row with another element count, at least, before a mat is refused.
 REFUSE_AFTER_N = 10
+#: The inbox waits for pages this long after the last was served, s (:meth:`Station.pages_first`).
+PAGE_GRACE_S = 0.3
 #: Unknown topics kept at most (the least recently seen go first) ...
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
@@ -464,6 +466,7 @@ class Station:
         self._stopping = False
         self._inbox: Inbox | None = None  # MQTT messages waiting for the loop
         self.serving = 0  # page requests and new viewers being served (they go first)
+        self.served_at = -1e9  # when the last of them was served (monotonic s)
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
@@ -535,8 +538,13 @@ class Station:
     def open_inbox(self) -> Inbox:
         """The inbox of MQTT messages, handled on the running event loop."""
         self._inbox = Inbox(asyncio.get_running_loop(), self.handle, self.quiet,
-                            skip=self.skip, defer=lambda: self.serving > 0)  # fmt: skip
+                            skip=self.skip, defer=self.pages_first)  # fmt: skip
         return self._inbox
+
+    def pages_first(self) -> bool:
+        """Whether the inbox waits for pages: while one is served and :data:`PAGE_GRACE_S`
+        after (a page opens in a burst: the page, its scripts and styles, its WebSocket)."""
+        return self.serving > 0 or time.monotonic() - self.served_at < PAGE_GRACE_S
 
     def skip(self, topic: str, payload: bytes, arrived: float) -> bool:
         """Skip a message's processing (the station is behind and a newer one of its topic
