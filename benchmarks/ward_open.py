@@ -113,7 +113,7 @@ def measure(
                 except PlaywrightTimeout:
                     data.append(math.inf)
                 w = ward(url)
-                behind.append(w.get("behind_s", 0.0))
+                behind.append(w.get("behind_s", math.nan))  # (not said before issue 33)
                 ages += [w["wall"] - m["last_frame_wall"] for m in w["mats"] if m["frames"]]
                 if screenshot is not None:
                     page.wait_for_timeout(1500)
@@ -135,6 +135,10 @@ def measure(
 
 def seconds(s: float) -> str:
     return f"{s:.2f} s" if math.isfinite(s) else f"never ({DATA_WAIT_S:g} s)"
+
+
+def lag(s: float) -> str:
+    return "–" if math.isnan(s) else f"{s:.2f} s"
 
 
 def main() -> None:
@@ -178,7 +182,7 @@ def main() -> None:
     for name, r in load:
         q, a = r["rates"], r["ages"]
         print(f"| {name} | {q['messages']:.1f} | {q['frames']:.1f} | {q['behind']:.1f} | "
-              f"{statistics.median(r['behind']):.2f} s | {max(r['behind']):.2f} s | "
+              f"{lag(statistics.median(r['behind']))} | {lag(max(r['behind']))} | "
               f"{statistics.median(a):.1f} s | {max(a):.1f} s |")  # fmt: skip
     if args.screenshot:
         shown = load[1][1]["shown"]

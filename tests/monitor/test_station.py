@@ -302,7 +302,7 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         expect(alert.locator("button.ack")).to_be_visible()
         page.wait_for_timeout(400)
         shot = tmp_path / "ward.png"
-        page.screenshot(path=str(shot))
+        page.screenshot(path=str(shot), full_page=True)  # every tile, none cut off
         assert shot.stat().st_size > 20_000
         if os.environ.get("TEXSENSE_SCREENSHOT_WARD"):
             shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_WARD"])
