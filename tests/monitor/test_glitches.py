@@ -347,6 +347,11 @@ def test_the_inbox_lets_pages_go_first_for_a_while():
         while len(handled) < 2:
             await asyncio.sleep(0.01)
         assert 0.3 <= handled[1] - put < 1.0  # a page that takes long: read after 0.3 s
+        put = time.monotonic()
+        inbox.put("texsense/bed1/frames", b"{}")
+        while len(handled) < 3:
+            await asyncio.sleep(0.01)
+        assert handled[2] - put < 0.25  # ... and then read as long without waiting again
 
     asyncio.run(run())
 

@@ -162,7 +162,9 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
         pub.frame("bed2", 13, [0.2] * 16)
         pub.frame("bed1", 12, [0.5] * 16)
         m = st.until(st.mats, lambda m: m["bed1"]["malformed"] == 2 and read(m["bed2"]) == 13)
-        assert m["bed2"]["state"] == "live" and m["bed2"]["malformed"] == 1
+        # (not refused; stale soon after its last frame, which may have waited for the
+        # test's own requests: pages go first)
+        assert m["bed2"]["state"] in ("live", "stale") and m["bed2"]["malformed"] == 1
         # ... but a mat whose frames keep not fitting is refused; the others go on
         k = 14
         while st.mats()["bed2"]["state"] != "refused":  # refused after 1 s and 10 in a row

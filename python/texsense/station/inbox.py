@@ -15,7 +15,8 @@ mat being recorded keeps every frame (``skip`` says no). A full inbox (:data:`IN
 drops its oldest messages, counted and logged.
 
 Pages go first: while ``defer`` says a page request or a new viewer is being served, the
-inbox waits (at most :data:`MAX_DEFER_S` at a time, then one slice), since every step of a
+inbox waits (at most :data:`MAX_DEFER_S` at a time, and then it reads as long without waiting:
+pages polled without a pause get at most half of the loop), since every step of a
 request would otherwise wait behind a slice of at least one frame (issue 33: on a loaded
 machine a bed frame takes 0.1-0.2 s, and opening the ward page takes a dozen such steps).
 
@@ -75,6 +76,7 @@ class Inbox:
         self.slice_s, self.max_wait_s, self.size = slice_s, max_wait_s, size
         self.defer, self.max_defer_s = defer, max_defer_s
         self._deferred: float | None = None  # since when it has waited for pages
+        self._reading_until = 0.0  # after a wait: no waiting again before this (monotonic s)
         self.pending: dict[str, deque[tuple[bytes, float]]] = {}  # topic -> (payload, arrival)
         self.turns: deque[str] = deque()  # the topics with messages, in turn
         self.waiting = 0  # messages waiting
@@ -143,11 +145,12 @@ class Inbox:
         """(The loop.) Handle waiting messages for at most ``slice_s``, then let the loop
         serve the pages before the next slice."""
         start = time.monotonic()
-        if self.defer is not None and self.defer():
+        if self.defer is not None and start >= self._reading_until and self.defer():
             self._deferred = self._deferred or start
             if start - self._deferred < self.max_defer_s:
                 self.loop.call_later(DEFER_STEP_S, self._drain)
                 return
+            self._reading_until = start + self.max_defer_s  # as long as it waited
         self._deferred = None
         deadline = start + self.slice_s
         while time.monotonic() < deadline:
