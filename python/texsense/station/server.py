@@ -96,6 +96,39 @@ def _api(station: Station) -> APIRouter:
     return r
 
 
+class Serving:
+    """ASGI middleware: counts the HTTP requests being served and the WebSocket viewers until
+    their first message (``Station.serving``): the station's inbox waits for them
+    (:mod:`texsense.station.inbox`), so a page opens as fast on a busy station as on a quiet
+    one."""
+
+    def __init__(self, app: Any, station: Station) -> None:
+        self.app, self.station = app, station
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        station, counted = self.station, [True]
+        station.serving += 1
+
+        def release() -> None:
+            if counted[0]:
+                counted[0] = False
+                station.serving -= 1
+                station.served_at = time.monotonic()
+
+        async def sending(message: dict[str, Any]) -> None:
+            if message["type"] == "websocket.send":
+                release()  # a viewer's first message is out: it waits like the others now
+            await send(message)
+
+        try:
+            await self.app(scope, receive, sending if scope["type"] == "websocket" else send)
+        finally:
+            release()
+
+
 def create_ward_app(
     station: Station,
     *,
@@ -122,6 +155,7 @@ def create_ward_app(
     for mat_id, entry in station.mats.items():
         app.mount(f"/mats/{mat_id}", create_app(entry.monitor, run_source=False, guarded=False))
     app.add_middleware(Guard, access=access or Access(token))
+    app.add_middleware(Serving, station=station)  # outermost: counted from the first byte
     return app
 
 
