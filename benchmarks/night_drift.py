@@ -20,14 +20,16 @@
    pipeline's own time per frame (``Pipeline.step`` on the same stream, in the same run).
 
 ``--calibrate`` makes the conformal scores of :data:`texsense.compensation.intervals.SCORES`
-instead, on data the tables above do not judge: nights of seed 100 of every law and records of
-specimens 12 and 13; it prints the dictionary to paste into ``intervals.py``.
+(pooled) and ``BAND_SCORES`` (the mat's, per band of the value) instead, on data the tables
+above do not judge: nights of seed 100 of the ``--laws`` given (``textile-3mm iwan-6mm``; no
+``bouc-wen-6mm`` night of seed 100 was simulated) and records of specimens 12 and 13; it prints
+the dictionaries to paste into ``intervals.py``.
 
 Nights are simulated once into ``--cache`` (default ``~/.cache/texsense/nights``): a textile
 night takes ~5 min, a Bouc–Wen one ~6 min, an Iwan one ~25 min on this machine.
 
 Run:  .venv/bin/python benchmarks/night_drift.py [--seeds 0 1 2] [--laws ...] [--cache DIR]
-      .venv/bin/python benchmarks/night_drift.py --calibrate
+      .venv/bin/python benchmarks/night_drift.py --calibrate --laws textile-3mm iwan-6mm
 """
 
 from __future__ import annotations
