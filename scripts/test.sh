@@ -51,4 +51,7 @@ if [ "${#mcu_missing[@]}" -gt 0 ]; then
     say "${mcu_missing[*]} missing and apt-get is not available as root: the microcontroller tests that need them are skipped"
   fi
 fi
-say "pytest";                python -m pytest -q --durations=25 "$@"
+# two workers side by side (pytest-xdist; TEXSENSE_TEST_JOBS to change): much of a test's
+# time is waiting on a child process, a server or a browser. Grouped tests stay together.
+say "pytest";                python -m pytest -q --durations=25 \
+  -n "${TEXSENSE_TEST_JOBS:-2}" --dist loadgroup "$@"

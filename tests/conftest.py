@@ -33,6 +33,11 @@ _TOUR_CANCEL = pytest.StashKey[threading.Event]()
 #: The C builds of tests/test_mcu.py (host, arm), started in the background when collected.
 MCU_BUILDS: dict[str, concurrent.futures.Future] = {}
 
+#: Set in the workers of ``pytest -n N`` (pytest-xdist, as scripts/test.sh runs the suite):
+#: every worker collects every test, so nothing is started in the background at collection;
+#: each page of the tour runs in its test, the C builds in the first test that needs them.
+IN_WORKER = "PYTEST_XDIST_WORKER" in os.environ
+
 
 def _start_mcu_builds(session: pytest.Session) -> None:
     """Build the C ABI and its test program for the host and the Cortex-M4 (tests/mcu/
@@ -54,9 +59,12 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     """Start the selected pages of the tour (every console block of the docs, about 2 min
     of child processes) now, in the background: the other tests run meanwhile. The
     environment is this moment's (tests that change os.environ do not reach the tour).
-    Start the C builds of the microcontroller tests too."""
+    Start the C builds of the microcontroller tests too. Not in a worker of ``pytest -n``
+    (:data:`IN_WORKER`): there the workers run tests side by side already."""
     from tour import start_pages
 
+    if IN_WORKER:
+        return
     _start_mcu_builds(session)
     pages = [
         item.callspec.params["page"]

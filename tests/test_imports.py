@@ -235,7 +235,9 @@ def test_imports_inside_functions_are_justified():
     assert unjustified() == []
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["--version"], ["info", "--help"]])
+@pytest.mark.parametrize(
+    "argv", [["--help"], ["--version"], ["info", "--help"], ["process", "--help"]]
+)
 def test_the_command_line_loads_only_what_the_command_needs(argv):
     code = (
         "import json, sys\n"
@@ -257,6 +259,8 @@ def test_the_command_line_loads_only_what_the_command_needs(argv):
     heavy_loaded, commands, numpy_loaded = json.loads(line[len("LOADED ") :])
     if argv[0] == "info":  # the info command's module (and the readers it needs) only
         assert commands == ["texsense.commands.info"] and "sklearn" not in heavy_loaded, line
+    elif argv[0] == "process":  # the posture classifiers (scikit-learn) are not needed
+        assert "texsense.commands.pipeline" in commands and "sklearn" not in heavy_loaded, line
     else:
         assert heavy_loaded == [] and commands == [] and not numpy_loaded, line
 

@@ -4,7 +4,9 @@ built with gcc, on the host and on an emulated Cortex-M4 (QEMU mps2-an386), agai
 Python pipeline; the fault cases; the header is what cbindgen makes of the crate.
 
 The builds (tests/mcu/build.py) start in the background when this module is collected and
-are cached in target/mcu/ (``core`` and ``compiler_builtins`` once per compiler)."""
+are cached in target/mcu/ (``core`` and ``compiler_builtins`` once per compiler); under
+``pytest -n N`` the module's tests run in one worker (one build, no race on the cache), which
+builds at its first test."""
 
 from __future__ import annotations
 
@@ -26,6 +28,8 @@ from texsense.sim.seated import SEAT_FAILURES
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "mcu"))
 import build  # noqa: E402
+
+pytestmark = pytest.mark.xdist_group("mcu")
 
 #: float32 against float64, frame by frame over the whole session: |C - Python| <=
 #: RTOL |Python| + ATOL (N/cm²); docs/embedded.md "Accuracy" shows the measured errors

@@ -29,6 +29,7 @@ __all__ = [
     "__version__",
     "everett_terms",
     "mcu_blob_info",
+    "parse_row",
     "set_simd",
     "simd_path",
 ]
@@ -236,6 +237,9 @@ def simd_path() -> tuple[str, str]:
 
 def set_simd(enabled: bool) -> None:
     """Allow (True, the default) or forbid the SIMD kernels process-wide (same numbers)."""
+
+def parse_row(line: str, sep: str, expected: int) -> npt.NDArray[np.float32] | None:
+    """Exactly ``expected`` numbers separated by ``sep``, as float32, or None (the fast path)."""
 
 def everett_terms(inputs: _F64, u_min: float, u_max: float) -> tuple[_U64, _F64, _F64, _F64]:
     """The Everett terms (indptr, alpha, beta, coef) of every sample of an input history."""

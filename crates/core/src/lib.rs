@@ -19,7 +19,8 @@
 //! - [`par`]: the one parallel loop over blocks of elements;
 //! - [`simd`]: runtime choice between the scalar kernels and their AVX2 paths;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep);
-//! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep).
+//! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep);
+//! - [`text`]: rows of numbers in text files, the readers' fast path.
 
 pub mod bouc_wen;
 pub mod chain;
@@ -37,6 +38,7 @@ pub mod simd;
 mod snapshot;
 pub mod spacer;
 pub mod spacer_batch;
+pub mod text;
 pub mod topology;
 
 pub use bouc_wen::{BoucWenBank, BoucWenParams};

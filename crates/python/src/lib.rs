@@ -17,6 +17,7 @@ mod preisach;
 mod repair;
 mod simd;
 mod spacer;
+mod text;
 
 /// The compiled core of texsense.
 #[pymodule]
@@ -35,6 +36,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(chain::py_mcu_blob_info, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_set_simd, m)?)?;
+    m.add_function(wrap_pyfunction!(text::py_parse_row, m)?)?;
     let py = m.py();
     m.add("ShapeError", py.get_type::<errors::ShapeError>())?;
     m.add(

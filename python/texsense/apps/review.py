@@ -15,7 +15,11 @@ are the ones the monitor raised, at their wall-clock times, with the recomputed 
 not raise marked as such.
 
 Memory: the statistics are computed in blocks of frames, so a night of 27,000 frames of a
-2048-element mat needs a few blocks' worth, not a float64 copy of the whole recording.
+2048-element mat needs a few blocks' worth, not a float64 copy of the whole recording. With
+``on_demand=True`` (the monitor's playback) a texsense HDF5 recording is not read whole at
+all (:mod:`texsense.io.lazy`): the statistics, events and health are streaming passes over
+its frames, a frame is read when it is shown, and what the review keeps is its timeline (a
+few values per frame), so a recording longer than the memory budget plays.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from texsense.apps.clinical import frame_walls, live_events, start_state
 from texsense.apps.review_events import (
     BLOCK,
     EVENT_TEXT,
+    block_of,
     element_health,
     merge_events,
     recompute_events,
@@ -42,7 +47,7 @@ from texsense.data import units
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
-__all__ = ["EVENT_TEXT", "Review", "open_review", "side_labels"]
+__all__ = ["BLOCK", "EVENT_TEXT", "Review", "open_review", "side_labels"]
 
 #: A cell is in contact above this pressure (N/cm², 3.75 mmHg: the monitor's) or, for other
 #: quantities, above this share of the colour scale's top.
@@ -83,8 +88,18 @@ class Review:
     walls: np.ndarray | None = None
     #: whether the events shown are the monitor's own (a live recording) or all recomputed
     live: bool = False
+    #: the recording as read, before its repairs counted (kept for a recording read on
+    #: demand, whose ``repaired`` mask is not held: :meth:`repaired_at`)
+    raw: Recording | None = None
     #: what the review could not use (a start state that does not fit), in words
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def on_demand(self) -> bool:
+        """True when the frames are read as they are needed (:mod:`texsense.io.lazy`)."""
+        from texsense.io import LazyRecording
+
+        return isinstance(self.rec, LazyRecording)
 
     @property
     def pressure(self) -> bool:
@@ -109,6 +124,15 @@ class Review:
         frames = float(self.rec.times[-1] - self.rec.times[0])
         return frames / wall if wall > 0 and frames > 0 else 1.0
 
+    def repaired_at(self, i: int) -> list[int]:
+        """The elements of frame ``i`` whose values are repairs (flagged invalid by the
+        file, counted as valid here: see ``_with_repairs``)."""
+        if self.repaired is not None:
+            return np.flatnonzero(self.repaired[i]).tolist()
+        if self.raw is not None:
+            return np.flatnonzero(~self.raw.valid[i]).tolist()
+        return []
+
     def frame(self, i: int) -> np.ndarray:
         """Frame ``i`` in the display unit, NaN where a reading is invalid."""
         if not 0 <= i < self.rec.n_frames:
@@ -123,8 +147,9 @@ class Review:
         out = np.full(self.rec.n_elements, -np.inf if how == "peak" else 0.0)
         count = np.zeros(self.rec.n_elements)
         loaded = (self.series["area_cm2"] > 0) & self.use
-        for start in range(0, self.rec.n_frames, BLOCK):
-            sl = slice(start, start + BLOCK)
+        step = block_of(self.rec)
+        for start in range(0, self.rec.n_frames, step):
+            sl = slice(start, start + step)
             v = np.where(self.rec.valid[sl], self.rec.frames[sl], np.nan).astype(np.float64)
             v[~self.use[sl]] = np.nan
             if how == "peak":
@@ -183,8 +208,9 @@ def _series(review: Review) -> dict[str, np.ndarray]:
         else CONTACT_SHARE * review.scale[1] / review.factor
     )
     parts: dict[str, list[np.ndarray]] = {"load_N": [], "peak": [], "area_cm2": [], "cof": []}
-    for start in range(0, rec.n_frames, BLOCK):
-        block = rec.select(slice(start, start + BLOCK))
+    step = block_of(rec)
+    for start in range(0, rec.n_frames, step):
+        block = rec.select(slice(start, start + step))
         if review.pressure:
             parts["load_N"].append(stats.total_load(block))
         parts["peak"].append(stats.peak_pressure(block) * review.factor)
@@ -217,6 +243,7 @@ def open_review(
     turn_every_min: float | None = None,
     model: Any = None,
     name: str | None = None,
+    on_demand: bool = False,
 ) -> Review:
     """Read a recording (or take one) and compute its :class:`Review`.
 
@@ -238,10 +265,16 @@ def open_review(
         A model of sides for a bed recording without side labels.
     name : str, optional
         What to call the recording (default: the file name).
+    on_demand : bool
+        Read a texsense HDF5 recording's frames when they are needed, not whole
+        (:mod:`texsense.io.lazy`: any length plays; other formats are read whole).
     """
-    from texsense.io import load
+    from texsense.io import load, open_recording
 
-    original = source if isinstance(source, Recording) else load(source)
+    if isinstance(source, Recording):
+        original = source
+    else:
+        original = open_recording(source) if on_demand else load(source)
     rec = _oriented(_with_repairs(original))
     if rec.n_frames == 0:
         raise ParameterError("the recording has no frames")
@@ -279,14 +312,26 @@ def open_review(
     review.series = _series(review)
     _events(review, model)
     review.health = element_health(original)
-    review.repaired = None if rec is original else ~original.valid
-    if rec.quantity == "pressure" and not isinstance(source, Recording):
-        path = Path(source)
-        if path.is_file() and path.suffix.lower() in (".h5", ".hdf5"):
+    _repairs_and_bounds(review, original, None if isinstance(source, Recording) else source)
+    return review
+
+
+def _repairs_and_bounds(review: Review, original: Recording, path: str | Path | None) -> None:
+    """Where the review's readings are repairs and, for an HDF5 file read whole, its bounds
+    (a recording read on demand keeps neither: they are read with each frame)."""
+    from texsense.io import LazyRecording
+
+    if isinstance(original, LazyRecording):
+        if review.pressure:  # its repairs: read with each frame (Review.repaired_at)
+            review.raw = original
+        return
+    review.repaired = None if review.rec is original else ~original.valid
+    if review.pressure and path is not None:
+        p = Path(path)
+        if p.is_file() and p.suffix.lower() in (".h5", ".hdf5"):
             from texsense.io.hdf5 import read_bounds
 
-            review.bounds = read_bounds(path)
-    return review
+            review.bounds = read_bounds(p)
 
 
 def _events(review: Review, model: Any) -> None:
@@ -311,6 +356,9 @@ def _events(review: Review, model: Any) -> None:
 def _scale(rec: Recording, factor: float, shown: str, mode: str) -> tuple[float, float]:
     """The colour scale a recording gets when none is given: the mode's, or one from a sample
     of at most ~400 of its reliable frames (PMD: all but the first and last 3 of a file)."""
+    m = MODES.get(mode, MODES["generic"])
+    if m.scale is not None and units.is_pressure_unit(shown):
+        return recording_scale(np.zeros(0), shown, mode)  # the mode's: no frame needed
     pick = np.flatnonzero(_usable(rec))
     sample = rec.frames[pick[:: max(1, pick.size // 400)]] * factor
     return recording_scale(sample, shown, mode)
@@ -328,6 +376,10 @@ def _oriented(rec: Recording) -> Recording:
         layout = rec.layout.with_orientation(edges or None)
     except ParameterError:
         return rec  # a mangled declaration: the map says what orientation_of finds
+    from texsense.io import LazyRecording
+
+    if isinstance(rec, LazyRecording):
+        return rec.with_layout(layout)
     return Recording(rec.frames, rec.times, layout, rec.quantity, rec.unit, valid=rec.valid,
                      element_times=rec.element_times, labels=rec.labels, meta=rec.meta)  # fmt: skip
 
@@ -337,7 +389,13 @@ def _with_repairs(rec: Recording) -> Recording:
     process`` flag a repaired element invalid but keep its estimate (eq. 6.14), and the live
     map, statistics and alerts use that estimate; the report and playback do the same.
     Other quantities keep their flags."""
-    if rec.quantity != "pressure" or rec.valid.all():
+    from texsense.io import LazyRecording
+
+    if rec.quantity != "pressure":
+        return rec
+    if isinstance(rec, LazyRecording):
+        return rec.with_repairs()
+    if rec.valid.all():
         return rec
     return Recording(rec.frames, rec.times, rec.layout, rec.quantity, rec.unit,
                      valid=np.isfinite(rec.frames), element_times=rec.element_times,

@@ -31,7 +31,7 @@ from texsense.apps.bed import (
 )
 from texsense.apps.clinical import POSTURE_LABEL
 from texsense.apps.views import alert_places, format_duration, seat_zones
-from texsense.data import units
+from texsense.data import budget, units
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BLOCK",
     "EVENT_TEXT",
+    "block_of",
     "element_health",
     "event_places",
     "event_text",
@@ -50,8 +51,16 @@ __all__ = [
     "side_labels",
 ]
 
-#: Frames per block of the statistics (bounds memory).
+#: Frames per block of the statistics (bounds memory; fewer under a small budget: block_of).
 BLOCK = 2048
+
+
+def block_of(rec: Recording) -> int:
+    """Frames per block of the statistics of ``rec``: :data:`BLOCK`, fewer when the float64
+    copies of a block of a mat with many elements would take more than a small share of the
+    memory budget (:mod:`texsense.data.budget`: a 256th per value)."""
+    return max(1, min(BLOCK, budget.max_memory() // (256 * max(1, rec.n_elements))))
+
 
 #: What the events are called on the pages and in the report.
 EVENT_TEXT = {
@@ -197,10 +206,10 @@ def recompute_events(
     to_ncm2 = units.factor(rec.unit, "N/cm2") if review.pressure else 1.0
     t0 = float(rec.times[0])
     out: list[dict[str, Any]] = []
-    for start in range(0, rec.n_frames, BLOCK):
-        block = np.where(
-            rec.valid[start : start + BLOCK], rec.frames[start : start + BLOCK], np.nan
-        )
+    step = block_of(rec)
+    stepping = tracker is not None or schedule is not None  # neither: no event to find
+    for start in range(0, rec.n_frames if stepping else 0, step):
+        block = np.where(rec.valid[start : start + step], rec.frames[start : start + step], np.nan)
         for k, row in enumerate(block.astype(np.float64) * to_ncm2):
             i = start + k
             t = float(rec.times[i])
@@ -280,10 +289,11 @@ def element_health(rec: Recording) -> dict[str, np.ndarray]:
     n = rec.n_elements
     invalid = np.zeros(n)
     top = np.full(n, -np.inf)
-    for start in range(0, rec.n_frames, BLOCK):
-        valid = rec.valid[start : start + BLOCK]
+    step = block_of(rec)
+    for start in range(0, rec.n_frames, step):
+        valid = rec.valid[start : start + step]
         invalid += np.sum(~valid, axis=0)
-        v = np.where(valid, rec.frames[start : start + BLOCK], -np.inf)
+        v = np.where(valid, rec.frames[start : start + step], -np.inf)
         top = np.maximum(top, v.max(axis=0))
     indptr, indices = rec.layout.neighbours
     finite = top[np.isfinite(top)]

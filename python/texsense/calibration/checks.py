@@ -33,7 +33,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
@@ -108,6 +107,8 @@ def record_thickness_mm(material: Mapping[str, np.ndarray]) -> float:
     """The spacer thickness that the material record's capacitance implies: ``d`` of
     ``C = C_par + ε A / (d - e)`` (eq. 2.1) fitted by least squares (``C_par`` and ``ε A``
     linear for each ``d``, ``d`` by a bounded scalar search)."""
+    from scipy.optimize import minimize_scalar  # heavy: only the check that fits needs it
+
     e = np.asarray(material["compression_mm"], dtype=np.float64)
     c = np.asarray(material["capacitance_pF"], dtype=np.float64)
     ok = np.isfinite(e) & np.isfinite(c)

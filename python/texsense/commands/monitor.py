@@ -26,7 +26,7 @@ from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sig
 
 if TYPE_CHECKING:
     from texsense.apps.bed import BedWatch
-    from texsense.apps.posture import PostureModel
+    from texsense.apps.posture.model import PostureModel
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -271,7 +271,7 @@ def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
 
 def build_monitor(args: argparse.Namespace) -> Monitor:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.apps.posture import PostureModel
+    from texsense.apps.posture.model import PostureModel
 
     source = open_source(args)
     calibration: StageChain | None
@@ -396,7 +396,7 @@ def _cached_model(
     when missing (a broken cache is rebuilt, and said so). The name carries the id of the
     virtual mat's calibration the model is trained on, so a texsense whose compensation
     changed trains a new one instead of reading an old one."""
-    from texsense.apps.posture import PostureModel
+    from texsense.apps.posture.model import PostureModel
 
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
     path = cache / f"{name}.joblib"

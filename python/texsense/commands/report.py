@@ -67,7 +67,7 @@ def run_report(args: argparse.Namespace) -> int:
             raise ParameterError(f"{args.rois}: {e}") from None
     model = None
     if args.model is not None:
-        from texsense.apps.posture import PostureModel
+        from texsense.apps.posture.model import PostureModel
 
         model = PostureModel.load(args.model)
     out = write_report(

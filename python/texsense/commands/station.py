@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from texsense.apps.posture import PostureModel
+from texsense.apps.posture.model import PostureModel
 from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
 from texsense.commands._options import RANGES

@@ -45,15 +45,18 @@ from texsense.io._base import RecordingReader
 from texsense.io._registry import READER_CLASSES, WRITERS, Probe
 from texsense.io._text import decode_head, open_binary
 from texsense.io.hdf5 import RecordingWriter
+from texsense.io.lazy import LazyRecording
 
 __all__ = [
     "READER_CLASSES",
     "WRITERS",
+    "LazyRecording",
     "RecordingReader",
     "RecordingWriter",
     "formats_table",
     "load",
     "open_reader",
+    "open_recording",
     "read_folder",
     "save",
     "sniff_format",
@@ -236,6 +239,16 @@ def load(
         return read_folder(path, accept_truncated=accept_truncated, **options)
     with open_reader(path, format=format, accept_truncated=accept_truncated, **options) as r:
         return r.read()
+
+
+def open_recording(path: str | Path) -> Recording:
+    """A recording to play: a texsense HDF5 recording as a
+    :class:`~texsense.io.lazy.LazyRecording` (its frames read when indexed: any length), any
+    other format read whole (within the memory budget: a file beyond it is refused in one
+    line, since the text formats are read from their start only)."""
+    if sniff_format(path) == "hdf5":
+        return LazyRecording.open(path)
+    return load(path)
 
 
 def read_folder(path: str | Path, *, accept_truncated: bool = False, **options: Any) -> Recording:

@@ -371,7 +371,10 @@ class RecordingReader(BlockReader):
         return impossible(values, quantity, non_negative=quantity in self.non_negative)
 
     # ------------------------------------------------------------------ the base's work
-    def _checked(self, piece: Piece) -> Piece:
+    def _checked(self, piece: Piece, *, running: bool = True) -> Piece:
+        """The piece in texsense's unit with its impossible readings invalid; ``running``:
+        part of the pass from the start (invalid readings counted, times checked against
+        the previous piece's), else a piece read out of order (:meth:`frames_at`)."""
         values = piece.values
         with np.errstate(over="ignore", invalid="ignore"):  # beyond float32: invalid readings
             if self._factor != 1.0:
@@ -384,9 +387,11 @@ class RecordingReader(BlockReader):
             new = mask & valid
             count = int(np.count_nonzero(new))
             if count:
-                self.invalid[reason] += count
+                if running:
+                    self.invalid[reason] += count
                 valid &= ~new
-        self._check_times(piece)
+        if running:
+            self._check_times(piece)
         return Piece(frames, piece.times, piece.labels, piece.lines, valid, piece.element_times)
 
     def _check_times(self, piece: Piece) -> None:
@@ -473,6 +478,21 @@ class RecordingReader(BlockReader):
         self._finish()
         if count:
             yield self._recording(_join(held))
+
+    def frames_at(self, start: int, stop: int) -> Piece:
+        """Frames ``start:stop`` read out of order (values in texsense's unit, impossible
+        readings invalid, as in every block; no labels): what a player seeking in a long
+        recording reads (:mod:`texsense.io.lazy`).
+
+        Raises
+        ------
+        FormatError
+            For a format that is read from its start only (every text format).
+        """
+        return self._checked(self._piece(start, stop), running=False)
+
+    def _piece(self, start: int, stop: int) -> Piece:
+        raise FormatError(self.path, f"a {self.what} is read from its start only, not in parts")
 
     def _expected_frames(self) -> int | None:
         """The frames :meth:`read` will read, if the file proves it before they are read

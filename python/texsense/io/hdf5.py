@@ -658,18 +658,38 @@ class HDF5Reader(RecordingReader):
             )
         return complete
 
-    def _pieces(self) -> Iterator[Piece]:
+    def _piece(self, a: int, b: int, labels: bool = False) -> Piece:
+        """Frames ``a:b`` as stored (HDF5 reads the chunks that hold them, nothing else)."""
         sets = self._sets
+        return Piece(
+            sets["frames"][a:b],
+            sets["times"][a:b],
+            _labels(self._file["labels"], a, b) if labels else {},
+            valid=sets["valid"][a:b],
+            element_times=sets["element_times"][a:b] if "element_times" in sets else None,
+        )
+
+    def timeline(self, frames: int = 1 << 16) -> Iterator[tuple[np.ndarray, dict[str, Any]]]:
+        """The times (s) and labels of every frame, ``frames`` at a time, without reading a
+        frame (times checked as :meth:`blocks` checks them): what a player needs over the
+        whole recording before it seeks (:mod:`texsense.io.lazy`)."""
+        for a in range(0, self.n_frames, frames):
+            b = min(self.n_frames, a + frames)
+            try:
+                t = np.asarray(self._sets["times"][a:b], dtype=np.float64)
+                labels = _labels(self._file["labels"], a, b)
+            except OSError as e:
+                raise FormatError(self.path, f"frames {a + 1}..{b} cannot be read ({e})") from None
+            self.frames_read = a
+            self._check_times(Piece(np.zeros((b - a, 0), np.float32), t, labels))
+            yield t, labels
+        self.frames_read = self.n_frames
+
+    def _pieces(self) -> Iterator[Piece]:
         for a in range(0, self.n_frames, self._block):
             b = min(self.n_frames, a + self._block)
             try:
-                yield Piece(
-                    sets["frames"][a:b],
-                    sets["times"][a:b],
-                    _labels(self._file["labels"], a, b),
-                    valid=sets["valid"][a:b],
-                    element_times=sets["element_times"][a:b] if "element_times" in sets else None,
-                )
+                yield self._piece(a, b, labels=True)
             except OSError as e:
                 self._cut(f"frames {a + 1}..{b} cannot be read ({e}): the file is damaged")
                 return

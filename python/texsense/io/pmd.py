@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense._core import parse_row
 from texsense._progress import progress
 from texsense.data.files import real_path
 from texsense.data.layout import Layout
@@ -349,13 +350,16 @@ class PMDReader(RecordingReader):
 
     def _parse(self, path: Path, line: Any) -> np.ndarray | None:
         """One frame's counts, or None (noted as a cut) for a last line without its end."""
-        tokens = line.text.strip().split("\t")
         if not line.ended:
             self._note(
                 f"truncated: {self._name(path)} ends in the middle of line {line.number} (a "
                 "PMD line ends with a line end)"
             )
             return None
+        fast = parse_row(line.text, "\t", ROWS * COLS)  # the well-formed line, in Rust
+        if fast is not None:
+            return fast
+        tokens = line.text.strip().split("\t")
         if len(tokens) != ROWS * COLS:
             raise FormatError(
                 path,

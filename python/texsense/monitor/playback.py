@@ -32,8 +32,16 @@ is a 422 with the reader's one-line message, a frame out of range 404.
 Nothing here can starve the rest of the server: recordings are read and reports made in the
 playback's own :class:`~texsense.monitor.web.Lane` (two at once, daemon threads, more are
 refused with 503), never in the threads the calibration panel uses, and a stop does not wait
-for them. The recordings kept in memory (:class:`_Reviews`) hold at most half of the memory
-budget (:mod:`texsense.data.budget`), and the next one is read within what is left.
+for them.
+
+Memory: a texsense recording (``.h5``) is read on demand (:mod:`texsense.io.lazy`): opening
+it reads its times and labels and makes the statistics, events and health in streaming
+passes over its frames; a frame is read when it is asked for, through a cache of frames
+bounded by a quarter of the memory budget (:mod:`texsense.data.budget`). So a recording of
+any length plays, longer than the budget. The other formats are read from their start only:
+they are read whole, within the budget, and one beyond it is refused in one line. The reviews
+kept (:class:`_Reviews`: timelines, statistics per frame, whole recordings of other formats)
+hold at most half of the budget, and the next one is opened within what is left.
 """
 
 from __future__ import annotations
@@ -127,7 +135,7 @@ class _Reviews:
 
     def get(self, path: Path) -> Review:
         from texsense.apps.review import open_review
-        from texsense.io import load
+        from texsense.io import open_recording
 
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
@@ -138,7 +146,7 @@ class _Reviews:
         with self._reading:  # one at a time: their memory does not add up
             self._shrink(budget.max_memory() // 2)
             with budget.share(budget.max_memory() - self.held()):
-                rec = load(path)
+                rec = open_recording(path)  # HDF5: on demand; other formats whole
                 # the page converts pressure from N/cm², as for the live frames
                 unit = "N/cm2" if rec.quantity == "pressure" else None
                 review = open_review(rec, unit=unit, name=path.name)
@@ -155,7 +163,10 @@ class _Reviews:
                 size = sum(s for _, s in self._items.values())
                 if key == keep or (len(self._items) <= CACHE and size <= limit):
                     continue
-                del self._items[key]
+                review = self._items.pop(key)[0]
+                close = getattr(review.rec, "close", None)  # a recording read on demand
+                if close is not None:
+                    close()
 
 
 def _series(review: Review) -> dict[str, Any]:
@@ -208,7 +219,7 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
 
 
 def _roi_stats(review: Review, rois: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    from texsense.apps.review import BLOCK, decimate
+    from texsense.apps.review import block_of, decimate
 
     rec = review.rec
     regions = {r["name"]: roi_elements(r, rec.layout) for r in rois}
@@ -218,8 +229,9 @@ def _roi_stats(review: Review, rois: list[dict[str, Any]]) -> list[dict[str, Any
         entry: dict[str, Any] = {"name": name, "elements": idx.tolist()}
         if idx.size:
             parts: dict[str, list[np.ndarray]] = {}
-            for start in range(0, rec.n_frames, BLOCK):
-                block = rec.select(slice(start, start + BLOCK))
+            step = block_of(rec)
+            for start in range(0, rec.n_frames, step):
+                block = rec.select(slice(start, start + step))
                 for k, v in stats.region_stats(block, {name: idx})[name].items():
                     parts.setdefault(k, []).append(v)
             for k, pieces in parts.items():
@@ -328,7 +340,7 @@ def _frame(review: Review, i: int) -> dict[str, Any]:
     if not 0 <= i < review.rec.n_frames:
         raise HTTPException(404, f"frame {i} is out of range 0..{review.rec.n_frames - 1}")
     rec = review.rec
-    repaired = [] if review.repaired is None else np.flatnonzero(review.repaired[i]).tolist()
+    repaired = review.repaired_at(i)
     out = {"i": i, "t": round(float(review.series["t"][i]), 3),
            "values": _rounded(review.frame(i), 4), "repaired": repaired}  # fmt: skip
     if review.pressure:  # the frame's peak pressure index, N/cm² (as the live snapshot's)
@@ -358,7 +370,11 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
     except ParameterError as e:
         raise _status_of(e) from None
     save_rois(path, rois)
-    return {"rois": rois, "stats": await folder.lane.run(_roi_stats, review, rois)}
+    try:  # a recording read on demand: a damaged chunk is said, not a 500
+        stats_ = await folder.lane.run(_roi_stats, review, rois)
+    except (FormatError, ParameterError) as e:
+        raise _status_of(e) from None
+    return {"rois": rois, "stats": stats_}
 
 
 def _report_path(folder: _Folder, name: str, format: str) -> Path:
@@ -373,7 +389,9 @@ async def _make_report(folder: _Folder, name: str, format: str) -> Any:
     try:
         rois = load_rois(path)
         make_folder(out.parent, "reports folder")
-        await folder.lane.run(write_report, review.rec, out, name=path.name, rois=rois)
+        # a recording read on demand is read whole for its report, within the memory budget
+        source = path if review.on_demand else review.rec
+        await folder.lane.run(write_report, source, out, name=path.name, rois=rois)
     except (FormatError, ParameterError, UnitError) as e:
         raise _status_of(e) from None
     except (OSError, WriteError) as e:
@@ -415,7 +433,10 @@ def playback_router(monitor: Monitor) -> APIRouter:
         """Frame ``i``: its time, values (N/cm² for pressure; null: no value), the elements
         whose values are repairs, and the bounds of a recording that has them."""
         path, review = await folder.review_of(name)
-        out = _frame(review, i)
+        try:  # read on demand: a damaged chunk is a 422 naming the file
+            out = _frame(review, i)
+        except (FormatError, ParameterError) as e:
+            raise _status_of(e) from None
         if review.pressure and path.suffix.lower() in (".h5", ".hdf5"):
             from texsense.io.hdf5 import read_bounds
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 from texsense.data.layout import Layout
 
 if TYPE_CHECKING:
-    from texsense.apps.posture import PostureModel
+    from texsense.apps.posture.model import PostureModel
     from texsense.compensation.stages import StageChain
 
 __all__ = ["MatConfig"]

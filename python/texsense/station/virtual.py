@@ -27,7 +27,7 @@ from texsense.station.broker import BrokerURL, mqtt_client
 from texsense.station.config import MatConfig
 
 if TYPE_CHECKING:
-    from texsense.apps.posture import PostureModel
+    from texsense.apps.posture.model import PostureModel
     from texsense.compensation.stages import StageChain
 
 __all__ = ["VirtualMats", "frame_payload"]

@@ -1,0 +1,19 @@
+//! The readers' fast path for rows of numbers in text files: `texsense_core::text`.
+
+use numpy::{IntoPyArray, PyArray1};
+use pyo3::prelude::*;
+
+/// Exactly `expected` numbers separated by `sep` in `line`, as a float32 array (each read as
+/// a double and rounded, as numpy does), or None when the line is not that (the reader's own
+/// parser then says what is wrong).
+#[pyfunction]
+#[pyo3(name = "parse_row")]
+pub(crate) fn py_parse_row<'py>(
+    py: Python<'py>,
+    line: &str,
+    sep: char,
+    expected: usize,
+) -> Option<Bound<'py, PyArray1<f32>>> {
+    let mut out = Vec::new();
+    texsense_core::text::parse_row(line, sep, expected, &mut out).then(|| out.into_pyarray(py))
+}
