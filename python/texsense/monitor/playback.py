@@ -39,7 +39,9 @@ it reads its times and labels and makes the statistics, events and health in str
 passes over its frames; a frame is read when it is asked for, through a cache of frames
 bounded by a quarter of the memory budget (:mod:`texsense.data.budget`). So a recording of
 any length plays, longer than the budget. The other formats are read from their start only:
-they are read whole, within the budget, and one beyond it is refused in one line. The reviews
+they are read whole, within the budget, and one beyond it is refused in one line; they are
+parsed in a child process (:mod:`texsense.io.apart`), so that the parsing never holds the
+server's Python lock (it starved the calibration panel for seconds in a thread). The reviews
 kept (:class:`_Reviews`: timelines, statistics per frame, whole recordings of other formats)
 hold at most half of the budget, and the next one is opened within what is left.
 """
@@ -135,7 +137,9 @@ class _Reviews:
 
     def get(self, path: Path) -> Review:
         from texsense.apps.review import open_review
-        from texsense.io import open_recording
+        from texsense.io import sniff_format
+        from texsense.io.apart import load_apart
+        from texsense.io.lazy import LazyRecording
 
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
@@ -145,8 +149,12 @@ class _Reviews:
                 return self._items[key][0]
         with self._reading:  # one at a time: their memory does not add up
             self._shrink(budget.max_memory() // 2)
-            with budget.share(budget.max_memory() - self.held()):
-                rec = open_recording(path)  # HDF5: on demand; other formats whole
+            memory = budget.max_memory() - self.held()
+            with budget.share(memory):
+                if sniff_format(path) == "hdf5":
+                    rec = LazyRecording.open(path)  # its frames read on demand
+                else:  # read whole, in a child process: parsing text holds Python's lock
+                    rec = load_apart(path, memory)
                 # the page converts pressure from N/cm², as for the live frames
                 unit = "N/cm2" if rec.quantity == "pressure" else None
                 review = open_review(rec, unit=unit, name=path.name)
