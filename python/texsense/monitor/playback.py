@@ -70,6 +70,7 @@ from texsense.monitor.web import Lane
 
 if TYPE_CHECKING:
     from texsense.apps.review import Review
+    from texsense.data.recording import Recording
     from texsense.monitor.live import Monitor
 
 __all__ = ["MAX_POINTS", "playback_router", "resolve_recording"]
@@ -150,6 +151,7 @@ class _Reviews:
         with self._reading:  # one at a time: their memory does not add up
             self._shrink(budget.max_memory() // 2)
             memory = budget.max_memory() - self.held()
+            rec: Recording
             with budget.share(memory):
                 if sniff_format(path) == "hdf5":
                     rec = LazyRecording.open(path)  # its frames read on demand
