@@ -15,6 +15,7 @@ from texsense._core import Curve, DriftBank, PreisachBank
 from texsense.compensation.drift import DriftModel, StepFit
 from texsense.compensation.hysteresis import DEFAULT_CAPACITY, HysteresisModel
 from texsense.compensation.stage import Stage
+from texsense.data.fitcache import remembered
 from texsense.data.modelfile import Fields
 from texsense.exceptions import ParameterError
 
@@ -61,9 +62,20 @@ class Hysteresis(Stage):
         return stage.set_fitted(model=model)
 
     def fit(self, compression_mm: npt.ArrayLike, pressure_ncm2: npt.ArrayLike) -> Hysteresis:
-        """Identify the Everett function from a test-machine record."""
-        model = HysteresisModel(**self.get_params())  # the stage's parameters are the model's
-        return self.set_fitted(model=model.fit(compression_mm, pressure_ncm2))
+        """Identify the Everett function from a test-machine record. The same record and
+        parameters give the same model: made once per version of the code
+        (:func:`texsense.data.fitcache.remembered`; a preset's record is fitted in every
+        calibration made from it)."""
+        params = self.get_params()  # the stage's parameters are the model's
+        e = np.asarray(compression_mm, dtype=np.float64)
+        p = np.asarray(pressure_ncm2, dtype=np.float64)
+        model = remembered(
+            "hysteresis",
+            [params, e, p],
+            lambda: HysteresisModel(**params).fit(e, p).to_content(),
+            lambda content: HysteresisModel.from_content(Fields(content, "the fit cache")),
+        )
+        return self.set_fitted(model=model)
 
     def _prepare(self) -> None:
         if not isinstance(self.model_, HysteresisModel):
