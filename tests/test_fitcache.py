@@ -34,7 +34,7 @@ def _counting(monkeypatch) -> list[int]:
     def spy(kind, parts, make, build):
         return real(kind, parts, lambda: made.append(1) or make(), build)
 
-    monkeypatch.setattr("texsense.compensation.stages.spacer.remembered", spy)
+    monkeypatch.setattr("texsense.compensation.hysteresis._model.remembered", spy)
     return made
 
 

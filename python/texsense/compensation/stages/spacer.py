@@ -15,7 +15,6 @@ from texsense._core import Curve, DriftBank, PreisachBank
 from texsense.compensation.drift import DriftModel, StepFit
 from texsense.compensation.hysteresis import DEFAULT_CAPACITY, HysteresisModel
 from texsense.compensation.stage import Stage
-from texsense.data.fitcache import remembered
 from texsense.data.modelfile import Fields
 from texsense.exceptions import ParameterError
 
@@ -64,17 +63,9 @@ class Hysteresis(Stage):
     def fit(self, compression_mm: npt.ArrayLike, pressure_ncm2: npt.ArrayLike) -> Hysteresis:
         """Identify the Everett function from a test-machine record. The same record and
         parameters give the same model: made once per version of the code
-        (:func:`texsense.data.fitcache.remembered`; a preset's record is fitted in every
-        calibration made from it)."""
-        params = self.get_params()  # the stage's parameters are the model's
-        e = np.asarray(compression_mm, dtype=np.float64)
-        p = np.asarray(pressure_ncm2, dtype=np.float64)
-        model = remembered(
-            "hysteresis",
-            [params, e, p],
-            lambda: HysteresisModel(**params).fit(e, p).to_content(),
-            lambda content: HysteresisModel.from_content(Fields(content, "the fit cache")),
-        )
+        (``HysteresisModel.fit(..., remember=True)``)."""
+        model = HysteresisModel(**self.get_params())  # the stage's parameters are the model's
+        model.fit(compression_mm, pressure_ncm2, remember=True)
         return self.set_fitted(model=model)
 
     def _prepare(self) -> None:
