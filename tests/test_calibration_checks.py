@@ -79,7 +79,7 @@ def test_recordings_checked_for_length_swaps_silent_elements_and_settling():
     creeping_zero = _mat(np.full(16, 3.85), drift=0.3)
     found = check_recordings(creeping_zero, _mat(np.full(16, 4.002)))
     steady = [f.text for f in found if "steady" in f.text]
-    assert steady and "times of the load response, 0.00" in steady[0], found
+    assert steady and "times the load response, 0.00" in steady[0], found
 
 
 def test_gains_far_from_one_are_said():
