@@ -14,11 +14,12 @@ frames' own times, so a skipped frame costs resolution, not minutes above the th
 mat being recorded keeps every frame (``skip`` says no). A full inbox (:data:`INBOX_MAX`)
 drops its oldest messages, counted and logged.
 
-A slice also ends as soon as the event loop has other work (a connection to accept, a
-request's bytes or its next step, a viewer's message, a thread's result), after the message
-at hand, and goes on after that work: a request waits for one frame at each of its first
-steps (accept, read, start), not for a slice at each (issue 33: 0.22-0.27 s to the first
-byte of the ward page under 20 mats at 10x; :func:`io_waiting`).
+The loop's other work goes first too (a connection to accept, a request's bytes or its next
+step, a viewer's message, a thread's result; :func:`io_waiting`): a slice ends after the
+message at hand when there is some, and the next waits until the loop has done it (within
+the same ``max_defer_s`` bounds). A request's first steps (accept, read, start), before it
+counts as a page being served, waited for a slice each (issue 33: 0.25-0.52 s to the first
+byte of the ward page under 20 mats at 10x, on a machine loaded by others as well).
 
 Pages go first: while ``defer`` says a page request or a new viewer is being served, the
 inbox waits (at most :data:`MAX_DEFER_S` at a time, and then it reads as long without waiting:
@@ -76,9 +77,9 @@ class Inbox:
     all but the newest go to ``skip`` (topic, payload, arrival), which says whether it skipped
     it (False: it is handled after all), and the newest is handled: every mat's newest frame
     is read once a round, however far behind the station is. While ``defer()`` is true (pages
-    are being served) it waits, at most ``max_defer_s`` at a time; a slice ends early when
-    ``busy()`` says the loop has other work waiting (default :func:`io_waiting`), after at
-    least one message."""
+    are being served) or ``busy()`` (the loop has other work waiting: default
+    :func:`io_waiting`) it waits, at most ``max_defer_s`` at a time; a slice ends early when
+    ``busy()``, after at least one message."""
 
     def __init__(
         self,
@@ -169,12 +170,15 @@ class Inbox:
         """(The loop.) Handle waiting messages for at most ``slice_s``, then let the loop
         serve the pages before the next slice."""
         start = time.monotonic()
-        if self.defer is not None and start >= self._reading_until and self.defer():
-            self._deferred = self._deferred or start
-            if start - self._deferred < self.max_defer_s:
-                self.loop.call_later(DEFER_STEP_S, self._drain)
-                return
-            self._reading_until = start + self.max_defer_s  # as long as it waited
+        if start >= self._reading_until:
+            pages = self.defer is not None and self.defer()
+            if pages or self.busy():  # pages being served, or the loop has other work
+                self._deferred = self._deferred or start
+                if start - self._deferred < self.max_defer_s:
+                    # pages: look again shortly; other work: right after it
+                    self.loop.call_later(DEFER_STEP_S if pages else 0.0, self._drain)
+                    return
+                self._reading_until = start + self.max_defer_s  # as long as it waited
         self._deferred = None
         deadline = start + self.slice_s
         first = True
