@@ -83,6 +83,16 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     )  # fmt: skip
 
 
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """SIGTERM ends a run as Ctrl-C does: the session finishes, so the tour's servers stop
+    and its folder goes (a terminated run left them running)."""
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """Stop the tour if it is still running (an interrupted or failed-fast session: its
     current command ends, its servers stop) and remove its folder."""

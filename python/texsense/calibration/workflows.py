@@ -15,11 +15,8 @@ ground truth that these workflows and the compensation are graded against.
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import logging
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
@@ -27,6 +24,7 @@ from texsense.compensation.drift import DriftModel, split_steps
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Drift, Hysteresis, StageChain, load_chain
 from texsense.data.files import cache_folder
+from texsense.data.fitcache import code_digest
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, WriteError
 from texsense.sensor.materials import PRESETS
@@ -118,18 +116,6 @@ def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChai
     record["held_out_compression_mm"] = st.labels["compression_mm"]
     record["held_out_pressure_ncm2"] = st.labels["pressure_ncm2"]
     return calibrate_mat(record, base, uni, 1.0, 3.0, steps=steps)
-
-
-@functools.cache
-def code_digest() -> str:
-    """A digest of this texsense's code (every Python file of the package and the compiled
-    core): a virtual mat's calibration cached by one version is read by that version only."""
-    root = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted([*root.rglob("*.py"), *root.glob("_core*.so"), *root.glob("_core*.pyd")]):
-        digest.update(str(path.relative_to(root)).encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:16]
 
 
 def _cached(name: str, fit: Callable[[], StageChain]) -> StageChain:

@@ -66,10 +66,15 @@ from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.data import budget, units
 from texsense.data.files import check_regular, make_folder, real_path, regular_files
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
+from texsense.io import sniff_format
+from texsense.io.apart import load_apart
+from texsense.io.hdf5 import read_bounds
+from texsense.io.lazy import LazyRecording
 from texsense.monitor.web import Lane
 
 if TYPE_CHECKING:
     from texsense.apps.review import Review
+    from texsense.data.recording import Recording
     from texsense.monitor.live import Monitor
 
 __all__ = ["MAX_POINTS", "playback_router", "resolve_recording"]
@@ -137,9 +142,6 @@ class _Reviews:
 
     def get(self, path: Path) -> Review:
         from texsense.apps.review import open_review
-        from texsense.io import sniff_format
-        from texsense.io.apart import load_apart
-        from texsense.io.lazy import LazyRecording
 
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
@@ -150,6 +152,7 @@ class _Reviews:
         with self._reading:  # one at a time: their memory does not add up
             self._shrink(budget.max_memory() // 2)
             memory = budget.max_memory() - self.held()
+            rec: Recording
             with budget.share(memory):
                 if sniff_format(path) == "hdf5":
                     rec = LazyRecording.open(path)  # its frames read on demand
@@ -270,8 +273,6 @@ class _Folder:
     def is_recording(self, p: Path, size: int, mtime: float) -> bool:
         """Whether texsense reads ``p`` as a recording (by its content, as ``load`` would;
         remembered while the file is unchanged)."""
-        from texsense.io import sniff_format
-
         key = (p.name, size, mtime)
         if key not in self._kinds:
             try:
@@ -446,8 +447,6 @@ def playback_router(monitor: Monitor) -> APIRouter:
         except (FormatError, ParameterError) as e:
             raise _status_of(e) from None
         if review.pressure and path.suffix.lower() in (".h5", ".hdf5"):
-            from texsense.io.hdf5 import read_bounds
-
             b = read_bounds(path, slice(i, i + 1))
             if b is not None:
                 out["lower"] = _rounded(b[0][0] * review.factor, 4)
