@@ -356,6 +356,55 @@ def test_the_inbox_lets_pages_go_first_for_a_while():
     asyncio.run(run())
 
 
+def test_a_slice_ends_when_the_loop_has_a_request_to_read():
+    """A connection that becomes readable while the inbox handles a frame is served after
+    that frame, not after the slice (a request's every step waited for a slice: issue 33),
+    and one readable before the inbox starts is served before any frame; with the check off
+    (``busy`` never true) the whole slice goes first."""
+    import socket
+
+    from texsense.monitor.clock import Quiet
+    from texsense.station.inbox import Inbox
+
+    def run(check: bool, early: bool = False) -> tuple[int, int]:
+        async def main() -> tuple[int, int]:
+            loop = asyncio.get_running_loop()
+            here, there = socket.socketpair()
+            served: list[int] = []
+            handled: list[int] = []
+
+            def handle(*_a: object) -> None:
+                handled.append(1)
+                if len(handled) == 1 and not early:
+                    there.send(b"GET")  # a request comes while the first frame is handled
+                time.sleep(0.01)  # a frame's work
+
+            def read() -> None:
+                here.recv(16)
+                served.append(len(handled))
+
+            loop.add_reader(here.fileno(), read)
+            kw = {} if check else {"busy": lambda: False}
+            inbox = Inbox(loop, handle, Quiet(logging.getLogger("test")), slice_s=5.0, **kw)
+            if early:
+                there.send(b"GET")  # a request is there before the frames
+            for _ in range(8):
+                inbox.put("texsense/bed1/frames", b"{}")
+            while len(handled) < 8:
+                await asyncio.sleep(0.005)
+            loop.remove_reader(here.fileno())
+            here.close()
+            there.close()
+            return served[0], inbox.yielded
+
+        return asyncio.run(main())
+
+    served, yielded = run(check=True)
+    assert served == 1 and yielded >= 1  # served after the frame at hand ...
+    assert run(check=False) == (8, 0)  # ... not after the whole slice
+    assert run(check=True, early=True)[0] == 0  # a request already there: before any frame
+
+
 def test_the_station_counts_the_pages_it_is_serving(monkeypatch):
     """What the inbox waits for: a request while it is served, a viewer until its first
     message (then it waits like the frames)."""

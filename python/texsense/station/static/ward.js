@@ -137,6 +137,11 @@ function connect() {
   ws.onmessage = (m) => render(JSON.parse(m.data));
   ws.onclose = () => { $("broker").textContent = "station unreachable — retrying…"; setTimeout(connect, 1000); };
 }
+// the tiles the page was served with: drawn at once, before the WebSocket's first message
+(function first() {
+  const block = $("first-ward"), msg = block && JSON.parse(block.textContent);
+  if (msg) render(msg);
+})();
 (function legend() {
   const c = $("ward-scale"), ctx = c.getContext("2d");
   for (let x = 0; x < c.width; x++) { ctx.fillStyle = colourOf("viridis", x / (c.width - 1)); ctx.fillRect(x, 0, 1, c.height); }
