@@ -59,6 +59,14 @@ ALL_SHOW_DATA = (
 )
 
 
+#: The tiles not showing data (name: state).
+NOT_SHOWING = (
+    "() => [...document.querySelectorAll('.tile')].filter(e => !['live', 'alert', "
+    "'acknowledged'].includes(e.dataset.state)).map(e => (e.dataset.id || e.id) + ': ' + "
+    "e.dataset.state)"
+)
+
+
 def measure(
     python_dir: str | None,
     n_mats: int,
@@ -96,6 +104,7 @@ def measure(
         time.sleep(warm_s)
         w0, t_w0 = ward(url), time.monotonic()
         first, every, data, ages, behind, shown = [], [], [], [], [], []
+        late: list[list[str]] = []  # per open: the tiles not showing data when all were there
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
             for _ in range(opens):
@@ -107,6 +116,7 @@ def measure(
                 page.wait_for_function(f"document.querySelectorAll('.tile').length >= {n_mats}",
                                        timeout=120_000)  # fmt: skip
                 every.append(time.monotonic() - t0)
+                late.append(page.evaluate(NOT_SHOWING))
                 try:  # (the station before issue 33's fix never got there)
                     page.wait_for_function(ALL_SHOW_DATA, arg=n_mats, timeout=DATA_WAIT_S * 1e3)
                     data.append(time.monotonic() - t0)
@@ -127,7 +137,8 @@ def measure(
         count = {k: sum(m.get(k, 0) for m in w1["mats"]) - sum(m.get(k, 0) for m in w0["mats"])
                  for k in ("messages", "frames", "behind")}  # fmt: skip
         return {"first": first, "every": every, "data": data, "ages": ages, "behind": behind,
-                "shown": shown, "rates": {k: v / span for k, v in count.items()}}  # fmt: skip
+                "shown": shown, "late": late,
+                "rates": {k: v / span for k, v in count.items()}}  # fmt: skip
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -184,6 +195,11 @@ def main() -> None:
         print(f"| {name} | {q['messages']:.1f} | {q['frames']:.1f} | {q['behind']:.1f} | "
               f"{lag(statistics.median(r['behind']))} | {lag(max(r['behind']))} | "
               f"{statistics.median(a):.1f} s | {max(a):.1f} s |")  # fmt: skip
+    for name, r in load:
+        for k, (t, late) in enumerate(zip(r["data"], r["late"], strict=True)):
+            if late:
+                print(f"{name}, open {k + 1}: every tile showing data after {seconds(t)}; "
+                      f"when all tiles were there, not yet: {', '.join(late)}")  # fmt: skip
     if args.screenshot:
         shown = load[1][1]["shown"]
         print(f"\n{args.screenshot}: tiles showing data 1.5 s after they all did, per open: "

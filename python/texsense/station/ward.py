@@ -15,8 +15,9 @@ any coordination of their own: the broker routes). Every mat is a
   really jumped is re-synchronised (:class:`~texsense.monitor.clock.FrameClock`, event
   ``clock``). None of them reaches the pipeline or the exposure, so no glitch clears an
   alert;
-- **stale**: a mat that has not sent for two of its frame periods (checked every 20 ms;
-  ``min_stale_s`` can set a floor for mats with jittery links) is marked stale and an event
+- **stale**: a mat that has not sent for two of its frame periods and at least
+  :data:`MIN_STALE_S` (checked every 20 ms; ``min_stale_s`` sets another floor) is marked
+  stale and an event
   is stored with how long it was silent; its next frame marks it live again. Silence is
   judged on the time line of what the station has read (:meth:`Inbox.read_until`): a mat
   whose frames wait in a busy station's inbox is not silent;
@@ -75,6 +76,11 @@ __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 log = logging.getLogger("texsense.station")
 
 #: Urgency order of a mat's state on the ward page (highest first).
+#: A mat is never called silent sooner than this, s: a fast mat (10 Hz, or a simulated one
+#: at 10x) missed for 0.2 s is a hiccup of the station's reading thread under load, not a
+#: silent mat (its tiles flickered "stale" while every mat sent, issue 33).
+MIN_STALE_S = 1.0
+
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
 #: Messages in a row with another element count, at least, before a mat is refused.
 REFUSE_AFTER_N = 10
@@ -428,7 +434,8 @@ class Station:
     store : EventStore, optional
         Events and sessions (default: SQLite in memory).
     min_stale_s : float
-        A mat is stale after two frame periods, but never sooner than this.
+        A mat is stale after two frame periods, but never sooner than this
+        (:data:`MIN_STALE_S`).
     refuse_after_s : float
         A mat whose frames have had another element count for this long (and at least
         :data:`REFUSE_AFTER_N` messages in a row) is refused.
@@ -442,7 +449,7 @@ class Station:
         topic: str = "texsense/+/frames",
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
-        min_stale_s: float = 0.0,
+        min_stale_s: float = MIN_STALE_S,
         refuse_after_s: float = 10.0,
     ) -> None:
         ids = [check_mat_id(m.id) for m in mats]
