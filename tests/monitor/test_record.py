@@ -181,7 +181,7 @@ def wizard(tmp_path):
             [sys.executable, "-m", "texsense.cli", "calibrate", "wizard", "--source",
              f"serial:{link}", "-o", "mat.json", "--frames", "5", "--wait-s", "60", *extra],
             cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
+            stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONFAULTHANDLER="1"),
         )  # fmt: skip
         started.append((proc, _Output(proc)))
         return started[-1]
@@ -231,7 +231,13 @@ def test_a_wizard_stopped_mid_way_keeps_what_it_recorded_and_writes_no_calibrati
     out.wait_for("step 2/4")
     time.sleep(1.0)  # waiting for a load that does not come
     proc.send_signal(signal.SIGINT if how == "Ctrl-C" else signal.SIGKILL)
-    rc = proc.wait(timeout=30)
+    try:
+        rc = proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:  # where it hangs: Python's fault handler dumps its stacks
+        proc.send_signal(signal.SIGABRT)
+        proc.wait(timeout=30)
+        out.close()
+        raise AssertionError(f"the wizard did not stop:\n{out.text[-6000:]}") from None
     out.close()  # all of its output
     if how == "Ctrl-C":
         assert rc == 130, out.text
