@@ -15,18 +15,16 @@ ground truth that these workflows and the compensation are graded against.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 
 import numpy as np
 
 from texsense.compensation.drift import DriftModel, split_steps
 from texsense.compensation.pipeline import Pipeline
-from texsense.compensation.stages import Drift, Hysteresis, StageChain, load_chain
-from texsense.data.files import cache_folder
-from texsense.data.fitcache import code_digest
+from texsense.compensation.stages import Drift, Hysteresis, StageChain
+from texsense.data.fitcache import remembered
 from texsense.data.recording import Recording
-from texsense.exceptions import FormatError, ParameterError, WriteError
+from texsense.exceptions import ParameterError
 from texsense.sensor.materials import PRESETS
 from texsense.sim import protocols
 from texsense.sim.bed import Sleeper, bed_layout, bed_mat, bed_session, night_plan
@@ -120,23 +118,16 @@ def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChai
 
 def _cached(name: str, fit: Callable[[], StageChain]) -> StageChain:
     """The calibration ``fit()`` makes (seconds of Preisach identification, the same every
-    time for the same code), read from the cache (:func:`texsense.data.files.cache_folder`)
-    when this version of the code made it before; a cache that cannot be read is fitted
-    again and a cache that cannot be written is skipped, each said in the log."""
-    path = cache_folder() / f"calibration-{name}-{code_digest()}.json"
-    log = logging.getLogger("texsense.calibration")
-    if path.is_file():
-        try:
-            return load_chain(path)
-        except FormatError as e:
-            log.warning("fitting again: %s", e)
-    chain = fit()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        chain.save(path)
-    except (OSError, WriteError) as e:
-        log.warning("not cached (%s): %s", path, e)
-    return chain
+    time for the same code), made once per version of the code
+    (:func:`texsense.data.fitcache.remembered`: kept in memory and in the cache folder; a
+    kept file that cannot be read is fitted again and a cache that cannot be written is
+    skipped, each said in the log)."""
+    return remembered(
+        "calibration",
+        [name],
+        lambda: fit().to_dict(),
+        lambda content: StageChain.from_dict(content, "the fit cache"),
+    )
 
 
 def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> StageChain:
