@@ -146,7 +146,7 @@ def throughput(tmp: Path, quick: bool) -> None:
         jobs, _ = archive_jobs([folder], out)
         env = dict.fromkeys(("RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"), "1")
         with LocalCluster(
-            n_workers=workers, threads_per_worker=1, dashboard_address=None, env=env
+            n_workers=workers, threads_per_worker=1, dashboard_address=":0", env=env
         ) as cluster:
             start = time.perf_counter()
             reports = process_archive(

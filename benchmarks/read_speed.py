@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ import numpy as np
 
 import texsense
 import texsense.io.pmd as pmd
+from _timing import best_of
 
 TREE = Path(__file__).resolve().parents[2] / "shared" / "data" / "pmd" / "experiment-i"
 
@@ -34,15 +34,6 @@ def slow_path() -> Any:
         pmd.parse_row = fast
 
 
-def best_cpu(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
-    best, result = float("inf"), None
-    for _ in range(repeat):
-        start = time.process_time()
-        result = fn()
-        best = min(best, time.process_time() - start)
-    return best, result
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=2)
@@ -52,8 +43,8 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|---|")
     for name, folder in folders.items():
         with slow_path():
-            slow, a = best_cpu(lambda f=folder: texsense.load(f), args.repeat)
-        fast, b = best_cpu(lambda f=folder: texsense.load(f), args.repeat)
+            slow, a = best_of(texsense.load, folder, repeat=args.repeat, clock=time.process_time)
+        fast, b = best_of(texsense.load, folder, repeat=args.repeat, clock=time.process_time)
         same = np.array_equal(a.frames.view(np.uint32), b.frames.view(np.uint32)) and (
             np.array_equal(a.valid, b.valid)
         )

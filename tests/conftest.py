@@ -11,6 +11,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +84,16 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     )  # fmt: skip
 
 
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """SIGTERM ends a run as Ctrl-C does: the session finishes, so the tour's servers stop
+    and its folder goes (a terminated run left them running)."""
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """Stop the tour if it is still running (an interrupted or failed-fast session: its
     current command ends, its servers stop) and remove its folder."""
@@ -109,6 +120,25 @@ def shared_data() -> Path:
 @pytest.fixture(autouse=True)
 def _no_progress(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("TEXSENSE_NO_PROGRESS", "1")
+
+
+@pytest.fixture(autouse=True)
+def _signals_as_found() -> Iterator[None]:
+    """No test leaves Ctrl-C or SIGTERM blocked or ignored in the test process: every child
+    a later test starts would inherit it (a wizard that a test stops with Ctrl-C did not
+    stop). The test that does fails, and the signals are restored for the next."""
+    stops = {signal.SIGINT, signal.SIGTERM}
+    before = {s: signal.getsignal(s) for s in stops}
+    yield
+    blocked = stops & signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    if blocked:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, blocked)
+    changed = {s for s in stops if signal.getsignal(s) is not before[s]}
+    for s in changed:
+        signal.signal(s, before[s])
+    assert not blocked and not changed, (
+        f"the test left {sorted(map(signal.Signals, blocked | changed))} blocked or changed"
+    )
 
 
 def check_recording(rec: Recording, tmp_path: Path) -> None:

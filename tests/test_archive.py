@@ -112,7 +112,7 @@ def test_archive_on_a_local_cluster_reports_a_bad_file_and_does_the_rest(session
         load(tmp_path / "in" / "notes.txt")
     jobs, ignored = archive_jobs([str(root / "sessions"), str(tmp_path / "in")], tmp_path / "o")
     assert [p.name for p in ignored] == ["notes.txt"] and len(jobs) == 4
-    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=":0") as cluster:
         reports = process_archive(
             jobs, root / "calibration.json", ProcessOptions(repair="idw8"),
             scheduler=cluster.scheduler_address,

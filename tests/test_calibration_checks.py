@@ -74,6 +74,12 @@ def test_recordings_checked_for_length_swaps_silent_elements_and_settling():
     assert found.level == "refuse" and "did not cover the mat" in found.text
     (found,) = check_recordings(zero, _mat(loaded, drift=0.3))
     assert found.level == "warn" and "not steady" in found.text
+    assert "(20 % of the load response, 1.15 pF)" in found.text
+    # a load that barely moved the mat: the creep said in times, not in thousands of percent
+    creeping_zero = _mat(np.full(16, 3.85), drift=0.3)
+    found = check_recordings(creeping_zero, _mat(np.full(16, 4.002)))
+    steady = [f.text for f in found if "steady" in f.text]
+    assert steady and "times the load response, 0.00" in steady[0], found
 
 
 def test_gains_far_from_one_are_said():

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from texsense import Layout
+from texsense.cli import main
 from texsense.commands.hysteresis import _apply_bounds
+from texsense.compensation import intervals
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Linear, StageChain
@@ -44,19 +46,22 @@ def test_simulate_night_writes_the_raw_night_and_its_truth(tmp_path: Path) -> No
 @pytest.fixture(scope="module")
 def seat(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("seat")
-    r = texsense("seat-sessions", "-n", "1", "--rest-s", "20", "-o", "s", cwd=root)
-    assert r.returncode == 0, r.stderr
+    assert main(["seat-sessions", "-n", "1", "--rest-s", "20", "-o", str(root / "s")]) == 0
     return root
 
 
-def test_process_corrects_in_use_by_default_and_gives_bounds(seat: Path) -> None:
+def test_process_corrects_in_use_by_default_and_gives_bounds(
+    seat: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # the command as a user runs it (one process); the other settings in this one (each
+    # process pays ~3 s of imports: scikit-learn through the calibration checks)
     r = texsense("process", "s/session-001.h5", "--calibration", "s/calibration.json",
                  "-o", "on.h5", "--interval", "0.95", cwd=seat)  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert "in-use drift correction" in r.stdout
-    off = texsense("process", "s/session-001.h5", "--calibration", "s/calibration.json",
-                   "-o", "off.h5", "--in-use-drift", "off", cwd=seat)  # fmt: skip
-    assert off.returncode == 0, off.stderr
+    cal, rec = str(seat / "s" / "calibration.json"), str(seat / "s" / "session-001.h5")
+    assert main(["process", rec, "--calibration", cal, "-o", str(seat / "off.h5"),
+                 "--in-use-drift", "off"]) == 0  # fmt: skip
     on_rec, off_rec = load(seat / "on.h5"), load(seat / "off.h5")
     assert "in-use drift" in on_rec.meta["stages"] and "drift" not in on_rec.meta["stages"]
     assert "drift" in off_rec.meta["stages"] and "in_use_drift" not in off_rec.meta
@@ -67,12 +72,13 @@ def test_process_corrects_in_use_by_default_and_gives_bounds(seat: Path) -> None
     assert np.all(hi - lo > 0)
     assert read_bounds(seat / "off.h5") is None
     # the output of the other setting is not "up to date"
-    again = texsense("process", "s/session-001.h5", "--calibration", "s/calibration.json",
-                     "-o", "on.h5", cwd=seat)  # fmt: skip
-    assert "up to date" not in again.stdout
-    csv = texsense("process", "s/session-001.h5", "--calibration", "s/calibration.json",
-                   "-o", "x.csv", "--interval", "0.95", cwd=seat)  # fmt: skip
-    assert csv.returncode != 0 and "HDF5" in csv.stderr and "Traceback" not in csv.stderr
+    capsys.readouterr()
+    assert main(["process", rec, "--calibration", cal, "-o", str(seat / "on.h5")]) == 0
+    assert "up to date" not in capsys.readouterr().out
+    code = main(["process", rec, "--calibration", cal, "-o", str(seat / "x.csv"),
+                 "--interval", "0.95"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code != 0 and "HDF5" in err and "Traceback" not in err
 
 
 def test_where_the_correction_cannot_run_it_says_why() -> None:
@@ -110,3 +116,32 @@ def test_hysteresis_apply_gives_lo_and_hi_columns(tmp_path: Path) -> None:
     model.held_out_ = None
     with pytest.raises(ParameterError, match="--held-out"):
         _apply_bounds(model, None, y, y, None, 0.95)
+
+
+def test_the_multiplier_is_taken_per_band_of_the_value(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Mondrian conformal: scores of small values (an empty element) are tight, of large ones
+    wide; one pooled quantile over-covers the one and under-covers the other, the band's own
+    quantile covers each at its level (calibration and test data drawn alike)."""
+    rng = np.random.default_rng(0)
+    n = 4000
+    v = np.concatenate([np.full(n, 0.05), np.full(n, 1.5)])  # bands 0 and 4
+    scale = np.where(v < 0.1, 0.2, 2.0)
+    cal, test = (np.abs(rng.normal(0, 1, 2 * n)) * scale for _ in range(2))
+    band = intervals.band_of(v)
+    pooled = intervals.conformal_quantiles(cal, range(101))
+    per_band = tuple(
+        intervals.conformal_quantiles(cal[band == b], range(50, 101)) if np.any(band == b)
+        else None
+        for b in range(len(intervals.BAND_EDGES))
+    )  # fmt: skip
+    held = intervals.HeldOut.from_residuals(np.ones(40), np.zeros(40))  # a(v) = 1: σ = 1
+    monkeypatch.setitem(intervals.SCORES, "test", pooled)
+    _, hi = intervals.bounds(v, 0.9, held, context="test")
+    inside = np.abs(test) <= hi - v
+    assert inside[band == 0].mean() > 0.99 and inside[band == 4].mean() < 0.86  # pooled
+    monkeypatch.setitem(intervals.BAND_SCORES, "test", per_band)
+    _, hi = intervals.bounds(v, 0.9, held, context="test")
+    inside = np.abs(test) <= hi - v
+    for b in (0, 4):
+        assert 0.88 < inside[band == b].mean() < 0.92
+    assert intervals.multiplier(0.9, "test", band=2) == intervals.multiplier(0.9, "test")

@@ -331,3 +331,25 @@ def test_alignment_ignores_readings_below_zero():
         a, b = align_maps(m, rotate=rotate), align_maps(noisy, rotate=rotate)
         assert np.isfinite(b).all()
         np.testing.assert_allclose(np.maximum(a, 0).sum(), np.maximum(b, 0).sum(), rtol=1e-6)
+
+
+def test_a_calibrated_model_gives_its_own_labels_with_their_confidence():
+    """predict_with_confidence of a sigmoid-calibrated SVM computes the probabilities once:
+    the same labels as predict, the confidence the highest probability."""
+    rng = np.random.default_rng(2)
+    lay = Layout.grid(4, 4, pitch_cm=2.0)
+    y = np.repeat(["left", "right", "supine"], 30)
+    frames = rng.random((90, 16))
+    frames[y == "left", 0] += 1.0
+    frames[y == "right", 15] += 1.0
+    from sklearn.calibration import CalibratedClassifierCV
+
+    from texsense.apps.posture.evaluate import make_classifier
+
+    svm = CalibratedClassifierCV(make_classifier("linear-svm"), ensemble=False)  # as trained
+    model = PostureModel(FeatureSet(("elements",)), lay, svm).fit(frames, y)
+    test = rng.random((40, 16)) + np.where(rng.random((40, 1)) < 0.5, 0.6, 0.0)
+    label, confidence = model.predict_with_confidence(test)
+    np.testing.assert_array_equal(label, model.predict(test))
+    proba = model.estimator.predict_proba(model.features_of(test))
+    np.testing.assert_allclose(confidence, proba.max(axis=1))

@@ -31,6 +31,8 @@ NAMES = ["", "/", "left/heel", "HX210/11 LF", ".", "..", "#0", "a\nb", "a\rb", "
 names = st.one_of(st.sampled_from(NAMES), st.text(max_size=40))
 UNITS = [("pressure", "N/cm2"), ("pressure", "kPa"), ("raw", "count"), ("capacitance", "pF"),
          ("force", "N")]  # fmt: skip
+#: The table test reads what the property tests counted: one worker of ``pytest -n`` for all.
+pytestmark = pytest.mark.xdist_group("roundtrip")
 OUTCOMES: collections.Counter[str] = collections.Counter()
 
 

@@ -164,10 +164,10 @@ class WardStation:
         once every message sent so far has been handled: the station handles its inbox in
         slices, so some may still wait)."""
         sent = self.sent.get(mat, 0)
-        before = self.until(lambda: self.mat(mat), lambda m: m["messages"] >= sent)["frames"]
+        before = read(self.until(lambda: self.mat(mat), lambda m: m["messages"] >= sent))
         for _ in range(frames):
             self.frame(mat)
-        return self.until(lambda: self.mat(mat), lambda m: m["frames"] == before + frames)
+        return self.until(lambda: self.mat(mat), lambda m: read(m) == before + frames)
 
     def stop(self) -> None:
         for c in self.clients.values():
@@ -185,6 +185,12 @@ class WardStation:
         for pid in broker_processes(own):  # a station that failed to stop its broker
             with contextlib.suppress(OSError):
                 os.kill(pid, signal.SIGKILL)
+
+
+def read(m: dict) -> int:
+    """The frames a mat's station has read: processed, or skimmed for their time because it
+    was more than 1 s behind (on a loaded machine it is, at start; issue 33)."""
+    return int(m["frames"] + m["behind"])
 
 
 @contextlib.contextmanager
@@ -211,7 +217,7 @@ def ward():
         for mat in MATS:
             for _ in range(3):
                 st.frame(mat)
-        st.until(lambda: st.get("api/mats"), lambda ms: all(m["frames"] == 3 for m in ms))
+        st.until(lambda: st.get("api/mats"), lambda ms: all(read(m) == 3 for m in ms))
         yield st
 
 
@@ -251,11 +257,11 @@ def test_a_clock_that_restarts_is_resynchronised_with_an_event(ward, fault_row):
     st = ward
     for _ in range(5):
         st.frame("restart")
-    before = st.until(lambda: st.mat("restart"), lambda m: m["frames"] == 8)
+    before = st.until(lambda: st.mat("restart"), lambda m: read(m) == 8)
     st.seq["restart"] = 0  # the device restarted: its clock starts at 0 again
     st.frame("restart")  # skipped: one frame off the clock could be a glitch ...
     st.frame("restart")  # ... but two that agree are a new clock
-    m = st.until(lambda: st.mat("restart"), lambda m: m["frames"] == before["frames"] + 1)
+    m = st.until(lambda: st.mat("restart"), lambda m: read(m) == read(before) + 1)
     assert m["skipped"] == 1
     (event,) = st.get("mats/restart/api/events?kind=clock")
     assert event["detail"]["source_t"] == 1.0 and event["detail"]["jump_s"] < -5
@@ -328,7 +334,7 @@ def test_a_wrong_element_count_once_and_sustained(ward, fault_row):
         st.frame("refuse", n=95)
         time.sleep(0.1)
     m = st.mat("refuse")
-    assert m["malformed"] >= 10 and m["frames"] == 3
+    assert m["malformed"] >= 10 and read(m) == 3
     assert "95 values" in m["refused"] and "96 elements" in m["refused"]
     st.frame("refuse")
     st.until(lambda: st.mat("refuse"), lambda m: m["ignored"] >= 1)
@@ -391,12 +397,12 @@ def test_nobody_publishes_without_credentials(ward, fault_row):
             c.disconnect()
             c.loop_stop()
     fault_row("MQTT", "log in to the station's broker with a wrong password", "refused")
-    before = st.mat("victim")["frames"]
+    before = read(st.mat("victim"))
     body = {"seq": 99, "t": 99, "values": [9.0] * 16, "unit": "N/cm2"}
     st.raw("victim", json.dumps(body).encode(), as_mat="intruder")  # another mat's topic
     st.live_after_glitch("intruder")  # the intruder's own frames go through meanwhile
     time.sleep(0.3)
-    assert st.mat("victim")["frames"] == before
+    assert read(st.mat("victim")) == before
     fault_row("MQTT", "a mat's credentials on another mat's topic", "refused")
 
 

@@ -186,8 +186,14 @@ def build_arm() -> Built:
 
 
 def build(kind: str) -> Built:
-    """The ``host`` or ``arm`` build."""
-    return build_host() if kind == "host" else build_arm()
+    """The ``host`` or ``arm`` build, one process at a time (a lock on ``target/mcu``: two
+    rustc runs into one folder remove each other's object files, e.g. two test workers)."""
+    import fcntl
+
+    CACHE.mkdir(parents=True, exist_ok=True)
+    with open(CACHE / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return build_host() if kind == "host" else build_arm()
 
 
 def qemu() -> str:

@@ -44,9 +44,16 @@ class Device:
             assert time.monotonic() < deadline, "the device did not come up"
             time.sleep(0.05)
 
-    def load(self, text: str) -> None:
+    def load(self, text: str) -> int:
+        """Change the load; the device's sequence number of the first frame under it."""
         self.proc.stdin.write(text + "\n")
         self.proc.stdin.flush()
+        said = f"load {text} from frame "
+        while True:  # the device says when it changed the load ("load X from frame N")
+            line = self.proc.stdout.readline()
+            assert line, f"the device exited ({self.proc.poll()})"
+            if said in line:
+                return int(line.split(said)[1].split()[0])
 
     def stop(self) -> None:
         if self.proc.poll() is None:
@@ -76,10 +83,13 @@ class Page:
         return self.mon.get("api/calibration")
 
     def put(self, load: str, settle: int = 6) -> None:
-        """Change the load and let ``settle`` frames pass (what was in the line goes by)."""
-        n = self.mon.status()["frames"]
-        self.device.load(load)
-        self.mon.wait_for_frames(n + settle, timeout=30)
+        """Change the load and wait until the monitor has processed ``settle`` frames under
+        it (by the device's sequence numbers: a monitor behind its serial line on a busy
+        machine is waited for)."""
+        first = self.device.load(load)
+        self.mon.until(
+            lambda: self.mon.get("api/frame/latest")["seq"], lambda s: s >= first + settle, 60
+        )
 
     def step(self, step: str, pressure: str | None = None, frames: int = 10) -> dict:
         status, body = self.post(f"api/calibration/record/{step}",

@@ -226,3 +226,199 @@ def test_one_mat_failing_is_one_line_and_the_ward_goes_on(caplog, monkeypatch):
     lines = [r for r in caplog.records if "boom" in r.getMessage()]
     assert len(lines) == 1 and lines[0].exc_info is None and "bed1" in lines[0].getMessage()
     assert st.mats["bed1"].failed == 5 and st.mats["bed2"].monitor.frames == 5
+
+
+def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatch):
+    """Issue 33: under 20 virtual mats at 10x the station read its inbox ever further behind
+    (50 s after two minutes) and called every mat silent ("no data") while its frames waited
+    in the inbox. Two mats send 100 frames a second each to a station that reads 50: it
+    skips the older frames of a mat whose newer ones wait, counts them, shows the newest,
+    and judges silence on what it has read."""
+    import threading
+
+    st = station("bed1", "bed2")
+    for entry in st.mats.values():
+        entry.min_stale_s = 0.3  # a floor above the sender thread's own hiccups
+        real = entry.monitor.process
+
+        def busy(frame, wall=None, real=real):
+            time.sleep(0.02)  # a busy machine: 20 ms a frame
+            return real(frame, wall=wall)
+
+        monkeypatch.setattr(entry.monitor, "process", busy)
+    sent = {"bed1": 0, "bed2": 0}
+    lags: list[float] = []
+    ages: list[float] = []  # how old the frame each mat shows is
+
+    async def run() -> None:
+        inbox = st.open_inbox()
+        inbox.max_wait_s = 0.2
+        watch = asyncio.create_task(st.watch())
+
+        def mats() -> None:
+            for k in range(150):  # 1.5 s
+                for m in sent:
+                    inbox.put(f"texsense/{m}/frames", payload(k, t=k * 0.01))
+                    sent[m] += 1
+                time.sleep(0.01)
+
+        sender = threading.Thread(target=mats)
+        sender.start()
+        while sender.is_alive() or inbox.waiting:
+            now = time.time()
+            lags.append(now - inbox.read_until(now))
+            ages.extend(now - e.last_wall for e in st.mats.values() if e.last_wall is not None)
+            await asyncio.sleep(0.01)
+        watch.cancel()
+
+    asyncio.run(run())
+    assert max(lags) < 1.0, f"the station fell {max(lags):.2f} s behind"  # (before: 6.7 s)
+    assert max(ages) < 1.2, f"a mat showed a frame {max(ages):.2f} s old"
+    assert not st.store.events(kind="stale"), "a mat that kept sending was called silent"
+    for m, entry in st.mats.items():
+        assert entry.state == "live" and entry.messages == sent[m] == 150
+        assert entry.behind > 0 and entry.monitor.frames + entry.behind == 150
+        assert entry.monitor.latest["seq"] == 149  # the newest frame is what the ward shows
+    assert st.header()["skipped"] == sum(e.behind for e in st.mats.values())
+
+
+def test_a_busy_station_keeps_a_skipped_burst_on_the_clock_and_every_recorded_frame():
+    """Frames a busy station skips still keep the mat's clock in step: a burst of buffered
+    frames (1 s apart, arriving at once) skipped in the middle is no clock jump, and the
+    exposure covers their time. A recording keeps every frame even so."""
+    st = station("bed1", "bed2")
+
+    class Recorder:  # what the monitor's recorder is handed
+        def __init__(self) -> None:
+            self.seqs: list[int] = []
+            self.pending: list[dict] = []  # the events raised while it records
+
+        def append(self, frame, *_a) -> None:
+            self.seqs.append(frame.seq)
+
+    recorder = Recorder()
+    st.mats["bed2"].monitor.recorder = recorder  # type: ignore[assignment]
+
+    async def run() -> None:
+        inbox = st.open_inbox()
+        inbox.max_wait_s = 0.05
+        for m in ("bed1", "bed2"):
+            inbox.put(f"texsense/{m}/frames", payload(0, t=0.0))
+        while inbox.waiting:
+            await asyncio.sleep(0.01)
+        for k in range(1, 21):  # all waiting while the loop is held below
+            for m in ("bed1", "bed2"):
+                inbox.put(f"texsense/{m}/frames", payload(k, t=float(k)))
+        time.sleep(0.1)  # the station busy elsewhere: every message now waited too long
+        while inbox.waiting:
+            await asyncio.sleep(0.01)
+
+    asyncio.run(run())
+    bed1, bed2 = st.mats["bed1"], st.mats["bed2"]
+    assert (bed1.behind, bed1.monitor.frames, bed1.monitor.latest["seq"]) == (19, 2, 20)
+    assert bed1.monitor.clock.skipped == 0 and bed1.state == "live"
+    assert bed1.monitor.tracker.exposure_s.max() == pytest.approx(20.0)  # 0.5 N/cm² is above
+    assert (bed2.behind, bed2.monitor.frames, recorder.seqs) == (0, 21, list(range(21)))
+    assert bed1.messages == bed2.messages == 21
+
+
+def test_the_inbox_lets_pages_go_first_for_a_while():
+    """While a page is being served the inbox waits (each step of a request would otherwise
+    wait behind a slice of frames), but never more than max_defer_s at a time."""
+    from texsense.monitor.clock import Quiet
+    from texsense.station.inbox import Inbox
+
+    handled: list[float] = []
+    serving = [True]
+
+    async def run() -> None:
+        inbox = Inbox(asyncio.get_running_loop(), lambda *_a: handled.append(time.monotonic()),
+                      Quiet(logging.getLogger("test")), defer=lambda: serving[0],
+                      max_defer_s=0.3)  # fmt: skip
+        inbox.put("texsense/bed1/frames", b"{}")
+        await asyncio.sleep(0.1)
+        assert not handled  # a page is being served: the frame waits
+        serving[0] = False
+        await asyncio.sleep(0.05)
+        assert len(handled) == 1  # ... and is read once it is out
+        serving[0] = True
+        put = time.monotonic()
+        inbox.put("texsense/bed1/frames", b"{}")
+        while len(handled) < 2:
+            await asyncio.sleep(0.01)
+        assert 0.3 <= handled[1] - put < 1.0  # a page that takes long: read after 0.3 s
+        put = time.monotonic()
+        inbox.put("texsense/bed1/frames", b"{}")
+        while len(handled) < 3:
+            await asyncio.sleep(0.01)
+        assert handled[2] - put < 0.25  # ... and then read as long without waiting again
+
+    asyncio.run(run())
+
+
+def test_a_slice_ends_when_the_loop_has_a_request_to_read():
+    """A connection that becomes readable while the inbox handles a frame is served after
+    that frame, not after the slice (a request's every step waited for a slice: issue 33),
+    and one readable before the inbox starts is served before any frame; with the check off
+    (``busy`` never true) the whole slice goes first."""
+    import socket
+
+    from texsense.monitor.clock import Quiet
+    from texsense.station.inbox import Inbox
+
+    def run(check: bool, early: bool = False) -> tuple[int, int]:
+        async def main() -> tuple[int, int]:
+            loop = asyncio.get_running_loop()
+            here, there = socket.socketpair()
+            served: list[int] = []
+            handled: list[int] = []
+
+            def handle(*_a: object) -> None:
+                handled.append(1)
+                if len(handled) == 1 and not early:
+                    there.send(b"GET")  # a request comes while the first frame is handled
+                time.sleep(0.01)  # a frame's work
+
+            def read() -> None:
+                here.recv(16)
+                served.append(len(handled))
+
+            loop.add_reader(here.fileno(), read)
+            kw = {} if check else {"busy": lambda: False}
+            inbox = Inbox(loop, handle, Quiet(logging.getLogger("test")), slice_s=5.0, **kw)
+            if early:
+                there.send(b"GET")  # a request is there before the frames
+            for _ in range(8):
+                inbox.put("texsense/bed1/frames", b"{}")
+            while len(handled) < 8:
+                await asyncio.sleep(0.005)
+            loop.remove_reader(here.fileno())
+            here.close()
+            there.close()
+            return served[0], inbox.yielded
+
+        return asyncio.run(main())
+
+    served, yielded = run(check=True)
+    assert served == 1 and yielded >= 1  # served after the frame at hand ...
+    assert run(check=False) == (8, 0)  # ... not after the whole slice
+    assert run(check=True, early=True)[0] == 0  # a request already there: before any frame
+
+
+def test_the_station_counts_the_pages_it_is_serving(monkeypatch):
+    """What the inbox waits for: a request while it is served, a viewer until its first
+    message (then it waits like the frames)."""
+    from fastapi.testclient import TestClient
+
+    from texsense.station.server import create_ward_app
+
+    st = station("bed1")
+    during: list[int] = []
+    real = st.ward
+    monkeypatch.setattr(st, "ward", lambda: during.append(st.serving) or real())
+    with TestClient(create_ward_app(st), base_url="http://127.0.0.1:8766") as client:
+        assert client.get("/api/ward").status_code == 200
+        with client.websocket_connect("ws://127.0.0.1:8766/ws/ward") as ws:
+            assert json.loads(ws.receive_text())["type"] == "ward"
+            assert st.serving == 0  # the viewer has its first message
+    assert during == [1] and st.serving == 0 and st.served_at > 0  # pages first a while after

@@ -7,6 +7,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -170,6 +171,15 @@ class _Output:
             time.sleep(0.05)
 
 
+def _as_from_a_shell() -> None:
+    """(In the child, before exec.) Ctrl-C and SIGTERM as a terminal gives them: default and
+    not blocked, whatever the test process inherited or set (a wizard started by a test
+    worker ignored Ctrl-C in three runs of the whole suite under two workers)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+
+
 @pytest.fixture
 def wizard(tmp_path):
     """``texsense calibrate wizard`` on a device's link as a child process, its output read in
@@ -181,7 +191,8 @@ def wizard(tmp_path):
             [sys.executable, "-m", "texsense.cli", "calibrate", "wizard", "--source",
              f"serial:{link}", "-o", "mat.json", "--frames", "5", "--wait-s", "60", *extra],
             cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
+            stderr=subprocess.STDOUT, env=dict(os.environ, PYTHONFAULTHANDLER="1"),
+            preexec_fn=_as_from_a_shell,
         )  # fmt: skip
         started.append((proc, _Output(proc)))
         return started[-1]
@@ -231,7 +242,16 @@ def test_a_wizard_stopped_mid_way_keeps_what_it_recorded_and_writes_no_calibrati
     out.wait_for("step 2/4")
     time.sleep(1.0)  # waiting for a load that does not come
     proc.send_signal(signal.SIGINT if how == "Ctrl-C" else signal.SIGKILL)
-    rc = proc.wait(timeout=30)
+    try:
+        rc = proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:  # where it hangs: Python's fault handler dumps its stacks
+        status = Path(f"/proc/{proc.pid}/status").read_text()
+        said = [line for line in status.splitlines() if line.startswith(("SigBlk", "SigIgn"))]
+        out.text += "\n" + "\n".join(said) + "\n"
+        proc.send_signal(signal.SIGABRT)
+        proc.wait(timeout=30)
+        out.close()
+        raise AssertionError(f"the wizard did not stop:\n{out.text[-6000:]}") from None
     out.close()  # all of its output
     if how == "Ctrl-C":
         assert rc == 130, out.text

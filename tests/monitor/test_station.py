@@ -20,7 +20,7 @@ from test_browser import open_page
 
 from conftest import ChildServer
 from texsense.station.broker import Broker, parse_broker_url
-from texsense.station.ward import mat_id_of
+from texsense.station.ward import MIN_STALE_S, mat_id_of
 
 
 @pytest.fixture
@@ -140,6 +140,12 @@ def test_virtual_mats_log_in_to_the_stations_own_broker(station, tmp_path):
     assert ward["connected"] and ward["broker"].startswith("mqtt://texsense-station@127.0.0.1:")
 
 
+def read(m: dict) -> int:
+    """The frames a mat's station has read: processed, or skimmed for their time because it
+    was more than 1 s behind (on a loaded machine it can be, at start; issue 33)."""
+    return int(m["frames"] + m["behind"])
+
+
 def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
     st = station("--config", str(ward_file(tmp_path, "bed1", "bed2")), "--broker",
                  f"mqtt://127.0.0.1:{broker.port}", "--refuse-after", "1")  # fmt: skip
@@ -150,7 +156,7 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
             pub.frame("bed1", k, [0.5] * 16)
             pub.frame("bed2", k, [0.2] * 16)
             time.sleep(0.1)
-        st.until(st.mats, lambda m: m["bed1"]["frames"] == 12 and m["bed2"]["frames"] == 12)
+        st.until(st.mats, lambda m: read(m["bed1"]) == 12 and read(m["bed2"]) == 12)
         # malformed payloads: counted for that mat and skipped
         pub.raw("bed1", b"{not json")
         pub.raw("bed1", json.dumps({"seq": 99, "values": [1] * 16}).encode())  # no "t"
@@ -158,8 +164,10 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
         pub.frame("bed2", 12, [0.2] * 64)
         pub.frame("bed2", 13, [0.2] * 16)
         pub.frame("bed1", 12, [0.5] * 16)
-        m = st.until(st.mats, lambda m: m["bed1"]["malformed"] == 2 and m["bed2"]["frames"] == 13)
-        assert m["bed2"]["state"] == "live" and m["bed2"]["malformed"] == 1
+        m = st.until(st.mats, lambda m: m["bed1"]["malformed"] == 2 and read(m["bed2"]) == 13)
+        # (not refused; stale soon after its last frame, which may have waited for the
+        # test's own requests: pages go first)
+        assert m["bed2"]["state"] in ("live", "stale") and m["bed2"]["malformed"] == 1
         # ... but a mat whose frames keep not fitting is refused; the others go on
         k = 14
         while st.mats()["bed2"]["state"] != "refused":  # refused after 1 s and 10 in a row
@@ -169,14 +177,14 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
             time.sleep(0.1)
             k += 1
         pub.frame("bed2", k, [0.2] * 16)  # ignored: the mat is refused
-        m = st.until(st.mats, lambda m: m["bed2"]["ignored"] >= 1 and m["bed1"]["frames"] == k - 1)
+        m = st.until(st.mats, lambda m: m["bed2"]["ignored"] >= 1 and read(m["bed1"]) == k - 1)
         assert "64 values" in m["bed2"]["refused"] and "16 elements" in m["bed2"]["refused"]
-        assert m["bed2"]["frames"] == 13
+        assert read(m["bed2"]) == 13
         # admitted again (the API of the ward page's button): its frames count again
         st.post("api/mats/bed2/admit")
         pub.frame("bed2", k + 1, [0.2] * 16)
-        st.until(st.mats, lambda m: m["bed2"]["frames"] == 14 and m["bed2"]["state"] == "live")
-        # bed1 stops: stale within two of its frame periods (0.1 s each)
+        st.until(st.mats, lambda m: read(m["bed2"]) == 14 and m["bed2"]["state"] == "live")
+        # bed1 stops: stale after two of its frame periods (0.1 s each), at least 1 s
         m = st.until(st.mats, lambda m: m["bed1"]["state"] == "stale", timeout=5)
         period = m["bed1"]["period_s"]
         assert 0.08 < period < 0.2
@@ -190,11 +198,13 @@ def test_stale_malformed_and_refused_mats(broker, station, tmp_path):
     db = sqlite3.connect(st.db_path)
     st.until(lambda: {r[0] for r in db.execute("SELECT kind FROM events")},
              lambda kinds: {"stale", "resumed", "refused", "admitted"} <= kinds)  # fmt: skip
-    last = "SELECT detail FROM events WHERE kind = 'stale' ORDER BY id DESC"
-    (detail,) = db.execute(last).fetchone()  # the stop above (earlier pauses count too)
+    last = ("SELECT e.detail, s.source FROM events e JOIN sessions s ON e.session = s.id "
+            "WHERE e.kind = 'stale' ORDER BY e.id DESC")  # fmt: skip
+    # bed1's stop above (bed2 goes stale later, after its own last frame)
+    detail, _ = next(r for r in db.execute(last) if "bed1" in r[1])
     silent = json.loads(detail)["silent_s"]
     # (silent_s is rounded to 10 ms; the check runs every 20 ms)
-    assert 2 * period - 0.01 <= silent < 2 * period + 0.1, (silent, period)
+    assert MIN_STALE_S - 0.01 <= silent < MIN_STALE_S + 0.1, (silent, period)
 
 
 def test_the_station_reconnects_when_the_broker_restarts(station, tmp_path):
@@ -308,7 +318,7 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         expect(alert.locator("button.ack")).to_be_visible()
         page.wait_for_timeout(400)
         shot = tmp_path / "ward.png"
-        page.screenshot(path=str(shot))
+        page.screenshot(path=str(shot), full_page=True)  # every tile, none cut off
         assert shot.stat().st_size > 20_000
         if os.environ.get("TEXSENSE_SCREENSHOT_WARD"):
             shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_WARD"])
@@ -346,7 +356,7 @@ def test_two_stations_split_a_site_by_topic(broker, tmp_path):
         pub.frame("bed2", 0, [0.2] * 16, prefix="ward4")
         pub.close()
         w3, w4 = made
-        m3 = w3.until(w3.mats, lambda m: m["bed1"]["frames"] == 3)
+        m3 = w3.until(w3.mats, lambda m: read(m["bed1"]) == 3)
         m4 = w4.until(w4.mats, lambda m: m["bed2"]["frames"] == 1)
         assert m3["bed2"]["frames"] == 0 and m4["bed1"]["frames"] == 0
     finally:

@@ -79,3 +79,31 @@ def test_the_feed_sends_what_changed_within_its_budget_and_starves_nobody():
     st.mats["m007"].feed(Frame(5, np.full(1024, 5.0), np.ones(1024), "N/cm2"), clock)
     one = json.loads(feed.message(now=clock + 1.2))
     assert [m["id"] for m in one["mats"]] == ["m007"] and one["mats"][0]["frames"] == 6
+
+
+def test_the_ward_page_comes_with_its_tiles_and_nothing_in_them_ends_the_block():
+    """``GET /`` carries the feed's first message (the page draws it before its WebSocket
+    answers: issue 33); a payload's text in a tile's error cannot close the data block."""
+    import re
+    import time
+
+    from fastapi.testclient import TestClient
+
+    from texsense.station.server import create_ward_app
+
+    st = ward(3)
+    assert st.mats["m000"].feed(Frame(0, np.zeros(1024), np.full(1024, 0.5), "N/cm2"), time.time())
+    unit = "</script><script>alert(1)</script>"  # told back in the mat's error
+    nasty = json.dumps({"seq": 0, "t": 0.0, "values": [0.5] * 1024, "unit": unit}).encode()
+    assert not st.mats["m001"].handle(nasty, time.time())
+    with TestClient(create_ward_app(st), base_url="http://127.0.0.1:8766") as client:
+        html = client.get("/").text
+    block = re.search(r'<script type="application/json" id="first-ward">(.*?)</script>', html)
+    assert block is not None and "<" not in block.group(1)
+    assert html.count("<script") == 3  # the block and the page's two scripts, nothing else
+    first = json.loads(block.group(1))
+    assert first["type"] == "ward" and first["reset"]
+    tiles = {m["id"]: m for m in first["mats"]}
+    assert set(tiles) == {"m000", "m001", "m002"}
+    assert tiles["m000"]["state"] == "live" and tiles["m000"]["map"]["rows"] == 16
+    assert unit in tiles["m001"]["last_error"]  # the text is all there, as text

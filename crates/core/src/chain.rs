@@ -494,9 +494,8 @@ impl FrameBlock for UsualBlock<'_> {
         let w = out.len();
         let (mut c, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
         let (c, ok) = (&mut c[..w], &mut ok[..w]);
-        for i in 0..w {
-            (c[i], ok[i]) = self.conv.stage(self.start + i, x[i], valid[i]);
-        }
+        self.conv.row(self.start, x, valid, c);
+        ok.copy_from_slice(valid); // conversion keeps the validity (stage::conversion)
         self.comp.row(dt, c, ok, out);
     }
 }

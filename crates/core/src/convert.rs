@@ -105,6 +105,28 @@ impl ConverterView<'_> {
     pub fn stage(&self, i: usize, c: f64, ok: bool) -> (f64, bool) {
         stage::conversion(self.offset[i], self.gain[i], self.curve.as_ref(), c, ok)
     }
+
+    /// The stage over elements `start .. start + x.len()` of a frame: readings `x` and
+    /// their validity `ok` -> values `out` (the validity stays `ok`); on AVX2 four elements
+    /// at a time ([`crate::simd`]; the same bits as [`ConverterView::stage`]).
+    ///
+    /// # Panics
+    /// When the slices differ in length or the view has too few elements.
+    pub fn row(&self, start: usize, x: &[f64], ok: &[bool], out: &mut [f64]) {
+        assert!(
+            x.len() == ok.len() && x.len() == out.len(),
+            "one per element"
+        );
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2() {
+            // SAFETY: the processor has AVX2 (detected by `simd::avx2`)
+            unsafe { avx2::row(self, start, x, ok, out) };
+            return;
+        }
+        for (i, slot) in out.iter_mut().enumerate() {
+            *slot = self.stage(start + i, x[i], ok[i]).0;
+        }
+    }
 }
 
 impl Converter {
@@ -178,3 +200,5 @@ impl Converter {
         Ok(())
     }
 }
+#[cfg(target_arch = "x86_64")]
+mod avx2;

@@ -100,18 +100,32 @@ impl DriftSettings {
     }
 }
 
+/// Elements per group of the states' layout: the K states of a group of [`GROUP`]
+/// neighbouring elements are stored term-major (`[group][term][element]`), so that the
+/// AVX2 path reads one term of four elements as one vector (the last group is padded).
+/// Block boundaries fall on group boundaries ([`crate::par::block_size`] is a multiple).
+pub const GROUP: usize = 4;
+
+/// Position of element `i`'s term `j` (of `k`) in the grouped layout.
+#[inline(always)]
+fn at(k: usize, i: usize, j: usize) -> usize {
+    (i / GROUP) * k * GROUP + j * GROUP + i % GROUP
+}
+
 /// Drift states of N elements.
 #[derive(Debug, Clone)]
 pub struct DriftBank {
     settings: DriftSettings,
     elements: Vec<Element<f64>>,
-    /// K states per element, element-major (`[N][K]`).
+    /// K states per element, in groups of [`GROUP`] elements, term-major ([`at`]).
     z: Vec<f64>,
-    /// The time clock's K states per element when two clocks run (else empty).
+    /// The time clock's K states per element when two clocks run (else empty), laid out
+    /// as `z`.
     z_time: Vec<f64>,
 }
 
-/// The elements of one block of a bank, for a parallel batch.
+/// The elements of one block of a bank, for a parallel batch (the block starts on a
+/// group boundary).
 pub struct DriftBlock<'a> {
     settings: Settings<'a, f64>,
     elements: &'a mut [Element<f64>],
@@ -133,11 +147,12 @@ impl DriftBlock<'_> {
     #[inline(always)]
     pub fn step(&mut self, i: usize, dt: f64, h: f64, valid: bool) -> f64 {
         let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
-        kernel::step(
+        kernel::step_strided(
             &self.settings,
             &mut self.elements[i],
             z,
             z_time,
+            GROUP,
             &self.decay,
             dt,
             h,
@@ -146,33 +161,43 @@ impl DriftBlock<'_> {
     }
 
     /// One frame of the block: element `i` reads `h[i]` (`ok[i]` false: skipped) into
-    /// `out[i]`; on AVX2 the kernel compiled for it ([`crate::simd`]: its K terms four at a
-    /// time; the same operations in the same order, so the same bits).
+    /// `out[i]`; on AVX2 with the time clock and the linear level (eq. 5.8 as printed),
+    /// four elements at a time, one vector per kernel term (`avx2`: the scalar kernel's
+    /// operations in the same order, so the same bits); the rest clock (an `exp` per
+    /// element and term) and a level power (a `powf`) run the scalar kernel.
+    ///
+    /// # Panics
+    /// When a slice does not hold one value per element.
     pub fn row(&mut self, dt: f64, h: &[f64], ok: &[bool], out: &mut [f64]) {
+        let n = self.elements.len();
+        assert!(
+            h.len() == n && ok.len() == n && out.len() == n,
+            "one per element"
+        );
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2() {
-            // SAFETY: the processor has AVX2 (detected by `simd::avx2`)
-            unsafe { self.row_avx2(dt, h, ok, out) };
+        if crate::simd::avx2() && self.settings.rest().0 == 0.0 && self.settings.exponent() == 1.0 {
+            let whole = n / GROUP * GROUP;
+            // SAFETY: the processor has AVX2 (detected by `simd::avx2`); `whole` elements
+            // are whole groups of the block's layout, the slices hold n >= whole values
+            unsafe {
+                avx2::groups(
+                    &self.settings,
+                    self.elements,
+                    self.z,
+                    &self.decay,
+                    &h[..whole],
+                    &ok[..whole],
+                    &mut out[..whole],
+                )
+            };
+            for i in whole..n {
+                out[i] = self.step(i, dt, h[i], ok[i]);
+            }
             return;
         }
-        self.row_scalar(dt, h, ok, out);
-    }
-
-    #[inline(always)]
-    fn row_scalar(&mut self, dt: f64, h: &[f64], ok: &[bool], out: &mut [f64]) {
         for (i, slot) in out.iter_mut().enumerate() {
             *slot = self.step(i, dt, h[i], ok[i]);
         }
-    }
-
-    /// [`DriftBlock::row`] compiled for AVX2.
-    ///
-    /// # Safety
-    /// The processor must have AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn row_avx2(&mut self, dt: f64, h: &[f64], ok: &[bool], out: &mut [f64]) {
-        self.row_scalar(dt, h, ok, out);
     }
 
     /// The drift of the elastic response `level(u)` of the hysteresis stage's input `u`,
@@ -188,11 +213,12 @@ impl DriftBlock<'_> {
         ok: bool,
     ) -> (f64, bool) {
         let (z, z_time) = states(self.z, self.z_time, self.settings.terms(), i);
-        texsense_kernels::stage::drift_on_level(
+        texsense_kernels::stage::drift_on_level_strided(
             &self.settings,
             &mut self.elements[i],
             z,
             z_time,
+            GROUP,
             &self.decay,
             dt,
             level,
@@ -203,20 +229,23 @@ impl DriftBlock<'_> {
     }
 }
 
-/// Element `i`'s K states and (with two clocks) the time clock's K states (empty without).
-#[inline]
+/// Element `i`'s K states (term `j` at `[j * GROUP]`) and, with two clocks, the time
+/// clock's (empty without), in the grouped layout ([`at`]).
+#[inline(always)]
 fn states<'b>(
     z: &'b mut [f64],
     z_time: &'b mut [f64],
     k: usize,
     i: usize,
 ) -> (&'b mut [f64], &'b mut [f64]) {
+    let first = at(k, i, 0);
+    let end = at(k, i, k - 1) + 1;
     let z_time: &mut [f64] = if z_time.is_empty() {
         &mut []
     } else {
-        &mut z_time[i * k..(i + 1) * k]
+        &mut z_time[first..end]
     };
-    (&mut z[i * k..(i + 1) * k], z_time)
+    (&mut z[first..end], z_time)
 }
 
 impl FrameBlock for DriftBlock<'_> {
@@ -255,7 +284,7 @@ impl DriftBank {
                 exponent: 1.0,
             },
             elements: vec![Element::default(); n],
-            z: vec![0.0; n * k],
+            z: vec![0.0; n.div_ceil(GROUP) * GROUP * k],
             z_time: Vec::new(),
         })
     }
@@ -354,8 +383,15 @@ impl DriftBank {
             w.f64(e.smooth);
             w.u32(e.started);
         }
-        w.f64s(&self.z);
-        w.f64s(&self.z_time);
+        // element-major, as before the grouped layout (the snapshot format is unchanged)
+        let k = self.settings.kernel.len();
+        for z in [&self.z, &self.z_time] {
+            if !z.is_empty() {
+                for i in 0..self.len() {
+                    (0..k).for_each(|j| w.f64(z[at(k, i, j)]));
+                }
+            }
+        }
     }
 
     /// Every element's state from a snapshot of a bank of the same shape.
@@ -371,8 +407,16 @@ impl DriftBank {
                 started: r.u32()?.min(1),
             };
         }
-        r.f64s(&mut self.z)?;
-        r.f64s(&mut self.z_time)?;
+        let (k, n) = (self.settings.kernel.len(), self.len());
+        for z in [&mut self.z, &mut self.z_time] {
+            if !z.is_empty() {
+                for i in 0..n {
+                    for j in 0..k {
+                        z[at(k, i, j)] = r.f64()?;
+                    }
+                }
+            }
+        }
         Ok(())
     }
 
@@ -460,5 +504,7 @@ pub(crate) fn check_time_steps(dt: &[f64]) -> Result<(), CoreError> {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 #[cfg(test)]
 mod tests;

@@ -3,10 +3,11 @@
 //! The scalar kernels are those of `texsense-kernels` (shared with the microcontroller
 //! build, which never sees this module). On x86-64 a processor with AVX2 runs the Preisach
 //! kernel across elements (four elements in the lanes of one register:
-//! `preisach::avx2`) and the drift kernel compiled for AVX2 (its K kernel terms four at a
-//! time); both give the scalar kernel's results bit for bit (no fused multiply-add, the
-//! same operations in the same order; property tests in `preisach/tests.rs` and
-//! `drift/tests.rs`). Elsewhere, or after [`set_enabled`]`(false)`, the scalar kernels run.
+//! `preisach::avx2`), the drift kernel on the time clock across elements (one kernel
+//! term of four elements per register: `drift::avx2`) and the conversion across elements
+//! (`convert::avx2`); all give the scalar kernels' results bit for bit (no fused
+//! multiply-add, the same operations in the same order; property tests in
+//! `preisach/tests.rs`, `drift/tests.rs` and `convert/avx2.rs`). Elsewhere, or after [`set_enabled`]`(false)`, the scalar kernels run.
 //!
 //! The choice is made per call from a flag and the CPU detection that `std` caches
 //! (`is_x86_feature_detected!`), so switching it between two batches is safe.

@@ -144,6 +144,11 @@ impl<'a, T: Real> Settings<'a, T> {
         self.gamma
     }
 
+    /// `Σ_j c_j`, summed in the order of the terms (what [`step`] multiplies `H` by).
+    pub fn weight_sum(&self) -> T {
+        self.weight_sum
+    }
+
     /// The rest clock's rate (0: the time clock) and window.
     pub fn rest(&self) -> (T, T) {
         (self.rest_rate, self.rest_window)
@@ -208,17 +213,33 @@ pub fn step<T: Real>(
     h: T,
     valid: bool,
 ) -> T {
+    step_strided(s, el, z, z_time, 1, decay, dt, h, valid)
+}
+
+/// [`step`] on states stored `stride` apart: term `j` at `z[j * stride]` (and
+/// `z_time[j * stride]`), as when the states of several elements are interleaved term by
+/// term (the desktop's groups of elements across SIMD lanes). The same operations in the
+/// same order for any stride.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn step_strided<T: Real>(
+    s: &Settings<'_, T>,
+    el: &mut Element<T>,
+    z: &mut [T],
+    z_time: &mut [T],
+    stride: usize,
+    decay: &[T],
+    dt: T,
+    h: T,
+    valid: bool,
+) -> T {
     // the second clock only runs beside the rest clock
     let two_clocks = !z_time.is_empty() && s.rest_rate > T::ZERO;
     if !(valid && h.is_finite()) {
         // time still passes for the element's states (at rest: nothing is known)
-        for (zj, &d) in z.iter_mut().zip(decay) {
-            *zj = *zj * d;
-        }
+        decay_and_add(z, stride, decay, None);
         if two_clocks {
-            for (zj, &d) in z_time.iter_mut().zip(decay) {
-                *zj = *zj * d;
-            }
+            decay_and_add(z_time, stride, decay, None);
         }
         return T::NAN;
     }
@@ -232,45 +253,57 @@ pub fn step<T: Real>(
         // this element's clock: slowed by its own (averaged) rate of change
         el.smooth += (change / dt - el.smooth) * (T::ONE - (-dt / s.rest_window).exp());
         let clock = dt / (T::ONE + el.smooth.abs() / s.rest_rate);
-        for (zj, &tau) in z.iter_mut().zip(s.taus) {
+        for (zj, &tau) in z.iter_mut().step_by(stride).zip(s.taus) {
             *zj = *zj * (-clock / tau).exp() + change;
         }
-        dot(s.weights, z)
+        dot(s.weights, z, stride)
     } else {
-        decay_and_add(z, decay, change);
-        dot(s.weights, z)
+        decay_and_add(z, stride, decay, Some(change));
+        dot(s.weights, z, stride)
     };
     let mut out = h + s.gamma * (el.total * s.weight_sum - weighted);
     if two_clocks {
-        decay_and_add(z_time, decay, change);
-        out += s.gamma_time * (el.total * s.weight_sum - dot(s.weights, z_time));
+        decay_and_add(z_time, stride, decay, Some(change));
+        out += s.gamma_time * (el.total * s.weight_sum - dot(s.weights, z_time, stride));
     }
     out
 }
 
-/// `z_j <- z_j d_j + change` for every term.
-#[inline]
-fn decay_and_add<T: Real>(z: &mut [T], decay: &[T], change: T) {
-    for (zj, &d) in z.iter_mut().zip(decay) {
-        *zj = *zj * d + change;
+/// `z_j <- z_j d_j + change` for every term (`z_j d_j` without a change: time passes).
+#[inline(always)]
+fn decay_and_add<T: Real>(z: &mut [T], stride: usize, decay: &[T], change: Option<T>) {
+    let k = decay.len();
+    assert!(
+        k == 0 || z.len() > (k - 1) * stride,
+        "K states, `stride` apart"
+    );
+    match change {
+        Some(c) => (0..k).for_each(|j| z[j * stride] = z[j * stride] * decay[j] + c),
+        None => (0..k).for_each(|j| z[j * stride] = z[j * stride] * decay[j]),
     }
 }
 
-/// `Σ w_j z_j` in four independent partial sums (the terms are added in a tree, not one
-/// long chain of dependent additions).
-#[inline]
-fn dot<T: Real>(w: &[T], z: &[T]) -> T {
-    let mut acc = [T::ZERO; 4];
-    let (wc, zc) = (w.chunks_exact(4), z.chunks_exact(4));
-    let (wr, zr) = (wc.remainder(), zc.remainder());
-    for (a, b) in wc.zip(zc) {
-        for q in 0..4 {
-            acc[q] += a[q] * b[q];
-        }
+/// `Σ w_j z_j` in four independent partial sums over the whole fours of terms (term `j`
+/// into sum `j mod 4`), then the remaining terms in order (the terms are added in a tree,
+/// not one long chain of dependent additions).
+#[inline(always)]
+fn dot<T: Real>(w: &[T], z: &[T], stride: usize) -> T {
+    let k = w.len();
+    assert!(
+        k == 0 || z.len() > (k - 1) * stride,
+        "K states, `stride` apart"
+    );
+    let whole = k / 4 * 4;
+    let (mut a0, mut a1, mut a2, mut a3) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
+    for j in (0..whole).step_by(4) {
+        a0 += w[j] * z[j * stride];
+        a1 += w[j + 1] * z[(j + 1) * stride];
+        a2 += w[j + 2] * z[(j + 2) * stride];
+        a3 += w[j + 3] * z[(j + 3) * stride];
     }
     let mut tail = T::ZERO;
-    for (&a, &b) in wr.iter().zip(zr) {
-        tail += a * b;
+    for j in whole..k {
+        tail += w[j] * z[j * stride];
     }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+    (a0 + a1) + (a2 + a3) + tail
 }

@@ -83,8 +83,28 @@ pub fn drift_on_level<T: Real>(
     h: T,
     ok: bool,
 ) -> (T, bool) {
+    drift_on_level_strided(s, el, z, z_time, 1, decay, dt, level, u, h, ok)
+}
+
+/// [`drift_on_level`] on states stored `stride` apart ([`drift::step_strided`]).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn drift_on_level_strided<T: Real>(
+    s: &Settings<'_, T>,
+    el: &mut drift::Element<T>,
+    z: &mut [T],
+    z_time: &mut [T],
+    stride: usize,
+    decay: &[T],
+    dt: T,
+    level: &Curve<'_, T>,
+    u: T,
+    h: T,
+    ok: bool,
+) -> (T, bool) {
     let b = if u.is_finite() { level.at(u) } else { T::NAN };
-    let y = h + (drift::step(s, el, z, z_time, decay, dt, b, ok && h.is_finite()) - b);
+    let valid = ok && h.is_finite();
+    let y = h + (drift::step_strided(s, el, z, z_time, stride, decay, dt, b, valid) - b);
     (y, ok && y.is_finite())
 }
 

@@ -245,9 +245,11 @@ def check_recordings(
     for name, rec in zip(names, (baseline, uniform), strict=True):
         moved = _settling(rec)
         if abs(moved) > STEADY_SHARE * typical:
+            ratio = abs(moved) / typical  # a tiny response makes a share meaningless
+            said = f"{100 * ratio:.0f} % of" if ratio < 10 else f"{ratio:.3g} times"
             found.append(Finding("warn", (
                 f"{name} was not steady: the readings moved by {moved:+.3g} pF "
-                f"({100 * abs(moved) / typical:.0f} % of the load response) from its first to "
+                f"({said} the load response, {typical:.3g} pF) from its first to "
                 "its last third (the spacer creeping, or the load settling): wait until the "
                 "readings are steady, or record longer")))  # fmt: skip
     return found

@@ -15,11 +15,14 @@ ground truth that these workflows and the compensation are graded against.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from texsense.compensation.drift import DriftModel, split_steps
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import Drift, Hysteresis, StageChain
+from texsense.data.fitcache import remembered
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.sensor.materials import PRESETS
@@ -113,18 +116,39 @@ def calibrate_virtual_mat(mat: VirtualMat, material_seed: int = 11) -> StageChai
     return calibrate_mat(record, base, uni, 1.0, 3.0, steps=steps)
 
 
+def _cached(name: str, fit: Callable[[], StageChain]) -> StageChain:
+    """The calibration ``fit()`` makes (seconds of Preisach identification, the same every
+    time for the same code), made once per version of the code
+    (:func:`texsense.data.fitcache.remembered`: kept in memory and in the cache folder; a
+    kept file that cannot be read is fitted again and a cache that cannot be written is
+    skipped, each said in the log)."""
+    return remembered(
+        "calibration",
+        [name],
+        lambda: fit().to_dict(),
+        lambda content: StageChain.from_dict(content, "the fit cache"),
+    )
+
+
 def seat_calibration(mat_seed: int = 5, material_seed: int = 11) -> StageChain:
     """Calibrate the virtual seat as a user would (docs/pipeline.md): zeroing + 1 N/cm²
     equilibration of a mat with the same ``mat_seed`` (the same elements), the spacer model
     from a test-machine record of another specimen (``material_seed``) with γ from its held
-    steps."""
-    return calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed)
+    steps. Cached (:func:`_cached`)."""
+    return _cached(
+        f"seat-{mat_seed}-{material_seed}",
+        lambda: calibrate_virtual_mat(VirtualMat.seat(seed=mat_seed), material_seed),
+    )
 
 
 def bed_calibration(material_seed: int = 11) -> StageChain:
     """Calibrate the virtual 64 x 32 bed mat (:class:`texsense.monitor.virtual.VirtualBedSource`
-    and the station's virtual beds: the same physical mat) as a user would."""
-    return calibrate_virtual_mat(bed_mat(failures=False), material_seed)
+    and the station's virtual beds: the same physical mat) as a user would. Cached
+    (:func:`_cached`)."""
+    return _cached(
+        f"bed-{material_seed}",
+        lambda: calibrate_virtual_mat(bed_mat(failures=False), material_seed),
+    )
 
 
 def strip_calibration(seed: int = 0, material_seed: int = 11) -> StageChain:

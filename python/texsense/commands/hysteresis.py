@@ -177,7 +177,7 @@ def run_fit(args: argparse.Namespace) -> int:
         input_unit=_unit_of(args.input),
         output_unit=_unit_of(args.output),
     )
-    model.fit(u, y, provenance={"calibration": str(args.calibration)})
+    model.fit(u, y, provenance={"calibration": str(args.calibration)}, remember=True)
     if args.held_out:
         held = read_columns(args.held_out)
         model.hold_out(

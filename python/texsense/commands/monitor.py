@@ -6,7 +6,6 @@ import argparse
 import importlib
 import importlib.util
 import logging
-import os
 import signal
 import socket
 from collections.abc import Callable
@@ -16,7 +15,7 @@ from typing import TYPE_CHECKING
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.files import check_writable
+from texsense.data.files import cache_folder, check_writable
 from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
@@ -398,7 +397,7 @@ def _cached_model(
     changed trains a new one instead of reading an old one."""
     from texsense.apps.posture.model import PostureModel
 
-    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
+    cache = cache_folder()
     path = cache / f"{name}.joblib"
     if path.is_file():
         try:

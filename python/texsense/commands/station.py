@@ -36,7 +36,7 @@ from texsense.monitor.store import open_store
 from texsense.monitor.web import resolve_token, stop_on_sigterm
 from texsense.station.broker import check_mat_id, mat_topic, parse_broker_url, station_broker
 from texsense.station.virtual import VirtualMats
-from texsense.station.ward import MatConfig, Station
+from texsense.station.ward import MIN_STALE_S, MatConfig, Station
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -80,9 +80,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mat-credentials", type=Path, default=Path("mat-credentials.toml"),
                    metavar="FILE", help="own broker: the MQTT mats' passwords, made when "
                    "missing (mode 0600; default mat-credentials.toml)")  # fmt: skip
-    p.add_argument("--stale-after", type=float, default=0.0, metavar="S",
+    p.add_argument("--stale-after", type=float, default=MIN_STALE_S, metavar="S",
                    help="a mat is stale after two of its frame periods without a frame, and "
-                   "not before S s (default 0: no floor; a floor for jittery links or a "
+                   f"not before S s (default {MIN_STALE_S:g}; more for jittery links or a "
                    "loaded machine)")  # fmt: skip
     p.add_argument("--refuse-after", type=float, default=10.0, metavar="S",
                    help="refuse a mat whose frames have had another element count for this "

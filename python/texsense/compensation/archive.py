@@ -332,7 +332,7 @@ def process_archive(
             n_workers=n,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            dashboard_address=":0",
             env=one_thread,
             # a worker's heartbeat to a scheduler closing at the end is logged as an error
             # with a traceback on a loaded machine; a task's own failure comes back through

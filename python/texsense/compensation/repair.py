@@ -183,7 +183,17 @@ class Repair(Stage):
 class _Harmonic:
     """Laplace inpainting of the failed elements of a frame: solve ``L_FF x_F = A_FV v_V``
     for the failed elements connected to a valid one (a factorisation per failure pattern,
-    reused while the pattern stays)."""
+    reused while the pattern stays).
+
+    The system of a new pattern is built from the neighbour graph's arrays (numpy index
+    arithmetic, no sparse slicing) and the right-hand side is one product with the whole
+    graph: the matrix, its factorisation and the solution are the same to the bit as those
+    of slicing the graph's sparse matrix (``tests/test_repair_harmonic.py``), at a fraction
+    of the cost (a failure pattern that changes every frame, as on a mat with intermittent
+    contacts, is factorised every frame). ``factorisations`` and ``hits`` count the work."""
+
+    #: failure patterns kept (the oldest go first)
+    CACHE_MAX = 64
 
     def __init__(self, layout: Layout) -> None:
         import scipy.sparse as sp
@@ -192,36 +202,68 @@ class _Harmonic:
         indptr, indices = layout.neighbours
         adj = sp.csr_matrix((np.ones(indices.size), indices, indptr), shape=(n, n))
         self._adj = ((adj + adj.T) > 0).astype(np.float64).tocsr()
+        self._adj.sort_indices()
         self._deg = np.asarray(self._adj.sum(axis=1)).ravel()
-        self._cache: dict[bytes, tuple[Any, Any, Any]] = {}
+        # the graph's edges (both directions), by row then column
+        self._rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(self._adj.indptr))
+        self._cols = self._adj.indices.astype(np.int64)
+        self._n = n
+        self._cache: dict[bytes, tuple[Any, Any]] = {}
+        self.factorisations = 0
+        self.hits = 0
 
     def solve(self, out: np.ndarray, ok: npt.NDArray[np.bool_]) -> None:
         """Fill ``out`` where not ``ok`` (in place), from its values where ``ok``."""
         key = np.packbits(ok).tobytes()
-        if key not in self._cache:
-            if len(self._cache) > 64:
-                self._cache.clear()
-            self._cache[key] = self._factorise(ok)
-        solvable, solver, rhs_op = self._cache[key]
+        entry = self._cache.pop(key, None)
+        if entry is None:
+            if len(self._cache) >= self.CACHE_MAX:
+                del self._cache[next(iter(self._cache))]
+            entry = self._factorise(ok)
+            self.factorisations += 1
+        else:
+            self.hits += 1
+        self._cache[key] = entry  # the most recent last
+        solvable, solver = entry
         if solver is not None:
-            out[solvable] = solver(rhs_op @ out[ok])
+            # A_FV v_V: the sum of each element's valid neighbours (failed ones add 0)
+            rhs = self._adj @ np.where(ok, out, 0.0)
+            out[solvable] = solver(rhs[solvable])
 
-    def _factorise(self, ok: np.ndarray) -> tuple[Any, Any, Any]:
+    def _solvable(self, ok: np.ndarray) -> np.ndarray:
+        """The failed elements connected to a valid one through failed ones (sorted)."""
+        bad = ~ok
+        from_bad = bad[self._rows]
+        reach = np.zeros(self._n, bool)
+        reach[self._rows[from_bad & ok[self._cols]]] = True  # next to a valid element
+        rows, cols = self._rows[from_bad & bad[self._cols]], self._cols[from_bad & bad[self._cols]]
+        while True:  # spread through failed neighbours (as many rounds as a cluster is wide)
+            more = rows[reach[cols] & ~reach[rows]]
+            if not more.size:
+                return np.flatnonzero(reach)
+            reach[more] = True
+
+    def _factorise(self, ok: np.ndarray) -> tuple[Any, Any]:
         import scipy.sparse as sp
         import scipy.sparse.linalg as spla
-        from scipy.sparse.csgraph import connected_components
 
-        bad = np.flatnonzero(~ok)
-        sub = self._adj[bad][:, bad]
-        ncomp, comp = connected_components(sub, directed=False)
-        touches = np.asarray(self._adj[bad][:, np.flatnonzero(ok)].sum(axis=1)).ravel() > 0
-        reach = np.zeros(ncomp, bool)
-        reach[comp[touches]] = True
-        solvable = bad[reach[comp]]
-        if not solvable.size:
-            return solvable, None, None
-        lap = sp.diags(self._deg[solvable]) - self._adj[solvable][:, solvable]
-        return solvable, spla.factorized(lap.tocsc()), self._adj[solvable][:, np.flatnonzero(ok)]
+        solvable = self._solvable(ok)
+        m = solvable.size
+        if not m:
+            return solvable, None
+        pos = np.full(self._n, -1, dtype=np.int64)
+        pos[solvable] = np.arange(m)
+        r, c = pos[self._rows], pos[self._cols]
+        inner = (r >= 0) & (c >= 0)
+        # L_FF = diag(deg) - A_FF: symmetric, so its rows are its columns (CSC = CSR)
+        rr = np.concatenate([r[inner], np.arange(m)])
+        cc = np.concatenate([c[inner], np.arange(m)])
+        data = np.concatenate([np.full(int(inner.sum()), -1.0), self._deg[solvable]])
+        order = np.argsort(rr * m + cc, kind="stable")
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rr, minlength=m))])
+        lap = sp.csc_matrix((data[order], cc[order].astype(np.int32), indptr.astype(np.int32)),
+                            shape=(m, m))  # fmt: skip
+        return solvable, spla.splu(lap).solve
 
 
 def idw_weights(layout: Layout, reach: float = 1.5) -> Any:

@@ -78,6 +78,12 @@ __all__ = [
 _TMP_PREFIX = ".texsense-tmp-"
 
 
+def cache_folder() -> Path:
+    """Where texsense keeps what it can make again (trained posture models, the virtual mats'
+    calibrations): ``$XDG_CACHE_HOME/texsense``, by default ``~/.cache/texsense``."""
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
+
+
 def _fsync_file(path: Path) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:

@@ -425,11 +425,17 @@ class Layout:
         k = round(float(np.sqrt(n_areas)))
         if k < 1 or k * k != n_areas:
             raise ParameterError(f"n_areas must be a square number (4, 16, ...), got {n_areas}")
-        x0, x1, y0, y1 = self.extent_cm
-        ix = np.clip(((self._xy[:, 0] - x0) / (x1 - x0) * k).astype(int), 0, k - 1)
-        iy = np.clip(((self._xy[:, 1] - y0) / (y1 - y0) * k).astype(int), 0, k - 1)
-        area_index = iy * k + ix
-        return {f"a{i + 1}": np.nonzero(area_index == i)[0] for i in range(n_areas)}
+        # worked out once per layout (the posture features ask for it on every live frame)
+        cache = self.__dict__.setdefault("_equal_areas", {})
+        if n_areas not in cache:
+            x0, x1, y0, y1 = self.extent_cm
+            ix = np.clip(((self._xy[:, 0] - x0) / (x1 - x0) * k).astype(int), 0, k - 1)
+            iy = np.clip(((self._xy[:, 1] - y0) / (y1 - y0) * k).astype(int), 0, k - 1)
+            area_index = iy * k + ix
+            cache[n_areas] = {
+                f"a{i + 1}": _readonly(np.nonzero(area_index == i)[0]) for i in range(n_areas)
+            }
+        return dict(cache[n_areas])
 
     # ------------------------------------------------------------------ (de)serialisation
     def _replace(self, **changes: Any) -> Layout:

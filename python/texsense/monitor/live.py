@@ -372,6 +372,12 @@ class Monitor:
             self._events([Event("clock", t, None, detail)])
         return True
 
+    def keep_time(self, frame: Frame, wall: float) -> bool:
+        """Place a frame that will not be processed (a busy station skips it) on the mat's
+        time line, so that the clock stays in step; False when its time is off the clock
+        (counted and logged as in :meth:`process`)."""
+        return self._in_step(frame, wall)
+
     def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
         """One frame through everything; returns the snapshot, or None for a frame whose
         time is off the mat's clock (skipped: see :class:`FrameClock`). ``wall``: when it

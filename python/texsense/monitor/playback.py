@@ -39,7 +39,9 @@ it reads its times and labels and makes the statistics, events and health in str
 passes over its frames; a frame is read when it is asked for, through a cache of frames
 bounded by a quarter of the memory budget (:mod:`texsense.data.budget`). So a recording of
 any length plays, longer than the budget. The other formats are read from their start only:
-they are read whole, within the budget, and one beyond it is refused in one line. The reviews
+they are read whole, within the budget, and one beyond it is refused in one line; they are
+parsed in a child process (:mod:`texsense.io.apart`), so that the parsing never holds the
+server's Python lock (it starved the calibration panel for seconds in a thread). The reviews
 kept (:class:`_Reviews`: timelines, statistics per frame, whole recordings of other formats)
 hold at most half of the budget, and the next one is opened within what is left.
 """
@@ -64,10 +66,15 @@ from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.data import budget, units
 from texsense.data.files import check_regular, make_folder, real_path, regular_files
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
+from texsense.io import sniff_format
+from texsense.io.apart import load_apart
+from texsense.io.hdf5 import read_bounds
+from texsense.io.lazy import LazyRecording
 from texsense.monitor.web import Lane
 
 if TYPE_CHECKING:
     from texsense.apps.review import Review
+    from texsense.data.recording import Recording
     from texsense.monitor.live import Monitor
 
 __all__ = ["MAX_POINTS", "playback_router", "resolve_recording"]
@@ -135,7 +142,6 @@ class _Reviews:
 
     def get(self, path: Path) -> Review:
         from texsense.apps.review import open_review
-        from texsense.io import open_recording
 
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
@@ -145,8 +151,13 @@ class _Reviews:
                 return self._items[key][0]
         with self._reading:  # one at a time: their memory does not add up
             self._shrink(budget.max_memory() // 2)
-            with budget.share(budget.max_memory() - self.held()):
-                rec = open_recording(path)  # HDF5: on demand; other formats whole
+            memory = budget.max_memory() - self.held()
+            rec: Recording
+            with budget.share(memory):
+                if sniff_format(path) == "hdf5":
+                    rec = LazyRecording.open(path)  # its frames read on demand
+                else:  # read whole, in a child process: parsing text holds Python's lock
+                    rec = load_apart(path, memory)
                 # the page converts pressure from N/cm², as for the live frames
                 unit = "N/cm2" if rec.quantity == "pressure" else None
                 review = open_review(rec, unit=unit, name=path.name)
@@ -262,8 +273,6 @@ class _Folder:
     def is_recording(self, p: Path, size: int, mtime: float) -> bool:
         """Whether texsense reads ``p`` as a recording (by its content, as ``load`` would;
         remembered while the file is unchanged)."""
-        from texsense.io import sniff_format
-
         key = (p.name, size, mtime)
         if key not in self._kinds:
             try:
@@ -438,8 +447,6 @@ def playback_router(monitor: Monitor) -> APIRouter:
         except (FormatError, ParameterError) as e:
             raise _status_of(e) from None
         if review.pressure and path.suffix.lower() in (".h5", ".hdf5"):
-            from texsense.io.hdf5 import read_bounds
-
             b = read_bounds(path, slice(i, i + 1))
             if b is not None:
                 out["lower"] = _rounded(b[0][0] * review.factor, 4)

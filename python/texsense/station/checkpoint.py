@@ -232,10 +232,11 @@ def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     entry.messages, entry.malformed = int(mat["messages"]), int(mat["malformed"])
     entry.ignored, entry.failed = int(mat["ignored"]), int(mat["failed"])
     entry.period_s, entry.last_wall = mat["period_s"], mat["last_wall"]
+    entry.last_seen = entry.last_wall
     entry.refused = mat["refused"]
     entry.state = str(mat.get("state", "waiting"))
     if entry.state == "live":  # stale once two of its periods pass without a frame here
-        entry.last_wall = time.time()
+        entry.last_wall = entry.last_seen = time.time()
     entry.version += 1
     m.changes += 1
 
@@ -269,6 +270,7 @@ def fresh(entry: MatEntry) -> None:
     m.clock = FrameClock()
     m.frames, m._t_first = 0, None
     entry.state, entry.last_wall, entry.period_s, entry.refused = "waiting", None, None, None
+    entry.last_seen = None
     entry.version += 1
     m.changes += 1
 

@@ -37,7 +37,7 @@ from texsense.station import checkpoint
 from texsense.station.broker import BrokerURL, mat_topic
 from texsense.station.group_view import Elsewhere, GroupMatEntry
 from texsense.station.lease import BEAT_S, LEASE_S, Grant, Journal, Membership, View
-from texsense.station.ward import MatConfig, MatEntry, Station, mat_id_of
+from texsense.station.ward import MIN_STALE_S, MatConfig, MatEntry, Station, mat_id_of
 
 __all__ = ["GroupMatEntry", "GroupStation", "GroupStore", "ward_digest"]
 
@@ -123,7 +123,7 @@ class GroupStation(Station):
         topic: str = "texsense/+/frames",
         record_dir: Path | str = "recordings",
         checkpoint_s: float = 2.0,
-        min_stale_s: float = 0.0,
+        min_stale_s: float = MIN_STALE_S,
         refuse_after_s: float = 10.0,
         token: str | None = None,
     ) -> None:

@@ -85,8 +85,8 @@ class GroupMatEntry(MatEntry):
         tile, text = self._away()
         return text or json.dumps(tile, separators=(",", ":"))
 
-    def check(self, now: float) -> bool:
-        return super().check(now) if self.held else False
+    def check(self, now: float, read_until: float | None = None) -> bool:
+        return super().check(now, read_until) if self.held else False
 
 
 class Elsewhere:

@@ -13,6 +13,11 @@ Endpoints (OpenAPI at ``/docs``):
 - ``WS /ws/ward``: the ward's tiles as they change (:mod:`texsense.station.tiles`);
 - ``/mats/{id}/``: the single-mat dashboard of :mod:`texsense.monitor` for that mat.
 
+The ward page (``GET /``) carries the ward's tiles as they are when it is asked for (the first
+message of the feed, in a JSON data block the page draws at once), so a page shows its mats
+without waiting for its WebSocket: on a busy station that wait was 7-550 ms after the
+page's scripts had run (issue 33). The WebSocket then starts with a reset.
+
 The monitor's access rules (:mod:`texsense.monitor.web`: Host, Origin, token, security
 headers) apply to every HTTP and WebSocket request, the mounted dashboards included.
 """
@@ -26,10 +31,11 @@ from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, FastAPI, HTTPException, WebSocket
+from fastapi.responses import Response
 
 from texsense.exceptions import ParameterError
 from texsense.monitor.routes.static import STATIC as MONITOR_STATIC
-from texsense.monitor.routes.static import pages
+from texsense.monitor.routes.static import file_response
 from texsense.monitor.server import create_app
 from texsense.monitor.web import (
     Access,
@@ -46,6 +52,36 @@ from texsense.station.ward import MatEntry, Station
 __all__ = ["create_ward_app", "serve_ward"]
 
 STATIC = Path(__file__).with_name("static")
+#: Where the ward page takes the tiles it is served with.
+FIRST_MARK = "<!-- first ward -->"
+
+
+def ward_page(station: Station, html: str) -> str:
+    """The ward page ``html`` with the feed's first message (a new viewer's: the header and
+    the most urgent tiles within a viewer's byte budget) in a JSON data block in place of
+    :data:`FIRST_MARK`; every ``<`` escaped, so nothing in it (a mat id, an error text) can
+    end the block. A data block is not run: the page's Content-Security-Policy, scripts from
+    the station only, holds."""
+    first = (WardFeed(station).message() or "null").replace("<", "\\u003c")
+    block = f'<script type="application/json" id="first-ward">{first}</script>'
+    return html.replace(FIRST_MARK, block, 1)
+
+
+def _pages(station: Station) -> APIRouter:
+    """``GET /``: the ward page with its tiles (:func:`ward_page`); ``GET /static/{name}``: its
+    files and the monitor's."""
+    r = APIRouter(include_in_schema=False)
+    html = (STATIC / "ward.html").read_text(encoding="utf-8")
+
+    @r.get("/")
+    async def page() -> Any:
+        return Response(ward_page(station, html), media_type="text/html")
+
+    @r.get("/static/{name}")
+    async def static(name: str) -> Any:
+        return file_response(name, STATIC, MONITOR_STATIC)
+
+    return r
 
 
 def _api(station: Station) -> APIRouter:
@@ -98,6 +134,39 @@ def _api(station: Station) -> APIRouter:
     return r
 
 
+class Serving:
+    """ASGI middleware: counts the HTTP requests being served and the WebSocket viewers until
+    their first message (``Station.serving``): the station's inbox waits for them
+    (:mod:`texsense.station.inbox`), so a page opens as fast on a busy station as on a quiet
+    one."""
+
+    def __init__(self, app: Any, station: Station) -> None:
+        self.app, self.station = app, station
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        station, counted = self.station, [True]
+        station.serving += 1
+
+        def release() -> None:
+            if counted[0]:
+                counted[0] = False
+                station.serving -= 1
+                station.served_at = time.monotonic()
+
+        async def sending(message: dict[str, Any]) -> None:
+            if message["type"] == "websocket.send":
+                release()  # a viewer's first message is out: it waits like the others now
+            await send(message)
+
+        try:
+            await self.app(scope, receive, sending if scope["type"] == "websocket" else send)
+        finally:
+            release()
+
+
 def create_ward_app(
     station: Station,
     *,
@@ -119,13 +188,14 @@ def create_ward_app(
         station.stop()
 
     app = plain_errors(FastAPI(title="texsense ward station", version="1", lifespan=lifespan))
-    app.include_router(pages(STATIC / "ward.html", STATIC, MONITOR_STATIC))
+    app.include_router(_pages(station))
     app.include_router(_api(station))
     for mat_id, entry in station.mats.items():
         app.mount(f"/mats/{mat_id}", create_app(entry.monitor, run_source=False, guarded=False))
     for layer, options in station.layers():  # a group's: the dashboards of mats held elsewhere
         app.add_middleware(layer, **options)
     app.add_middleware(Guard, access=access or Access(token))
+    app.add_middleware(Serving, station=station)  # outermost: counted from the first byte
     return app
 
 

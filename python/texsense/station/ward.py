@@ -15,9 +15,12 @@ any coordination of their own: the broker routes). Every mat is a
   really jumped is re-synchronised (:class:`~texsense.monitor.clock.FrameClock`, event
   ``clock``). None of them reaches the pipeline or the exposure, so no glitch clears an
   alert;
-- **stale**: a mat that has not sent for two of its frame periods (checked every 20 ms;
-  ``min_stale_s`` can set a floor for mats with jittery links) is marked stale and an event
-  is stored with how long it was silent; its next frame marks it live again;
+- **stale**: a mat that has not sent for two of its frame periods and at least
+  :data:`MIN_STALE_S` (checked every 20 ms; ``min_stale_s`` sets another floor) is marked
+  stale and an event
+  is stored with how long it was silent; its next frame marks it live again. Silence is
+  judged on the time line of what the station has read (:meth:`Inbox.read_until`): a mat
+  whose frames wait in a busy station's inbox is not silent;
 - **refused**: a mat whose every frame has had another number of elements than its layout for
   ``refuse_after_s`` (and at least :data:`REFUSE_AFTER_N` messages in a row) is refused with
   an event that says both counts; the other mats go on. :meth:`MatEntry.admit` (the API and
@@ -26,8 +29,9 @@ any coordination of their own: the broker routes). Every mat is a
   :data:`UNKNOWN_TTL_S` after its last message;
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
   back, and subscribes again;
-- **the pages stay served under load**: messages are handled in slices of the event loop
-  (:mod:`texsense.station.inbox`).
+- **the pages stay served under load**: messages are handled in slices of the event loop,
+  and a station that cannot keep up skips the older frames of a mat whose newer ones wait
+  (counted as ``behind``) instead of falling ever further behind (:mod:`texsense.station.inbox`).
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import time
 from collections import OrderedDict
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -64,17 +68,20 @@ from texsense.station.config import MatConfig
 from texsense.station.inbox import Inbox
 from texsense.station.tiles import BlockMap
 
-if TYPE_CHECKING:
-    pass
-
 __all__ = ["MatConfig", "MatEntry", "Station", "mat_id_of"]
 
 log = logging.getLogger("texsense.station")
 
+#: A mat is never called silent sooner than this, s: a fast mat (10 Hz, or a simulated one
+#: at 10x) missed for 0.2 s is a hiccup of the station's reading thread under load, not a
+#: silent mat (its tiles flickered "stale" while every mat sent, issue 33).
+MIN_STALE_S = 1.0
 #: Urgency order of a mat's state on the ward page (highest first).
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
 #: Messages in a row with another element count, at least, before a mat is refused.
 REFUSE_AFTER_N = 10
+#: The inbox waits for pages this long after the last was served, s (:meth:`Station.pages_first`).
+PAGE_GRACE_S = 0.3
 #: Unknown topics kept at most (the least recently seen go first) ...
 UNKNOWN_MAX = 100
 #: ... and each forgotten this long after its last message, s.
@@ -141,8 +148,10 @@ class MatEntry:
         self.min_stale_s = min_stale_s
         self.refuse_after_s = refuse_after_s
         self.messages = self.malformed = self.ignored = self.failed = 0
+        self.behind = 0  # frames only skimmed for their time: the station was behind
         self.last_error: str | None = None
-        self.last_wall: float | None = None
+        self.last_wall: float | None = None  # arrival of the last frame processed
+        self.last_seen: float | None = None  # ... or of a frame skimmed after it
         self.period_s: float | None = None
         self.state = "waiting"
         self.refused: str | None = None
@@ -168,9 +177,9 @@ class MatEntry:
         self.version += 1
         self.quiet.warn(f"mat {self.id}", kind, f"skipped message {self.messages}: {text}")
 
-    def handle(self, payload: bytes, now: float) -> bool:
+    def handle(self, payload: bytes, now: float, *, skim: bool = False) -> bool:
         """One message; True when it gave a frame. Its length is checked first: an oversized
-        payload is never parsed."""
+        payload is never parsed. ``skim``: the station is behind (:meth:`skim`)."""
         self.messages += 1  # every message that came, the ignored ones too
         if self.refused is not None:
             self.ignored += 1
@@ -187,7 +196,31 @@ class MatEntry:
         except ProtocolError as e:
             self._malformed("malformed", str(e))
             return False
-        return self.feed(frame, now)
+        return self.skim(frame, now) if skim else self.feed(frame, now)
+
+    def skim(self, frame: Frame, now: float) -> bool:
+        """A frame the station skips because it is behind and a newer one of this mat waits
+        (:mod:`texsense.station.inbox`): only its time is taken, which keeps the mat's clock
+        in step (a burst of buffered frames skipped in the middle is no jump of the clock) and
+        the mat heard (not silent); counted as ``behind``. The next frame processed carries
+        the exposure over the frames skipped (it is integrated over the frames' times)."""
+        if frame.values.size != self.config.layout.n_elements:
+            self._malformed("count", f"a frame of {frame.values.size} values")
+            return False
+        if not self.monitor.keep_time(frame, now):
+            return False
+        self._mismatch = None
+        self.behind += 1
+        self._heard(now)
+        return True
+
+    def _heard(self, now: float) -> None:
+        """The mat sent at ``now``: its frame period (the running mean of the gaps between
+        its messages, read or skipped)."""
+        if self.last_seen is not None:
+            gap = max(now - self.last_seen, 0.0)
+            self.period_s = gap if self.period_s is None else 0.8 * self.period_s + 0.2 * gap
+        self.last_seen = now
 
     def _count_mismatch(self, got: int, now: float) -> None:
         """Refuse the mat once its frames have had another element count for
@@ -211,7 +244,7 @@ class MatEntry:
         if self.refused is None:
             raise ParameterError(f"mat {self.id} is not refused")
         self.refused, self._mismatch = None, None
-        self.state, self.last_wall = "waiting", None
+        self.state, self.last_wall, self.last_seen = "waiting", None, None
         self.version += 1
         self._event("admitted", {})
         log.warning("mat %s: admitted again", self.id)
@@ -245,17 +278,16 @@ class MatEntry:
         return True
 
     def _arrived(self, now: float) -> None:
-        if self.last_wall is not None:
-            gap = now - self.last_wall
-            self.period_s = gap if self.period_s is None else 0.8 * self.period_s + 0.2 * gap
         if self.state == "stale":
-            self._event("resumed", {"after_s": round(now - (self.last_wall or now), 2)})
+            self._event("resumed", {"after_s": round(now - (self.last_seen or now), 2)})
+        self._heard(now)
         self.state = "live"
         self.last_wall = now
 
-    def check(self, now: float) -> bool:
+    def check(self, now: float, read_until: float | None = None) -> bool:
         """Mark the mat stale (and store an event) when it stopped sending, and follow its
-        local source's trouble; True if anything changed."""
+        local source's trouble; True if anything changed. ``read_until``: the wall time up to
+        which the station has read its inbox (default ``now``): silence is judged there."""
         problem = self._problem(now)
         changed = problem != self.problem
         if changed:
@@ -264,12 +296,13 @@ class MatEntry:
                 log.warning("mat %s: %s", self.id, problem)
             self.problem = problem
             self.version += 1
-        if self.state != "live" or self.last_wall is None or self.period_s is None:
+        if self.state != "live" or self.last_seen is None or self.period_s is None:
             return changed
-        if now - self.last_wall > max(2.0 * self.period_s, self.min_stale_s):
+        until = now if read_until is None or self.local is not None else read_until
+        if until - self.last_seen > max(2.0 * self.period_s, self.min_stale_s):
             self.state = "stale"
             self.version += 1
-            self._event("stale", {"silent_s": round(now - self.last_wall, 2)})
+            self._event("stale", {"silent_s": round(until - self.last_seen, 2)})
             return True
         return changed
 
@@ -334,6 +367,7 @@ class MatEntry:
             "skipped": self.monitor.clock.skipped,
             "failed": self.failed,
             "ignored": self.ignored,
+            "behind": self.behind,
             "last_error": self.last_error,
             "problem": self.problem,
             "last_frame_wall": self.last_wall,
@@ -398,7 +432,8 @@ class Station:
     store : EventStore, optional
         Events and sessions (default: SQLite in memory).
     min_stale_s : float
-        A mat is stale after two frame periods, but never sooner than this.
+        A mat is stale after two frame periods, but never sooner than this
+        (:data:`MIN_STALE_S`).
     refuse_after_s : float
         A mat whose frames have had another element count for this long (and at least
         :data:`REFUSE_AFTER_N` messages in a row) is refused.
@@ -415,7 +450,7 @@ class Station:
         topic: str = "texsense/+/frames",
         store: EventStore | None = None,
         record_dir: Path | str = "recordings",
-        min_stale_s: float = 0.0,
+        min_stale_s: float = MIN_STALE_S,
         refuse_after_s: float = 10.0,
     ) -> None:
         ids = [check_mat_id(m.id) for m in mats]
@@ -439,6 +474,8 @@ class Station:
         self._client: Any = None
         self._stopping = False
         self._inbox: Inbox | None = None  # MQTT messages waiting for the loop
+        self.serving = 0  # page requests and new viewers being served (they go first)
+        self.served_at = -1e9  # when the last of them was served (monotonic s)
 
     # ---------------------------------------------------------------- MQTT
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any = None) -> None:
@@ -507,11 +544,41 @@ class Station:
             del self.unknown[key]
             self.unknown_forgotten += 1
 
+    def open_inbox(self) -> Inbox:
+        """The inbox of MQTT messages, handled on the running event loop."""
+        self._inbox = Inbox(asyncio.get_running_loop(), self.handle, self.quiet,
+                            skip=self.skip, defer=self.pages_first)  # fmt: skip
+        return self._inbox
+
+    def pages_first(self) -> bool:
+        """Whether the inbox waits for pages: while one is served and :data:`PAGE_GRACE_S`
+        after (a page opens in a burst: the page, its scripts and styles, its WebSocket)."""
+        return self.serving > 0 or time.monotonic() - self.served_at < PAGE_GRACE_S
+
+    def skip(self, topic: str, payload: bytes, arrived: float) -> bool:
+        """Skip a message's processing (the station is behind and a newer one of its topic
+        waits): only its time is taken (:meth:`MatEntry.skim`); an unknown topic's is counted.
+        A mat being recorded keeps every frame (False: the message is handled)."""
+        mat = mat_id_of(topic)
+        entry = self.mats.get(mat) if mat is not None else None
+        if entry is None:
+            self._unknown((mat or topic)[:120], arrived)
+            return True
+        if entry.monitor.recorder is not None:
+            return False
+        try:
+            entry.handle(payload, arrived, skim=True)
+        except Exception as e:  # as in handle: one line, counted, the ward goes on
+            entry.failed += 1
+            self.quiet.warn(f"mat {entry.id}", "failed", f"message {entry.messages} could not "
+                            f"be handled ({type(e).__name__}: {e})")  # fmt: skip
+        return True
+
     def start(self) -> None:
         """Connect (in paho's network thread) from within the running event loop."""
         if self.broker is None:
             return
-        self._inbox = Inbox(asyncio.get_running_loop(), self.handle, self.quiet)
+        self.open_inbox()
         client = mqtt_client(self.broker, f"texsense-station-{id(self)}")
         client.on_connect = self._on_connect
         client.on_subscribe = self._on_subscribe
@@ -550,8 +617,9 @@ class Station:
         k = 0
         while True:
             now = time.time()
+            read = now if self._inbox is None else self._inbox.read_until(now)
             for e in self.mats.values():
-                e.check(now)
+                e.check(now, read)
             k += 1
             if k % 50 == 0:
                 self.forget_unknown(now)
@@ -580,6 +648,7 @@ class Station:
     def header(self) -> dict[str, Any]:
         """The broker, the connection and the unknown mats (the 20 busiest)."""
         busiest = sorted(self.unknown.items(), key=lambda kv: -kv[1][0])[:20]
+        inbox, now = self._inbox, time.time()
         return {
             "broker": None if self.broker is None else str(self.broker),
             "connected": self.connected,
@@ -589,6 +658,9 @@ class Station:
             "unknown_topics": len(self.unknown),
             "unknown_forgotten": self.unknown_forgotten,
             "dropped": 0 if self._inbox is None else self._inbox.dropped,
+            # how far behind the station reads (s) and the frames it skipped to keep up
+            "behind_s": 0.0 if inbox is None else round(max(now - inbox.read_until(now), 0.0), 2),
+            "skipped": 0 if inbox is None else inbox.skipped,
         }
 
     def ward(self) -> dict[str, Any]:

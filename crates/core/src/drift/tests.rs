@@ -223,20 +223,22 @@ fn on_path(simd: bool, bank: &DriftBank, dt: &[f64], h: &[f64], ok: &[bool]) -> 
 fn the_avx2_build_of_the_kernel_equals_the_scalar_one_bit_for_bit() {
     let _guard = crate::simd::testing::lock();
     let mut rng = crate::preisach::tests::Rng(7);
-    for case in 0..24 {
-        let terms = 1 + case % 17;
+    // cases 24.. on the time clock with the linear level (the path across elements in
+    // groups of four): 3 ..= 14 terms, whole fours and tails
+    for case in 0..36 {
+        let terms = if case < 24 { 1 + case % 17 } else { case - 21 };
         let weights: Vec<f64> = (0..terms).map(|_| rng.unit()).collect();
         let taus: Vec<f64> = (0..terms).map(|_| 0.01 + 100.0 * rng.unit()).collect();
         let n = 1 + (rng.next() % 70) as usize;
         let t = 1 + (rng.next() % 60) as usize;
         let mut bank = DriftBank::new(Kernel::new(weights, taus).unwrap(), -0.03, n).unwrap();
-        if case % 3 >= 1 {
+        if case % 3 >= 1 && case < 24 {
             bank = bank.with_rest_rate(0.5, 0.4).unwrap();
         }
         if case % 3 == 2 {
             bank = bank.with_time_component(0.01).unwrap();
         }
-        if case % 4 == 3 {
+        if case % 4 == 3 && case < 24 {
             bank = bank.with_exponent(1.7).unwrap();
         }
         let (h, ok) = crate::preisach::tests::hostile_history(&mut rng, t, n, -1.0, 4.0);
@@ -249,4 +251,77 @@ fn the_avx2_build_of_the_kernel_equals_the_scalar_one_bit_for_bit() {
             "case {case}"
         );
     }
+}
+
+#[test]
+fn grouped_states_each_element_as_on_its_own_and_snapshots_element_major() {
+    // the states of groups of four elements share vectors: every element of a bank must
+    // still give what a bank of that element alone gives, on both paths, and a snapshot
+    // must hold each element's K states together (the format of one element per bank)
+    let _guard = crate::simd::testing::lock();
+    let mut rng = crate::preisach::tests::Rng(5);
+    let weights: Vec<f64> = (0..14).map(|_| rng.unit()).collect();
+    let taus: Vec<f64> = (0..14).map(|_| 0.01 + 100.0 * rng.unit()).collect();
+    let kernel = Kernel::new(weights, taus).unwrap();
+    let (n, t) = (11, 40);
+    let (h, ok) = crate::preisach::tests::hostile_history(&mut rng, t, n, -1.0, 4.0);
+    let dt: Vec<f64> = (0..t).map(|_| rng.unit()).collect();
+    for simd in [false, true] {
+        crate::simd::set_enabled(simd);
+        let mut bank = DriftBank::new(kernel.clone(), -0.03, n).unwrap();
+        let mut out = vec![0.0; n * t];
+        bank.run(&dt, &h, &ok, &mut out).unwrap();
+        let mut w = Writer::default();
+        bank.save(&mut w);
+        let mut all = Reader::new(&w.buf);
+        all.expect("drift elements", n).unwrap();
+        all.expect("drift kernel terms", 14).unwrap();
+        all.expect("drift clocks", 0).unwrap();
+        let heads: Vec<[f64; 3]> = (0..n)
+            .map(|_| {
+                let head = [all.f64().unwrap(), all.f64().unwrap(), all.f64().unwrap()];
+                all.u32().unwrap();
+                head
+            })
+            .collect();
+        for i in 0..n {
+            let mut one = DriftBank::new(kernel.clone(), -0.03, 1).unwrap();
+            let col = |v: &[f64]| (0..t).map(|r| v[r * n + i]).collect::<Vec<_>>();
+            let okc: Vec<bool> = (0..t).map(|r| ok[r * n + i]).collect();
+            let mut o = vec![0.0; t];
+            one.run(&dt, &col(&h), &okc, &mut o).unwrap();
+            assert_eq!(
+                o.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                col(&out).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                "element {i}, simd {simd}"
+            );
+            let mut w1 = Writer::default();
+            one.save(&mut w1);
+            let mut r1 = Reader::new(&w1.buf);
+            (0..3).for_each(|_| {
+                r1.u32().unwrap();
+            });
+            let head = [r1.f64().unwrap(), r1.f64().unwrap(), r1.f64().unwrap()];
+            r1.u32().unwrap();
+            assert_eq!(head.map(f64::to_bits), heads[i].map(f64::to_bits));
+            let mut z1 = vec![0.0; 14];
+            r1.f64s(&mut z1).unwrap();
+            // element i's states in the bank's snapshot: after the heads, i * 14 on
+            let mut zi = vec![0.0; 14];
+            let mut at = Reader::new(&w.buf[12 + n * 28 + i * 14 * 8..]);
+            at.f64s(&mut zi).unwrap();
+            assert_eq!(z1, zi, "element {i}");
+        }
+        // and a snapshot loads into a fresh bank that continues the same
+        let mut fresh = DriftBank::new(kernel.clone(), -0.03, n).unwrap();
+        fresh.load(&mut Reader::new(&w.buf)).unwrap();
+        let (mut a, mut b) = (vec![0.0; n * t], vec![0.0; n * t]);
+        bank.run(&dt, &h, &ok, &mut a).unwrap();
+        fresh.run(&dt, &h, &ok, &mut b).unwrap();
+        assert_eq!(
+            a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            b.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+    }
+    crate::simd::set_enabled(true);
 }

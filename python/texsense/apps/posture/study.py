@@ -243,7 +243,7 @@ def sensor_hysteresis_model(spacer: str = "textile-3mm", seed: int = 0) -> Any:
     reading = np.interp(e, rise_e[keep], rise_p[keep])  # the uncompensated sensor
     # the thesis's own hysteresis model for its error study (eq. 6.12), from its protocol
     return HysteresisModel(method="thesis", input_name="pressure_ncm2", input_unit="N/cm2").fit(
-        p, reading
+        p, reading, remember=True
     )
 
 

@@ -28,6 +28,7 @@ from texsense.compensation.hysteresis._relay import loop_orientation
 from texsense.compensation.hysteresis._segments import split_branches
 from texsense.compensation.intervals import HeldOut
 from texsense.data import modelfile, units
+from texsense.data.fitcache import remembered
 from texsense.data.modelfile import Fields
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
 
@@ -213,8 +214,17 @@ class HysteresisModel:
         inputs: npt.ArrayLike,
         outputs: npt.ArrayLike,
         provenance: dict[str, Any] | None = None,
+        *,
+        remember: bool = False,
     ) -> HysteresisModel:
-        """Identify the Everett function from a record of inputs and outputs (T,)."""
+        """Identify the Everett function from a record of inputs and outputs (T,).
+
+        With ``remember``, the model is identified once per record, parameters and version of
+        the code, and read back after that (:func:`texsense.data.fitcache.remembered`): the
+        same model to the bit, in milliseconds instead of seconds (a spacer preset's record
+        is fitted in every calibration made from it)."""
+        if remember:
+            return self._fit_remembered(inputs, outputs, provenance)
         if self.method not in ("auto", "thesis", "lsq", "relay"):
             raise ParameterError(f"method must be auto, lsq, relay or thesis, got {self.method!r}")
         units.canonical(self.input_unit)
@@ -254,6 +264,25 @@ class HysteresisModel:
         self.details_ = ident.details
         self.held_out_: HeldOut | None = None  # residuals on a record not fitted on (bounds)
         self.provenance_ = dict(provenance or {})
+        return self
+
+    def _params(self) -> dict[str, Any]:
+        names = "method grid cells smoothing folds input_name output_name input_unit output_unit"
+        return {name: getattr(self, name) for name in names.split()}
+
+    def _fit_remembered(
+        self, inputs: npt.ArrayLike, outputs: npt.ArrayLike, provenance: dict[str, Any] | None
+    ) -> HysteresisModel:
+        params = self._params()
+        u = np.asarray(inputs, dtype=np.float64).ravel()
+        p = np.asarray(outputs, dtype=np.float64).ravel()
+        fitted = remembered(
+            "hysteresis",
+            [params, dict(provenance or {}), u, p],
+            lambda: HysteresisModel(**params).fit(u, p, provenance).to_content(),
+            lambda content: HysteresisModel.from_content(Fields(content, "the fit cache")),
+        )
+        vars(self).update(vars(fitted))  # this model, fitted
         return self
 
     def _auto(self, u: np.ndarray, p: np.ndarray) -> Identified:

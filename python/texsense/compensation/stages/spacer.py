@@ -61,9 +61,12 @@ class Hysteresis(Stage):
         return stage.set_fitted(model=model)
 
     def fit(self, compression_mm: npt.ArrayLike, pressure_ncm2: npt.ArrayLike) -> Hysteresis:
-        """Identify the Everett function from a test-machine record."""
+        """Identify the Everett function from a test-machine record. The same record and
+        parameters give the same model: made once per version of the code
+        (``HysteresisModel.fit(..., remember=True)``)."""
         model = HysteresisModel(**self.get_params())  # the stage's parameters are the model's
-        return self.set_fitted(model=model.fit(compression_mm, pressure_ncm2))
+        model.fit(compression_mm, pressure_ncm2, remember=True)
+        return self.set_fitted(model=model)
 
     def _prepare(self) -> None:
         if not isinstance(self.model_, HysteresisModel):

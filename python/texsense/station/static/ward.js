@@ -79,8 +79,10 @@ function tile(mat) {
     const line = el.querySelector(".bed-line"), b = mat.bed, now = b.turn_due || mat.state === "alert";
     line.hidden = false;
     line.classList.toggle("turn-due", now);
-    line.textContent = b.side === null ? "out of bed"
-      : `${b.side} for ${hm(b.since_turn_s)} · ${now ? "turn now" : `turn due in ${hm(b.due_in_s)}`}`;
+    // two parts that never break inside ("turn due in 1:56 h" whole on the next line)
+    const parts = b.side === null ? ["out of bed"]
+      : [`${b.side} for ${hm(b.since_turn_s)}`, now ? "turn now" : `turn due in ${hm(b.due_in_s)}`];
+    line.replaceChildren(...parts.map((text) => Object.assign(document.createElement("span"), { textContent: text })));
   }
   const trouble = mat.refused || mat.problem;
   if (trouble) {  // a refused mat, a missing or silent device: said on the tile
@@ -135,7 +137,9 @@ function render(msg) {
   const alerts = all.filter((m) => m.state === "alert").length;
   const stale = all.filter((m) => m.state === "stale" || m.state === "refused" || m.state === "unwatched").length;
   const unknown = h.unknown_topics ? ` · ${h.unknown_topics} unknown topic(s)` : "";
-  $("counts").textContent = `${all.length} mats · ${alerts} alert(s) · ${stale} without data${unknown}`;
+  // a station that cannot keep up reads the newest frames and skips older ones: said here
+  const busy = h.skipped ? ` · ${h.skipped} frames skipped to keep up (${h.behind_s.toFixed(1)} s behind)` : "";
+  $("counts").textContent = `${all.length} mats · ${alerts} alert(s) · ${stale} without data${unknown}${busy}`;
 }
 function connect() {
   const proto = location.protocol === "https:" ? "wss" : "ws";
@@ -143,6 +147,11 @@ function connect() {
   ws.onmessage = (m) => render(JSON.parse(m.data));
   ws.onclose = () => { $("broker").textContent = "station unreachable — retrying…"; setTimeout(connect, 1000); };
 }
+// the tiles the page was served with: drawn at once, before the WebSocket's first message
+(function first() {
+  const block = $("first-ward"), msg = block && JSON.parse(block.textContent);
+  if (msg) render(msg);
+})();
 (function legend() {
   const c = $("ward-scale"), ctx = c.getContext("2d");
   for (let x = 0; x < c.width; x++) { ctx.fillStyle = colourOf("viridis", x / (c.width - 1)); ctx.fillRect(x, 0, 1, c.height); }

@@ -1,0 +1,125 @@
+//! The drift step of eq. 5.8 (time clock, linear level) for four elements at once: each
+//! kernel term of a group of [`GROUP`] elements is one AVX2 vector (the states' grouped
+//! layout, `super::at`), so a term costs one load, a multiply, an add and a store for four
+//! elements instead of a quarter vector each. The operations are the scalar kernel's
+//! (`texsense_kernels::drift::step`: `z_j d_j + Δh`, the weighted sum in four partial sums
+//! and a tail, `h + γ (H Σc - Σ c_j z_j)`) in the same order, without fused multiply-adds,
+//! so every output and state is the scalar kernel's, bit for bit.
+
+use std::arch::x86_64::*;
+
+use texsense_kernels::drift::{Element, Settings};
+
+use super::GROUP;
+
+/// Whole groups of a block: levels `h` and their validity `ok` -> outputs `out` (NaN where
+/// invalid or not finite; time still passes for those elements' states), for a stage on
+/// the time clock with level power 1 and `decay` of the frame.
+///
+/// # Safety
+/// The processor must have AVX2.
+///
+/// # Panics
+/// When `h` is not whole groups, or a slice is shorter than the block's groups need.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn groups(
+    s: &Settings<'_, f64>,
+    elements: &mut [Element<f64>],
+    z: &mut [f64],
+    decay: &[f64],
+    h: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) {
+    let (n, k) = (h.len(), s.terms());
+    assert!(n.is_multiple_of(GROUP) && ok.len() == n && out.len() == n);
+    assert!(elements.len() >= n && z.len() >= n * k && decay.len() == k);
+    for g in 0..n / GROUP {
+        let at = g * GROUP;
+        // SAFETY: AVX2 (this function's feature); the group's states are
+        // z[at * k .. (at + GROUP) * k] (checked above)
+        unsafe {
+            group(
+                s,
+                &mut elements[at..at + GROUP],
+                &mut z[at * k..(at + GROUP) * k],
+                decay,
+                &h[at..at + GROUP],
+                &ok[at..at + GROUP],
+                &mut out[at..at + GROUP],
+            )
+        };
+    }
+}
+
+/// One group of four elements (the arguments of [`groups`], one group's share).
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn group(
+    s: &Settings<'_, f64>,
+    els: &mut [Element<f64>],
+    z: &mut [f64],
+    decay: &[f64],
+    h: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) {
+    let k = s.terms();
+    let w = s.weights();
+    let hv = _mm256_loadu_pd(h.as_ptr());
+    let m = |b: bool| -i64::from(b);
+    let ok_m = _mm256_castsi256_pd(_mm256_set_epi64x(m(ok[3]), m(ok[2]), m(ok[1]), m(ok[0])));
+    // valid and finite (h - h is 0 for a finite h, NaN otherwise)
+    let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(hv, hv), _mm256_setzero_pd());
+    let live = _mm256_and_pd(ok_m, finite);
+    let started = _mm256_castsi256_pd(_mm256_set_epi64x(
+        m(els[3].started != 0),
+        m(els[2].started != 0),
+        m(els[1].started != 0),
+        m(els[0].started != 0),
+    ));
+    let last = _mm256_set_pd(els[3].last_h, els[2].last_h, els[1].last_h, els[0].last_h);
+    let total = _mm256_set_pd(els[3].total, els[2].total, els[1].total, els[0].total);
+    // the level is h itself (power 1); the first valid level is a step from 0
+    let change = _mm256_blendv_pd(hv, _mm256_sub_pd(hv, last), started);
+    let total = _mm256_add_pd(total, change);
+    // z_j <- z_j d_j + change (live), z_j d_j (time passes); Σ c_j z_j in the kernel's
+    // four partial sums over whole fours of terms, then the tail in order
+    let zero = _mm256_setzero_pd();
+    let (mut acc, mut tail) = ([zero; 4], zero);
+    let whole = k / 4 * 4;
+    let p = z.as_mut_ptr();
+    for j in 0..k {
+        // SAFETY: term j of the group's four elements: z[4 j .. 4 j + 4] (z holds 4 k)
+        let zj = unsafe { _mm256_loadu_pd(p.add(GROUP * j)) };
+        let zd = _mm256_mul_pd(zj, _mm256_set1_pd(decay[j]));
+        let zn = _mm256_blendv_pd(zd, _mm256_add_pd(zd, change), live);
+        // SAFETY: as the load
+        unsafe { _mm256_storeu_pd(p.add(GROUP * j), zn) };
+        let wz = _mm256_mul_pd(_mm256_set1_pd(w[j]), zn);
+        if j < whole {
+            acc[j % 4] = _mm256_add_pd(acc[j % 4], wz);
+        } else {
+            tail = _mm256_add_pd(tail, wz);
+        }
+    }
+    let weighted = _mm256_add_pd(
+        _mm256_add_pd(_mm256_add_pd(acc[0], acc[1]), _mm256_add_pd(acc[2], acc[3])),
+        tail,
+    );
+    let wsum = _mm256_set1_pd(s.weight_sum());
+    let drift = _mm256_sub_pd(_mm256_mul_pd(total, wsum), weighted);
+    let y = _mm256_add_pd(hv, _mm256_mul_pd(_mm256_set1_pd(s.gamma()), drift));
+    let nan = _mm256_set1_pd(f64::NAN);
+    _mm256_storeu_pd(out.as_mut_ptr(), _mm256_blendv_pd(nan, y, live));
+    let mut totals = [0.0; GROUP];
+    _mm256_storeu_pd(totals.as_mut_ptr(), total);
+    let lives = _mm256_movemask_pd(live);
+    for (l, el) in els.iter_mut().enumerate() {
+        if lives >> l & 1 != 0 {
+            el.started = 1;
+            el.last_h = h[l];
+            el.total = totals[l];
+        }
+    }
+}
