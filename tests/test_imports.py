@@ -236,7 +236,8 @@ def test_imports_inside_functions_are_justified():
 
 
 @pytest.mark.parametrize(
-    "argv", [["--help"], ["--version"], ["info", "--help"], ["process", "--help"]]
+    "argv",
+    [["--help"], ["--version"], ["info", "--help"], ["process", "--help"], ["station", "--help"]],
 )
 def test_the_command_line_loads_only_what_the_command_needs(argv):
     code = (
@@ -261,6 +262,8 @@ def test_the_command_line_loads_only_what_the_command_needs(argv):
         assert commands == ["texsense.commands.info"] and "sklearn" not in heavy_loaded, line
     elif argv[0] == "process":  # the posture classifiers (scikit-learn) are not needed
         assert "texsense.commands.pipeline" in commands and "sklearn" not in heavy_loaded, line
+    elif argv[0] == "station":  # scikit-learn only for a bed's posture model (every member
+        assert "sklearn" not in heavy_loaded, line  # of a group starts faster)
     else:
         assert heavy_loaded == [] and commands == [] and not numpy_loaded, line
 
