@@ -35,6 +35,9 @@ SPEED = float(os.environ.get("TEXSENSE_GROUP_SPEED", "8"))
 REPOSITION_MIN = 5.0
 #: a killed member's mats are back within this (issue 38), s
 TAKEOVER_S = 10.0
+#: the group raises each of the reference's alerts within this of the reference's time
+#: (simulated s)
+ALERT_TOL_S = 10.0
 
 #: One worker runs the whole module (pytest-xdist's --dist loadgroup): the cases share one
 #: cluster and run in order (a member is killed, then comes back).
@@ -117,26 +120,38 @@ def timers(cluster, member: str) -> dict[str, float]:
     return {k: m["exposure_s"] for k, m in cluster.mats_of(member).items()}
 
 
-def off_reference(cluster, member: str, mats: set[str], seconds: float = 2.0) -> dict:
+def off_reference(cluster, member: str, mats: set[str], timeout: float = 30.0) -> dict:
     """How far each of ``mats``' timer on ``member`` is from the reference's at the same frame
-    time (simulated s, + ahead): both are read for ``seconds``, and each reading of ours is
-    compared with the reference's interpolated at its frame time (the two stations read the
-    frames a moment apart; a loaded member lags by seconds)."""
+    time (simulated s, + ahead): both are read until each of our readings of every mat lies
+    between two of the reference's (a timer runs linearly between them; the two stations read
+    the frames a moment apart, a loaded member seconds later), and the reference's timer
+    interpolated at our readings' frame times."""
     seen: dict[str, dict[str, dict[float, float]]] = {member: {}, "ref": {}}
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+
+    def between() -> dict[str, list[float]]:
+        out = {}
+        for k in mats:
+            rt = sorted(seen["ref"].get(k, {}))
+            out[k] = [t for t in seen[member].get(k, {}) if rt and rt[0] <= t <= rt[-1]]
+        return out
+
+    deadline = time.monotonic() + timeout
+    while not all(len(v) >= 2 for v in between().values()):
+        assert time.monotonic() < deadline, {
+            k: (sorted(seen[member].get(k, {}))[-3:], sorted(seen["ref"].get(k, {}))[-3:])
+            for k, v in between().items()
+            if len(v) < 2
+        }
         for who in seen:
             for k, m in cluster.mats_of(who).items():
                 if k in mats and m["frame_t"] is not None:
                     seen[who].setdefault(k, {})[m["frame_t"]] = m["exposure_s"]
-        time.sleep(0.05)
+        time.sleep(0.1)
     off = {}
-    for k in mats:
-        ours, ref = seen[member].get(k, {}), seen["ref"].get(k, {})
+    for k, both in between().items():
+        ref = seen["ref"][k]
         rt = sorted(ref)
-        both = [t for t in ours if rt and rt[0] <= t <= rt[-1]]  # the reference's, between
-        assert both, (k, sorted(ours)[-3:], rt[-3:])  # its readings (a timer runs linearly)
-        off[k] = float(np.median([ours[t] - np.interp(t, rt, [ref[r] for r in rt])
+        off[k] = float(np.median([seen[member][k][t] - np.interp(t, rt, [ref[r] for r in rt])
                                   for t in both]))  # fmt: skip
     return off
 
@@ -147,12 +162,15 @@ def test_a_killed_member_s_mats_are_taken_over(cluster, fault_row):
     # the group's timers against the reference's before the fault (the reference started
     # a moment after the group: each counts from the first frame it read)
     start = off_reference(cluster, "a", victims)
-    before = cluster.mats_of("a")
-    t0 = time.monotonic()
+    t0, killed = time.monotonic(), time.time()
     cluster.kill("b")
-    after = cluster.until(lambda: cluster.mats_of("a"),
-                          lambda s: all(s[k]["holder"] in ("a", "c") for k in victims) and
-                          live({k: s[k] for k in victims}, before), 30, step=0.05)  # fmt: skip
+
+    def back(s: dict) -> bool:  # held by a survivor, live, a frame read there after the kill
+        return all(s[k]["holder"] in ("a", "c") and s[k]["state"] in ("live", "alert",
+                   "acknowledged") and (s[k]["last_frame_wall"] or 0.0) > killed
+                   for k in victims)  # fmt: skip
+
+    after = cluster.until(lambda: cluster.mats_of("a"), back, 30, step=0.05)
     took = time.monotonic() - t0
     assert took < TAKEOVER_S, f"{len(victims)} mats back after {took:.1f} s"
     # the exposure timers go on: within 10 s (simulated) of the run without the fault
@@ -240,15 +258,22 @@ def test_the_alerts_of_the_reference_all_raised_none_twice(cluster, fault_row):
         return horizon, reposition_alerts(cluster.pg.url, "ward"), \
             reposition_alerts(cluster.reference_db, "ref")  # fmt: skip
 
-    # until the reference has raised an alert that both databases are past (a person sat
-    # for 5 simulated min: 37.5 s at 8x)
+    # until the reference has raised an alert that both databases are ALERT_TOL_S past (a
+    # person sat for 5 simulated min: 37.5 s at 8x); an alert is judged only that far before
+    # the horizon, where its twin in the other database is in too (a station that skimmed
+    # frames to keep up raises it a frame or two later: 300.2 vs 302 s at 60 mats)
     horizon, ours, reference = cluster.until(read, lambda r: any(
-        t < r[0].get(mat, 0.0) for mat, v in r[2].items() for t, _ in v), 150)  # fmt: skip
+        t < r[0].get(mat, 0.0) - ALERT_TOL_S for mat, v in r[2].items() for t, _ in v),
+        150 * 4 / SPEED)  # fmt: skip
     n = 0
-    for mat, alerts in reference.items():
-        want = [t for t, _ in alerts if t < horizon.get(mat, 0.0)]
-        got = [t for t, _ in ours.get(mat, []) if t < horizon.get(mat, 0.0)]
-        assert len(got) == len(want), (mat, got, want)
-        assert all(abs(g - w) <= 10 for g, w in zip(got, want, strict=True)), (mat, got, want)
-        n += len(want)
+    for mat in set(reference) | set(ours):
+        until = horizon.get(mat, 0.0) - ALERT_TOL_S
+        want = [t for t, _ in reference.get(mat, [])]
+        got = [t for t, _ in ours.get(mat, [])]
+        for w in (w for w in want if w < until):  # raised, once
+            twins = [g for g in got if abs(g - w) <= ALERT_TOL_S]
+            assert len(twins) == 1, (mat, got, want)
+            n += 1
+        for g in (g for g in got if g < until):  # none that the reference did not raise
+            assert any(abs(g - w) <= ALERT_TOL_S for w in want), (mat, got, want)
     fault_row("group", "alerts across a takeover", "said", f"{n} alerts, none twice")
