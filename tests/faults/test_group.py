@@ -170,11 +170,10 @@ def test_a_killed_member_s_mats_are_taken_over(cluster, fault_row):
                    "acknowledged") and (s[k]["last_frame_wall"] or 0.0) > killed
                    for k in victims)  # fmt: skip
 
-    after = cluster.until(lambda: cluster.mats_of("a"), back, 30, step=0.05)
+    cluster.until(lambda: cluster.mats_of("a"), back, 30, step=0.05)
     took = time.monotonic() - t0
     assert took < TAKEOVER_S, f"{len(victims)} mats back after {took:.1f} s"
     # the exposure timers go on: within 10 s (simulated) of the run without the fault
-    cluster.until(lambda: cluster.mats_of("a"), lambda s: live(s, after), 20)
     after = off_reference(cluster, "a", victims)
     off = {k: round(abs(after[k] - start[k]), 1) for k in victims}
     assert max(off.values()) <= 10.0, (off, start, after)

@@ -37,6 +37,7 @@ Examples
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import struct
@@ -79,12 +80,14 @@ MONITOR_VERSION = 1
 
 @dataclass(frozen=True)
 class Part:
-    """A named part of a mat's checkpoint: ``save(entry)`` gives its bytes (None: nothing to
-    save), ``restore(entry, data)`` goes on from them (raising ``ValueError`` when they do
-    not fit); ``often``: written with every checkpoint, else with every ``sensor_every``-th."""
+    """A named part of a mat's checkpoint: ``save(entry)`` gives its bytes, or a JSON-ready
+    dict of containers of its own that is encoded later, off the event loop (None: nothing
+    to save), ``restore(entry, data)`` goes on from the bytes (raising ``ValueError`` when
+    they do not fit); ``often``: written with every checkpoint, else with every
+    ``sensor_every``-th."""
 
     name: str
-    save: Callable[[MatEntry], bytes | None]
+    save: Callable[[MatEntry], bytes | dict[str, Any] | None]
     restore: Callable[[MatEntry, bytes], None]
     often: bool = True
 
@@ -134,20 +137,23 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
 
 @dataclass(frozen=True)
 class Taken:
-    """A mat's state as the parts' bytes, taken at once (on the event loop that changes it)
-    and packed later, elsewhere (:meth:`pack`: the compression, in the journal's thread)."""
+    """A mat's state as the parts' bytes or JSON-ready dicts, taken at once (on the event loop
+    that changes it) and packed later, elsewhere (:meth:`pack`: the JSON text and the
+    compression, in the journal's thread)."""
 
-    parts: dict[str, bytes]
+    parts: dict[str, bytes | dict[str, Any]]
     head: dict[str, Any]
 
     def pack(self) -> bytes:
         """The container (:func:`pack`)."""
-        return pack(self.parts, **self.head)
+        return pack({name: data if isinstance(data, bytes) else
+                     json.dumps(data, separators=(",", ":")).encode()
+                     for name, data in self.parts.items()}, **self.head)  # fmt: skip
 
 
 def take(entry: MatEntry, often: bool = True) -> Taken:
     """The parts written every time (``often``), or the others, of the mat's state now."""
-    parts = {}
+    parts: dict[str, bytes | dict[str, Any]] = {}
     for part in PARTS.values():
         if part.often != often:
             continue
@@ -191,14 +197,18 @@ def restore(entry: MatEntry, blobs: list[bytes]) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------ the monitor part
-def _save_monitor(entry: MatEntry) -> bytes:
+def _save_monitor(entry: MatEntry) -> dict[str, Any]:
+    """The monitor's state as fresh containers (encoded in the journal's thread: the event
+    loop only gathers it; the open alert's lists are copied, the rest is built here)."""
     m = entry.monitor
+    tracker = m.tracker.state()
+    tracker["alert"] = copy.deepcopy(tracker.get("alert"))
     state = {
         "version": MONITOR_VERSION,
         "frames": m.frames,
         "t_first": m._t_first,
         "clock": m.clock.state(),
-        "tracker": m.tracker.state(),
+        "tracker": tracker,
         "bed": None if m.bed is None else m.bed.schedule.state(),
         "vote": m._vote.state(),
         "mat": {
@@ -212,7 +222,7 @@ def _save_monitor(entry: MatEntry) -> bytes:
             "state": entry.state,
         },
     }
-    return json.dumps(state, separators=(",", ":")).encode()
+    return state
 
 
 def _restore_monitor(entry: MatEntry, data: bytes) -> None:

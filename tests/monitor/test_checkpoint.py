@@ -1,0 +1,64 @@
+"""A mat's checkpoint (texsense.station.checkpoint, docs/station.md "A group of stations"):
+what a member takes on its event loop and packs in the journal's thread is what a taking
+member goes on from. One virtual seat, fed the same frames as `texsense station` would."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from texsense.calibration.workflows import seat_calibration
+from texsense.monitor.store import EventStore
+from texsense.monitor.virtual import VirtualSeatSource
+from texsense.station import checkpoint
+from texsense.station.virtual import VirtualMats, frame_payload
+from texsense.station.ward import MatEntry
+
+SPEED = 8.0
+
+
+@pytest.fixture(scope="module")
+def seat():
+    """A seat's config and 60 of its payloads with their arrival times."""
+    config = VirtualMats(1, None, speed=SPEED).configs(seat_calibration(), None, 5.0, None, 120.0)[
+        0
+    ]
+    src = VirtualSeatSource(speed=0, seed=3)
+
+    async def take() -> list[tuple[bytes, float]]:
+        out = []
+        async for f in src.frames():
+            out.append((frame_payload(f), 1000.0 + float(f.element_times[0]) / SPEED))
+            if len(out) == 60:
+                return out
+        return out
+
+    return config, asyncio.run(take())
+
+
+def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat, tmp_path):
+    config, payloads = seat
+    a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)
+    for p, now in payloads[:40]:
+        a.handle(p, now)
+    often, rarely = checkpoint.take(a, often=True), checkpoint.take(a, often=False)
+    assert isinstance(often.parts["monitor"], dict)  # JSON text made later, off the loop
+    a.handle(*payloads[40])  # the mat goes on before the journal packs what was taken
+    blobs = [rarely.pack(), often.pack()]
+    b = MatEntry(config, EventStore(":memory:"), tmp_path / "b", 1.0)
+    done = checkpoint.restore(b, blobs)
+    assert sorted(done["parts"]) == ["monitor", "pipeline"], done
+    assert b.monitor.frames == 40
+    # the one frame after the checkpoint, on both: the same exposure, pressure and clock
+    c = MatEntry(config, EventStore(":memory:"), tmp_path / "c", 1.0)
+    checkpoint.restore(c, blobs)
+    c.handle(*payloads[40])
+    # (the checkpoint keeps each exposure to the millisecond)
+    ours, theirs = c.monitor.tracker.state(), a.monitor.tracker.state()
+    np.testing.assert_allclose(ours.pop("exposed"), theirs.pop("exposed"), atol=1.5e-3)
+    assert ours == theirs
+    np.testing.assert_array_equal(c.monitor.last_pressure, a.monitor.last_pressure)
+    assert c.monitor.clock.state() == a.monitor.clock.state()
+    assert c.state == "live" and b.state == "live" and b.last_seen is not None
