@@ -536,18 +536,17 @@ class Monitor:
             none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
             return none, 0.0
         rec = Recording(np.nan_to_num(pressure)[None, :], [t], self.layout, "pressure", "N/cm2")
-        # the statistics the snapshot shows, each as stats.frame_stats computes it (not its
-        # coefficient of variation: a third of frame_stats' time on a 96-element seat)
-        load = float(np.nan_to_num(stats.total_load(rec)[0]))
+        fs = stats.frame_stats(rec, threshold=0.05)
         cof = self._cof_cell(pressure)
+        load = float(np.nan_to_num(fs.load_N[0])) if fs.load_N is not None else 0.0
         if np.all(np.isfinite(cof)):
             self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
-        cof_cm = stats.centre_of_force(rec)[0]
+        cof_cm = fs.cof_cm[0]
         return {
             "load_N": round(load, 2),
-            "contact_area_cm2": round(float(np.nan_to_num(stats.contact_area(rec, 0.05)[0])), 1),
-            "peak_ncm2": round(float(np.nan_to_num(stats.peak_pressure(rec)[0])), 3),
-            "ppi_ncm2": round(float(np.nan_to_num(stats.peak_pressure_index(rec)[0])), 3),
+            "contact_area_cm2": round(float(np.nan_to_num(fs.contact_area_cm2[0])), 1),
+            "peak_ncm2": round(float(np.nan_to_num(fs.peak[0])), 3),
+            "ppi_ncm2": round(float(np.nan_to_num(fs.ppi[0])), 3),
             "cof_cm": [round(float(v), 2) for v in cof_cm] if np.all(np.isfinite(cof_cm)) else None,
         }, load
 
