@@ -1,0 +1,181 @@
+"""What a group of stations holds as members are added (issue 38): 1, 2, 3 members of one
+group over M mats of 1024 elements at a rate, through a real Mosquitto and a real PostgreSQL.
+
+Run:  .venv/bin/python benchmarks/station_group_capacity.py --members 1,2,3 --loads 200x1,400x1
+
+For each load and number of members, fresh `texsense station --group cap` processes (one per
+member, the same ward file of M mats of 32 x 32 elements with the seat's spacer model and
+per-element gains, as benchmarks/station_load.py uses) share the mats by rendezvous hashing;
+the benchmark waits until every mat is held where the hashing says, then the publisher of
+station_load.py sends every mat's frames at the rate (phases spread over the period), each
+stamped with its wall-clock send time. Viewers on the dashboards of five mats (at the member
+that holds each) measure frame-to-viewer latency; at the end every member's `GET /api/mats`
+says how many frames each mat it holds processed, against how many were published. The
+members' CPU is taken over the measuring window. One machine: members beyond its cores add
+no capacity here (they would on machines of their own).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import psycopg
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from archive_scale import big_calibration
+from conftest import free_port
+from postgres_server import PostgresServer
+from station_load import PUBLISHER, cpu_seconds, viewer
+from texsense.station.broker import Broker
+from texsense.station.lease import preferred
+
+
+def get(url: str, timeout: float = 30.0):
+    with urllib.request.urlopen(url, timeout=timeout) as r:
+        return json.load(r)
+
+
+def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[str]) -> dict:
+    """The members' processes and page URLs (started together)."""
+    out = {}
+    for name in names:
+        port = free_port()
+        log = (tmp / f"{name}.log").open("wb")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "texsense.cli", "station", "--group", "cap", "--member", name,
+             "--config", str(ward), "--broker", f"mqtt://127.0.0.1:{broker.port}", "--db", db,
+             "--port", str(port), "--record-dir", str(tmp / f"rec-{name}")],
+            stdout=log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        out[name] = (proc, f"http://127.0.0.1:{port}/")
+    return out
+
+
+def settle(members: dict, mats: list[str], timeout: float = 600.0) -> float:
+    """Wait until every mat is held by the member rendezvous hashing names; seconds taken."""
+    names = sorted(members)
+    want = {m: preferred(m, names) for m in mats}
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        for name, (proc, _) in members.items():
+            if proc.poll() is not None:
+                raise SystemExit(f"member {name} exited: see its log")
+        try:
+            rows = get(members[names[0]][1] + "api/mats", timeout=10)
+            if {r["id"]: r.get("holder") for r in rows} == want:
+                return time.monotonic() - t0
+        except OSError:
+            pass
+        time.sleep(0.5)
+    raise SystemExit(f"the group did not settle in {timeout:.0f} s")
+
+
+def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: float,
+        seconds: float, db_k: int) -> dict:  # fmt: skip
+    ward = tmp / f"ward-{mats}.toml"
+    ward.write_text("".join(
+        f'[[mat]]\nid = "m{m:03d}"\nlayout = "grid:32x32"\ncalibration = "{tmp / "cal.json"}"\n\n'
+        for m in range(mats)
+    ))  # fmt: skip
+    db = f"cap{db_k}"
+    with psycopg.connect(pg.url, autocommit=True) as c:
+        c.execute(f"CREATE DATABASE {db}")
+    url = pg.url.rsplit("/", 1)[0] + "/" + db
+    ids = [f"m{m:03d}" for m in range(mats)]
+    members = start_members(tmp, broker, url, ward, [f"s{k + 1}" for k in range(n)])
+    try:
+        took = settle(members, ids)
+        holder = {r["id"]: r["holder_url"] for r in get(next(iter(members.values()))[1] +
+                                                          "api/mats")}  # fmt: skip
+        pub = subprocess.Popen(
+            [sys.executable, "-c", PUBLISHER, str(broker.port), str(mats), str(hz),
+             str(seconds), str(tmp / "cal.npz")],
+            stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        start = time.time()
+        stop = start + seconds
+        watched = [ids[k] for k in np.linspace(0, mats - 1, min(5, mats)).astype(int)]
+        latencies: list[float] = []
+        cpu: dict[str, float] = {}
+
+        async def members_cpu() -> None:
+            await asyncio.sleep(5.0)
+            t0 = time.time()
+            c0 = {k: cpu_seconds(p.pid) for k, (p, _) in members.items()}
+            await asyncio.sleep(max(stop - time.time(), 0.0))
+            for k, (p, _) in members.items():
+                cpu[k] = (cpu_seconds(p.pid) - c0[k]) / (time.time() - t0)
+
+        async def view_all() -> None:
+            await asyncio.gather(*(
+                viewer(holder[w].replace("http", "ws", 1) + f"mats/{w}/ws", latencies, stop)
+                for w in watched), members_cpu())  # fmt: skip
+
+        asyncio.run(view_all())
+        sent = json.loads(pub.communicate(timeout=120)[0])
+        time.sleep(1.0)  # the members drain what is in flight
+        processed = 0
+        for name, (_, page) in members.items():
+            processed += sum(r["frames"] for r in get(page + "api/mats") if r["holder"] == name)
+        lat = np.asarray(latencies[len(latencies) // 10 :]) * 1e3  # after the start
+        return {
+            "members": n, "mats": mats, "hz": hz, "settle_s": took, "sent": sent["sent"],
+            "processed": processed, "lost": sent["sent"] - processed,
+            "p50": float(np.percentile(lat, 50)) if lat.size else float("nan"),
+            "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
+            "cpu": " / ".join(f"{100 * cpu[k]:.0f}" for k in sorted(cpu)),
+        }  # fmt: skip
+    finally:
+        for proc, _ in members.values():
+            proc.kill()
+            proc.wait()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--members", default="1,2,3")
+    ap.add_argument("--loads", default="200x1,400x1", help="MATSxHZ,...")
+    ap.add_argument("--seconds", type=float, default=30.0)
+    args = ap.parse_args()
+    counts = [int(v) for v in args.members.split(",")]
+    loads = [(int(m), float(h)) for m, h in (x.split("x") for x in args.loads.split(","))]
+    print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared)")
+    print(
+        "| mats (1024 elements) | rate | members | settled after | frames published | "
+        "processed | lost | frame-to-viewer p50 | p99 | members' CPU (% of a core) |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    with tempfile.TemporaryDirectory() as d, Broker() as broker:
+        tmp = Path(d)
+        cal = big_calibration(1024, tmp / "cal.json")
+        c = cal["convert"]
+        np.savez(tmp / "cal.npz", offset=c.offset_pF_, gain=c.gain_,
+                 curve_e=c.curve_compression_mm_, curve_c=c.curve_capacitance_pF_)  # fmt: skip
+        pg = PostgresServer()
+        try:
+            k = 0
+            for mats, hz in loads:
+                for n in counts:
+                    k += 1
+                    r = run(tmp, broker, pg, n, mats, hz, args.seconds, k)
+                    print(f"| {mats} | {hz:g} Hz | {n} | {r['settle_s']:.0f} s | {r['sent']} | "
+                          f"{r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
+                          f"{r['p99']:.0f} ms | {r['cpu']} |", flush=True)  # fmt: skip
+        finally:
+            pg.close()
+    print(f"load average {os.getloadavg()[0]:.1f} at the end")
+
+
+if __name__ == "__main__":
+    main()
