@@ -41,6 +41,7 @@ import numpy.typing as npt
 from texsense._progress import progress
 from texsense.apps.posture.evaluate import class_distances, make_classifier
 from texsense.apps.posture.features import FeatureSet
+from texsense.compensation.hysteresis import HysteresisModel, scale_hysteresis
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 from texsense.sim import protocols
@@ -151,7 +152,6 @@ class ErrorStudy:
         elif source == "hysteresis":
             if self.hysteresis_model is None:
                 raise ParameterError("the hysteresis source needs a hysteresis_model")
-            from texsense.compensation.hysteresis import scale_hysteresis
 
             out = scale_hysteresis(self.hysteresis_model, r1, r2, level).reshape(r2.shape)
             out = np.clip(out, 0.0, None)
@@ -232,7 +232,6 @@ def sensor_hysteresis_model(spacer: str = "textile-3mm", seed: int = 0) -> Any:
     pressure, output what the sensor reports through its first-loading curve, identified
     (thesis method, §4.3) on the virtual spacer's calibration protocol (rising curve and
     falling curves)."""
-    from texsense.compensation.hysteresis import HysteresisModel
 
     rec = protocols.run_protocol("calibration", spacer, seed=seed, sample_hz=None)
     e = rec.labels["compression_mm"]
