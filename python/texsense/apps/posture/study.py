@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense._progress import progress
-from texsense.apps.posture.evaluate import class_distances, make_classifier
+from texsense.apps.posture.evaluate import class_distances, make_classifier, pooled_precision
 from texsense.apps.posture.features import FeatureSet
 from texsense.compensation.hysteresis import HysteresisModel, scale_hysteresis
 from texsense.data.layout import Layout
@@ -129,6 +129,7 @@ class ErrorStudy:
         self.train_y = np.repeat(self.labels, n_train)
         self.train_X = self.features.transform(train, layout)
         self.model = make_classifier(classifier).fit(self.train_X, self.train_y)
+        self.metric = pooled_precision(self.train_X, self.train_y)  # one metric for all tests
 
     # ------------------------------------------------------------------ test patterns
     def _transitions(self) -> tuple[np.ndarray, np.ndarray]:
@@ -172,7 +173,7 @@ class ErrorStudy:
         patterns, y = self.test_patterns(source, level)
         X = self.features.transform(patterns, self.layout)
         rate = float(np.mean(self.model.predict(X) == y))
-        d_md, d_ms = class_distances(X, y, reference=(self.train_X, self.train_y))
+        d_md, d_ms = class_distances(X, y, precision=self.metric)
         return StudyPoint(source, float(level), rate, d_md, d_ms)
 
     def sweep(self, source: str, levels: Sequence[float] | None = None) -> list[StudyPoint]:
