@@ -92,8 +92,6 @@ class DriftKernel:
 
 
 def _fit_exponentials(t: np.ndarray, target: np.ndarray, taus: np.ndarray) -> np.ndarray:
-    from scipy.optimize import nnls  # 1 s of import; a station that reads its fits needs none
-
     basis = 1.0 - np.exp(-t[:, None] / taus[None, :])
     from scipy.optimize import nnls  # heavy: only fits need it
 
