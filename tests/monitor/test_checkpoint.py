@@ -44,7 +44,7 @@ def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat, tmp_path):
     for p, now in payloads[:40]:
         a.handle(p, now)
     often, rarely = checkpoint.take(a, often=True), checkpoint.take(a, often=False)
-    assert isinstance(often.parts["monitor"], dict)  # JSON text made later, off the loop
+    assert callable(often.parts["monitor"])  # its JSON-ready rows made later, off the loop
     a.handle(*payloads[40])  # the mat goes on before the journal packs what was taken
     blobs = [rarely.pack(), often.pack()]
     b = MatEntry(config, EventStore(":memory:"), tmp_path / "b", 1.0)
@@ -62,3 +62,16 @@ def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat, tmp_path):
     np.testing.assert_array_equal(c.monitor.last_pressure, a.monitor.last_pressure)
     assert c.monitor.clock.state() == a.monitor.clock.state()
     assert c.state == "live" and b.state == "live" and b.last_seen is not None
+
+
+def test_the_tracker_s_state_later_is_its_state(seat, tmp_path):
+    config, payloads = seat
+    a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)
+    for p, now in payloads[:30]:
+        a.handle(p, now)
+    now, later = a.monitor.tracker.state(), a.monitor.tracker.state_later()
+    a.handle(*payloads[30])  # copies were taken: what the tracker does next is not in it
+    made = later()
+    assert [r[0] for r in made["exposed"]] == [r[0] for r in now["exposed"]] != []
+    np.testing.assert_allclose(made.pop("exposed"), now.pop("exposed"), atol=1e-3)
+    assert made == now

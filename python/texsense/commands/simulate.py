@@ -29,6 +29,7 @@ from texsense.sim.night import virtual_night
 from texsense.sim.protocols import PROTOCOLS, run_protocol
 from texsense.sim.seated import Subject, simulate_session
 from texsense.station.broker import parse_broker_url
+from texsense.station.virtual import VirtualMats
 
 #: CLI option -> protocol keyword, for the protocols that take it.
 _OPTIONS = {
@@ -210,8 +211,6 @@ def run_device(args: argparse.Namespace) -> int:
 
 def run_mats(args: argparse.Namespace) -> int:
     """Run ``texsense simulate mats``: publish until Ctrl-C or SIGTERM."""
-    from texsense.station.virtual import VirtualMats  # the virtual mats (and paho): only here
-
     if not args.broker:
         raise ParameterError("simulate mats needs --broker mqtt://host[:port]")
     if args.count < 1:

@@ -37,7 +37,6 @@ Examples
 
 from __future__ import annotations
 
-import copy
 import json
 import logging
 import struct
@@ -80,14 +79,14 @@ MONITOR_VERSION = 1
 
 @dataclass(frozen=True)
 class Part:
-    """A named part of a mat's checkpoint: ``save(entry)`` gives its bytes, or a JSON-ready
-    dict of containers of its own that is encoded later, off the event loop (None: nothing
+    """A named part of a mat's checkpoint: ``save(entry)`` gives its bytes, or a function
+    of copies taken now that makes a JSON-ready dict later, off the event loop (None: nothing
     to save), ``restore(entry, data)`` goes on from the bytes (raising ``ValueError`` when
     they do not fit); ``often``: written with every checkpoint, else with every
     ``sensor_every``-th."""
 
     name: str
-    save: Callable[[MatEntry], bytes | dict[str, Any] | None]
+    save: Callable[[MatEntry], bytes | Callable[[], dict[str, Any]] | None]
     restore: Callable[[MatEntry, bytes], None]
     often: bool = True
 
@@ -137,23 +136,23 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
 
 @dataclass(frozen=True)
 class Taken:
-    """A mat's state as the parts' bytes or JSON-ready dicts, taken at once (on the event loop
-    that changes it) and packed later, elsewhere (:meth:`pack`: the JSON text and the
-    compression, in the journal's thread)."""
+    """A mat's state as the parts' bytes or functions that make them, taken at once (on the
+    event loop that changes it) and packed later, elsewhere (:meth:`pack`: the JSON text
+    and the compression, in the journal's thread)."""
 
-    parts: dict[str, bytes | dict[str, Any]]
+    parts: dict[str, bytes | Callable[[], dict[str, Any]]]
     head: dict[str, Any]
 
     def pack(self) -> bytes:
         """The container (:func:`pack`)."""
         return pack({name: data if isinstance(data, bytes) else
-                     json.dumps(data, separators=(",", ":")).encode()
+                     json.dumps(data(), separators=(",", ":")).encode()
                      for name, data in self.parts.items()}, **self.head)  # fmt: skip
 
 
 def take(entry: MatEntry, often: bool = True) -> Taken:
     """The parts written every time (``often``), or the others, of the mat's state now."""
-    parts: dict[str, bytes | dict[str, Any]] = {}
+    parts: dict[str, bytes | Callable[[], dict[str, Any]]] = {}
     for part in PARTS.values():
         if part.often != often:
             continue
@@ -197,18 +196,17 @@ def restore(entry: MatEntry, blobs: list[bytes]) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------ the monitor part
-def _save_monitor(entry: MatEntry) -> dict[str, Any]:
-    """The monitor's state as fresh containers (encoded in the journal's thread: the event
-    loop only gathers it; the open alert's lists are copied, the rest is built here)."""
+def _save_monitor(entry: MatEntry) -> Callable[[], dict[str, Any]]:
+    """The monitor's state, taken now (copies) and made JSON-ready when called: in the
+    journal's thread, not on the event loop (the exposure rows of a 1024-element mat)."""
     m = entry.monitor
-    tracker = m.tracker.state()
-    tracker["alert"] = copy.deepcopy(tracker.get("alert"))
+    tracker = m.tracker.state_later()
     state = {
         "version": MONITOR_VERSION,
         "frames": m.frames,
         "t_first": m._t_first,
         "clock": m.clock.state(),
-        "tracker": tracker,
+        "tracker": None,
         "bed": None if m.bed is None else m.bed.schedule.state(),
         "vote": m._vote.state(),
         "mat": {
@@ -222,7 +220,12 @@ def _save_monitor(entry: MatEntry) -> dict[str, Any]:
             "state": entry.state,
         },
     }
-    return state
+
+    def made() -> dict[str, Any]:
+        state["tracker"] = tracker()
+        return state
+
+    return made
 
 
 def _restore_monitor(entry: MatEntry, data: bytes) -> None:
