@@ -157,11 +157,20 @@ def _starve_and_stop(m: ChildServer, fault_row) -> None:
     for t in slow:
         t.start()
     time.sleep(1.0)  # the lane is busy reading
+    meanwhile = []
     for path in ("api/calibration", "api/status", "api/frame/latest", "api/playback"):
         status, took = _request(m.url + path)
-        assert status == 200 and took < 1.5, (path, status, took)
+        assert status == 200, (path, status, took)
+        meanwhile.append((path, took))
     busy = [a for a in answers if a[0] == 503]
     assert len(busy) >= 2, answers  # 2 read, 8 wait, the rest are told at once
+    deadline = time.monotonic() + 120
+    while not any(status == 200 for status, _ in answers) and time.monotonic() < deadline:
+        time.sleep(0.05)  # the first read to come back (the others read on: SIGTERM below)
+    read = min(took for status, took in answers if status == 200)
+    # measured against the read in the same run (a loaded machine slows both): a server
+    # starved by the read answered in about the read's time (4.4-5.1 s for a 4 s read)
+    assert all(took < read / 4 for _, took in meanwhile), (read, meanwhile)
     fault_row(
         "not a file",
         "12 requests for a file that takes long to read",
