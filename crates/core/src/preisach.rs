@@ -43,6 +43,10 @@ mod avx2;
 /// capacity, and back in place once it is shallow again.
 pub const INLINE_EXTREMA: usize = 12;
 
+/// Element-samples per tile of frames in a batch of the [`Schedule::Blocks`] and
+/// [`Schedule::Parallel`] schedules (64 frames of 4096 elements).
+const TILE_SAMPLES: usize = 1 << 18;
+
 /// Elements per group of heads ([`Heads`]): the lanes of an AVX2 register of f64.
 pub(crate) const LANES: usize = 4;
 
@@ -599,13 +603,27 @@ impl PreisachBank {
             return Ok(());
         }
         let par = schedule == Schedule::Parallel && parallel(t, n);
-        for_blocks(out, n, self.blocks(), par, |mut block, o| {
-            let (start, width) = (o.start(), o.width());
-            for r in 0..t {
-                let row = r * n + start..r * n + start + width;
-                block.row(&inputs[row.clone()], &valid[row], o.row(r));
-            }
-        });
+        // tiles of frames: each block runs through a tile, then the next tile (a block that
+        // ran through all frames at once read every row from another page of memory, and
+        // ran out of the address translation cache on long batches)
+        let tile = (TILE_SAMPLES / n).max(1);
+        for a in (0..t).step_by(tile) {
+            let b = (a + tile).min(t);
+            let (inputs, valid) = (&inputs[a * n..b * n], &valid[a * n..b * n]);
+            for_blocks(
+                &mut out[a * n..b * n],
+                n,
+                self.blocks(),
+                par,
+                |mut block, o| {
+                    let (start, width) = (o.start(), o.width());
+                    for r in 0..b - a {
+                        let row = r * n + start..r * n + start + width;
+                        block.row(&inputs[row.clone()], &valid[row], o.row(r));
+                    }
+                },
+            );
+        }
         Ok(())
     }
 }
