@@ -84,11 +84,14 @@ def test_preisach_out_must_be_a_separate_float64_array_of_the_batch(cal):
     bank = cal["hysteresis"].model_.bank(6)
     walk = np.full((4, 6), 0.5)
     ok = np.ones(walk.shape, bool)
+    frozen = np.zeros((4, 6))
+    frozen.flags.writeable = False
     for bad, why in (
-        (np.empty((4, 5)), "out"),
+        (frozen, "cannot write into"),
+        (np.empty((4, 5)), r"shape \[4, 5\]"),
         (np.empty((4, 12))[:, ::2], "C-contiguous"),
         (np.empty((4, 6), np.float32), "float64"),
-        (walk, "read at the same time"),
+        (walk, "cannot write into"),
     ):
         with pytest.raises((ValueError, TypeError, RuntimeError), match=why):
             bank.run(walk, ok, out=bad)

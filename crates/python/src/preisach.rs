@@ -125,7 +125,7 @@ element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
         {
             let mut w = out
                 .try_readwrite()
-                .map_err(|_| wrong("an array that is read at the same time".into()))?;
+                .map_err(|e| wrong(format!("an array it cannot write into ({e})")))?;
             let o = w.as_slice_mut()?;
             py.detach(|| inner.run_scheduled(b.values, b.valid, o, schedule))
                 .map_err(to_py)?;
