@@ -89,3 +89,46 @@ def test_the_cache_can_be_turned_off(cache, record, monkeypatch):
     Hysteresis(method="thesis").fit(e, p)
     assert made == [1, 1]
     assert not cache.exists()
+
+
+_MAKER = """
+import json, sys, time
+from pathlib import Path
+from texsense.data import fitcache
+
+def make():
+    with open(sys.argv[1], "a") as f:
+        f.write("made\\n")
+    time.sleep(0.5)  # the work: the others arrive while it is made
+    return {"value": 42}
+
+print(json.dumps(fitcache.remembered("test", ["together"], make, lambda c: c)))
+"""
+
+
+def test_processes_started_together_make_it_once(cache, tmp_path):
+    """Three processes that need the same fit at once: one makes it, the others wait for it
+    and read it (a fresh machine starting several monitors or test workers)."""
+    import os
+    import subprocess
+    import sys
+
+    log = tmp_path / "made.log"
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
+    procs = [
+        subprocess.Popen([sys.executable, "-c", _MAKER, str(log)], env=env, stdout=subprocess.PIPE)
+        for _ in range(3)
+    ]
+    outs = [p.communicate(timeout=120)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0]
+    assert [o.decode().strip() for o in outs] == ['{"value": 42}'] * 3
+    assert log.read_text().splitlines() == ["made"]
+
+
+def test_a_lock_that_cannot_be_made_does_not_stop_the_work(tmp_path):
+    from texsense.data.files import made_once
+
+    with made_once(tmp_path / "no-such-folder" / "x.lock") as held:
+        assert held is False
+    with made_once(tmp_path / "x.lock") as held:
+        assert held is True

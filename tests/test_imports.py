@@ -34,6 +34,8 @@ LATE_BOUND = {
         "texsense.io",
     ): "Recording.save is a façade over texsense.io, whose "
     "readers build recordings (so texsense.io depends on texsense.data.recording)",
+    ("texsense.io", "texsense.io.apart"): "open_recording(apart=True) hands the read to "
+    "texsense.io.apart, whose child process runs texsense.io.load",
     ("texsense.calibration", "texsense.compensation.conversion"): "the names of the eq. 2.1 "
     "module that was texsense.calibration, found there for one release (with a warning)",
 }

@@ -101,6 +101,7 @@ def check_case(case: Case, path: Path, rc: int, out: str, err: str) -> str:
     return f"{info['frames']} frames read"
 
 
+@pytest.mark.xdist_group("reading")  # one worker builds and reads the cases (20 s), not both
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_reading(case, reading, fault_row):
     path, rc, out, err = reading[case.id]

@@ -16,6 +16,7 @@ from texsense.sensor.design import (
 from texsense.sim.failures import FailureModel
 from texsense.sim.mat import CROSSTALK_AT_HALF, VirtualMat
 from texsense.sim.protocols import run_protocol
+from texsense.sim.seated import SEAT_FAILURES
 
 
 def test_calibration_protocol_has_rising_and_three_falling_curves():
@@ -91,6 +92,37 @@ def test_mat_multiplexing_failures_and_crosstalk():
     c_e = alone.scan([0.0, 1.0], p).capacitance.frames
     change = c_s[1, 1] / c_e[1, 1] - 1
     assert change == pytest.approx(CROSSTALK_AT_HALF, rel=0.1)
+
+
+def test_a_mat_scanned_frame_by_frame_keeps_its_failures():
+    """A live virtual source scans one frame per call: the broken elements stay broken and
+    an intermittent episode runs on across frames (they were drawn anew at every call)."""
+    frames, dt = 600, 0.5
+    p = np.full((1, 96), 2.0)
+    live = VirtualMat.seat(seed=4, failures=SEAT_FAILURES)
+    per_frame = np.vstack([live.scan([k * dt], p).failed for k in range(frames)])
+    whole = VirtualMat.seat(seed=4, failures=SEAT_FAILURES)
+    at_once = whole.scan(np.arange(frames) * dt, np.repeat(p, frames, axis=0)).failed
+    n_perm = round(SEAT_FAILURES.permanent_fraction * 96)
+    for failed in (per_frame, at_once):
+        assert failed.all(axis=0).sum() == n_perm  # the same 12 elements in every frame
+        episodes = np.diff(failed[:, ~failed.all(axis=0)].astype(int), axis=0)
+        starts = int((episodes == 1).sum())
+        assert starts > 20  # intermittent failures happen frame by frame too
+        # an episode lasts 10 s on average (20 frames): runs, not single frames
+        assert failed[:, ~failed.all(axis=0)].sum() / starts > 8
+    # the same process either way: the share of failed readings agrees
+    assert per_frame.mean() == pytest.approx(at_once.mean(), rel=0.25)
+    # one call of a whole session draws as it always did (the recorded nights stay the same)
+    state_free = SEAT_FAILURES.simulate(
+        np.arange(frames) * dt, np.repeat(p, frames, axis=0), np.random.default_rng(1)
+    )
+    again = SEAT_FAILURES.simulate(
+        np.arange(frames) * dt, np.repeat(p, frames, axis=0), np.random.default_rng(1)
+    )
+    np.testing.assert_array_equal(state_free, again)
+    with pytest.raises(ParameterError, match="of a mat of 96 elements, not 3"):
+        SEAT_FAILURES.simulate([0.0], np.ones((1, 3)), np.random.default_rng(0), live._failing)
 
 
 def test_mat_wet_spacer_reads_higher():

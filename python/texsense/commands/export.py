@@ -11,6 +11,8 @@ from pathlib import Path
 from texsense._core import mcu_blob_info
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
+from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.stages import load_chain
 from texsense.data.files import check_not_input, write_bytes, write_text
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
@@ -77,8 +79,6 @@ def c_source(blob: bytes, name: str) -> str:
 
 def run_export_mcu(args: argparse.Namespace) -> int:
     """Run ``texsense export mcu``."""
-    from texsense.compensation.pipeline import Pipeline
-    from texsense.compensation.stages import load_chain
     from texsense.io import load
 
     suffix = args.output.suffix.lower()

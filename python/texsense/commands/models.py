@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.commands import HELP
+from texsense.compensation.stages import chain_from_dict
 from texsense.data.modelfile import rehash
 
 
@@ -27,7 +28,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_rehash(args: argparse.Namespace) -> int:
     """Run ``texsense rehash``."""
-    from texsense.compensation.stages import chain_from_dict
 
     for path in args.files:
 

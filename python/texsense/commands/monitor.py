@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.files import cache_folder, check_writable
+from texsense.data.files import cache_folder, check_writable, made_once
 from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
@@ -394,25 +394,39 @@ def _cached_model(
     """A posture model cached under ~/.cache/texsense/NAME.joblib, trained by ``train()``
     when missing (a broken cache is rebuilt, and said so). The name carries the id of the
     virtual mat's calibration the model is trained on, so a texsense whose compensation
-    changed trains a new one instead of reading an old one."""
-    from texsense.apps.posture.model import PostureModel
-
+    changed trains a new one instead of reading an old one. Processes started together train
+    it once: the others wait for it (:func:`~texsense.data.files.made_once`)."""
     cache = cache_folder()
     path = cache / f"{name}.joblib"
-    if path.is_file():
-        try:
-            return PostureModel.load(path)
-        except Exception as e:
-            logging.getLogger("texsense.monitor").warning("rebuilding %s: %s", path, e)
+    model = _kept_model(path)
+    if model is not None:
+        return model
     cache.mkdir(parents=True, exist_ok=True)
-    print(
-        f"texsense monitor: training {what} on simulated people (once, about {seconds} s; "
-        f"cached in {path})",
-        flush=True,
-    )
-    model = train()
-    model.save(path)
+    with made_once(path.with_name(path.name + ".lock")):  # another process may be training it
+        model = _kept_model(path)
+        if model is not None:
+            return model
+        print(
+            f"texsense monitor: training {what} on simulated people (once, about {seconds} s; "
+            f"cached in {path})",
+            flush=True,
+        )
+        model = train()
+        model.save(path)
     return model
+
+
+def _kept_model(path: Path) -> PostureModel | None:
+    """The posture model kept at ``path``, or None (none, or one that cannot be read: said)."""
+    from texsense.apps.posture.model import PostureModel
+
+    if not path.is_file():
+        return None
+    try:
+        return PostureModel.load(path)
+    except Exception as e:
+        logging.getLogger("texsense.monitor").warning("rebuilding %s: %s", path, e)
+        return None
 
 
 def virtual_seat_model(calibration_id: str) -> PostureModel:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from texsense.calibration.workflows import sleeve_calibration
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
@@ -46,7 +47,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense muscle simulate``: sleeve.h5, calibration.json and truth.json."""
-    from texsense.calibration.workflows import sleeve_calibration
     from texsense.io import save
 
     make_folder(args.output)

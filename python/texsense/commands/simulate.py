@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 
 from texsense._progress import progress
+from texsense.calibration.night import night_calibration
+from texsense.calibration.workflows import seat_calibration
 from texsense.commands import HELP
 from texsense.data.files import check_not_input, make_folder, real_path
 from texsense.exceptions import ParameterError
@@ -193,7 +195,6 @@ def run_device(args: argparse.Namespace) -> int:
 
 def run_night(args: argparse.Namespace) -> int:
     """Run ``texsense simulate night``: the raw night, its truth and the mat's calibration."""
-    from texsense.calibration.night import night_calibration
 
     if args.output is None:
         raise ParameterError("simulate night needs -o NIGHT.h5 (the raw capacitance)")
@@ -267,7 +268,6 @@ def register_sessions(sub: argparse._SubParsersAction) -> None:
 
 def run_sessions(args: argparse.Namespace) -> int:
     """Run ``texsense seat-sessions``."""
-    from texsense.calibration.workflows import seat_calibration
 
     if args.sessions < 1 or args.rounds < 1 or args.rest_s < 0:
         raise ParameterError("--sessions and --rounds must be >= 1 and --rest-s >= 0")

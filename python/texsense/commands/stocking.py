@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 from texsense.apps.stocking import POINTS, report
+from texsense.calibration.workflows import strip_calibration
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated
 from texsense.data.files import make_folder
@@ -44,7 +45,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``texsense stocking simulate``: strip.h5 (capacitance, true pressure as labels) and
     calibration.json (the strip's stage chain)."""
-    from texsense.calibration.workflows import strip_calibration
     from texsense.io import save
 
     make_folder(args.output)

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import nnls
 
 from texsense._core import Curve, DriftBank
 from texsense.compensation.stage import time_steps as _time_steps
@@ -94,6 +93,8 @@ class DriftKernel:
 
 def _fit_exponentials(t: np.ndarray, target: np.ndarray, taus: np.ndarray) -> np.ndarray:
     basis = 1.0 - np.exp(-t[:, None] / taus[None, :])
+    from scipy.optimize import nnls  # heavy: only fits need it
+
     weights, _ = nnls(basis, target, maxiter=50 * taus.size)
     return weights
 

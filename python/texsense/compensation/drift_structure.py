@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import nnls
 
 from texsense.compensation.drift import DriftKernel, DriftModel, log_kernel, unit_drift
 from texsense.exceptions import ParameterError
@@ -174,6 +173,8 @@ def _fit(name: str, parts: list[_Part], use: str) -> np.ndarray:
     if name.startswith("prony"):  # one sign, non-negative weights: the better of the two
         best = None
         for sign in (1.0, -1.0):
+            from scipy.optimize import nnls  # heavy: only fits need it
+
             c, r = nnls(sign * A, b, maxiter=50 * A.shape[1])
             if best is None or r < best[1]:
                 best = (sign * c, r)

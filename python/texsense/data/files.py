@@ -63,6 +63,7 @@ __all__ = [
     "check_not_input",
     "check_regular",
     "check_writable",
+    "made_once",
     "make_folder",
     "open_regular",
     "read_regular",
@@ -82,6 +83,31 @@ def cache_folder() -> Path:
     """Where texsense keeps what it can make again (trained posture models, the virtual mats'
     calibrations): ``$XDG_CACHE_HOME/texsense``, by default ``~/.cache/texsense``."""
     return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "texsense"
+
+
+@contextlib.contextmanager
+def made_once(path: str | Path) -> Iterator[bool]:
+    """Hold an exclusive lock on the file ``path`` (made if missing) while the block runs, so
+    that processes about to make the same cached result (a fit, a trained model) make it one
+    after the other: the later ones find it made and read it. Yields whether the lock is held:
+    not where the platform has no file locks (Windows) or the lock file cannot be made (a
+    read-only cache, whose write is skipped anyway); the block runs all the same. The kernel
+    lets go of the lock of a process that dies."""
+    try:
+        import fcntl  # POSIX only
+    except ImportError:
+        yield False
+        return
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        yield False
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield True
+    finally:
+        os.close(fd)  # lets go of the lock
 
 
 def _fsync_file(path: Path) -> None:

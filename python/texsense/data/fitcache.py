@@ -15,6 +15,7 @@ is made again, and a cache that cannot be written is skipped, each said in the l
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import functools
 import hashlib
@@ -28,7 +29,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from texsense.data.files import cache_folder, write_text
+from texsense.data.files import cache_folder, made_once, write_text
 
 __all__ = ["code_digest", "remembered"]
 
@@ -79,24 +80,38 @@ def remembered(
         _memory.move_to_end(key)
         return build(copy.deepcopy(_memory[key]))
     path = cache_folder() / f"fit-{key}.json"
-    if path.is_file():
-        try:
-            content = json.loads(path.read_text(encoding="utf-8"))
-            built = build(content)
-        except (OSError, ValueError) as e:
-            log.warning("making again: %s: %s", path, e)
-        else:
-            _keep(key, copy.deepcopy(content))
-            return built
-    content = make()
-    built = build(copy.deepcopy(content))
-    try:
+    kept = _read(path, key, build)
+    if kept is not None:
+        return kept[0]
+    with contextlib.suppress(OSError):  # a cache that cannot be made is skipped below
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_text(path, json.dumps(content))
-    except OSError as e:
-        log.warning("not kept (%s): %s", path, e)
+    with made_once(path.with_name(path.name + ".lock")):  # one process makes it, the others wait
+        kept = _read(path, key, build)  # made meanwhile by another process
+        if kept is not None:
+            return kept[0]
+        content = make()
+        built = build(copy.deepcopy(content))
+        try:
+            write_text(path, json.dumps(content))
+        except OSError as e:
+            log.warning("not kept (%s): %s", path, e)
     _keep(key, content)
     return built
+
+
+def _read(path: Path, key: str, build: Callable[[Any], T]) -> tuple[T] | None:
+    """``(build(content),)`` of the content kept at ``path``, or None (none kept, or one that
+    cannot be read: said in the log, to be made again)."""
+    if not path.is_file():
+        return None
+    try:
+        content = json.loads(path.read_text(encoding="utf-8"))
+        built = build(content)
+    except (OSError, ValueError) as e:
+        log.warning("making again: %s: %s", path, e)
+        return None
+    _keep(key, copy.deepcopy(content))
+    return (built,)
 
 
 def _keep(key: str, content: Any) -> None:

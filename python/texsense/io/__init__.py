@@ -241,13 +241,19 @@ def load(
         return r.read()
 
 
-def open_recording(path: str | Path) -> Recording:
+def open_recording(path: str | Path, *, apart: bool = False) -> Recording:
     """A recording to play: a texsense HDF5 recording as a
     :class:`~texsense.io.lazy.LazyRecording` (its frames read when indexed: any length), any
     other format read whole (within the memory budget: a file beyond it is refused in one
-    line, since the text formats are read from their start only)."""
+    line, since the text formats are read from their start only); with ``apart`` that read
+    is done in a child process (:func:`texsense.io.apart.load_apart`: a server's threads go
+    on while text is parsed)."""
     if sniff_format(path) == "hdf5":
         return LazyRecording.open(path)
+    if apart:
+        from texsense.io.apart import load_apart  # late: its child process runs load()
+
+        return load_apart(path)
     return load(path)
 
 

@@ -66,10 +66,8 @@ from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.data import budget, units
 from texsense.data.files import check_regular, make_folder, real_path, regular_files
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
-from texsense.io import sniff_format
-from texsense.io.apart import load_apart
+from texsense.io import open_recording, sniff_format
 from texsense.io.hdf5 import read_bounds
-from texsense.io.lazy import LazyRecording
 from texsense.monitor.web import Lane
 
 if TYPE_CHECKING:
@@ -154,10 +152,9 @@ class _Reviews:
             memory = budget.max_memory() - self.held()
             rec: Recording
             with budget.share(memory):
-                if sniff_format(path) == "hdf5":
-                    rec = LazyRecording.open(path)  # its frames read on demand
-                else:  # read whole, in a child process: parsing text holds Python's lock
-                    rec = load_apart(path, memory)
+                # HDF5 read on demand; text read whole in a child process (parsing text holds
+                # Python's lock), within the share
+                rec = open_recording(path, apart=True)
                 # the page converts pressure from N/cm², as for the live frames
                 unit = "N/cm2" if rec.quantity == "pressure" else None
                 review = open_review(rec, unit=unit, name=path.name)

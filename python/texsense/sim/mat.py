@@ -34,7 +34,7 @@ from texsense.exceptions import ParameterError
 from texsense.sensor.electrode import Electrode, wet_factor
 from texsense.sensor.materials import PRESETS
 from texsense.sensor.readout import CDC
-from texsense.sim.failures import FailureModel
+from texsense.sim.failures import FailureModel, FailureState
 from texsense.sim.spacer import Spacer
 
 __all__ = ["CROSSTALK_AT_HALF", "MatScan", "VirtualMat"]
@@ -148,6 +148,7 @@ class VirtualMat:
             stray + stray_spread_pF * self._rng.standard_normal(n), 0.0, None
         )
         self._clock = 0.0
+        self._failing: FailureState | None = None  # drawn at the first scan, kept after
 
     @classmethod
     def seat(cls, spacer: str = "textile-3mm", **kwargs: Any) -> VirtualMat:
@@ -226,7 +227,9 @@ class VirtualMat:
         cap = (cap - stray) * self.element_gain + self.element_stray_pF
         if self.architecture == "stripes":
             cap = self._crosstalk(cap, comp / thickness)
-        failed = self.failures.simulate(element_times[:, 0], p_at, self._rng)
+        if self._failing is None:
+            self._failing = self.failures.start(n, self._rng)
+        failed = self.failures.simulate(element_times[:, 0], p_at, self._rng, self._failing)
         _, measured, saturated = self.cdc.convert(cap, self._rng, self.offsets_pF[None, :])
         measured = np.where(failed, 0.0, measured)
         self._clock = float(t[-1]) if t.size else self._clock

@@ -49,6 +49,7 @@ import numpy as np
 
 from texsense.apps.alerts import Event, ExposureTracker
 from texsense.apps.bed import BedWatch
+from texsense.compensation.pipeline import Pipeline
 from texsense.data import units
 from texsense.data.protocol import (
     CountError,
@@ -108,7 +109,6 @@ class _FedSource(Source):
 
 def _monitor(config: MatConfig, source: Source, store: EventStore, record_dir: Path) -> Monitor:
     """The single-mat monitor of a mat of the ward."""
-    from texsense.compensation.pipeline import Pipeline
 
     pipeline = None
     if config.quantity == "capacitance":

@@ -42,6 +42,7 @@ __all__ = [
     "class_distances",
     "loso",
     "make_classifier",
+    "pooled_precision",
     "sequential_forward_selection",
     "takes_groups",
 ]
@@ -377,9 +378,11 @@ def sequential_forward_selection(
     return chosen, scores
 
 
-def _pooled_precision(X: np.ndarray, y: np.ndarray, ridge: float) -> np.ndarray:
+def pooled_precision(X: npt.ArrayLike, y: npt.ArrayLike, ridge: float = 0.05) -> np.ndarray:
     """Inverse of the pooled within-class covariance (with a ridge of ``ridge`` x its mean
-    variance, so that it exists with more features than samples)."""
+    variance, so that it exists with more features than samples): the metric of
+    :func:`class_distances` (thesis §6.4.2)."""
+    X, y = np.asarray(X, dtype=np.float64), np.asarray(y)
     centred = np.vstack([X[y == c] - X[y == c].mean(axis=0) for c in np.unique(y)])
     dof = max(centred.shape[0] - np.unique(y).size, 1)
     cov = centred.T @ centred / dof
@@ -393,6 +396,7 @@ def class_distances(
     *,
     reference: tuple[np.ndarray, np.ndarray] | None = None,
     ridge: float = 0.05,
+    precision: np.ndarray | None = None,
 ) -> tuple[float, float]:
     """Mahalanobis distances between and within classes (thesis §6.4.2).
 
@@ -401,7 +405,8 @@ def class_distances(
     ``d_c`` (eq. 6.10), the mean distance between all pairs of different samples of a class.
     The metric is the pooled within-class covariance of ``reference`` (features, labels) —
     e.g. the training patterns, so that distances of test sets with growing errors are
-    measured with one fixed metric — or of (X, y) itself.
+    measured with one fixed metric — or of (X, y) itself; ``precision`` gives that metric
+    directly (:func:`pooled_precision`, computed once for many test sets).
 
     Returns
     -------
@@ -412,12 +417,17 @@ def class_distances(
     classes = np.unique(ya)
     if classes.size < 2:
         raise ParameterError("class distances need at least two classes")
-    rx, ry = reference if reference is not None else (Xa, ya)
-    precision = _pooled_precision(np.asarray(rx, dtype=np.float64), np.asarray(ry), ridge)
+    if precision is None:
+        rx, ry = reference if reference is not None else (Xa, ya)
+        precision = pooled_precision(rx, ry, ridge)
+
+    # d' P d = |L' d|² with P = L L' (Cholesky): distances in whitened coordinates, one
+    # product per sample instead of one per pair
+    whiten = np.linalg.cholesky(precision)
 
     def dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        d = a[:, None, :] - b[None, :, :]
-        return np.sqrt(np.maximum(np.einsum("ijk,kl,ijl->ij", d, precision, d), 0.0))
+        d = (a @ whiten)[:, None, :] - (b @ whiten)[None, :, :]
+        return np.sqrt(np.einsum("ijk,ijk->ij", d, d))
 
     means = np.vstack([Xa[ya == c].mean(axis=0) for c in classes])
     dm = dist(means, means)

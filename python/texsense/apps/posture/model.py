@@ -32,7 +32,7 @@ from sklearn.base import BaseEstimator
 from texsense import __version__
 from texsense.apps.posture.evaluate import make_classifier, takes_groups
 from texsense.apps.posture.features import FeatureSet, mirror_samples
-from texsense.data.files import open_regular
+from texsense.data.files import atomic_path, open_regular
 from texsense.data.layout import Layout
 from texsense.exceptions import FormatError, ParameterError
 
@@ -163,7 +163,8 @@ class PostureModel:
             "classes": self.classes_,
             "estimator": self.estimator,
         }
-        joblib.dump(envelope, path)
+        with atomic_path(path) as tmp:  # a reader never sees half a model
+            joblib.dump(envelope, tmp)
         return path
 
     @classmethod

@@ -39,8 +39,9 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense._progress import progress
-from texsense.apps.posture.evaluate import class_distances, make_classifier
+from texsense.apps.posture.evaluate import class_distances, make_classifier, pooled_precision
 from texsense.apps.posture.features import FeatureSet
+from texsense.compensation.hysteresis import HysteresisModel, scale_hysteresis
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 from texsense.sim import protocols
@@ -128,6 +129,7 @@ class ErrorStudy:
         self.train_y = np.repeat(self.labels, n_train)
         self.train_X = self.features.transform(train, layout)
         self.model = make_classifier(classifier).fit(self.train_X, self.train_y)
+        self.metric = pooled_precision(self.train_X, self.train_y)  # one metric for all tests
 
     # ------------------------------------------------------------------ test patterns
     def _transitions(self) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +153,6 @@ class ErrorStudy:
         elif source == "hysteresis":
             if self.hysteresis_model is None:
                 raise ParameterError("the hysteresis source needs a hysteresis_model")
-            from texsense.compensation.hysteresis import scale_hysteresis
 
             out = scale_hysteresis(self.hysteresis_model, r1, r2, level).reshape(r2.shape)
             out = np.clip(out, 0.0, None)
@@ -172,7 +173,7 @@ class ErrorStudy:
         patterns, y = self.test_patterns(source, level)
         X = self.features.transform(patterns, self.layout)
         rate = float(np.mean(self.model.predict(X) == y))
-        d_md, d_ms = class_distances(X, y, reference=(self.train_X, self.train_y))
+        d_md, d_ms = class_distances(X, y, precision=self.metric)
         return StudyPoint(source, float(level), rate, d_md, d_ms)
 
     def sweep(self, source: str, levels: Sequence[float] | None = None) -> list[StudyPoint]:
@@ -232,7 +233,6 @@ def sensor_hysteresis_model(spacer: str = "textile-3mm", seed: int = 0) -> Any:
     pressure, output what the sensor reports through its first-loading curve, identified
     (thesis method, §4.3) on the virtual spacer's calibration protocol (rising curve and
     falling curves)."""
-    from texsense.compensation.hysteresis import HysteresisModel
 
     rec = protocols.run_protocol("calibration", spacer, seed=seed, sample_hz=None)
     e = rec.labels["compression_mm"]

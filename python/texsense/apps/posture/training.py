@@ -8,6 +8,8 @@ from texsense.apps.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAUL
 from texsense.apps.posture.evaluate import make_classifier
 from texsense.apps.posture.features import FeatureSet
 from texsense.apps.posture.model import PostureModel
+from texsense.calibration.workflows import bed_calibration, seat_calibration
+from texsense.compensation.pipeline import Pipeline
 from texsense.sim.bed import bed_layout, every_position
 from texsense.sim.seated import POSTURES, Subject, simulate_session
 
@@ -30,9 +32,6 @@ def train_virtual_seat_model(
     SVM 91.7 % (91.3 % calibrated), logistic 80.2 %, LDA 78.1 %, naive Bayes 78.9 % of
     seated frames right; the other three people: 82-87 %)."""
     from sklearn.calibration import CalibratedClassifierCV
-
-    from texsense.calibration.workflows import seat_calibration
-    from texsense.compensation.pipeline import Pipeline
 
     cal = seat_calibration()
     frames, labels = [], []
@@ -71,9 +70,6 @@ def train_virtual_bed_model(
     classifier and features are the posture defaults (:mod:`texsense.apps.posture.defaults`);
     a classifier without probabilities gets sigmoid-calibrated ones for the dashboard."""
     from sklearn.calibration import CalibratedClassifierCV
-
-    from texsense.calibration.workflows import bed_calibration
-    from texsense.compensation.pipeline import Pipeline
 
     lay = bed_layout()
     pipeline = Pipeline(bed_calibration(), lay)

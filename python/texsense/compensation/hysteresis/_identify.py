@@ -32,11 +32,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import csr_matrix
 
 from texsense._core import PreisachBank
 from texsense.compensation.hysteresis._lsq import branch_folds, design_entries, fit_everett_lsq
@@ -49,6 +48,9 @@ from texsense.compensation.hysteresis._relay import (
 )
 from texsense.compensation.hysteresis._segments import Branch, split_branches
 from texsense.exceptions import ParameterError
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 __all__ = [
     "Identified",
@@ -251,6 +253,8 @@ def everett_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -
     spread over the grid nodes with the interpolation weights of the core (bilinear; linear on
     the lower triangle of a diagonal cell).
     """
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     k = nodes.size
     r, i, j, w = design_entries(np.asarray(u, dtype=np.float64), nodes)
     return csr_matrix((w, (r, i * k + j)), shape=(np.size(u), k * k))

@@ -30,17 +30,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import csr_matrix, hstack
 from threadpoolctl import threadpool_limits
 
 from texsense._core import everett_terms
 from texsense.compensation.hysteresis._qp import solve_monotone_qp
 from texsense.compensation.hysteresis._segments import split_branches
 from texsense.exceptions import ParameterError
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 __all__ = ["Candidate", "LsqResult", "design_entries", "fit_everett_lsq", "lower_design"]
 
@@ -152,6 +154,8 @@ def spread_bilinear(
 def lower_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]) -> csr_matrix:
     """Design matrix (T x K(K-1)/2) over the free table entries ``F[i, j]`` (i > j, column
     ``i (i - 1) / 2 + j``); see :func:`design_entries`."""
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     k = nodes.size
     r, i, j, w = design_entries(u, nodes)
     return csr_matrix((w, (r, i * (i - 1) // 2 + j)), shape=(u.size, k * (k - 1) // 2))
@@ -167,6 +171,8 @@ def _shape_constraints(alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
     - ``∂B/∂α + ∂B/∂d >= 0`` at the four corners of every cell (the sum is affine in the
       cell, so its minimum is at a corner): ``F`` non-decreasing in α at fixed β.
     """
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     na, nd = alpha_cells + 1, d_nodes.size - 1
     h_a = 1.0 / alpha_cells
 
@@ -215,6 +221,8 @@ def _d_nodes(cells: int, spacing: float) -> np.ndarray:
 
 def _shape_map(k: int, alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
     """Fine free entries <- coarse unknowns on (α node, d node ≥ 1); bilinear in (α, d)."""
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     i, j = _lower_index(k)
     x = np.linspace(0.0, 1.0, k)
     a = np.clip(x[i] * alpha_cells, 0.0, alpha_cells * (1 - 1e-12))
@@ -246,6 +254,8 @@ def _shape_map(k: int, alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
 def _curvature(alpha_cells: int, d_nodes: np.ndarray) -> csr_matrix:
     """Second differences of the coarse unknowns along α and along d (divided differences on
     the non-uniform d-nodes, scaled to a uniform step), one row each."""
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     na, nd = alpha_cells + 1, d_nodes.size - 1
     h = (d_nodes[-1] - d_nodes[0]) / nd
     rows, cols, vals = [], [], []
@@ -345,6 +355,8 @@ class _Problem:
         self.held_out: dict[Candidate, np.ndarray] = {}
 
     def system(self, alpha_cells: int, d_cells: int, spacing: float) -> _System:
+        from scipy.sparse import csr_matrix, hstack  # heavy: imported where a fit needs it
+
         key = (alpha_cells, d_cells, spacing)
         if key not in self._cache:
             d_nodes = _d_nodes(d_cells, spacing)

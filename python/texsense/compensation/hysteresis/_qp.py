@@ -11,12 +11,15 @@ iteration — nothing is clipped afterwards.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
-from scipy.sparse import csr_matrix
 
 from texsense.exceptions import ParameterError
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 __all__ = ["solve_monotone_qp"]
 
@@ -45,6 +48,12 @@ def solve_monotone_qp(
     :class:`ParameterError` when ``x0`` is not strictly feasible or ``H`` is not positive
     definite.
     """
+    from scipy.linalg import (  # heavy: imported where a fit needs it
+        LinAlgError,
+        cho_factor,
+        cho_solve,
+    )
+
     x = np.array(x0, dtype=np.float64)
     s = C @ x
     if not np.all(s > 0):

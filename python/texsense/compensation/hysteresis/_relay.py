@@ -35,16 +35,18 @@ the falling one, as for magnetisation against field). A spacer's loops run the o
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import cho_factor, cho_solve
-from scipy.sparse import csr_matrix
 from threadpoolctl import threadpool_limits
 
 from texsense._core import everett_terms
 from texsense.compensation.hysteresis._lsq import spread_bilinear
 from texsense.compensation.hysteresis._segments import reversal_indices
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 __all__ = [
     "RelayFit",
@@ -111,6 +113,8 @@ def nonuniform_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]
     ``i (i - 1) / 2 + j``) on non-uniform nodes: the Rust core's Everett terms (eq.
     4.15/4.16) interpolated bilinearly, linearly on the lower triangle of a diagonal cell.
     Output at ``u_min`` = 0."""
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     m = nodes.size
     indptr, alpha, beta, coef = everett_terms(
         np.ascontiguousarray(u, dtype=np.float64), float(nodes[0]), float(nodes[-1])
@@ -128,6 +132,8 @@ def nonuniform_design(u: npt.NDArray[np.float64], nodes: npt.NDArray[np.float64]
 def cell_map(m: int) -> csr_matrix:
     """``F = T w``: node values ``F[i, j]`` (i > j) from cell weights ``w[a, b]`` (a >= b,
     cell column ``a (a + 1) / 2 + b``), ``F[i, j] = Σ_{j <= b <= a < i} w[a, b]``."""
+    from scipy.sparse import csr_matrix  # heavy: imported where a fit needs it
+
     rows, cols = [], []
     for i in range(1, m):
         for j in range(i):
@@ -240,6 +246,8 @@ def _inner(
 
 def _free_solve(H: np.ndarray, g: np.ndarray, free: np.ndarray) -> np.ndarray:
     """The unconstrained minimiser over the free variables (the others at 0)."""
+    from scipy.linalg import cho_factor, cho_solve  # heavy: imported where a fit needs it
+
     z = np.zeros(g.size)
     f = np.nonzero(free)[0]
     if f.size:
@@ -308,6 +316,8 @@ class RelayProblem:
 
     def solve(self, ridge: float, signed: bool, exclude: int | None = None) -> np.ndarray:
         """Weights (cells, then the offset) without the held-out fold ``exclude``."""
+        from scipy.linalg import cho_factor, cho_solve  # heavy: imported where a fit needs it
+
         G, b, count = self.whole
         if exclude is not None:
             G0, b0, n0 = self.folds[exclude]
