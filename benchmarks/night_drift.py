@@ -18,6 +18,11 @@
    specimens 0-3 of each law: coverage, median half-width and RMSE.
 4. **Cost** of the in-use estimator per frame at 4096 elements (64 x 64), against the
    pipeline's own time per frame (``Pipeline.step`` on the same stream, in the same run).
+5. **Bounds by the families the scores came from** (``--skip`` without ``families``; in use,
+   95 %): each night's bounds with the shipped score tables (seed-100 nights of the textile
+   law and Iwan), with tables from its own family's seed-100 night only, and from the other
+   two families' only (its family never used for its scores). The families: the textile law
+   (``textile-3mm`` and the foams), Iwan, Bouc–Wen.
 
 ``--calibrate`` makes the conformal scores of :data:`texsense.compensation.intervals.SCORES`
 (pooled) and ``BAND_SCORES`` (the mat's, per band of the value) instead, on data the tables
@@ -25,11 +30,13 @@ above do not judge: nights of seed 100 of the ``--laws`` given (``textile-3mm iw
 ``bouc-wen-6mm`` night of seed 100 was simulated) and records of specimens 12 and 13; it prints
 the dictionaries to paste into ``intervals.py``.
 
-Nights are simulated once into ``--cache`` (default ``~/.cache/texsense/nights``): a textile
-night takes ~5 min, a Bouc–Wen one ~6 min, an Iwan one ~25 min on this machine.
+Nights are simulated once into ``--cache`` (default ``~/.cache/texsense/nights``): an 8-h night
+takes 1-4 min on the shared 2-core machine (textile 52 s, Bouc–Wen 71 s, Iwan 161 s wall at a
+load average of 3-8), and processing it three ways about 20 s.
 
 Run:  .venv/bin/python benchmarks/night_drift.py [--seeds 0 1 2] [--laws ...] [--cache DIR]
       .venv/bin/python benchmarks/night_drift.py --calibrate --laws textile-3mm iwan-6mm
+      .venv/bin/python benchmarks/night_drift.py --skip nights records real cost --laws ...
 """
 
 from __future__ import annotations
@@ -309,22 +316,101 @@ def cost_table() -> None:
     )
 
 
+def mat_scores(law: str, hours: float, cache: Path) -> Path:
+    """The scores of the seed-100 night of ``law`` (in use and laboratory-only), kept in
+    ``cache``."""
+    part = cache / f"scores-mat-{law}.npz"
+    if not part.exists():
+        raw, truth_rec, chain = night_files(law, 100, hours, cache)
+        truth = truth_rec.frames.astype(np.float64)
+        both = [scores(chain, raw, truth, in_use=flag) for flag in (False, True)]
+        np.savez(
+            part,
+            score=np.concatenate([b[0] for b in both]).astype(np.float32),
+            band=np.concatenate([b[1] for b in both]).astype(np.int8),
+        )
+    print(f"scores of the {law} night: done", file=sys.stderr, flush=True)
+    return part
+
+
+def band_tables(s: np.ndarray, b: np.ndarray) -> tuple[tuple, tuple]:
+    """The pooled quantiles (0-100 %) and those per band (50-100 %; None below ``MIN_BAND``
+    scores)."""
+    per_band = tuple(
+        intervals.conformal_quantiles(s[b == k], range(50, 101)) if np.sum(b == k) >= MIN_BAND
+        else None
+        for k in range(len(intervals.BAND_EDGES))
+    )  # fmt: skip
+    return intervals.conformal_quantiles(s, range(101)), per_band
+
+
+#: The law family of every night's spacer (the foams are the textile law with other parameters).
+FAMILY = {
+    "textile-3mm": "textile law",
+    "foam-9mm": "textile law",
+    "foam-13mm": "textile law",
+    "foam-7mm": "textile law",
+    "iwan-6mm": "Iwan",
+    "bouc-wen-6mm": "Bouc-Wen",
+}
+#: The calibration night (seed 100) of every family.
+FAMILY_NIGHT = {"textile law": "textile-3mm", "Iwan": "iwan-6mm", "Bouc-Wen": "bouc-wen-6mm"}
+
+
+def family_table(laws: list[str], seeds: list[int], hours: float, cache: Path) -> None:
+    """Table 4: the bounds in use with score tables made from the seed-100 nights of chosen
+    families: the shipped one (textile and Iwan), the night's own family only, and the other
+    two families only (the night's family never used for its scores)."""
+    parts = {f: np.load(mat_scores(law, hours, cache)) for f, law in FAMILY_NIGHT.items()}
+
+    def tables(fams: list[str]) -> tuple[tuple, tuple]:
+        return band_tables(
+            np.concatenate([parts[f]["score"] for f in fams]),
+            np.concatenate([parts[f]["band"] for f in fams]),
+        )
+
+    print("\n## Bounds in use (95 %) by the families the scores came from\n")
+    print(
+        "| law | seed | scores from | coverage, all element-frames | coverage at 10-150 mmHg | "
+        "median half-width at 10-150 mmHg | half-width / RMSE |"
+    )
+    print("|---|---:|---|---:|---:|---:|---:|")
+    saved, saved_bands = dict(intervals.SCORES), dict(intervals.BAND_SCORES)
+    try:
+        for law in laws:
+            fam = FAMILY[law]
+            others = [f for f in FAMILY_NIGHT if f != fam]
+            variants = {
+                "shipped (textile law, Iwan)": (saved["mat"], saved_bands["mat"]),
+                f"own family ({fam})": tables([fam]),
+                f"other families ({', '.join(others)})": tables(others),
+            }
+            for seed in seeds:
+                raw, truth_rec, chain = night_files(law, seed, hours, cache)
+                truth = truth_rec.frames.astype(np.float64)
+                band = (truth >= BAND[0]) & (truth <= BAND[1])
+                for name, (pooled, per_band) in variants.items():
+                    intervals.SCORES["mat"], intervals.BAND_SCORES["mat"] = pooled, per_band
+                    v, _, (lo, hi), _ = process(chain, raw, 0.95, in_use=True)
+                    inside = (truth >= lo) & (truth <= hi)
+                    hw = float(np.median(0.5 * (hi - lo)[band])) * MMHG
+                    rmse = float(np.sqrt(np.mean((v - truth)[band] ** 2))) * MMHG
+                    print(
+                        f"| {law} | {seed} | {name} | {100 * inside.mean():.1f}% | "
+                        f"{100 * inside[band].mean():.1f}% | {hw:.1f} mmHg | {hw / rmse:.2f} |",
+                        flush=True,
+                    )
+    finally:
+        intervals.SCORES.update(saved)
+        intervals.BAND_SCORES.update(saved_bands)
+
+
 def calibrate(cache: Path, hours: float, laws: list[str]) -> None:
     """The conformal score tables on data the benchmark does not judge (each part's scores
     kept in ``cache``, so that a part simulated later adds to the others): pooled, and per band
     of the value (a band with fewer than ``MIN_BAND`` scores takes the pooled table)."""
     for law in laws:
-        part = cache / f"scores-mat-{law}.npz"
-        if not part.exists():
-            raw, truth_rec, chain = night_files(law, 100, hours, cache)
-            truth = truth_rec.frames.astype(np.float64)
-            both = [scores(chain, raw, truth, in_use=flag) for flag in (False, True)]
-            np.savez(
-                part,
-                score=np.concatenate([b[0] for b in both]).astype(np.float32),
-                band=np.concatenate([b[1] for b in both]).astype(np.int8),
-            )
-        print(f"scores of the {law} night: done", file=sys.stderr, flush=True)
+        mat_scores(law, hours, cache)
     for law in RECORD_LAWS:
         part = cache / f"scores-record-{law}.npz"
         if not part.exists():
@@ -347,15 +433,9 @@ def calibrate(cache: Path, hours: float, laws: list[str]) -> None:
         parts = [np.load(f) for f in files]
         s = np.concatenate([p["score"] for p in parts])
         b = np.concatenate([p["band"] for p in parts])
-        pooled[name] = intervals.conformal_quantiles(s, range(101))
-        if name == "record":  # pooled only (intervals.BAND_SCORES)
-            continue
-        per_band[name] = tuple(
-            intervals.conformal_quantiles(s[b == k], range(50, 101))
-            if np.sum(b == k) >= MIN_BAND
-            else None
-            for k in range(len(intervals.BAND_EDGES))
-        )
+        pooled[name], bands = band_tables(s, b)
+        if name != "record":  # records: pooled only (intervals.BAND_SCORES)
+            per_band[name] = bands
     print("SCORES: dict[str, tuple[float, ...]] = {")
     for name, q in pooled.items():
         print(f'    "{name}": {q},')
@@ -373,7 +453,10 @@ def main() -> int:
     ap.add_argument("--hours", type=float, default=8.0)
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "texsense" / "nights")
     ap.add_argument("--calibrate", action="store_true", help="make the score tables (seed 100)")
-    ap.add_argument("--skip", nargs="*", default=[], choices=("nights", "records", "real", "cost"))
+    ap.add_argument(
+        "--skip", nargs="*", default=["families"],
+        choices=("nights", "records", "real", "cost", "families"),
+    )  # fmt: skip
     args = ap.parse_args()
     if args.calibrate:
         calibrate(args.cache, args.hours, args.laws)
@@ -386,6 +469,8 @@ def main() -> int:
         real_record_table()
     if "cost" not in args.skip:
         cost_table()
+    if "families" not in args.skip:
+        family_table(args.laws, args.seeds, args.hours, args.cache)
     return 0
 
 

@@ -64,3 +64,25 @@ def test_unused_name_counts_up(tmp_path):
     write_text(first, "")
     write_text(tmp_path / "s-2.h5", "")
     assert unused_name(first).name == "s-3.h5"
+
+
+def test_hdf5_letting_go_of_a_stopped_writer_says_nothing(tmp_path, monkeypatch):
+    """A writer stopped mid-way (SIGTERM in `process`) closes its guarded file; HDF5 lets go
+    of its own file object later and flushes through the guard: dropped, not a traceback
+    ('Exception ignored ... I/O operation on closed file' ended a stopped `process`)."""
+    import gc
+    import sys
+
+    import h5py
+
+    from texsense.io._guarded import GuardedFile
+
+    unraisable: list[BaseException | None] = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: unraisable.append(u.exc_value))
+    guard = GuardedFile(tmp_path / "stopped.h5")
+    f = h5py.File(guard, "w")
+    f["x"] = list(range(1000))
+    guard.close()
+    del f
+    gc.collect()
+    assert unraisable == []

@@ -94,6 +94,32 @@ def test_a_slow_second_load_is_not_corrected_away() -> None:
             assert kept > 0.85
 
 
+def test_a_still_person_keeps_their_weight_and_a_second_load_is_kept() -> None:
+    area = LAY.area_cm2
+    a, b = blob(2.5, 2.5), blob(4.5, 4.5)  # the same load (mirrored on the grid)
+    two_hours = [a] * 720  # lying still: the weight is taken as the first still period begins
+    after_turn = [reading(b, 0.02)] * 20  # elements whose creep was never read: 5-6 % heavy
+    heavy = (after_turn[0] @ area) / (b @ area) - 1
+    assert heavy > 0.03
+    for weigh in (False, True):
+        est = estimator(predict=False, weigh=weigh)
+        run(est, two_hours)
+        out = run(est, [0.5 * (a + b), *after_turn], t0=7200.0)
+        err = (out[-1] @ area) / (b @ area) - 1
+        if weigh:  # brought back to the weight, by creep (it stays when the reading changes)
+            assert abs(err) < 0.005 and est.state.weighed == 1
+            assert est.state.status()["weight_n"] == pytest.approx(a @ area, abs=0.05)
+        else:
+            assert err > 0.8 * heavy
+    # a second load put down with the turn, more than drift can make (15 %): kept
+    est = estimator(predict=False)
+    run(est, two_hours)
+    bag = blob(6.0, 1.0, peak=0.8, width=1.0)
+    out = run(est, [0.5 * (a + b)] + [b + bag] * 20, t0=7200.0)
+    np.testing.assert_allclose(out[-1] @ area, (b + bag) @ area, rtol=1e-6)
+    assert est.state.weighed == 0
+
+
 def test_a_person_sliding_slowly_keeps_the_load_where_it_goes() -> None:
     est = estimator(predict=False)
     frames = [blob(2.5 + min(k, 90) * 0.03, 3.5) for k in range(120)]  # 2.7 cells in 15 min

@@ -341,10 +341,16 @@ def in_use_line(status: dict[str, Any]) -> str:
         return "in-use drift correction: no still period seen, nothing corrected"
     z = status["zeroed"]
     zeros = {0: "never", 1: "once", 2: "twice"}.get(z, f"{z} times")
+    kept = status.get("weighed", 0)
+    weight = (
+        f"; weight {status['weight_n']:.0f} N kept {kept} time{'' if kept == 1 else 's'}"
+        if kept and status.get("weight_n") is not None
+        else ""
+    )
     return (
         f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
         f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
-        f"zero taken {zeros}"
+        f"zero taken {zeros}{weight}"
     )
 
 

@@ -27,6 +27,16 @@ eq. 2.1 on its raw capacitance: a true zero load) is the set the spacer kept, wh
 pressure cannot show (on a descending branch of the hysteresis every set reads about zero);
 it becomes the creep of the elements whose creep was never read while loaded.
 
+A still person also keeps their weight: the load on the mat (missing elements filled from
+their measured neighbours) at the start of every still period is compared with the load of the
+first one, and a difference no larger than drift can make since then (``weigh_rate`` per hour,
+at most ``weigh_max``) is taken as creep the reading did not show — the creep of elements
+loaded only after the stillness began, and what crept before the period settled — and shared
+over the loaded elements in proportion to their readings. A larger difference is a load change
+(a second load, a person sitting on the edge) and is left alone; after an empty mat it is
+another occupant, weighed anew. A second load lighter than that window, put down while the
+person moves, is taken for drift (docs/drift.md says where the line is).
+
 Stillness and emptiness are read from the frames: the map's change between frames summed
 over small blocks of elements (so that breathing, a common factor, is not movement and a
 turn, a shift of load, is), relative to the load; a frame is still when it changes by less
@@ -103,6 +113,9 @@ class InUseState:
     read: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (N,) creep was read
     law: tuple[float, ...] | None = None  # creep = a · exposure^b fitted on the read ones
     at_read: np.ndarray = field(default_factory=lambda: np.zeros(0))  # exposure when last set
+    weight: float | None = None  # the still load the mat carries (N), from the first still period
+    weight_t: float | None = None  # when it was taken
+    weighed: int = 0  # still periods whose load was brought back to it
 
     def __post_init__(self) -> None:
         n = self.creep.size
@@ -128,6 +141,8 @@ class InUseState:
             "max_creep_mm": round(float(np.max(np.abs(self.creep), initial=0.0)), 4),
             "read_elements": int(np.count_nonzero(self.read)),
             "creep_law": None if self.law is None else [round(v, 5) for v in self.law],
+            "weight_n": None if self.weight is None else round(float(self.weight), 1),
+            "weighed": self.weighed,
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -145,6 +160,9 @@ class InUseState:
             "read": np.asarray(self.read, bool).tolist(),
             "at_read": np.asarray(self.at_read, float).tolist(),
             "law": None if self.law is None else list(self.law),
+            "weight": self.weight,
+            "weight_t": self.weight_t,
+            "weighed": self.weighed,
         }
 
     @classmethod
@@ -162,7 +180,7 @@ class InUseState:
             )
         if not np.all(np.isfinite(creep)):
             raise ParameterError("in-use drift state: creep must be numbers")
-        opt = {k: d.get(k) for k in ("first_t", "last_t", "zeroed_t")}
+        opt = {k: d.get(k) for k in ("first_t", "last_t", "zeroed_t", "weight", "weight_t")}
         exposure = np.asarray(d.get("exposure", np.zeros(creep.size)), dtype=np.float64)
         read = np.asarray(d.get("read", np.zeros(creep.size, bool)), dtype=bool)
         at_read = np.asarray(d.get("at_read", np.zeros(creep.size)), dtype=np.float64)
@@ -174,6 +192,7 @@ class InUseState:
             float(d.get("still_s", 0.0)),
             zeroed=int(d.get("zeroed", 0)),
             refused=int(d.get("refused", 0)),
+            weighed=int(d.get("weighed", 0)),
             load_correction=float(d.get("load_correction", 0.0)),
             exposure=exposure,
             read=read,
@@ -221,6 +240,13 @@ class InUseDrift:
     rest_input : float, optional
         What ``converter`` gives for a rested, unloaded element (its lowest compression; default
         the loading curve's first input).
+    weigh : bool
+        Keep a still person's weight (module documentation; default on).
+    weigh_rate, weigh_max : float
+        How much the load of a still person may differ from their weight and still be taken
+        for drift: 1 % + ``weigh_rate`` (0.03) per hour since the weight was taken, at most
+        ``weigh_max`` (0.15). Chosen on the textile and Iwan nights of seeds 0 and 1 (0.02 /
+        0.10 and 0.05 / 0.25 were worse there: docs/drift.md).
     """
 
     def __init__(
@@ -240,6 +266,9 @@ class InUseDrift:
         zero: bool = True,
         converter: Any = None,
         rest_input: float | None = None,
+        weigh: bool = True,
+        weigh_rate: float = 0.03,
+        weigh_max: float = 0.15,
     ) -> None:
         u = np.asarray(curve_input, dtype=np.float64)
         p = np.asarray(curve_output, dtype=np.float64)
@@ -263,6 +292,12 @@ class InUseDrift:
         self.loaded_ncm2, self.empty_ncm2 = float(loaded_ncm2), float(empty_ncm2)
         self.max_rate, self.max_creep_mm = float(max_rate) / 3600.0, float(max_creep_mm)
         self.predict, self.zero, self.converter = bool(predict), bool(zero), converter
+        if not (0 <= weigh_rate < 1 and 0 <= weigh_max < 0.5):
+            raise ParameterError("need 0 <= weigh_rate < 1 and 0 <= weigh_max < 0.5")
+        self.weigh, self.weigh_rate, self.weigh_max = bool(weigh), weigh_rate / 3600, weigh_max
+        indptr, indices = layout.neighbours
+        self._nb_owner = np.repeat(np.arange(layout.n_elements), np.diff(indptr))
+        self._nb_index = np.asarray(indices, dtype=np.intp)
         n = layout.n_elements
         self.area = np.asarray(layout.area_cm2, dtype=np.float64)
         self._blocks = motion_blocks(layout, MOTION_BLOCK)
@@ -284,6 +319,7 @@ class InUseDrift:
         self._zeroing = False
         self._gain = np.ones(n)  # c = x * gain: the creep at the last refresh
         self._set: np.ndarray | None = None  # an empty mat's compression, smoothed
+        self._returned = False  # the mat was empty since the last still period began
         return self
 
     def forget(self) -> InUseDrift:
@@ -365,6 +401,7 @@ class InUseDrift:
         smoothed over ``update_s``."""
         self._still_since, self._period, self._prev = None, None, None
         self._empty_since = t if self._empty_since is None else self._empty_since
+        self._returned = True
         if not (self.zero and self.converter is not None and raw is not None):
             return
         if t - self._empty_since < self.settle_s:
@@ -420,6 +457,8 @@ class InUseDrift:
         per = self._period
         if per is None:  # the period's reference: the loaded elements and their values
             if self.predict and self._predict_unread(x0, ok):
+                c = self._refresh(x0)
+            if self.weigh and self._weigh(x0, c, ok, t):
                 c = self._refresh(x0)
             loaded = ok & (c > self.loaded_ncm2)
             self._period = {
@@ -481,6 +520,46 @@ class InUseDrift:
         if before > 0:
             st.load_correction = float(self.area[pos] @ out[pos]) / before - 1.0
         return out
+
+    def total(self, c: np.ndarray, ok: np.ndarray) -> float:
+        """The load on the mat (N): measured elements as read, every other element the mean of
+        its measured neighbours (a frame misses 15-20 % of its elements on the virtual bed)."""
+        v = np.where(ok, c, 0.0)
+        s = np.bincount(self._nb_owner, weights=v[self._nb_index], minlength=v.size)
+        n = np.bincount(self._nb_owner, weights=ok[self._nb_index], minlength=v.size)
+        fill = np.where(n > 0, s / np.maximum(n, 1), 0.0)
+        return float(self.area @ np.where(ok, v, fill))
+
+    def _weigh(self, x0: np.ndarray, c: np.ndarray, ok: np.ndarray, t: float) -> bool:
+        """At the start of a still period: a still person weighs what they weighed in the
+        first still period (the weight). A load off by no more than drift can make since then
+        (``weigh_rate`` per hour, at most ``weigh_max``) is brought back to it by creep shared
+        in proportion to the loaded elements' readings; a larger change is a load change
+        (after an empty mat: another occupant, weighed anew). True when a creep changed."""
+        st = self.state
+        load = self.total(c, ok)
+        if load <= self._floor_n:
+            return False
+        returned, self._returned = self._returned, False
+        if st.weight is None or st.weight_t is None:
+            st.weight, st.weight_t = load, t
+            return False
+        r = load / st.weight - 1.0
+        window = min(self.weigh_max, LOAD_SLACK / 3 + self.weigh_rate * (t - st.weight_t))
+        if abs(r) > window:
+            if returned:
+                st.weight, st.weight_t = load, t
+            return False
+        if abs(r) < 0.005:
+            return False
+        sel = ok & (c > self.loaded_ncm2)
+        u_now = np.interp(c[sel], self._p, self._u)
+        u_new = np.interp(c[sel] / (1.0 + r), self._p, self._u)
+        st.creep[sel] = np.clip(
+            st.creep[sel] + u_now - u_new, -self.max_creep_mm, self.max_creep_mm
+        )
+        st.weighed += 1
+        return True
 
     def _predict_unread(self, x0: np.ndarray, ok: np.ndarray) -> bool:
         """At the start of a still period: the creep of elements never read (module

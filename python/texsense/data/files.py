@@ -71,6 +71,7 @@ __all__ = [
     "real_path",
     "regular_files",
     "save_figure",
+    "signals_held",
     "unused_name",
     "write_bytes",
     "write_text",
@@ -156,7 +157,7 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
     if target.exists() and not target.is_file():
         raise WriteError(target, "is not a regular file (a device, a FIFO, ...): not replaced")
     mode = _mode_of(target)
-    with _signals_held() as release:  # a stop signal between the file and the try: no leftover
+    with signals_held() as release:  # a stop signal between the file and the try: no leftover
         try:
             fd, tmp_name = tempfile.mkstemp(
                 prefix=_TMP_PREFIX + target.name[:80] + ".",
@@ -508,7 +509,7 @@ def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[Callable[[], None]]:
+def signals_held() -> Iterator[Callable[[], None]]:
     """Hold SIGINT and SIGTERM (in the main thread) until the block calls ``release()`` or
     ends; a signal that came meanwhile takes effect at the release."""
     held = {signal.SIGINT, signal.SIGTERM}

@@ -4,7 +4,9 @@ HDF5 cannot recover from a write that the operating system refused (a full disk,
 limit): its file stays half-closed and the process crashed when it closed the file at exit
 (``texsense convert`` under ``ulimit -f`` ended in a segmentation fault). Written through
 :class:`GuardedFile`, HDF5 never sees the failure: the first ``OSError`` is kept, later writes
-are dropped, and the writer raises the kept error once HDF5 has closed the file.
+are dropped, and the writer raises the kept error once HDF5 has closed the file. After the
+guard is closed (a writer stopped mid-way, whose HDF5 file object is let go later), what HDF5
+still writes is dropped: the file is being discarded.
 """
 
 from __future__ import annotations
@@ -46,16 +48,18 @@ class GuardedFile(io.RawIOBase):
         return True
 
     def seek(self, pos: int, whence: int = 0) -> int:
-        return self._f.seek(pos, whence)
+        return pos if self._f.closed else self._f.seek(pos, whence)
 
     def tell(self) -> int:
-        return self._f.tell()
+        return 0 if self._f.closed else self._f.tell()
 
     def readinto(self, b: Any) -> int:
-        return self._f.readinto(b) or 0
+        return 0 if self._f.closed else self._f.readinto(b) or 0
 
     def write(self, b: Any) -> int:
         view = memoryview(b).cast("B")
+        if self._f.closed:  # HDF5 letting go of a file whose writer was stopped: discarded
+            return len(view)
         if self.error is None:
             try:
                 done = 0
@@ -68,6 +72,8 @@ class GuardedFile(io.RawIOBase):
         return len(view)
 
     def truncate(self, size: int | None = None) -> int:
+        if self._f.closed:
+            return 0 if size is None else size
         if self.error is None:
             try:
                 return self._f.truncate(size)

@@ -49,7 +49,7 @@ import numpy.typing as npt
 from texsense._core import __version__
 from texsense._progress import logger
 from texsense.data import budget, units
-from texsense.data.files import atomic_path
+from texsense.data.files import atomic_path, signals_held
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
@@ -391,12 +391,13 @@ class RecordingWriter:
         """Mark the file complete, flush and close it (the file is released also when a
         write failed; then the kept ``OSError`` is raised)."""
         f = getattr(self, "_file", None)
-        if f is not None and f.id.valid:
-            if self._guard.error is None:
-                f.attrs["open"] = 0
-            f.close()
-        if not self._guard.closed:
-            self._guard.close()
+        with signals_held():  # a stop signal waits until the file is closed, not half-closed
+            if f is not None and f.id.valid:
+                if self._guard.error is None:
+                    f.attrs["open"] = 0
+                f.close()
+            if not self._guard.closed:
+                self._guard.close()
         self._check()
 
     def __enter__(self) -> RecordingWriter:

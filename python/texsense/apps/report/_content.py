@@ -149,6 +149,8 @@ def _certainty_rows(review: Review) -> list[list[str]]:
                 f"{format_duration(iu.get('since_t') or 0)} into the data; zero taken "
                 f"{iu.get('zeroed', 0)} times"
             )
+            if iu.get("weight_n") is not None:
+                text += f"; weight {iu['weight_n']:.0f} N, kept {iu.get('weighed', 0)} times"
         elif iu.get("state") == "off":
             text = f"off: {iu.get('why', '')}"
         else:

@@ -117,7 +117,8 @@ function inUseText(s) {  // the in-use drift correction's state (issue 37)
   if (s.state === "off") return `drift corrected in use: off (${s.why})`;
   if (s.state !== "correcting") return "drift corrected in use: waiting for a still moment";
   const pct = fmt(100 * s.load_correction, 1);
-  return `drift corrected in use: load ${s.load_correction >= 0 ? "+" : ""}${pct} %, since ${duration(s.since_t)} into the data, from ${duration(s.still_s)} still; zero taken ${s.zeroed} ×`;
+  return `drift corrected in use: load ${s.load_correction >= 0 ? "+" : ""}${pct} %, since ${duration(s.since_t)} into the data, from ${duration(s.still_s)} still; zero taken ${s.zeroed} ×`
+    + (s.weight_n == null ? "" : `; weight ${fmt(s.weight_n, 0)} N, kept ${s.weighed} ×`);
 }
 
 async function api(path, method = "GET", body = undefined) {
