@@ -5,8 +5,9 @@ on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_si
 Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|cpu] [--quick]
 
 - Preisach batch: the Rust ``PreisachBank`` behind ``HysteresisModel.predict`` on a
-  4000 x 4096 random walk (one thread, frame order; one thread, element blocks; all threads)
-  and ``predict`` itself;
+  4000 x 4096 random walk (one thread, frame order; one thread, element blocks; all threads),
+  writing into an array allocated beforehand as the copy does, and ``predict`` itself (which
+  allocates its output);
 - the whole pipeline (detect -> convert -> Preisach + drift -> eq. 6.14 repair) at 96, 1024 and
   4096 elements with 2 % failed readings;
 - ``Pipeline.step`` latency on a real stream (every frame different), median and p99;
@@ -111,6 +112,9 @@ def cases(
     model = cal["hysteresis"].model_
     bank = model.bank(walk.shape[1])  # the Rust PreisachBank behind predict
     ok = np.ones(walk.shape, bool)
+    # the kernel rows write into one array allocated beforehand, as the copy does (a new
+    # array of 131 MB costs its page faults on first write; `predict` allocates)
+    into = np.empty_like(walk)
     out: list[tuple[str, Callable[[], object], int]] = []
     for label, schedule in (
         ("one thread, frame after frame", "frames"),
@@ -120,7 +124,7 @@ def cases(
         out.append(
             (
                 f"Preisach kernel, {label}",
-                lambda s=schedule: (bank.reset(), bank.run(walk, ok, schedule=s)),
+                lambda s=schedule: (bank.reset(), bank.run(walk, ok, schedule=s, out=into)),
                 walk.size,
             )
         )

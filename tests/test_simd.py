@@ -68,12 +68,33 @@ def test_preisach_bank_same_bits_on_both_paths(cal):
     def run() -> tuple[np.ndarray, ...]:
         bank = model.bank(walk.shape[1])
         out = bank.run(walk, ok, schedule="blocks")
-        return out, bank.clamped(), bank.depth(), bank.outputs()
+        bank.reset()
+        given = np.full(walk.shape, 7.0)  # the same batch into an array given as `out`
+        assert bank.run(walk, ok, schedule="frames", out=given) is given
+        return out, given, bank.clamped(), bank.depth(), bank.outputs()
 
     scalar, simd = both_paths(run)
     assert np.isnan(scalar[0]).any() and np.isfinite(scalar[0]).mean() > 0.5
+    np.testing.assert_array_equal(scalar[0].view(np.uint64), scalar[1].view(np.uint64))
     for a, b in zip(scalar, simd, strict=True):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+def test_preisach_out_must_be_a_separate_float64_array_of_the_batch(cal):
+    bank = cal["hysteresis"].model_.bank(6)
+    walk = np.full((4, 6), 0.5)
+    ok = np.ones(walk.shape, bool)
+    frozen = np.zeros((4, 6))
+    frozen.flags.writeable = False
+    for bad, why in (
+        (frozen, "cannot write into"),
+        (np.empty((4, 5)), r"shape \[4, 5\]"),
+        (np.empty((4, 12))[:, ::2], "C-contiguous"),
+        (np.empty((4, 6), np.float32), "float64"),
+        (walk, "cannot write into"),
+    ):
+        with pytest.raises((ValueError, TypeError, RuntimeError), match=why):
+            bank.run(walk, ok, out=bad)
 
 
 def test_pipeline_same_bits_on_both_paths_in_batches_and_steps(cal):

@@ -245,7 +245,12 @@ impl FailureDetector {
                 for (li, el) in block.iter_mut().enumerate() {
                     let i = start + li;
                     let nbs = this.neighbours.of(i);
-                    let nb_move = if nbs.len() <= few.len() {
+                    let (c, d) = (readings[row + i], delta[row + i]);
+                    // the neighbours' movement counts only for a reading that holds still
+                    // (`code` reads it then alone)
+                    let nb_move = if !kernel::holds_still(p, c, d) {
+                        0.0
+                    } else if nbs.len() <= few.len() {
                         kernel::neighbour_move(nbs, delta, row, &mut few)
                     } else {
                         wide.resize(nbs.len(), 0.0);
@@ -256,7 +261,6 @@ impl FailureDetector {
                         baseline: this.baseline.as_ref().map(|b| b[i]),
                         max: this.max.as_ref().map(|m| m[i]),
                     };
-                    let (c, d) = (readings[row + i], delta[row + i]);
                     let has_nbs = !nbs.is_empty();
                     match valid {
                         Validity::Given(v) => {

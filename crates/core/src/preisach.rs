@@ -43,28 +43,91 @@ mod avx2;
 /// capacity, and back in place once it is shallow again.
 pub const INLINE_EXTREMA: usize = 12;
 
-/// The state of one element: the kernel's head (depth, last input and output), its
-/// extremum stack (input and output at each extremum) and its counters.
+/// Element-samples per tile of frames in a batch of the [`Schedule::Blocks`] and
+/// [`Schedule::Parallel`] schedules (64 frames of 4096 elements).
+const TILE_SAMPLES: usize = 1 << 18;
+
+/// Elements per group of heads ([`Heads`]): the lanes of an AVX2 register of f64.
+pub(crate) const LANES: usize = 4;
+
+/// The heads of four neighbouring elements, field after field (structure of arrays): the
+/// kernel's head (depth, last input and output), copies of the stack's top extremum (input
+/// and output) and of the input of the extremum below it, and the clamping counter. The
+/// copies make the common step (no loop wiped out) a step of plain vector loads and stores
+/// on the SIMD path; every step, on either path, keeps them equal to the stack
+/// ([`Heads::set`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C, align(32))]
+pub(crate) struct Heads {
+    /// Extrema on the stack (>= 1).
+    len: [i64; LANES],
+    last_u: [f64; LANES],
+    last_h: [f64; LANES],
+    /// `stack[len - 1]`: the top extremum's input and output.
+    top_u: [f64; LANES],
+    top_h: [f64; LANES],
+    /// `stack[max(len, 2) - 2]`'s input: the extremum below the top (the lower saturation
+    /// at depth 1).
+    below_u: [f64; LANES],
+    clamped: [u64; LANES],
+}
+
+impl Heads {
+    /// Four elements at lower saturation.
+    fn new(u_min: f64) -> Self {
+        Self {
+            len: [1; LANES],
+            last_u: [u_min; LANES],
+            last_h: [0.0; LANES],
+            top_u: [u_min; LANES],
+            top_h: [0.0; LANES],
+            below_u: [u_min; LANES],
+            clamped: [0; LANES],
+        }
+    }
+
+    /// Lane `l`'s kernel head.
+    #[inline(always)]
+    fn head(&self, l: usize) -> Head<f64> {
+        Head {
+            len: self.len[l] as u32,
+            last_u: self.last_u[l],
+            last_h: self.last_h[l],
+        }
+    }
+
+    /// Lane `l` takes the kernel head `h` over the stack `s` (its copies of the top and
+    /// the extremum below from the stack).
+    #[inline(always)]
+    fn set(&mut self, l: usize, h: &Head<f64>, s: &[[f64; 2]]) {
+        let len = h.len as usize;
+        self.len[l] = len as i64;
+        self.last_u[l] = h.last_u;
+        self.last_h[l] = h.last_h;
+        [self.top_u[l], self.top_h[l]] = s[len - 1];
+        self.below_u[l] = s[len.max(2) - 2][0];
+    }
+}
+
+/// The stack and the rare counter of one element (its head is in the group's [`Heads`]).
 #[derive(Debug, Clone)]
 struct Element {
-    head: Head<f64>,
-    clamped: u64,
     forgotten: u64,
     inline: [[f64; 2]; INLINE_EXTREMA + 1],
     spill: Option<Box<[[f64; 2]]>>,
 }
 
 impl Element {
-    fn new(u_min: f64) -> Self {
+    /// At lower saturation, with its head.
+    fn new(u_min: f64) -> (Self, Head<f64>) {
         let mut el = Self {
-            head: Head::new(u_min),
-            clamped: 0,
             forgotten: 0,
             inline: [[0.0; 2]; INLINE_EXTREMA + 1],
             spill: None,
         };
-        kernel::start(&mut el.head, &mut el.inline, u_min);
-        el
+        let mut head = Head::new(u_min);
+        kernel::start(&mut head, &mut el.inline, u_min);
+        (el, head)
     }
 
     #[inline]
@@ -75,53 +138,65 @@ impl Element {
         }
     }
 
-    /// Give the stack room for `room` extrema on the heap (plus the spare slot).
+    #[inline]
+    fn stack_mut(&mut self) -> &mut [[f64; 2]] {
+        match &mut self.spill {
+            Some(s) => s,
+            None => &mut self.inline,
+        }
+    }
+
+    /// Extrema the stack has room for now (in place or on the heap, at most the capacity).
+    #[inline]
+    fn room(&self, capacity: usize) -> usize {
+        (self.stack().len() - 1).min(capacity)
+    }
+
+    /// Give the stack of `len` extrema room for `room` on the heap (plus the spare slot).
     #[cold]
-    fn grow_to(&mut self, room: usize) {
-        let len = self.head.len as usize;
+    fn grow_to(&mut self, len: usize, room: usize) {
         let mut s = vec![[0.0; 2]; room + 1].into_boxed_slice();
         s[..len].copy_from_slice(&self.stack()[..len]);
         self.spill = Some(s);
     }
 
-    /// Back in place (the stack is shallow again).
+    /// Back in place (the stack of `len` extrema is shallow again).
     #[cold]
-    fn unspill(&mut self) {
+    fn unspill(&mut self, len: usize) {
         if let Some(s) = self.spill.take() {
-            let len = self.head.len as usize;
             self.inline[..len].copy_from_slice(&s[..len]);
         }
     }
 
-    /// One valid input (eq. 4.16-4.22): the kernel's step (`prepare`, then `finish`) on
-    /// this element's stack, which grows on the heap up to the capacity.
+    /// One valid input (eq. 4.16-4.22) of the element in lane `l` of `heads`: the kernel's
+    /// step (`prepare`, then `finish`) on this element's stack, which grows on the heap up
+    /// to the capacity.
     #[inline]
-    fn step(&mut self, e: &EverettView<'_, f64>, capacity: usize, u_in: f64) -> f64 {
-        let (prepared, flags) = kernel::prepare(&self.head, e, u_in);
-        self.clamped += u64::from(flags & CLAMPED != 0);
+    fn step(
+        &mut self,
+        heads: &mut Heads,
+        l: usize,
+        e: &EverettView<'_, f64>,
+        capacity: usize,
+        u_in: f64,
+    ) -> f64 {
+        let mut head = heads.head(l);
+        let (prepared, flags) = kernel::prepare(&head, e, u_in);
+        heads.clamped[l] += u64::from(flags & CLAMPED != 0);
         let (u, rising, turned) = match prepared {
             Prepared::Same(h) => return h,
             Prepared::Moves { u, rising, turned } => (u, rising, turned),
         };
-        if self.head.len as usize == (self.stack().len() - 1).min(capacity) {
+        if head.len as usize == self.room(capacity) {
             // rare; `turned` is tested inside, out of line, so that the compiler cannot
             // test it first (it is as unpredictable as a coin on a real input)
-            self.make_room(capacity, turned);
+            self.make_room(&mut head, capacity, turned);
         }
-        let Element {
-            head,
-            inline,
-            spill,
-            ..
-        } = self;
-        let s: &mut [[f64; 2]] = match spill {
-            Some(b) => b,
-            None => inline,
-        };
-        let h = kernel::finish(head, s, e, u, rising, turned);
-        if head.len as usize <= INLINE_EXTREMA / 2 && spill.is_some() {
-            self.unspill();
+        let h = kernel::finish(&mut head, self.stack_mut(), e, u, rising, turned);
+        if head.len as usize <= INLINE_EXTREMA / 2 && self.spill.is_some() {
+            self.unspill(head.len as usize);
         }
+        heads.set(l, &head, self.stack());
         h
     }
 
@@ -129,37 +204,26 @@ impl Element {
     /// the capacity, else forget the innermost loop (the kernel's `forget`).
     #[cold]
     #[inline(never)]
-    fn make_room(&mut self, capacity: usize, turned: bool) {
+    fn make_room(&mut self, head: &mut Head<f64>, capacity: usize, turned: bool) {
         if !turned {
             return;
         }
         let room = self.stack().len() - 1;
         if room < capacity {
-            self.grow_to((2 * room).min(capacity));
+            self.grow_to(head.len as usize, (2 * room).min(capacity));
             return;
         }
-        let Element {
-            head,
-            inline,
-            spill,
-            forgotten,
-            ..
-        } = self;
-        let s: &mut [[f64; 2]] = match spill {
-            Some(b) => b,
-            None => inline,
-        };
-        kernel::forget(head, s);
-        *forgotten += 1;
+        kernel::forget(head, self.stack_mut());
+        self.forgotten += 1;
     }
 
     /// The element's state in a snapshot: head, counters, the extrema on the stack.
-    fn save(&self, w: &mut Writer) {
-        let len = self.head.len as usize;
-        w.u32(self.head.len);
-        w.f64(self.head.last_u);
-        w.f64(self.head.last_h);
-        w.u64(self.clamped);
+    fn save(&self, head: &Head<f64>, clamped: u64, w: &mut Writer) {
+        let len = head.len as usize;
+        w.u32(head.len);
+        w.f64(head.last_u);
+        w.f64(head.last_h);
+        w.u64(clamped);
         w.u64(self.forgotten);
         for &[u, h] in &self.stack()[..len] {
             w.f64(u);
@@ -167,31 +231,32 @@ impl Element {
         }
     }
 
-    /// An element from a snapshot ([`Element::save`]) of a bank with `capacity`.
-    fn load(r: &mut Reader<'_>, u_min: f64, capacity: usize) -> Result<Self, CoreError> {
-        let mut el = Self::new(u_min);
+    /// An element, its head and its clamping counter from a snapshot ([`Element::save`])
+    /// of a bank with `capacity`.
+    fn load(
+        r: &mut Reader<'_>,
+        u_min: f64,
+        capacity: usize,
+    ) -> Result<(Self, Head<f64>, u64), CoreError> {
+        let (mut el, _) = Self::new(u_min);
         let len = r.u32()? as usize;
         if len == 0 || len > capacity {
             return Err(r.error("a Preisach stack is deeper than the capacity"));
         }
-        el.head = Head {
+        let head = Head {
             len: len as u32,
             last_u: r.f64()?,
             last_h: r.f64()?,
         };
-        el.clamped = r.u64()?;
+        let clamped = r.u64()?;
         el.forgotten = r.u64()?;
         if len > INLINE_EXTREMA {
-            el.grow_to(len.next_power_of_two().min(capacity));
+            el.grow_to(0, len.next_power_of_two().min(capacity));
         }
-        let s: &mut [[f64; 2]] = match &mut el.spill {
-            Some(b) => b,
-            None => &mut el.inline,
-        };
-        for slot in &mut s[..len] {
+        for slot in &mut el.stack_mut()[..len] {
             *slot = [r.f64()?, r.f64()?];
         }
-        Ok(el)
+        Ok((el, head, clamped))
     }
 }
 
@@ -215,14 +280,19 @@ pub struct PreisachBank {
     everett: Arc<Everett>,
     capacity: usize,
     elements: Vec<Element>,
+    /// The heads of elements `4 g .. 4 g + 4` in `heads[g]` (the last group's lanes beyond
+    /// the bank stay at lower saturation).
+    heads: Vec<Heads>,
     output: Output<f64>,
 }
 
-/// The elements `start .. start + len` of a bank, for a parallel batch.
+/// The elements `start .. start + len` of a bank, for a parallel batch (`start` a multiple
+/// of [`LANES`]: their heads are `heads`).
 pub struct PreisachBlock<'a> {
     everett: EverettView<'a, f64>,
     capacity: usize,
     elements: &'a mut [Element],
+    heads: &'a mut [Heads],
     output: Output<f64>,
 }
 
@@ -232,8 +302,9 @@ impl PreisachBlock<'_> {
     #[inline(always)]
     pub fn step(&mut self, i: usize, u: f64, valid: bool) -> f64 {
         if valid && u.is_finite() {
-            self.output
-                .of(self.elements[i].step(&self.everett, self.capacity, u))
+            let heads = &mut self.heads[i / LANES];
+            let h = self.elements[i].step(heads, i % LANES, &self.everett, self.capacity, u);
+            self.output.of(h)
         } else {
             f64::NAN
         }
@@ -260,6 +331,7 @@ impl PreisachBlock<'_> {
                     self.capacity,
                     self.output,
                     self.elements,
+                    self.heads,
                     u,
                     ok,
                     out,
@@ -304,8 +376,10 @@ impl PreisachBank {
                 why: format!("must be >= 4, got {capacity}"),
             });
         }
+        let (element, _) = Element::new(everett.u_min);
         Ok(Self {
-            elements: vec![Element::new(everett.u_min); n],
+            elements: vec![element; n],
+            heads: vec![Heads::new(everett.u_min); n.div_ceil(LANES)],
             capacity,
             everett: Arc::new(everett),
             output: Output::identity(),
@@ -341,8 +415,9 @@ impl PreisachBank {
 
     /// Back to lower saturation; counters cleared.
     pub fn reset(&mut self) {
-        let fresh = Element::new(self.everett.u_min);
+        let (fresh, _) = Element::new(self.everett.u_min);
         self.elements.iter_mut().for_each(|e| *e = fresh.clone());
+        self.heads.fill(Heads::new(self.everett.u_min));
     }
 
     /// Turning points an element keeps at most.
@@ -359,8 +434,9 @@ impl PreisachBank {
     pub(crate) fn save(&self, w: &mut Writer) {
         w.u32(self.len() as u32);
         w.u32(self.capacity as u32);
-        for e in &self.elements {
-            e.save(w);
+        for (i, e) in self.elements.iter().enumerate() {
+            let heads = &self.heads[i / LANES];
+            e.save(&heads.head(i % LANES), heads.clamped[i % LANES], w);
         }
     }
 
@@ -369,16 +445,30 @@ impl PreisachBank {
         r.expect("Preisach elements", self.len())?;
         r.expect("Preisach capacity", self.capacity)?;
         let u_min = self.everett.u_min;
-        let elements = (0..self.len())
-            .map(|_| Element::load(r, u_min, self.capacity))
-            .collect::<Result<Vec<_>, _>>()?;
+        let mut heads = vec![Heads::new(u_min); self.heads.len()];
+        let mut elements = Vec::with_capacity(self.len());
+        for i in 0..self.len() {
+            let (el, head, clamped) = Element::load(r, u_min, self.capacity)?;
+            let g = &mut heads[i / LANES];
+            g.set(i % LANES, &head, el.stack());
+            g.clamped[i % LANES] = clamped;
+            elements.push(el);
+        }
         self.elements = elements;
+        self.heads = heads;
         Ok(())
+    }
+
+    /// The head of element `i`.
+    fn head(&self, i: usize) -> Head<f64> {
+        self.heads[i / LANES].head(i % LANES)
     }
 
     /// Samples clamped into the input range, per element.
     pub fn clamped(&self) -> Vec<u64> {
-        self.elements.iter().map(|e| e.clamped).collect()
+        (0..self.len())
+            .map(|i| self.heads[i / LANES].clamped[i % LANES])
+            .collect()
     }
 
     /// Minor loops forgotten because a stack was full, per element.
@@ -388,18 +478,18 @@ impl PreisachBank {
 
     /// Current depth of every element's stack.
     pub fn depth(&self) -> Vec<usize> {
-        self.elements.iter().map(|e| e.head.len as usize).collect()
+        (0..self.len()).map(|i| self.head(i).len as usize).collect()
     }
 
     /// Last output of every element.
     pub fn last_outputs(&self) -> Vec<f64> {
-        self.elements
-            .iter()
-            .map(|e| self.output.of(e.head.last_h))
+        (0..self.len())
+            .map(|i| self.output.of(self.head(i).last_h))
             .collect()
     }
 
-    /// Bytes of state: the elements themselves and the stacks moved to the heap.
+    /// Bytes of state: the elements themselves (stacks in place and heads) and the stacks
+    /// moved to the heap.
     pub fn state_bytes(&self) -> usize {
         let heap: usize = self
             .elements
@@ -407,7 +497,9 @@ impl PreisachBank {
             .filter_map(|e| e.spill.as_ref())
             .map(|s| std::mem::size_of_val(&s[..]))
             .sum();
-        self.elements.len() * std::mem::size_of::<Element>() + heap
+        self.elements.len() * std::mem::size_of::<Element>()
+            + self.heads.len() * std::mem::size_of::<Heads>()
+            + heap
     }
 
     /// Set element `i` to input `u` with the output `target` (§6.4.4: a model started from a
@@ -427,19 +519,27 @@ impl PreisachBank {
         let e = self.everett.view();
         let el = &mut self.elements[i];
         el.spill = None;
-        kernel::set_sum(&mut el.head, &mut el.inline, &e, u, target)
+        let heads = &mut self.heads[i / LANES];
+        let mut head = heads.head(i % LANES);
+        let h = kernel::set_sum(&mut head, &mut el.inline, &e, u, target);
+        heads.set(i % LANES, &head, &el.inline);
+        h
     }
 
-    /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
+    /// The bank split into blocks of [`block_size`] elements (the last may be shorter; a
+    /// block's first element is a multiple of [`LANES`]).
     pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
         let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
         let size = block_size(self.len());
+        debug_assert!(size.is_multiple_of(LANES));
         self.elements
             .chunks_mut(size)
-            .map(|elements| PreisachBlock {
+            .zip(self.heads.chunks_mut(size / LANES))
+            .map(|(elements, heads)| PreisachBlock {
                 everett,
                 capacity,
                 elements,
+                heads,
                 output,
             })
             .collect()
@@ -490,6 +590,7 @@ impl PreisachBank {
                 everett: self.everett.view(),
                 capacity: self.capacity,
                 elements: &mut self.elements,
+                heads: &mut self.heads,
                 output: self.output,
             };
             for ((f, v), o) in inputs
@@ -502,13 +603,27 @@ impl PreisachBank {
             return Ok(());
         }
         let par = schedule == Schedule::Parallel && parallel(t, n);
-        for_blocks(out, n, self.blocks(), par, |mut block, o| {
-            let (start, width) = (o.start(), o.width());
-            for r in 0..t {
-                let row = r * n + start..r * n + start + width;
-                block.row(&inputs[row.clone()], &valid[row], o.row(r));
-            }
-        });
+        // tiles of frames: each block runs through a tile, then the next tile (a block that
+        // ran through all frames at once read every row from another page of memory, and
+        // ran out of the address translation cache on long batches)
+        let tile = (TILE_SAMPLES / n).max(1);
+        for a in (0..t).step_by(tile) {
+            let b = (a + tile).min(t);
+            let (inputs, valid) = (&inputs[a * n..b * n], &valid[a * n..b * n]);
+            for_blocks(
+                &mut out[a * n..b * n],
+                n,
+                self.blocks(),
+                par,
+                |mut block, o| {
+                    let (start, width) = (o.start(), o.width());
+                    for r in 0..b - a {
+                        let row = r * n + start..r * n + start + width;
+                        block.row(&inputs[row.clone()], &valid[row], o.row(r));
+                    }
+                },
+            );
+        }
         Ok(())
     }
 }

@@ -127,6 +127,14 @@ pub struct Limits<T> {
     pub max: Option<T>,
 }
 
+/// Whether reading `c` with its change `delta` (from [`change`]) holds still: the only
+/// case in which [`code`] reads the neighbours' movement (a caller may skip computing it
+/// otherwise).
+#[inline]
+pub fn holds_still<T: Real>(p: &Params<T>, c: T, delta: T) -> bool {
+    !delta.is_nan() && delta <= p.stuck_pf && c > p.stuck_floor_pf
+}
+
 /// Pass 2: the code of reading `c` (`valid`: not flagged invalid before) with its change
 /// `delta` (from [`change`]) and its neighbours' median movement (`nb_move`; `has_nbs`:
 /// whether it has neighbours).
@@ -144,7 +152,7 @@ pub fn code<T: Real>(
 ) -> u8 {
     let is_first = delta.is_nan();
     let d = moved(delta);
-    let still = d <= p.stuck_pf && !is_first && c > p.stuck_floor_pf;
+    let still = holds_still(p, c, delta);
     if still {
         el.still = el.still.saturating_add(1);
         el.moved += nb_move;

@@ -1,7 +1,8 @@
 //! `PreisachBank` (thesis eq. 4.15-4.22) and the Everett terms of an input history.
 
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use texsense_core::preisach::Schedule;
@@ -68,14 +69,16 @@ element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
 
     /// Batch: inputs (T, N), valid (T, N) -> outputs (T, N), NaN where skipped.
     /// `schedule`: "parallel" (default), "blocks" or "frames" (one thread, frame after
-    /// frame): identical outputs, for the benchmark's step-by-step table.
-    #[pyo3(signature = (inputs, valid, schedule="parallel"))]
+    /// frame): identical outputs, for the benchmark's step-by-step table. `out`: a
+    /// C-contiguous float64 array (T, N) to write into (and return) instead of a new one.
+    #[pyo3(signature = (inputs, valid, schedule="parallel", out=None))]
     fn run<'py>(
         &mut self,
         py: Python<'py>,
         inputs: PyReadonlyArray2<'py, f64>,
         valid: PyReadonlyArray2<'py, bool>,
         schedule: &str,
+        out: Option<Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let schedule = match schedule {
             "parallel" => Schedule::Parallel,
@@ -90,9 +93,44 @@ element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
         };
         let b = Batch::new("inputs", self.inner.len(), None, &inputs, &valid)?;
         let inner = &mut self.inner;
-        run_detached(py, b.t, b.n, |out| {
-            inner.run_scheduled(b.values, b.valid, out, schedule)
-        })
+        let Some(out) = out else {
+            return run_detached(py, b.t, b.n, |out| {
+                inner.run_scheduled(b.values, b.valid, out, schedule)
+            });
+        };
+        let wrong = |got: String| {
+            to_py(CoreError::Shape {
+                what: "out",
+                expected: format!(
+                    "a C-contiguous float64 array ({}, {}), not an input",
+                    b.t, b.n
+                ),
+                got,
+            })
+        };
+        let out = out.cast_into::<PyArray2<f64>>().map_err(|e| {
+            let obj = e.into_inner();
+            wrong(match obj.getattr("dtype") {
+                Ok(d) => format!("dtype {d}"),
+                Err(_) => format!("{}", obj.get_type()),
+            })
+        })?;
+        if out.shape() != [b.t, b.n] || !out.is_c_contiguous() {
+            return Err(wrong(format!(
+                "shape {:?}, strides {:?}",
+                out.shape(),
+                out.strides()
+            )));
+        }
+        {
+            let mut w = out
+                .try_readwrite()
+                .map_err(|e| wrong(format!("an array it cannot write into ({e})")))?;
+            let o = w.as_slice_mut()?;
+            py.detach(|| inner.run_scheduled(b.values, b.valid, o, schedule))
+                .map_err(to_py)?;
+        }
+        Ok(out)
     }
 
     /// Bytes of state of the whole bank (elements and stacks moved to the heap).

@@ -377,3 +377,44 @@ fn this_machine_runs_the_avx2_path_when_it_has_avx2() {
         assert_eq!(crate::simd::detected(), crate::simd::Path::Avx2);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    #[test]
+    fn both_paths_equal_the_kernel_of_one_element(
+        seed in any::<u64>(),
+        n in 1usize..40,
+        t in 1usize..90,
+        capacity in prop::sample::select(vec![4usize, 7, 16, 64]),
+    ) {
+        // the bank (heads in groups of four, stacks in place or on the heap) against the
+        // microcontroller's kernel on one plain stack per element
+        let _guard = crate::simd::testing::lock();
+        let mut rng = Rng(seed);
+        let (lo, hi) = (-0.5 + rng.unit(), 1.0 + rng.unit());
+        let k = 2 + (rng.next() % 30) as usize;
+        let e = random_everett(&mut rng, k, lo, hi);
+        let (u, ok) = hostile_history(&mut rng, t, n, lo, hi);
+        let view = e.view();
+        let mut want = vec![0.0; t * n];
+        for i in 0..n {
+            let mut head = Head::new(lo);
+            let mut stack = vec![[0.0; 2]; capacity + 1];
+            kernel::start(&mut head, &mut stack, lo);
+            for r in 0..t {
+                let x = u[r * n + i];
+                want[r * n + i] = if ok[r * n + i] && x.is_finite() {
+                    kernel::step(&mut head, &mut stack, capacity, &view, x).0
+                } else {
+                    f64::NAN
+                };
+            }
+        }
+        let bank = PreisachBank::new(e.clone(), n, capacity).unwrap();
+        let want: Vec<u64> = want.iter().map(|v| v.to_bits()).collect();
+        for simd in [false, true] {
+            let (bits, _, _, _) = simd_run(simd, &bank, &u, &ok, Schedule::FrameOrder);
+            prop_assert!(bits == want, "simd {}: outputs differ from the kernel", simd);
+        }
+    }
+}
