@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
-from texsense.data.files import cache_folder, check_writable, made_once
+from texsense.data.files import cache_folder, check_writable, kept_or_made
 from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
 from texsense.monitor import ExposureTracker, Monitor, sources
@@ -396,16 +396,9 @@ def _cached_model(
     virtual mat's calibration the model is trained on, so a texsense whose compensation
     changed trains a new one instead of reading an old one. Processes started together train
     it once: the others wait for it (:func:`~texsense.data.files.made_once`)."""
-    cache = cache_folder()
-    path = cache / f"{name}.joblib"
-    model = _kept_model(path)
-    if model is not None:
-        return model
-    cache.mkdir(parents=True, exist_ok=True)
-    with made_once(path.with_name(path.name + ".lock")):  # another process may be training it
-        model = _kept_model(path)
-        if model is not None:
-            return model
+    path = cache_folder() / f"{name}.joblib"
+
+    def training() -> PostureModel:
         print(
             f"texsense monitor: training {what} on simulated people (once, about {seconds} s; "
             f"cached in {path})",
@@ -413,7 +406,9 @@ def _cached_model(
         )
         model = train()
         model.save(path)
-    return model
+        return model
+
+    return kept_or_made(path, _kept_model, training)
 
 
 def _kept_model(path: Path) -> PostureModel | None:

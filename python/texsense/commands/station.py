@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import fcntl
 import logging
 import os
 import signal
@@ -26,7 +25,7 @@ from texsense.commands.monitor import (
 )
 from texsense.compensation.stages import load_chain
 from texsense.data import budget
-from texsense.data.files import check_writable, open_regular
+from texsense.data.files import check_writable, kept_or_made, open_regular
 from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
@@ -322,16 +321,17 @@ def virtual_calibration(folder: Path | None, kind: str, make: Any) -> Any:
     if folder is None:
         return make()
     path = folder / f"virtual-{kind}.json"
+
+    def calibrating() -> Any:
+        print(f"texsense station: calibrating the virtual {kind} into {path}", flush=True)
+        make().save(path)
+        return load_chain(path)  # what every other member reads
+
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        with (folder / ".lock").open("a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
-            if not path.exists():
-                print(f"texsense station: calibrating the virtual {kind} into {path}", flush=True)
-                make().save(path)
+        return kept_or_made(path, lambda p: load_chain(p) if p.exists() else None, calibrating)
     except OSError as e:
         raise ParameterError(f"--virtual-calibrations {folder}: {e.strerror or e}") from None
-    return load_chain(path)
 
 
 def check_group(args: argparse.Namespace, local: dict[str, Any]) -> None:

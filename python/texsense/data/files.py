@@ -63,6 +63,7 @@ __all__ = [
     "check_not_input",
     "check_regular",
     "check_writable",
+    "kept_or_made",
     "made_once",
     "make_folder",
     "open_regular",
@@ -109,6 +110,20 @@ def made_once(path: str | Path) -> Iterator[bool]:
         yield True
     finally:
         os.close(fd)  # lets go of the lock
+
+
+def kept_or_made(path: Path, read: Callable[[Path], Any], make: Callable[[], Any]) -> Any:
+    """What ``read(path)`` finds kept at ``path`` (None: nothing it can use), else what
+    ``make()`` gives (``make`` also keeps it at ``path``), made by one process at a time: a
+    process that needs it meanwhile waits for that one (:func:`made_once`) and reads it."""
+    kept = read(path)
+    if kept is not None:
+        return kept
+    with contextlib.suppress(OSError):  # a folder that cannot be made: make() says so
+        path.parent.mkdir(parents=True, exist_ok=True)
+    with made_once(path.with_name(path.name + ".lock")):
+        kept = read(path)  # made meanwhile by another process
+        return kept if kept is not None else make()
 
 
 def _fsync_file(path: Path) -> None:

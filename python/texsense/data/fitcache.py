@@ -15,7 +15,6 @@ is made again, and a cache that cannot be written is skipped, each said in the l
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import functools
 import hashlib
@@ -29,7 +28,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from texsense.data.files import cache_folder, made_once, write_text
+from texsense.data.files import cache_folder, kept_or_made, write_text
 
 __all__ = ["code_digest", "remembered"]
 
@@ -80,23 +79,19 @@ def remembered(
         _memory.move_to_end(key)
         return build(copy.deepcopy(_memory[key]))
     path = cache_folder() / f"fit-{key}.json"
-    kept = _read(path, key, build)
-    if kept is not None:
-        return kept[0]
-    with contextlib.suppress(OSError):  # a cache that cannot be made is skipped below
-        path.parent.mkdir(parents=True, exist_ok=True)
-    with made_once(path.with_name(path.name + ".lock")):  # one process makes it, the others wait
-        kept = _read(path, key, build)  # made meanwhile by another process
-        if kept is not None:
-            return kept[0]
+
+    def fit() -> tuple[T]:
         content = make()
         built = build(copy.deepcopy(content))
         try:
             write_text(path, json.dumps(content))
         except OSError as e:
             log.warning("not kept (%s): %s", path, e)
-    _keep(key, content)
-    return built
+        _keep(key, content)
+        return (built,)
+
+    # one process makes it, the others wait and read it
+    return kept_or_made(path, lambda p: _read(p, key, build), fit)[0]
 
 
 def _read(path: Path, key: str, build: Callable[[Any], T]) -> tuple[T] | None:
