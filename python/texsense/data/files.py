@@ -113,9 +113,8 @@ def made_once(path: str | Path) -> Iterator[bool]:
 
 
 def kept_or_made(path: Path, read: Callable[[Path], Any], make: Callable[[], Any]) -> Any:
-    """What ``read(path)`` finds kept at ``path`` (None: nothing it can use), else what
-    ``make()`` gives (``make`` also keeps it at ``path``), made by one process at a time: a
-    process that needs it meanwhile waits for that one (:func:`made_once`) and reads it."""
+    """What ``read(path)`` finds kept at ``path`` (None: nothing usable), else ``make()`` (which
+    keeps it there), made by one process at a time: the others wait (:func:`made_once`)."""
     kept = read(path)
     if kept is not None:
         return kept
