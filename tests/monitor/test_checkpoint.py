@@ -5,11 +5,13 @@ member goes on from. One virtual seat, fed the same frames as `texsense station`
 from __future__ import annotations
 
 import asyncio
+import json
 
 import numpy as np
 import pytest
 
 from texsense.calibration.workflows import seat_calibration
+from texsense.exceptions import ParameterError
 from texsense.monitor.store import EventStore
 from texsense.monitor.virtual import VirtualSeatSource
 from texsense.station import checkpoint
@@ -64,14 +66,23 @@ def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat, tmp_path):
     assert c.state == "live" and b.state == "live" and b.last_seen is not None
 
 
-def test_the_tracker_s_state_later_is_its_state(seat, tmp_path):
+def test_the_tracker_s_packed_state_is_its_state_exactly(seat, tmp_path):
     config, payloads = seat
     a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)
     for p, now in payloads[:30]:
         a.handle(p, now)
-    now, later = a.monitor.tracker.state(), a.monitor.tracker.state_later()
+    tracker = a.monitor.tracker
+    rows, packed = tracker.state(), tracker.state_packed()
+    exposure = tracker.exposure_s.copy()
     a.handle(*payloads[30])  # copies were taken: what the tracker does next is not in it
-    made = later()
-    assert [r[0] for r in made["exposed"]] == [r[0] for r in now["exposed"]] != []
-    np.testing.assert_allclose(made.pop("exposed"), now.pop("exposed"), atol=1e-3)
-    assert made == now
+    assert set(packed["exposed"]) == {"index", "exposure_s", "relief_s"}
+    b = MatEntry(config, EventStore(":memory:"), tmp_path / "b", 1.0)
+    b.monitor.tracker.restore(json.loads(json.dumps(packed)))
+    assert np.count_nonzero(exposure) > 0
+    np.testing.assert_array_equal(b.monitor.tracker.exposure_s, exposure)  # exact
+    assert b.monitor.tracker.state() == rows  # and the rows' form says the same
+    c = MatEntry(config, EventStore(":memory:"), tmp_path / "c", 1.0)
+    c.monitor.tracker.restore(rows)  # a checkpoint of version 1 (rows) is read too
+    np.testing.assert_allclose(c.monitor.tracker.exposure_s, exposure, atol=1e-3)
+    with pytest.raises(ParameterError, match="exposure state"):
+        c.monitor.tracker.restore({**packed, "exposed": {**packed["exposed"], "index": "AA"}})

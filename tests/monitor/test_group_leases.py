@@ -13,7 +13,8 @@ import pytest
 from postgres_server import PostgresServer
 from texsense.apps.alerts import Event
 from texsense.station import lease
-from texsense.station.lease import Journal, Membership, plan, preferred
+from texsense.station.journal import Journal
+from texsense.station.lease import Membership, plan, preferred
 
 MATS = [f"bed{k:02d}" for k in range(12)]
 
@@ -212,3 +213,42 @@ def test_the_journal_waits_while_the_server_is_away():
             j._halt = True
             j.cond.notify_all()
         j.join(5)
+
+
+def test_a_member_checkpoints_what_changed_and_less_often_with_many_mats(db, monkeypatch):
+    """Checkpoints cost what changed: a mat without a frame since its last checkpoint is not
+    written again, and the interval grows with the mats held (group.CHECKPOINTS_PER_S)."""
+    from texsense.data.layout import Layout
+    from texsense.station import group
+    from texsense.station.broker import BrokerURL
+    from texsense.station.ward import MatConfig
+
+    mats = [MatConfig(f"m{k}", Layout.grid(2, 2), quantity="pressure") for k in range(4)]
+    st = group.GroupStation(BrokerURL("127.0.0.1", 9), mats, group="g", member="a", db=db,
+                            page="http://a/", record_dir=".", checkpoint_s=2.0)  # fmt: skip
+    written: list[tuple[str, bool]] = []
+    monkeypatch.setattr(st.journal, "checkpoint",
+                        lambda mat, *a, **k: written.append((mat, a[4] is not None)))  # fmt: skip
+    st.grant([lease.Grant(m.id, 1, 0) for m in mats])  # no loop: held at once
+    t0 = time.monotonic() + 1.0  # (the first full checkpoints come at most 20 a second)
+    assert st.checkpoints(t0) == 4 + 4  # the first checkpoint of each, and its first full one
+    assert sum(full for _, full in written) == 4
+    frame = b'{"seq":%d,"t":%.1f,"values":[1,2,0,0],"unit":"N/cm2"}'
+    written.clear()
+    st.mats["m0"].handle(frame % (1, 1.0), 1.0)
+    assert st.checkpoints(t0 + 2.1) == 1, written
+    assert written == [("m0", False)]  # m1-m3: no frame since their last one
+    assert st.skipped == 3
+    monkeypatch.setattr(group, "CHECKPOINTS_PER_S", 1.0)  # 4 mats held: every 4 s
+    assert st.interval() == 4.0
+    written.clear()
+    for k in range(2, 14):  # every mat reads a frame every second
+        for m in mats:
+            st.mats[m.id].handle(frame % (k, float(k)), float(k))
+        st.checkpoints(t0 + 2.1 + k - 1)
+    per_mat = {m.id: sum(w == m.id for w, _ in written) for m in mats}
+    # 12 s: at 4.1 s (the old 2 s), then every 4 s (at 2 s: 6 each); one more for a mat
+    # whose alert event (loaded) came between two
+    assert all(3 <= n <= 4 for n in per_mat.values()), written
+    assert sum(per_mat.values()) <= 14
+    st.store.close()

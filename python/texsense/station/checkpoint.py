@@ -12,7 +12,8 @@ how to save it from a :class:`~texsense.station.ward.MatEntry` (bytes, or None w
 has no such state) and how to restore it, and how often it is written:
 
 - ``monitor`` (every checkpoint, a few kB): the exposure of every exposed element and the
-  open alert (:meth:`~texsense.apps.alerts.ExposureTracker.state`), the bed's side, time on
+  open alert (:meth:`~texsense.apps.alerts.ExposureTracker.state_packed`: arrays' bytes,
+  exact; version 1 of the part held rows, still read), the bed's side, time on
   it and turning schedule (:meth:`~texsense.apps.bed.TurningSchedule.state`), the posture
   vote, the mat's clock (:meth:`~texsense.monitor.clock.FrameClock.state`) and its counters;
 - ``pipeline`` (every ``sensor_every``-th checkpoint: 100-300 kB for 1024 elements): the
@@ -74,7 +75,7 @@ MAGIC = b"TXSCKPT\x00"
 #: The container's version (the parts carry their own).
 VERSION = 1
 #: The monitor part's own version.
-MONITOR_VERSION = 1
+MONITOR_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -197,16 +198,16 @@ def restore(entry: MatEntry, blobs: list[bytes]) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------ the monitor part
 def _save_monitor(entry: MatEntry) -> Callable[[], dict[str, Any]]:
-    """The monitor's state, taken now (copies) and made JSON-ready when called: in the
-    journal's thread, not on the event loop (the exposure rows of a 1024-element mat)."""
+    """The monitor's state, taken now (copies; the exposure as arrays' bytes,
+    :meth:`~texsense.apps.alerts.ExposureTracker.state_packed`), its JSON text made when
+    called: in the journal's thread, not on the event loop."""
     m = entry.monitor
-    tracker = m.tracker.state_later()
     state = {
         "version": MONITOR_VERSION,
         "frames": m.frames,
         "t_first": m._t_first,
         "clock": m.clock.state(),
-        "tracker": None,
+        "tracker": m.tracker.state_packed(),
         "bed": None if m.bed is None else m.bed.schedule.state(),
         "vote": m._vote.state(),
         "mat": {
@@ -221,16 +222,12 @@ def _save_monitor(entry: MatEntry) -> Callable[[], dict[str, Any]]:
         },
     }
 
-    def made() -> dict[str, Any]:
-        state["tracker"] = tracker()
-        return state
-
-    return made
+    return lambda: state
 
 
 def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     state = json.loads(data)
-    if state.get("version") != MONITOR_VERSION:
+    if state.get("version") not in (1, MONITOR_VERSION):  # 1: the exposure as rows
         raise ParameterError(f"monitor state of version {state.get('version')}")
     m = entry.monitor
     clock = FrameClock().restore(state["clock"])

@@ -36,7 +36,8 @@ from texsense.monitor.store import PostgresEventStore
 from texsense.station import checkpoint
 from texsense.station.broker import BrokerURL, mat_topic
 from texsense.station.group_view import Elsewhere, GroupMatEntry
-from texsense.station.lease import BEAT_S, LEASE_S, Grant, Journal, Membership, View
+from texsense.station.journal import Journal
+from texsense.station.lease import BEAT_S, LEASE_S, Grant, Membership, View
 from texsense.station.ward import MIN_STALE_S, MatConfig, MatEntry, Station, mat_id_of
 
 __all__ = ["GroupMatEntry", "GroupStation", "GroupStore", "ward_digest"]
@@ -49,6 +50,11 @@ TILE_S = 1.0
 TILE_BATCH_BYTES = 200_000
 #: The sensor's state (the ``rarely`` parts) goes with every this many checkpoints.
 SENSOR_EVERY = 15
+#: A member writes at most about this many checkpoints a second: with more mats than
+#: ``checkpoint_s`` x this, each mat's interval grows with the mats held (1,000 mats: 10 s).
+#: The exposure timers run on the frames' clock, so a takeover from an older checkpoint
+#: still continues them (the first frame after it carries the time between).
+CHECKPOINTS_PER_S = 100.0
 #: First full checkpoints (the sensor's state) of mats just taken, at most this many a second
 #: (a member that takes 300 mats does not copy 300 pipelines in one turn of its loop).
 FULL_PER_S = 20.0
@@ -157,6 +163,9 @@ class GroupStation(Station):
         self._session_mat: dict[int, str] = {}
         self._due: collections.deque[tuple[float, str]] = collections.deque()
         self._count: dict[str, int] = {}  # checkpoints of each held mat so far
+        self._revision: dict[str, int] = {}  # each held mat's revision at its last checkpoint
+        self._scheduled: set[str] = set()  # mats in the queue of due checkpoints
+        self.skipped = 0  # checkpoints not written: the mat had not changed since its last
         self._soon_mats: set[str] = set()
         self._tiles: dict[str, tuple[dict[str, Any] | None, str, float]] = {}
         self._sent: dict[str, int] = {}
@@ -256,6 +265,7 @@ class GroupStation(Station):
             self.held[g.mat] = g.epoch
             self._session_mat[g.session] = g.mat
             self._count[g.mat] = 1  # the sensor's state: by the queue of first full ones
+            self._revision.pop(g.mat, None)  # its first checkpoint is written whatever it holds
             self._full.append(g.mat)
             self._soon_mats.add(g.mat)
             topics.append(mat_topic(self.topic, g.mat))
@@ -312,6 +322,7 @@ class GroupStation(Station):
     def _write(self, mat: str, epoch: int, rarely: bool = False, release: bool = False) -> None:
         """Checkpoint a mat: its state taken here (a copy), packed in the journal's thread."""
         entry = self.mats[mat]
+        self._revision[mat] = entry.revision
         often = checkpoint.take(entry, often=True)
         sensor = checkpoint.take(entry, often=False) if rarely else None
         self.journal.checkpoint(mat, epoch, entry.monitor.session_id, entry.monitor.clock.last_t,
@@ -322,16 +333,18 @@ class GroupStation(Station):
         if mat is not None:
             self._soon_mats.add(mat)
 
+    def interval(self) -> float:
+        """Seconds between two checkpoints of a held mat: ``checkpoint_s``, or longer when
+        this member holds more than ``checkpoint_s`` x :data:`CHECKPOINTS_PER_S` mats."""
+        return max(self.checkpoint_s, len(self.held) / CHECKPOINTS_PER_S)
+
     def checkpoints(self, now: float) -> int:
-        """Checkpoint the held mats that are due (every ``checkpoint_s``, the sensor's state
-        every :data:`SENSOR_EVERY`-th time), those with a new alert event, and the first full
-        checkpoints of mats just taken (at most :data:`FULL_PER_S` a second); returns how
-        many."""
+        """Checkpoint the held mats that are due (every :meth:`interval`, the sensor's state
+        every :data:`SENSOR_EVERY`-th time; a mat that has not changed since its last one is
+        not written again), those with a new alert event, and the first full checkpoints of
+        mats just taken (at most :data:`FULL_PER_S` a second); returns how many."""
         soon, self._soon_mats = self._soon_mats, set()
-        for m in soon:
-            if m in self.held:
-                self._checkpoint(m, now)
-        n = len(soon)
+        n = sum(self._checkpoint(m, now) for m in soon if m in self.held)
         self._allowance = min(self._allowance + (now - self._full_t) * FULL_PER_S, FULL_PER_S)
         self._full_t = now
         while self._full and self._allowance >= 1:
@@ -342,16 +355,27 @@ class GroupStation(Station):
                 n += 1
         while self._due and self._due[0][0] <= now:
             _, m = self._due.popleft()
-            if m in self.held and m not in soon:
-                self._checkpoint(m, now)
-                n += 1
+            self._scheduled.discard(m)
+            if m in soon and m in self.held:  # written just now: the next one in an interval
+                self._schedule(m, now)
+            elif m in self.held:
+                n += self._checkpoint(m, now)
         return n
 
-    def _checkpoint(self, mat: str, now: float) -> None:
+    def _schedule(self, mat: str, now: float) -> None:
+        if mat not in self._scheduled:  # one place in the queue per mat
+            self._scheduled.add(mat)
+            self._due.append((now + self.interval(), mat))
+
+    def _checkpoint(self, mat: str, now: float) -> bool:
+        self._schedule(mat, now)
+        if self._revision.get(mat) == self.mats[mat].revision:
+            self.skipped += 1  # nothing changed (no frame, no event): the last one holds
+            return False
         k = self._count.get(mat, 0)
         self._count[mat] = k + 1
         self._write(mat, self.held[mat], rarely=k % SENSOR_EVERY == 0)
-        self._due.append((now + self.checkpoint_s, mat))
+        return True
 
     # ---------------------------------------------------------------- MQTT
     @property
