@@ -122,3 +122,23 @@ def test_region_stats_and_raw_data():
     assert fs.load_N is None and fs.peak[0] == 3.0
     with pytest.raises(ParameterError, match="no regions"):
         stats.region_stats(Recording([[1.0]], [0.0], Layout.grid(1, 1)))
+
+
+@pytest.mark.parametrize("layout", [Layout.grid(6, 5, pitch_cm=1.5),
+                                    Layout.points(np.random.default_rng(1).uniform(0, 9, (12, 2)))],
+                         ids=["grid", "points"])  # fmt: skip
+def test_one_frame_stats_are_frame_stats_of_that_frame(layout):
+    rng = np.random.default_rng(0)
+    for k in range(20):
+        v = rng.gamma(1.0, 1.0, layout.n_elements) * (k % 4 != 0)  # an empty frame sometimes
+        v[rng.random(layout.n_elements) < 0.2] = 0.0
+        if k % 3 == 0:
+            v[rng.integers(layout.n_elements)] = np.nan  # read as 0, as the station does
+        one = stats.one_frame_stats(v, layout, threshold=0.05)
+        full = stats.frame_stats(
+            Recording(np.nan_to_num(v)[None, :], [0.0], layout, "pressure", "N/cm2"), 0.05
+        )
+        assert one["load_N"] == full.load_N[0]
+        assert one["contact_area_cm2"] == full.contact_area_cm2[0]
+        assert one["peak"] == full.peak[0] and one["ppi"] == full.ppi[0]
+        np.testing.assert_array_equal(one["cof_cm"], full.cof_cm[0])

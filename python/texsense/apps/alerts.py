@@ -250,8 +250,8 @@ class ExposureTracker:
         return out
 
     def _values(self, pressure: np.ndarray) -> np.ndarray:
-        p = np.nan_to_num(pressure, nan=0.0)
-        if self._groups is None:
+        p = np.where(np.isnan(pressure), 0.0, pressure)  # (what it is compared with:
+        if self._groups is None:  # an infinity needs no nan_to_num's largest float)
             return p
         return np.array([p[g].mean() for g in self._groups])
 

@@ -51,6 +51,7 @@ __all__ = [
     "coefficient_of_variation",
     "contact_area",
     "frame_stats",
+    "one_frame_stats",
     "peak_pressure",
     "peak_pressure_index",
     "raw_rise",
@@ -212,6 +213,39 @@ def frame_stats(rec: Recording, threshold: float = 0.0, ppi_window: int = 3) -> 
         cof_cm=centre_of_force(rec),
         cov=coefficient_of_variation(rec, threshold),
     )
+
+
+def one_frame_stats(
+    pressure_ncm2: npt.ArrayLike, layout: Layout, threshold: float = 0.0, ppi_window: int = 3
+) -> dict[str, Any]:
+    """:func:`frame_stats` of one frame of pressure in N/cm² (NaN read as 0) without a
+    :class:`~texsense.data.recording.Recording`: ``load_N``, ``contact_area_cm2``, ``peak``,
+    ``ppi`` as floats and ``cof_cm`` (x, y; NaN when unloaded), the same numbers by the same
+    operations (the values stored as float32 first, as a recording stores them). A station
+    computes them for every frame of hundreds of mats; the recording's per-array steps (and
+    the coefficient of variation, which it does not show) were most of its cost. A points
+    layout takes the recording's path for the PPI."""
+    v = np.nan_to_num(np.asarray(pressure_ncm2, dtype=np.float64))
+    v = v.astype(np.float32).astype(np.float64)
+    area = layout.area_cm2
+    w = v * area
+    with np.errstate(invalid="ignore"):
+        loaded = v > threshold
+    if layout.shape is not None:
+        ppi = float(_window_means_grid(layout.to_grid(v[None, :]), ppi_window)[0])
+    else:
+        rec = Recording(v[None, :], [0.0], layout, "pressure", "N/cm2")
+        ppi = float(peak_pressure_index(rec, ppi_window)[0])
+    cw = np.clip(w, 0.0, None)
+    total = cw.sum()
+    cof = (cw @ layout.xy_cm) / total if total > 0 else np.full(2, np.nan)
+    return {
+        "load_N": float(w.sum()) if v.size else float("nan"),
+        "contact_area_cm2": float((loaded * area).sum()),
+        "peak": float(v.max()) if v.size else float("nan"),
+        "ppi": ppi,
+        "cof_cm": cof,
+    }
 
 
 def region_stats(

@@ -39,6 +39,7 @@ True
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -241,6 +242,15 @@ def multiplier(level: float, context: str = "mat", band: int | None = None) -> f
     return float(np.interp(100.0 * level, np.arange(q.size, dtype=np.float64), q))
 
 
+@functools.lru_cache(maxsize=64)
+def _per_band(level: float, context: str, tables: Any) -> np.ndarray:
+    """The multiplier of every band at ``level`` (made once per ``tables``, the context's
+    scores, which are part of the key: a station bounds every frame)."""
+    out = np.array([multiplier(level, context, b) for b in range(len(BAND_EDGES))])
+    out.setflags(write=False)
+    return out
+
+
 def conformal_quantiles(scores: npt.ArrayLike, levels: range) -> tuple[float, ...]:
     """The split-conformal quantile of ``scores`` at every level (%): the ⌈(n + 1) p⌉-th
     smallest score (Lei et al. 2018), so that a new exchangeable score lies at or below it
@@ -283,8 +293,8 @@ def bounds(
     if range_max is not None:
         sigma = sigma + np.clip(v - range_max, 0.0, None)
     if multiplier_value is None:  # the band's multiplier (Mondrian)
-        per_band = np.array([multiplier(level, context, b) for b in range(len(BAND_EDGES))])
-        m = per_band[band_of(v)]
+        tables = (SCORES.get(context), BAND_SCORES.get(context))
+        m = _per_band(float(level), context, tables)[band_of(v)]
     else:
         m = np.asarray(float(multiplier_value))
     hw = m * sigma

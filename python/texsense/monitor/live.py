@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import time
 from collections import deque
 from collections.abc import Callable
@@ -36,7 +37,6 @@ from texsense.apps.stats import raw_rise
 from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
 from texsense.data import units
 from texsense.data.protocol import Frame
-from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.record import Recorder, unused_recording_name
@@ -68,6 +68,11 @@ def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
     out = np.round(a, nd).astype(object)
     out[~np.isfinite(a)] = None
     return out.tolist()
+
+
+def _finite(x: float) -> float:
+    """``np.nan_to_num`` of one float (NaN -> 0, an infinity -> the largest float), quickly."""
+    return x if math.isfinite(x) else float(np.nan_to_num(x))
 
 
 class Monitor:
@@ -153,6 +158,7 @@ class Monitor:
         self.frames = 0
         self.started = time.time()
         self._latest: dict[str, Any] | None = None
+        self._maps: tuple[Any, ...] | None = None  # the latest snapshot's maps, not yet lists
         self._latest_text: str | None = "null"
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_first: float | None = None  # the time of the first frame
@@ -417,10 +423,10 @@ class Monitor:
             "seq": frame.seq,
             "frames": self.frames,
             "t": frame.t,
-            "raw": _rounded(raw),
+            "raw": None,  # the maps: made from _maps when somebody asks (no viewer: no cost)
             "raw_unit": frame.unit,
             "calibrated": not self.raw_only,
-            "pressure": _rounded(pressure),
+            "pressure": None,
             "failed": np.flatnonzero(codes != 0).tolist(),
             "repaired": np.flatnonzero((codes != 0) & np.isfinite(pressure)).tolist(),
             "stats": frame_stats,  # pressure statistics; null for a mat with no calibration
@@ -428,7 +434,7 @@ class Monitor:
             "cof_trace": self._cof_trace,  # grid cells (row, col)
             "posture": posture,
             "bed": bed,
-            "exposure_s": _rounded(self.tracker.exposure_map(), 1),
+            "exposure_s": None,
             "alert": alert.to_dict() if alert is not None else None,
             "recording": self.recorder is not None,
             "source": self.source.info(),
@@ -437,6 +443,7 @@ class Monitor:
             **self._certainty(bounds),
         }
         self._latest = snap
+        self._maps = (raw, self.last_pressure, self.tracker.exposure_map(), bounds)
         self._latest_text = None  # serialised when somebody asks (no viewer: no cost)
         if self._subscribers:
             self._publish(self.latest_text)
@@ -502,7 +509,7 @@ class Monitor:
             out["in_use"] = self.pipeline.in_use_status()
         if bounds is not None and self.pipeline is not None:
             out["interval"] = self.pipeline.interval
-            out["lower"], out["upper"] = _rounded(bounds[0]), _rounded(bounds[1])
+            out["lower"], out["upper"] = None, None  # made with the maps (latest)
             out["possible"] = np.flatnonzero(self.tracker.possible).tolist()
             out["count_possible"] = self.tracker.count_possible
         return out
@@ -535,18 +542,17 @@ class Monitor:
         if self.raw_only:  # no pressure: nothing to say (and no centre of force)
             none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
             return none, 0.0
-        rec = Recording(np.nan_to_num(pressure)[None, :], [t], self.layout, "pressure", "N/cm2")
-        fs = stats.frame_stats(rec, threshold=0.05)
+        fs = stats.one_frame_stats(pressure, self.layout, threshold=0.05)
         cof = self._cof_cell(pressure)
-        load = float(np.nan_to_num(fs.load_N[0])) if fs.load_N is not None else 0.0
+        load = _finite(fs["load_N"])
         if np.all(np.isfinite(cof)):
             self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
-        cof_cm = fs.cof_cm[0]
+        cof_cm = fs["cof_cm"]
         return {
             "load_N": round(load, 2),
-            "contact_area_cm2": round(float(np.nan_to_num(fs.contact_area_cm2[0])), 1),
-            "peak_ncm2": round(float(np.nan_to_num(fs.peak[0])), 3),
-            "ppi_ncm2": round(float(np.nan_to_num(fs.ppi[0])), 3),
+            "contact_area_cm2": round(_finite(fs["contact_area_cm2"]), 1),
+            "peak_ncm2": round(_finite(fs["peak"]), 3),
+            "ppi_ncm2": round(_finite(fs["ppi"]), 3),
             "cof_cm": [round(float(v), 2) for v in cof_cm] if np.all(np.isfinite(cof_cm)) else None,
         }, load
 
@@ -579,14 +585,23 @@ class Monitor:
 
     @property
     def latest(self) -> dict[str, Any] | None:
-        """The latest snapshot."""
-        return self._latest
+        """The latest snapshot (its maps as lists made now, once per frame: hundreds of mats
+        of a station are not viewed most of the time)."""
+        snap, maps = self._latest, self._maps
+        if snap is not None and maps is not None:
+            raw, pressure, exposure, bounds = maps
+            snap["raw"], snap["pressure"] = _rounded(raw), _rounded(pressure)
+            snap["exposure_s"] = _rounded(exposure, 1)
+            if "lower" in snap and bounds is not None:
+                snap["lower"], snap["upper"] = _rounded(bounds[0]), _rounded(bounds[1])
+            self._maps = None
+        return snap
 
     @property
     def latest_text(self) -> str:
         """The latest snapshot as JSON text (serialised once per frame, when first asked)."""
         if self._latest_text is None:
-            self._latest_text = json.dumps(self._latest, separators=(",", ":"))
+            self._latest_text = json.dumps(self.latest, separators=(",", ":"))
         return self._latest_text
 
     async def run(self, max_frames: int | None = None) -> None:
