@@ -7,10 +7,13 @@ import pytest
 
 from texsense import Layout, Recording
 from texsense.data.protocol import (
+    CountError,
+    PayloadSizeError,
     ProtocolError,
     format_serial_line,
     parse_mqtt_payload,
     parse_serial_line,
+    peek_mqtt_payload,
 )
 from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor import IIOSource, MQTTSource, ReplaySource, SerialSource, VirtualSeatSource
@@ -69,6 +72,25 @@ def test_mqtt_payload_and_errors():
     ]:
         with pytest.raises(ProtocolError, match=msg):
             parse_mqtt_payload(payload, 2)
+
+
+def test_a_payload_peeked_gives_what_its_parse_gives_or_says_to_parse_it():
+    """A skipped frame's time without its values (peek_mqtt_payload): the parse's seq and t,
+    its count checked; anything not of the plain form is left to the full parse (None)."""
+    plain = json.dumps({"seq": 1, "t": 1e9, "values": [1e-3, 2, -4]}).encode()
+    for payload in [json.dumps({"seq": 7, "t": 2.5, "values": [1, None, 3.0]}),
+                    '{"values" : [ 1,2 ,3 ], "unit": "pF", "t": 4, "seq": 0}', plain]:  # fmt: skip
+        f = parse_mqtt_payload(payload, 3)
+        assert peek_mqtt_payload(payload, 3) == (f.seq, f.t)
+    with pytest.raises(CountError):
+        peek_mqtt_payload(json.dumps({"seq": 1, "t": 1, "values": [1, 2]}), 3)
+    with pytest.raises(PayloadSizeError):
+        peek_mqtt_payload(b" " * 100, 3, max_bytes=50)
+    for payload in ['{"unit": "values", "seq": 1, "t": 1, "values": [1, 2, 3]}',
+                    '{"seq": 1, "t": 1, "values": [[1], 2, 3]}', '{"seq": 1, "t": 1}',
+                    '{"seq": true, "t": 1, "values": [1, 2, 3]}', '{"seq": 1, "values": [1,2,3]',
+                    '{"seq": 1, "t": "1", "values": [1, 2, 3]}']:  # fmt: skip
+        assert peek_mqtt_payload(payload, 3) is None, payload
 
 
 def random_line(rng):

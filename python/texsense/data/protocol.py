@@ -75,6 +75,7 @@ __all__ = [
     "parse_mqtt_payload",
     "parse_serial_line",
     "payload_limit",
+    "peek_mqtt_payload",
 ]
 
 MAX_LINE = 65536  # characters; longer lines are rejected before parsing
@@ -219,6 +220,43 @@ def _finite(v: float) -> bool:
         return math.isfinite(v) and math.isfinite(float(v))
     except OverflowError:  # an integer beyond any float
         return False
+
+
+def peek_mqtt_payload(
+    payload: bytes | str, n_elements: int, max_bytes: int | None = None
+) -> tuple[int, float] | None:
+    """A payload's ``seq`` and ``t`` without parsing its values, for a frame that will not be
+    processed (a station that is behind skips it, taking only its time): the ``values`` list
+    is counted (raising :class:`CountError` as :func:`parse_mqtt_payload` does) and left out
+    of the JSON that is parsed. None when the payload is not of that plain form (numbers or
+    nulls in one list): then parse it whole. The size is checked first."""
+    limit = payload_limit(n_elements) if max_bytes is None else max_bytes
+    if len(payload) > limit:
+        raise PayloadSizeError(len(payload), limit)
+    b = payload.encode() if isinstance(payload, str) else payload
+    i = b.find(b'"values"')
+    j = b.find(b"[", i)
+    k = b.find(b"]", j)
+    if i < 0 or j < 0 or k < 0 or b[i + 8 : j].strip() != b":":
+        return None
+    inner = b[j + 1 : k]
+    if any(c in inner for c in (b"[", b"{", b'"')):
+        return None
+    try:
+        d = json.loads(b[:i] + b'"values":0' + b[k + 1 :])
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if not isinstance(d, dict) or d.get("values") != 0:  # not the payload's own key
+        return None
+    seq, t = d.get("seq"), d.get("t")
+    if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
+        return None  # (parsed whole: the error named there)
+    if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
+        return None
+    count = inner.count(b",") + 1 if inner.strip() else 0
+    if count != n_elements:
+        raise CountError(f"'values' must be a list of {n_elements} numbers, got {count}", count)
+    return seq, float(t)
 
 
 def parse_mqtt_payload(

@@ -38,7 +38,7 @@ from texsense.station.broker import BrokerURL, mat_topic
 from texsense.station.group_view import Elsewhere, GroupMatEntry
 from texsense.station.journal import Journal
 from texsense.station.lease import BEAT_S, LEASE_S, Grant, Membership, View
-from texsense.station.ward import MIN_STALE_S, MatConfig, MatEntry, Station, mat_id_of
+from texsense.station.ward import CHECK_S, MIN_STALE_S, MatConfig, MatEntry, Station, mat_id_of
 
 __all__ = ["GroupMatEntry", "GroupStation", "GroupStore", "ward_digest"]
 
@@ -170,6 +170,7 @@ class GroupStation(Station):
         self._tiles: dict[str, tuple[dict[str, Any] | None, str, float]] = {}
         self._sent: dict[str, int] = {}
         self._next_tiles = 0.0
+        self._next_check = 0.0
         self._unwatched: dict[str, float] = {}
         self._main: asyncio.AbstractEventLoop | None = None
         self._restoring: dict[str, int] = {}  # mat -> epoch: restored in the worker thread
@@ -488,8 +489,9 @@ class GroupStation(Station):
             await asyncio.sleep(every_s)
 
     def _beat(self, now: float) -> None:
-        for m in list(self.held):
-            self.mats[m].check(now)
+        if now >= self._next_check:  # silence judged at what the inbox has read (behind)
+            self._next_check = now + CHECK_S
+            self.check_all(now, list(self.held))
         self.checkpoints(time.monotonic())
         if time.monotonic() >= self._next_tiles:
             self._next_tiles = time.monotonic() + TILE_S

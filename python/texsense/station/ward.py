@@ -58,6 +58,7 @@ from texsense.data.protocol import (
     ProtocolError,
     parse_mqtt_payload,
     payload_limit,
+    peek_mqtt_payload,
 )
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import Quiet
@@ -77,6 +78,9 @@ log = logging.getLogger("texsense.station")
 #: at 10x) missed for 0.2 s is a hiccup of the station's reading thread under load, not a
 #: silent mat (its tiles flickered "stale" while every mat sent, issue 33).
 MIN_STALE_S = 1.0
+#: Every mat's silence is judged this often, s (a station of 1,000 mats judged 50 times a
+#: second spent a tenth of its event loop on it).
+CHECK_S = 0.1
 #: Urgency order of a mat's state on the ward page (highest first).
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
 #: Messages in a row with another element count, at least, before a mat is refused.
@@ -184,8 +188,14 @@ class MatEntry:
         if self.refused is not None:
             self.ignored += 1
             return False
+        n = self.config.layout.n_elements
         try:
-            frame = parse_mqtt_payload(payload, self.config.layout.n_elements, self.max_bytes)
+            head = peek_mqtt_payload(payload, n, self.max_bytes) if skim else None
+            if head is not None:  # its time only: the values are not read
+                seq, t = head
+                frame = Frame(seq, np.array([t]), np.empty(n), "")
+            else:
+                frame = parse_mqtt_payload(payload, n, self.max_bytes)
         except PayloadSizeError as e:
             self._malformed("size", str(e))
             return False
@@ -612,18 +622,22 @@ class Station:
         finally:
             source.close()
 
-    async def watch(self, every_s: float = 0.02) -> None:
+    async def watch(self, every_s: float = CHECK_S) -> None:
         """Mark mats stale as they stop sending (runs until cancelled)."""
         k = 0
         while True:
             now = time.time()
-            read = now if self._inbox is None else self._inbox.read_until(now)
-            for e in self.mats.values():
-                e.check(now, read)
+            self.check_all(now)
             k += 1
-            if k % 50 == 0:
+            if k % max(1, round(1.0 / every_s)) == 0:
                 self.forget_unknown(now)
             await asyncio.sleep(every_s)
+
+    def check_all(self, now: float, mats: Any = None) -> None:
+        """Judge the silence of ``mats`` (default all) at what the inbox has read by now."""
+        read = now if self._inbox is None else self._inbox.read_until(now)
+        for e in self.mats.values() if mats is None else (self.mats[m] for m in mats):
+            e.check(now, read)
 
     async def acknowledge(self, mat_id: str, alert_id: int) -> dict[str, Any]:
         """Acknowledge a mat's alert (the event, JSON-ready)."""
