@@ -253,7 +253,8 @@ class GroupStation(Station):
     def _hold(self, grants: list[Grant], details: dict[str, dict[str, Any]]) -> None:
         """(The loop.) The restored mats are held: their frames subscribed, a first small
         checkpoint at once (the new epoch and session in the database), the first full one
-        (the sensor's state) spread over the next beats (:data:`FULL_PER_S`)."""
+        of a mat taken over (the sensor's state) spread over the next beats
+        (:data:`FULL_PER_S`)."""
         topics, held = [], []
         for g in grants:
             if g.mat not in details or self._restoring.get(g.mat) != g.epoch:
@@ -267,7 +268,8 @@ class GroupStation(Station):
             self._session_mat[g.session] = g.mat
             self._count[g.mat] = 1  # the sensor's state: by the queue of first full ones
             self._revision.pop(g.mat, None)  # its first checkpoint is written whatever it holds
-            self._full.append(g.mat)
+            if g.blobs:  # a fresh mat's sensor state is the reset one: nothing to write yet
+                self._full.append(g.mat)
             self._soon_mats.add(g.mat)
             topics.append(mat_topic(self.topic, g.mat))
             kind = "taken-over" if g.blobs else "watched"
@@ -442,6 +444,12 @@ class GroupStation(Station):
         :data:`TILE_BATCH_BYTES`); returns how many."""
         client = self._client
         if client is None or not self.connected:
+            return 0
+        view = self.view
+        if view is not None and {m for m, v in view.members.items() if v.get("alive")} <= {
+            self.member
+        }:
+            self._sent.clear()  # alone: nobody reads them (a member that joins gets them all)
             return 0
         head = json.dumps({"member": self.member, "url": self.page, "wall": time.time(),
                            "held": sorted(self.held)}, separators=(",", ":"))  # fmt: skip
