@@ -80,7 +80,7 @@ log = logging.getLogger("texsense.station")
 MIN_STALE_S = 1.0
 #: Every mat's silence is judged this often, s (a station of 1,000 mats judged 50 times a
 #: second spent a tenth of its event loop on it).
-CHECK_S = 0.1
+CHECK_S = 0.25
 #: Urgency order of a mat's state on the ward page (highest first).
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
 #: Messages in a row with another element count, at least, before a mat is refused.
