@@ -56,9 +56,17 @@ class Cluster:
         for m in members:
             self.start(m)
 
-    def publish(self) -> None:
+    def publish(self, replay: bool = False) -> None:
         """Start `texsense simulate mats` (``publish=False``: the stations can be started
-        first, so that all of them read the mats from their first frame)."""
+        first, so that all of them read the mats from their first frame); ``replay``: the
+        virtual seats' frames made once and replayed (tests/replay_mats.py, no beds)."""
+        if replay:
+            with (self.folder / "simulate.log").open("ab") as out:
+                self.publisher = subprocess.Popen(
+                    [sys.executable, str(Path(__file__).with_name("replay_mats.py")),
+                     str(self.broker.port), str(self.mats), str(self.speed)],
+                    stdout=out, stderr=subprocess.STDOUT, cwd=self.folder)  # fmt: skip
+            return
         self.publisher = self._spawn("simulate", ["simulate", "mats", "--count", str(self.mats),
                                                   "--broker", self.broker_url,
                                                   "--speed", str(self.speed),

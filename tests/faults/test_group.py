@@ -1,6 +1,8 @@
 """Fault battery, a group of stations (docs/station.md, "A group of stations"): three members
 and 6 virtual mats (60 on request: MATS below), with a real PostgreSQL, a real Mosquitto and
-`texsense simulate mats` as processes (one cluster for the module, the cases in order). A
+the virtual seats' frames published as processes (one cluster for the module, the cases in
+order): made once and replayed (tests/replay_mats.py), or with
+TEXSENSE_GROUP_PUBLISHER=simulate by `texsense simulate mats` for every frame. A
 fourth station, alone in a group of its own (its own database), reads the same frames and is
 never harmed: the reference run without the fault, which the group's exposure timers and
 alerts are compared with."""
@@ -33,6 +35,7 @@ MEMBERS = ["a", "b", "c"]
 MATS = int(os.environ.get("TEXSENSE_GROUP_MATS", "6"))
 SPEED = float(os.environ.get("TEXSENSE_GROUP_SPEED", "8"))
 REPOSITION_MIN = 5.0
+REPLAY = os.environ.get("TEXSENSE_GROUP_PUBLISHER", "replay") != "simulate"
 #: a killed member's mats are back within this (issue 38), s
 TAKEOVER_S = 10.0
 #: the group raises each of the reference's alerts within this of the reference's time
@@ -63,7 +66,7 @@ def cluster():
                     {k: m["holder"] for k, m in hm[1].items()} == holders, 240)  # fmt: skip
         for who in ("b", "c"):
             c.until(lambda who=who: c.get(who, "api/ward"), lambda h: h["connected"], 60)
-        c.publish()
+        c.publish(replay=REPLAY)
         yield c
     finally:
         c.close()
