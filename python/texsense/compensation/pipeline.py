@@ -375,7 +375,7 @@ class Pipeline:
         """The in-use drift correction now (:meth:`InUseState.status`), or why it is off."""
         if self.estimator is None:
             return {"state": "off", "why": self.in_use_note or "not asked for"}
-        return self.estimator.state.status()
+        return self.estimator.state.status(self.estimator.last_t)
 
     def process(
         self, frames_pF: npt.ArrayLike, times_s: npt.ArrayLike, valid: npt.ArrayLike | None = None
