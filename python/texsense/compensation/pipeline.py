@@ -190,7 +190,7 @@ class Pipeline:
         n = layout.n_elements
         self._held = (np.empty(n), np.empty(n, np.uint8), np.empty(n, bool))
         #: the failure codes of the last frames (0: measured)
-        self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
+        self.codes_: np.ndarray = np.zeros((0, layout.n_elements), np.uint8)
 
     def _in_use_setup(
         self, in_use: bool, options: dict[str, Any] | None, interval: float | None
