@@ -474,7 +474,7 @@ class Pipeline:
             raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
         t = float(t)
         dt = 0.0 if self._last_t is None else t - self._last_t
-        if not (dt >= 0 and np.isfinite(t)):
+        if not (dt >= 0 and -np.inf < t < np.inf):
             raise ParameterError("frame times must be numbers and must not decrease")
         if self._live is not None:  # one compiled pass: into the arrays held, then copies
             out, codes, ok = self._held
