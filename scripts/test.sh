@@ -1,15 +1,11 @@
 #!/usr/bin/env bash
 # Every test and check: lint and format (Python and Rust), types (mypy on the package, stubtest
-# on the binding's stubs), clippy, Rust unit tests, pytest.
+# on the binding's stubs), clippy, Rust unit tests, pytest (the slow checks beside it).
 source "$(dirname "${BASH_SOURCE[0]}")/_bootstrap.sh"
 export TEXSENSE_NO_PROGRESS=1
 say "ruff check";            ruff check python tests benchmarks examples
 say "ruff format --check";   ruff format --check python tests benchmarks examples
-say "mypy";                  mypy
-say "stubtest";              MYPYPATH=python python -m mypy.stubtest texsense._core
 say "cargo fmt --check";     cargo fmt --all --check
-say "cargo clippy";          cargo clippy --quiet --all-targets -- -D warnings
-say "cargo test";            cargo test --quiet -p texsense-core -p texsense-kernels -p texsense-mcu
 # the browser test drives Debian's chromium (docs/monitor.md); install it if we may
 if [ ! -x "${TEXSENSE_CHROMIUM:-/usr/bin/chromium}" ] && ! command -v chromium >/dev/null 2>&1; then
   if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
@@ -57,5 +53,45 @@ fi
 say "compileall";            python -m compileall -q -j 0 python/texsense >/dev/null
 # two workers side by side (pytest-xdist; TEXSENSE_TEST_JOBS to change): much of a test's
 # time is waiting on a child process, a server or a browser. Grouped tests stay together.
-say "pytest";                python -m pytest -q --durations=25 \
-  -n "${TEXSENSE_TEST_JOBS:-2}" --dist loadgroup "$@"
+# the slow checks (types, stubs, clippy, the Rust tests: ~4 CPU-minutes from a clean clone) run
+# one after the other beside pytest, at a lower priority: pytest's workers spend much of their
+# time waiting on a child process, a server or a browser, and these fill that time. Their
+# output is kept and shown after pytest; any failure fails the command.
+CHECKS="$(mktemp -d "${TMPDIR:-/tmp}/texsense-checks.XXXXXX")"
+checks=(mypy stubtest clippy cargo-test)
+run_check() {  # NAME: run one check, its output and exit status into $CHECKS
+  local rc=0 start=$SECONDS
+  case "$1" in
+    mypy) mypy ;;
+    stubtest) MYPYPATH=python python -m mypy.stubtest texsense._core ;;
+    clippy) cargo clippy --quiet --all-targets -- -D warnings ;;
+    cargo-test) cargo test --quiet -p texsense-core -p texsense-kernels -p texsense-mcu ;;
+  esac >"$CHECKS/$1.log" 2>&1 || rc=$?
+  echo "$rc" >"$CHECKS/$1.rc"
+  echo "$((SECONDS - start))" >"$CHECKS/$1.s"
+}
+say "beside pytest: ${checks[*]} (reported at the end)"
+( renice -n 10 "$BASHPID" >/dev/null; for c in "${checks[@]}"; do run_check "$c"; done ) &
+checks_pid=$!
+# two workers side by side (pytest-xdist; TEXSENSE_TEST_JOBS to change): much of a test's
+# time is waiting on a child process, a server or a browser. Grouped tests stay together.
+say "pytest"
+pytest_rc=0
+python -m pytest -q --durations=25 -n "${TEXSENSE_TEST_JOBS:-2}" --dist loadgroup "$@" \
+  || pytest_rc=$?
+say "waiting for the checks beside pytest"
+wait "$checks_pid" || true
+failed=()
+for c in "${checks[@]}"; do
+  rc="$(cat "$CHECKS/$c.rc" 2>/dev/null || echo "did not run")"
+  if [ "$rc" = 0 ]; then
+    say "$c: ok ($(cat "$CHECKS/$c.s") s)"
+  else
+    say "$c FAILED (exit $rc):"; cat "$CHECKS/$c.log" >&2; failed+=("$c")
+  fi
+done
+rm -rf "$CHECKS"
+if [ "$pytest_rc" != 0 ] || [ "${#failed[@]}" -gt 0 ]; then
+  say "FAILED: ${failed[*]}${failed[*]:+ }$([ "$pytest_rc" != 0 ] && echo "pytest (exit $pytest_rc)")"
+  exit 1
+fi

@@ -128,6 +128,7 @@ def test_archive_on_a_local_cluster_reports_a_bad_file_and_does_the_rest(session
     assert not list((tmp_path / "o").glob(".*partial"))
 
 
+@pytest.mark.slow
 def test_cli_archive_of_real_pmd_files_restarts(shared_data, tmp_path, capsys):
     """A glob over real PMD files, a linear (identity) calibration: detection and repair
     only; exit code 0, outputs mirror the folders, a second run skips every file."""

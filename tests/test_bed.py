@@ -227,6 +227,7 @@ def small_bed_model():
     return train_virtual_bed_model(people=3, hold_s=6.0)
 
 
+@pytest.mark.slow
 def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_model):
     from texsense.calibration.workflows import bed_calibration
     from texsense.compensation.pipeline import Pipeline

@@ -236,6 +236,7 @@ def test_gamma_from_any_history_is_recovered_exactly():
         DriftModel.fit_history(h, p[:-1], t)
 
 
+@pytest.mark.slow
 def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     import json
 
@@ -326,6 +327,7 @@ def test_level_power_superposes_the_steps_of_h_to_the_q(tmp_path):
     assert DriftModel.load(path).exponent == 2.0
 
 
+@pytest.mark.slow
 def test_cli_clock_choice_and_bad_rest_rate(tmp_path, capsys):
     from texsense.cli import main
 

@@ -158,3 +158,42 @@ def test_the_state_is_small_and_goes_through_json() -> None:
         InUseState.from_dict(saved, 63)
     with pytest.raises(ParameterError, match="creep"):
         InUseState.from_dict({"creep": "nope"})
+
+
+def test_the_age_of_the_correction_is_since_the_weight_last_agreed() -> None:
+    from texsense.compensation.intervals import drift_share
+
+    a, b = blob(2.5, 2.5), blob(4.5, 4.5)
+    stream = [a] * 720 + [0.5 * (a + b)] + [reading(b, 0.02)] * 360  # 2 h still, a turn, 1 h
+    ages = {}
+    for weigh in (True, False):
+        est = estimator(predict=False, weigh=weigh)
+        ok = np.ones((len(stream), 64), bool)
+        est.run(np.array(stream), ok, np.arange(len(stream)) * 10.0)
+        ages[weigh] = est.ages_
+        assert np.isnan(est.ages_[0])  # not correcting yet: no age
+        saved = InUseState.from_dict(json.loads(json.dumps(est.state.to_dict())))
+        assert saved.checked_t == est.state.checked_t
+    # checked: the still load after the turn agreed with the weight taken an hour before
+    assert ages[True][-1] < 1.0 and ages[True][-1] < ages[False][-1] - 1.9
+    assert ages[False][-1] == pytest.approx(3.0, abs=0.05)  # never checked: since the first
+    d = [drift_share(3.0, 0.01, age) for age in (ages[True][-1], ages[False][-1])]
+    assert d[1] > d[0] > drift_share(3.0, 0.01)  # an older correction: a wider bound
+
+
+def test_a_still_load_lighter_than_the_weight_is_not_raised_to_it() -> None:
+    area = LAY.area_cm2
+    a, b = blob(2.5, 2.5), blob(4.5, 4.5)
+    light = reading(b, -0.02)  # 5-6 % light after the turn: not what creep makes
+    assert 0.03 < 1 - (light @ area) / (b @ area) < 0.1
+    for up in (False, True):
+        est = estimator(predict=False, weigh_up=up)
+        run(est, [a] * 720)
+        out = run(est, [0.5 * (a + b)] + [light] * 20, t0=7200.0)
+        err = (out[-1] @ area) / (light @ area) - 1
+        checked = est.state.checked_t
+        assert checked is not None and 7200.0 < checked <= 7400.0  # agreed: checked
+        if up:
+            assert est.state.weighed == 1 and err > 0.03  # raised towards the weight
+        else:
+            assert est.state.weighed == 0 and abs(err) < 1e-9  # left as read

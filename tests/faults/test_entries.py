@@ -119,7 +119,7 @@ def _slow_recording(path: Path, elements: int = 400, frames: int = 30_000) -> Pa
 def test_a_monitor_never_waits_on_its_folder(tmp_path, fault_row):
     folder = _folder(tmp_path)
     _slow_recording(folder / "slow.csv")
-    m = ChildServer(tmp_path, "monitor", "--source", "virtual", "--speed", "20",
+    m = ChildServer(tmp_path, "monitor", "--source", "virtual", "--speed", "1",
                     "--record-dir", str(folder))  # fmt: skip
     try:
         m.until(lambda: m.get("api/status")["frames"], lambda n: n > 0, 60)

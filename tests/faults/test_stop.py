@@ -185,6 +185,7 @@ def test_the_station_stops_within_2_s_with_its_broker_and_its_folder(tmp_path, s
               f"{took:.1f} s, its Mosquitto and its folder gone")  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_missing_or_refusing_device_is_one_line_and_a_state(tmp_path, fault_row):
     cal = str(calibration(tmp_path))
     refusing = f"socket://127.0.0.1:{free_port()}"

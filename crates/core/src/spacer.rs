@@ -50,6 +50,9 @@
 //! bisection (the stress is monotone in the compression for a given state).
 
 use crate::error::{check_len, CoreError};
+use step_factors::StepFactors;
+
+mod step_factors;
 
 /// Largest share of the elastic and friction stress the clutched relaxation can cancel.
 const CLUTCH_FLOOR: f64 = 0.8;
@@ -201,6 +204,8 @@ pub struct SpacerBank {
     ef_prev: Vec<f64>,
     stress_prev: Vec<f64>,
     backbone_prev: Vec<f64>,
+    /// The step's factors that depend on `dt` alone (computed once per `dt`).
+    factors: StepFactors,
 }
 
 /// What one trial step produces for one element, without committing it.
@@ -474,6 +479,7 @@ impl SpacerBank {
             stress_prev: vec![0.0; n],
             e: vec![0.0; n],
             backbone_prev: vec![0.0; n],
+            factors: StepFactors::default(),
             p: params,
             n,
             scale,
@@ -520,7 +526,9 @@ impl SpacerLaw for SpacerBank {
     /// Compute the end-of-step stress of element `i` for platen compression `e_new`
     /// after `dt` seconds; when `commit`, store the new state.
     fn trial(&mut self, i: usize, dt: f64, e_new: f64, commit: bool) -> Trial {
+        self.factors.update(&self.p, dt);
         let p = &self.p;
+        let f = &self.factors;
         let (nk, nf, nv) = (p.kelvin.len(), p.friction.len(), p.viscous.len());
         // 1. structural creep strain, driven by the pressure of the previous step (an
         //    unloaded specimen recovers)
@@ -528,15 +536,15 @@ impl SpacerLaw for SpacerBank {
         let drive = h / (1.0 + h);
         let mut creep_old = 0.0;
         let mut creep_new = 0.0;
-        for (j, &(c_max, tau)) in p.kelvin.iter().enumerate() {
+        for (j, &(c_max, _)) in p.kelvin.iter().enumerate() {
             let c = self.c[i * nk + j];
             let target = c_max * drive;
-            let tau = if target >= c {
-                tau
+            let decay = if target >= c {
+                f.kelvin_loading[j]
             } else {
-                tau * p.recovery_factor
+                f.kelvin_recovering[j]
             };
-            let c1 = target + (c - target) * (-dt / tau).exp();
+            let c1 = target + (c - target) * decay;
             creep_old += c;
             creep_new += c1;
             if commit {
@@ -582,13 +590,8 @@ impl SpacerLaw for SpacerBank {
         // 3. fast viscoelastic branches, exact for a stress linear within the step
         let step = backbone - self.backbone_prev[i];
         let mut viscous = 0.0;
-        for (j, &(w, tau)) in p.viscous.iter().enumerate() {
-            let decay = (-dt / tau).exp();
-            let gain = if dt > 0.0 {
-                tau / dt * (1.0 - decay)
-            } else {
-                1.0
-            };
+        for (j, &(w, _)) in p.viscous.iter().enumerate() {
+            let (decay, gain) = (f.viscous_decay[j], f.viscous_gain[j]);
             let q = self.q[i * nv + j] * decay + w * step * gain;
             viscous += q;
             if commit {
@@ -657,7 +660,7 @@ impl SpacerLaw for SpacerBank {
             let target = rho * backbone;
             let mut r = target + (r0 - target) * (-kappa * path).exp();
             if target < r {
-                r = target + (r - target) * (-dt / p.softening_recovery_s).exp();
+                r = target + (r - target) * f.softening_recovery;
             }
             softening += r;
             if commit {

@@ -30,9 +30,11 @@ it becomes the creep of the elements whose creep was never read while loaded.
 A still person also keeps their weight: the load on the mat (missing elements filled from
 their measured neighbours) at the start of every still period is compared with the load of the
 first one, and a difference no larger than drift can make since then (``weigh_rate`` per hour,
-at most ``weigh_max``) is taken as creep the reading did not show — the creep of elements
+at most ``weigh_max``) checks the correction (the bounds widen with the time since the last
+check). A heavier load is taken as creep the reading did not show — the creep of elements
 loaded only after the stillness began, and what crept before the period settled — and shared
-over the loaded elements in proportion to their readings. A larger difference is a load change
+over the loaded elements in proportion to their readings; a lighter one is not (creep only
+makes a reading heavier; ``weigh_up`` takes it too). A larger difference is a load change
 (a second load, a person sitting on the edge) and is left alone; after an empty mat it is
 another occupant, weighed anew. A second load lighter than that window, put down while the
 person moves, is taken for drift (docs/drift.md says where the line is).
@@ -64,12 +66,12 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from texsense.compensation.inuse_state import InUseState
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 
@@ -94,112 +96,6 @@ def motion_blocks(layout: Layout, size: int = 4) -> np.ndarray:
     blocks = (rows // size) * per_row + cols // size
     _, index = np.unique(blocks, return_inverse=True)
     return np.asarray(index, dtype=np.intp)
-
-
-@dataclass
-class InUseState:
-    """What the in-use estimator knows: the creep of every element and how it
-    came to them (small: two numbers per element; ``to_dict``/``from_dict`` for checkpoints)."""
-
-    creep: np.ndarray  # (N,) in the hysteresis stage's input unit (mm)
-    still_s: float = 0.0  # still time the creep was read from (s)
-    first_t: float | None = None  # when the creep was first changed
-    last_t: float | None = None  # when the creep was last changed
-    zeroed_t: float | None = None  # when an empty mat last gave the creep
-    zeroed: int = 0  # how many empty periods gave the creep
-    refused: int = 0  # still periods refused (their load changed faster than drift can)
-    load_correction: float = 0.0  # the correction of the present load (share, -0.12: 12 % less)
-    exposure: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) ∫ p dt, N/cm² s
-    read: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (N,) creep was read
-    law: tuple[float, ...] | None = None  # creep = a · exposure^b fitted on the read ones
-    at_read: np.ndarray = field(default_factory=lambda: np.zeros(0))  # exposure when last set
-    weight: float | None = None  # the still load the mat carries (N), from the first still period
-    weight_t: float | None = None  # when it was taken
-    weighed: int = 0  # still periods whose load was brought back to it
-
-    def __post_init__(self) -> None:
-        n = self.creep.size
-        if self.exposure.size != n:
-            self.exposure = np.zeros(n)
-        if self.read.size != n:
-            self.read = np.zeros(n, bool)
-        if self.at_read.size != n:
-            self.at_read = np.zeros(n)
-
-    def status(self, t: float | None = None) -> dict[str, Any]:
-        """The state in words and numbers (dashboard, metadata, report)."""
-        state = "waiting for stillness" if self.first_t is None else "correcting"
-        return {
-            "state": state,
-            "load_correction": round(float(self.load_correction), 4),
-            "since_t": self.first_t,
-            "last_t": self.last_t,
-            "still_s": round(float(self.still_s), 1),
-            "zeroed": self.zeroed,
-            "zeroed_t": self.zeroed_t,
-            "refused": self.refused,
-            "max_creep_mm": round(float(np.max(np.abs(self.creep), initial=0.0)), 4),
-            "read_elements": int(np.count_nonzero(self.read)),
-            "creep_law": None if self.law is None else [round(v, 5) for v in self.law],
-            "weight_n": None if self.weight is None else round(float(self.weight), 1),
-            "weighed": self.weighed,
-        }
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able."""
-        return {
-            "creep": np.asarray(self.creep, float).tolist(),
-            "still_s": self.still_s,
-            "first_t": self.first_t,
-            "last_t": self.last_t,
-            "zeroed_t": self.zeroed_t,
-            "zeroed": self.zeroed,
-            "refused": self.refused,
-            "load_correction": self.load_correction,
-            "exposure": np.asarray(self.exposure, float).tolist(),
-            "read": np.asarray(self.read, bool).tolist(),
-            "at_read": np.asarray(self.at_read, float).tolist(),
-            "law": None if self.law is None else list(self.law),
-            "weight": self.weight,
-            "weight_t": self.weight_t,
-            "weighed": self.weighed,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any], n_elements: int | None = None) -> InUseState:
-        """Inverse of :meth:`to_dict`; ``n_elements`` checks the size."""
-        try:
-            creep = np.asarray(d["creep"], dtype=np.float64)
-        except (KeyError, TypeError, ValueError) as e:
-            raise ParameterError(f"in-use drift state: the creep: {e}") from None
-        if creep.ndim != 1:
-            raise ParameterError("in-use drift state: creep must be a list of numbers")
-        if n_elements is not None and creep.size != n_elements:
-            raise ParameterError(
-                f"in-use drift state of {creep.size} elements, the mat has {n_elements}"
-            )
-        if not np.all(np.isfinite(creep)):
-            raise ParameterError("in-use drift state: creep must be numbers")
-        opt = {k: d.get(k) for k in ("first_t", "last_t", "zeroed_t", "weight", "weight_t")}
-        exposure = np.asarray(d.get("exposure", np.zeros(creep.size)), dtype=np.float64)
-        read = np.asarray(d.get("read", np.zeros(creep.size, bool)), dtype=bool)
-        at_read = np.asarray(d.get("at_read", np.zeros(creep.size)), dtype=np.float64)
-        law = d.get("law")
-        if not exposure.shape == read.shape == at_read.shape == creep.shape:
-            raise ParameterError("in-use drift state: exposure and read need one value per element")
-        return cls(
-            creep,
-            float(d.get("still_s", 0.0)),
-            zeroed=int(d.get("zeroed", 0)),
-            refused=int(d.get("refused", 0)),
-            weighed=int(d.get("weighed", 0)),
-            load_correction=float(d.get("load_correction", 0.0)),
-            exposure=exposure,
-            read=read,
-            at_read=at_read,
-            law=None if law is None else (float(law[0]), float(law[1])),
-            **{k: None if v is None else float(v) for k, v in opt.items()},
-        )
 
 
 class InUseDrift:
@@ -247,6 +143,10 @@ class InUseDrift:
         for drift: 1 % + ``weigh_rate`` (0.03) per hour since the weight was taken, at most
         ``weigh_max`` (0.15). Chosen on the textile and Iwan nights of seeds 0 and 1 (0.02 /
         0.10 and 0.05 / 0.25 were worse there: docs/drift.md).
+    weigh_up : bool
+        Also bring a still load lighter than the weight up to it (off: creep only makes a
+        reading heavier, so a lighter load is not creep the reading missed; with it the
+        Bouc–Wen nights and one foam night were worse per element: docs/drift.md).
     """
 
     def __init__(
@@ -269,6 +169,7 @@ class InUseDrift:
         weigh: bool = True,
         weigh_rate: float = 0.03,
         weigh_max: float = 0.15,
+        weigh_up: bool = False,
     ) -> None:
         u = np.asarray(curve_input, dtype=np.float64)
         p = np.asarray(curve_output, dtype=np.float64)
@@ -295,6 +196,7 @@ class InUseDrift:
         if not (0 <= weigh_rate < 1 and 0 <= weigh_max < 0.5):
             raise ParameterError("need 0 <= weigh_rate < 1 and 0 <= weigh_max < 0.5")
         self.weigh, self.weigh_rate, self.weigh_max = bool(weigh), weigh_rate / 3600, weigh_max
+        self.weigh_up = bool(weigh_up)
         indptr, indices = layout.neighbours
         self._nb_owner = np.repeat(np.arange(layout.n_elements), np.diff(indptr))
         self._nb_index = np.asarray(indices, dtype=np.intp)
@@ -533,9 +435,10 @@ class InUseDrift:
     def _weigh(self, x0: np.ndarray, c: np.ndarray, ok: np.ndarray, t: float) -> bool:
         """At the start of a still period: a still person weighs what they weighed in the
         first still period (the weight). A load off by no more than drift can make since then
-        (``weigh_rate`` per hour, at most ``weigh_max``) is brought back to it by creep shared
-        in proportion to the loaded elements' readings; a larger change is a load change
-        (after an empty mat: another occupant, weighed anew). True when a creep changed."""
+        (``weigh_rate`` per hour, at most ``weigh_max``) checks the correction; a heavier one is
+        brought back to it by creep shared in proportion to the loaded elements' readings (a
+        lighter one too with ``weigh_up``); a larger change is a load change (after an empty
+        mat: another occupant, weighed anew). True when a creep changed."""
         st = self.state
         load = self.total(c, ok)
         if load <= self._floor_n:
@@ -543,14 +446,17 @@ class InUseDrift:
         returned, self._returned = self._returned, False
         if st.weight is None or st.weight_t is None:
             st.weight, st.weight_t = load, t
+            st.checked_t = t
             return False
         r = load / st.weight - 1.0
         window = min(self.weigh_max, LOAD_SLACK / 3 + self.weigh_rate * (t - st.weight_t))
         if abs(r) > window:
             if returned:
                 st.weight, st.weight_t = load, t
+                st.checked_t = t
             return False
-        if abs(r) < 0.005:
+        st.checked_t = t
+        if abs(r) < 0.005 or (r < 0 and not self.weigh_up):
             return False
         sel = ok & (c > self.loaded_ncm2)
         u_now = np.interp(c[sel], self._p, self._u)
@@ -607,8 +513,11 @@ class InUseDrift:
         out = np.empty_like(x)
         #: the load correction after every frame of the last run (NaN: not correcting yet)
         self.corrections_ = np.full(x.shape[0], np.nan)
+        #: hours since the correction was last checked against the weight after every frame
+        self.ages_ = np.full(x.shape[0], np.nan)
         for k in range(x.shape[0]):
             out[k] = self.step(x[k], ok[k], float(t[k]), None if raw is None else raw[k])
             if self.state.first_t is not None:
                 self.corrections_[k] = self.state.load_correction
+                self.ages_[k] = self.state.age_h(float(t[k]))
         return out

@@ -441,14 +441,11 @@ class Pipeline:
         if self._t_first is None:
             self._t_first = float(times[0])
         hours = (np.asarray(times, dtype=np.float64) - self._t_first) / 3600.0
-        corr = (
-            self.estimator.corrections_
-            if self.estimator is not None
-            else np.full(hours.shape, np.nan)
-        )
-        d = np.array(
-            [drift_share(h, None if np.isnan(c) else c) for h, c in zip(hours, corr, strict=True)]
-        )
+        est = self.estimator
+        corr = est.corrections_ if est is not None else np.full(hours.shape, np.nan)
+        ages = est.ages_ if est is not None else np.zeros(hours.shape)
+        rows = zip(hours, corr, ages, strict=True)
+        d = np.array([drift_share(h, None if np.isnan(c) else c, a) for h, c, a in rows])
         return bounds(
             values,
             self.interval,

@@ -117,3 +117,42 @@ fn bad_input_is_rejected() {
     assert!(bank.step_pressure(0.1, &[1e30], &mut p, &mut q).is_err());
     assert!(bank.step_pressure(0.1, &[-1.0], &mut p, &mut q).is_err());
 }
+
+#[test]
+fn the_factors_of_a_step_follow_its_length() {
+    // steps of changing length (and none): the bank that keeps its factors from step to step
+    // gives the same bits as one that computes them afresh for every trial
+    let dts = [0.1, 0.5, 0.1, 0.0, 2.0, 2.0, 0.05, 30.0, 0.1];
+    let targets = [0.5, 1.5, 1.2, 1.2, 2.5, 0.3, 0.0, 0.8, 1.0];
+    let mut kept = SpacerBank::new(textile(), vec![1.0, 1.1]).unwrap();
+    let mut fresh = kept.clone();
+    for (&dt, &p) in dts.iter().zip(&targets) {
+        let (mut e1, mut r1, mut e2, mut r2) = ([0.0; 2], [0.0; 2], [0.0; 2], [0.0; 2]);
+        kept.step_pressure(dt, &[p, 0.7 * p], &mut e1, &mut r1)
+            .unwrap();
+        fresh.factors = StepFactors::default();
+        for i in 0..2 {
+            // the solve of element i, each trial with factors made for it
+            let target = [p, 0.7 * p][i];
+            let (mut lo, mut hi) = (0.0, fresh.limit() * (1.0 - 1e-6));
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                fresh.factors = StepFactors::default();
+                if fresh.trial(i, dt, mid, false).stress <= target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+                if hi - lo < 1e-13 {
+                    break;
+                }
+            }
+            fresh.factors = StepFactors::default();
+            let t = fresh.trial(i, dt, lo, true);
+            e2[i] = lo.max(t.creep);
+            r2[i] = t.stress;
+        }
+        assert_eq!(e1.map(f64::to_bits), e2.map(f64::to_bits), "dt {dt}");
+        assert_eq!(r1.map(f64::to_bits), r2.map(f64::to_bits), "dt {dt}");
+    }
+}
