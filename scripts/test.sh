@@ -60,7 +60,7 @@ say "compileall";            python -m compileall -q -j 0 python/texsense >/dev/
 CHECKS="$(mktemp -d "${TMPDIR:-/tmp}/texsense-checks.XXXXXX")"
 checks=(mypy stubtest clippy cargo-test)
 run_check() {  # NAME: run one check, its output and exit status into $CHECKS
-  local rc=0
+  local rc=0 start=$SECONDS
   case "$1" in
     mypy) mypy ;;
     stubtest) MYPYPATH=python python -m mypy.stubtest texsense._core ;;
@@ -68,6 +68,7 @@ run_check() {  # NAME: run one check, its output and exit status into $CHECKS
     cargo-test) cargo test --quiet -p texsense-core -p texsense-kernels -p texsense-mcu ;;
   esac >"$CHECKS/$1.log" 2>&1 || rc=$?
   echo "$rc" >"$CHECKS/$1.rc"
+  echo "$((SECONDS - start))" >"$CHECKS/$1.s"
 }
 say "beside pytest: ${checks[*]} (reported at the end)"
 ( renice -n 10 "$BASHPID" >/dev/null; for c in "${checks[@]}"; do run_check "$c"; done ) &
@@ -84,7 +85,7 @@ failed=()
 for c in "${checks[@]}"; do
   rc="$(cat "$CHECKS/$c.rc" 2>/dev/null || echo "did not run")"
   if [ "$rc" = 0 ]; then
-    say "$c: ok"
+    say "$c: ok ($(cat "$CHECKS/$c.s") s)"
   else
     say "$c FAILED (exit $rc):"; cat "$CHECKS/$c.log" >&2; failed+=("$c")
   fi
