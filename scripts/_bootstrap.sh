@@ -45,7 +45,16 @@ want="$(sha256sum "$LOCK" | cut -d' ' -f1)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$want" ]; then
   say "installing locked Python packages ($LOCK)"
   .venv/bin/python -m pip install --quiet --upgrade pip
+  # the build tool first, then the Rust core compiles while the other packages install (from
+  # a clean clone each takes minutes; `maturin develop` below then finds the core built)
+  .venv/bin/python -m pip install --quiet "$(grep -m1 '^maturin==' "$LOCK")"
+  prebuilt="$(mktemp -d "${TMPDIR:-/tmp}/texsense-build.XXXXXX")"
+  ( .venv/bin/maturin build --release --quiet -i .venv/bin/python -o "$prebuilt" \
+      >"$prebuilt/log" 2>&1 || true ) &
+  prebuild=$!
   .venv/bin/python -m pip install --quiet -r "$LOCK"
+  wait "$prebuild"  # a failed build shows itself in `maturin develop` below
+  rm -rf "$prebuilt"
   echo "$want" > "$STAMP"
 fi
 say "building the Rust core (texsense._core)"

@@ -137,3 +137,44 @@ def test_a_large_mat_runs_in_parallel_blocks_with_the_same_result(seat):
     rows = [stream.step(cap[k], None, t[k])[0] for k in range(t.size)]
     np.testing.assert_array_equal(np.array(rows), batch)
     assert (~ok).sum() > 1000 and np.isfinite(batch).all()
+
+
+def test_chain_step_writes_what_run_gives_into_the_arrays_held(seat):
+    """`Chain.step` (the live path of `Pipeline.step`, issue 34): one frame into arrays the
+    caller holds gives the values and codes of `run`, frame after frame; an array of the
+    wrong shape, or an output that is the input, is one ShapeError line; the pipeline hands
+    out copies (a frame kept stays as it was after the next step)."""
+    from texsense.exceptions import ShapeError
+
+    cal, rec = seat
+    lay, n = rec.layout, rec.n_elements
+    pipe = Pipeline(cal, lay, repair="neighbour-mean")
+    chain = pipe.compiled()
+    dt = np.diff(rec.times, prepend=rec.times[0])
+    frames = np.ascontiguousarray(rec.frames, dtype=np.float64)
+    valid = rec.valid.copy()
+    valid[::2] = True  # the frames stepped with None
+    batch, codes = chain.run(dt, frames, valid)
+    chain.reset()
+    out, got, measured = np.empty(n), np.empty(n, np.uint8), np.empty(n, bool)
+    for k in range(rec.n_frames):
+        chain.step(dt[k], frames[k], valid[k] if k % 2 else None, out, got, measured)
+        np.testing.assert_array_equal(out, batch[k])
+        np.testing.assert_array_equal(got, codes[k])
+        np.testing.assert_array_equal(measured, codes[k] == 0)
+    assert (codes != 0).any()
+    for bad in (
+        lambda: chain.step(0.1, frames[0][:-1], None, out, got, measured),
+        lambda: chain.step(0.1, frames[0], None, np.empty(n + 1), got, measured),
+        lambda: chain.step(0.1, out, None, out, got, measured),
+    ):
+        with pytest.raises(ShapeError) as e:
+            bad()
+        assert "\n" not in str(e.value)
+    first, ok = pipe.step(rec.frames[0], None, rec.times[0])
+    kept = first.copy(), ok.copy(), pipe.codes_.copy()
+    pipe.step(rec.frames[1] * 0.0, None, rec.times[1])
+    for a, b in zip((first, ok, pipe.codes_), kept, strict=True):
+        assert a is not b
+    np.testing.assert_array_equal(first, kept[0])
+    np.testing.assert_array_equal(ok, kept[1])

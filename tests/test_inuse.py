@@ -9,11 +9,15 @@ loading curve is ``F(u) = u²`` creeps under load by ``δ(t)`` (mm), so an eleme
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from texsense import Layout
+from texsense.apps.report._content import _certainty_rows
+from texsense.apps.views import format_duration
+from texsense.commands.pipeline import in_use_line
 from texsense.compensation.inuse import InUseDrift, InUseState
 from texsense.exceptions import ParameterError
 
@@ -32,6 +36,13 @@ def reading(p: np.ndarray, creep_mm: np.ndarray | float) -> np.ndarray:
     """What a creeping spacer reads: the compression of ``p`` plus the creep, through F."""
     u = np.sqrt(np.clip(p, 0, None)) + np.where(p > 0.02, creep_mm, 0.0)
     return u**2
+
+
+def certainty(status: dict) -> str:
+    """The report's row on the in-use drift correction of a recording with ``status``."""
+    review = SimpleNamespace(rec=SimpleNamespace(meta={"in_use_drift": status}), bounds=None)
+    (row,) = _certainty_rows(review)  # type: ignore[arg-type]
+    return str(row[1])
 
 
 def estimator(**kw: object) -> InUseDrift:
@@ -174,6 +185,18 @@ def test_the_age_of_the_correction_is_since_the_weight_last_agreed() -> None:
         assert np.isnan(est.ages_[0])  # not correcting yet: no age
         saved = InUseState.from_dict(json.loads(json.dumps(est.state.to_dict())))
         assert saved.checked_t == est.state.checked_t
+        # shown with the rest of the state: the status at the last frame has the age, in
+        # numbers (recordings' metadata, the dashboard) and in words (process, the report)
+        status = est.state.status(est.last_t)
+        assert status["checked_age_s"] == pytest.approx(3600 * est.ages_[-1], abs=0.1)
+        words = [in_use_line(status), certainty(status)]
+        expected = format_duration(status["checked_age_s"])
+        if weigh:
+            assert all(f"last checked against the weight {expected} before the end" in w
+                       for w in words), words  # fmt: skip
+        else:
+            assert all(f"never checked against a still weight ({expected} since the first"
+                       in w for w in words), words  # fmt: skip
     # checked: the still load after the turn agreed with the weight taken an hour before
     assert ages[True][-1] < 1.0 and ages[True][-1] < ages[False][-1] - 1.9
     assert ages[False][-1] == pytest.approx(3.0, abs=0.05)  # never checked: since the first

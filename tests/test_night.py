@@ -66,6 +66,7 @@ def test_process_corrects_in_use_by_default_and_gives_bounds(
     assert "in-use drift" in on_rec.meta["stages"] and "drift" not in on_rec.meta["stages"]
     assert "drift" in off_rec.meta["stages"] and "in_use_drift" not in off_rec.meta
     assert on_rec.meta["in_use_drift"]["state"] in ("correcting", "waiting for stillness")
+    assert {"checked_t", "checked_age_s"} <= set(on_rec.meta["in_use_drift"])  # the age kept
     lo, hi = read_bounds(seat / "on.h5")
     v = on_rec.frames
     assert lo.shape == hi.shape == v.shape and np.all(lo <= v + 1e-6) and np.all(hi >= v - 1e-6)

@@ -223,6 +223,17 @@ def test_bed_dashboard_in_headless_chromium(monitor_process, tmp_path):
         assert page.evaluate(f"[...document.querySelectorAll('.card .v')].every({fits})")
         page.select_option("#unit", "mmHg")
         expect(page.locator("#regions")).to_contain_text("mmHg")
+        # the in-use drift correction with the age of its last check (issue 37): the state
+        # the monitor serves, and one made up to read the words of a check 1.5 h old
+        expect(page.locator("#in-use")).to_contain_text("drift corrected in use")
+        shown = page.locator("#in-use").inner_text()
+        assert "load" not in shown or "checked against" in shown, shown  # when correcting
+        state = (
+            "{state: 'correcting', load_correction: -0.05, since_t: 600, still_s: 3000, "
+            "zeroed: 1, weight_n: 700, weighed: 2, checked_t: 4000, checked_age_s: 5400}"
+        )
+        words = page.evaluate(f"inUseText({state})")
+        assert words.endswith("; last checked against the weight 1 h 30 min ago"), words
         page.wait_for_timeout(300)
         shot = tmp_path / "bed.png"
         page.screenshot(path=str(shot))

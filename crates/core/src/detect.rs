@@ -233,53 +233,172 @@ impl FailureDetector {
         // the elements' states leave `self` for the pass, which reads the rest of it
         let mut elements = std::mem::take(&mut self.elements);
         let this = &*self;
-        let p = &this.params;
         let chunks: Vec<_> = elements.chunks_mut(block_size(n)).collect();
+        let lanes = simd_lanes();
         for_blocks(codes, n, chunks, par, |block, o| {
             let start = o.start();
-            let mut wide = Vec::new();
-            let mut few = [0.0; 8];
+            let mut scratch = (Vec::new(), [0.0; 8]);
             for r in 0..t {
                 let row = r * n;
                 let out = o.row(r);
-                for (li, el) in block.iter_mut().enumerate() {
-                    let i = start + li;
-                    let nbs = this.neighbours.of(i);
-                    let (c, d) = (readings[row + i], delta[row + i]);
-                    // the neighbours' movement counts only for a reading that holds still
-                    // (`code` reads it then alone)
-                    let nb_move = if !kernel::holds_still(p, c, d) {
-                        0.0
-                    } else if nbs.len() <= few.len() {
-                        kernel::neighbour_move(nbs, delta, row, &mut few)
-                    } else {
-                        wide.resize(nbs.len(), 0.0);
-                        kernel::neighbour_move(nbs, delta, row, &mut wide)
-                    };
-                    let lim = Limits {
-                        jump: this.jump[i],
-                        baseline: this.baseline.as_ref().map(|b| b[i]),
-                        max: this.max.as_ref().map(|m| m[i]),
-                    };
-                    let has_nbs = !nbs.is_empty();
-                    match valid {
-                        Validity::Given(v) => {
-                            out[li] = kernel::code(p, el, lim, c, v[row + i], d, nb_move, has_nbs);
-                        }
-                        Validity::InCodes(unset) => {
-                            let was = out[li];
-                            let k = kernel::code(p, el, lim, c, was == 0, d, nb_move, has_nbs);
-                            if was == 0 || was == unset {
-                                out[li] = k;
-                            }
+                let w = out.len();
+                let mut li = 0;
+                while li < w {
+                    let end = (li + GROUP).min(w);
+                    if lanes
+                        && end - li == GROUP
+                        && this.moving(
+                            readings,
+                            delta,
+                            valid,
+                            row,
+                            start + li,
+                            &mut block[li..end],
+                            &mut out[li..end],
+                        )
+                    {
+                        li = end;
+                        continue;
+                    }
+                    for lj in li..end {
+                        let i = start + lj;
+                        let was = out[lj];
+                        let ok = match valid {
+                            Validity::Given(v) => v[row + i],
+                            Validity::InCodes(_) => was == 0,
+                        };
+                        let k = this.code_of(
+                            &mut block[lj],
+                            i,
+                            readings[row + i],
+                            delta,
+                            row,
+                            ok,
+                            &mut scratch,
+                        );
+                        if match valid {
+                            Validity::Given(_) => true,
+                            Validity::InCodes(unset) => was == 0 || was == unset,
+                        } {
+                            out[lj] = k;
                         }
                     }
+                    li = end;
                 }
             }
         });
         self.elements = elements;
     }
 }
+
+impl FailureDetector {
+    /// The code of element `i`'s reading `c` (`ok`: valid before) by the scalar kernel,
+    /// with the neighbours' median change of frame `row` when the reading holds still.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn code_of(
+        &self,
+        el: &mut Element<f64>,
+        i: usize,
+        c: f64,
+        delta: &[f64],
+        row: usize,
+        ok: bool,
+        (wide, few): &mut (Vec<f64>, [f64; 8]),
+    ) -> u8 {
+        let p = &self.params;
+        let nbs = self.neighbours.of(i);
+        let d = delta[row + i];
+        // the neighbours' movement counts only for a reading that holds still (`code` reads
+        // it then alone)
+        let nb_move = if !kernel::holds_still(p, c, d) {
+            0.0
+        } else if nbs.len() <= few.len() {
+            kernel::neighbour_move(nbs, delta, row, few)
+        } else {
+            wide.resize(nbs.len(), 0.0);
+            kernel::neighbour_move(nbs, delta, row, wide)
+        };
+        let lim = Limits {
+            jump: self.jump[i],
+            baseline: self.baseline.as_ref().map(|b| b[i]),
+            max: self.max.as_ref().map(|m| m[i]),
+        };
+        kernel::code(p, el, lim, c, ok, d, nb_move, !nbs.is_empty())
+    }
+
+    /// The codes of the four elements `i .. i + 4` of frame `row` in SIMD lanes when none
+    /// of their readings holds still (`detect::avx2`); false (nothing written, no state
+    /// touched) when one does, or without AVX2.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn moving(
+        &self,
+        readings: &[f64],
+        delta: &[f64],
+        valid: Validity<'_>,
+        row: usize,
+        i: usize,
+        els: &mut [Element<f64>],
+        out: &mut [u8],
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let at = row + i..row + i + GROUP;
+            let ok: [bool; GROUP] = std::array::from_fn(|l| match valid {
+                Validity::Given(v) => v[row + i + l],
+                Validity::InCodes(_) => out[l] == 0,
+            });
+            let lim = avx2::Limits4 {
+                jump: &self.jump[i..i + GROUP],
+                baseline: self.baseline.as_deref().map(|b| &b[i..i + GROUP]),
+                max: self.max.as_deref().map(|m| &m[i..i + GROUP]),
+            };
+            // SAFETY: `simd_lanes` found AVX2 before the caller came here
+            let Some(k) = (unsafe {
+                avx2::moving(&self.params, &lim, &readings[at.clone()], &delta[at], ok)
+            }) else {
+                return false;
+            };
+            for (l, (el, slot)) in els.iter_mut().zip(out.iter_mut()).enumerate() {
+                // kernel::code for a reading that does not hold still
+                el.still = 0;
+                el.moved = 0.0;
+                let write = match valid {
+                    Validity::Given(_) => true,
+                    Validity::InCodes(unset) => *slot == 0 || *slot == unset,
+                };
+                if write {
+                    *slot = k[l];
+                }
+            }
+            true
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = (readings, delta, valid, row, i, els, out);
+            false
+        }
+    }
+}
+
+/// Elements per group of the SIMD path.
+const GROUP: usize = 4;
+
+/// Whether the codes run four elements at a time in AVX2 lanes ([`crate::simd`]).
+fn simd_lanes() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        crate::simd::avx2()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 
 #[cfg(test)]
 mod tests {
@@ -360,6 +479,78 @@ mod tests {
             .unwrap();
             assert_eq!(&c[..], &codes[rr]);
         }
+    }
+
+    /// The codes in SIMD lanes (`detect::avx2`, groups where no reading holds still) equal
+    /// the scalar kernel's, with the elements' states, on random histories: readings that
+    /// hold still, jump, are not numbers, infinite, at the floor or beyond the range, flagged
+    /// invalid; with and without unloaded and largest readings; both validity modes.
+    #[test]
+    fn lanes_give_the_scalar_codes_and_states() {
+        use crate::preisach::tests::Rng;
+        let _guard = crate::simd::testing::lock();
+        let mut rng = Rng(11);
+        let mut seen = std::collections::BTreeSet::<u8>::new();
+        for case in 0..24 {
+            let (rows, cols) = (1 + (rng.next() % 6) as usize, 1 + (rng.next() % 9) as usize);
+            let n = rows * cols;
+            let t = 30;
+            let mut p = params();
+            p.stuck_frames = 2 + (rng.next() % 4) as u32;
+            p.stuck_pf = [1e-4, 0.25][case % 2];
+            let limits = |v: f64| (case % 3 != 2).then(|| vec![v; n]);
+            let mk = || {
+                let jump = (0..n).map(|i| 1.0 + (i % 5) as f64).collect();
+                let nb = Neighbours::grid4(rows, cols);
+                FailureDetector::new(p, nb, jump, limits(10.0), limits(20.0)).unwrap()
+            };
+            let mut last = vec![12.0; n];
+            let mut readings = Vec::with_capacity(t * n);
+            for _ in 0..t {
+                for (i, l) in last.iter_mut().enumerate() {
+                    // every third element mostly holds still (stuck codes), the others move
+                    let r = rng.next() % 12;
+                    *l = match r {
+                        _ if i % 3 == 0 && r < 10 => *l,
+                        0 => f64::NAN,
+                        1 => [f64::INFINITY, f64::NEG_INFINITY, 0.01, 30.0]
+                            [(rng.next() % 4) as usize],
+                        2 => *l + 6.0,  // a jump
+                        3 => *l,        // holds still
+                        4 => *l + 0.25, // a change of stuck_pf exactly
+                        // eighths: changes that equal the limits exactly
+                        _ => 11.0 + (rng.next() % 24) as f64 / 8.0,
+                    };
+                    readings.push(*l);
+                }
+            }
+            let valid: Vec<bool> = (0..t * n).map(|_| !rng.next().is_multiple_of(7)).collect();
+            let given: Vec<u8> = (0..t * n)
+                .map(|_| [0, 0, 0, 2, 9][(rng.next() % 5) as usize])
+                .collect();
+            let run = |simd: bool| {
+                crate::simd::set_enabled(simd);
+                let (mut a, mut b) = (mk(), mk());
+                let mut codes = vec![0u8; t * n];
+                a.run(&readings, &valid, &mut codes, &mut Changes::default())
+                    .unwrap();
+                let mut merged = given.clone();
+                b.run_on_codes(&readings, &mut merged, 9, &mut Changes::default())
+                    .unwrap();
+                crate::simd::set_enabled(true);
+                let bits = |d: &FailureDetector| {
+                    d.elements
+                        .iter()
+                        .map(|e| (e.last.to_bits(), e.still, e.moved.to_bits()))
+                        .collect::<Vec<_>>()
+                };
+                (codes, merged, bits(&a), bits(&b))
+            };
+            let (scalar, lanes) = (run(false), run(true));
+            assert_eq!(scalar, lanes, "case {case}");
+            seen.extend(scalar.0.iter().chain(&scalar.1));
+        }
+        assert_eq!(seen.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
     }
 
     #[test]

@@ -1,7 +1,9 @@
 //! `Chain`: a mat's chain of stages compiled, assembled from the kernels of its stages in
 //! order; its state as bytes; its model blob for a microcontroller.
 
-use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use texsense_core::{Chain, ChainStage, CoreError};
@@ -51,6 +53,8 @@ fn stage_of(item: &Bound<'_, PyAny>, position: usize) -> PyResult<ChainStage> {
 #[pyclass(name = "Chain", module = "texsense._core")]
 pub(crate) struct PyChain {
     inner: Chain,
+    /// The validity of a frame given as None (every reading valid).
+    all_valid: Vec<bool>,
 }
 
 element_bank!(PyChain, reset = "Every stage back to its initial state.", {
@@ -62,7 +66,10 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
             .map(|(k, s)| stage_of(s, k + 1))
             .collect::<PyResult<Vec<_>>>()?;
         let inner = Chain::new(n_elements, stages).map_err(to_py)?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner,
+            all_valid: vec![true; n_elements],
+        })
     }
 
     /// The stages' names in order.
@@ -92,6 +99,73 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
             inner.run(b.dt, b.values, b.valid, out, &mut codes)
         })?;
         Ok((out, to_2d(py, codes, b.t, b.n)?))
+    }
+
+    /// One frame, for a live stream: `dt` (s since the previous frame), readings (N,) and
+    /// their validity (N,; None: all valid) into arrays the caller holds and reuses: values
+    /// `out` (N,) float64, failure codes `codes` (N,) uint8 and `measured` (N,) bool (code
+    /// 0). The same kernels as `run` with one frame; no array is made per frame.
+    #[pyo3(signature = (dt, readings, valid, out, codes, measured))]
+    #[allow(clippy::too_many_arguments)]
+    fn step<'py>(
+        &mut self,
+        dt: f64,
+        readings: PyReadonlyArray1<'py, f64>,
+        valid: Option<PyReadonlyArray1<'py, bool>>,
+        out: &Bound<'py, PyArray1<f64>>,
+        codes: &Bound<'py, PyArray1<u8>>,
+        measured: &Bound<'py, PyArray1<bool>>,
+    ) -> PyResult<()> {
+        let n = self.inner.len();
+        let shape = |what: &'static str, got: &[usize]| {
+            to_py(CoreError::Shape {
+                what,
+                expected: format!("({n},), C-contiguous"),
+                got: format!("{got:?}"),
+            })
+        };
+        let valid = match &valid {
+            Some(v) if v.shape() != [n] => return Err(shape("valid", v.shape())),
+            Some(v) => v.as_slice()?,
+            None => &self.all_valid,
+        };
+        if readings.shape() != [n] {
+            return Err(shape("readings", readings.shape()));
+        }
+        for (what, got, contiguous) in [
+            ("out", out.shape(), out.is_c_contiguous()),
+            ("codes", codes.shape(), codes.is_c_contiguous()),
+            ("measured", measured.shape(), measured.is_c_contiguous()),
+        ] {
+            if got != [n] || !contiguous {
+                return Err(shape(what, got));
+            }
+        }
+        // a borrow conflict (an output that is an input, or read-only) is one ShapeError line
+        let taken = |what: &'static str, e: numpy::BorrowError| {
+            to_py(CoreError::Shape {
+                what,
+                expected: "a writable array of its own".into(),
+                got: e.to_string(),
+            })
+        };
+        let mut out = out.try_readwrite().map_err(|e| taken("out", e))?;
+        let mut codes = codes.try_readwrite().map_err(|e| taken("codes", e))?;
+        let mut measured = measured.try_readwrite().map_err(|e| taken("measured", e))?;
+        let (codes, measured) = (codes.as_slice_mut()?, measured.as_slice_mut()?);
+        self.inner
+            .run(
+                &[dt],
+                readings.as_slice()?,
+                valid,
+                out.as_slice_mut()?,
+                codes,
+            )
+            .map_err(to_py)?;
+        for (m, &c) in measured.iter_mut().zip(codes.iter()) {
+            *m = c == 0;
+        }
+        Ok(())
     }
 
     /// The state of every stage as bytes (versioned).

@@ -50,6 +50,7 @@ __all__ = [
     "MODES",
     "Mode",
     "alert_places",
+    "checked_words",
     "format_clock",
     "format_duration",
     "guess_mode",
@@ -420,6 +421,19 @@ def format_duration(seconds: float | None) -> str:
         return f"{sign}{m} min {s} s" if s else f"{sign}{m} min"
     h, m = divmod(m, 60)
     return f"{sign}{h} h {m:02d} min"
+
+
+def checked_words(status: dict[str, Any], when: str) -> str:
+    """How long before the last frame a still load last agreed with the weight, from the
+    in-use drift correction's status (``checked_t``, ``checked_age_s``; the bounds widen with
+    that age), in words; ``when`` ends the phrase (``before the end``, ``ago``)."""
+    age = status.get("checked_age_s")
+    if status.get("checked_t") is None:
+        since = "" if age is None else f" ({format_duration(age)} since the first correction)"
+        return "never checked against a still weight" + since
+    if age is None:
+        return f"last checked against the weight at t = {status['checked_t']:.0f} s"
+    return f"last checked against the weight {format_duration(age)} {when}"
 
 
 def format_clock(start: float | None, t: float) -> str:

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense.apps.views import checked_words
 from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
 from texsense.commands._options import add_accept_truncated, refuse_replacing
@@ -350,7 +351,7 @@ def in_use_line(status: dict[str, Any]) -> str:
     return (
         f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
         f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
-        f"zero taken {zeros}{weight}"
+        f"zero taken {zeros}{weight}; {checked_words(status, 'before the end')}"
     )
 
 

@@ -237,6 +237,11 @@ class InUseDrift:
         self.state = state
         return self.reset()
 
+    @property
+    def last_t(self) -> float | None:
+        """The time of the last frame of the stream (s), None before the first."""
+        return self._last_t
+
     def corrected(self, x0: np.ndarray) -> np.ndarray:
         """``F(F⁻¹(x0) - creep)`` where an element reads above zero and has creep; else
         ``x0`` (exact: what the per-frame gain approximates between refreshes)."""

@@ -61,8 +61,10 @@ class InUseState:
         return 0.0 if since is None else max(t - since, 0.0) / 3600.0
 
     def status(self, t: float | None = None) -> dict[str, Any]:
-        """The state in words and numbers (dashboard, metadata, report)."""
+        """The state in words and numbers (dashboard, metadata, report); at ``t`` (the last
+        frame's time) also ``checked_age_s``, the age the bounds are widened by (:meth:`age_h`)."""
         state = "waiting for stillness" if self.first_t is None else "correcting"
+        age = None if t is None or self.first_t is None else round(3600.0 * self.age_h(t), 1)
         return {
             "state": state,
             "load_correction": round(float(self.load_correction), 4),
@@ -78,6 +80,7 @@ class InUseState:
             "weight_n": None if self.weight is None else round(float(self.weight), 1),
             "weighed": self.weighed,
             "checked_t": self.checked_t,
+            "checked_age_s": age,
         }
 
     def to_dict(self) -> dict[str, Any]:

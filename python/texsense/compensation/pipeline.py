@@ -184,8 +184,13 @@ class Pipeline:
         self.reset()
         self._dt1 = np.zeros(1)
         self._all_valid = np.ones(layout.n_elements, bool)
+        # a stream of one compiled pass steps into arrays it holds (Chain.step, issue 34)
+        one = self._parts[0] if len(self._parts) == 1 and self.interval is None else None
+        self._live = one if isinstance(one, Chain) else None
+        n = layout.n_elements
+        self._held = (np.empty(n), np.empty(n, np.uint8), np.empty(n, bool))
         #: the failure codes of the last frames (0: measured)
-        self.codes_ = np.zeros((0, layout.n_elements), np.uint8)
+        self.codes_: np.ndarray = np.zeros((0, layout.n_elements), np.uint8)
 
     def _in_use_setup(
         self, in_use: bool, options: dict[str, Any] | None, interval: float | None
@@ -375,7 +380,7 @@ class Pipeline:
         """The in-use drift correction now (:meth:`InUseState.status`), or why it is off."""
         if self.estimator is None:
             return {"state": "off", "why": self.in_use_note or "not asked for"}
-        return self.estimator.state.status()
+        return self.estimator.state.status(self.estimator.last_t)
 
     def process(
         self, frames_pF: npt.ArrayLike, times_s: npt.ArrayLike, valid: npt.ArrayLike | None = None
@@ -461,14 +466,21 @@ class Pipeline:
         x = np.ascontiguousarray(values, dtype=np.float64)
         if x.shape != (n,):
             raise ParameterError(f"expected a frame of {n} elements, got shape {x.shape}")
-        v = self._all_valid if valid is None else np.ascontiguousarray(valid, dtype=bool)
-        if v.shape != (n,):
+        v = None if valid is None else np.ascontiguousarray(valid, dtype=bool)
+        if v is not None and v.shape != (n,):
             raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
         t = float(t)
         dt = 0.0 if self._last_t is None else t - self._last_t
-        if not (dt >= 0 and np.isfinite(t)):
+        if not (dt >= 0 and -np.inf < t < np.inf):
             raise ParameterError("frame times must be numbers and must not decrease")
+        if self._live is not None:  # one compiled pass: into the arrays held, then copies
+            out, codes, ok = self._held
+            self._live.step(dt, x, v, out, codes, ok)
+            self._last_t = t
+            self.codes_ = codes.copy()
+            return out.copy(), ok.copy()
         self._dt1[0] = dt
+        v = self._all_valid if v is None else v
         # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
         out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
         self.codes_ = codes[0]

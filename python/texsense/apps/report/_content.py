@@ -12,7 +12,13 @@ from texsense import __version__
 from texsense.apps.bed import BANDS, find_regions, region_elements
 from texsense.apps.review import BLOCK, Review, side_labels
 from texsense.apps.roi import roi_elements
-from texsense.apps.views import format_clock, format_duration, place_names, seat_zones
+from texsense.apps.views import (
+    checked_words,
+    format_clock,
+    format_duration,
+    place_names,
+    seat_zones,
+)
 from texsense.data import units
 
 __all__ = ["ReportContent", "Table", "report_content"]
@@ -150,7 +156,11 @@ def _certainty_rows(review: Review) -> list[list[str]]:
                 f"{iu.get('zeroed', 0)} times"
             )
             if iu.get("weight_n") is not None:
-                text += f"; weight {iu['weight_n']:.0f} N, kept {iu.get('weighed', 0)} times"
+                kept = iu.get("weighed", 0)
+                text += (
+                    f"; weight {iu['weight_n']:.0f} N, kept {kept} time{'' if kept == 1 else 's'}"
+                )
+            text += "; " + checked_words(iu, "before the end")
         elif iu.get("state") == "off":
             text = f"off: {iu.get('why', '')}"
         else:

@@ -118,7 +118,16 @@ function inUseText(s) {  // the in-use drift correction's state (issue 37)
   if (s.state !== "correcting") return "drift corrected in use: waiting for a still moment";
   const pct = fmt(100 * s.load_correction, 1);
   return `drift corrected in use: load ${s.load_correction >= 0 ? "+" : ""}${pct} %, since ${duration(s.since_t)} into the data, from ${duration(s.still_s)} still; zero taken ${s.zeroed} ×`
-    + (s.weight_n == null ? "" : `; weight ${fmt(s.weight_n, 0)} N, kept ${s.weighed} ×`);
+    + (s.weight_n == null ? "" : `; weight ${fmt(s.weight_n, 0)} N, kept ${s.weighed} ×`)
+    + `; ${checkedText(s)}`;
+}
+
+function checkedText(s) {  // how long ago a still load last agreed with the weight (the bounds widen with it)
+  if (s.checked_t == null) {
+    return "never checked against a still weight" + (s.checked_age_s == null ? "" : ` (${duration(s.checked_age_s)} since the first correction)`);
+  }
+  if (s.checked_age_s == null) return `last checked against the weight at ${duration(s.checked_t)} into the data`;
+  return `last checked against the weight ${duration(s.checked_age_s)} ago`;
 }
 
 async function api(path, method = "GET", body = undefined) {
