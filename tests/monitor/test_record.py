@@ -83,8 +83,17 @@ def test_monitor_without_calibration_shows_and_records_raw_pf(device, tmp_path):
 
 
 def _type_load(proc, text):
+    """Type a load on the device and wait until it says it serves it (however slow the
+    machine), then for a few frames of it."""
     proc.stdin.write(text + "\n")
     proc.stdin.flush()
+    said = f"texsense simulate device: load {text} from frame"
+    for line in proc.stdout:
+        if line.startswith(said):
+            break
+    else:
+        raise AssertionError(f"the device ended before taking the load {text}")
+    time.sleep(0.5)
 
 
 def test_device_record_calibrate_process_through_the_serial_line(device, tmp_path):
@@ -94,7 +103,6 @@ def test_device_record_calibrate_process_through_the_serial_line(device, tmp_pat
     for name, load_text in (("zero", None), ("one", "uniform:1.0"), ("two", "uniform:2.0")):
         if load_text:
             _type_load(proc, load_text)
-            time.sleep(0.5)
         rc, _, err = run_cli("record", "--source", port, "-o", f"{name}.h5", "--frames", "6",
                              cwd=tmp_path)  # fmt: skip
         assert rc == 0, err
