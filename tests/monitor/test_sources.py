@@ -4,6 +4,8 @@ import random
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from texsense import Layout, Recording
 from texsense.data.protocol import (
@@ -296,3 +298,47 @@ def test_cli_iio_source_with_a_multiplexer_from_a_file(tmp_path):
         args.multiplexer = bad
         with pytest.raises(ParameterError, match=what):
             open_source(args)
+
+
+_KEYS = st.sampled_from(["seq", "t", "values", "unit", "note", "vals", "value"])
+_SCALARS = st.one_of(
+    st.none(), st.booleans(), st.integers(-5, 2**40), st.floats(allow_nan=False),
+    st.text(max_size=8),
+)  # fmt: skip
+
+
+@st.composite
+def _payloads(draw: st.DrawFn) -> bytes:
+    """Plain payloads, payloads with odd keys and values, and their bytes cut or spliced."""
+    d = {"seq": draw(st.integers(-2, 2**40)), "t": draw(_SCALARS | st.floats(0, 1e10))}
+    d["values"] = draw(st.lists(_SCALARS | st.floats(-1e3, 1e3), min_size=0, max_size=5))
+    for key in draw(st.lists(_KEYS, max_size=3)):
+        d[key] = draw(_SCALARS | st.lists(_SCALARS, max_size=3))
+    b = json.dumps(d).encode()
+    if draw(st.booleans()):
+        i = draw(st.integers(0, len(b)))
+        j = draw(st.integers(i, len(b)))
+        b = b[:i] + draw(st.sampled_from([b"", b"[", b"]", b'"', b",", b"{", b'"values"'])) + b[j:]
+    return b
+
+
+@settings(max_examples=300, deadline=None)
+@given(_payloads())
+def test_a_peek_never_disagrees_with_the_parse(payload):
+    """Generated payloads: a peek that answers gives the parse's seq and t (when the parse
+    accepts the frame: a skipped frame's values are not judged), an error it raises is the
+    parse's, and anything it cannot vouch for it leaves to the parse (None)."""
+    try:
+        peeked = peek_mqtt_payload(payload, 3)
+    except (CountError, PayloadSizeError) as e:
+        with pytest.raises(type(e)):
+            parse_mqtt_payload(payload, 3)
+        return
+    try:
+        frame = parse_mqtt_payload(payload, 3)
+    except CountError:
+        assert peeked is None, (payload, peeked)  # a wrong count is said by both
+        return
+    except ProtocolError:
+        return
+    assert peeked is None or peeked == (frame.seq, frame.t), (payload, peeked)
