@@ -29,6 +29,7 @@ __all__ = [
     "__version__",
     "everett_terms",
     "mcu_blob_info",
+    "parse_json_numbers",
     "parse_row",
     "set_simd",
     "simd_path",
@@ -252,6 +253,10 @@ def set_simd(enabled: bool) -> None:
 
 def parse_row(line: str, sep: str, expected: int) -> npt.NDArray[np.float32] | None:
     """Exactly ``expected`` numbers separated by ``sep``, as float32, or None (the fast path)."""
+
+def parse_json_numbers(text: bytes, expected: int) -> npt.NDArray[np.float64] | None:
+    """The inside of a JSON list of ``expected`` numbers or nulls (NaN), or None (the fast
+    path of a frame's values)."""
 
 def everett_terms(inputs: _F64, u_min: float, u_max: float) -> tuple[_U64, _F64, _F64, _F64]:
     """The Everett terms (indptr, alpha, beta, coef) of every sample of an input history."""

@@ -342,3 +342,86 @@ def test_a_peek_never_disagrees_with_the_parse(payload):
     except ProtocolError:
         return
     assert peeked is None or peeked == (frame.seq, frame.t), (payload, peeked)
+
+
+_NUMBERS = st.one_of(
+    st.floats(allow_nan=False, allow_infinity=False).map(repr),
+    st.integers(-(2**70), 2**70).map(str),
+    st.sampled_from(["null", "-0", "-0.0", "0e0", "1E+2", "2.5e-3", "-1.5E-300", "4.9e-324"]),
+)  # fmt: skip
+_ODD = st.sampled_from(["1e400", "-1e400", "NaN", "Infinity", "01", "1.", ".5", "+1", "true",
+                        '"1"', "1e", "0x1", "", "[1]", "{}"])  # fmt: skip
+_EXTRA = st.sampled_from([
+    ',"unit":"pF"', ',"unit":"kPa"', ',"unit":"V"', ',"unit":3', ',"dt":0.001', ',"dt":-1',
+    ',"element_times":[0,1,2]', ',"element_times":[0,1]', ',"values":[1,2,3]', ',"values":false',
+    ',"values":0', ',"\\u0076alues":[4,5,6]', ',"\\u0076alues":0', ',"note":"a\\"values\\":[1]"',
+    ',"x":{"values":[1]}', ',"note":"\\u00e9t\u00e9"', ',"note":"été"',
+])  # fmt: skip
+
+
+@st.composite
+def _value_payloads(draw: st.DrawFn) -> bytes:
+    """Payloads of three values written as JSON writes numbers, and (each now and then) as it
+    does not, another count, odd seq and t, odd keys after them, a BOM or a byte in front, and
+    their bytes cut or spliced."""
+    odd = lambda: draw(st.integers(0, 5)) == 0  # noqa: E731
+    tokens = draw(st.lists(_NUMBERS, min_size=3, max_size=3))
+    if odd():
+        tokens[draw(st.integers(0, 2))] = draw(_ODD)
+    if odd():
+        tokens = tokens[: draw(st.sampled_from([0, 2]))] + (["5"] if odd() else [])
+    space = draw(st.sampled_from(["", " ", "\n\t", "\r "] + (["\x0b"] if odd() else [])))
+    seq = draw(st.sampled_from(["-1", "true", "1.5", '"7"'])) if odd() else "7"
+    t = draw(st.sampled_from(["null", "1e999", '"1"'])) if odd() else "12.25"
+    text = draw(st.sampled_from(['{{"seq":{s},"t":{t},"values":{v}{x}}}',
+                                 '{{"values" :{v},"t":{t},"seq":{s}{x}}}']))  # fmt: skip
+    if odd():
+        text = draw(st.sampled_from(['{{"t":{t},"values":{v}{x}}}', "[{v}]"]))
+    values = "[" + space + ("," + space).join(tokens) + space + "]"
+    b = text.format(s=seq, t=t, v=values, x=draw(_EXTRA) if odd() else "").encode()
+    if odd():
+        b = draw(st.sampled_from([b"\xef\xbb\xbf", b" ", b"\xff"])) + b
+    if odd():
+        i = draw(st.integers(0, len(b)))
+        j = draw(st.integers(i, min(i + 3, len(b))))
+        b = b[:i] + draw(st.sampled_from([b"", b"[", b"]", b'"', b",", b"{", b"\\"])) + b[j:]
+    return b
+
+
+@settings(max_examples=400, deadline=None)
+@given(_value_payloads())
+def test_the_compiled_values_read_gives_the_whole_parse_frame_or_its_error(payload):
+    """Generated payloads: parse_mqtt_payload (values read by the compiled core where the
+    payload is plain) gives exactly the frame of the parse by json alone (seq, t, unit, element
+    times, every value to the bit, NaN for null, the sign of a zero), or its error, the same
+    class and line."""
+    from texsense.data.protocol import _parse_whole
+
+    try:
+        want = _parse_whole(payload, 3)
+    except ProtocolError as e:
+        with pytest.raises(type(e)) as got:
+            parse_mqtt_payload(payload, 3)
+        assert str(got.value) == str(e) and "\n" not in str(e)
+        return
+    frame = parse_mqtt_payload(payload, 3)
+    assert (frame.seq, frame.t, frame.unit) == (want.seq, want.t, want.unit)
+    np.testing.assert_array_equal(frame.element_times, want.element_times)
+    assert frame.values.dtype == np.float64
+    assert frame.values.tobytes() == want.values.tobytes(), (payload, frame.values, want.values)
+
+
+def test_plain_payloads_take_the_compiled_values_read():
+    """The station's payloads are of the plain form: their values are read by the compiled
+    core, not by json (what makes the parse cheap), to the same numbers."""
+    import texsense.data.protocol as protocol
+
+    payload = json.dumps({"seq": 3, "t": 1.5, "values": [0.1, -2, None, 1e-7], "unit": "pF"})
+    whole = protocol._parse_whole
+    try:
+        protocol._parse_whole = None  # type: ignore[assignment]  (not reached)
+        frame = protocol.parse_mqtt_payload(payload.encode(), 4)
+    finally:
+        protocol._parse_whole = whole
+    np.testing.assert_array_equal(frame.values, [0.1, -2.0, np.nan, 1e-7])
+    assert (frame.seq, frame.t, frame.unit) == (3, 1.5, "pF")

@@ -17,3 +17,17 @@ pub(crate) fn py_parse_row<'py>(
     let mut out = Vec::new();
     texsense_core::text::parse_row(line, sep, expected, &mut out).then(|| out.into_pyarray(py))
 }
+
+/// The inside of a JSON list of `expected` numbers or `null`s (an MQTT frame's `values`) as a
+/// float64 array (null: NaN), or None when it is not exactly that (the station's full JSON
+/// parse then says what is wrong).
+#[pyfunction]
+#[pyo3(name = "parse_json_numbers")]
+pub(crate) fn py_parse_json_numbers<'py>(
+    py: Python<'py>,
+    text: &[u8],
+    expected: usize,
+) -> Option<Bound<'py, PyArray1<f64>>> {
+    let mut out = Vec::new();
+    texsense_core::text::parse_json_numbers(text, expected, &mut out).then(|| out.into_pyarray(py))
+}

@@ -57,6 +57,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import parse_json_numbers
 from texsense.data import units
 from texsense.data.layout import Layout, parse_orientation
 from texsense.exceptions import ParameterError
@@ -222,6 +223,31 @@ def _finite(v: float) -> bool:
         return False
 
 
+def _splice(b: bytes) -> tuple[dict[str, Any], bytes] | None:
+    """A payload's own ``values`` list cut out: the rest parsed as JSON (``values`` 0 in its
+    place) and the bytes inside the list; None unless the payload is of the plain form where
+    that is certain (one key ``values``, holding a flat list, no escapes outside it, UTF-8):
+    then parse it whole."""
+    i = b.find(b'"values"')
+    j = b.find(b"[", i)
+    k = b.find(b"]", j)
+    if i < 0 or j < 0 or k < 0 or b[i + 8 : j].strip(b" \t\r\n") != b":":
+        return None
+    inner = b[j + 1 : k]
+    if any(c in inner for c in (b"[", b"{", b'"')):
+        return None
+    rest = b[:i] + b'"values":0' + b[k + 1 :]
+    if b"\\" in rest or rest.find(b'"values"', i + 1) >= 0:  # another key may be "values"
+        return None
+    try:
+        d = json.loads(rest.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if not isinstance(d, dict) or d.get("values") != 0:  # not the payload's own key
+        return None
+    return d, inner
+
+
 def peek_mqtt_payload(
     payload: bytes | str, n_elements: int, max_bytes: int | None = None
 ) -> tuple[int, float] | None:
@@ -233,21 +259,10 @@ def peek_mqtt_payload(
     limit = payload_limit(n_elements) if max_bytes is None else max_bytes
     if len(payload) > limit:
         raise PayloadSizeError(len(payload), limit)
-    b = payload.encode() if isinstance(payload, str) else payload
-    i = b.find(b'"values"')
-    j = b.find(b"[", i)
-    k = b.find(b"]", j)
-    if i < 0 or j < 0 or k < 0 or b[i + 8 : j].strip() != b":":
+    got = _splice(payload.encode() if isinstance(payload, str) else payload)
+    if got is None:
         return None
-    inner = b[j + 1 : k]
-    if any(c in inner for c in (b"[", b"{", b'"')):
-        return None
-    try:
-        d = json.loads(b[:i] + b'"values":0' + b[k + 1 :])
-    except (ValueError, UnicodeDecodeError):
-        return None
-    if not isinstance(d, dict) or d.get("values") != 0:  # not the payload's own key
-        return None
+    d, inner = got
     seq, t = d.get("seq"), d.get("t")
     if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
         return None  # (parsed whole: the error named there)
@@ -263,10 +278,23 @@ def parse_mqtt_payload(
     payload: bytes | str, n_elements: int, max_bytes: int | None = None
 ) -> Frame:
     """Parse one MQTT message (JSON, see the module docstring); ``max_bytes`` (default
-    :func:`payload_limit`) is checked first, before anything is parsed."""
+    :func:`payload_limit`) is checked first, before anything is parsed. A payload of the
+    plain form (one flat list of numbers or nulls) has its values read by the compiled core
+    (:func:`texsense._core.parse_json_numbers`, JSON's number grammar) and the rest by
+    :mod:`json`; anything else, and anything the core does not read, is parsed whole, which
+    names what is wrong. Both give the same frame (tested on generated payloads)."""
     limit = payload_limit(n_elements) if max_bytes is None else max_bytes
     if len(payload) > limit:
         raise PayloadSizeError(len(payload), limit)
+    got = _splice(payload) if isinstance(payload, bytes) else None
+    values = None if got is None else parse_json_numbers(got[1], n_elements)
+    if got is not None and values is not None:
+        return _frame_of(got[0], values, n_elements)
+    return _parse_whole(payload, n_elements)
+
+
+def _parse_whole(payload: bytes | str, n_elements: int) -> Frame:
+    """:func:`parse_mqtt_payload` by :mod:`json` alone (the size already checked)."""
     try:
         text = payload.decode("utf-8") if isinstance(payload, bytes) else payload
     except UnicodeDecodeError:
@@ -280,18 +308,34 @@ def parse_mqtt_payload(
     for key in ("seq", "t", "values"):
         if key not in d:
             raise ProtocolError(f"payload lacks {key!r}")
-    seq, t, vals = d["seq"], d["t"], d["values"]
-    if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
-        raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {str(seq)[:20]!r}")
-    if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
-        raise ProtocolError(f"'t' must be a finite number, got {str(t)[:20]!r}")
+    _seq_and_t(d)
+    vals = d["values"]
     if not isinstance(vals, list):
         raise ProtocolError(f"'values' must be a list of {n_elements} numbers")
     if len(vals) != n_elements:
         raise CountError(
             f"'values' must be a list of {n_elements} numbers, got {len(vals)}", len(vals)
         )
-    values = _values(vals, n_elements)
+    return _frame_of(d, _values(vals, n_elements), n_elements)
+
+
+def _seq_and_t(d: dict[str, Any]) -> tuple[int, float]:
+    """A payload's ``seq`` and ``t``, checked (after its keys were)."""
+    for key in ("seq", "t"):
+        if key not in d:
+            raise ProtocolError(f"payload lacks {key!r}")
+    seq, t = d["seq"], d["t"]
+    if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
+        raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {str(seq)[:20]!r}")
+    if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
+        raise ProtocolError(f"'t' must be a finite number, got {str(t)[:20]!r}")
+    return seq, t
+
+
+def _frame_of(d: dict[str, Any], values: np.ndarray, n_elements: int) -> Frame:
+    """The frame of a payload's object ``d`` whose values were read: its seq, time, unit
+    and element times, checked."""
+    seq, t = _seq_and_t(d)
     unit = d.get("unit", "pF")
     if not isinstance(unit, str):
         raise ProtocolError("'unit' must be a string")
