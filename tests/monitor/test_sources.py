@@ -78,14 +78,17 @@ def test_mqtt_payload_and_errors():
 
 def test_a_payload_peeked_gives_what_its_parse_gives_or_says_to_parse_it():
     """A skipped frame's time without its values (peek_mqtt_payload): the parse's seq and t,
-    its count checked; anything not of the plain form is left to the full parse (None)."""
+    its count checked; anything not of the plain form or of another count is left to the
+    full parse (None), which says what is wrong (a list that is not JSON, or its count)."""
     plain = json.dumps({"seq": 1, "t": 1e9, "values": [1e-3, 2, -4]}).encode()
     for payload in [json.dumps({"seq": 7, "t": 2.5, "values": [1, None, 3.0]}),
                     '{"values" : [ 1,2 ,3 ], "unit": "pF", "t": 4, "seq": 0}', plain]:  # fmt: skip
         f = parse_mqtt_payload(payload, 3)
         assert peek_mqtt_payload(payload, 3) == (f.seq, f.t)
-    with pytest.raises(CountError):
-        peek_mqtt_payload(json.dumps({"seq": 1, "t": 1, "values": [1, 2]}), 3)
+    assert peek_mqtt_payload(json.dumps({"seq": 1, "t": 1, "values": [1, 2]}), 3) is None
+    assert peek_mqtt_payload(b'{"seq": 0, "t": 0, "values": [2,00.0]}', 3) is None
+    with pytest.raises(ProtocolError, match="not JSON"):  # not a count of 2
+        parse_mqtt_payload(b'{"seq": 0, "t": 0, "values": [2,00.0]}', 3)
     with pytest.raises(PayloadSizeError):
         peek_mqtt_payload(b" " * 100, 3, max_bytes=50)
     for payload in ['{"unit": "values", "seq": 1, "t": 1, "values": [1, 2, 3]}',
@@ -337,7 +340,7 @@ def test_a_peek_never_disagrees_with_the_parse(payload):
     try:
         frame = parse_mqtt_payload(payload, 3)
     except CountError:
-        assert peeked is None, (payload, peeked)  # a wrong count is said by both
+        assert peeked is None, (payload, peeked)  # a wrong count is left to the parse
         return
     except ProtocolError:
         return

@@ -253,9 +253,9 @@ def peek_mqtt_payload(
 ) -> tuple[int, float] | None:
     """A payload's ``seq`` and ``t`` without parsing its values, for a frame that will not be
     processed (a station that is behind skips it, taking only its time): the ``values`` list
-    is counted (raising :class:`CountError` as :func:`parse_mqtt_payload` does) and left out
-    of the JSON that is parsed. None when the payload is not of that plain form (numbers or
-    nulls in one list): then parse it whole. The size is checked first."""
+    is counted and left out of the JSON that is parsed. None when the payload is not of that
+    plain form (numbers or nulls in one list) or has another count: then parse it whole (which
+    says whether the list is JSON and how many values it has). The size is checked first."""
     limit = payload_limit(n_elements) if max_bytes is None else max_bytes
     if len(payload) > limit:
         raise PayloadSizeError(len(payload), limit)
@@ -269,9 +269,7 @@ def peek_mqtt_payload(
     if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
         return None
     count = inner.count(b",") + 1 if inner.strip() else 0
-    if count != n_elements:
-        raise CountError(f"'values' must be a list of {n_elements} numbers, got {count}", count)
-    return seq, float(t)
+    return (seq, float(t)) if count == n_elements else None
 
 
 def parse_mqtt_payload(
