@@ -143,7 +143,8 @@ def test_chain_step_writes_what_run_gives_into_the_arrays_held(seat):
     """`Chain.step` (the live path of `Pipeline.step`, issue 34): one frame into arrays the
     caller holds gives the values and codes of `run`, frame after frame; an array of the
     wrong shape, or an output that is the input, is one ShapeError line; the pipeline hands
-    out copies (a frame kept stays as it was after the next step)."""
+    out copies (a frame kept stays as it was after the next step), or with keep=False the
+    arrays it holds (no copy per frame)."""
     from texsense.exceptions import ShapeError
 
     cal, rec = seat
@@ -178,3 +179,16 @@ def test_chain_step_writes_what_run_gives_into_the_arrays_held(seat):
         assert a is not b
     np.testing.assert_array_equal(first, kept[0])
     np.testing.assert_array_equal(ok, kept[1])
+    # keep=False (a caller that keeps nothing past the next step): the arrays held, no copies,
+    # the same numbers as the copies of a pipeline stepped alike
+    twin = Pipeline(cal, lay, repair="neighbour-mean")
+    pipe.reset()
+    held = None
+    for k in range(3):
+        want, want_ok = twin.step(rec.frames[k], None, rec.times[k])
+        got, got_ok = pipe.step(rec.frames[k], None, rec.times[k], keep=False)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(got_ok, want_ok)
+        np.testing.assert_array_equal(pipe.codes_, twin.codes_)
+        assert held is None or (got is held[0] and got_ok is held[1] and pipe.codes_ is held[2])
+        held = got, got_ok, pipe.codes_

@@ -311,7 +311,8 @@ def test_reference_detector_median_equals_a_brute_force_median():
 
 
 def test_the_pipeline_follows_the_streaming_contract(mat_setup):
-    """step(values, valid, t) with t required, run, reset, parameters from the constructor."""
+    """step(values, valid, t) with t required (anything more keyword-only, with a default),
+    run, reset, parameters from the constructor."""
     import inspect
 
     cal, *_, scan = mat_setup
@@ -324,7 +325,10 @@ def test_the_pipeline_follows_the_streaming_contract(mat_setup):
     ]  # fmt: skip
     assert params["repair"] == "idw8" and params["drift"] is False
     step = inspect.signature(Pipeline.step).parameters
-    assert list(step)[1:] == ["values", "valid", "t"]
+    positional = [p for p in step.values() if p.kind is not inspect.Parameter.KEYWORD_ONLY]
+    assert [p.name for p in positional][1:] == ["values", "valid", "t"]
+    more = [p for p in step.values() if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    assert all(p.default is not inspect.Parameter.empty for p in more)
     assert step["t"].default is inspect.Parameter.empty
     batch = pipe.run(rec)
     pipe.reset()

@@ -124,6 +124,53 @@ def test_region_stats_and_raw_data():
         stats.region_stats(Recording([[1.0]], [0.0], Layout.grid(1, 1)))
 
 
+@pytest.mark.parametrize("unit", ["N/cm2", "kPa"])
+@pytest.mark.parametrize("gaps", [False, True], ids=["all-valid", "gaps"])
+def test_frame_stats_are_one_computation_and_match_brute_force(monkeypatch, unit, gaps):
+    """frame_stats and one_frame_stats are one computation (stats._block_stats, called once
+    by each), right on frames with every reading valid (the plain reductions a station's
+    frames take) and on frames with invalid readings (left out): load, contact area, peak,
+    3 x 3 PPI, centre of force and coefficient of variation against loops over the elements
+    and windows."""
+    rng = np.random.default_rng(3)
+    lay = Layout.grid(6, 5, pitch_cm=1.5)
+    frames = rng.gamma(1.0, 20.0, (6, lay.n_elements)) * (rng.random((6, lay.n_elements)) < 0.7)
+    valid = np.ones(frames.shape, bool)
+    if gaps:  # frames 1 and 4 with invalid readings, 5 with none valid
+        valid[1, [0, 7, 8]] = False
+        valid[4, ::3] = False
+        valid[5] = False
+    rec = Recording(frames, np.arange(6.0), lay, "pressure", unit, valid=valid)
+    frames = rec.frames.astype(np.float64)  # (a recording stores float32)
+    calls = []
+    block = stats._block_stats
+    monkeypatch.setattr(stats, "_block_stats", lambda *a, **k: calls.append(1) or block(*a, **k))
+    got = stats.frame_stats(rec, threshold=5.0)
+    assert len(calls) == 1
+    f = 0.1 if unit == "kPa" else 1.0  # N/cm² of the unit, for the load
+    area, xy = lay.area_cm2, lay.xy_cm
+    maps = lay.to_grid(np.where(valid, frames, np.nan))
+    for t in range(6):
+        v, ok = frames[t], valid[t]
+        if not ok.any():
+            assert np.isnan(got.load_N[t]) and np.isnan(got.peak[t]) and np.isnan(got.ppi[t])
+            continue
+        assert got.load_N[t] == pytest.approx(sum(v[i] * f * area[i] for i in np.flatnonzero(ok)))
+        assert got.contact_area_cm2[t] == pytest.approx(area[ok & (v > 5.0)].sum())
+        assert got.peak[t] == v[ok].max()
+        windows = [maps[t, r : r + 3, c : c + 3] for r in range(4) for c in range(3)]
+        assert got.ppi[t] == pytest.approx(max(np.nanmean(w) for w in windows))
+        w = np.where(ok, np.maximum(v * area, 0.0), 0.0)
+        np.testing.assert_allclose(got.cof_cm[t], (w @ xy) / w.sum())
+        loaded = v[ok & (v > 5.0)]
+        assert got.cov[t] == pytest.approx(loaded.std() / loaded.mean())
+    one = stats.one_frame_stats(frames[0] * f, lay, threshold=5.0 * f)
+    assert len(calls) == 2
+    assert one["peak"] == pytest.approx(got.peak[0] * f)
+    assert one["load_N"] == pytest.approx(got.load_N[0])
+    assert one["ppi"] == pytest.approx(got.ppi[0] * f)
+
+
 @pytest.mark.parametrize("layout", [Layout.grid(6, 5, pitch_cm=1.5),
                                     Layout.points(np.random.default_rng(1).uniform(0, 9, (12, 2)))],
                          ids=["grid", "points"])  # fmt: skip

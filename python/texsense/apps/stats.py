@@ -88,8 +88,7 @@ def total_load(rec: Recording) -> _Array:
     """Total force per frame in N: sum of pressure (N/cm²) x element area (cm²), eq. 2.1 of a
     pressure map. Frames without any valid reading give NaN."""
     v = _values(rec, need_pressure=True)
-    count = np.sum(np.isfinite(v), axis=1)
-    return _nan_if_empty(np.nansum(v * rec.layout.area_cm2, axis=1), count)
+    return _load_of(v, rec.layout.area_cm2, np.isfinite(v))
 
 
 def contact_area(rec: Recording, threshold: float = 0.0) -> _Array:
@@ -119,7 +118,9 @@ def centre_of_force(rec: Recording) -> _Array:
 def centre_of_force_values(values: npt.ArrayLike, layout: Layout) -> _Array:
     """:func:`centre_of_force` of plain frames (T, N) on ``layout`` (NaN readings count 0)."""
     v = np.asarray(values, dtype=np.float64)
-    w = np.clip(np.nan_to_num(v, nan=0.0) * layout.area_cm2, 0.0, None)
+    if not np.isfinite(v).all():
+        v = np.nan_to_num(v, nan=0.0)
+    w = np.maximum(v * layout.area_cm2, 0.0)  # (np.clip's lower end, without its wrapper)
     total = w.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         xy = (w @ layout.xy_cm) / total[:, None]
@@ -130,15 +131,7 @@ def centre_of_force_values(values: npt.ArrayLike, layout: Layout) -> _Array:
 def coefficient_of_variation(rec: Recording, threshold: float = 0.0) -> _Array:
     """Standard deviation / mean of the element values above ``threshold`` per frame; NaN
     with fewer than two loaded elements."""
-    v = _values(rec)
-    with np.errstate(invalid="ignore"):
-        loaded = np.where(v > threshold, v, np.nan)
-    count = np.sum(np.isfinite(loaded), axis=1)
-    out = np.full(rec.n_frames, np.nan)
-    ok = count >= 2
-    if ok.any():
-        out[ok] = np.nanstd(loaded[ok], axis=1) / np.nanmean(loaded[ok], axis=1)
-    return out
+    return _cov_of(_values(rec), threshold)
 
 
 def _window_means_grid(maps: _Array, k: int) -> _Array:
@@ -146,19 +139,30 @@ def _window_means_grid(maps: _Array, k: int) -> _Array:
     t, rows, cols = maps.shape
     kr, kc = min(k, rows), min(k, cols)
     finite = np.isfinite(maps)
-    vals = np.where(finite, maps, 0.0)
-
-    def box_sums(a: _Array) -> _Array:
-        s = np.zeros((a.shape[0], rows + 1, cols + 1))
-        s[:, 1:, 1:] = a.cumsum(axis=1).cumsum(axis=2)
-        return s[:, kr:, kc:] - s[:, :-kr, kc:] - s[:, kr:, :-kc] + s[:, :-kr, :-kc]
-
-    sums = box_sums(vals)
-    counts = np.rint(box_sums(finite.astype(np.float64)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        means = np.where(counts > 0, sums / counts, -np.inf)
+    if finite.all():  # every window full: the count is kr x kc (as counted below)
+        means = _window_sums(maps, kr, kc) / float(kr * kc)
+    else:
+        sums = _window_sums(np.where(finite, maps, 0.0), kr, kc)
+        counts = _window_sums(finite.astype(np.float64), kr, kc)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.where(counts > 0, sums / counts, -np.inf)
     best = means.reshape(t, -1).max(axis=1)
     return np.where(np.isfinite(best), best, np.nan)
+
+
+def _window_sums(a: _Array, kr: int, kc: int) -> _Array:
+    """The sum of every kr x kc window of maps (T, R, C) -> (T, R - kr + 1, C - kc + 1): kc
+    columns added, then kr rows of those (kr + kc - 2 additions of shifted maps, no running
+    sums whose differences would cancel)."""
+    c = a.shape[2] - kc + 1
+    across = a[:, :, :c].copy()
+    for j in range(1, kc):
+        across += a[:, :, j : j + c]
+    r = a.shape[1] - kr + 1
+    out = across[:, :r].copy()
+    for i in range(1, kr):
+        out += across[:, i : i + r]
+    return out
 
 
 def peak_pressure_index(rec: Recording, window: int = 3) -> _Array:
@@ -168,20 +172,23 @@ def peak_pressure_index(rec: Recording, window: int = 3) -> _Array:
     left out of the mean; the window shrinks on grids smaller than k). On a points layout the
     group is the peak element and its k² - 1 nearest elements.
     """
+    return _ppi_of(_values(rec), rec.layout, window)
+
+
+def _ppi_of(v: _Array, lay: Layout, window: int) -> _Array:
+    """:func:`peak_pressure_index` of frames with invalid readings NaN."""
     if window < 1:
         raise ParameterError(f"window must be >= 1, got {window}")
-    v = _values(rec)
-    lay = rec.layout
-    out = np.empty(rec.n_frames)
+    out = np.empty(v.shape[0])
     if lay.shape is not None:
-        for start in range(0, rec.n_frames, _BLOCK):
+        for start in range(0, v.shape[0], _BLOCK):
             block = lay.to_grid(v[start : start + _BLOCK])
             out[start : start + _BLOCK] = _window_means_grid(block, window)
         return out
     k = min(window * window, lay.n_elements)
     d = np.linalg.norm(lay.xy_cm[:, None, :] - lay.xy_cm[None, :, :], axis=2)
     nearest = np.argsort(d, axis=1, kind="stable")[:, :k]
-    for t in range(rec.n_frames):
+    for t in range(v.shape[0]):
         row = v[t]
         if not np.isfinite(row).any():
             out[t] = np.nan
@@ -204,14 +211,18 @@ class FrameStats:
 
 
 def frame_stats(rec: Recording, threshold: float = 0.0, ppi_window: int = 3) -> FrameStats:
-    """All frame statistics at once (``load_N`` is None unless the recording holds pressure)."""
+    """All frame statistics at once (``load_N`` is None unless the recording holds pressure):
+    :func:`_block_stats` of its values, read once."""
+    pressure = rec.quantity == "pressure"
+    factor = units.factor(rec.unit, "N/cm2") if pressure else None
+    got = _block_stats(_values(rec), rec.layout, threshold, ppi_window, load=factor, cov=True)
     return FrameStats(
-        load_N=total_load(rec) if rec.quantity == "pressure" else None,
-        contact_area_cm2=contact_area(rec, threshold),
-        peak=peak_pressure(rec),
-        ppi=peak_pressure_index(rec, ppi_window),
-        cof_cm=centre_of_force(rec),
-        cov=coefficient_of_variation(rec, threshold),
+        load_N=got.get("load_N"),
+        contact_area_cm2=got["contact_area_cm2"],
+        peak=got["peak"],
+        ppi=got["ppi"],
+        cof_cm=got["cof_cm"],
+        cov=got["cov"],
     )
 
 
@@ -220,32 +231,75 @@ def one_frame_stats(
 ) -> dict[str, Any]:
     """:func:`frame_stats` of one frame of pressure in N/cm² (NaN read as 0) without a
     :class:`~texsense.data.recording.Recording`: ``load_N``, ``contact_area_cm2``, ``peak``,
-    ``ppi`` as floats and ``cof_cm`` (x, y; NaN when unloaded), the same numbers by the same
-    operations (the values stored as float32 first, as a recording stores them). A station
-    computes them for every frame of hundreds of mats; the recording's per-array steps (and
-    the coefficient of variation, which it does not show) were most of its cost. A points
-    layout takes the recording's path for the PPI."""
-    v = np.nan_to_num(np.asarray(pressure_ncm2, dtype=np.float64))
-    v = v.astype(np.float32).astype(np.float64)
-    area = layout.area_cm2
-    w = v * area
-    with np.errstate(invalid="ignore"):
-        loaded = v > threshold
-    if layout.shape is not None:
-        ppi = float(_window_means_grid(layout.to_grid(v[None, :]), ppi_window)[0])
-    else:
-        rec = Recording(v[None, :], [0.0], layout, "pressure", "N/cm2")
-        ppi = float(peak_pressure_index(rec, ppi_window)[0])
-    cw = np.clip(w, 0.0, None)
-    total = cw.sum()
-    cof = (cw @ layout.xy_cm) / total if total > 0 else np.full(2, np.nan)
+    ``ppi`` as floats and ``cof_cm`` (x, y; NaN when unloaded). The same computation
+    (:func:`_block_stats`) on the frame's values stored as float32 first, as a recording
+    stores them; a station computes it for every frame of hundreds of mats (without the
+    coefficient of variation, which it does not show)."""
+    v = np.asarray(pressure_ncm2, dtype=np.float64)
+    if not np.isfinite(v).all():
+        v = np.nan_to_num(v)
+    v = v.astype(np.float32).astype(np.float64)[None, :]
+    got = _block_stats(v, layout, threshold, ppi_window, load=1.0)
     return {
-        "load_N": float(w.sum()) if v.size else float("nan"),
-        "contact_area_cm2": float((loaded * area).sum()),
-        "peak": float(v.max()) if v.size else float("nan"),
-        "ppi": ppi,
-        "cof_cm": cof,
+        "load_N": float(got["load_N"][0]),
+        "contact_area_cm2": float(got["contact_area_cm2"][0]),
+        "peak": float(got["peak"][0]),
+        "ppi": float(got["ppi"][0]),
+        "cof_cm": got["cof_cm"][0],
     }
+
+
+def _block_stats(
+    v: _Array,
+    layout: Layout,
+    threshold: float,
+    ppi_window: int,
+    *,
+    load: float | None,
+    cov: bool = False,
+) -> dict[str, _Array]:
+    """The frame statistics of frames ``v`` (T, N; NaN: an invalid reading, left out): what
+    :func:`frame_stats` and :func:`one_frame_stats` both are. Frames with no NaN or infinity
+    (every frame of a station) take the plain reductions, which give the NaN-aware ones'
+    numbers to the bit on such frames. The load when ``load`` is the factor from the values'
+    unit to N/cm² (eq. 2.1 of a pressure map), the coefficient of variation when ``cov``."""
+    area = layout.area_cm2
+    finite = np.isfinite(v)
+    clean = bool(finite.all()) and v.shape[1] > 0
+    out: dict[str, _Array] = {}
+    if load is not None:
+        p = v * load if load != 1.0 else v
+        out["load_N"] = (p * area).sum(axis=1) if clean else _load_of(p, area, np.isfinite(p))
+    with np.errstate(invalid="ignore"):
+        out["contact_area_cm2"] = ((v > threshold) * area).sum(axis=1)
+    if clean:
+        out["peak"] = v.max(axis=1)
+    else:
+        out["peak"] = np.full(v.shape[0], np.nan)
+        ok = finite.any(axis=1)
+        out["peak"][ok] = np.nanmax(v[ok], axis=1)
+    out["ppi"] = _ppi_of(v, layout, ppi_window)
+    out["cof_cm"] = centre_of_force_values(v if clean else np.nan_to_num(v, nan=0.0), layout)
+    if cov:
+        out["cov"] = _cov_of(v, threshold)
+    return out
+
+
+def _load_of(v: _Array, area: _Array, finite: npt.NDArray[np.bool_]) -> _Array:
+    """:func:`total_load` of frames in N/cm² with invalid readings NaN."""
+    return _nan_if_empty(np.nansum(v * area, axis=1), np.sum(finite, axis=1))
+
+
+def _cov_of(v: _Array, threshold: float) -> _Array:
+    """:func:`coefficient_of_variation` of frames with invalid readings NaN."""
+    with np.errstate(invalid="ignore"):
+        loaded = np.where(v > threshold, v, np.nan)
+    count = np.sum(np.isfinite(loaded), axis=1)
+    out = np.full(v.shape[0], np.nan)
+    ok = count >= 2
+    if ok.any():
+        out[ok] = np.nanstd(loaded[ok], axis=1) / np.nanmean(loaded[ok], axis=1)
+    return out
 
 
 def region_stats(

@@ -169,6 +169,16 @@ def band_of(values: npt.ArrayLike, edges: tuple[float, ...] = BAND_EDGES) -> np.
     return np.clip(np.searchsorted(edges, v, side="right") - 1, 0, len(edges) - 1)
 
 
+_BAND_EDGES = np.asarray(BAND_EDGES, dtype=np.float64)
+
+
+def _bands(magnitudes: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """:func:`band_of` of values' magnitudes with the edges as an array (a search never
+    gives more than the last band: only the lower end is clipped)."""
+    band = np.searchsorted(edges, magnitudes, side="right") - 1
+    return np.maximum(band, 0, out=band)
+
+
 @dataclass(frozen=True)
 class HeldOut:
     """The calibration's held-out residuals, summarised by band of the predicted value: the
@@ -214,6 +224,11 @@ class HeldOut:
         """``a(v)``: the band scale of every value."""
         return np.asarray(self.scale, dtype=np.float64)[band_of(values, self.edges)]
 
+    @functools.cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The edges and scales as arrays (made once: a station bounds every frame)."""
+        return np.asarray(self.edges, dtype=np.float64), np.asarray(self.scale, dtype=np.float64)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-able."""
         return {"edges": list(self.edges), "scale": list(self.scale),
@@ -248,12 +263,21 @@ def multiplier(level: float, context: str = "mat", band: int | None = None) -> f
     return float(np.interp(100.0 * level, np.arange(q.size, dtype=np.float64), q))
 
 
-@functools.lru_cache(maxsize=64)
-def _per_band(level: float, context: str, tables: Any) -> np.ndarray:
-    """The multiplier of every band at ``level`` (made once per ``tables``, the context's
-    scores, which are part of the key: a station bounds every frame)."""
+#: (level, context) -> (the context's score tables, the multiplier of every band)
+_PER_BAND: dict[tuple[float, str], tuple[Any, Any, np.ndarray]] = {}
+
+
+def _per_band(level: float, context: str) -> np.ndarray:
+    """The multiplier of every band at ``level``, made once per level and score tables (the
+    tables are looked up by identity: replacing a context's scores, as a test does, makes
+    them anew; hashing them took longer than a station's bounds of a frame)."""
+    scores, banded = SCORES.get(context), BAND_SCORES.get(context)
+    hit = _PER_BAND.get((level, context))
+    if hit is not None and hit[0] is scores and hit[1] is banded:
+        return hit[2]
     out = np.array([multiplier(level, context, b) for b in range(len(BAND_EDGES))])
     out.setflags(write=False)
+    _PER_BAND[(level, context)] = (scores, banded, out)
     return out
 
 
@@ -300,14 +324,18 @@ def bounds(
     ``drift`` is ``d`` (:func:`drift_share`), ``repaired`` marks repaired values,
     ``range_max`` the largest pressure of the calibration's range."""
     v = np.asarray(values, dtype=np.float64)
-    sigma = held_out.scale_of(v) + np.abs(v) * np.asarray(drift, dtype=np.float64)
+    a = np.abs(v)
+    edges, scale = held_out._arrays
+    band = _bands(a, edges)  # (band_of, the edges made an array once)
+    sigma = scale[band] + a * np.asarray(drift, dtype=np.float64)
     if repaired is not None:
-        sigma = sigma + R_REPAIRED * np.abs(v) * np.asarray(repaired, dtype=bool)
+        sigma = sigma + R_REPAIRED * a * np.asarray(repaired, dtype=bool)
     if range_max is not None:
-        sigma = sigma + np.clip(v - range_max, 0.0, None)
+        sigma = sigma + np.maximum(v - range_max, 0.0)
     if multiplier_value is None:  # the band's multiplier (Mondrian)
-        tables = (SCORES.get(context), BAND_SCORES.get(context))
-        m = _per_band(float(level), context, tables)[band_of(v)]
+        if held_out.edges != BAND_EDGES:
+            band = _bands(a, _BAND_EDGES)
+        m = _per_band(float(level), context)[band]
     else:
         m = np.asarray(float(multiplier_value))
     hw = m * sigma

@@ -279,7 +279,9 @@ class InUseDrift:
         """One frame of hysteresis outputs (N/cm²) with the mask of measured elements at ``t``
         (s) -> the corrected frame (elements not measured keep their value, corrected);
         ``raw``: the frame's raw readings, for the zero of an empty mat (with ``converter``)."""
-        x = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        x = np.asarray(values, dtype=np.float64)  # (read, never written to)
+        if not np.isfinite(x).all():
+            x = np.nan_to_num(x)
         ok = np.asarray(valid, dtype=bool)
         t = float(t)
         dt = 0.0 if self._last_t is None else t - self._last_t

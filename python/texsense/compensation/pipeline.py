@@ -412,8 +412,11 @@ class Pipeline:
         codes: np.ndarray | None = None
         times = None
         if self.estimator is not None or self.interval is not None:  # the frames' times
-            after = np.concatenate([np.cumsum(dt[::-1])[::-1][1:], [0.0]])
-            times = last_t - after
+            if dt.size == 1:  # a frame of the stream (step): at the time it came with
+                times = np.full(1, last_t)
+            else:
+                after = np.concatenate([np.cumsum(dt[::-1])[::-1][1:], [0.0]])
+                times = last_t - after
         for p in self._parts:
             if isinstance(p, Chain):
                 values, found = p.run(dt, values, np.ascontiguousarray(ok))
@@ -457,11 +460,13 @@ class Pipeline:
         )
 
     def step(
-        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float, *, keep: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
         """One frame of readings (N,) with their validity (None: all valid) at ``t`` (s) ->
         values (N,) and the mask of measured (not repaired) elements; the failure codes in
-        ``codes_``."""
+        ``codes_``. ``keep=False``: the caller keeps nothing of the frame past the next step,
+        so a pipeline of one compiled pass hands out the arrays it steps into (overwritten by
+        the next step) instead of copies of them."""
         n = self.layout.n_elements
         x = np.ascontiguousarray(values, dtype=np.float64)
         if x.shape != (n,):
@@ -473,10 +478,13 @@ class Pipeline:
         dt = 0.0 if self._last_t is None else t - self._last_t
         if not (dt >= 0 and -np.inf < t < np.inf):
             raise ParameterError("frame times must be numbers and must not decrease")
-        if self._live is not None:  # one compiled pass: into the arrays held, then copies
+        if self._live is not None:  # one compiled pass: into the arrays held (copies kept)
             out, codes, ok = self._held
             self._live.step(dt, x, v, out, codes, ok)
             self._last_t = t
+            if not keep:
+                self.codes_ = codes
+                return out, ok
             self.codes_ = codes.copy()
             return out.copy(), ok.copy()
         self._dt1[0] = dt

@@ -163,6 +163,7 @@ class Monitor:
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_first: float | None = None  # the time of the first frame
         self._cof_trace: list[list[float]] = []
+        self._cells_rc: tuple[np.ndarray, np.ndarray] | None = None  # (rows, cols) of elements
         self.clock = FrameClock()
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
@@ -485,7 +486,10 @@ class Monitor:
         raw = frame.values
         if self.pipeline is not None and self.source.quantity == "capacitance":
             valid = np.isfinite(raw)
-            pressure, measured = self.pipeline.step(np.nan_to_num(raw), valid, frame.t)
+            x = raw if valid.all() else np.nan_to_num(raw)  # (the pipeline reads it only)
+            # the frame is kept past the next step by a recorder only (last_pressure: a copy)
+            keep = self.recorder is not None
+            pressure, measured = self.pipeline.step(x, valid, frame.t, keep=keep)
             return pressure, measured, self.pipeline.codes_
         if self.raw_only:
             none = np.full(raw.shape, np.nan)
@@ -574,12 +578,14 @@ class Monitor:
     def _cof_cell(self, pressure: np.ndarray) -> np.ndarray:
         """Centre of force in grid cells (row, col) — what the dashboard draws — or in the
         elements' (x, y) cm for a points layout."""
-        w = np.clip(np.nan_to_num(pressure), 0.0, None)
+        w = np.maximum(pressure if np.isfinite(pressure).all() else np.nan_to_num(pressure), 0.0)
         total = w.sum()
         if total <= 0:
             return np.array([np.nan, np.nan])
         if self.layout.cells is not None and self.layout.shape is not None:
-            rows, cols = np.divmod(self.layout.cells, self.layout.shape[1])
+            if self._cells_rc is None:  # the elements' rows and columns (made once)
+                self._cells_rc = np.divmod(self.layout.cells, self.layout.shape[1])
+            rows, cols = self._cells_rc
             return np.array([w @ rows, w @ cols]) / total
         return (w @ self.layout.xy_cm) / total
 
