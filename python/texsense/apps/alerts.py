@@ -290,10 +290,11 @@ class ExposureTracker:
             ) & ~self.confident
             loaded = self.confident | (self.possible & self.count_possible)
         # exposure grows while loaded; relief time grows while not; a long relief resets
-        self.exposure_s[loaded] += dt
-        self._relief_s[loaded] = 0.0
-        self._relief_s[~loaded] += dt
-        self.exposure_s[self._relief_s >= self.offload_s] = 0.0
+        # (masked ufuncs: the same sums as the masked assignments, without gathering)
+        np.add(self.exposure_s, dt, out=self.exposure_s, where=loaded)
+        np.copyto(self._relief_s, 0.0, where=loaded)
+        np.add(self._relief_s, dt, out=self._relief_s, where=~loaded)
+        np.copyto(self.exposure_s, 0.0, where=self._relief_s >= self.offload_s)
         events += self._occupancy(t, bool(loaded.any()))
         alert = self.open_alert
         if alert is None:
