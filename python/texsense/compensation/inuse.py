@@ -517,6 +517,13 @@ class InUseDrift:
         x = np.asarray(frames, dtype=np.float64)
         ok = np.asarray(valid, dtype=bool)
         t = np.asarray(times, dtype=np.float64)
+        if x.shape[0] == 1:  # a frame of a stream (Pipeline.step): no per-frame loop
+            t0 = float(t[0])
+            out = self.step(x[0], ok[0], t0, None if raw is None else raw[0])[None, :]
+            on = self.state.first_t is not None
+            self.corrections_ = np.array([self.state.load_correction if on else np.nan])
+            self.ages_ = np.array([self.state.age_h(t0) if on else np.nan])
+            return out
         out = np.empty_like(x)
         #: the load correction after every frame of the last run (NaN: not correcting yet)
         self.corrections_ = np.full(x.shape[0], np.nan)

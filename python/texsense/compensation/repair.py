@@ -151,6 +151,11 @@ class Repair(Stage):
 
     def _fill(self, x: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One frame of a harmonic method."""
+        if ok.all() and np.isfinite(x).all():  # nothing to fill (a station's every frame)
+            out = x.copy()
+            self._last = out.copy()
+            self._prev = out.copy()
+            return out, np.zeros(x.shape, np.uint8)
         out = np.where(ok, x, np.nan)
         outcome = np.where(ok, 0, 1).astype(np.uint8)
         bad = ~ok
