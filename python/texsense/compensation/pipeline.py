@@ -447,7 +447,9 @@ class Pipeline:
         est = self.estimator
         corr = est.corrections_ if est is not None else np.full(hours.shape, np.nan)
         ages = est.ages_ if est is not None else np.zeros(hours.shape)
-        rows = zip(hours.tolist(), corr.tolist(), ages.tolist(), strict=True)
+        rows = zip(
+            hours.tolist(), np.asarray(corr).tolist(), np.asarray(ages).tolist(), strict=True
+        )
         d = np.array([drift_share(h, None if c != c else c, a) for h, c, a in rows])  # c != c: NaN
         return bounds(
             values,
