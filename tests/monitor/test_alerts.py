@@ -35,6 +35,29 @@ def test_short_relief_does_not_reset_but_offloading_does():
     assert tr.exposure_s[0] == 0.0  # 1 min offloaded: reset
 
 
+def test_a_change_inside_skipped_frames_is_put_midway():
+    """A station behind skims frames: the next frame read says the time since the last one
+    read was skipped (skipped=True), and an element that changed between the two counts
+    half that time in its old state (not all of it in the new one); a state that held over
+    the gap counts all of it, as between frames in a row. Frames 1 s apart, 10 skipped."""
+    lay = Layout.grid(1, 3)
+    on, off = 1.0, 0.0
+    whole, skim = (ExposureTracker(lay, reposition_min=20, offload_min=1) for _ in range(2))
+    for t in range(100):  # loaded from 0 to 49 s: element 0 onsets at 50 s, element 1 offsets
+        p = np.array([off if t < 50 else on, on if t < 50 else off, on])
+        whole.step(p, float(t))
+        if t <= 45 or t >= 56:  # 46 ... 55 s skimmed
+            skim.step(p, float(t), skipped=t == 56)
+    # every frame read: 0 counted 50 s, 1 counted 49 s (the first frame has no interval);
+    # skimmed: each change put midway through the 11 s gap, 1.5 s off the whole run
+    np.testing.assert_allclose(whole.exposure_s, [50.0, 49.0, 99.0])
+    np.testing.assert_allclose(skim.exposure_s, [5.5 + 43.0, 45.0 + 5.5, 99.0])
+    old = ExposureTracker(lay, reposition_min=20, offload_min=1)  # (not said: all in the new)
+    for t in [*range(46), *range(56, 100)]:
+        old.step(np.array([off if t < 50 else on, on if t < 50 else off, on]), float(t))
+    np.testing.assert_allclose(old.exposure_s, [11.0 + 43.0, 45.0, 99.0])  # 4 s off
+
+
 def test_reposition_alert_opens_once_acknowledge_and_clear():
     lay = Layout.grid(2, 2)
     tr = ExposureTracker(lay, reposition_min=5, offload_min=1)
@@ -108,3 +131,21 @@ def test_possibly_above_counts_only_when_the_user_chooses_so():
         assert tr.confident.tolist() == [True, False, False]
         assert tr.possible.tolist() == [False, True, False]
         np.testing.assert_allclose(tr.exposure_s, expected)
+
+
+def test_a_station_that_skims_frames_says_so_to_the_exposure(tmp_path):
+    """The station's mat (MatEntry): frames skimmed while behind (only their time read) make
+    the next frame processed put a change midway through the skimmed time."""
+    import json
+
+    from texsense.station.ward import MatConfig, MatEntry
+
+    entry = MatEntry(MatConfig("m", Layout.grid(1, 2), None, quantity="pressure"),
+                     EventStore(":memory:"), tmp_path, 0.5)  # fmt: skip
+    for t in range(30):  # element 0 loaded from 10 s; 5 ... 14 s skimmed
+        p = [1.0 if t >= 10 else 0.0, 1.0]
+        payload = json.dumps({"seq": t, "t": float(t), "values": p, "unit": "N/cm2"}).encode()
+        assert entry.handle(payload, 1000.0 + t, skim=5 <= t < 15)
+    assert entry.behind == 10
+    # 15 s: the 11 s since 4 s half in the old state; then 15 more s
+    np.testing.assert_allclose(entry.monitor.tracker.exposure_s, [5.5 + 14.0, 29.0])

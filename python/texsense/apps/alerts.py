@@ -215,6 +215,7 @@ class ExposureTracker:
         n = len(self.names)
         self.exposure_s = np.zeros(n)
         self._relief_s = np.zeros(n)
+        self._loaded_last = np.zeros(n, bool)  # the state of the last step
         self._last_t: float | None = None
         self._ids = itertools.count(1)
         self.alerts: list[Alert] = []
@@ -261,12 +262,18 @@ class ExposureTracker:
         t: float,
         lower: npt.ArrayLike | None = None,
         upper: npt.ArrayLike | None = None,
+        *,
+        skipped: bool = False,
     ) -> list[Event]:
         """Advance to time ``t`` (s) with the pressure (N/cm²) of every element; returns the
         events this frame caused. A missing (NaN) reading counts as unloaded. (Time after the
         values, as a stage's ``step(values, valid, t)``.) With the bounds ``lower`` and
         ``upper`` (issue 37) an element is above the threshold when its lower bound is,
-        *possibly* above when only its upper bound is (counted with ``count_possible``)."""
+        *possibly* above when only its upper bound is (counted with ``count_possible``).
+        ``skipped``: frames since the last step were not read (a station behind skims them):
+        an element that changed between the two frames read changed midway between them, not
+        at the first frame skipped (the time since the last step is counted in this frame's
+        state otherwise, as between two frames in a row)."""
         t = frame_time(t)
         p = np.asarray(pressure_ncm2, dtype=np.float64)
         if p.shape != (self.layout.n_elements,):
@@ -289,12 +296,14 @@ class ExposureTracker:
                 self._values(np.asarray(upper, np.float64)) > self.threshold_ncm2
             ) & ~self.confident
             loaded = self.confident | (self.possible & self.count_possible)
-        # exposure grows while loaded; relief time grows while not; a long relief resets
-        # (masked ufuncs: the same sums as the masked assignments, without gathering)
-        np.add(self.exposure_s, dt, out=self.exposure_s, where=loaded)
-        np.copyto(self._relief_s, 0.0, where=loaded)
-        np.add(self._relief_s, dt, out=self._relief_s, where=~loaded)
-        np.copyto(self.exposure_s, 0.0, where=self._relief_s >= self.offload_s)
+        changed = loaded != self._loaded_last
+        if skipped and dt > 0 and changed.any():  # half the skipped time in the old state
+            half = 0.5 * dt
+            self._advance(np.where(changed, self._loaded_last, loaded), np.where(changed, half, dt))
+            self._advance(loaded, np.where(changed, half, 0.0))
+        else:
+            self._advance(loaded, dt)
+        self._loaded_last = loaded
         events += self._occupancy(t, bool(loaded.any()))
         alert = self.open_alert
         if alert is None:
@@ -313,6 +322,15 @@ class ExposureTracker:
                 alert.cleared_t, alert.cleared_by = t, "offloaded"
                 events.append(Event("cleared", t, alert.id, {"by": "offloaded"}))
         return events
+
+    def _advance(self, loaded: np.ndarray, dt: float | np.ndarray) -> None:
+        """``dt`` (s, per element or one for all) in the state ``loaded``: exposure grows
+        while loaded, relief time while not; a relief of ``offload_s`` resets the exposure
+        (masked ufuncs: the same sums as masked assignments, without gathering)."""
+        np.add(self.exposure_s, dt, out=self.exposure_s, where=loaded)
+        np.copyto(self._relief_s, 0.0, where=loaded)
+        np.add(self._relief_s, dt, out=self._relief_s, where=~loaded)
+        np.copyto(self.exposure_s, 0.0, where=self._relief_s >= self.offload_s)
 
     def turned(self, t: float, since_t: float) -> list[Event]:
         """A bed's turn that began at ``since_t`` is confirmed at ``t``: other skin now lies on
@@ -388,6 +406,7 @@ class ExposureTracker:
         self.exposure_s[:] = 0.0
         self._relief_s[:] = self.offload_s
         self.exposure_s[index], self._relief_s[index] = exposure, relief
+        self._loaded_last = self._relief_s == 0.0  # (loaded at its last step: no relief)
         self._last_t = t
         self.seated = bool(state.get("loaded", False))
         self._occupancy_since = None

@@ -424,6 +424,7 @@ def exposure_with_turns(
     schedule: TurningSchedule | None = None,
     schedule_events: list[Event] | None = None,
     bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+    skipped: bool = False,
 ) -> list[Event]:
     """The exposure tracker's step on a bed, after the schedule's step of the same frame
     (``schedule_events``): a confirmed turn hands the exposure to new skin and clears an open
@@ -431,13 +432,15 @@ def exposure_with_turns(
     held but not yet confirmed (a sleeper who turned right -> supine 24 s before the sacrum's
     exposure reached its limit is not told to reposition). Returns the schedule's events and
     the tracker's. The live monitor and a recording's review both run this; ``bounds``
-    (lower, upper) go to the tracker (issue 37: confident or only possible exceedances)."""
+    (lower, upper) go to the tracker (issue 37: confident or only possible exceedances), and
+    ``skipped`` (frames before this one were skimmed, :meth:`ExposureTracker.step`)."""
     events = list(schedule_events or [])
     tracker.hold = schedule is not None and schedule.turning
     for turn in [e for e in events if e.kind == "turn"]:
         events += tracker.turned(t, turn.t)
     lo, hi = (None, None) if bounds is None else bounds
-    return events + tracker.step(np.asarray(pressure, dtype=np.float64), t, lo, hi)
+    p = np.asarray(pressure, dtype=np.float64)
+    return events + tracker.step(p, t, lo, hi, skipped=skipped)
 
 
 class BedWatch:

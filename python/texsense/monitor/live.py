@@ -164,6 +164,7 @@ class Monitor:
         self._t_first: float | None = None  # the time of the first frame
         self._cof_trace: list[list[float]] = []
         self._cells_rc: tuple[np.ndarray, np.ndarray] | None = None  # (rows, cols) of elements
+        self._skimmed = False  # frames skimmed since the last frame processed (keep_time)
         self.clock = FrameClock()
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
@@ -382,8 +383,11 @@ class Monitor:
     def keep_time(self, frame: Frame, wall: float) -> bool:
         """Place a frame that will not be processed (a busy station skips it) on the mat's
         time line, so that the clock stays in step; False when its time is off the clock
-        (counted and logged as in :meth:`process`)."""
-        return self._in_step(frame, wall)
+        (counted and logged as in :meth:`process`). The exposure of the next frame
+        processed spans it (:meth:`ExposureTracker.step`, ``skipped``)."""
+        kept = self._in_step(frame, wall)
+        self._skimmed = self._skimmed or kept
+        return kept
 
     def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
         """One frame through everything; returns the snapshot, or None for a frame whose
@@ -469,7 +473,8 @@ class Monitor:
             schedule = self.bed.schedule
         if not (self.mode.alerts and not self.raw_only):
             return events
-        events = exposure_with_turns(self.tracker, t, pressure, schedule, events, bounds)
+        skipped, self._skimmed = self._skimmed, False
+        events = exposure_with_turns(self.tracker, t, pressure, schedule, events, bounds, skipped)
         for e in events:
             if e.kind == "reposition" and e.alert_id is not None:
                 raised = next(a for a in self.tracker.alerts if a.id == e.alert_id)
