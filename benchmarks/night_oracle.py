@@ -19,7 +19,12 @@ giving the estimator the *true* total load from the truth recording of the virtu
   between elements alone;
 - ``best gain every frame``: the in-use output of every frame times the one factor that makes
   that frame's per-element error at 10-150 mmHg smallest (the weighted median of truth /
-  value): the floor of any correction that moves the whole mat's level, frame by frame.
+  value): the floor of any correction that moves the whole mat's level, frame by frame;
+  ``--regions``: the same per block of 16 x 16, 8 x 8 and 4 x 4 elements (a level per region).
+
+``--bands``: where the in-use output's total-load error sits, by band of the true pressure
+(frames the simulator labels as held positions, hours 1, 4 and 8): each band's share of the
+true load of the measured elements and its error as a share of that load.
 
 Not an oracle (what a mat in use can know from outside its frames): ``body weight entered``,
 the person's weight as entered at admission (the virtual sleeper's, rounded to 1 kg) times
@@ -32,12 +37,15 @@ Beside them the baselines and today's product (``benchmarks/night_drift.py``'s t
 Worst hour 1-8 of the per-element mean relative error at 10-150 mmHg and of the total load,
 scored as ``night_drift.py`` scores them (truth from the virtual sensor).
 
-Run:  .venv/bin/python benchmarks/night_oracle.py --nights textile-3mm:0 ... --cache DIR
+Run:  .venv/bin/python benchmarks/night_oracle.py [--nights textile-3mm:0 ...] --cache DIR
+      .venv/bin/python benchmarks/night_oracle.py --regions [--nights ...] --cache DIR
+      .venv/bin/python benchmarks/night_oracle.py --bands [--nights ...] --cache DIR
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -46,8 +54,8 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from night_drift import BAND, METHODS, hourly, night_files
-from texsense.compensation.inuse import InUseDrift
+from night_drift import BAND, METHODS, MMHG, hourly, night_files
+from texsense.compensation.inuse import InUseDrift, motion_blocks
 from texsense.compensation.pipeline import Pipeline
 from texsense.sim.bed import Sleeper
 
@@ -163,12 +171,86 @@ def best_gain(
     return out
 
 
+def regions_table(nights: list[str], hours: float, cache: Path) -> None:
+    """ORACLE: the best gain per frame of every block of the in-use output (a level per region,
+    fitted on the truth): the floor of a level correction at that scale."""
+    sizes = (16, 8, 4)
+    print("per element, worst hour at 10-150 mmHg: in use, and times the best gain per frame")
+    print("(ORACLE: fitted on the truth) of the whole mat or of every block of elements\n")
+    cols = " | ".join(f"{k} x {k} blocks" for k in sizes)
+    print(f"| night | used for | in use (today) | whole mat | {cols} |")
+    print("|---|---|" + "---:|" * (2 + len(sizes)))
+    for spec in nights:
+        law, seed_s = spec.split(":")
+        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
+        y = truth_rec.frames.astype(np.float64)
+        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        pipe = Pipeline(chain, raw.layout, in_use=True)
+        v, ok, _ = pipe.process(raw.frames, raw.times, raw.valid)
+        v = np.nan_to_num(v)
+        outs = [v, best_gain(v, ok, y, BAND)]
+        for k in sizes:
+            blocks = motion_blocks(raw.layout, k)
+            w = v.copy()
+            for b in np.unique(blocks):
+                m = blocks == b
+                w[:, m] = best_gain(v[:, m], ok[:, m], y[:, m], BAND)
+            outs.append(w)
+        cells = [max(hourly(w, ok, y, raw.times, area, round(hours))[0]) for w in outs]
+        used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
+        print(f"| {spec} | {used} | " + " | ".join(f"{100 * c:.1f}%" for c in cells) + " |")
+
+
+def bands_table(nights: list[str], hours: float, cache: Path) -> None:
+    """Where the total-load error of the in-use output sits, by band of the true pressure."""
+    edges = (0.0, 1.0, 10.0, 40.0, 150.0, np.inf)  # mmHg
+    pairs = list(itertools.pairwise(edges))
+    names = [f"{a:g}-{b:g} mmHg" if np.isfinite(b) else f"> {a:g} mmHg" for a, b in pairs]
+    print("in use: share of the true load / error as a share of the true load (measured elements,")
+    print("held positions), by band of the true pressure\n")
+    print("| night | hour | " + " | ".join(names) + " | all |")
+    print("|---|---:|" + "---:|" * (len(names) + 1))
+    for spec in nights:
+        law, seed_s = spec.split(":")
+        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
+        y = truth_rec.frames.astype(np.float64)
+        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        v, ok, _ = Pipeline(chain, raw.layout, in_use=True).process(
+            raw.frames, raw.times, raw.valid
+        )
+        v = np.nan_to_num(v)
+        hour = ((raw.times - raw.times[0]) // 3600).astype(int)
+        hold = np.asarray(raw.labels["hold"], dtype=bool)
+        for h in (0, 3, 7):
+            f = hold & (hour == h)
+            if not f.any():
+                continue
+            yf, vf, of = y[f], v[f], ok[f]
+            total = (yf * of) @ area
+            cells = []
+            for a, b in pairs:
+                m = of & (yf * MMHG >= a) & (yf * MMHG < b)
+                share = float(np.mean(((yf * m) @ area) / total))
+                err = float(np.mean((((vf - yf) * m) @ area) / total))
+                cells.append(f"{100 * share:.1f} / {100 * err:+.1f}%")
+            err_all = float(np.mean((((vf - yf) * of) @ area) / total))
+            print(f"| {spec} | {h + 1} | " + " | ".join(cells) + f" | {100 * err_all:+.1f}% |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--nights", nargs="+", default=list(NIGHTS), help="law:seed")
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "texsense" / "nights")
     ap.add_argument("--hours", type=float, default=8.0)
+    ap.add_argument("--regions", action="store_true", help="the floor of a level per region")
+    ap.add_argument("--bands", action="store_true", help="where the total load's error sits")
     args = ap.parse_args()
+    if args.bands:
+        bands_table(args.nights, args.hours, args.cache)
+        return 0
+    if args.regions:
+        regions_table(args.nights, args.hours, args.cache)
+        return 0
     n_h = round(args.hours)
     names = [
         "hysteresis only", "laboratory drift", "in use (today)",
