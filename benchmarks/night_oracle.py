@@ -22,6 +22,9 @@ giving the estimator the *true* total load from the truth recording of the virtu
   value): the floor of any correction that moves the whole mat's level, frame by frame;
   ``--regions``: the same per block of 16 x 16, 8 x 8 and 4 x 4 elements (a level per region).
 
+``--body``: the oracle of the first and of every still period's level computed on the loaded
+elements only (the body, the elements a level correction moves), not on every measured one.
+
 ``--bands``: where the in-use output's total-load error sits, by band of the true pressure
 (frames the simulator labels as held positions, hours 1, 4 and 8): each band's share of the
 true load of the measured elements and its error as a share of that load.
@@ -82,6 +85,7 @@ class OracleDrift(InUseDrift):
 
     truth: np.ndarray
     mode: str
+    body: bool = False
     known_n: float
     _k: int
 
@@ -90,9 +94,11 @@ class OracleDrift(InUseDrift):
         return super().step(values, valid, t, raw)
 
     def _level(self, c: np.ndarray, ok: np.ndarray) -> float:
-        """The measured elements' load over what they truly carry, less 1."""
-        true = float(self.area[ok] @ self.truth[self._k][ok])
-        return float(self.area[ok] @ c[ok]) / max(true, 1e-12) - 1.0
+        """The measured elements' load over what they truly carry, less 1 (with ``body``: the
+        loaded elements' only, those the shift moves)."""
+        sel = ok & (c > self.loaded_ncm2) if self.body else ok
+        true = float(self.area[sel] @ self.truth[self._k][sel])
+        return float(self.area[sel] @ c[sel]) / max(true, 1e-12) - 1.0
 
     def _shift(self, c: np.ndarray, ok: np.ndarray, r: float) -> None:
         """Creep that divides every loaded element's reading by ``1 + r`` (as ``_weigh``)."""
@@ -121,15 +127,22 @@ class OracleDrift(InUseDrift):
             r = self._level(c, ok)
             self._shift(c, ok, r)
             st.checked_t = t
-            if st.weight is None:  # the weight kept: the filled load, once corrected
-                st.weight, st.weight_t = self.total(c, ok) / (1.0 + r), t
+            if st.weight is None:  # the weight kept: the true load (the body's: as corrected)
+                load = self.total(self.corrected(x0), ok) if self.body else self.total(c, ok)
+                st.weight, st.weight_t = load / (1.0 + (0.0 if self.body else r)), t
                 self._returned = False
             return True
         return super()._weigh(x0, c, ok, t)
 
 
 def oracle_run(
-    chain: Any, raw: Any, truth: np.ndarray, mode: str, known_n: float = 0.0, **options: Any
+    chain: Any,
+    raw: Any,
+    truth: np.ndarray,
+    mode: str,
+    known_n: float = 0.0,
+    body: bool = False,
+    **options: Any,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The pipeline in use with the estimator made an :class:`OracleDrift` of ``mode``."""
     pipe = Pipeline(chain, raw.layout, in_use=True, in_use_options=options or None)
@@ -137,7 +150,7 @@ def oracle_run(
     assert est is not None
     est.__class__ = OracleDrift
     assert isinstance(est, OracleDrift)
-    est.truth, est.mode, est.known_n, est._k = truth, mode, known_n, -1
+    est.truth, est.mode, est.known_n, est.body, est._k = truth, mode, known_n, body, -1
     values, ok, _ = pipe.process(raw.frames, raw.times, raw.valid)
     return values, ok
 
@@ -237,6 +250,34 @@ def bands_table(nights: list[str], hours: float, cache: Path) -> None:
             print(f"| {spec} | {h + 1} | " + " | ".join(cells) + f" | {100 * err_all:+.1f}% |")
 
 
+def body_table(nights: list[str], hours: float, cache: Path) -> None:
+    """ORACLE: the level of the body (the loaded elements, those a level correction moves)
+    brought to the truth at the first or at every still period."""
+    names = [
+        "in use (today)",
+        "oracle first level of the body",
+        "oracle body level every still period",
+    ]
+    print("per element (worst hour at 10-150 mmHg) / total load (worst hour)\n")
+    print("| night | used for | " + " | ".join(names) + " |")
+    print("|---|---|" + "---:|" * len(names))
+    for spec in nights:
+        law, seed_s = spec.split(":")
+        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
+        y = truth_rec.frames.astype(np.float64)
+        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        pipe = Pipeline(chain, raw.layout, in_use=True)
+        runs = [pipe.process(raw.frames, raw.times, raw.valid)[:2]]
+        runs.append(oracle_run(chain, raw, y, "first", body=True))
+        runs.append(oracle_run(chain, raw, y, "every", body=True))
+        cells = []
+        for v, ok in runs:
+            err, lerr = hourly(v, ok, y, raw.times, area, round(hours))
+            cells.append(f"{100 * max(err):.1f} / {100 * max(lerr):.1f}%")
+        used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
+        print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--nights", nargs="+", default=list(NIGHTS), help="law:seed")
@@ -244,7 +285,11 @@ def main() -> int:
     ap.add_argument("--hours", type=float, default=8.0)
     ap.add_argument("--regions", action="store_true", help="the floor of a level per region")
     ap.add_argument("--bands", action="store_true", help="where the total load's error sits")
+    ap.add_argument("--body", action="store_true", help="the oracle of the body's level")
     args = ap.parse_args()
+    if args.body:
+        body_table(args.nights, args.hours, args.cache)
+        return 0
     if args.bands:
         bands_table(args.nights, args.hours, args.cache)
         return 0
