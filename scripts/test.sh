@@ -3,6 +3,11 @@
 # on the binding's stubs), clippy, Rust unit tests, pytest (the slow checks beside it).
 source "$(dirname "${BASH_SOURCE[0]}")/_bootstrap.sh"
 export TEXSENSE_NO_PROGRESS=1
+# one BLAS thread per process: two pytest workers and the checks already fill the cores, and
+# OpenBLAS threads that find their core busy spin (a 500x500 Cholesky factor, with a second
+# process busy beside it: 37 CPU-ms with its default threads, 4.3 with one; a Preisach fit
+# 5.6-6.2 -> 4.6-5.1 CPU-s). Set it yourself to try other counts.
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 say "ruff check";            ruff check python tests benchmarks examples
 say "ruff format --check";   ruff format --check python tests benchmarks examples
 say "cargo fmt --check";     cargo fmt --all --check
