@@ -25,6 +25,9 @@ giving the estimator the *true* total load from the truth recording of the virtu
 ``--body``: the oracle of the first and of every still period's level computed on the loaded
 elements only (the body, the elements a level correction moves), not on every measured one.
 
+``--weight-clip``: the body weight entered, and the same with readings below zero weighed as
+zero (the unloaded part of a Bouc–Wen mat reads below zero: ``--bands``).
+
 ``--bands``: where the in-use output's total-load error sits, by band of the true pressure
 (frames the simulator labels as held positions, hours 1, 4 and 8): each band's share of the
 true load of the measured elements and its error as a share of that load.
@@ -86,12 +89,16 @@ class OracleDrift(InUseDrift):
     truth: np.ndarray
     mode: str
     body: bool = False
+    clip: bool = False  # weigh readings below zero as zero (``--weight-clip``)
     known_n: float
     _k: int
 
     def step(self, values: Any, valid: Any, t: float, raw: Any = None) -> np.ndarray:
         self._k += 1
         return super().step(values, valid, t, raw)
+
+    def total(self, c: np.ndarray, ok: np.ndarray) -> float:
+        return super().total(np.maximum(c, 0.0) if self.clip else c, ok)
 
     def _level(self, c: np.ndarray, ok: np.ndarray) -> float:
         """The measured elements' load over what they truly carry, less 1 (with ``body``: the
@@ -142,6 +149,7 @@ def oracle_run(
     mode: str,
     known_n: float = 0.0,
     body: bool = False,
+    clip: bool = False,
     **options: Any,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The pipeline in use with the estimator made an :class:`OracleDrift` of ``mode``."""
@@ -151,6 +159,7 @@ def oracle_run(
     est.__class__ = OracleDrift
     assert isinstance(est, OracleDrift)
     est.truth, est.mode, est.known_n, est.body, est._k = truth, mode, known_n, body, -1
+    est.clip = clip
     values, ok, _ = pipe.process(raw.frames, raw.times, raw.valid)
     return values, ok
 
@@ -278,6 +287,40 @@ def body_table(nights: list[str], hours: float, cache: Path) -> None:
         print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
 
 
+def entered_weight(raw: Any, seed: int) -> float:
+    """The weight a nurse enters (the virtual sleeper's, rounded to 1 kg) as the load the mat's
+    elements carry (N): times :data:`LYING_SHARE` and the elements' share of the surface."""
+    kg = round(Sleeper.random(seed).weight_kg)
+    py, px = raw.layout.pitch_cm
+    cover = float(np.mean(raw.layout.area_cm2)) / (py * px)
+    return kg * G * LYING_SHARE * cover
+
+
+def clip_table(nights: list[str], hours: float, cache: Path) -> None:
+    """The body weight entered, weighed as the readings are and with readings below zero
+    weighed as zero (not an oracle)."""
+    names = ["in use (today)", "body weight entered", "body weight entered, weighed clipped at 0"]
+    print("per element (worst hour at 10-150 mmHg) / total load (worst hour)\n")
+    print("| night | used for | " + " | ".join(names) + " |")
+    print("|---|---|" + "---:|" * len(names))
+    for spec in nights:
+        law, seed_s = spec.split(":")
+        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
+        y = truth_rec.frames.astype(np.float64)
+        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        w = entered_weight(raw, int(seed_s))
+        pipe = Pipeline(chain, raw.layout, in_use=True)
+        runs = [pipe.process(raw.frames, raw.times, raw.valid)[:2]]
+        runs.append(oracle_run(chain, raw, y, "weight", w))
+        runs.append(oracle_run(chain, raw, y, "weight", w, clip=True))
+        cells = []
+        for v, ok in runs:
+            err, lerr = hourly(v, ok, y, raw.times, area, round(hours))
+            cells.append(f"{100 * max(err):.1f} / {100 * max(lerr):.1f}%")
+        used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
+        print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--nights", nargs="+", default=list(NIGHTS), help="law:seed")
@@ -286,7 +329,11 @@ def main() -> int:
     ap.add_argument("--regions", action="store_true", help="the floor of a level per region")
     ap.add_argument("--bands", action="store_true", help="where the total load's error sits")
     ap.add_argument("--body", action="store_true", help="the oracle of the body's level")
+    ap.add_argument("--weight-clip", action="store_true", help="the entered weight, clipped")
     args = ap.parse_args()
+    if args.weight_clip:
+        clip_table(args.nights, args.hours, args.cache)
+        return 0
     if args.body:
         body_table(args.nights, args.hours, args.cache)
         return 0
@@ -325,10 +372,7 @@ def main() -> int:
         v, ok = outs["in use (today)"]
         outs[names[6]] = (level_exact(v, ok, truth, area), ok)
         outs[names[7]] = (best_gain(v, ok, truth, BAND), ok)
-        kg = round(Sleeper.random(seed).weight_kg)  # what the nurse enters at admission
-        py, px = raw.layout.pitch_cm
-        cover = float(area.mean()) / (py * px)  # the elements' share of the mat's surface
-        outs[names[8]] = oracle_run(chain, raw, truth, "weight", kg * G * LYING_SHARE * cover)
+        outs[names[8]] = oracle_run(chain, raw, truth, "weight", entered_weight(raw, seed))
         cells = []
         for name in names:
             v, ok = outs[name]
