@@ -56,8 +56,6 @@ fi
 # (Python reads it even where PYTHONDONTWRITEBYTECODE keeps each process from writing it;
 # about 0.2 s of every start)
 say "compileall";            python -m compileall -q -j 0 python/texsense >/dev/null
-# two workers side by side (pytest-xdist; TEXSENSE_TEST_JOBS to change): much of a test's
-# time is waiting on a child process, a server or a browser. Grouped tests stay together.
 # the slow checks (types, stubs, clippy, the Rust tests: ~4 CPU-minutes from a clean clone) run
 # one after the other beside pytest, at a lower priority: pytest's workers spend much of their
 # time waiting on a child process, a server or a browser, and these fill that time. Their
