@@ -32,7 +32,7 @@ use texsense_kernels::preisach::{self as kernel, Head, Output, Prepared, CLAMPED
 
 use crate::error::{check_len, frames_of, CoreError};
 pub use crate::everett::{everett_terms, Everett, EverettTerms};
-use crate::par::{block_size, for_blocks, parallel, FrameBlock};
+use crate::par::{block_size, for_blocks, parallel, prefetch, FrameBlock, PREFETCH_AHEAD};
 use crate::snapshot::{Reader, Writer};
 
 #[cfg(target_arch = "x86_64")]
@@ -290,6 +290,8 @@ pub struct PreisachBank {
 /// of [`LANES`]: their heads are `heads`).
 pub struct PreisachBlock<'a> {
     everett: EverettView<'a, f64>,
+    /// The Everett table by cell (empty: gathered from the table).
+    cells: &'a [f64],
     capacity: usize,
     elements: &'a mut [Element],
     heads: &'a mut [Heads],
@@ -328,6 +330,7 @@ impl PreisachBlock<'_> {
             unsafe {
                 avx2::row(
                     &self.everett,
+                    self.cells,
                     self.capacity,
                     self.output,
                     self.elements,
@@ -530,6 +533,7 @@ impl PreisachBank {
     /// block's first element is a multiple of [`LANES`]).
     pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
         let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
+        let cells = self.everett.cells();
         let size = block_size(self.len());
         debug_assert!(size.is_multiple_of(LANES));
         self.elements
@@ -537,6 +541,7 @@ impl PreisachBank {
             .zip(self.heads.chunks_mut(size / LANES))
             .map(|(elements, heads)| PreisachBlock {
                 everett,
+                cells,
                 capacity,
                 elements,
                 heads,
@@ -588,6 +593,7 @@ impl PreisachBank {
             // the whole bank as one block, frame after frame
             let mut all = PreisachBlock {
                 everett: self.everett.view(),
+                cells: self.everett.cells(),
                 capacity: self.capacity,
                 elements: &mut self.elements,
                 heads: &mut self.heads,
@@ -618,6 +624,11 @@ impl PreisachBank {
                 |mut block, o| {
                     let (start, width) = (o.start(), o.width());
                     for r in 0..b - a {
+                        if r + PREFETCH_AHEAD < b - a {
+                            let next = (r + PREFETCH_AHEAD) * n + start;
+                            prefetch(&inputs[next..next + width]);
+                            prefetch(&valid[next..next + width]);
+                        }
                         let row = r * n + start..r * n + start + width;
                         block.row(&inputs[row.clone()], &valid[row], o.row(r));
                     }
