@@ -31,29 +31,6 @@ pub fn block_size(n: usize) -> usize {
         .clamp(MIN_BLOCK, MAX_BLOCK)
 }
 
-/// Ask the processor to bring every cache line of `s` into its first-level cache (a hint:
-/// no effect on results). A block reads its columns of each row, a short run every
-/// `N` values, which the hardware prefetcher of a streaming read does not foresee; a block
-/// loop asks for the row a few frames ahead.
-#[inline]
-pub fn prefetch<T>(s: &[T]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let bytes = std::mem::size_of_val(s);
-        let p = s.as_ptr().cast::<i8>();
-        for off in (0..bytes).step_by(64) {
-            // SAFETY: a prefetch is a hint that never faults; the address is inside `s`
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(off)) };
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = s;
-}
-
-/// Frames ahead of the one a block loop works on whose inputs it asks for ([`prefetch`]).
-pub const PREFETCH_AHEAD: usize = 2;
-
 /// True when a batch of `t` frames of `n` elements is worth handing to the thread pool.
 #[inline]
 pub fn parallel(t: usize, n: usize) -> bool {

@@ -32,7 +32,7 @@ use texsense_kernels::preisach::{self as kernel, Head, Output, Prepared, CLAMPED
 
 use crate::error::{check_len, frames_of, CoreError};
 pub use crate::everett::{everett_terms, Everett, EverettTerms};
-use crate::par::{block_size, for_blocks, parallel, prefetch, FrameBlock, PREFETCH_AHEAD};
+use crate::par::{block_size, for_blocks, parallel, FrameBlock};
 use crate::snapshot::{Reader, Writer};
 
 #[cfg(target_arch = "x86_64")]
@@ -624,11 +624,6 @@ impl PreisachBank {
                 |mut block, o| {
                     let (start, width) = (o.start(), o.width());
                     for r in 0..b - a {
-                        if r + PREFETCH_AHEAD < b - a {
-                            let next = (r + PREFETCH_AHEAD) * n + start;
-                            prefetch(&inputs[next..next + width]);
-                            prefetch(&valid[next..next + width]);
-                        }
                         let row = r * n + start..r * n + start + width;
                         block.row(&inputs[row.clone()], &valid[row], o.row(r));
                     }
