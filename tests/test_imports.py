@@ -270,6 +270,31 @@ def test_the_command_line_loads_only_what_the_command_needs(argv):
         assert heavy_loaded == [] and commands == [] and not numpy_loaded, line
 
 
+def test_a_monitor_of_a_recording_starts_without_the_classifiers(tmp_path, shared_data):
+    """A monitor with no posture model (a replay, a serial mat) loads neither scikit-learn
+    (with scipy.stats: ~2 CPU-s of import) nor scipy.ndimage: each start of a monitor pays
+    only for what it uses."""
+    asf = shared_data / "vendor-formats" / "fscan_testL.asf"
+    code = (
+        "import json, sys\n"
+        "from texsense.cli import build_parser\n"
+        "from texsense.commands.monitor import build_monitor\n"
+        "import texsense.monitor.server\n"
+        "args = build_parser(['monitor']).parse_args(\n"
+        f"    ['monitor', '--source', 'replay:{asf}', '--db', 'm.sqlite'])\n"
+        "m = build_monitor(args)\n"
+        "heavy = sorted(x for x in ('sklearn', 'scipy.stats', 'scipy.ndimage') "
+        "if x in sys.modules)\n"
+        "print('LOADED', json.dumps([heavy, m.source.name]))\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path
+    )
+    line = next((x for x in run.stdout.splitlines() if x.startswith("LOADED")), run.stderr)
+    heavy_loaded, name = json.loads(line[len("LOADED ") :])
+    assert "fscan_testL" in name and heavy_loaded == [], line
+
+
 #: The layers of the tree, lowest first (docs/development.md, texsense/__init__.py): a module
 #: imports only from its own group and from groups of lower rank; groups of one rank do not
 #: import each other (the compensation never uses the simulator that grades it, nor the other

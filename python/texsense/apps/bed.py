@@ -44,7 +44,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from texsense.apps.alerts import Event, ExposureTracker, frame_time
 from texsense.data import units
@@ -222,6 +221,8 @@ def find_regions(
     ``prone``, ``left``, ``right`` or ``sitting``): name -> :class:`Region`, for the
     prominences found (a prominence off the mat or without a pressure maximum in its band is
     left out)."""
+    from scipy import ndimage  # (a second of import: only where a frame is searched)
+
     if side not in BANDS:
         raise ParameterError(f"unknown side {side!r}; known: {', '.join(BANDS)}")
     if not units.is_pressure_unit(unit):

@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from texsense.data import units
 from texsense.data.layout import ORIENTATIONS, Layout
@@ -226,6 +225,8 @@ def _span(lo: int, hi: int, word: str) -> str:
 
 def _grid_groups(elements: np.ndarray, layout: Layout) -> list[str]:
     """Connected groups of elements as 'row r, column c' or 'rows a-b, columns c-d'."""
+    from scipy import ndimage  # (a second of import: only where groups are named)
+
     assert layout.shape is not None
     rows, cols = _rc(layout, elements)
     mask = np.zeros(layout.shape, bool)

@@ -10,8 +10,10 @@ import signal
 import socket
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from texsense.apps.bed import BedWatch
+from texsense.apps.posture.model import PostureModel
+from texsense.apps.views import guess_mode
 from texsense.commands import HELP
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
@@ -22,10 +24,6 @@ from texsense.monitor import ExposureTracker, Monitor, sources
 from texsense.monitor.sources import Source
 from texsense.monitor.store import open_store
 from texsense.monitor.web import Access, is_loopback, resolve_token, stop_on_sigterm
-
-if TYPE_CHECKING:
-    from texsense.apps.bed import BedWatch
-    from texsense.apps.posture.model import PostureModel
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -270,8 +268,6 @@ def open_source(args: argparse.Namespace, *, loop: bool = True) -> Source:
 
 def build_monitor(args: argparse.Namespace) -> Monitor:
     """Source, pipeline, tracker, model, store -> a Monitor."""
-    from texsense.apps.posture.model import PostureModel
-
     source = open_source(args)
     calibration: StageChain | None
     if args.calibration is not None:
@@ -305,8 +301,6 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
     if args.bed and args.no_posture:
         raise ParameterError("--bed needs the side model: drop --no-posture")
     if args.bed or (args.source == "virtual-bed" and not args.no_posture):
-        from texsense.apps.bed import BedWatch
-
         if model is None and args.source == "virtual-bed":
             model = virtual_bed_model(_virtual_calibration(args).id)
         if model is None:
@@ -373,8 +367,6 @@ def _mode(args: argparse.Namespace, source: Source, bed: BedWatch | None) -> str
         return "bed"
     rec = getattr(source, "rec", None)
     if rec is not None:
-        from texsense.apps.views import guess_mode
-
         return guess_mode(rec.layout, rec.meta)
     return "seat"
 
@@ -413,8 +405,6 @@ def _cached_model(
 
 def _kept_model(path: Path) -> PostureModel | None:
     """The posture model kept at ``path``, or None (none, or one that cannot be read: said)."""
-    from texsense.apps.posture.model import PostureModel
-
     if not path.is_file():
         return None
     try:

@@ -7,6 +7,7 @@ import json
 import time
 from pathlib import Path
 
+from texsense.apps.posture.model import PostureModel
 from texsense.apps.report import write_report
 from texsense.apps.roi import parse_rois
 from texsense.commands import HELP
@@ -67,8 +68,6 @@ def run_report(args: argparse.Namespace) -> int:
             raise ParameterError(f"{args.rois}: {e}") from None
     model = None
     if args.model is not None:
-        from texsense.apps.posture.model import PostureModel
-
         model = PostureModel.load(args.model)
     out = write_report(
         args.recording, args.output, rois=rois, mode=args.mode, unit=args.unit,

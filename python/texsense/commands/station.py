@@ -13,6 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from texsense.apps.posture.model import PostureModel
 from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
 from texsense.commands._options import RANGES
@@ -239,8 +240,6 @@ def read_config(
             if not m.get("model"):
                 raise FormatError(path, f"[[mat]] #{k + 1}: a bed needs model = \"FILE\", a "
                                   "posture model of sides (texsense posture train)")  # fmt: skip
-            from texsense.apps.posture.model import PostureModel  # scikit-learn: beds only
-
             model = PostureModel.load(str(m["model"]))
         every = float(m.get("turn_every_min", turn_every_min))
         mats.append(MatConfig(str(m["id"]), layout, cal, quantity, str(m.get("source", "mqtt")),

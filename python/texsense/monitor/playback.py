@@ -62,7 +62,9 @@ from fastapi.responses import FileResponse
 from texsense.apps import stats
 from texsense.apps.clinical import POSTURE_LABEL
 from texsense.apps.report import write_report
+from texsense.apps.review import block_of, decimate, open_review
 from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
+from texsense.apps.views import orientation_of
 from texsense.data import budget, units
 from texsense.data.files import check_regular, make_folder, real_path, regular_files
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
@@ -139,8 +141,6 @@ class _Reviews:
             return sum(size for _, size in self._items.values())
 
     def get(self, path: Path) -> Review:
-        from texsense.apps.review import open_review
-
         st = path.stat()
         key = (str(path), st.st_size, st.st_mtime)
         with self._lock:
@@ -178,8 +178,6 @@ class _Reviews:
 
 
 def _series(review: Review) -> dict[str, Any]:
-    from texsense.apps.review import decimate
-
     s = review.series
     n = s["t"].size
     bins = min(n, MAX_POINTS)
@@ -227,8 +225,6 @@ def _summary(review: Review, path: Path) -> dict[str, Any]:
 
 
 def _roi_stats(review: Review, rois: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    from texsense.apps.review import block_of, decimate
-
     rec = review.rec
     regions = {r["name"]: roi_elements(r, rec.layout) for r in rois}
     out = []
@@ -321,8 +317,6 @@ class _Folder:
 
 
 def _view(monitor: Monitor) -> dict[str, Any]:
-    from texsense.apps.views import orientation_of
-
     mode = monitor.mode
     scale = None
     if mode.scale is not None:

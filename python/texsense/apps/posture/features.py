@@ -36,7 +36,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from texsense._progress import logger
 from texsense.apps.stats import centre_of_force_values
@@ -84,6 +83,8 @@ def align_maps(maps: npt.ArrayLike, rotate: bool = False) -> np.ndarray:
     """Shift each map (T, rows, cols) so its centre of force lies in the middle of the grid
     (linear interpolation, zeros shifted in); with ``rotate`` also turn it so the principal
     axis of its pressure (the body axis) runs along the rows."""
+    from scipy import ndimage  # (a second of import: only where maps are aligned)
+
     m = np.nan_to_num(np.asarray(maps, dtype=np.float64))
     rows, cols = m.shape[1:]
     r, c = np.mgrid[:rows, :cols]

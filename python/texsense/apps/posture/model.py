@@ -23,18 +23,22 @@ Examples
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from sklearn.base import BaseEstimator
 
 from texsense import __version__
-from texsense.apps.posture.evaluate import make_classifier, takes_groups
 from texsense.apps.posture.features import FeatureSet, mirror_samples
 from texsense.data.files import atomic_path, open_regular
 from texsense.data.layout import Layout
 from texsense.exceptions import FormatError, ParameterError
+
+if TYPE_CHECKING:
+    from sklearn.base import BaseEstimator
+
+# scikit-learn (and with it scipy.stats: ~2 CPU-s of import) only where a model is made,
+# fitted or read: a monitor without a posture model starts without it
 
 __all__ = ["FORMAT", "VERSION", "PostureModel"]
 
@@ -73,7 +77,11 @@ class PostureModel:
         self.classifier_name = (
             classifier if isinstance(classifier, str) else type(classifier).__name__
         )
-        self.estimator = make_classifier(classifier) if isinstance(classifier, str) else classifier
+        if isinstance(classifier, str):
+            from texsense.apps.posture.evaluate import make_classifier
+
+            classifier = make_classifier(classifier)
+        self.estimator = classifier
         self.columns = None if columns is None else [int(c) for c in columns]
         self.mirror = None if mirror is None else {str(k): v for k, v in mirror.items()}
         self.classes_: np.ndarray | None = None
@@ -106,6 +114,8 @@ class PostureModel:
             X = np.vstack([X, self.features_of(flipped, b)])
             y = np.concatenate([y, y_m])
             g = None if g is None else np.concatenate([g, g[source]])
+        from texsense.apps.posture.evaluate import takes_groups
+
         if takes_groups(self.estimator):
             self.estimator.fit(X, y, groups=g)
         else:

@@ -27,8 +27,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from texsense.apps.report._content import report_content
 from texsense.apps.report._html import write_html
 from texsense.apps.report._pdf import write_pdf
+from texsense.apps.review import open_review
 from texsense.apps.roi import load_rois
 from texsense.data.files import check_not_input
 from texsense.data.recording import Recording
@@ -55,9 +57,6 @@ def write_report(
     ``unit``, ``scale``, ``threshold_mmhg``, ``reposition_min``, ``turn_every_min``,
     ``model``, ``name``).
     """
-    from texsense.apps.report._content import report_content
-    from texsense.apps.review import open_review
-
     out = Path(out)
     fmt = FORMATS.get(out.suffix.lower())
     if fmt is None:

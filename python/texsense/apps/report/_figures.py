@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from texsense.apps.views import outline_segments, threshold_mask
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -103,8 +105,6 @@ def draw_values(
 def _outline(ax: Axes, layout: Layout, grid: np.ndarray, threshold: float) -> None:
     """The outline of the region above ``threshold`` along the cells' edges."""
     from matplotlib.collections import LineCollection
-
-    from texsense.apps.views import outline_segments, threshold_mask
 
     active = np.zeros(grid.shape, bool)
     assert layout.cells is not None
