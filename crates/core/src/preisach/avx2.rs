@@ -98,7 +98,6 @@ pub(super) unsafe fn row(
         let moved = unsafe {
             group(
                 &consts,
-                e.table().as_ptr(),
                 hd,
                 &stacks,
                 off,
@@ -149,7 +148,8 @@ struct Consts {
     k: __m256i,
     offset: __m256d,
     sign: __m256d,
-    /// The table by cell (null: gathered from the table).
+    /// The table, and the table by cell (null: gathered from the table).
+    table: *const f64,
     cells: *const f64,
 }
 
@@ -167,6 +167,7 @@ impl Consts {
             k: _mm256_set1_epi64x(k as i64),
             offset: _mm256_set1_pd(output.offset),
             sign: _mm256_set1_pd(output.sign),
+            table: e.table().as_ptr(),
             cells: if cells.is_empty() {
                 std::ptr::null()
             } else {
@@ -200,7 +201,8 @@ unsafe fn grid(c: &Consts, v: __m256d) -> __m256d {
 /// no lane reads outside the table.
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn everett(c: &Consts, table: *const f64, alpha: __m256d, beta: __m256d) -> __m256d {
+unsafe fn everett(c: &Consts, alpha: __m256d, beta: __m256d) -> __m256d {
+    let table = c.table;
     let zero = _mm256_setzero_pd();
     let one = _mm256_set1_pd(1.0);
     let (a, b) = (grid(c, alpha), grid(c, beta));
@@ -276,7 +278,6 @@ unsafe fn cell_corners(
 #[target_feature(enable = "avx2")]
 unsafe fn group(
     c: &Consts,
-    table: *const f64,
     hd: &mut Heads,
     stacks: &[*mut f64; LANES],
     off: __m256i,
@@ -364,7 +365,7 @@ unsafe fn group(
     let alpha = _mm256_blendv_pd(t_u, uc, odd);
     let beta = _mm256_blendv_pd(uc, t_u, odd);
     let sign = _mm256_blendv_pd(_mm256_set1_pd(-2.0), _mm256_set1_pd(2.0), odd);
-    let f = everett(c, table, alpha, beta);
+    let f = everett(c, alpha, beta);
     let h = _mm256_add_pd(t_h, _mm256_mul_pd(sign, f));
     let sum = _mm256_blendv_pd(last_h, h, moving);
     let y = _mm256_mul_pd(c.sign, _mm256_add_pd(sum, c.offset));
