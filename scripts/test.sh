@@ -3,6 +3,11 @@
 # on the binding's stubs), clippy, Rust unit tests, pytest (the slow checks beside it).
 source "$(dirname "${BASH_SOURCE[0]}")/_bootstrap.sh"
 export TEXSENSE_NO_PROGRESS=1
+# one BLAS thread per process: two pytest workers and the checks already fill the cores, and
+# OpenBLAS threads that find their core busy spin (a 500x500 Cholesky factor, with a second
+# process busy beside it: 37 CPU-ms with its default threads, 4.3 with one; a Preisach fit
+# 5.6-6.2 -> 4.6-5.1 CPU-s). Set it yourself to try other counts.
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 say "ruff check";            ruff check python tests benchmarks examples
 say "ruff format --check";   ruff format --check python tests benchmarks examples
 say "cargo fmt --check";     cargo fmt --all --check
@@ -51,8 +56,6 @@ fi
 # (Python reads it even where PYTHONDONTWRITEBYTECODE keeps each process from writing it;
 # about 0.2 s of every start)
 say "compileall";            python -m compileall -q -j 0 python/texsense >/dev/null
-# two workers side by side (pytest-xdist; TEXSENSE_TEST_JOBS to change): much of a test's
-# time is waiting on a child process, a server or a browser. Grouped tests stay together.
 # the slow checks (types, stubs, clippy, the Rust tests: ~4 CPU-minutes from a clean clone) run
 # one after the other beside pytest, at a lower priority: pytest's workers spend much of their
 # time waiting on a child process, a server or a browser, and these fill that time. Their
