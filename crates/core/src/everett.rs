@@ -18,6 +18,30 @@ pub struct Everett {
     pub(crate) u_min: f64,
     pub(crate) u_max: f64,
     pub(crate) table: Vec<f64>,
+    /// The table by cell for the SIMD path: the cell with lower corner (i, j), j <= i <=
+    /// K - 2, at `4 (i (i + 1) / 2 + j)` as `F(i, j), F(i, j + 1), F(i + 1, j),
+    /// F(i + 1, j + 1)` — one 32-byte load per lookup instead of four gathers. Empty for
+    /// grids above [`CELL_GRID_MAX`] points (then the SIMD path gathers from `table`).
+    pub(crate) cells: Vec<f64>,
+}
+
+/// The largest grid whose table is also kept by cell (`(K - 1) K / 2` cells of 32 bytes:
+/// 4 MB at 512 points).
+pub const CELL_GRID_MAX: usize = 512;
+
+/// [`Everett::cells`] of a prepared `k x k` table (empty above [`CELL_GRID_MAX`]).
+fn cells_of(k: usize, table: &[f64]) -> Vec<f64> {
+    if k > CELL_GRID_MAX {
+        return Vec::new();
+    }
+    let mut cells = Vec::with_capacity(2 * k * (k - 1));
+    for i in 0..k - 1 {
+        for j in 0..=i {
+            let q = i * k + j;
+            cells.extend_from_slice(&[table[q], table[q + 1], table[q + k], table[q + k + 1]]);
+        }
+    }
+    cells
 }
 
 impl Everett {
@@ -50,6 +74,7 @@ impl Everett {
             k,
             u_min,
             u_max,
+            cells: cells_of(k, &table),
             table,
         })
     }
@@ -87,6 +112,19 @@ impl Everett {
     /// The table (row α, column β; zero on and above the diagonal).
     pub fn table(&self) -> &[f64] {
         &self.table
+    }
+
+    /// The table by cell ([`Everett::cells`]; empty for large grids).
+    pub(crate) fn cells(&self) -> &[f64] {
+        &self.cells
+    }
+
+    /// The same function without its table by cell (the SIMD path then gathers from the
+    /// table, as for grids above [`CELL_GRID_MAX`]; for tests of that path).
+    #[cfg(test)]
+    pub(crate) fn without_cells(mut self) -> Self {
+        self.cells = Vec::new();
+        self
     }
 
     /// `F(α, β)` for `u_min <= β <= α <= u_max` (interpolated; NaN for NaN).

@@ -290,6 +290,8 @@ pub struct PreisachBank {
 /// of [`LANES`]: their heads are `heads`).
 pub struct PreisachBlock<'a> {
     everett: EverettView<'a, f64>,
+    /// The Everett table by cell (empty: gathered from the table).
+    cells: &'a [f64],
     capacity: usize,
     elements: &'a mut [Element],
     heads: &'a mut [Heads],
@@ -328,6 +330,7 @@ impl PreisachBlock<'_> {
             unsafe {
                 avx2::row(
                     &self.everett,
+                    self.cells,
                     self.capacity,
                     self.output,
                     self.elements,
@@ -530,6 +533,7 @@ impl PreisachBank {
     /// block's first element is a multiple of [`LANES`]).
     pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
         let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
+        let cells = self.everett.cells();
         let size = block_size(self.len());
         debug_assert!(size.is_multiple_of(LANES));
         self.elements
@@ -537,6 +541,7 @@ impl PreisachBank {
             .zip(self.heads.chunks_mut(size / LANES))
             .map(|(elements, heads)| PreisachBlock {
                 everett,
+                cells,
                 capacity,
                 elements,
                 heads,
@@ -588,6 +593,7 @@ impl PreisachBank {
             // the whole bank as one block, frame after frame
             let mut all = PreisachBlock {
                 everett: self.everett.view(),
+                cells: self.everett.cells(),
                 capacity: self.capacity,
                 elements: &mut self.elements,
                 heads: &mut self.heads,

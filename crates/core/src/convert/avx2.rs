@@ -1,8 +1,9 @@
 //! Conversion (eq. 2.1) of four elements at once in AVX2 lanes: `(c - a_i) / b_i`, then the
 //! material curve, with the kernel's operations (`texsense_kernels::convert`: the bucket
 //! table, the steps to the segment, `slope (v - x_j) + y_j`, the ends held) in the same
-//! order, so the same bits. The bucket, the steps and the segment's values are gathered;
-//! the steps loop while any lane still moves (a step or two at most on a real curve).
+//! order, so the same bits. The bucket, the steps and the segment's values are gathered
+//! (x[j] once: the search's load is the segment's); the steps loop while any lane still
+//! moves (a step or two at most on a real curve).
 
 use std::arch::x86_64::*;
 
@@ -88,8 +89,10 @@ unsafe fn at(c: &Curve<'_, f64>, v: __m256d) -> __m256d {
     let (zero_i, one_i) = (_mm256_setzero_si256(), _mm256_set1_epi64x(1));
     let xp = xs.as_ptr();
     // the bucket's start may round either way at its edge: settle on x[j] <= v < x[j + 1]
+    // (`xj`: x[j] of every lane, kept from the loads of the search)
+    let mut xj;
     loop {
-        let xj = _mm256_i64gather_pd::<8>(xp, j);
+        xj = _mm256_i64gather_pd::<8>(xp, j);
         let down = _mm256_and_si256(
             _mm256_and_si256(inside, _mm256_cmpgt_epi64(j, zero_i)),
             _mm256_castpd_si256(_mm256_cmp_pd::<_CMP_GT_OQ>(xj, vin)),
@@ -113,8 +116,8 @@ unsafe fn at(c: &Curve<'_, f64>, v: __m256d) -> __m256d {
             break;
         }
         j = _mm256_sub_epi64(j, up);
+        xj = _mm256_blendv_pd(xj, xn, _mm256_castsi256_pd(up));
     }
-    let xj = _mm256_i64gather_pd::<8>(xp, j);
     let yj = _mm256_i64gather_pd::<8>(ys.as_ptr(), j);
     // slope j exists for inside lanes (j <= last - 1); outside lanes read slope 0
     let sj = _mm256_i64gather_pd::<8>(slope.as_ptr(), j);

@@ -31,6 +31,7 @@ use super::{Element, Heads, INLINE_EXTREMA, LANES};
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn row(
     e: &EverettView<'_, f64>,
+    cells: &[f64],
     capacity: usize,
     output: Output<f64>,
     elements: &mut [Element],
@@ -42,7 +43,11 @@ pub(super) unsafe fn row(
     let n = elements.len();
     assert!(u.len() == n && ok.len() == n && out.len() == n);
     assert!(heads.len() == n.div_ceil(LANES));
-    let consts = Consts::new(e, output);
+    let consts = Consts::new(e, cells, output);
+    // the room of a stack in place (`Element::room`)
+    let room = _mm256_set1_epi64x(INLINE_EXTREMA.min(capacity) as i64);
+    let step = (std::mem::size_of::<Element>() / 8) as i64;
+    let in_place = _mm256_set_epi64x(3 * step, 2 * step, step, 0);
     for (g, hd) in heads.iter_mut().enumerate() {
         let i = g * LANES;
         if i + LANES > n {
@@ -62,12 +67,25 @@ pub(super) unsafe fn row(
         }
         let els = &mut elements[i..i + LANES];
         let mut stacks = [std::ptr::null_mut::<f64>(); LANES];
-        let (mut at_room, mut spilled) = (false, false);
-        for (l, el) in els.iter_mut().enumerate() {
-            at_room |= hd.len[l] as usize == el.room(capacity);
-            spilled |= el.spill.is_some();
-            stacks[l] = el.stack_mut().as_mut_ptr().cast::<f64>();
-        }
+        let spilled = els.iter().any(|el| el.spill.is_some());
+        let (at_room, off) = if spilled {
+            let mut at_room = false;
+            for (l, el) in els.iter_mut().enumerate() {
+                at_room |= hd.len[l] as usize == el.room(capacity);
+                stacks[l] = el.stack_mut().as_mut_ptr().cast::<f64>();
+            }
+            // each stack from lane 0's, in f64 (the distance of two f64 arrays)
+            let rel = |l: usize| (stacks[l] as isize - stacks[0] as isize) as i64 >> 3;
+            (at_room, _mm256_set_epi64x(rel(3), rel(2), rel(1), 0))
+        } else {
+            // every stack in place, with the same room, one element apart
+            for (l, el) in els.iter_mut().enumerate() {
+                stacks[l] = el.inline.as_mut_ptr().cast::<f64>();
+            }
+            let len = _mm256_load_si256(hd.len.as_ptr().cast());
+            let full = _mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpeq_epi64(len, room)));
+            (full != 0, in_place)
+        };
         if at_room {
             for l in 0..LANES {
                 let (x, v) = (u[i + l], ok[i + l]);
@@ -80,9 +98,9 @@ pub(super) unsafe fn row(
         let moved = unsafe {
             group(
                 &consts,
-                e.table().as_ptr(),
                 hd,
                 &stacks,
+                off,
                 &u[i..i + LANES],
                 &ok[i..i + LANES],
                 &mut out[i..i + LANES],
@@ -130,12 +148,16 @@ struct Consts {
     k: __m256i,
     offset: __m256d,
     sign: __m256d,
+    /// The table, and the table by cell (null: gathered from the table).
+    table: *const f64,
+    cells: *const f64,
 }
 
 impl Consts {
     #[target_feature(enable = "avx2")]
-    unsafe fn new(e: &EverettView<'_, f64>, output: Output<f64>) -> Self {
+    unsafe fn new(e: &EverettView<'_, f64>, cells: &[f64], output: Output<f64>) -> Self {
         let k = e.size();
+        debug_assert!(cells.is_empty() || cells.len() == 2 * k * (k - 1));
         Self {
             u_min: _mm256_set1_pd(e.u_min()),
             u_max: _mm256_set1_pd(e.u_max()),
@@ -145,6 +167,12 @@ impl Consts {
             k: _mm256_set1_epi64x(k as i64),
             offset: _mm256_set1_pd(output.offset),
             sign: _mm256_set1_pd(output.sign),
+            table: e.table().as_ptr(),
+            cells: if cells.is_empty() {
+                std::ptr::null()
+            } else {
+                cells.as_ptr()
+            },
         }
     }
 }
@@ -157,40 +185,48 @@ unsafe fn clamp(x: __m256d, lo: __m256d, hi: __m256d) -> __m256d {
     _mm256_blendv_pd(x, hi, _mm256_cmp_pd::<_CMP_GT_OQ>(x, hi))
 }
 
-/// An input in grid steps, clamped into `[0, K - 1]` (0 for a lane that is not a number).
+/// An input in grid steps, at most `K - 1`: `(v - u_min) / step` of a number
+/// `v >= u_min` (an input clamped into the range, an extremum on a stack, or the lower
+/// saturation). That is `+0`, `-0` (`v = -0`, `u_min = +0`) or above and never NaN, so
+/// the scalar kernel's clamp into `[0, K - 1]` only ever takes the upper bound, which
+/// `min` gives bit for bit.
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn grid(c: &Consts, v: __m256d) -> __m256d {
-    let zero = _mm256_setzero_pd();
-    let x = clamp(
-        _mm256_mul_pd(_mm256_sub_pd(v, c.u_min), c.inv_step),
-        zero,
-        c.last,
-    );
-    _mm256_blendv_pd(x, zero, _mm256_cmp_pd::<_CMP_UNORD_Q>(x, x))
+    _mm256_min_pd(_mm256_mul_pd(_mm256_sub_pd(v, c.u_min), c.inv_step), c.last)
 }
 
-/// `Everett::value_of_numbers` per lane (the same arithmetic; lanes that are not numbers
-/// read the table's first cell instead of out of bounds, and are discarded by the caller).
+/// `Everett::value_of_numbers` per lane for `u_min <= alpha, beta` (the same arithmetic;
+/// see [`grid`]). The cell indices are kept in `[0, K - 2]` whatever the inputs, so that
+/// no lane reads outside the table.
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn everett(c: &Consts, table: *const f64, alpha: __m256d, beta: __m256d) -> __m256d {
+unsafe fn everett(c: &Consts, alpha: __m256d, beta: __m256d) -> __m256d {
+    let table = c.table;
     let zero = _mm256_setzero_pd();
     let one = _mm256_set1_pd(1.0);
     let (a, b) = (grid(c, alpha), grid(c, beta));
-    // a, b in [0, K - 1]: truncation is the floor; then at most K - 2
-    let i0 = _mm_min_epi32(_mm256_cvttpd_epi32(a), c.top);
-    let j0 = _mm_min_epi32(_mm256_cvttpd_epi32(b), c.top);
+    // a, b in [0, K - 1]: truncation is the floor; then at most K - 2 (and at least 0:
+    // a NaN, which the caller never passes, would truncate to i32::MIN)
+    let zero_i = _mm_setzero_si128();
+    let i0 = _mm_max_epi32(_mm_min_epi32(_mm256_cvttpd_epi32(a), c.top), zero_i);
+    let j0 = _mm_max_epi32(_mm_min_epi32(_mm256_cvttpd_epi32(b), c.top), zero_i);
     let wa = _mm256_sub_pd(a, _mm256_cvtepi32_pd(i0));
     let wb = _mm256_sub_pd(b, _mm256_cvtepi32_pd(j0));
     let (i64a, i64b) = (_mm256_cvtepi32_epi64(i0), _mm256_cvtepi32_epi64(j0));
-    let q = _mm256_add_epi64(_mm256_mul_epi32(i64a, c.k), i64b);
-    let one_i = _mm256_set1_epi64x(1);
-    let f00 = _mm256_i64gather_pd::<8>(table, q);
-    let f01 = _mm256_i64gather_pd::<8>(table, _mm256_add_epi64(q, one_i));
-    let qk = _mm256_add_epi64(q, c.k);
-    let f10 = _mm256_i64gather_pd::<8>(table, qk);
-    let f11 = _mm256_i64gather_pd::<8>(table, _mm256_add_epi64(qk, one_i));
+    let (f00, f01, f10, f11) = if c.cells.is_null() {
+        let q = _mm256_add_epi64(_mm256_mul_epi32(i64a, c.k), i64b);
+        let one_i = _mm256_set1_epi64x(1);
+        let qk = _mm256_add_epi64(q, c.k);
+        (
+            _mm256_i64gather_pd::<8>(table, q),
+            _mm256_i64gather_pd::<8>(table, _mm256_add_epi64(q, one_i)),
+            _mm256_i64gather_pd::<8>(table, qk),
+            _mm256_i64gather_pd::<8>(table, _mm256_add_epi64(qk, one_i)),
+        )
+    } else {
+        cell_corners(c.cells, i0, j0)
+    };
     let (owa, owb) = (_mm256_sub_pd(one, wa), _mm256_sub_pd(one, wb));
     let low = _mm256_add_pd(_mm256_mul_pd(owb, f00), _mm256_mul_pd(wb, f01));
     let high = _mm256_add_pd(_mm256_mul_pd(owb, f10), _mm256_mul_pd(wb, f11));
@@ -201,15 +237,50 @@ unsafe fn everett(c: &Consts, table: *const f64, alpha: __m256d, beta: __m256d) 
     _mm256_blendv_pd(v, zero, _mm256_cmp_pd::<_CMP_GE_OQ>(b, a))
 }
 
+/// The four corners of each lane's Everett cell `(i0, j0)` (`i0, j0 <= K - 2`) from the
+/// table by cell: one 32-byte load per lane, transposed into `F(i, j), F(i, j + 1),
+/// F(i + 1, j), F(i + 1, j + 1)` across the lanes. A lane with `j0 > i0` (whose value the
+/// caller discards: `β >= α`) reads a cell of the next row, still inside the table.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn cell_corners(
+    cells: *const f64,
+    i0: __m128i,
+    j0: __m128i,
+) -> (__m256d, __m256d, __m256d, __m256d) {
+    // cell index i (i + 1) / 2 + j, in 32-bit lanes (K <= CELL_GRID_MAX)
+    let tri = _mm_srli_epi32::<1>(_mm_mullo_epi32(i0, _mm_add_epi32(i0, _mm_set1_epi32(1))));
+    let q = _mm_slli_epi32::<2>(_mm_add_epi32(tri, j0));
+    let at = |l: usize| -> __m256d {
+        let q = match l {
+            0 => _mm_cvtsi128_si32(q),
+            1 => _mm_extract_epi32::<1>(q),
+            2 => _mm_extract_epi32::<2>(q),
+            _ => _mm_extract_epi32::<3>(q),
+        };
+        // SAFETY: i0, j0 <= K - 2, so the cell index is below (K - 1) K / 2
+        unsafe { _mm256_loadu_pd(cells.add(q as usize)) }
+    };
+    let (r0, r1, r2, r3) = (at(0), at(1), at(2), at(3));
+    let (lo01, hi01) = (_mm256_unpacklo_pd(r0, r1), _mm256_unpackhi_pd(r0, r1));
+    let (lo23, hi23) = (_mm256_unpacklo_pd(r2, r3), _mm256_unpackhi_pd(r2, r3));
+    (
+        _mm256_permute2f128_pd::<0x20>(lo01, lo23),
+        _mm256_permute2f128_pd::<0x20>(hi01, hi23),
+        _mm256_permute2f128_pd::<0x31>(lo01, lo23),
+        _mm256_permute2f128_pd::<0x31>(hi01, hi23),
+    )
+}
+
 /// Four elements whose stacks all have room for a turning point (`stacks`: each one's
-/// extrema, input and output after each other): the outputs into `out`, the heads and the
+/// extrema, input and output after each other, `off` lane `l`'s from lane 0's in f64): the outputs into `out`, the heads and the
 /// pushed turning points stored; returns the lanes that moved (bit `l` for lane `l`).
 #[target_feature(enable = "avx2")]
 unsafe fn group(
     c: &Consts,
-    table: *const f64,
     hd: &mut Heads,
     stacks: &[*mut f64; LANES],
+    off: __m256i,
     u: &[f64],
     ok: &[bool],
     out: &mut [f64],
@@ -255,8 +326,6 @@ unsafe fn group(
     );
     let base = stacks[0] as *const f64;
     if _mm256_testz_si256(wiped, wiped) == 0 {
-        let rel = |l: usize| (stacks[l] as isize - base as isize) as i64 / 8;
-        let off = _mm256_set_epi64x(rel(3), rel(2), rel(1), rel(0));
         // slot `s` (an extremum's index) of every lane's stack as an index from `base`
         let slot = |s: __m256i| _mm256_add_epi64(_mm256_add_epi64(s, s), off);
         len = _mm256_add_epi64(len, _mm256_add_epi64(wiped, wiped));
@@ -286,8 +355,6 @@ unsafe fn group(
         _mm256_castpd_si256(_mm256_cmp_pd::<_CMP_LE_OQ>(uc, b_u)),
     );
     if _mm256_testz_si256(at_sat, at_sat) == 0 {
-        let rel = |l: usize| (stacks[l] as isize - base as isize) as i64 / 8;
-        let off = _mm256_set_epi64x(rel(3), rel(2), rel(1), rel(0));
         let s = _mm256_castsi256_pd(at_sat);
         len = _mm256_blendv_epi8(len, one_i, at_sat);
         t_u = _mm256_blendv_pd(t_u, b_u, s);
@@ -298,7 +365,7 @@ unsafe fn group(
     let alpha = _mm256_blendv_pd(t_u, uc, odd);
     let beta = _mm256_blendv_pd(uc, t_u, odd);
     let sign = _mm256_blendv_pd(_mm256_set1_pd(-2.0), _mm256_set1_pd(2.0), odd);
-    let f = everett(c, table, alpha, beta);
+    let f = everett(c, alpha, beta);
     let h = _mm256_add_pd(t_h, _mm256_mul_pd(sign, f));
     let sum = _mm256_blendv_pd(last_h, h, moving);
     let y = _mm256_mul_pd(c.sign, _mm256_add_pd(sum, c.offset));
