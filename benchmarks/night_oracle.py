@@ -54,6 +54,7 @@ import argparse
 import itertools
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -259,14 +260,15 @@ def bands_table(nights: list[str], hours: float, cache: Path) -> None:
             print(f"| {spec} | {h + 1} | " + " | ".join(cells) + f" | {100 * err_all:+.1f}% |")
 
 
-def body_table(nights: list[str], hours: float, cache: Path) -> None:
-    """ORACLE: the level of the body (the loaded elements, those a level correction moves)
-    brought to the truth at the first or at every still period."""
-    names = [
-        "in use (today)",
-        "oracle first level of the body",
-        "oracle body level every still period",
-    ]
+def _runs_table(
+    nights: list[str],
+    hours: float,
+    cache: Path,
+    names: list[str],
+    more_runs: Callable[[Any, Any, np.ndarray, int], list[tuple[np.ndarray, np.ndarray]]],
+) -> None:
+    """One row per night: today's in-use output and the runs ``more_runs(chain, raw, truth,
+    seed)`` adds, each as its worst hour per element / of the total load."""
     print("per element (worst hour at 10-150 mmHg) / total load (worst hour)\n")
     print("| night | used for | " + " | ".join(names) + " |")
     print("|---|---|" + "---:|" * len(names))
@@ -277,14 +279,30 @@ def body_table(nights: list[str], hours: float, cache: Path) -> None:
         area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
         pipe = Pipeline(chain, raw.layout, in_use=True)
         runs = [pipe.process(raw.frames, raw.times, raw.valid)[:2]]
-        runs.append(oracle_run(chain, raw, y, "first", body=True))
-        runs.append(oracle_run(chain, raw, y, "every", body=True))
+        runs += more_runs(chain, raw, y, int(seed_s))
         cells = []
         for v, ok in runs:
             err, lerr = hourly(v, ok, y, raw.times, area, round(hours))
             cells.append(f"{100 * max(err):.1f} / {100 * max(lerr):.1f}%")
         used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
         print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
+
+
+def body_table(nights: list[str], hours: float, cache: Path) -> None:
+    """ORACLE: the level of the body (the loaded elements, those a level correction moves)
+    brought to the truth at the first or at every still period."""
+    names = [
+        "in use (today)",
+        "oracle first level of the body",
+        "oracle body level every still period",
+    ]
+    _runs_table(
+        nights, hours, cache, names,
+        lambda chain, raw, y, seed: [
+            oracle_run(chain, raw, y, "first", body=True),
+            oracle_run(chain, raw, y, "every", body=True),
+        ],
+    )  # fmt: skip
 
 
 def entered_weight(raw: Any, seed: int) -> float:
@@ -300,25 +318,15 @@ def clip_table(nights: list[str], hours: float, cache: Path) -> None:
     """The body weight entered, weighed as the readings are and with readings below zero
     weighed as zero (not an oracle)."""
     names = ["in use (today)", "body weight entered", "body weight entered, weighed clipped at 0"]
-    print("per element (worst hour at 10-150 mmHg) / total load (worst hour)\n")
-    print("| night | used for | " + " | ".join(names) + " |")
-    print("|---|---|" + "---:|" * len(names))
-    for spec in nights:
-        law, seed_s = spec.split(":")
-        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
-        y = truth_rec.frames.astype(np.float64)
-        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
-        w = entered_weight(raw, int(seed_s))
-        pipe = Pipeline(chain, raw.layout, in_use=True)
-        runs = [pipe.process(raw.frames, raw.times, raw.valid)[:2]]
-        runs.append(oracle_run(chain, raw, y, "weight", w))
-        runs.append(oracle_run(chain, raw, y, "weight", w, clip=True))
-        cells = []
-        for v, ok in runs:
-            err, lerr = hourly(v, ok, y, raw.times, area, round(hours))
-            cells.append(f"{100 * max(err):.1f} / {100 * max(lerr):.1f}%")
-        used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
-        print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
+
+    def weighed(chain: Any, raw: Any, y: np.ndarray, seed: int) -> list:
+        w = entered_weight(raw, seed)
+        return [
+            oracle_run(chain, raw, y, "weight", w),
+            oracle_run(chain, raw, y, "weight", w, clip=True),
+        ]
+
+    _runs_table(nights, hours, cache, names, weighed)
 
 
 def main() -> int:
