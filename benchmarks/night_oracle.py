@@ -56,7 +56,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -194,6 +194,28 @@ def best_gain(
     return out
 
 
+class Night(NamedTuple):
+    """One night of the tables: the raw recording, its truth (N/cm², float64), the calibration
+    chain, the elements' areas, and what the night is used for (tuning or judging)."""
+
+    raw: Any
+    truth: np.ndarray
+    chain: Any
+    area: np.ndarray
+    seed: int
+    used: str
+
+
+def load_night(spec: str, hours: float, cache: Path) -> Night:
+    """The night ``law:seed`` (simulated once, then read from ``cache``)."""
+    law, seed_s = spec.split(":")
+    seed = int(seed_s)
+    raw, truth_rec, chain = night_files(law, seed, hours, cache)
+    used = "tuning" if (law, seed) in TUNING else "judging"
+    area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+    return Night(raw, truth_rec.frames.astype(np.float64), chain, area, seed, used)
+
+
 def regions_table(nights: list[str], hours: float, cache: Path) -> None:
     """ORACLE: the best gain per frame of every block of the in-use output (a level per region,
     fitted on the truth): the floor of a level correction at that scale."""
@@ -204,10 +226,7 @@ def regions_table(nights: list[str], hours: float, cache: Path) -> None:
     print(f"| night | used for | in use (today) | whole mat | {cols} |")
     print("|---|---|" + "---:|" * (2 + len(sizes)))
     for spec in nights:
-        law, seed_s = spec.split(":")
-        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
-        y = truth_rec.frames.astype(np.float64)
-        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        raw, y, chain, area, _seed, used = load_night(spec, hours, cache)
         pipe = Pipeline(chain, raw.layout, in_use=True)
         v, ok, _ = pipe.process(raw.frames, raw.times, raw.valid)
         v = np.nan_to_num(v)
@@ -220,7 +239,6 @@ def regions_table(nights: list[str], hours: float, cache: Path) -> None:
                 w[:, m] = best_gain(v[:, m], ok[:, m], y[:, m], BAND)
             outs.append(w)
         cells = [max(hourly(w, ok, y, raw.times, area, round(hours))[0]) for w in outs]
-        used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
         print(f"| {spec} | {used} | " + " | ".join(f"{100 * c:.1f}%" for c in cells) + " |")
 
 
@@ -234,10 +252,7 @@ def bands_table(nights: list[str], hours: float, cache: Path) -> None:
     print("| night | hour | " + " | ".join(names) + " | all |")
     print("|---|---:|" + "---:|" * (len(names) + 1))
     for spec in nights:
-        law, seed_s = spec.split(":")
-        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
-        y = truth_rec.frames.astype(np.float64)
-        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        raw, y, chain, area, _seed, _used = load_night(spec, hours, cache)
         v, ok, _ = Pipeline(chain, raw.layout, in_use=True).process(
             raw.frames, raw.times, raw.valid
         )
@@ -273,18 +288,14 @@ def _runs_table(
     print("| night | used for | " + " | ".join(names) + " |")
     print("|---|---|" + "---:|" * len(names))
     for spec in nights:
-        law, seed_s = spec.split(":")
-        raw, truth_rec, chain = night_files(law, int(seed_s), hours, cache)
-        y = truth_rec.frames.astype(np.float64)
-        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        raw, y, chain, area, seed, used = load_night(spec, hours, cache)
         pipe = Pipeline(chain, raw.layout, in_use=True)
         runs = [pipe.process(raw.frames, raw.times, raw.valid)[:2]]
-        runs += more_runs(chain, raw, y, int(seed_s))
+        runs += more_runs(chain, raw, y, seed)
         cells = []
         for v, ok in runs:
             err, lerr = hourly(v, ok, y, raw.times, area, round(hours))
             cells.append(f"{100 * max(err):.1f} / {100 * max(lerr):.1f}%")
-        used = "tuning" if (law, int(seed_s)) in TUNING else "judging"
         print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
 
 
@@ -363,12 +374,8 @@ def main() -> int:
     print("|---|---|" + "---:|" * len(names))
     hourly_rows = []
     for spec in args.nights:
-        law, seed_s = spec.split(":")
-        seed = int(seed_s)
         t0 = time.time()
-        raw, truth_rec, chain = night_files(law, seed, args.hours, args.cache)
-        truth = truth_rec.frames.astype(np.float64)
-        area = np.asarray(raw.layout.area_cm2, dtype=np.float64)
+        raw, truth, chain, area, seed, used = load_night(spec, args.hours, args.cache)
         outs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, opts in METHODS.items():
             pipe = Pipeline(chain, raw.layout, **opts)
@@ -387,7 +394,6 @@ def main() -> int:
             err, lerr = hourly(v, ok, truth, raw.times, area, n_h)
             cells.append(f"{100 * max(err):.1f} / {100 * max(lerr):.1f}%")
             hourly_rows.append((spec, name, err, lerr))
-        used = "tuning" if (law, seed) in TUNING else "judging"
         print(f"| {spec} | {used} | " + " | ".join(cells) + " |", flush=True)
         print(f"({spec}: {time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
     print("\nper element by hour (10-150 mmHg) | total load by hour\n")
