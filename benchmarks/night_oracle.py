@@ -350,18 +350,14 @@ def main() -> int:
     ap.add_argument("--body", action="store_true", help="the oracle of the body's level")
     ap.add_argument("--weight-clip", action="store_true", help="the entered weight, clipped")
     args = ap.parse_args()
-    if args.weight_clip:
-        clip_table(args.nights, args.hours, args.cache)
-        return 0
-    if args.body:
-        body_table(args.nights, args.hours, args.cache)
-        return 0
-    if args.bands:
-        bands_table(args.nights, args.hours, args.cache)
-        return 0
-    if args.regions:
-        regions_table(args.nights, args.hours, args.cache)
-        return 0
+    tables = {
+        "weight_clip": clip_table, "body": body_table, "bands": bands_table,
+        "regions": regions_table,
+    }  # fmt: skip
+    for flag, table in tables.items():
+        if getattr(args, flag):
+            table(args.nights, args.hours, args.cache)
+            return 0
     n_h = round(args.hours)
     names = [
         "hysteresis only", "laboratory drift", "in use (today)",
