@@ -263,11 +263,10 @@ def peek_mqtt_payload(
     if got is None:
         return None
     d, inner = got
-    seq, t = d.get("seq"), d.get("t")
-    if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
+    try:
+        seq, t = _seq_and_t(d)
+    except ProtocolError:
         return None  # (parsed whole: the error named there)
-    if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
-        return None
     count = inner.count(b",") + 1 if inner.strip() else 0
     return (seq, float(t)) if count == n_elements else None
 
