@@ -328,8 +328,12 @@ def test_a_page_without_calibration_shows_no_pressure(page, tmp_path):
         snap = page.mon.get("api/frame/latest")
         assert snap["raw_stats"]["unit"] == "pF" and snap["stats"]["load_N"] is None
         # the colour scale goes to the highest rise so far: the range boxes say the same
-        top = float(web.input_value("#scale-max"))
-        assert top == pytest.approx(float(web.inner_text("#scale-text").split()[0]), abs=0.011)
+        # (both read in one go: the highest so far rises with every live frame)
+        box, text = web.evaluate(
+            "() => [document.querySelector('#scale-max').value,"
+            " document.querySelector('#scale-text').innerText]"
+        )
+        assert float(box) == pytest.approx(float(text.split()[0]), abs=0.011)
         parts = ("section.map .legend", ".scale-controls", ".cards", "#raw-cards-note", ".marks")
         shown = {sel: web.inner_text(sel) for sel in parts}
         for sel, text in shown.items():
