@@ -163,7 +163,7 @@ class Monitor:
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_first: float | None = None  # the time of the first frame
         self._cof_trace: list[list[float]] = []
-        self._cells_rc: tuple[np.ndarray, np.ndarray] | None = None  # (rows, cols) of elements
+        self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
         self._skimmed = False  # frames skimmed since the last frame processed (keep_time)
         self.clock = FrameClock()
         self.quiet = Quiet(log)
@@ -551,8 +551,10 @@ class Monitor:
         if self.raw_only:  # no pressure: nothing to say (and no centre of force)
             none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
             return none, 0.0
-        fs = stats.one_frame_stats(pressure, self.layout, threshold=0.05)
-        cof = self._cof_cell(pressure)
+        live = self._live_stats
+        if live is None or live.layout is not self.layout:  # made again when it turns
+            live = self._live_stats = stats.LiveStats(self.layout, threshold=0.05)
+        fs, cof = live(pressure)
         load = _finite(fs["load_N"])
         if np.all(np.isfinite(cof)):
             self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
@@ -579,20 +581,6 @@ class Monitor:
             "confidence": conf,
             "window_s": POSTURE_WINDOW_S,
         }
-
-    def _cof_cell(self, pressure: np.ndarray) -> np.ndarray:
-        """Centre of force in grid cells (row, col) — what the dashboard draws — or in the
-        elements' (x, y) cm for a points layout."""
-        w = np.maximum(pressure if np.isfinite(pressure).all() else np.nan_to_num(pressure), 0.0)
-        total = w.sum()
-        if total <= 0:
-            return np.array([np.nan, np.nan])
-        if self.layout.cells is not None and self.layout.shape is not None:
-            if self._cells_rc is None:  # the elements' rows and columns (made once)
-                self._cells_rc = np.divmod(self.layout.cells, self.layout.shape[1])
-            rows, cols = self._cells_rc
-            return np.array([w @ rows, w @ cols]) / total
-        return (w @ self.layout.xy_cm) / total
 
     @property
     def latest(self) -> dict[str, Any] | None:
