@@ -347,14 +347,14 @@ class MatEntry:
         alert = self.monitor.tracker.open_alert
         if state == "live" and alert is not None:
             state = "alert" if alert.active else "acknowledged"
-        latest = self.monitor.latest
+        latest = self.monitor.latest_head  # (no maps: they are not shown)
         bed = latest.get("bed") if latest and state != "stale" else None
         turn_due = bool(bed and bed["turn_due"])
         return state, max(URGENCY[state], URGENCY["alert"] if turn_due else 0)
 
     def status(self) -> dict[str, Any]:
         """The mat's state without its maps (what ``GET /api/mats`` and a ward tile show)."""
-        latest = self.monitor.latest
+        latest = self.monitor.latest_head  # (no maps: they are not shown)
         alert = self.monitor.tracker.open_alert
         stats = latest["stats"] if latest else None
         state, urgency = self.view_state()
