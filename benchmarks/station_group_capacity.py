@@ -128,10 +128,15 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
                 done = await asyncio.to_thread(frames_of, k) - f0[k]
                 per_frame[k] = 1e3 * used / max(done, 1)
 
+        async def view(w: str) -> None:
+            url = holder[w].replace("http", "ws", 1) + f"mats/{w}/ws"
+            try:
+                await viewer(url, latencies, stop)
+            except Exception as e:  # said, and the row goes on with the other viewers
+                print(f"viewer of {w} at {url}: {type(e).__name__}: {e}", file=sys.stderr)
+
         async def view_all() -> None:
-            await asyncio.gather(*(
-                viewer(holder[w].replace("http", "ws", 1) + f"mats/{w}/ws", latencies, stop)
-                for w in watched), members_cpu())  # fmt: skip
+            await asyncio.gather(*(view(w) for w in watched), members_cpu())
 
         asyncio.run(view_all())
         sent = json.loads(pub.communicate(timeout=120)[0])
