@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ from texsense.calibration.workflows import seat_calibration
 from texsense.monitor.store import EventStore
 from texsense.monitor.virtual import VirtualSeatSource
 from texsense.station.virtual import VirtualMats, frame_payload
-from texsense.station.ward import MatEntry
+from texsense.station.ward import FOLLOW_S, MatEntry, Station
 
 SPEED = 8.0
 #: frames of the seat (1.6 s each): the first reposition alert (5 min) comes at ~300 s
@@ -104,3 +105,18 @@ def test_a_station_far_behind_peeks_and_says_so(seat):
     assert entry.peeked == entry.behind == sum(skims)
     off = np.abs(entry.monitor.tracker.exposure_s - whole.monitor.tracker.exposure_s).max()
     assert off > 1.0, off
+
+
+def test_the_station_peeks_only_at_frames_that_waited_over_follow_s(seat, tmp_path):
+    """Station.skip (what the inbox calls for a late frame with newer ones behind it) follows
+    a frame that waited up to FOLLOW_S and peeks at one that waited longer."""
+    config, payloads, _ = seat
+    station = Station(None, [config], record_dir=tmp_path)
+    entry = station.mats[config.id]
+    topic = f"texsense/{config.id}/frames"
+    now = time.time()
+    station.handle(topic, payloads[0][0], now - 2 * FOLLOW_S)
+    assert station.skip(topic, payloads[1][0], time.time() - FOLLOW_S - 1.0)
+    assert (entry.behind, entry.peeked) == (1, 1)
+    assert station.skip(topic, payloads[2][0], time.time() - 0.5 * FOLLOW_S)
+    assert (entry.behind, entry.peeked, entry.monitor.frames) == (2, 1, 1)
