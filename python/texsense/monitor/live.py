@@ -381,13 +381,44 @@ class Monitor:
         return True
 
     def keep_time(self, frame: Frame, wall: float) -> bool:
-        """Place a frame that will not be processed (a busy station skips it) on the mat's
-        time line, so that the clock stays in step; False when its time is off the clock
-        (counted and logged as in :meth:`process`). The exposure of the next frame
-        processed spans it (:meth:`ExposureTracker.step`, ``skipped``)."""
+        """Place a frame whose values are not read (a station far behind peeks at its time
+        only) on the mat's time line, so that the clock stays in step; False when its time is
+        off the clock (counted and logged as in :meth:`process`). The exposure of the next
+        frame processed spans it (:meth:`ExposureTracker.step`, ``skipped``)."""
         kept = self._in_step(frame, wall)
         self._skimmed = self._skimmed or kept
         return kept
+
+    def follow(self, frame: Frame, wall: float) -> bool:
+        """A frame a busy station does not process in full (a newer one of the mat waits):
+        it goes through what the frames after it depend on, as in :meth:`process` — the
+        clock, the pipeline's state (failure detector, Preisach memory eq. 4.18-4.22, drift
+        history), for a bed the side vote and the turning schedule, the exposure and its
+        alerts and events — and through nothing that only shows it (statistics, maps,
+        snapshot, charts, viewers, a bed's regions). The exposure timers and alerts are those
+        of processing every frame (issue 38). False when its time is off the clock."""
+        if not self._in_step(frame, wall):
+            return False
+        for tap in self.taps:
+            tap(frame)
+        if self._t_first is None:
+            self._t_first = frame.t
+        if self.raw_only:  # nothing of a raw frame outlives it but the clock and the floor
+            floor = self._raw_floor
+            raw = frame.values
+            self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
+            return True
+        pressure, _, _ = self._pressure_of(frame)
+        bounds = self._bounds_of()
+        posture = None
+        if self.bed is not None:  # the side's vote feeds the turning schedule
+            load = _finite(stats.one_frame_stats(pressure, self.layout, threshold=0.05)["load_N"])
+            posture = self._posture_of(frame.t, pressure, load)
+        events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=False)
+        if events:
+            self._events(events, wall)
+            self.changes += 1
+        return True
 
     def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
         """One frame through everything; returns the snapshot, or None for a frame whose
@@ -461,15 +492,18 @@ class Monitor:
         posture: dict[str, Any] | None,
         wall: float,
         bounds: tuple[np.ndarray, np.ndarray] | None = None,
+        regions: bool = True,
     ) -> list[Event]:
         """The bed's schedule and the exposure tracker on one frame: a turn hands the
         exposure to new skin (and clears an open alert), no alert opens while a turn is being
         confirmed; a new alert is named by the places of this frame. With ``bounds`` (lower,
-        upper) the tracker tells confident from possible exceedances (issue 37)."""
+        upper) the tracker tells confident from possible exceedances (issue 37); without
+        ``regions`` the bed's at-risk regions are not looked for (a followed frame)."""
         events: list[Event] = []
         schedule = None
         if self.bed is not None:
-            events += self.bed.step(pressure, posture["label"] if posture else None, t)
+            side = posture["label"] if posture else None
+            events += self.bed.step(pressure, side, t, regions=regions)
             schedule = self.bed.schedule
         if not (self.mode.alerts and not self.raw_only):
             return events
