@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import GridStats
 from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
@@ -264,8 +265,6 @@ class LiveStats:
     """
 
     def __init__(self, layout: Layout, threshold: float = 0.0, ppi_window: int = 3) -> None:
-        from texsense._core import GridStats
-
         self.layout, self.threshold, self.ppi_window = layout, float(threshold), int(ppi_window)
         self._grid = None
         if layout.shape is not None and layout.cells is not None and ppi_window >= 1:
