@@ -100,9 +100,9 @@ pub(super) unsafe fn codes_row(
         // the later rule wins, as in kernel::code: short/break, then out of range, then jump
         let high = (high | !ok & 0xf) & !low;
         let jump = jump & !low & !high;
-        let word = spread(low) * u32::from(codes::SHORT_OR_BREAK)
-            | spread(high) * u32::from(codes::OUT_OF_RANGE)
-            | spread(jump) * u32::from(codes::JUMP);
+        let word = (spread(low) * u32::from(codes::SHORT_OR_BREAK))
+            | (spread(high) * u32::from(codes::OUT_OF_RANGE))
+            | (spread(jump) * u32::from(codes::JUMP));
         out[i..i + LANES].copy_from_slice(&word.to_le_bytes());
         for el in &mut els[i..i + LANES] {
             // kernel::code for a reading that does not hold still
