@@ -11,7 +11,9 @@ station_load.py sends every mat's frames at the rate (phases spread over the per
 stamped with its wall-clock send time. Viewers on the dashboards of five mats (at the member
 that holds each) measure frame-to-viewer latency; at the end every member's `GET /api/mats`
 says how many frames each mat it holds processed, against how many were published. The
-members' CPU is taken over the measuring window. One machine: members beyond its cores add
+members' CPU is taken over the measuring window (also per frame processed: each member's
+CPU over the frames its mats processed in that window, in ms), and the publisher's per frame
+sent (its own count of CPU time). One machine: members beyond its cores add
 no capacity here (they would on machines of their own).
 """
 
@@ -108,19 +110,33 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         watched = [ids[k] for k in np.linspace(0, mats - 1, min(5, mats)).astype(int)]
         latencies: list[float] = []
         cpu: dict[str, float] = {}
+        per_frame: dict[str, float] = {}
+
+        def frames_of(name: str) -> int:
+            rows = get(members[name][1] + "api/mats")
+            return sum(r["frames"] for r in rows if r["holder"] == name)
 
         async def members_cpu() -> None:
             await asyncio.sleep(5.0)
             t0 = time.time()
             c0 = {k: cpu_seconds(p.pid) for k, (p, _) in members.items()}
+            f0 = {k: await asyncio.to_thread(frames_of, k) for k in members}
             await asyncio.sleep(max(stop - time.time(), 0.0))
             for k, (p, _) in members.items():
-                cpu[k] = (cpu_seconds(p.pid) - c0[k]) / (time.time() - t0)
+                used = cpu_seconds(p.pid) - c0[k]
+                cpu[k] = used / (time.time() - t0)
+                done = await asyncio.to_thread(frames_of, k) - f0[k]
+                per_frame[k] = 1e3 * used / max(done, 1)
+
+        async def view(w: str) -> None:
+            url = holder[w].replace("http", "ws", 1) + f"mats/{w}/ws"
+            try:
+                await viewer(url, latencies, stop)
+            except Exception as e:  # said, and the row goes on with the other viewers
+                print(f"viewer of {w} at {url}: {type(e).__name__}: {e}", file=sys.stderr)
 
         async def view_all() -> None:
-            await asyncio.gather(*(
-                viewer(holder[w].replace("http", "ws", 1) + f"mats/{w}/ws", latencies, stop)
-                for w in watched), members_cpu())  # fmt: skip
+            await asyncio.gather(*(view(w) for w in watched), members_cpu())
 
         asyncio.run(view_all())
         sent = json.loads(pub.communicate(timeout=120)[0])
@@ -135,6 +151,8 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
             "p50": float(np.percentile(lat, 50)) if lat.size else float("nan"),
             "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
             "cpu": " / ".join(f"{100 * cpu[k]:.0f}" for k in sorted(cpu)),
+            "ms_frame": " / ".join(f"{per_frame[k]:.2f}" for k in sorted(per_frame)),
+            "pub_us": sent["cpu_us_per_frame"],
         }  # fmt: skip
     finally:
         for proc, _ in members.values():
@@ -153,9 +171,10 @@ def main() -> None:
     print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared)")
     print(
         "| mats (1024 elements) | rate | members | settled after | frames published | "
-        "processed | lost | frame-to-viewer p50 | p99 | members' CPU (% of a core) |"
+        "processed | lost | frame-to-viewer p50 | p99 | members' CPU (% of a core) | "
+        "members' CPU per frame processed (ms) | publisher's CPU per frame (µs) |"
     )
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|")
     with tempfile.TemporaryDirectory() as d, Broker() as broker:
         tmp = Path(d)
         cal = big_calibration(1024, tmp / "cal.json")
@@ -171,7 +190,8 @@ def main() -> None:
                     r = run(tmp, broker, pg, n, mats, hz, args.seconds, k)
                     print(f"| {mats} | {hz:g} Hz | {n} | {r['settle_s']:.0f} s | {r['sent']} | "
                           f"{r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
-                          f"{r['p99']:.0f} ms | {r['cpu']} |", flush=True)  # fmt: skip
+                          f"{r['p99']:.0f} ms | {r['cpu']} | {r['ms_frame']} | "
+                          f"{r['pub_us']:.0f} |", flush=True)  # fmt: skip
         finally:
             pg.close()
     print(f"load average {os.getloadavg()[0]:.1f} at the end")

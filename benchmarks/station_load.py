@@ -7,7 +7,9 @@ Run:  .venv/bin/python benchmarks/station_load.py [--quick]
 For each load (mats x rate) a fresh `texsense station` (its own process) reads M mats of
 32 x 32 elements (capacitance, the seat's spacer model with per-element gain and offset, the
 compiled pipeline with eq. 6.14 repair) from a Mosquitto started here. A publisher process
-sends every mat's frames at the rate (the mats' phases spread over the period, as
+(MQTT 3.1.1 PUBLISH packets written to a plain socket, QoS 0, the frames' real JSON payload:
+paho's client cost it three times the CPU, on the same two cores) sends every mat's frames at
+the rate (the mats' phases spread over the period, as
 unsynchronised mats are), each stamped with its wall-clock send time as the frame time `t`.
 Viewers on the WebSockets of five mats' dashboards measure frame-to-viewer latency: the time
 from publishing a frame to the viewer receiving that mat's processed snapshot. At the
@@ -43,9 +45,8 @@ from conftest import free_port
 from texsense.station.broker import Broker
 
 PUBLISHER = r"""
-import json, sys, time
+import json, socket, struct, sys, time
 import numpy as np
-import paho.mqtt.client as mqtt
 port, mats, hz = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
 seconds, cal_offsets = float(sys.argv[4]), sys.argv[5]
 offsets = np.load(cal_offsets)
@@ -55,13 +56,30 @@ pool = []
 for k in range(16):
     e = 1.0 + 0.8 * np.sin(k / 3 + np.arange(1024) / 50) + rng.normal(0, 0.01, 1024)
     cap = offsets["offset"] + offsets["gain"] * np.interp(e, offsets["curve_e"], offsets["curve_c"])
-    pool.append(json.dumps([round(float(v), 5) for v in cap]))
-c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
-c.max_queued_messages_set(0)
-c.connect("127.0.0.1", port)
-c.loop_start()
+    pool.append(json.dumps([round(float(v), 5) for v in cap]).encode())
+
+def length(n):  # MQTT's remaining length (7 bits a byte)
+    out = bytearray()
+    while True:
+        n, b = n >> 7, n & 127
+        out.append(b | (128 if n else 0))
+        if not n:
+            return bytes(out)
+
+# MQTT 3.1.1 over a plain socket, QoS 0 (what a mat sends): CONNECT (no keep-alive), CONNACK,
+# then one PUBLISH packet per frame; nothing else runs in this process
+sock = socket.create_connection(("127.0.0.1", port))
+cid = b"texsense-bench-publisher"
+head = b"\x00\x04MQTT\x04\x02\x00\x00" + struct.pack(">H", len(cid)) + cid
+sock.sendall(b"\x10" + length(len(head)) + head)
+ack = sock.recv(4)
+if ack[:1] != b"\x20" or ack[3:4] != b"\x00":
+    raise SystemExit(f"the broker refused the publisher: {ack!r}")
+topics = [b"texsense/m%03d/frames" % m for m in range(mats)]
+topics = [struct.pack(">H", len(t)) + t for t in topics]
 period = 1.0 / hz
 start = time.time()
+cpu0 = time.process_time()
 sent = 0
 k = 0
 while time.time() - start < seconds:
@@ -70,13 +88,16 @@ while time.time() - start < seconds:
         if delay > 0:
             time.sleep(delay)
         now = time.time()
-        payload = '{"seq":%d,"t":%.6f,"values":%s,"unit":"pF"}' % (k, now, pool[(k + m) % 16])
-        c.publish(f"texsense/m{m:03d}/frames", payload)
+        payload = b'{"seq":%d,"t":%.6f,"values":%s,"unit":"pF"}' % (k, now, pool[(k + m) % 16])
+        body = topics[m] + payload
+        sock.sendall(b"\x30" + length(len(body)) + body)
         sent += 1
     k += 1
+cpu = time.process_time() - cpu0
 time.sleep(0.5)
-c.loop_stop()
-print(json.dumps({"sent": sent, "frames_per_mat": k}))
+sock.sendall(b"\xe0\x00")  # DISCONNECT
+sock.close()
+print(json.dumps({"sent": sent, "frames_per_mat": k, "cpu_us_per_frame": 1e6 * cpu / max(sent, 1)}))
 """
 
 

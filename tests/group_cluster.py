@@ -56,15 +56,16 @@ class Cluster:
         for m in members:
             self.start(m)
 
-    def publish(self, replay: bool = False) -> None:
+    def publish(self, replay: bool = False, every: int = 1) -> None:
         """Start `texsense simulate mats` (``publish=False``: the stations can be started
         first, so that all of them read the mats from their first frame); ``replay``: the
-        virtual seats' frames made once and replayed (tests/replay_mats.py, no beds)."""
+        virtual seats' frames made once and replayed (tests/replay_mats.py, no beds), each
+        mat's ``every``-th frame only."""
         if replay:
             with (self.folder / "simulate.log").open("ab") as out:
                 self.publisher = subprocess.Popen(
                     [sys.executable, str(Path(__file__).with_name("replay_mats.py")),
-                     str(self.broker.port), str(self.mats), str(self.speed)],
+                     str(self.broker.port), str(self.mats), str(self.speed), str(every)],
                     stdout=out, stderr=subprocess.STDOUT, cwd=self.folder)  # fmt: skip
             return
         self.publisher = self._spawn("simulate", ["simulate", "mats", "--count", str(self.mats),
@@ -94,9 +95,19 @@ class Cluster:
             "--db", db or self.pg.url, "--virtual-mats", str(self.mats), "--speed", str(self.speed),
             "--port", str(port), "--record-dir", f"rec-{member}", *self.extra])  # fmt: skip
 
+    def cpu(self, name: str, proc: subprocess.Popen[bytes]) -> None:
+        """Note the CPU time a process has used so far (user + system, s) in ``cpu.txt`` of
+        the folder (what each part of a run costs)."""
+        with contextlib.suppress(OSError, IndexError, ValueError):
+            fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            used = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+            with (self.folder / "cpu.txt").open("a") as out:
+                out.write(f"{name} {used:.2f}\n")
+
     def kill(self, member: str) -> None:
         """SIGKILL ``member`` (no last word)."""
         proc = self.procs.pop(member)
+        self.cpu(member, proc)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
 
@@ -111,7 +122,7 @@ class Cluster:
         """``GET /api/mats`` of ``member``: every mat of the group by id."""
         return {m["id"]: m for m in self.get(member, "api/mats")}
 
-    def until(self, what: Any, cond: Any, timeout: float, step: float = 0.1) -> Any:
+    def until(self, what: Any, cond: Any, timeout: float, step: float = 0.25) -> Any:
         """Poll ``what()`` until ``cond(value)``; :class:`NotReachedError` with the logs
         otherwise."""
         deadline = time.monotonic() + timeout
@@ -151,6 +162,9 @@ class Cluster:
 
     def close(self) -> None:
         procs = [*self.procs.values(), *([self.publisher] if self.publisher else [])]
+        for name, proc in [*self.procs.items(), ("publisher", self.publisher)]:
+            if proc is not None:
+                self.cpu(name, proc)
         for proc in procs:
             with contextlib.suppress(ProcessLookupError):
                 proc.send_signal(signal.SIGTERM)

@@ -6,9 +6,12 @@ test's CPU. Here a few simulated people (``POOL_PEOPLE``, the same
 ``POOL_FRAMES`` frames each, their values' JSON made once, and every mat ``vmat-NN`` replays
 one of them (mat k: person k mod POOL_PEOPLE, starting ``k // POOL_PEOPLE`` x 37 frames in),
 looping, on a time line of its own that goes on (seq and t grow), paced at ``speed`` and
-published to the broker as the simulator does (reconnecting when it restarts).
+published to the broker as the simulator does (reconnecting when it restarts). With
+``EVERY`` > 1 each mat publishes every EVERY-th frame only (a mat that scans every
+1.6 x EVERY s): the stations read a 1/EVERY of the frames for the same simulated time (the
+group's fault test: the reference's first alert comes after 5 simulated minutes).
 
-Run: python tests/replay_mats.py BROKER_PORT MATS SPEED
+Run: python tests/replay_mats.py BROKER_PORT MATS SPEED [EVERY]
 """
 
 from __future__ import annotations
@@ -52,8 +55,9 @@ def pool(seed: int) -> tuple[list[str], float, float]:
 
 def main() -> None:
     port, mats, speed = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
+    every = int(sys.argv[4]) if len(sys.argv) > 4 else 1
     people = [pool(seed) for seed in range(min(POOL_PEOPLE, mats))]
-    period = people[0][1]
+    period = people[0][1] * every
     client = mqtt_client(BrokerURL("127.0.0.1", port), f"texsense-replay-{port}")
     client.loop_start()
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
@@ -64,7 +68,7 @@ def main() -> None:
             time.sleep(delay)
         for m in range(mats):
             texts, _, dt = people[m % len(people)]
-            values = texts[(k + 37 * (m // len(people))) % len(texts)]
+            values = texts[(k * every + 37 * (m // len(people))) % len(texts)]
             head = f'{{"seq":{k},"t":{k * period:.6f},"dt":{dt:.9f},"values":'
             payload = head + values + ',"unit":"pF"}'
             client.publish(f"texsense/vmat-{m + 1:02d}/frames", payload)

@@ -128,6 +128,48 @@ def test_archive_on_a_local_cluster_reports_a_bad_file_and_does_the_rest(session
     assert not list((tmp_path / "o").glob(".*partial"))
 
 
+def test_a_small_archive_is_processed_here_with_the_same_reports(sessions, tmp_path, monkeypatch):
+    """No scheduler, no worker count, inputs under IN_PROCESS_BYTES: no cluster is started,
+    the outputs are those of the one-file path, a bad file is a failed report and an
+    unexpected error in one file does not stop the others; above the size, a cluster."""
+    import dask.distributed
+
+    from texsense.compensation import archive
+
+    def no_cluster(*a, **kw):
+        raise AssertionError("a LocalCluster was started")
+
+    monkeypatch.setattr(dask.distributed, "LocalCluster", no_cluster)
+    root, cal = sessions
+    bad = tmp_path / "in" / "bad.h5"
+    bad.parent.mkdir()
+    save(load(root / "sessions" / "s0.h5")._with(quantity="pressure", unit="N/cm2"), bad)
+    jobs, _ = archive_jobs([str(root / "sessions"), str(tmp_path / "in")], tmp_path / "o")
+    original = archive.process_file
+
+    def s1_breaks(src, *a, **kw):
+        if Path(src).name == "s1.h5":
+            raise RuntimeError("a bug (simulated)")
+        return original(src, *a, **kw)
+
+    monkeypatch.setattr(archive, "process_file", s1_breaks)
+    reports = process_archive(jobs, root / "calibration.json", ProcessOptions(repair="idw8"))
+    status = {Path(r.source).name: (r.status, r.error) for r in reports}
+    assert status["s0.h5"] == status["s2.h5"] == ("done", "")
+    assert status["bad.h5"][0] == "failed" and "holds pressure" in status["bad.h5"][1]
+    assert status["s1.h5"] == ("failed", "RuntimeError: a bug (simulated)")
+    process_file(
+        root / "sessions" / "s2.h5", cal, tmp_path / "one.h5", ProcessOptions(repair="idw8")
+    )
+    np.testing.assert_array_equal(
+        load(tmp_path / "o" / "s2.h5").frames, load(tmp_path / "one.h5").frames
+    )
+    # the same jobs above the size go to a cluster (the patched one says so)
+    monkeypatch.setattr(archive, "IN_PROCESS_BYTES", 1)
+    with pytest.raises(AssertionError, match="LocalCluster was started"):
+        process_archive(jobs, root / "calibration.json")
+
+
 @pytest.mark.slow
 def test_cli_archive_of_real_pmd_files_restarts(shared_data, tmp_path, capsys):
     """A glob over real PMD files, a linear (identity) calibration: detection and repair

@@ -2,6 +2,7 @@
 (texsense.apps.bed), and the monitor's bed mode."""
 
 import asyncio
+import copy
 import itertools
 
 import numpy as np
@@ -227,31 +228,44 @@ def small_bed_model():
     return train_virtual_bed_model(people=3, hold_s=6.0)
 
 
-@pytest.mark.slow
-def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_model):
-    from texsense.calibration.workflows import bed_calibration
-    from texsense.compensation.pipeline import Pipeline
-    from texsense.monitor import Monitor
+@pytest.fixture(scope="module")
+def bed_frames():
+    """400 frames of a person on the virtual bed (turning, sitting up, away) and the side
+    they lay on at each."""
     from texsense.monitor.virtual import VirtualBedSource
 
-    assert set(small_bed_model.classes_) == set(SIDES)
     src = VirtualBedSource(speed=0, hold_s=90, positions_per_stay=4, away_s=60, seed=3)
-    m = Monitor(
-        src,
-        pipeline=Pipeline(bed_calibration(), src.layout),
-        posture_model=small_bed_model,
-        bed=BedWatch(src.layout, interval_min=15, settle_s=20),
-    )
-    snaps, truth = [], []
+    frames, truth = [], []
 
     async def go():
         async for f in src.frames():
-            snaps.append(m.process(f))
+            frames.append(f)
             truth.append(src.side)
-            if len(snaps) >= 400:
+            if len(frames) >= 400:
                 break
 
     asyncio.run(go())
+    return src.layout, frames, truth
+
+
+def bed_monitor(layout, model):
+    from texsense.calibration.workflows import bed_calibration
+    from texsense.compensation.pipeline import Pipeline
+    from texsense.monitor import Monitor
+    from texsense.monitor.sources import Source
+
+    src = Source()
+    src.layout, src.quantity, src.unit, src.name = layout, "capacitance", "pF", "bed"
+    return Monitor(src, pipeline=Pipeline(bed_calibration(), layout), posture_model=model,
+                   bed=BedWatch(layout, interval_min=15, settle_s=20))  # fmt: skip
+
+
+@pytest.mark.slow
+def test_monitor_on_the_virtual_bed_reports_sides_turns_and_regions(small_bed_model, bed_frames):
+    assert set(small_bed_model.classes_) == set(SIDES)
+    layout, frames, truth = bed_frames
+    m = bed_monitor(layout, small_bed_model)
+    snaps = [m.process(copy.copy(f)) for f in frames]
     kinds = [e["kind"] for e in m.store.events(m.session_id)]
     assert "in-bed" in kinds and kinds.count("turn") >= 2
     lying = [k for k, s in enumerate(snaps) if truth[k] not in (None, "transition")]
@@ -300,3 +314,30 @@ def test_monitor_command_refuses_a_bed_mode_it_cannot_run(tmp_path, capsys):
     assert "--bed needs --model" in capsys.readouterr().err
     assert main([*base, "--no-posture"]) != 0
     assert "drop --no-posture" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_bed_s_skimmed_frames_give_the_schedule_and_exposure_of_every_frame(
+    small_bed_model, bed_frames
+):
+    """A station behind follows the frames it skims (Monitor.follow, issue 38): on a bed the
+    side vote and the turning schedule too, so its turns, events and exposure are those of
+    processing every frame (half of them skimmed at random)."""
+    layout, frames, _ = bed_frames
+    whole, skimming = bed_monitor(layout, small_bed_model), bed_monitor(layout, small_bed_model)
+    skims = np.random.default_rng(38).random(len(frames)) < 0.5
+    skims[-1] = False
+    for k, f in enumerate(frames):
+        whole.process(copy.copy(f), wall=1000.0 + k)
+        if skims[k]:
+            assert skimming.follow(copy.copy(f), 1000.0 + k)
+        else:
+            skimming.process(copy.copy(f), wall=1000.0 + k)
+    events = [
+        [(e["kind"], e["t"]) for e in m.store.events(m.session_id)] for m in (whole, skimming)
+    ]
+    assert [k for k, _ in events[0]].count("turn") >= 2
+    assert events[0] == events[1]
+    assert whole.bed.schedule.state() == skimming.bed.schedule.state()
+    np.testing.assert_array_equal(whole.tracker.exposure_s, skimming.tracker.exposure_s)
+    assert skimming.frames == len(frames) - skims.sum()

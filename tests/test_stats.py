@@ -189,3 +189,42 @@ def test_one_frame_stats_are_frame_stats_of_that_frame(layout):
         assert one["contact_area_cm2"] == full.contact_area_cm2[0]
         assert one["peak"] == full.peak[0] and one["ppi"] == full.ppi[0]
         np.testing.assert_array_equal(one["cof_cm"], full.cof_cm[0])
+
+
+@pytest.mark.parametrize("layout", [Layout.grid(32, 32), Layout.grid(6, 5, pitch_cm=1.5),
+                                    Layout.grid(4, 6, active=np.arange(24).reshape(4, 6) % 5 != 0),
+                                    Layout.points(np.random.default_rng(1).uniform(0, 9, (12, 2)))],
+                         ids=["32x32", "6x5", "gaps", "points"])  # fmt: skip
+def test_live_stats_are_one_frame_stats(layout):
+    """The station's per-frame statistics (compiled on a grid) are one_frame_stats of the
+    frame, and the centre of force in cells the pressure-weighted mean of the elements' rows
+    and columns, to the last few bits: on loaded, empty, negative and NaN frames; a frame with
+    an infinite value takes one_frame_stats itself."""
+    rng = np.random.default_rng(7)
+    live = stats.LiveStats(layout, threshold=0.05)
+    assert (live._grid is None) == (layout.shape is None)
+    n = layout.n_elements
+    if layout.cells is not None:
+        rows, cols = np.divmod(layout.cells, layout.shape[1])
+        where = np.stack([rows, cols], axis=1).astype(float)
+    else:
+        where = layout.xy_cm
+    for k in range(24):
+        v = rng.gamma(1.0, 2.0, n) * (k % 6 != 0) - 0.3 * (k % 5 == 1)
+        if k % 3 == 0:
+            v[rng.integers(n, size=3)] = np.nan
+        if k == 23:  # (float32 overflows: numpy warns, in either path)
+            v[0] = np.inf
+            with np.errstate(over="ignore", invalid="ignore"):
+                fs, _ = live(v)
+                ref = stats.one_frame_stats(v, layout, threshold=0.05)
+            assert fs["load_N"] == ref["load_N"] and fs["peak"] == ref["peak"] == np.inf
+            continue
+        fs, cell = live(v)
+        ref = stats.one_frame_stats(v, layout, threshold=0.05)
+        for key in ("load_N", "contact_area_cm2", "peak", "ppi"):
+            assert fs[key] == pytest.approx(ref[key], rel=1e-12, abs=1e-12, nan_ok=True), key
+        np.testing.assert_allclose(fs["cof_cm"], ref["cof_cm"], rtol=1e-12)
+        w = np.maximum(np.nan_to_num(v), 0.0)
+        want = (w @ where) / w.sum() if w.sum() > 0 else [np.nan, np.nan]
+        np.testing.assert_allclose(cell, want, rtol=1e-12)

@@ -20,6 +20,7 @@ __all__ = [
     "Curve",
     "DriftBank",
     "FailureDetector",
+    "GridStats",
     "LocalRepair",
     "NeighbourIndexError",
     "ParameterError",
@@ -240,6 +241,18 @@ class Chain:
     def snapshot(self) -> bytes: ...
     def restore(self, state: bytes) -> None: ...
     def mcu_blob(self) -> bytes: ...
+
+@final
+class GridStats:
+    """One frame's pressure statistics on a grid layout (crates/core/src/stats.rs)."""
+
+    def __new__(
+        cls, area: _F64, xy: _F64, cells: _I64, rows: int, cols: int, window: int
+    ) -> Self: ...
+    def frame(
+        self, pressure: _F64, threshold: float
+    ) -> tuple[float, float, float, float, float, float, float, float] | None:
+        """(load, contact area, peak, ppi, cof x, cof y, cof row, cof column), or None."""
 
 def mcu_blob_info(blob: bytes) -> tuple[int, list[str], int, int, int, int]:
     """(elements, stage names, memory bytes, state bytes per element, scratch bytes per

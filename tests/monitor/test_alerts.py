@@ -134,18 +134,21 @@ def test_possibly_above_counts_only_when_the_user_chooses_so():
 
 
 def test_a_station_that_skims_frames_says_so_to_the_exposure(tmp_path):
-    """The station's mat (MatEntry): frames skimmed while behind (only their time read) make
-    the next frame processed put a change midway through the skimmed time."""
+    """The station's mat (MatEntry): frames skimmed while behind are followed (the exposure
+    of every frame); frames only peeked at (far behind: their time read) make the next frame
+    read put a change midway through the time peeked at."""
     import json
 
     from texsense.station.ward import MatConfig, MatEntry
 
-    entry = MatEntry(MatConfig("m", Layout.grid(1, 2), None, quantity="pressure"),
-                     EventStore(":memory:"), tmp_path, 0.5)  # fmt: skip
-    for t in range(30):  # element 0 loaded from 10 s; 5 ... 14 s skimmed
-        p = [1.0 if t >= 10 else 0.0, 1.0]
-        payload = json.dumps({"seq": t, "t": float(t), "values": p, "unit": "N/cm2"}).encode()
-        assert entry.handle(payload, 1000.0 + t, skim=5 <= t < 15)
-    assert entry.behind == 10
-    # 15 s: the 11 s since 4 s half in the old state; then 15 more s
-    np.testing.assert_allclose(entry.monitor.tracker.exposure_s, [5.5 + 14.0, 29.0])
+    for peek, expected in ((False, [20.0, 29.0]), (True, [5.5 + 14.0, 29.0])):
+        entry = MatEntry(MatConfig("m", Layout.grid(1, 2), None, quantity="pressure"),
+                         EventStore(":memory:"), tmp_path, 0.5)  # fmt: skip
+        for t in range(30):  # element 0 loaded from 10 s; 5 ... 14 s skimmed
+            p = [1.0 if t >= 10 else 0.0, 1.0]
+            payload = json.dumps({"seq": t, "t": float(t), "values": p, "unit": "N/cm2"}).encode()
+            assert entry.handle(payload, 1000.0 + t, skim=5 <= t < 15, peek=peek)
+        assert entry.behind == 10 and entry.peeked == (10 if peek else 0)
+        assert entry.monitor.frames == 20
+        # peeked: the 11 s from 4 to 15 s half in the old state; then 15 more s
+        np.testing.assert_allclose(entry.monitor.tracker.exposure_s, expected)

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from texsense.exceptions import FormatError
 from texsense.io.columns_csv import ColumnsReader, read_columns_csv, write_columns_csv
@@ -49,3 +51,77 @@ def test_non_finite_values_are_counted(tmp_path, caplog):
     path.write_text("time_s,p\n0,1\n0.1,nan\n0.2,inf\n")
     assert np.isnan(read_columns_csv(path)["p"][1])
     assert "2 value(s) are not finite" in caplog.text
+
+
+_GOOD = ["1", "-2.5", " 3e2 ", "nan", "inf", "1_0", "+7", "\u0661"]  # float() reads each
+_BAD = ["", "x", "1.2.3", "0x1"]
+
+
+def _line(n: int) -> st.SearchStrategy[list[str]]:
+    """Mostly n numbers; now and then one too many or too few, or a token that is no number."""
+    token = st.one_of(st.sampled_from(_GOOD), st.sampled_from(_GOOD), st.sampled_from(_BAD))
+    length = st.sampled_from([n] * 6 + [max(1, n - 1), n + 1])
+    good = st.sampled_from(_GOOD)  # a line of the wrong length holds numbers only
+    return length.flatmap(lambda k: st.lists(token if k == n else good, min_size=k, max_size=k))
+
+
+def _by_line(text: str, n: int) -> tuple[np.ndarray | None, int | None]:
+    """What the table's rows are when each line is read on its own (the rule the reader
+    states): the values, or the number of the first line that is not n numbers (or of an
+    empty line inside the table)."""
+    rows, blank = [], None
+    for number, line in enumerate(text.split("\n")[1:], start=2):
+        if not line.strip():  # empty lines end a table; one inside it is an error
+            blank = blank or number
+            continue
+        if blank is not None:
+            return None, blank
+        tokens = line.split(",")
+        try:
+            assert len(tokens) == n
+            rows.append([float(t) for t in tokens])
+        except (AssertionError, ValueError):
+            return None, number
+    return np.array(rows, dtype=np.float64).reshape(len(rows), n), None
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.data(), n=st.integers(1, 4), rows=st.integers(1, 9))
+def test_blocks_read_what_each_line_reads_or_name_its_first_bad_line(tmp_path, data, n, rows):
+    """The reader parses a block of lines at once; the values, or the line its error names,
+    are those of reading each line on its own, whatever the block size."""
+    blank = st.just([" "])  # an empty line: the end of the table, or an error inside it
+    lines = data.draw(st.lists(st.one_of(_line(n), _line(n), _line(n), blank), max_size=40))
+    names = [f"c{k}" for k in range(n)]
+    text = ",".join(names) + "\n" + "".join(",".join(t) + "\n" for t in lines)
+    path = tmp_path / "g.csv"
+    path.write_text(text, encoding="utf-8")
+    expected, bad_line = _by_line(text, n)
+    with ColumnsReader(path) as reader:
+        if bad_line is not None:
+            with pytest.raises(FormatError, match=rf"g\.csv, line {bad_line}: "):
+                list(reader.blocks(rows))
+            return
+        blocks = list(reader.blocks(rows))
+    assert all(len(b["c0"]) == rows for b in blocks[:-1])
+    got = (
+        np.column_stack([np.concatenate([b[c] for b in blocks]) for c in names]) if blocks else None
+    )
+    if expected.size == 0:
+        assert got is None
+    else:
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_written_text_is_each_value_s_repr_across_the_writer_s_pieces(tmp_path):
+    """Across the writer's pieces of rows, every value is written as its ``repr`` (the
+    shortest text that reads back to the same float), in order, one row a line."""
+    rng = np.random.default_rng(4)
+    cols = {"time_s": np.arange(40_000) * 0.02, "p": rng.standard_normal(40_000) * 1e-3}
+    cols["p"][[5, 20_000]] = [np.nan, -np.inf]
+    path = write_columns_csv(tmp_path / "w.csv", cols)
+    rows = zip(cols["time_s"].tolist(), cols["p"].tolist(), strict=True)
+    expected = "# rows: 40000\ntime_s,p\n" + "".join(f"{a!r},{b!r}\n" for a, b in rows)
+    assert path.read_text() == expected

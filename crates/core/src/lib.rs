@@ -20,7 +20,8 @@
 //! - [`simd`]: runtime choice between the scalar kernels and their AVX2 paths;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep);
 //! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep);
-//! - [`text`]: rows of numbers in text files, the readers' fast path.
+//! - [`text`]: rows of numbers in text files, the readers' fast path;
+//! - [`stats`]: one frame's pressure statistics on a grid, the station's per-frame numbers.
 
 pub mod bouc_wen;
 pub mod chain;
@@ -38,6 +39,7 @@ pub mod simd;
 mod snapshot;
 pub mod spacer;
 pub mod spacer_batch;
+pub mod stats;
 pub mod text;
 pub mod topology;
 

@@ -17,6 +17,7 @@ mod preisach;
 mod repair;
 mod simd;
 mod spacer;
+mod stats;
 mod text;
 
 /// The compiled core of texsense.
@@ -32,6 +33,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<convert::PyConverter>()?;
     m.add_class::<repair::PyLocalRepair>()?;
     m.add_class::<chain::PyChain>()?;
+    m.add_class::<stats::PyGridStats>()?;
     m.add_function(wrap_pyfunction!(preisach::py_everett_terms, m)?)?;
     m.add_function(wrap_pyfunction!(chain::py_mcu_blob_info, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_simd_path, m)?)?;

@@ -477,10 +477,15 @@ class BedWatch:
         self.threshold, self.unit = float(threshold), unit
         self.regions: dict[str, Region] = {}
 
-    def step(self, pressure: npt.ArrayLike, side: str | None, t: float) -> list[Event]:
+    def step(
+        self, pressure: npt.ArrayLike, side: str | None, t: float, *, regions: bool = True
+    ) -> list[Event]:
         """One frame at ``t`` (s): its pressure (N/cm²) and the side the person lies on (None:
-        nobody)."""
+        nobody). Without ``regions`` only the schedule steps (the regions of the last frame
+        that looked for them stay: a station's followed frame, :meth:`Monitor.follow`)."""
         events = self.schedule.step(side, t)
+        if not regions:
+            return events
         self.regions = {}
         if side in BANDS:
             self.regions = find_regions(

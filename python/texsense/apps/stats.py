@@ -15,6 +15,8 @@ Readings flagged invalid are left out.
 - :func:`coefficient_of_variation`: standard deviation / mean of the loaded elements.
 - :func:`region_stats`: load, mean, peak and contact area per named region.
 - :func:`raw_rise`: what a mat without a calibration can say of a frame (the live monitor's).
+- :class:`LiveStats`: :func:`one_frame_stats` and the centre of force in grid cells of one
+  frame after another, in one compiled call on a grid (a station's every frame).
 
 Statistics other than the load also work on raw counts (``quantity="raw"``); the centre of
 force is then the centre of the raw values.
@@ -247,6 +249,63 @@ def one_frame_stats(
         "ppi": float(got["ppi"][0]),
         "cof_cm": got["cof_cm"][0],
     }
+
+
+class LiveStats:
+    """:func:`one_frame_stats` of frames of pressure (N/cm², NaN read as 0) on one layout, with
+    the centre of force in grid cells (row, column; weights: the pressure, not rounded) that
+    the live dashboard draws: what a station computes for every frame of every mat.
+
+    On a grid layout the compiled core computes them in one pass
+    (``texsense._core.GridStats``): the same numbers up to the order of the additions (a few
+    units in the last place). A points layout, or a frame with a value infinite as float32,
+    takes :func:`one_frame_stats` (the centre in cells is then the layout's x, y in cm
+    weighted by pressure, as :meth:`cof_cell` says).
+    """
+
+    def __init__(self, layout: Layout, threshold: float = 0.0, ppi_window: int = 3) -> None:
+        from texsense._core import GridStats
+
+        self.layout, self.threshold, self.ppi_window = layout, float(threshold), int(ppi_window)
+        self._grid = None
+        if layout.shape is not None and layout.cells is not None and ppi_window >= 1:
+            self._grid = GridStats(
+                np.ascontiguousarray(layout.area_cm2, dtype=np.float64),
+                np.ascontiguousarray(layout.xy_cm, dtype=np.float64),
+                np.ascontiguousarray(layout.cells, dtype=np.int64),
+                int(layout.shape[0]),
+                int(layout.shape[1]),
+                int(ppi_window),
+            )
+        self._cells_rc: tuple[_Array, _Array] | None = None
+
+    def __call__(self, pressure_ncm2: npt.ArrayLike) -> tuple[dict[str, Any], _Array]:
+        """(:func:`one_frame_stats` of the frame, its centre of force in cells)."""
+        p = np.ascontiguousarray(pressure_ncm2, dtype=np.float64)
+        got = self._grid.frame(p, self.threshold) if self._grid is not None else None
+        if got is None:
+            fs = one_frame_stats(p, self.layout, self.threshold, self.ppi_window)
+            return fs, self.cof_cell(p)
+        load, area, peak, ppi, x, y, row, col = got
+        fs = {"load_N": load, "contact_area_cm2": area, "peak": peak, "ppi": ppi,
+              "cof_cm": np.array([x, y])}  # fmt: skip
+        return fs, np.array([row, col])
+
+    def cof_cell(self, pressure: _Array) -> _Array:
+        """Centre of force in grid cells (row, col), weighted by the pressure (NaN and below 0
+        count 0), or in the elements' (x, y) cm for a points layout; NaN when unloaded."""
+        w = np.maximum(pressure if np.isfinite(pressure).all() else np.nan_to_num(pressure), 0.0)
+        total = w.sum()
+        if total <= 0:
+            return np.array([np.nan, np.nan])
+        lay = self.layout
+        if lay.cells is not None and lay.shape is not None:
+            if self._cells_rc is None:  # the elements' rows and columns (made once)
+                rows, cols = np.divmod(lay.cells, lay.shape[1])
+                self._cells_rc = (rows.astype(np.float64), cols.astype(np.float64))
+            rows, cols = self._cells_rc
+            return np.array([w @ rows, w @ cols]) / total
+        return np.asarray((w @ lay.xy_cm) / total)
 
 
 def _block_stats(

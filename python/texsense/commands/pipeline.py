@@ -150,7 +150,12 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
         help="frames per block (default: about 2^18 element-samples, 256 frames of 1024)",
     )
     p.add_argument("--scheduler", help="dask.distributed scheduler address (archives)")
-    p.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        help="local worker processes (default: one per core, at most one per file; an archive "
+        "under 32 MB, or 1: in this process)",
+    )
     add_accept_truncated(p)
     p.set_defaults(run=run_process)
 

@@ -292,6 +292,13 @@ def _task(src: str, calibration: dict[str, Any], dst: str, options: dict[str, An
         return asdict(FileReport(src, dst, "failed", error=f"{type(e).__name__}: {e}"))
 
 
+#: Inputs of fewer bytes than this, in all, are processed in this process when no scheduler
+#: and no worker count is given: a local cluster's start (scheduler, worker processes that each
+#: import texsense) costs ~1.5 s and ~5 CPU-s on the 2-core machine, more than such an archive
+#: takes to process (two seat sessions, 0.6 MB: 0.7 CPU-s in this process).
+IN_PROCESS_BYTES = 32 << 20
+
+
 def process_archive(
     jobs: Sequence[tuple[Path, Path]],
     calibration: str | Path,
@@ -315,16 +322,63 @@ def process_archive(
         Address of a running ``dask.distributed`` scheduler (``tcp://host:8786``). Default:
         a local cluster of worker processes, one thread each.
     workers : int, optional
-        Worker processes of the local cluster (default: one per core).
+        Worker processes of the local cluster (default: one per core, at most one per file).
+        ``1``, or neither this nor ``scheduler`` given and the inputs smaller than
+        :data:`IN_PROCESS_BYTES` in all: the files are processed one after the other in this
+        process, with the same reports.
     """
-    from dask.distributed import Client, LocalCluster, as_completed
-
     # a bad file fails here, once, not in every task; the workers get the chain's content
     cal_dict = load_chain(calibration).to_dict()
     opts = asdict(options or ProcessOptions())
+    if scheduler is None and (workers == 1 or (workers is None and _small(jobs))):
+        reports = [
+            _here(src, dst, cal_dict, opts)
+            for src, dst in progress(jobs, total=len(jobs), desc="files", unit="file")
+        ]
+    else:
+        reports = _on_dask(jobs, cal_dict, opts, scheduler, workers)
+    order = {str(src): k for k, (src, _) in enumerate(jobs)}
+    return sorted(reports, key=lambda r: order.get(r.source, 0))
+
+
+def _here(src: Path, dst: Path, cal_dict: dict[str, Any], opts: dict[str, Any]) -> FileReport:
+    """One file in this process; an unexpected error is that file's ``failed`` report, as
+    a task's on a cluster is (the other files go on)."""
+    try:
+        return FileReport(**_task(str(src), cal_dict, str(dst), opts))
+    except Exception as e:
+        return FileReport(str(src), str(dst), "failed", error=f"{type(e).__name__}: {e}")
+
+
+def _small(jobs: Sequence[tuple[Path, Path]]) -> bool:
+    """One file, or inputs of fewer than :data:`IN_PROCESS_BYTES` in all."""
+    if len(jobs) == 1:
+        return True
+    total = 0
+    for src, _ in jobs:
+        try:
+            total += src.stat().st_size
+        except OSError:  # the task reports it
+            continue
+        if total >= IN_PROCESS_BYTES:
+            return False
+    return True
+
+
+def _on_dask(
+    jobs: Sequence[tuple[Path, Path]],
+    cal_dict: dict[str, Any],
+    opts: dict[str, Any],
+    scheduler: str | None,
+    workers: int | None,
+) -> list[FileReport]:
+    """One Dask task per file, on the scheduler at ``scheduler`` or on a local cluster of
+    ``workers`` processes (default: one per core, at most one per file)."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
     cluster = None
     if scheduler is None:
-        n = workers or os.cpu_count() or 1
+        n = workers or min(os.cpu_count() or 1, len(jobs))
         one_thread = {
             k: "1" for k in ("RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
         }
@@ -362,5 +416,4 @@ def process_archive(
         client.close()
         if cluster is not None:
             cluster.close()
-    order = {str(src): k for k, (src, _) in enumerate(jobs)}
-    return sorted(reports, key=lambda r: order.get(r.source, 0))
+    return reports

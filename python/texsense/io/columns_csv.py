@@ -33,6 +33,7 @@ from texsense.io._base import BlockReader, Header, Piece, RecordingReader
 from texsense.io._registry import Probe
 from texsense.io._text import (
     UTF16_BOMS,
+    Line,
     TextLines,
     decode_head,
     is_number,
@@ -137,9 +138,14 @@ def write_columns_csv(path: str | Path, columns: Mapping[str, npt.ArrayLike]) ->
         raise ParameterError("all columns must have the same length")
     with atomic_open(path, "w", encoding="utf-8") as out:
         out.write(f"# rows: {length}\n" + ",".join(names) + "\n")
-        for row in zip(*(a.tolist() for a in arrays), strict=True):
-            out.write(",".join(repr(v) for v in row) + "\n")
+        for start in range(0, length, _WRITE_ROWS):  # each column's texts made at once
+            texts = [list(map(repr, a[start : start + _WRITE_ROWS].tolist())) for a in arrays]
+            out.write("".join(",".join(row) + "\n" for row in zip(*texts, strict=True)))
     return path
+
+
+#: Rows made into text at a time by :func:`write_columns_csv` (bounded memory, few calls).
+_WRITE_ROWS = 16384
 
 
 class ColumnsReader(BlockReader):
@@ -198,51 +204,92 @@ class ColumnsReader(BlockReader):
                 raise FormatError(path, f"no column {name!r}; columns are {', '.join(names)}")
         return names, declared
 
-    def _rows(self) -> Iterator[list[float]]:
-        n = len(self.names)
-        what = f"{n} values ({', '.join(self.names)})"
-        for line in self.lines.data_lines("the table"):
-            if not line.ended and self.declared_rows is not None:
-                self._cut(f"truncated: the file ends in the middle of line {line.number}")
-                return
+    def _row_blocks(self, rows: int) -> Iterator[npt.NDArray[np.float64]]:
+        """The table's rows as (k, columns) arrays of up to ``rows`` rows."""
+        held: list[Line] = []
+        lines = self.lines.data_lines("the table")
+        while True:
             try:
-                yield parse_csv_row(self.path, line, n, what)
-            except FormatError:
-                if line.ended:
-                    raise
-                self._cut(f"truncated: the file ends in the middle of line {line.number}")
+                line = next(lines)
+            except StopIteration:
+                break
+            except FormatError:  # an empty line inside: a bad line before it is named first
+                if held:
+                    self._parse(held)
+                raise
+            if not line.ended:  # only the last line: cut or whole, decided on its own
+                if held:
+                    yield self._parse(held)
+                    held = []
+                last = self._last_row(line)
+                if last is not None:
+                    yield np.array([last], dtype=np.float64)
                 return
+            held.append(line)
+            if len(held) == rows:
+                yield self._parse(held)
+                held = []
+        if held:
+            yield self._parse(held)
+
+    def _parse(self, lines: list[Line]) -> npt.NDArray[np.float64]:
+        """Complete lines as one array: every line's commas counted, then every number read by
+        ``float`` at once (the same tokens and the same ``float`` as :func:`parse_csv_row`);
+        anything amiss is found again line by line, for the error that names its line."""
+        n = len(self.names)
+        texts = [line.text for line in lines]
+        if all(t.count(",") == n - 1 for t in texts):
+            try:
+                values = list(map(float, ",".join(texts).split(",")))
+            except ValueError:
+                pass
+            else:
+                return np.array(values, dtype=np.float64).reshape(len(lines), n)
+        what = f"{n} values ({', '.join(self.names)})"
+        for line in lines:
+            parse_csv_row(self.path, line, n, what)  # raises for the first bad line
+        raise AssertionError("unreachable: a block that failed parses line by line")
+
+    def _last_row(self, line: Line) -> list[float] | None:
+        """A last line without its line end: the table's last row, or its cut-off part."""
+        if self.declared_rows is not None:
+            self._cut(f"truncated: the file ends in the middle of line {line.number}")
+            return None
+        n = len(self.names)
+        try:
+            return parse_csv_row(self.path, line, n, f"{n} values ({', '.join(self.names)})")
+        except FormatError:
+            self._cut(f"truncated: the file ends in the middle of line {line.number}")
+            return None
 
     def blocks(self, rows: int = 65536) -> Iterator[dict[str, npt.NDArray[np.float64]]]:
-        """Yield the table as {column: array} blocks of ``rows`` rows."""
-        held: list[list[float]] = []
-        for row in self._rows():
-            held.append(row)
-            if len(held) == rows:
-                yield self._block(held)
-                held = []
-        declared = self.declared_rows
-        if (
-            declared is not None
-            and self._shortfall is None
-            and self.rows_read + len(held) < declared
-        ):
-            missing = declared - self.rows_read - len(held)
+        """Yield the table as {column: array} blocks of ``rows`` rows (the last one after the
+        table's end was checked: a table cut short raises before it, unless accepted)."""
+        pending: list[npt.NDArray[np.float64]] = []
+        count = 0
+        for data in self._row_blocks(rows):
+            pending.append(data)
+            count += len(data)
+            if count >= rows:  # blocks of exactly ``rows``, whatever the parsed pieces
+                whole = np.concatenate(pending) if len(pending) > 1 else pending[0]
+                yield self._block(whole[:rows])
+                pending, count = ([whole[rows:]] if count > rows else []), count - rows
+        declared, total = self.declared_rows, self.rows_read + count
+        if declared is not None and self._shortfall is None and total < declared:
             self._cut(
                 f"truncated: '# rows: {declared}' but the file holds "
-                f"{declared - missing} ({missing} missing)"
+                f"{total} ({declared - total} missing)"
             )
-        self._finish_cut(self.rows_read + len(held), "row")
-        if held:
-            yield self._block(held)
+        self._finish_cut(total, "row")
+        if count:
+            yield self._block(np.concatenate(pending) if len(pending) > 1 else pending[0])
         if self.not_finite:
             logger.warning(
                 "warning: %s: %d value(s) are not finite numbers", self.path, self.not_finite
             )
 
-    def _block(self, rows: list[list[float]]) -> dict[str, npt.NDArray[np.float64]]:
-        data = np.array(rows, dtype=np.float64).reshape(len(rows), len(self.names))
-        self.rows_read += len(rows)
+    def _block(self, data: npt.NDArray[np.float64]) -> dict[str, npt.NDArray[np.float64]]:
+        self.rows_read += len(data)
         self.not_finite += int(np.count_nonzero(~np.isfinite(data)))
         return {n: data[:, i].copy() for i, n in enumerate(self.names)}
 

@@ -163,7 +163,7 @@ class Monitor:
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_first: float | None = None  # the time of the first frame
         self._cof_trace: list[list[float]] = []
-        self._cells_rc: tuple[np.ndarray, np.ndarray] | None = None  # (rows, cols) of elements
+        self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
         self._skimmed = False  # frames skimmed since the last frame processed (keep_time)
         self.clock = FrameClock()
         self.quiet = Quiet(log)
@@ -381,13 +381,44 @@ class Monitor:
         return True
 
     def keep_time(self, frame: Frame, wall: float) -> bool:
-        """Place a frame that will not be processed (a busy station skips it) on the mat's
-        time line, so that the clock stays in step; False when its time is off the clock
-        (counted and logged as in :meth:`process`). The exposure of the next frame
-        processed spans it (:meth:`ExposureTracker.step`, ``skipped``)."""
+        """Place a frame whose values are not read (a station far behind peeks at its time
+        only) on the mat's time line, so that the clock stays in step; False when its time is
+        off the clock (counted and logged as in :meth:`process`). The exposure of the next
+        frame processed spans it (:meth:`ExposureTracker.step`, ``skipped``)."""
         kept = self._in_step(frame, wall)
         self._skimmed = self._skimmed or kept
         return kept
+
+    def follow(self, frame: Frame, wall: float) -> bool:
+        """A frame a busy station does not process in full (a newer one of the mat waits):
+        it goes through what the frames after it depend on, as in :meth:`process` — the
+        clock, the pipeline's state (failure detector, Preisach memory eq. 4.18-4.22, drift
+        history), for a bed the side vote and the turning schedule, the exposure and its
+        alerts and events — and through nothing that only shows it (statistics, maps,
+        snapshot, charts, viewers, a bed's regions). The exposure timers and alerts are those
+        of processing every frame (issue 38). False when its time is off the clock."""
+        if not self._in_step(frame, wall):
+            return False
+        for tap in self.taps:
+            tap(frame)
+        if self._t_first is None:
+            self._t_first = frame.t
+        if self.raw_only:  # nothing of a raw frame outlives it but the clock and the floor
+            floor = self._raw_floor
+            raw = frame.values
+            self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
+            return True
+        pressure, _, _ = self._pressure_of(frame)
+        bounds = self._bounds_of()
+        posture = None
+        if self.bed is not None:  # the side's vote feeds the turning schedule
+            load = _finite(stats.one_frame_stats(pressure, self.layout, threshold=0.05)["load_N"])
+            posture = self._posture_of(frame.t, pressure, load)
+        events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=False)
+        if events:
+            self._events(events, wall)
+            self.changes += 1
+        return True
 
     def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
         """One frame through everything; returns the snapshot, or None for a frame whose
@@ -461,15 +492,18 @@ class Monitor:
         posture: dict[str, Any] | None,
         wall: float,
         bounds: tuple[np.ndarray, np.ndarray] | None = None,
+        regions: bool = True,
     ) -> list[Event]:
         """The bed's schedule and the exposure tracker on one frame: a turn hands the
         exposure to new skin (and clears an open alert), no alert opens while a turn is being
         confirmed; a new alert is named by the places of this frame. With ``bounds`` (lower,
-        upper) the tracker tells confident from possible exceedances (issue 37)."""
+        upper) the tracker tells confident from possible exceedances (issue 37); without
+        ``regions`` the bed's at-risk regions are not looked for (a followed frame)."""
         events: list[Event] = []
         schedule = None
         if self.bed is not None:
-            events += self.bed.step(pressure, posture["label"] if posture else None, t)
+            side = posture["label"] if posture else None
+            events += self.bed.step(pressure, side, t, regions=regions)
             schedule = self.bed.schedule
         if not (self.mode.alerts and not self.raw_only):
             return events
@@ -551,8 +585,10 @@ class Monitor:
         if self.raw_only:  # no pressure: nothing to say (and no centre of force)
             none = dict.fromkeys(("load_N", "contact_area_cm2", "peak_ncm2", "ppi_ncm2", "cof_cm"))
             return none, 0.0
-        fs = stats.one_frame_stats(pressure, self.layout, threshold=0.05)
-        cof = self._cof_cell(pressure)
+        live = self._live_stats
+        if live is None or live.layout is not self.layout:  # made again when it turns
+            live = self._live_stats = stats.LiveStats(self.layout, threshold=0.05)
+        fs, cof = live(pressure)
         load = _finite(fs["load_N"])
         if np.all(np.isfinite(cof)):
             self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
@@ -580,19 +616,13 @@ class Monitor:
             "window_s": POSTURE_WINDOW_S,
         }
 
-    def _cof_cell(self, pressure: np.ndarray) -> np.ndarray:
-        """Centre of force in grid cells (row, col) — what the dashboard draws — or in the
-        elements' (x, y) cm for a points layout."""
-        w = np.maximum(pressure if np.isfinite(pressure).all() else np.nan_to_num(pressure), 0.0)
-        total = w.sum()
-        if total <= 0:
-            return np.array([np.nan, np.nan])
-        if self.layout.cells is not None and self.layout.shape is not None:
-            if self._cells_rc is None:  # the elements' rows and columns (made once)
-                self._cells_rc = np.divmod(self.layout.cells, self.layout.shape[1])
-            rows, cols = self._cells_rc
-            return np.array([w @ rows, w @ cols]) / total
-        return (w @ self.layout.xy_cm) / total
+    @property
+    def latest_head(self) -> dict[str, Any] | None:
+        """The latest snapshot as it is, its maps not made (``raw``, ``pressure``,
+        ``exposure_s``, bounds: None until :attr:`latest` makes them): its statistics, bed,
+        posture and alert, what a ward tile shows (made for every changed mat of a group
+        member every second: the maps' lists cost ~0.3 ms a mat)."""
+        return self._latest
 
     @property
     def latest(self) -> dict[str, Any] | None:

@@ -5,13 +5,13 @@ that a page request or a WebSocket message is never queued behind a second's wor
 
 A station that cannot keep up stays current instead of falling ever further behind: the mats
 are read in turn, and when a mat's next message has waited longer than :data:`MAX_WAIT_S`,
-the messages behind it but the newest are skipped (only their time is read, which keeps the
-mat's clock in step; counted per mat as ``behind``) and the newest is handled, so every mat's
-newest frame is read once a round. (Without it, 20 virtual mats at 10x on a shared 2-core
-machine put the station 50 s behind after two minutes, growing by 0.6 s every second, and
-every mat was called silent while its frames waited.) The exposure is integrated over the
-frames' own times, so a skipped frame costs resolution, not minutes above the threshold; a
-mat being recorded keeps every frame (``skip`` says no). A full inbox (:data:`INBOX_MAX`)
+the messages behind it but the newest are skipped (the station follows them through the
+pipeline and the exposure without a snapshot, or reads only their time when they waited
+very long: :meth:`texsense.station.ward.Station.skip`; counted per mat as ``behind``) and the
+newest is handled, so every mat's newest frame is read once a round. (Without it, 20 virtual
+mats at 10x on a shared 2-core machine put the station 50 s behind after two minutes, growing
+by 0.6 s every second, and every mat was called silent while its frames waited.) A mat being
+recorded keeps every frame (``skip`` says no). A full inbox (:data:`INBOX_MAX`)
 drops its oldest messages, counted and logged.
 
 The loop's other work goes first too (a connection to accept, a request's bytes or its next

@@ -30,8 +30,11 @@ any coordination of their own: the broker routes). Every mat is a
 - **connection**: the MQTT client reconnects by itself when the broker goes away and comes
   back, and subscribes again;
 - **the pages stay served under load**: messages are handled in slices of the event loop,
-  and a station that cannot keep up skips the older frames of a mat whose newer ones wait
-  (counted as ``behind``) instead of falling ever further behind (:mod:`texsense.station.inbox`).
+  and a station that cannot keep up makes no snapshot of the older frames of a mat whose newer
+  ones wait (counted as ``behind``; they still go through the pipeline and the exposure, so
+  timers and alerts are exact; only their time is read when they waited more than
+  :data:`FOLLOW_S`, counted as ``peeked``) instead of falling ever further behind
+  (:mod:`texsense.station.inbox`).
 """
 
 from __future__ import annotations
@@ -81,6 +84,10 @@ MIN_STALE_S = 1.0
 #: Every mat's silence is judged this often, s (a station of 1,000 mats judged 50 times a
 #: second spent a tenth of its event loop on it).
 CHECK_S = 0.25
+#: A frame the station skips because it is behind (a newer one of its mat waits) is still
+#: followed through the pipeline and the exposure (exact timers and alerts, issue 38) unless
+#: it waited longer than this, s: then only its time is read (the station is far behind).
+FOLLOW_S = 5.0
 #: Urgency order of a mat's state on the ward page (highest first).
 URGENCY = {"alert": 4, "stale": 3, "refused": 3, "acknowledged": 2, "live": 1, "waiting": 0}
 #: Messages in a row with another element count, at least, before a mat is refused.
@@ -152,7 +159,8 @@ class MatEntry:
         self.min_stale_s = min_stale_s
         self.refuse_after_s = refuse_after_s
         self.messages = self.malformed = self.ignored = self.failed = 0
-        self.behind = 0  # frames only skimmed for their time: the station was behind
+        self.behind = 0  # frames not processed in full (followed or peeked): it was behind
+        self.peeked = 0  # ... of them, frames whose time only was read: it was far behind
         self.last_error: str | None = None
         self.last_wall: float | None = None  # arrival of the last frame processed
         self.last_seen: float | None = None  # ... or of a frame skimmed after it
@@ -181,16 +189,18 @@ class MatEntry:
         self.version += 1
         self.quiet.warn(f"mat {self.id}", kind, f"skipped message {self.messages}: {text}")
 
-    def handle(self, payload: bytes, now: float, *, skim: bool = False) -> bool:
+    def handle(self, payload: bytes, now: float, *, skim: bool = False, peek: bool = False) -> bool:
         """One message; True when it gave a frame. Its length is checked first: an oversized
-        payload is never parsed. ``skim``: the station is behind (:meth:`skim`)."""
+        payload is never parsed. ``skim``: the station is behind and a newer frame of this
+        mat waits: the frame is followed (:meth:`feed`), not processed in full; with ``peek``
+        only its time is read (:meth:`skim`)."""
         self.messages += 1  # every message that came, the ignored ones too
         if self.refused is not None:
             self.ignored += 1
             return False
         n = self.config.layout.n_elements
         try:
-            head = peek_mqtt_payload(payload, n, self.max_bytes) if skim else None
+            head = peek_mqtt_payload(payload, n, self.max_bytes) if skim and peek else None
             if head is not None:  # its time only: the values are not read
                 seq, t = head
                 frame = Frame(seq, np.array([t]), np.empty(n), "")
@@ -206,14 +216,19 @@ class MatEntry:
         except ProtocolError as e:
             self._malformed("malformed", str(e))
             return False
-        return self.skim(frame, now) if skim else self.feed(frame, now)
+        if head is not None:
+            return self.skim(frame, now)
+        return self.feed(frame, now, follow=skim)
 
     def skim(self, frame: Frame, now: float) -> bool:
-        """A frame the station skips because it is behind and a newer one of this mat waits
-        (:mod:`texsense.station.inbox`): only its time is taken, which keeps the mat's clock
-        in step (a burst of buffered frames skipped in the middle is no jump of the clock) and
-        the mat heard (not silent); counted as ``behind``. The next frame processed carries
-        the exposure over the frames skipped (it is integrated over the frames' times)."""
+        """A frame the station peeks at because it is far behind (more than
+        :data:`FOLLOW_S`) and a newer one of this mat waits (:mod:`texsense.station.inbox`):
+        only its time is taken, which keeps the mat's clock in step (a burst of buffered
+        frames skipped in the middle is no jump of the clock) and the mat heard (not silent);
+        counted as ``behind`` and ``peeked``. The next frame read carries the exposure over
+        the frames peeked at (integrated over the frames' times, a change put midway): the
+        exposure and the pipeline's state are no longer exactly those of reading every
+        frame."""
         if frame.values.size != self.config.layout.n_elements:
             self._malformed("count", f"a frame of {frame.values.size} values")
             return False
@@ -221,6 +236,7 @@ class MatEntry:
             return False
         self._mismatch = None
         self.behind += 1
+        self.peeked += 1
         self._heard(now)
         return True
 
@@ -261,8 +277,11 @@ class MatEntry:
         t = self.monitor.clock.last_t or 0.0
         return Event("admitted", t, None, {"mat": self.id})
 
-    def feed(self, frame: Frame, now: float) -> bool:
-        """One frame (from MQTT or a local source); True when it was processed."""
+    def feed(self, frame: Frame, now: float, *, follow: bool = False) -> bool:
+        """One frame (from MQTT or a local source); True when it was processed. ``follow``:
+        the station is behind and a newer frame of this mat waits: the frame goes through
+        the pipeline and the exposure but makes no snapshot (:meth:`Monitor.follow`),
+        counted as ``behind``."""
         if frame.values.size != self.config.layout.n_elements:
             self._malformed("count", f"a frame of {frame.values.size} values")
             return False
@@ -274,15 +293,23 @@ class MatEntry:
             frame.values = units.convert(frame.values, frame.unit, self.source.unit)
             frame.unit = self.source.unit
         try:
-            snapshot = self.monitor.process(frame, wall=now)
+            if follow:
+                done = self.monitor.follow(frame, now)
+            else:
+                done = self.monitor.process(frame, wall=now) is not None
         except Exception as e:  # one mat's failure must not stop the ward: one line, no trace
             self.failed += 1
             self.version += 1
             self.quiet.warn(f"mat {self.id}", "failed", f"frame {frame.seq} could not be "
                             f"processed ({type(e).__name__}: {e})")  # fmt: skip
             return False
+        if follow:  # no snapshot: the mat's view changes with the frame after it
+            if done:
+                self.behind += 1
+                self._heard(now)
+            return done
         self.version += 1
-        if snapshot is None:  # off the mat's clock: counted and logged by the monitor
+        if not done:  # off the mat's clock: counted and logged by the monitor
             return False
         self._arrived(now)
         return True
@@ -347,14 +374,14 @@ class MatEntry:
         alert = self.monitor.tracker.open_alert
         if state == "live" and alert is not None:
             state = "alert" if alert.active else "acknowledged"
-        latest = self.monitor.latest
+        latest = self.monitor.latest_head  # (no maps: they are not shown)
         bed = latest.get("bed") if latest and state != "stale" else None
         turn_due = bool(bed and bed["turn_due"])
         return state, max(URGENCY[state], URGENCY["alert"] if turn_due else 0)
 
     def status(self) -> dict[str, Any]:
         """The mat's state without its maps (what ``GET /api/mats`` and a ward tile show)."""
-        latest = self.monitor.latest
+        latest = self.monitor.latest_head  # (no maps: they are not shown)
         alert = self.monitor.tracker.open_alert
         stats = latest["stats"] if latest else None
         state, urgency = self.view_state()
@@ -378,6 +405,7 @@ class MatEntry:
             "failed": self.failed,
             "ignored": self.ignored,
             "behind": self.behind,
+            "peeked": self.peeked,
             "last_error": self.last_error,
             "problem": self.problem,
             "last_frame_wall": self.last_wall,
@@ -566,9 +594,13 @@ class Station:
         return self.serving > 0 or time.monotonic() - self.served_at < PAGE_GRACE_S
 
     def skip(self, topic: str, payload: bytes, arrived: float) -> bool:
-        """Skip a message's processing (the station is behind and a newer one of its topic
-        waits): only its time is taken (:meth:`MatEntry.skim`); an unknown topic's is counted.
-        A mat being recorded keeps every frame (False: the message is handled)."""
+        """Skip a message's full processing (the station is behind and a newer one of its
+        topic waits): the frame is followed through the pipeline and the exposure, without a
+        snapshot (:meth:`MatEntry.feed`, ``follow``); an unknown topic's is counted. A message
+        that waited longer than :data:`FOLLOW_S` is only peeked at for its time
+        (:meth:`MatEntry.skim`: the station is far behind, and following every frame would not
+        let it catch up). A mat being recorded keeps every frame (False: the message is
+        handled)."""
         mat = mat_id_of(topic)
         entry = self.mats.get(mat) if mat is not None else None
         if entry is None:
@@ -577,7 +609,7 @@ class Station:
         if entry.monitor.recorder is not None:
             return False
         try:
-            entry.handle(payload, arrived, skim=True)
+            entry.handle(payload, arrived, skim=True, peek=time.time() - arrived > FOLLOW_S)
         except Exception as e:  # as in handle: one line, counted, the ward goes on
             entry.failed += 1
             self.quiet.warn(f"mat {entry.id}", "failed", f"message {entry.messages} could not "
