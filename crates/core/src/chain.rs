@@ -25,7 +25,7 @@ use crate::convert::{Converter, ConverterView, Curve};
 use crate::detect::{code, Changes, FailureDetector};
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
-use crate::par::{block_size, run_frames, FrameBlock, MAX_BLOCK};
+use crate::par::{block_size, run_frames_coded, FrameBlock, MAX_BLOCK};
 use crate::repair::LocalRepair;
 use crate::snapshot::{Reader, Writer};
 use texsense_kernels::blob::kind;
@@ -387,6 +387,15 @@ fn segment(
             parts: Vec::with_capacity(stages.len()),
         })
         .collect();
+    if let Some(&first) = dt.first() {
+        for s in stages.iter_mut() {
+            match s {
+                Stage::Compensation(c) => c.prepare(first),
+                Stage::Drift(d) => d.prepare(first),
+                _ => {}
+            }
+        }
+    }
     for s in stages.iter_mut() {
         match s {
             Stage::Convert(c) => {
@@ -414,17 +423,15 @@ fn segment(
             Stage::Detect(_) | Stage::Repair(_) => unreachable!("not element-wise"),
         }
     }
-    let codes_in: &[u8] = codes;
-    let input = |idx: usize, _| (codes_in[idx] == code::OK).then(|| src[idx]);
     if blocks.iter().all(SegmentBlock::is_usual) {
         // conversion then compensation, the usual segment: one step without a dispatch
         let usual = blocks
             .into_iter()
             .filter_map(SegmentBlock::into_usual)
             .collect();
-        run_frames(dst, n, usual, dt, input);
+        run_frames_coded(dst, n, usual, dt, src, codes, code::OK);
     } else {
-        run_frames(dst, n, blocks, dt, input);
+        run_frames_coded(dst, n, blocks, dt, src, codes, code::OK);
     }
     for (c, v) in codes.iter_mut().zip(dst.iter()) {
         if *c == code::OK && !v.is_finite() {

@@ -188,6 +188,14 @@ impl Compensation {
                 .map_or(0, DriftBank::state_bytes_per_element)
     }
 
+    /// The drift's decay factors of a time step `dt` computed once for the next blocks
+    /// ([`DriftBank::prepare`]).
+    pub fn prepare(&mut self, dt: f64) {
+        if let Some(d) = &mut self.drift {
+            d.prepare(dt);
+        }
+    }
+
     /// Both stages split into blocks of [`crate::par::block_size`] elements.
     pub fn blocks(&mut self) -> Vec<CompensationBlock<'_>> {
         let mut drift = self.drift.as_mut().map(|d| d.blocks().into_iter());
@@ -217,6 +225,9 @@ impl Compensation {
         check_len("inputs", inputs.len(), dt.len() * n)?;
         check_len("valid", valid.len(), dt.len() * n)?;
         check_len("out", out.len(), dt.len() * n)?;
+        if let Some(&first) = dt.first() {
+            self.prepare(first);
+        }
         run_frames(out, n, self.blocks(), dt, |idx, _| {
             valid[idx].then_some(inputs[idx])
         });

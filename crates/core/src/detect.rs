@@ -207,13 +207,21 @@ impl FailureDetector {
         let n = self.len();
         let t = readings.len() / n;
         let chunks: Vec<_> = self.elements.chunks_mut(block_size(n)).collect();
+        let lanes = simd_lanes();
         for_blocks(delta, n, chunks, par, |block, o| {
             let start = o.start();
             for r in 0..t {
                 let row = r * n + start;
                 let out = o.row(r);
+                let c = &readings[row..row + out.len()];
+                #[cfg(target_arch = "x86_64")]
+                if lanes {
+                    // SAFETY: `simd_lanes` found AVX2
+                    unsafe { avx2::changes_row(block, c, out) };
+                    continue;
+                }
                 for (li, el) in block.iter_mut().enumerate() {
-                    out[li] = kernel::change(el, readings[row + li]);
+                    out[li] = kernel::change(el, c[li]);
                 }
             }
         });
@@ -242,10 +250,26 @@ impl FailureDetector {
                 let row = r * n;
                 let out = o.row(r);
                 let w = out.len();
+                // the whole groups of the row in lanes, except those with a reading that
+                // holds still (`in_lanes`: bit g for the group at 4 g done)
+                let in_lanes = match valid {
+                    Validity::Given(v) if lanes => {
+                        let whole = w / GROUP * GROUP;
+                        let left =
+                            this.codes_row(readings, delta, v, row + start, block, out, whole);
+                        !u64::from(left) & ((1u64 << (whole / GROUP)) - 1)
+                    }
+                    _ => 0,
+                };
                 let mut li = 0;
                 while li < w {
                     let end = (li + GROUP).min(w);
+                    if in_lanes >> (li / GROUP) & 1 != 0 {
+                        li = end;
+                        continue;
+                    }
                     if lanes
+                        && matches!(valid, Validity::InCodes(_))
                         && end - li == GROUP
                         && this.moving(
                             readings,
@@ -325,6 +349,52 @@ impl FailureDetector {
             max: self.max.as_ref().map(|m| m[i]),
         };
         kernel::code(p, el, lim, c, ok, d, nb_move, !nbs.is_empty())
+    }
+
+    /// The codes of the first `whole` elements (whole groups) of a block's row starting
+    /// at reading `at` (element `at % n`) in SIMD lanes (`detect::avx2::codes_row`);
+    /// returns the groups left to the scalar kernel (bit g: the group at 4 g); all of them
+    /// without AVX2.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn codes_row(
+        &self,
+        readings: &[f64],
+        delta: &[f64],
+        valid: &[bool],
+        at: usize,
+        els: &mut [Element<f64>],
+        out: &mut [u8],
+        whole: usize,
+    ) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let n = self.jump.len(); // the states are out of `self` during the pass
+            let i = at % n;
+            let lim = avx2::RowLimits {
+                jump: &self.jump[i..i + whole],
+                baseline: self.baseline.as_deref().map(|b| &b[i..i + whole]),
+                max: self.max.as_deref().map(|m| &m[i..i + whole]),
+            };
+            let at = at..at + whole;
+            // SAFETY: `simd_lanes` found AVX2 before the caller came here
+            unsafe {
+                avx2::codes_row(
+                    &self.params,
+                    &lim,
+                    &readings[at.clone()],
+                    &delta[at.clone()],
+                    &valid[at],
+                    &mut els[..whole],
+                    &mut out[..whole],
+                )
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = (readings, delta, valid, at, els, out, whole);
+            u32::MAX
+        }
     }
 
     /// The codes of the four elements `i .. i + 4` of frame `row` in SIMD lanes when none

@@ -122,6 +122,10 @@ pub struct DriftBank {
     /// The time clock's K states per element when two clocks run (else empty), laid out
     /// as `z`.
     z_time: Vec<f64>,
+    /// The decay factors of the kernel's terms for a time step (`kernel::frame`), the
+    /// blocks' start ([`DriftBank::prepare`]): a block whose frame has this step computes
+    /// none (a stream of one frame per call would compute them anew in every block).
+    memo: (f64, Vec<f64>),
 }
 
 /// The elements of one block of a bank, for a parallel batch (the block starts on a
@@ -132,13 +136,18 @@ pub struct DriftBlock<'a> {
     z: &'a mut [f64],
     z_time: &'a mut [f64],
     decay: Vec<f64>,
+    /// The time step of `decay` (NaN: none yet).
+    decay_dt: f64,
 }
 
 impl DriftBlock<'_> {
     /// Start a frame `dt` seconds after the previous one (once per frame, before `step`).
     #[inline]
     pub fn frame(&mut self, dt: f64) {
-        kernel::frame(&mut self.decay, self.settings.taus(), dt);
+        if dt.to_bits() != self.decay_dt.to_bits() {
+            kernel::frame(&mut self.decay, self.settings.taus(), dt);
+            self.decay_dt = dt;
+        }
     }
 
     /// Element `i` of the block, in the frame started by [`DriftBlock::frame`] with `dt`:
@@ -286,6 +295,7 @@ impl DriftBank {
             elements: vec![Element::default(); n],
             z: vec![0.0; n.div_ceil(GROUP) * GROUP * k],
             z_time: Vec::new(),
+            memo: (f64::NAN, vec![1.0; k]),
         })
     }
 
@@ -453,9 +463,20 @@ impl DriftBank {
                 elements,
                 z,
                 z_time: z_time.next().unwrap_or_default(),
-                decay: vec![1.0; k],
+                decay: self.memo.1.clone(),
+                decay_dt: self.memo.0,
             })
             .collect()
+    }
+
+    /// The decay factors of a time step `dt` computed once for the blocks that
+    /// [`DriftBank::blocks`] hands out next (the first step of a batch; the same values as
+    /// each block would compute).
+    pub fn prepare(&mut self, dt: f64) {
+        if dt.to_bits() != self.memo.0.to_bits() {
+            kernel::frame(&mut self.memo.1, &self.settings.kernel.taus, dt);
+            self.memo.0 = dt;
+        }
     }
 
     /// One sample `dt` seconds after the previous one: the hysteresis outputs `h` (N,) in,
@@ -486,6 +507,9 @@ impl DriftBank {
         check_len("h", h.len(), dt.len() * n)?;
         check_len("valid", valid.len(), dt.len() * n)?;
         check_len("out", out.len(), dt.len() * n)?;
+        if let Some(&first) = dt.first() {
+            self.prepare(first);
+        }
         run_frames(out, n, self.blocks(), dt, |idx, _| {
             valid[idx].then_some(h[idx])
         });

@@ -194,6 +194,47 @@ where
     });
 }
 
+/// [`run_frames`] for readings whose validity is a code (`codes[idx] == ok_code`: valid):
+/// element `i` of frame `r` reads `src[r * n + i]`, the same inputs as `run_frames` with
+/// `input = |idx, _| (codes[idx] == ok_code).then(|| src[idx])`, gathered a row at a time
+/// without a call per reading.
+///
+/// # Panics
+/// When `src` or `codes` is not `T x n`.
+pub fn run_frames_coded<B>(
+    out: &mut [f64],
+    n: usize,
+    blocks: Vec<B>,
+    dt: &[f64],
+    src: &[f64],
+    codes: &[u8],
+    ok_code: u8,
+) where
+    B: FrameBlock,
+{
+    assert!(
+        src.len() == dt.len() * n && codes.len() == src.len(),
+        "T x {n}"
+    );
+    let par = parallel(dt.len(), n);
+    for_blocks(out, n, blocks, par, |mut block, o| {
+        let (start, width) = (o.start(), o.width());
+        let (mut x, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
+        let (x, ok) = (&mut x[..width], &mut ok[..width]);
+        for (r, &d) in dt.iter().enumerate() {
+            block.frame(d);
+            let at = r * n + start;
+            let (s, c) = (&src[at..at + width], &codes[at..at + width]);
+            for li in 0..width {
+                let good = c[li] == ok_code;
+                ok[li] = good;
+                x[li] = if good { s[li] } else { f64::NAN };
+            }
+            block.row(d, x, ok, o.row(r));
+        }
+    });
+}
+
 /// `work((b, chunk))` for every chunk of `size` items (chunk `b` starts at item `b * size`),
 /// on the thread pool when `par`, else one after the other on this thread.
 pub fn each_chunk<T, F>(items: &mut [T], size: usize, par: bool, work: F)

@@ -17,7 +17,7 @@
 //! computed from its readings as they came in and written after them, so no fill sees
 //! another.
 
-use texsense_kernels::repair::{self as kernel, repair_frame};
+use texsense_kernels::repair::{self as kernel, outcome as how_of};
 
 use crate::error::{check_len, frames_of, CoreError};
 use crate::snapshot::{Reader, Writer};
@@ -58,6 +58,8 @@ pub struct LocalRepair {
     last: Vec<f64>,
     /// The fills of a frame until all are known (scratch).
     fills: Vec<f64>,
+    /// The readings of a frame that are not available (scratch).
+    failed: Vec<usize>,
 }
 
 impl LocalRepair {
@@ -82,6 +84,7 @@ impl LocalRepair {
             method,
             last: vec![f64::NAN; n],
             fills: vec![0.0; n],
+            failed: Vec::new(),
         })
     }
 
@@ -165,6 +168,7 @@ impl LocalRepair {
             method,
             last,
             fills,
+            failed,
         } = self;
         let method = match method {
             Method::Zero => kernel::Method::Zero,
@@ -175,9 +179,56 @@ impl LocalRepair {
         for (r, frame) in values.chunks_exact_mut(n).enumerate() {
             let row = r * n;
             let o = outcome.as_deref_mut().map(|o| &mut o[row..row + n]);
-            repair_frame(&method, last, frame, |j| ok(row + j), fills, o);
+            repair_listed(&method, last, frame, |j| ok(row + j), fills, failed, o);
         }
         Ok(())
+    }
+}
+
+/// The kernel's `repair_frame` (same values, last values and outcomes), visiting the
+/// readings that are not available alone after one pass over the frame: the pass keeps the
+/// last value of every available reading and lists the others; their fills read the frame
+/// as it came in and their own last value (which the pass left alone), then go in.
+fn repair_listed(
+    method: &kernel::Method<'_, f64>,
+    last: &mut [f64],
+    frame: &mut [f64],
+    ok: impl Fn(usize) -> bool,
+    fills: &mut [f64],
+    failed: &mut Vec<usize>,
+    mut outcome: Option<&mut [u8]>,
+) {
+    failed.clear();
+    for (i, (&v, l)) in frame.iter().zip(last.iter_mut()).enumerate() {
+        if ok(i) && v.is_finite() {
+            *l = v;
+            if let Some(o) = outcome.as_deref_mut() {
+                o[i] = how_of::MEASURED;
+            }
+        } else {
+            failed.push(i);
+        }
+    }
+    if failed.is_empty() {
+        return;
+    }
+    let frame_in: &[f64] = frame;
+    let available = |j: usize| {
+        let v = frame_in[j];
+        (ok(j) && v.is_finite()).then_some(v)
+    };
+    for (f, &i) in fills.iter_mut().zip(failed.iter()) {
+        let (v, how) = kernel::fill(method, i, last[i], &available);
+        if v.is_finite() {
+            last[i] = v;
+        }
+        *f = v;
+        if let Some(o) = outcome.as_deref_mut() {
+            o[i] = how;
+        }
+    }
+    for (&f, &i) in fills.iter().zip(failed.iter()) {
+        frame[i] = f;
     }
 }
 
@@ -316,6 +367,44 @@ mod tests {
     }
 
     proptest! {
+        /// The listed path gives the kernel's `repair_frame` bit for bit: values, last
+        /// values and outcomes, over frames with NaN, infinite and flagged readings, for
+        /// every method.
+        #[test]
+        fn listed_repair_equals_the_kernel_frame(
+            vals in proptest::collection::vec(
+                prop_oneof![8 => -5.0f64..5.0, 1 => Just(f64::NAN), 1 => Just(f64::INFINITY)],
+                5 * 12,
+            ),
+            mask in proptest::collection::vec(prop::bool::weighted(0.7), 5 * 12),
+            which in 0usize..4,
+        ) {
+            let (n, g) = (12, Neighbours::grid4(3, 4));
+            let weights: Vec<f64> = (0..g.nnz()).map(|q| 0.5 + (q % 3) as f64).collect();
+            let method = [
+                Method::Zero,
+                Method::LastValue,
+                Method::NeighbourMean(g.clone()),
+                Method::Weighted(g, weights),
+            ][which].clone();
+            let mut rep = LocalRepair::new(method, n).unwrap();
+            let mut last = vec![f64::NAN; n];
+            let mut fills = vec![0.0; n];
+            for t in 0..5 {
+                let (v, m) = (&vals[t * n..(t + 1) * n], &mask[t * n..(t + 1) * n]);
+                let (out, oc) = run_all(&mut rep, v, m);
+                let mut frame = v.to_vec();
+                let mut oc_k = vec![9; n];
+                kernel::repair_frame(
+                    &rep.view(), &mut last, &mut frame, |i| m[i], &mut fills, Some(&mut oc_k),
+                );
+                let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                prop_assert_eq!(bits(&out), bits(&frame));
+                prop_assert_eq!(&oc, &oc_k);
+                prop_assert_eq!(bits(rep.last_values()), bits(&last));
+            }
+        }
+
         #[test]
         fn streaming_equals_batch(
             vals in proptest::collection::vec(-5.0f64..5.0, 4 * 12),

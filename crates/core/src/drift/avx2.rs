@@ -83,28 +83,37 @@ unsafe fn group(
     // the level is h itself (power 1); the first valid level is a step from 0
     let change = _mm256_blendv_pd(hv, _mm256_sub_pd(hv, last), started);
     let total = _mm256_add_pd(total, change);
-    // z_j <- z_j d_j + change (live), z_j d_j (time passes); Σ c_j z_j in the kernel's
-    // four partial sums over whole fours of terms, then the tail in order
-    let zero = _mm256_setzero_pd();
-    let (mut acc, mut tail) = ([zero; 4], zero);
-    let whole = k / 4 * 4;
+    // z_j <- z_j d_j + change (live), z_j d_j (time passes: + -0, which leaves every value
+    // as it is, so one add serves both); Σ c_j z_j in the kernel's four partial sums over
+    // whole fours of terms (one register each), then the tail in order
+    let cm = _mm256_blendv_pd(_mm256_set1_pd(-0.0), change, live);
     let p = z.as_mut_ptr();
-    for j in 0..k {
-        // SAFETY: term j of the group's four elements: z[4 j .. 4 j + 4] (z holds 4 k)
-        let zj = unsafe { _mm256_loadu_pd(p.add(GROUP * j)) };
-        let zd = _mm256_mul_pd(zj, _mm256_set1_pd(decay[j]));
-        let zn = _mm256_blendv_pd(zd, _mm256_add_pd(zd, change), live);
-        // SAFETY: as the load
-        unsafe { _mm256_storeu_pd(p.add(GROUP * j), zn) };
-        let wz = _mm256_mul_pd(_mm256_set1_pd(w[j]), zn);
-        if j < whole {
-            acc[j % 4] = _mm256_add_pd(acc[j % 4], wz);
-        } else {
-            tail = _mm256_add_pd(tail, wz);
+    let term = |j: usize| {
+        // SAFETY: term j of the group's four elements: z[4 j .. 4 j + 4] (z holds 4 k;
+        // j < k = decay.len() = w.len(), checked by the caller's asserts and `Settings`)
+        unsafe {
+            let at = p.add(GROUP * j);
+            let zd = _mm256_mul_pd(_mm256_loadu_pd(at), _mm256_set1_pd(*decay.get_unchecked(j)));
+            let zn = _mm256_add_pd(zd, cm);
+            _mm256_storeu_pd(at, zn);
+            _mm256_mul_pd(_mm256_set1_pd(*w.get_unchecked(j)), zn)
         }
+    };
+    let zero = _mm256_setzero_pd();
+    let (mut a0, mut a1, mut a2, mut a3) = (zero, zero, zero, zero);
+    let whole = k / 4 * 4;
+    for j in (0..whole).step_by(4) {
+        a0 = _mm256_add_pd(a0, term(j));
+        a1 = _mm256_add_pd(a1, term(j + 1));
+        a2 = _mm256_add_pd(a2, term(j + 2));
+        a3 = _mm256_add_pd(a3, term(j + 3));
+    }
+    let mut tail = zero;
+    for j in whole..k {
+        tail = _mm256_add_pd(tail, term(j));
     }
     let weighted = _mm256_add_pd(
-        _mm256_add_pd(_mm256_add_pd(acc[0], acc[1]), _mm256_add_pd(acc[2], acc[3])),
+        _mm256_add_pd(_mm256_add_pd(a0, a1), _mm256_add_pd(a2, a3)),
         tail,
     );
     let wsum = _mm256_set1_pd(s.weight_sum());
