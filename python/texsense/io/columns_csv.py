@@ -176,6 +176,8 @@ class ColumnsReader(BlockReader):
             raise
         self.rows_read = 0
         self.not_finite = 0
+        n = len(self.names)
+        self._what = f"{n} values ({', '.join(self.names)})"  # what a row holds, for errors
 
     def _read_header(self, required: Sequence[str]) -> tuple[list[str], int | None]:
         path, declared = self.path, None
@@ -205,7 +207,7 @@ class ColumnsReader(BlockReader):
         return names, declared
 
     def _row_blocks(self, rows: int) -> Iterator[npt.NDArray[np.float64]]:
-        """The table's rows as (k, columns) arrays of up to ``rows`` rows."""
+        """The table's rows as (k, columns) arrays of ``rows`` rows, the last one of fewer."""
         held: list[Line] = []
         lines = self.lines.data_lines("the table")
         while True:
@@ -218,12 +220,12 @@ class ColumnsReader(BlockReader):
                     self._parse(held)
                 raise
             if not line.ended:  # only the last line: cut or whole, decided on its own
-                if held:
-                    yield self._parse(held)
-                    held = []
+                done = self._parse(held) if held else np.empty((0, len(self.names)))
                 last = self._last_row(line)
                 if last is not None:
-                    yield np.array([last], dtype=np.float64)
+                    done = np.vstack([done, [last]])
+                if len(done):
+                    yield done
                 return
             held.append(line)
             if len(held) == rows:
@@ -245,9 +247,8 @@ class ColumnsReader(BlockReader):
                 pass
             else:
                 return np.array(values, dtype=np.float64).reshape(len(lines), n)
-        what = f"{n} values ({', '.join(self.names)})"
         for line in lines:
-            parse_csv_row(self.path, line, n, what)  # raises for the first bad line
+            parse_csv_row(self.path, line, n, self._what)  # raises for the first bad line
         raise AssertionError("unreachable: a block that failed parses line by line")
 
     def _last_row(self, line: Line) -> list[float] | None:
@@ -255,9 +256,8 @@ class ColumnsReader(BlockReader):
         if self.declared_rows is not None:
             self._cut(f"truncated: the file ends in the middle of line {line.number}")
             return None
-        n = len(self.names)
         try:
-            return parse_csv_row(self.path, line, n, f"{n} values ({', '.join(self.names)})")
+            return parse_csv_row(self.path, line, len(self.names), self._what)
         except FormatError:
             self._cut(f"truncated: the file ends in the middle of line {line.number}")
             return None
@@ -265,15 +265,13 @@ class ColumnsReader(BlockReader):
     def blocks(self, rows: int = 65536) -> Iterator[dict[str, npt.NDArray[np.float64]]]:
         """Yield the table as {column: array} blocks of ``rows`` rows (the last one after the
         table's end was checked: a table cut short raises before it, unless accepted)."""
-        pending: list[npt.NDArray[np.float64]] = []
-        count = 0
+        tail = None  # a last block of fewer rows waits for the table's end to be checked
         for data in self._row_blocks(rows):
-            pending.append(data)
-            count += len(data)
-            if count >= rows:  # blocks of exactly ``rows``, whatever the parsed pieces
-                whole = np.concatenate(pending) if len(pending) > 1 else pending[0]
-                yield self._block(whole[:rows])
-                pending, count = ([whole[rows:]] if count > rows else []), count - rows
+            if len(data) < rows:
+                tail = data
+            else:
+                yield self._block(data)
+        count = 0 if tail is None else len(tail)
         declared, total = self.declared_rows, self.rows_read + count
         if declared is not None and self._shortfall is None and total < declared:
             self._cut(
@@ -281,8 +279,8 @@ class ColumnsReader(BlockReader):
                 f"{total} ({declared - total} missing)"
             )
         self._finish_cut(total, "row")
-        if count:
-            yield self._block(np.concatenate(pending) if len(pending) > 1 else pending[0])
+        if tail is not None:
+            yield self._block(tail)
         if self.not_finite:
             logger.warning(
                 "warning: %s: %d value(s) are not finite numbers", self.path, self.not_finite
