@@ -22,6 +22,7 @@ __all__ = [
     "FailureDetector",
     "GridStats",
     "LocalRepair",
+    "MotionTest",
     "NeighbourIndexError",
     "ParameterError",
     "PreisachBank",
@@ -29,6 +30,8 @@ __all__ = [
     "SpacerBank",
     "__version__",
     "everett_terms",
+    "exposure_advance",
+    "frame_bounds",
     "mcu_blob_info",
     "parse_json_numbers",
     "parse_row",
@@ -253,6 +256,59 @@ class GridStats:
         self, pressure: _F64, threshold: float
     ) -> tuple[float, float, float, float, float, float, float, float] | None:
         """(load, contact area, peak, ppi, cof x, cof y, cof row, cof column), or None."""
+
+@final
+class MotionTest:
+    """The in-use drift estimator's empty count and movement test (crates/core/src/live.rs)."""
+
+    def __new__(cls, blocks: _I64, area: _F64) -> Self: ...
+    def forget(self) -> None:
+        """Forget the last frame."""
+
+    def step(
+        self,
+        x: _F64,
+        gain: _F64,
+        ok: _Bools,
+        empty: float,
+        empty_count: int,
+        floor: float,
+        motion: float,
+    ) -> tuple[_F64, str]:
+        """``x * gain`` and "empty", "moved" or "still"."""
+
+def frame_bounds(
+    values: _F64,
+    ok: _Bools,
+    drift: float,
+    edges: _F64,
+    scale: _F64,
+    mult_edges: _F64,
+    mult: _F64,
+    multiplier: float | None,
+    r_repaired: float,
+    range_max: float | None,
+) -> tuple[_F64, _F64]:
+    """The lower and upper bounds of one frame (``intervals.bounds``, the same bits)."""
+
+def exposure_advance(
+    pressure: _F64,
+    lower: _F64 | None,
+    upper: _F64 | None,
+    threshold: float,
+    count_possible: bool,
+    offload_s: float,
+    reposition_s: float,
+    dt: float,
+    skipped: bool,
+    exposure: _F64,
+    relief: _F64,
+    loaded_last: _Bools,
+    confident: _Bools,
+    possible: _Bools,
+) -> tuple[bool, int, float]:
+    """One exposure step of single elements, in place: (any loaded, at the reposition time,
+    largest exposure)."""
 
 def mcu_blob_info(blob: bytes) -> tuple[int, list[str], int, int, int, int]:
     """(elements, stage names, memory bytes, state bytes per element, scratch bytes per

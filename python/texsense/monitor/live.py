@@ -397,61 +397,62 @@ class Monitor:
         alerts and events — and through nothing that only shows it (statistics, maps,
         snapshot, charts, viewers, a bed's regions). The exposure timers and alerts are those
         of processing every frame (issue 38). False when its time is off the clock."""
+        return self._take(frame, wall, full=False) is not None
+
+    def _take(self, frame: Frame, wall: float, *, full: bool) -> tuple[Any, ...] | None:
+        """What :meth:`follow` and :meth:`process` share: the clock, the taps, the first
+        frame's time, a raw mat's floor, the pressure and its bounds, the bed's side, the
+        exposure and its events (stored). None when the frame's time is off the clock;
+        ``full``: with the statistics, the posture and a bed's regions (what a snapshot
+        shows), else ``()`` for a raw mat (nothing else of it outlives the frame)."""
         if not self._in_step(frame, wall):
-            return False
+            return None
+        if full:
+            self.last_wall = wall
         for tap in self.taps:
             tap(frame)
         if self._t_first is None:
             self._t_first = frame.t
         if self.raw_only:  # nothing of a raw frame outlives it but the clock and the floor
-            floor = self._raw_floor
-            raw = frame.values
+            floor, raw = self._raw_floor, frame.values
             self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
-            return True
-        pressure, _, _ = self._pressure_of(frame)
+            if not full:
+                return ()
+        pressure, measured, codes = self._pressure_of(frame)
         bounds = self._bounds_of()
-        posture = None
-        if self.bed is not None:  # the side's vote feeds the turning schedule
+        frame_stats, posture = None, None
+        if full:
+            frame_stats, load = self._stats_of(frame.t, pressure)
+            posture = self._posture_of(frame.t, pressure, load)
+        elif self.bed is not None:  # the side's vote feeds the turning schedule
             load = _finite(stats.one_frame_stats(pressure, self.layout, threshold=0.05)["load_N"])
             posture = self._posture_of(frame.t, pressure, load)
-        events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=False)
-        if events:
+        events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=full)
+        if events or full:
             self._events(events, wall)
             self.changes += 1
-        return True
+        return pressure, measured, codes, bounds, frame_stats, posture
 
     def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
         """One frame through everything; returns the snapshot, or None for a frame whose
         time is off the mat's clock (skipped: see :class:`FrameClock`). ``wall``: when it
         arrived (Unix s, default now)."""
         received_at = time.time() if wall is None else wall
-        if not self._in_step(frame, received_at):
+        taken = self._take(frame, received_at, full=True)
+        if taken is None:
             return None
-        self.last_wall = received_at
-        for tap in self.taps:
-            tap(frame)
-        pressure, measured, codes = self._pressure_of(frame)
-        bounds = self._bounds_of()
-        if self._t_first is None:
-            self._t_first = frame.t
-        frame_stats, load = self._stats_of(frame.t, pressure)
-        posture = self._posture_of(frame.t, pressure, load)
-        events = self._exposure(frame.t, pressure, posture, received_at, bounds)
+        pressure, measured, codes, bounds, frame_stats, posture = taken
         bed = self.bed.status(frame.t) if self.bed is not None else None
         if bed is not None and bounds is not None:
             self._bound_regions(bed["regions"], pressure, bounds)
-        self._events(events, received_at)
         if self.recorder is not None:
             label = posture["label"] if posture else None
             self.recorder.append(frame, pressure, measured, received_at, label, bounds)
         self.frames += 1
-        self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
         raw = frame.values
         raw_stats = None
-        if self.raw_only:  # no pressure: no load, area, peak pressure or PPI, but the rise
-            floor = self._raw_floor
-            self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
+        if self.raw_only and self._raw_floor is not None:  # no pressure: the rise, no load...
             raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
         self._remember(frame.t, frame_stats, raw_stats)
         alert = self.tracker.open_alert
