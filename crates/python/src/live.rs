@@ -143,7 +143,13 @@ impl PyMotionTest {
         };
         let verdict = self
             .inner
-            .step(x.as_slice()?, gain.as_slice()?, ok.as_slice()?, limits, &mut c)
+            .step(
+                x.as_slice()?,
+                gain.as_slice()?,
+                ok.as_slice()?,
+                limits,
+                &mut c,
+            )
             .ok_or_else(|| misfit("MotionTest.step"))?;
         let word = match verdict {
             Verdict::Empty => "empty",
