@@ -162,7 +162,7 @@ class Monitor:
         self._latest_text: str | None = "null"
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_first: float | None = None  # the time of the first frame
-        self._cof_trace: list[list[float]] = []
+        self._cof_trace: list[tuple[float, float]] = []
         self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
         self._skimmed = False  # frames skimmed since the last frame processed (keep_time)
         self.clock = FrameClock()
@@ -175,7 +175,9 @@ class Monitor:
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
         #: the statistics of the last :data:`HISTORY` frames (the page's charts)
-        self.history: deque[list[Any]] = deque(maxlen=HISTORY)
+        #: (rows are tuples of numbers: the collector leaves them, issue 38: as lists, 1,200 a
+        #: mat were most of a station's objects, and a full collection at 1,000 mats took 0.1 s)
+        self.history: deque[tuple[Any, ...]] = deque(maxlen=HISTORY)
         self.calibrated_wall: float | None = None  # when the calibration came into use
         self._adopt_orientation(pipeline)
         #: called with every frame on the mat's clock, before it is processed (the page's
@@ -576,9 +578,9 @@ class Monitor:
         and without a calibration the peak rise and the elements responding."""
         cof = st.get("cof_cm") or [None, None]
         rise = raw or {}
-        self.history.append([round(t, 3), st.get("load_N"), st.get("peak_ncm2"),
+        self.history.append((round(t, 3), st.get("load_N"), st.get("peak_ncm2"),
                              st.get("contact_area_cm2"), cof[0], cof[1],
-                             rise.get("peak_rise"), rise.get("responding")])  # fmt: skip
+                             rise.get("peak_rise"), rise.get("responding")))  # fmt: skip
 
     def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
         """The frame's statistics for the snapshot (null for a mat with no calibration) and
@@ -592,7 +594,7 @@ class Monitor:
         fs, cof = live(pressure)
         load = _finite(fs["load_N"])
         if np.all(np.isfinite(cof)):
-            self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
+            self._cof_trace = [*self._cof_trace[-59:], (float(cof[0]), float(cof[1]))]
         cof_cm = fs["cof_cm"]
         return {
             "load_N": round(load, 2),
