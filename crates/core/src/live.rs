@@ -90,16 +90,15 @@ pub fn frame_bounds(
         let a = x.abs();
         let mut sigma = of.scale[band(of.edges, a)] + a * drift;
         let rep = if ok[i] { 0.0 } else { 1.0 };
-        sigma = sigma + of.r_repaired * a * rep;
+        sigma += of.r_repaired * a * rep;
         if let Some(top) = of.range_max {
             let beyond = x - top;
             // np.maximum: NaN propagates
-            sigma = sigma
-                + if beyond.is_nan() {
-                    beyond
-                } else {
-                    beyond.max(0.0)
-                };
+            sigma += if beyond.is_nan() {
+                beyond
+            } else {
+                beyond.max(0.0)
+            };
         }
         let m = match of.multiplier {
             Some(m) => m,
@@ -292,7 +291,7 @@ pub fn exposure_advance(
 ) -> Option<ExposureStep> {
     let n = p.len();
     let lens = [st.exposure.len(), st.relief.len(), st.loaded_last.len()];
-    let bl = bounds.map_or(true, |(lo, hi)| lo.len() == n && hi.len() == n);
+    let bl = bounds.is_none_or(|(lo, hi)| lo.len() == n && hi.len() == n);
     let flags = st.confident.len() == n && st.possible.len() == n;
     if lens.iter().any(|&k| k != n) || !bl || !flags {
         return None;

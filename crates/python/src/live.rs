@@ -8,6 +8,9 @@ use texsense_core::CoreError;
 
 use crate::errors::to_py;
 
+/// Two float64 arrays (lower, upper).
+type Pair<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
 fn misfit(what: &'static str) -> PyErr {
     to_py(CoreError::Shape {
         what,
@@ -33,7 +36,7 @@ pub(crate) fn py_frame_bounds<'py>(
     multiplier: Option<f64>,
     r_repaired: f64,
     range_max: Option<f64>,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+) -> PyResult<Pair<'py>> {
     let v = values.as_slice()?;
     let of = BoundsOf {
         edges: edges.as_slice()?,
