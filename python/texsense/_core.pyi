@@ -25,6 +25,7 @@ __all__ = [
     "NeighbourIndexError",
     "ParameterError",
     "PreisachBank",
+    "PreisachBank32",
     "ShapeError",
     "SpacerBank",
     "__version__",
@@ -122,6 +123,25 @@ class PreisachBank:
     def forgotten(self) -> _U64: ...
     def depth(self) -> _U64: ...
     def outputs(self) -> _F64: ...
+
+@final
+class PreisachBank32:
+    """Experimental: the Preisach model in float32, eight elements per AVX2 register
+    (crates/core/src/preisach/f32x8.rs); 28 turning points per element, one thread."""
+
+    def __new__(
+        cls,
+        u_min: float,
+        u_max: float,
+        table: _F64,
+        n_elements: int,
+        offset: float = 0.0,
+        sign: float = 1.0,
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, inputs: _F64, valid: _Bools, out: _F64 | None = None) -> _F64: ...
 
 @final
 class DriftBank:

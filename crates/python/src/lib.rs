@@ -26,6 +26,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<spacer::PySpacerBank>()?;
     m.add_class::<preisach::PyPreisachBank>()?;
+    m.add_class::<preisach::PyPreisachBank32>()?;
     m.add_class::<drift::PyDriftBank>()?;
     m.add_class::<compensation::PyCompensation>()?;
     m.add_class::<detect::PyFailureDetector>()?;
