@@ -1,6 +1,9 @@
 """Accuracy of the Preisach compensation: virtual spacers (thesis §4.5) and real records.
 
 Run:  .venv/bin/python benchmarks/hysteresis_accuracy.py       (writes docs/img/hyst_*.png)
+      .venv/bin/python benchmarks/hysteresis_accuracy.py --float32
+      (every prediction through the experimental float32 bank ``PreisachBank32`` of issue 34,
+      for comparing the tables; no figures written)
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _realdata import elastomer_sawtooth, vhb_cycle
+from texsense import _core
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis._identify import identify_thesis
 from texsense.compensation.hysteresis.plots import validation_figure
@@ -20,6 +24,18 @@ from texsense.sim.spacer import Spacer
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 BANDS = ((0.5, 3.5), (3.5, 10.0))
+FLOAT32 = "--float32" in sys.argv
+
+
+def predict(m: HysteresisModel, u: np.ndarray) -> np.ndarray:
+    """The model's outputs over the history ``u`` (T,): its float64 kernel, or with
+    ``--float32`` the experimental float32 bank (issue 34)."""
+    if not FLOAT32:
+        return m.predict(u)
+    table = np.ascontiguousarray(m.everett_, dtype=np.float64)
+    bank = _core.PreisachBank32(m.u_min_, m.u_max_, table, 1, m.offset_, m.sign_)
+    x = np.ascontiguousarray(u, dtype=np.float64).reshape(-1, 1)
+    return bank.run(x, np.ones(x.shape, bool))[:, 0]
 
 
 def mean_of_branches(u: np.ndarray, p: np.ndarray, bins: int = 200):
@@ -87,16 +103,19 @@ def virtual(name: str = "textile-6mm", seeds=(0, 1, 2, 3), figure: bool = True) 
             (
                 "Preisach, thesis method",
                 "calibration (3 falling curves)",
-                from_ident(thesis).predict(u),
+                predict(from_ident(thesis), u),
             ),
             (
                 "Preisach, thesis method, 200 x 200",
                 "4 falling curves (100/60/30/13 %)",
-                from_ident(
-                    identify_thesis(
-                        cal4.labels["compression_mm"], cal4.labels["pressure_ncm2"], grid=200
-                    )
-                ).predict(u),
+                predict(
+                    from_ident(
+                        identify_thesis(
+                            cal4.labels["compression_mm"], cal4.labels["pressure_ncm2"], grid=200
+                        )
+                    ),
+                    u,
+                ),
             ),
         ]
         for source, (ui, pi) in (
@@ -104,10 +123,10 @@ def virtual(name: str = "textile-6mm", seeds=(0, 1, 2, 3), figure: bool = True) 
             ("65 s random sawtooth", (us, ps)),
         ):
             m = HysteresisModel().fit(ui, pi)
-            rows.append((f"Preisach, default ({m.method_})", source, m.predict(u)))
+            rows.append((f"Preisach, default ({m.method_})", source, predict(m, u)))
         for label, source, pm in rows:
             print(f"| {seed} | {label} | {source} | " + " | ".join(band_errors(p, pm)) + " |")
-        if figure and seed == 0:
+        if figure and seed == 0 and not FLOAT32:
             pm = from_ident(thesis).predict(u)
             n = u.size // 50  # one validation cycle
             validation_figure(
@@ -140,7 +159,7 @@ def real() -> None:
     m = HysteresisModel(input_name="displacement_mm", output_name="force_n", output_unit="N").fit(
         fit_u, fit_y
     )
-    full = m.predict(test_u)
+    full = predict(m, test_u)
     for label, pred in (("mean of branches", base(test_u)), ("Preisach, default", full)):
         y, pm = test_y[cut:], pred[cut:]
         mean, p95 = rel_err(y, pm)
@@ -148,16 +167,17 @@ def real() -> None:
             f"| elastomer sawtooth, last 40 % (fit on first 60 %) | {label} | "
             f"{nrmse(y, pm):.3f} | {mean:.1%} | {p95:.1%} |"
         )
-    validation_figure(
-        test_u,
-        test_y,
-        full,
-        IMG / "hyst_elastomer.png",
-        input_label="displacement [mm]",
-        output_label="force [N]",
-        title="elastomer random sawtooth: default identification on the first 60 %, "
-        "predicted over the whole record",
-    )
+    if not FLOAT32:
+        validation_figure(
+            test_u,
+            test_y,
+            full,
+            IMG / "hyst_elastomer.png",
+            input_label="displacement [mm]",
+            output_label="force [N]",
+            title="elastomer random sawtooth: default identification on the first 60 %, "
+            "predicted over the whole record",
+        )
     # VHB 4910 at 0.01 /s: identify on stretches 1.5, 2.5, 3.0, predict 2.0
     parts = [vhb_cycle(n) for n in ("0d01_3d0", "0d01_2d5", "0d01_1d5")]
     uu = np.concatenate([p[1] for p in parts])
@@ -172,14 +192,16 @@ def real() -> None:
     )
     for label, pm in (
         ("mean of branches", base(ut)),
-        ("Preisach, thesis method", thesis.predict(ut)),
-        (f"Preisach, default ({lsq.method_})", lsq.predict(ut)),
+        ("Preisach, thesis method", predict(thesis, ut)),
+        (f"Preisach, default ({lsq.method_})", predict(lsq, ut)),
     ):
         mean, p95 = rel_err(yt, pm)
         print(
             f"| VHB 4910, stretch 2.0 (fit on 1.5/2.5/3.0, 0.01 /s) | {label} | "
             f"{nrmse(yt, pm):.3f} | {mean:.1%} | {p95:.1%} |"
         )
+    if FLOAT32:
+        return
     validation_figure(
         ut,
         yt,
