@@ -186,12 +186,15 @@ mod avx2 {
         let zero = _mm256_setzero_ps();
         for g in 0..n / WIDTH {
             let at = g * WIDTH;
-            let els = &mut elements[at..at + WIDTH];
+            let els: &mut [Element<f32>; WIDTH] = (&mut elements[at..at + WIDTH])
+                .try_into()
+                .expect("a whole group");
             let p = h.as_ptr().add(at);
             let lo = _mm256_cvtpd_ps(_mm256_loadu_pd(p));
             let hi = _mm256_cvtpd_ps(_mm256_loadu_pd(p.add(4)));
             let hv = _mm256_set_m128(hi, lo);
-            let bytes = u64::from_le_bytes(std::array::from_fn(|l| u8::from(ok[at + l])));
+            let okg: &[bool; WIDTH] = ok[at..at + WIDTH].try_into().expect("a whole group");
+            let bytes = u64::from_le_bytes(okg.map(u8::from));
             let ok_m = _mm256_cmpgt_epi32(
                 _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(bytes as i64)),
                 _mm256_setzero_si256(),

@@ -302,7 +302,8 @@ mod avx2 {
             }
             let lo = _mm256_cvtpd_ps(_mm256_loadu_pd(u.as_ptr().add(i)));
             let hi = _mm256_cvtpd_ps(_mm256_loadu_pd(u.as_ptr().add(i + 4)));
-            let bytes = u64::from_le_bytes(std::array::from_fn(|l| u8::from(ok[i + l])));
+            let okg: &[bool; WIDTH] = ok[i..i + WIDTH].try_into().expect("a whole group");
+            let bytes = u64::from_le_bytes(okg.map(u8::from));
             let ok_m = _mm256_cmpgt_epi32(
                 _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(bytes as i64)),
                 _mm256_setzero_si256(),
