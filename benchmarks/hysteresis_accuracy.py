@@ -2,8 +2,8 @@
 
 Run:  .venv/bin/python benchmarks/hysteresis_accuracy.py       (writes docs/img/hyst_*.png)
       .venv/bin/python benchmarks/hysteresis_accuracy.py --float32
-      (every prediction through the experimental float32 bank ``PreisachBank32`` of issue 34,
-      for comparing the tables; no figures written)
+      (every prediction through the experimental float32 bank of issue 34, benchmarks/_float32.py;
+      no figures written)
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _float32 import FLOAT32, predict
 from _realdata import elastomer_sawtooth, vhb_cycle
-from texsense import _core
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis._identify import identify_thesis
 from texsense.compensation.hysteresis.plots import validation_figure
@@ -24,18 +24,6 @@ from texsense.sim.spacer import Spacer
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 BANDS = ((0.5, 3.5), (3.5, 10.0))
-FLOAT32 = "--float32" in sys.argv
-
-
-def predict(m: HysteresisModel, u: np.ndarray) -> np.ndarray:
-    """The model's outputs over the history ``u`` (T,): its float64 kernel, or with
-    ``--float32`` the experimental float32 bank (issue 34)."""
-    if not FLOAT32:
-        return m.predict(u)
-    table = np.ascontiguousarray(m.everett_, dtype=np.float64)
-    bank = _core.PreisachBank32(m.u_min_, m.u_max_, table, 1, m.offset_, m.sign_)
-    x = np.ascontiguousarray(u, dtype=np.float64).reshape(-1, 1)
-    return bank.run(x, np.ones(x.shape, bool))[:, 0]
 
 
 def mean_of_branches(u: np.ndarray, p: np.ndarray, bins: int = 200):

@@ -19,6 +19,7 @@ __all__ = [
     "Converter",
     "Curve",
     "DriftBank",
+    "DriftBank32",
     "FailureDetector",
     "GridStats",
     "LocalRepair",
@@ -158,6 +159,17 @@ class DriftBank:
         gamma_time: float = 0.0,
         exponent: float = 1.0,
     ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, dt: _F64, h: _F64, valid: _Bools) -> _F64: ...
+
+@final
+class DriftBank32:
+    """Experimental: eq. 5.8 on the time clock in float32, eight elements per AVX2 register
+    (crates/core/src/drift/f32x8.rs), one thread."""
+
+    def __new__(cls, weights: _F64, taus: _F64, gamma: float, n_elements: int) -> Self: ...
     @property
     def n_elements(self) -> int: ...
     def reset(self) -> None: ...

@@ -28,6 +28,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<preisach::PyPreisachBank>()?;
     m.add_class::<preisach::PyPreisachBank32>()?;
     m.add_class::<drift::PyDriftBank>()?;
+    m.add_class::<drift::PyDriftBank32>()?;
     m.add_class::<compensation::PyCompensation>()?;
     m.add_class::<detect::PyFailureDetector>()?;
     m.add_class::<convert::PyCurve>()?;

@@ -12,7 +12,8 @@
 
 use texsense_kernels::drift::{self as kernel, Element, Settings};
 
-use crate::error::CoreError;
+use super::check_time_steps;
+use crate::error::{check_len, CoreError};
 
 /// Elements per group: the f32 lanes of an AVX2 register.
 pub const WIDTH: usize = 8;
@@ -66,6 +67,29 @@ impl Drift32 {
     pub fn reset(&mut self) {
         self.elements.fill(Element::default());
         self.z.fill(0.0);
+    }
+
+    /// A batch (T x N row-major) with time steps `dt` (T,), frame after frame.
+    pub fn run(
+        &mut self,
+        dt: &[f64],
+        h: &[f64],
+        ok: &[bool],
+        out: &mut [f64],
+    ) -> Result<(), CoreError> {
+        let n = self.n;
+        check_time_steps(dt)?;
+        check_len("h", h.len(), dt.len() * n)?;
+        check_len("valid", ok.len(), dt.len() * n)?;
+        check_len("out", out.len(), dt.len() * n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        for (r, &d) in dt.iter().enumerate() {
+            let at = r * n..(r + 1) * n;
+            self.row(d, &h[at.clone()], &ok[at.clone()], &mut out[at]);
+        }
+        Ok(())
     }
 
     /// One frame `dt` s after the previous one: levels `h` (rounded to float32) and their
