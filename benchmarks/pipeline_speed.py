@@ -12,7 +12,9 @@ Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|c
   4096 elements with 2 % failed readings;
 - ``Pipeline.step`` latency on a real stream (every frame different), median and p99, and
   its compiled part alone (``Chain.step`` into arrays held);
-- the state kept per element.
+- the state kept per element;
+- the experimental float32 Preisach bank (``PreisachBank32``, eight lanes on AVX2; issue 34,
+  seventh round) on the same walk, and its largest difference from the float64 bank.
 
 Every path runs on both kernel paths, scalar and SIMD, back to back; the whole set is
 repeated ``--repeat`` times (each repetition measures the copy rate anew) and the table gives
@@ -121,6 +123,23 @@ def chain_latency(pipe: Pipeline, cap: np.ndarray, dt: float) -> np.ndarray:
     return lat[100:]
 
 
+def f32_bank(model: object, n: int) -> _core.PreisachBank32:
+    """The experimental float32 bank (eight lanes on AVX2) of the model."""
+    table = np.ascontiguousarray(model.everett_, dtype=np.float64)
+    return _core.PreisachBank32(model.u_min_, model.u_max_, table, n, model.offset_, model.sign_)
+
+
+def f32_difference(model: object, walk: np.ndarray) -> tuple[float, float]:
+    """Largest |float32 bank - float64 bank| on the walk (N/cm²), and the largest relative
+    difference where the float64 output exceeds 0.1 N/cm²."""
+    ok = np.ones(walk.shape, bool)
+    y64 = model.bank(walk.shape[1]).run(walk, ok)
+    y32 = f32_bank(model, walk.shape[1]).run(walk, ok)
+    d = np.abs(y32 - y64)
+    big = np.abs(y64) > 0.1
+    return float(d.max()), float((d[big] / np.abs(y64[big])).max())
+
+
 def cases(
     cal: StageChain, frames: int, walk: np.ndarray
 ) -> list[tuple[str, Callable[[], object], int]]:
@@ -144,6 +163,15 @@ def cases(
                 walk.size,
             )
         )
+    bank32 = f32_bank(model, walk.shape[1])
+    out.append(
+        (
+            "Preisach kernel in float32 (experimental `PreisachBank32`), one thread, frame "
+            "after frame",
+            lambda: (bank32.reset(), bank32.run(walk, ok, out=into)),
+            walk.size,
+        )
+    )
     out.append(("Preisach `HysteresisModel.predict`", lambda: model.predict(walk), walk.size))
     for rows, cols in ((8, 12), (32, 32), (64, 64)):
         n = rows * cols
@@ -242,6 +270,12 @@ def main() -> None:
     for p in paths:
         med, p99 = median_row(lat_med[p]) * 1e6, median_row(lat_p99[p]) * 1e6
         print(f"| {p} | {med:.0f} µs | {p99:.0f} µs | {median_row(lat_chain[p]) * 1e6:.0f} µs |")
+    d_abs, d_rel = f32_difference(cal["hysteresis"].model_, walk)
+    print()
+    print(
+        f"float32 bank against the float64 bank on the walk: max |difference| {d_abs:.1e} "
+        f"N/cm², max relative {d_rel:.1e} where p > 0.1 N/cm²"
+    )
     state = getattr(step_pipe, "state_bytes_per_element", None)
     if state is not None:
         print()

@@ -80,6 +80,55 @@ def test_preisach_bank_same_bits_on_both_paths(cal):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
 
 
+def test_float32_bank_same_bits_on_both_paths_and_close_to_float64(cal):
+    # the experimental float32 bank (eight lanes): its lanes give its scalar kernel's bits,
+    # and the seat model's outputs stay within 1e-5 |p| + 2e-5 N/cm² of the float64 bank's
+    # (the microcontroller's float32 bound, docs/embedded.md)
+    model = cal["hysteresis"].model_
+    lo, hi = model.u_min_, model.u_max_
+    table = np.ascontiguousarray(model.everett_, dtype=np.float64)
+    rng = np.random.default_rng(5)
+    walk = lo + np.abs(np.cumsum(rng.normal(0, 0.05, (300, 203)), axis=0)) % (hi - lo)
+    ok = rng.random(walk.shape) > 0.05
+    spoilt = spoil(walk, rng, lo, hi)
+
+    def run() -> tuple[np.ndarray, ...]:
+        bank = _core.PreisachBank32(lo, hi, table, walk.shape[1], model.offset_, model.sign_)
+        clean = bank.run(walk, ok)
+        bank.reset()
+        given = np.full(walk.shape, 7.0)
+        assert bank.run(spoilt, ok, out=given) is given
+        return clean, given
+
+    scalar, simd = both_paths(run)
+    for a, b in zip(scalar, simd, strict=True):
+        np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+    y64 = model.bank(walk.shape[1]).run(walk, ok)
+    assert np.array_equal(np.isnan(y64), np.isnan(simd[0]))
+    assert np.nanmax(np.abs(simd[0] - y64) - 1e-5 * np.abs(y64)) <= 2e-5
+    assert np.isnan(simd[1]).any() and np.isfinite(simd[1]).mean() > 0.5
+
+
+def test_float32_drift_same_bits_on_both_paths_and_close_to_float64():
+    # the experimental float32 drift bank (eq. 5.8, time clock): its lanes give its scalar
+    # kernel's bits; on 500 frames its outputs stay within 1e-4 N/cm² of the float64 bank's
+    rng = np.random.default_rng(6)
+    w, taus = rng.random(14), 2.0 ** np.arange(14)
+    h = np.clip(2 + np.cumsum(rng.normal(0, 0.2, (500, 203)), axis=0), 0, 10)
+    h[rng.random(h.shape) < 0.03] = np.nan
+    ok = rng.random(h.shape) > 0.05
+    dt = np.full(500, 0.1)
+
+    def run() -> np.ndarray:
+        return _core.DriftBank32(w, taus, -0.025, h.shape[1]).run(dt, h, ok)
+
+    scalar, simd = both_paths(run)
+    np.testing.assert_array_equal(scalar.view(np.uint64), simd.view(np.uint64))
+    y64 = _core.DriftBank(w, taus, -0.025, h.shape[1]).run(dt, h, ok)
+    assert np.array_equal(np.isnan(y64), np.isnan(simd))
+    assert np.nanmax(np.abs(simd - y64)) < 1e-4
+
+
 def test_preisach_out_must_be_a_separate_float64_array_of_the_batch(cal):
     bank = cal["hysteresis"].model_.bank(6)
     walk = np.full((4, 6), 0.5)

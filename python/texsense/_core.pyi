@@ -19,6 +19,7 @@ __all__ = [
     "Converter",
     "Curve",
     "DriftBank",
+    "DriftBank32",
     "FailureDetector",
     "GridStats",
     "LocalRepair",
@@ -26,6 +27,7 @@ __all__ = [
     "NeighbourIndexError",
     "ParameterError",
     "PreisachBank",
+    "PreisachBank32",
     "ShapeError",
     "SpacerBank",
     "__version__",
@@ -127,6 +129,25 @@ class PreisachBank:
     def outputs(self) -> _F64: ...
 
 @final
+class PreisachBank32:
+    """Experimental: the Preisach model in float32, eight elements per AVX2 register
+    (crates/core/src/preisach/f32x8.rs); 28 turning points per element, one thread."""
+
+    def __new__(
+        cls,
+        u_min: float,
+        u_max: float,
+        table: _F64,
+        n_elements: int,
+        offset: float = 0.0,
+        sign: float = 1.0,
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, inputs: _F64, valid: _Bools, out: _F64 | None = None) -> _F64: ...
+
+@final
 class DriftBank:
     """Recursive drift superposition of N elements (crates/core/src/drift.rs)."""
 
@@ -141,6 +162,17 @@ class DriftBank:
         gamma_time: float = 0.0,
         exponent: float = 1.0,
     ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, dt: _F64, h: _F64, valid: _Bools) -> _F64: ...
+
+@final
+class DriftBank32:
+    """Experimental: eq. 5.8 on the time clock in float32, eight elements per AVX2 register
+    (crates/core/src/drift/f32x8.rs), one thread."""
+
+    def __new__(cls, weights: _F64, taus: _F64, gamma: float, n_elements: int) -> Self: ...
     @property
     def n_elements(self) -> int: ...
     def reset(self) -> None: ...

@@ -530,5 +530,6 @@ pub(crate) fn check_time_steps(dt: &[f64]) -> Result<(), CoreError> {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+pub mod f32x8;
 #[cfg(test)]
 mod tests;

@@ -38,6 +38,7 @@ use crate::snapshot::{Reader, Writer};
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 mod element;
+pub mod f32x8;
 
 use element::Element;
 pub(crate) use element::Heads;

@@ -27,7 +27,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<spacer::PySpacerBank>()?;
     m.add_class::<preisach::PyPreisachBank>()?;
+    m.add_class::<preisach::PyPreisachBank32>()?;
     m.add_class::<drift::PyDriftBank>()?;
+    m.add_class::<drift::PyDriftBank32>()?;
     m.add_class::<compensation::PyCompensation>()?;
     m.add_class::<detect::PyFailureDetector>()?;
     m.add_class::<convert::PyCurve>()?;

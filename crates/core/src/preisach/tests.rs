@@ -318,7 +318,7 @@ pub(crate) fn hostile_history(
 }
 
 /// A random Everett table over [lo, hi] (non-negative, not symmetric in any way).
-fn random_everett(rng: &mut Rng, k: usize, lo: f64, hi: f64) -> Everett {
+pub(crate) fn random_everett(rng: &mut Rng, k: usize, lo: f64, hi: f64) -> Everett {
     let t: Vec<f64> = (0..k * k).map(|_| rng.unit() * 3.0).collect();
     Everett::new(k, lo, hi, t).unwrap()
 }
