@@ -1,6 +1,6 @@
 """Speed of the compiled pipeline against the physical yardstick of this machine: the rate at
 which it copies the same array (``np.multiply(x, 1.0, out=y)``), measured in the same run,
-on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd``).
+on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd_path``).
 
 Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|cpu] [--quick]
 
@@ -205,7 +205,7 @@ def main() -> None:
     CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     frames = 400 if args.quick else 4000
     _, best = _core.simd_path()
-    paths = ["scalar", best] if best != "scalar" else ["scalar"]
+    paths = ["scalar", "avx2", "avx512"][: ["scalar", "avx2", "avx512"].index(best) + 1]
     cal = seat_calibration(mat_seed=5)
     walk = random_walk(cal["hysteresis"].model_, frames, 4096)
     batch = cases(cal, frames, walk)
@@ -228,12 +228,12 @@ def main() -> None:
             copies.append(copy)
             for label, run, size in batch:
                 for p in paths:
-                    _core.set_simd(p != "scalar")
+                    _core.set_simd_path(p)
                     t = timed(run)
                     rates[label, p].append(size / t)
                     shares[label, p].append(size / t / copy)
             for p in paths:
-                _core.set_simd(p != "scalar")
+                _core.set_simd_path(p)
                 lat = step_latency(step_pipe, cap, rec.times)
                 lat_med[p].append(float(np.median(lat)))
                 lat_p99[p].append(float(np.percentile(lat, 99)))
@@ -248,8 +248,10 @@ def main() -> None:
     )
     print()
     head = " | ".join(f"{p}: rate | {p}: share of the copy rate" for p in paths)
-    print(f"| path | {head} |" + (" SIMD / scalar |" if len(paths) > 1 else ""))
-    print("|---|" + "---:|---:|" * len(paths) + ("---:|" if len(paths) > 1 else ""))
+    pairs = [("scalar", p) for p in paths[1:]] + ([("avx2", "avx512")] if len(paths) > 2 else [])
+    ratios = "".join(f" {b} / {a} |" for a, b in pairs)
+    print(f"| path | {head} |{ratios}")
+    print("|---|" + "---:|---:|" * len(paths) + "---:|" * len(pairs))
     for label, _, _ in batch:
         cells = " | ".join(
             f"{median_row(rates[label, p]) / 1e6:.1f} M/s | "
@@ -257,9 +259,9 @@ def main() -> None:
             for p in paths
         )
         ratio = ""
-        if len(paths) > 1:
-            r = [b / a for a, b in zip(rates[label, "scalar"], rates[label, paths[1]], strict=True)]
-            ratio = f" {median_row(r):.2f} x |"
+        for a, b in pairs:
+            r = [y / x for x, y in zip(rates[label, a], rates[label, b], strict=True)]
+            ratio += f" {median_row(r):.2f} x |"
         print(f"| {label} | {cells} |{ratio}")
     print()
     print(

@@ -31,14 +31,39 @@ def simd_back_on() -> Iterator[None]:
     _core.set_simd(True)
 
 
+def same_bits(a: Any, b: Any) -> None:
+    """Arrays (or tuples of arrays and numbers) equal bit for bit."""
+    if isinstance(a, tuple):
+        for x, y in zip(a, b, strict=True):
+            same_bits(x, y)
+    else:
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape and a.dtype == b.dtype
+        np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8))
+
+
 def both_paths(run: Callable[[], Any]) -> tuple[Any, Any]:
-    """``run()`` on the scalar kernels, then on the SIMD path."""
+    """``run()`` on the scalar kernels, then on the best SIMD path; on an AVX-512 processor
+    also with the AVX2 kernels forced in between, which must give the scalar bits too."""
     _core.set_simd(False)
     assert _core.simd_path()[0] == "scalar"
     scalar = run()
+    if BEST == "avx512":
+        _core.set_simd_path("avx2")
+        assert _core.simd_path()[0] == "avx2"
+        same_bits(scalar, run())
     _core.set_simd(True)
     assert _core.simd_path()[0] == BEST
     return scalar, run()
+
+
+def test_the_path_can_be_limited():
+    _core.set_simd_path("scalar")
+    assert _core.simd_path()[0] == "scalar"
+    _core.set_simd_path("avx512")
+    assert _core.simd_path()[0] == BEST
+    with pytest.raises(ValueError, match="one of scalar, avx2, avx512"):
+        _core.set_simd_path("sse2")
 
 
 def spoil(x: np.ndarray, rng: np.random.Generator, lo: float, hi: float) -> np.ndarray:

@@ -38,6 +38,7 @@ __all__ = [
     "parse_json_numbers",
     "parse_row",
     "set_simd",
+    "set_simd_path",
     "simd_path",
 ]
 
@@ -347,10 +348,13 @@ def mcu_blob_info(blob: bytes) -> tuple[int, list[str], int, int, int, int]:
     element, fixed bytes) of a model blob, checked as the C side checks it."""
 
 def simd_path() -> tuple[str, str]:
-    """(path in use, best path of this processor): "avx2" or "scalar" each."""
+    """(path in use, best path of this processor): "avx512", "avx2" or "scalar" each."""
 
 def set_simd(enabled: bool) -> None:
     """Allow (True, the default) or forbid the SIMD kernels process-wide (same numbers)."""
+
+def set_simd_path(best: str) -> None:
+    """The best SIMD path batches may take: "avx512" (default), "avx2" or "scalar"."""
 
 def parse_row(line: str, sep: str, expected: int) -> npt.NDArray[np.float32] | None:
     """Exactly ``expected`` numbers separated by ``sep``, as float32, or None (the fast path)."""

@@ -1,5 +1,5 @@
 //! Timing of the drift row (eq. 5.8, time clock, 14 kernel terms) on a smooth load, for
-//! profiling: `cargo run --release -p texsense-core --example drift_time -- [avx2|scalar|f32|f32-scalar] [T] [N]`
+//! profiling: `cargo run --release -p texsense-core --example drift_time -- [avx512|avx2|scalar|f32|f32-scalar] [T] [N]`
 //! (`f32`: the experimental float32 bank, eight lanes), frame after frame on one thread.
 
 extern "C" {
@@ -17,11 +17,16 @@ fn cpu() -> f64 {
 use texsense_core::drift::f32x8::Drift32;
 use texsense_core::drift::{DriftBank, Kernel};
 use texsense_core::par::block_size;
+use texsense_core::simd::Path;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("avx2", |s| s.as_str());
-    texsense_core::simd::set_enabled(!path.ends_with("scalar"));
+    let path = args.get(1).map_or("avx512", |s| s.as_str());
+    texsense_core::simd::set_limit(match path {
+        "avx2" => Path::Avx2,
+        p if p.ends_with("scalar") => Path::Scalar,
+        _ => Path::Avx512,
+    });
     let f32 = path.starts_with("f32");
     let t: usize = args.get(2).map_or(1000, |s| s.parse().unwrap());
     let n: usize = args.get(3).map_or(4096, |s| s.parse().unwrap());

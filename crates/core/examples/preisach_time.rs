@@ -1,5 +1,5 @@
 //! Timing of the Preisach bank on a random walk (the benchmark's input shape), for profiling:
-//! `cargo run --release -p texsense-core --example preisach_time -- [avx2|scalar|f32] [frames|blocks] [T] [N]`
+//! `cargo run --release -p texsense-core --example preisach_time -- [avx512|avx2|scalar|f32] [frames|blocks] [T] [N]`
 //! (`f32`: the experimental float32 bank, eight lanes, frame order; `f32-scalar`: its
 //! scalar kernel).
 
@@ -17,10 +17,11 @@ fn cpu() -> f64 {
 
 use texsense_core::preisach::f32x8::Bank32;
 use texsense_core::preisach::{Everett, PreisachBank, Schedule};
+use texsense_core::simd::Path;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("avx2", |s| s.as_str());
+    let path = args.get(1).map_or("avx512", |s| s.as_str());
     let simd = !path.ends_with("scalar");
     let f32 = path.starts_with("f32");
     let schedule = match args.get(2).map_or("frames", |s| s) {
@@ -30,7 +31,11 @@ fn main() {
     };
     let t: usize = args.get(3).map_or(4000, |s| s.parse().unwrap());
     let n: usize = args.get(4).map_or(4096, |s| s.parse().unwrap());
-    texsense_core::simd::set_enabled(simd);
+    texsense_core::simd::set_limit(match path {
+        "avx2" => Path::Avx2,
+        _ if !simd => Path::Scalar,
+        _ => Path::Avx512,
+    });
     let k = 100;
     let (lo, hi) = (0.0, 2.212);
     let mut table = vec![0.0; k * k];

@@ -42,6 +42,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(chain::py_mcu_blob_info, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_set_simd, m)?)?;
+    m.add_function(wrap_pyfunction!(simd::py_set_simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(text::py_parse_row, m)?)?;
     m.add_function(wrap_pyfunction!(text::py_parse_json_numbers, m)?)?;
     m.add_function(wrap_pyfunction!(live::py_frame_bounds, m)?)?;

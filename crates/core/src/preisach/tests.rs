@@ -377,10 +377,17 @@ proptest! {
 }
 
 #[test]
-fn this_machine_runs_the_avx2_path_when_it_has_avx2() {
+fn this_machine_runs_the_best_path_it_has() {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
-        assert_eq!(crate::simd::detected(), crate::simd::Path::Avx2);
+        assert!(crate::simd::detected() >= crate::simd::Path::Avx2);
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512dq")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+    {
+        assert_eq!(crate::simd::detected(), crate::simd::Path::Avx512);
     }
 }
 
