@@ -28,7 +28,8 @@ from texsense.station.server import create_ward_app
 
 UNSAFE = {"POST", "PUT", "PATCH", "DELETE"}
 ODD_BODIES = [b'{"frames": NaN}', b'{"frames": 1e999}', b"[", b'"x"', b"[1, 2]", b"\xff\xfe",
-              b'{"regions": {"a": NaN}}', b"null"]  # fmt: skip
+              b'{"regions": {"a": NaN}}', b"null",
+              b"[" * 5000 + b"]" * 5000, b'{"a":' * 5000 + b"1" + b"}" * 5000]  # fmt: skip
 
 
 def _fill(path: str, alert: int) -> str:

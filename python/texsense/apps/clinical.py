@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data.files import json_loads
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
@@ -104,7 +105,7 @@ def live_events(rec: Recording) -> list[dict[str, Any]] | None:
     out: list[dict[str, Any]] = []
     for i in np.flatnonzero(np.asarray(labels).astype(str) != ""):
         try:
-            items = json.loads(str(labels[i]))
+            items = json_loads(str(labels[i]))
             if not isinstance(items, list):
                 raise ValueError("not a list")
             for e in items:

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import os
 import signal
 import stat
@@ -63,6 +64,7 @@ __all__ = [
     "check_not_input",
     "check_regular",
     "check_writable",
+    "json_loads",
     "kept_or_made",
     "made_once",
     "make_folder",
@@ -501,6 +503,19 @@ def read_regular(path: str | Path, what: str) -> bytes:
         size = os.fstat(f.fileno()).st_size
         budget.check(size, what, p)
         return f.read(size + 1)
+
+
+def json_loads(text: str | bytes | bytearray) -> Any:
+    """``json.loads`` of text that came from outside (a file, an attribute, a message, a
+    request): every way it is not JSON is a ``ValueError`` (:class:`json.JSONDecodeError`),
+    text nested deeper than the parser's recursion included, which ``json`` raises as a
+    ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
+    of a device's reading thread)."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        doc = text if isinstance(text, str) else ""
+        raise json.JSONDecodeError("nested too deeply", doc, 0) from None
 
 
 def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:

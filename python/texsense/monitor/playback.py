@@ -48,7 +48,6 @@ hold at most half of the budget, and the next one is opened within what is left.
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 from collections import OrderedDict
@@ -66,7 +65,13 @@ from texsense.apps.review import block_of, decimate, open_review
 from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
 from texsense.apps.views import orientation_of
 from texsense.data import budget, units
-from texsense.data.files import check_regular, make_folder, real_path, regular_files
+from texsense.data.files import (
+    check_regular,
+    json_loads,
+    make_folder,
+    real_path,
+    regular_files,
+)
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 from texsense.io import open_recording, sniff_format
 from texsense.io.hdf5 import read_bounds
@@ -362,7 +367,7 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
     if len(body) > MAX_ROI_BYTES:
         raise HTTPException(413, f"regions: at most {MAX_ROI_BYTES // 1024} KiB")
     try:
-        data = json.loads(body)
+        data = json_loads(body)
     except (ValueError, UnicodeDecodeError) as e:
         raise HTTPException(400, f"regions: not JSON ({e})") from None
     try:
