@@ -117,7 +117,7 @@ def live_events(rec: Recording) -> list[dict[str, Any]] | None:
                     "alert_id": None if e.get("alert_id") is None else int(e["alert_id"]),
                     "detail": dict(e.get("detail") or {}),
                 })  # fmt: skip
-        except (ValueError, TypeError, KeyError) as err:
+        except (ValueError, TypeError, KeyError, OverflowError) as err:
             raise ParameterError(
                 f"label {EVENTS_LABEL!r} of frame {int(i)} is not a list of events: {err}"
             ) from None

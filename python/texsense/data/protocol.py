@@ -60,7 +60,7 @@ import numpy.typing as npt
 from texsense._core import parse_json_numbers
 from texsense.data import units
 from texsense.data.files import json_loads
-from texsense.data.layout import Layout, parse_orientation
+from texsense.data.layout import Layout, parse_orientation, whole_numbers
 from texsense.exceptions import ParameterError
 
 if TYPE_CHECKING:
@@ -420,7 +420,7 @@ def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | Non
     if not isinstance(d, dict):
         raise ProtocolError("layout announcement must be a JSON object")
     try:
-        rows, cols = (int(v) for v in d["grid"])
+        rows, cols = (int(v) for v in whole_numbers(d["grid"], "grid"))
         pitch = tuple(float(v) for v in d["pitch_cm"])
         element = tuple(float(v) for v in d.get("element_cm", pitch))
         if not (0 < rows <= 4096 and 0 < cols <= 4096) or len(pitch) != 2 or len(element) != 2:
@@ -439,7 +439,7 @@ def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | Non
             layout = layout.with_orientation(parse_orientation(d["orientation"]))
     except ParameterError as e:
         raise ProtocolError(f"layout announcement: {e}") from None
-    except (KeyError, TypeError, ValueError) as e:
+    except (KeyError, TypeError, ValueError, OverflowError) as e:
         what = f"lacks {e}" if isinstance(e, KeyError) else str(e)
         raise ProtocolError(f"layout announcement {what}") from None
     if "elements" in d and d["elements"] != layout.n_elements:

@@ -132,7 +132,7 @@ def _read_layout(group: h5py.Group) -> Layout:
     shape = None
     cells = None
     if group.attrs.get("kind") == "grid":
-        shape = (int(group.attrs["rows"]), int(group.attrs["cols"]))
+        shape = (group.attrs["rows"], group.attrs["cols"])  # whole numbers: checked by Layout
         cells = _whole(group["cells"])
     pitch = None
     if "pitch_cm" in group.attrs:
