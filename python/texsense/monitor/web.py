@@ -155,7 +155,10 @@ def safe_file(folder: Path, name: str) -> Path | None:
         return None
     base = real_path(folder)
     path = real_path(base / name)
-    if path.parent != base or not path.is_file():
+    try:
+        if path.parent != base or not path.is_file():
+            return None
+    except OSError:  # a name the file system refuses (too long, ...): no such file
         return None
     return path
 
