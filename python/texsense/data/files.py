@@ -75,6 +75,7 @@ __all__ = [
     "regular_files",
     "save_figure",
     "signals_held",
+    "toml_loads",
     "unused_name",
     "write_bytes",
     "write_text",
@@ -516,6 +517,24 @@ def json_loads(text: str | bytes | bytearray) -> Any:
     except RecursionError:
         doc = text if isinstance(text, str) else ""
         raise json.JSONDecodeError("nested too deeply", doc, 0) from None
+
+
+def toml_loads(raw: bytes) -> dict[str, Any]:
+    """The TOML document of a file's bytes (UTF-8, a byte-order mark allowed): every way it is
+    not TOML is a ``ValueError`` (``tomllib.TOMLDecodeError``, ``UnicodeDecodeError``), also
+    arrays or inline tables nested deeper than ``tomllib`` recurses (a ``RecursionError``) and
+    an integer of more digits than Python converts (a bare ``ValueError`` from ``int``)."""
+    import tomllib
+
+    text = raw.decode("utf-8-sig")
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+    except tomllib.TOMLDecodeError:
+        raise
+    except ValueError as e:  # int(): "Exceeds the limit (4300 digits) ..."
+        raise ValueError(str(e).split(";")[0]) from None
 
 
 def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:
