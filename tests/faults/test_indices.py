@@ -102,3 +102,39 @@ def test_a_device_announcing_a_grid_of_no_whole_numbers_is_a_protocol_error(faul
     assert parse_announcement('#layout {"grid": [3, 4.0], "pitch_cm": [1, 1]}')[0].n_elements == 12
     fault_row("indices", "a device's #layout line: a grid of inf, NaN, 1.5, 2**64, text",
               "refused", "ProtocolError: counted and skipped", cases=tried)  # fmt: skip
+
+
+#: (field, where) of a layout's real numbers, and values no layout holds there
+REALS = {"xy_cm": (0, 0), "size_cm": (3, 1), "area_cm2": (5,), "pitch_cm": (1,)}
+ODD_REALS = {"10**400": 10**400, "inf": float("inf"), "nan": float("nan"), "text": "x",
+             "list": [1.0], "-1": -1.0, "0": 0.0}  # fmt: skip
+
+
+def test_a_layout_line_with_numbers_no_layout_has_is_one_line(tmp_path, fault_row):
+    """The real numbers of a layout line (centres, sizes, areas, pitch): an integer of 400
+    digits (an OverflowError traceback), text, a list, a size, area or pitch that is not
+    positive and finite (an infinite size was read): one line naming the file."""
+    argvs, names = [], []
+    for field, where in REALS.items():
+        for name, value in ODD_REALS.items():
+            if field == "xy_cm" and name in ("-1", "0"):
+                continue  # a centre may lie anywhere
+            d = small_recording().layout.to_dict()
+            target = d[field]
+            for k in where[:-1]:
+                target = target[k]
+            target[where[-1]] = value
+            path = tmp_path / f"{field}-{name}.csv"
+            save(small_recording(), path)
+            line = json.dumps(d)
+            text = re.sub(r"(?m)^# layout: .*$", lambda m, t=line: f"# layout: {t}",
+                          path.read_text(encoding="utf-8"))  # fmt: skip
+            path.write_text(text, encoding="utf-8")
+            argvs.append(["info", str(path)])
+            names.append(path.name)
+    results, _, _ = batch(argvs, tmp_path)
+    for file, (rc, _out, err) in zip(names, results, strict=True):
+        one_line(rc, err, file, "layout")
+    fault_row("indices", f"{len(argvs)} real numbers no layout has (10**400, inf, NaN, text, a "
+              "list, sizes of 0 or -1) in a wide CSV's layout line", "clear error",
+              cases=len(argvs))  # fmt: skip

@@ -138,14 +138,14 @@ class Layout:
             size = np.broadcast_to(size, (n, 2))
         if size.shape != (n, 2):
             raise ParameterError(f"size_cm: expected shape ({n}, 2) or (2,), got {size.shape}")
-        if np.any(~(size > 0)):
-            raise ParameterError("size_cm: element sizes must be positive")
+        if np.any(~(size > 0)) or not np.all(np.isfinite(size)):
+            raise ParameterError("size_cm: element sizes must be positive and finite")
         if area_cm2 is None:
             area = size[:, 0] * size[:, 1]
         else:
             area = np.broadcast_to(np.asarray(area_cm2, dtype=np.float64), (n,))
-            if np.any(~(area > 0)):
-                raise ParameterError("area_cm2: element areas must be positive")
+            if np.any(~(area > 0)) or not np.all(np.isfinite(area)):
+                raise ParameterError("area_cm2: element areas must be positive and finite")
         self._xy = _readonly(xy)
         self._size = _readonly(size)
         self._area = _readonly(area)
@@ -497,6 +497,11 @@ class Layout:
             )
         except KeyError as e:
             raise ParameterError(f"layout description lacks the field {e.args[0]!r}") from None
+        except ParameterError:
+            raise
+        except (OverflowError, TypeError, ValueError) as e:  # a description from a file:
+            # a number beyond float64 (a 400-digit integer), text or a ragged list
+            raise ParameterError(f"layout description: {e}") from None
 
     def __eq__(self, other: object) -> bool:
         """Equal geometry, topology, names and regions (the orientation only labels the
@@ -624,8 +629,8 @@ def _grid_of(
     pitch = None
     if pitch_cm is not None:
         pitch = (float(pitch_cm[0]), float(pitch_cm[1]))
-        if not (pitch[0] > 0 and pitch[1] > 0):
-            raise ParameterError(f"pitch_cm must be positive, got {pitch_cm}")
+        if not (0 < pitch[0] < np.inf and 0 < pitch[1] < np.inf):
+            raise ParameterError(f"pitch_cm must be positive and finite, got {pitch_cm}")
     return (rows, cols), _readonly(c), pitch
 
 
