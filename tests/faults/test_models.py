@@ -8,10 +8,12 @@ import hashlib
 import json
 import resource
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from faults._families import batch, one_line
 from faults.conftest import assert_clear_error, run_cli
 from texsense.calibration.workflows import material_record
 from texsense.io.columns_csv import write_columns_csv
@@ -283,3 +285,48 @@ def test_a_broken_drift_stage_is_one_line(written, tmp_path, case, field, fault_
     assert field in line, line
     assert not (tmp_path / "o.csv").exists()
     fault_row("model files", f"drift stage with {case}", "clear error")
+
+
+#: values a stage's parameter may not hold (for every type hint one of them is wrong)
+ODD_PARAMS = {"text": "x", "object": {}, "list": [1, 2], "1e308": 1e308, "NaN": float("nan"),
+              "true": True, "2**64": 2**64}  # fmt: skip
+
+
+def test_every_stage_parameter_of_a_wrong_kind_is_one_line(written, tmp_path, fault_row):
+    """Every parameter of every stage of a calibration (re-hashed: a deliberate edit) holding
+    a value its type cannot (a count of 1e308 was an OverflowError out of the compiled
+    detector, an object for a pressure a TypeError): a FormatError naming the file and the
+    parameter, from the one place a stage's parameters are read (``Stage.from_dict``)."""
+    import typing
+
+    from texsense.compensation.stages import STAGES, load_chain
+    from texsense.exceptions import FormatError
+
+    good = json.loads((written / "mat.json").read_text(encoding="utf-8"))
+    argvs, tried = [], 0
+    for k, stage in enumerate(_content(good)["stages"]):
+        hints = typing.get_type_hints(STAGES[stage["stage"]].__init__)
+        for key in stage["params"]:
+            kind = getattr(hints[key], "__name__", str(hints[key]))
+            if "Layout" in kind:
+                continue  # a layout is decoded by Layout.from_dict (tests/faults/test_indices.py)
+            for name, value in ODD_PARAMS.items():
+                if name in ("NaN", "1e308", "2**64") and "int" not in kind:
+                    continue  # a number where a number belongs: its range is the stage's
+                if name == "text" and "str" in kind:
+                    continue
+                d = json.loads(json.dumps(good))
+                _content(d)["stages"][k]["params"][key] = value
+                path = tmp_path / f"{stage['stage']}-{key}-{name}.json"
+                path.write_text(json.dumps(_rehashed(d)), encoding="utf-8")
+                with pytest.raises(FormatError, match=f"params.{key}") as e:
+                    load_chain(path)
+                assert path.name in str(e.value)
+                argvs.append(["health", str(written / "raw.h5"), "--calibration", str(path)])
+                tried += 1
+    results, _, _ = batch(argvs[::7], tmp_path)  # a sample end to end: one line each
+    for argv, (rc, _out, err) in zip(argvs[::7], results, strict=True):
+        one_line(rc, err, Path(argv[-1]).name)
+    fault_row("model files", f"{tried} stage parameters of a wrong kind (text, object, list, "
+              "1e308, NaN or 2**64 for a count, true), re-hashed", "clear error",
+              cases=tried)  # fmt: skip

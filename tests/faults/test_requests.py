@@ -28,7 +28,8 @@ from texsense.station.server import create_ward_app
 
 UNSAFE = {"POST", "PUT", "PATCH", "DELETE"}
 ODD_BODIES = [b'{"frames": NaN}', b'{"frames": 1e999}', b"[", b'"x"', b"[1, 2]", b"\xff\xfe",
-              b'{"regions": {"a": NaN}}', b"null"]  # fmt: skip
+              b'{"regions": {"a": NaN}}', b"null",
+              b"[" * 5000 + b"]" * 5000, b'{"a":' * 5000 + b"1" + b"}" * 5000]  # fmt: skip
 
 
 def _fill(path: str, alert: int) -> str:
@@ -119,6 +120,33 @@ def test_no_get_route_writes(app, fault_row):
         "nothing written",
         cases=3 * len(gets),
     )
+
+
+#: names in a route's path that the file system refuses or that reach for another place
+ODD_NAMES = ["a" * 300, "\u00e9" * 200, "b" * 247 + ".h5", "%2e%2e%2fok.h5", "ok.h5%00",
+             "..%2f..%2fetc%2fpasswd", "%2fetc%2fpasswd", "..%5cok.h5", "%ff%fe"]  # fmt: skip
+
+
+def test_names_in_the_path_that_no_file_can_have(app, fault_row):
+    """Every route with a name in its path, given names too long for the file system (in bytes
+    too), traversal and NUL: a 4xx, never a 500 (a 300-character name was an OSError out of
+    ``safe_file``: a 500 on ``/static/`` and ``/api/recordings/``); a recording whose name
+    leaves no room for its report's is refused in one line."""
+    kind, application, alert, folder = app
+    if kind == "monitor":  # a recording whose name is as long as a file's may be
+        save(small_recording(), folder / "rec" / ("b" * 247 + ".h5"))
+    named = [(m, p) for m, p in _routes(application) if re.search(r"\{(name|path|filename)", p)]
+    assert named, _routes(application)
+    tried = 0
+    with TestClient(application, base_url=BASE) as client:
+        for method, path in named:
+            for name in ODD_NAMES:
+                url = _fill(re.sub(r"\{(name|path|filename)(:\w+)?\}", name, path), alert)
+                r = client.request(method, url, content=b"[]")
+                assert r.status_code < 500, (method, url[:80], r.status_code, r.text[:200])
+                tried += 1
+    fault_row("requests", f"{kind}: {len(named)} routes with a name in the path x names too "
+              "long, traversal, NUL", "refused", "4xx (never 500)", cases=tried)  # fmt: skip
 
 
 def _rss_kib(pid: int) -> int:

@@ -138,6 +138,49 @@ def test_every_ward_key_is_checked(tmp_path, fault_row):
               "the nearest known key named", cases=tried + 1)  # fmt: skip
 
 
+#: TOML texts that tomllib reads with another exception than its own, or that a grid refuses
+ODD_TOML = {
+    "arrays nested too deeply": "x = " + "[" * 3000 + "]" * 3000,
+    "inline tables nested too deeply": "x = " + "{a = " * 3000 + "1" + "}" * 3000,
+    "an integer of 5000 digits": "x = 1" + "0" * 5000,
+}
+ODD_GRIDS = ["grid:0x4", "grid:4x0", "grid:-4x4", "grid:\uff14x4", "grid:4x4x4", "grid:4.5x4",
+             "grid:1e400x4", "grid: x4"]  # fmt: skip
+
+
+def test_ward_and_credential_files_that_are_no_toml_or_no_grid(tmp_path, fault_row):
+    """Every odd TOML text in the ward file and the mats' credentials, and every odd grid in a
+    ward file: one FormatError or ParameterError naming the file and the [[mat]] (a
+    RecursionError and int's ValueError came out of tomllib as tracebacks; a grid of 0 rows
+    did not name the ward file, one of full-width digits was read)."""
+    from texsense.commands.station import read_config
+    from texsense.station.broker import read_mat_credentials
+
+    tried = 0
+    for what, text in ODD_TOML.items():
+        for kind in ("ward", "credentials"):
+            path = tmp_path / f"{kind}.toml"
+            path.write_text(text + "\n", encoding="utf-8")
+            with pytest.raises(FormatError, match=rf"{kind}.toml: ") as e:
+                if kind == "ward":
+                    read_config(path, 20.0)
+                else:
+                    read_mat_credentials(path)
+            assert "\n" not in str(e.value) and len(str(e.value)) < 300, (what, str(e.value))
+            tried += 1
+    path = tmp_path / "ward.toml"
+    for grid in ODD_GRIDS:
+        path.write_text(f'[[mat]]\nid = "a"\nlayout = "{grid}"\n', encoding="utf-8")
+        with pytest.raises((FormatError, ParameterError), match=r"ward.toml \[\[mat\]\] #1"):
+            read_config(path, 20.0)
+        tried += 1
+    path.write_bytes(b'\xef\xbb\xbf[[mat]]\nid = "a"\nlayout = "grid:4x4"\n')  # Notepad's BOM
+    assert read_config(path, 20.0)[0][0].layout.n_elements == 16
+    fault_row("settings", f"{tried} ward and credential files: nested too deeply, 5000 digits, "
+              "grids of 0, negative, full-width or fractional rows", "clear error",
+              "the file and the [[mat]] named; a BOM read", cases=tried + 1)  # fmt: skip
+
+
 def test_a_calibration_for_another_mat_is_refused(fault_row):
     from texsense.calibration.workflows import seat_calibration
     from texsense.compensation.pipeline import Pipeline

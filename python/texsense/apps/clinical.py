@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data.files import json_loads
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
@@ -104,7 +105,7 @@ def live_events(rec: Recording) -> list[dict[str, Any]] | None:
     out: list[dict[str, Any]] = []
     for i in np.flatnonzero(np.asarray(labels).astype(str) != ""):
         try:
-            items = json.loads(str(labels[i]))
+            items = json_loads(str(labels[i]))
             if not isinstance(items, list):
                 raise ValueError("not a list")
             for e in items:
@@ -116,7 +117,7 @@ def live_events(rec: Recording) -> list[dict[str, Any]] | None:
                     "alert_id": None if e.get("alert_id") is None else int(e["alert_id"]),
                     "detail": dict(e.get("detail") or {}),
                 })  # fmt: skip
-        except (ValueError, TypeError, KeyError) as err:
+        except (ValueError, TypeError, KeyError, OverflowError) as err:
             raise ParameterError(
                 f"label {EVENTS_LABEL!r} of frame {int(i)} is not a list of events: {err}"
             ) from None

@@ -348,7 +348,10 @@ def _events(review: Review, model: Any) -> None:
         review.notes.append(f"the clinical state at the start is not used ({e})")
     recomputed, review.sides, notes = recompute_events(review, model)
     review.notes += notes
-    live = live_events(rec)
+    try:
+        live = live_events(rec)
+    except ParameterError as e:  # the file's own label: named, as a reader would
+        raise ParameterError(f"{review.name}: {e}") from None
     review.live = live is not None
     review.events = recomputed if live is None else merge_events(review, live, recomputed)
 

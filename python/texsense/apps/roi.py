@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from texsense.data.files import read_regular, write_text
+from texsense.data.files import json_loads, read_regular, write_text
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 
@@ -135,7 +135,7 @@ def load_rois(recording: str | Path) -> list[dict[str, Any]]:
     if not os.path.lexists(path):
         return []
     try:
-        data = json.loads(read_regular(path, "a regions file").decode("utf-8"))
+        data = json_loads(read_regular(path, "a regions file").decode("utf-8"))
     except (ValueError, UnicodeDecodeError) as e:
         raise ParameterError(f"{path}: not a regions file ({e})") from None
     except OSError as e:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -11,7 +10,7 @@ from texsense.apps.posture.model import PostureModel
 from texsense.apps.report import write_report
 from texsense.apps.roi import parse_rois
 from texsense.commands import HELP
-from texsense.data.files import read_regular
+from texsense.data.files import json_loads, read_regular
 from texsense.exceptions import FormatError, ParameterError
 
 
@@ -57,7 +56,7 @@ def run_report(args: argparse.Namespace) -> int:
     rois = None
     if args.rois is not None:
         try:
-            data = json.loads(read_regular(args.rois, "a regions file").decode("utf-8"))
+            data = json_loads(read_regular(args.rois, "a regions file").decode("utf-8"))
         except FormatError:
             raise  # (names the file and what it is instead)
         except (OSError, ValueError) as e:

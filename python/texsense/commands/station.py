@@ -6,9 +6,9 @@ import argparse
 import difflib
 import logging
 import os
+import re
 import signal
 import socket
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -26,7 +26,7 @@ from texsense.commands.monitor import (
 )
 from texsense.compensation.stages import load_chain
 from texsense.data import budget
-from texsense.data.files import check_writable, kept_or_made, open_regular
+from texsense.data.files import check_writable, kept_or_made, open_regular, toml_loads
 from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
@@ -120,11 +120,13 @@ def _layout(spec: Any, where: str) -> Any:
     from texsense.io import load
 
     if isinstance(spec, str) and spec.startswith("grid:"):
+        dims = re.fullmatch(r"([0-9]+)x([0-9]+)", spec[5:].strip().lower())
+        if dims is None:
+            raise ParameterError(f"{where}: layout {spec!r}: expected grid:ROWSxCOLS")
         try:
-            rows, cols = (int(v) for v in spec[5:].lower().split("x"))
-        except ValueError:
-            raise ParameterError(f"{where}: layout {spec!r}: expected grid:ROWSxCOLS") from None
-        return Layout.grid(rows, cols)
+            return Layout.grid(int(dims[1]), int(dims[2]))
+        except ParameterError as e:  # 0 rows, a grid beyond the budget: the ward file named
+            raise ParameterError(f"{where}: layout {spec!r}: {e}") from None
     if isinstance(spec, str):
         return load(spec).layout
     raise ParameterError(f"{where}: layout must be 'grid:ROWSxCOLS' or a recording's path")
@@ -176,12 +178,12 @@ def read_config(
     try:
         with open_regular(path) as f:  # a regular file only: no FIFO, no device
             budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
-            doc = tomllib.loads(f.read().decode("utf-8"))
+            doc = toml_loads(f.read())
     except OSError as e:
         raise FormatError(path, f"cannot read: {e.strerror}") from None
     except UnicodeDecodeError:
         raise FormatError(path, "not UTF-8 text") from None
-    except tomllib.TOMLDecodeError as e:
+    except ValueError as e:  # tomllib's, and nested too deeply, too many digits
         raise FormatError(path, f"not TOML: {e}") from None
     _known_keys(path, "the ward file", doc, {"mat": list})
     mats: list[Any] = []

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import glob
 import hashlib
-import json
 import logging
 import os
 from collections.abc import Sequence
@@ -38,6 +37,7 @@ from texsense.compensation.stages import StageChain, load_chain
 from texsense.data.files import (
     atomic_path,
     check_not_input,
+    json_loads,
     make_folder,
     open_regular,
     real_path,
@@ -135,7 +135,7 @@ def _output_matches(
 
     try:
         with open_hdf5(dst) as f:
-            meta = json.loads(f.attrs.get("meta", "{}"))
+            meta = json_loads(f.attrs.get("meta", "{}"))
             complete = not int(f.attrs.get("open", 1))
     except (OSError, ValueError, TypeError):  # FormatError among them: not an output of ours
         return False

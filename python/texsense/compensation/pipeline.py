@@ -52,6 +52,7 @@ from texsense.compensation.inuse import InUseDrift, InUseState
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
 from texsense.compensation.stage import Stage, time_steps
 from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, StageChain
+from texsense.data.files import json_loads
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
@@ -598,7 +599,7 @@ def _restore_part(p: Chain | Repair | InUseDrift, s: bytes) -> None:
         p.restore(s)
     elif isinstance(p, InUseDrift):
         try:
-            state = InUseState.from_dict(json.loads(s), p.layout.n_elements)
+            state = InUseState.from_dict(json_loads(s), p.layout.n_elements)
         except (ParameterError, TypeError, KeyError) as e:
             raise ValueError(f"the in-use drift state: {e}") from None
         p.set_state(state)
@@ -631,7 +632,7 @@ def _read_state(state: bytes) -> tuple[dict[str, Any], list[bytes]]:
             f"a pipeline state of version {version}; this build reads version {STATE_VERSION}"
         )
     try:
-        head = json.loads(state[k + 8 : k + 8 + size])
+        head = json_loads(state[k + 8 : k + 8 + size])
         lengths = [int(x) for x in head["sections"]]
     except (ValueError, KeyError, TypeError):
         raise ParameterError("the pipeline state's header is damaged") from None

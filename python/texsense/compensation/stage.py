@@ -51,6 +51,34 @@ def time_steps(times: npt.ArrayLike, last_t: float | None = None) -> np.ndarray:
     return np.ascontiguousarray(dt)
 
 
+#: the plain types a stage's parameter may have in a model file, by its type hint's name
+_PLAIN = {"float": (int, float), "int": (int, float), "str": (str,), "bool": (bool,)}
+
+
+def _plain_param(value: Any, hint: Any) -> Any:
+    """A parameter of a model file checked against its type hint (``float``, ``int``, ``str``,
+    ``bool``, each possibly ``| None``): a text where a number belongs, a number of 1e308
+    where a count belongs or an object anywhere is a ``TypeError``/``ValueError`` that
+    :meth:`Stage.from_dict` names, not a traceback from deep in a kernel. Other hints (a
+    ``Layout``) are decoded by their own ``from_dict``."""
+    names = [a.__name__ for a in typing.get_args(hint)] if typing.get_args(hint) else []
+    names = names or [getattr(hint, "__name__", "")]
+    if value is None and "NoneType" in names:
+        return None
+    kinds = [n for n in names if n in _PLAIN]
+    if not kinds:
+        return value
+    kind = kinds[0]
+    if isinstance(value, bool) != (kind == "bool") or not isinstance(value, _PLAIN[kind]):
+        raise TypeError(f"expected {'a number' if kind in ('int', 'float') else kind}, "
+                        f"got {type(value).__name__}")  # fmt: skip
+    if kind == "int":
+        if value != value or abs(value) > 2**62 or value != int(value):
+            raise ValueError(f"expected a whole number, got {value}")
+        return int(value)
+    return value
+
+
 class Stream:
     """Streaming and batch over one checked batch path, ``_arrays(values, valid, times)``:
     what every stage and the chain of stages share."""
@@ -250,8 +278,11 @@ class Stage(Stream):
         for key, value in params.items():
             decode = getattr(hints.get(key), "from_dict", None)
             try:
-                args[key] = decode(value) if decode is not None and value is not None else value
-            except (KeyError, TypeError, ValueError) as e:
+                if decode is not None and value is not None:
+                    args[key] = decode(value)
+                else:
+                    args[key] = _plain_param(value, hints.get(key))
+            except (KeyError, TypeError, ValueError, OverflowError) as e:
                 raise f.error(f"params.{key}", f"cannot be read ({e})") from None
         try:
             stage = cls(**args)

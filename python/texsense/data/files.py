@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import os
 import signal
 import stat
@@ -63,6 +64,7 @@ __all__ = [
     "check_not_input",
     "check_regular",
     "check_writable",
+    "json_loads",
     "kept_or_made",
     "made_once",
     "make_folder",
@@ -73,6 +75,7 @@ __all__ = [
     "regular_files",
     "save_figure",
     "signals_held",
+    "toml_loads",
     "unused_name",
     "write_bytes",
     "write_text",
@@ -501,6 +504,37 @@ def read_regular(path: str | Path, what: str) -> bytes:
         size = os.fstat(f.fileno()).st_size
         budget.check(size, what, p)
         return f.read(size + 1)
+
+
+def json_loads(text: str | bytes | bytearray) -> Any:
+    """``json.loads`` of text that came from outside (a file, an attribute, a message, a
+    request): every way it is not JSON is a ``ValueError`` (:class:`json.JSONDecodeError`),
+    text nested deeper than the parser's recursion included, which ``json`` raises as a
+    ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
+    of a device's reading thread)."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        doc = text if isinstance(text, str) else ""
+        raise json.JSONDecodeError("nested too deeply", doc, 0) from None
+
+
+def toml_loads(raw: bytes) -> dict[str, Any]:
+    """The TOML document of a file's bytes (UTF-8, a byte-order mark allowed): every way it is
+    not TOML is a ``ValueError`` (``tomllib.TOMLDecodeError``, ``UnicodeDecodeError``), also
+    arrays or inline tables nested deeper than ``tomllib`` recurses (a ``RecursionError``) and
+    an integer of more digits than Python converts (a bare ``ValueError`` from ``int``)."""
+    import tomllib
+
+    text = raw.decode("utf-8-sig")
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+    except tomllib.TOMLDecodeError:
+        raise
+    except ValueError as e:  # int(): "Exceeds the limit (4300 digits) ..."
+        raise ValueError(str(e).split(";")[0]) from None
 
 
 def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:

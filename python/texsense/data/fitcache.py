@@ -28,7 +28,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from texsense.data.files import cache_folder, kept_or_made, write_text
+from texsense.data.files import cache_folder, json_loads, kept_or_made, write_text
 
 __all__ = ["code_digest", "remembered"]
 
@@ -100,7 +100,7 @@ def _read(path: Path, key: str, build: Callable[[Any], T]) -> tuple[T] | None:
     if not path.is_file():
         return None
     try:
-        content = json.loads(path.read_text(encoding="utf-8"))
+        content = json_loads(path.read_text(encoding="utf-8"))
         built = build(content)
     except (OSError, ValueError) as e:
         log.warning("making again: %s: %s", path, e)

@@ -50,7 +50,14 @@ from texsense.data.orientation import (
 )
 from texsense.exceptions import ParameterError
 
-__all__ = ["EDGES", "ORIENTATIONS", "Layout", "orientation_toward", "parse_orientation"]
+__all__ = [
+    "EDGES",
+    "ORIENTATIONS",
+    "Layout",
+    "orientation_toward",
+    "parse_orientation",
+    "whole_numbers",
+]
 
 _FloatArray = npt.NDArray[np.float64]
 _IntArray = npt.NDArray[np.int64]
@@ -131,14 +138,14 @@ class Layout:
             size = np.broadcast_to(size, (n, 2))
         if size.shape != (n, 2):
             raise ParameterError(f"size_cm: expected shape ({n}, 2) or (2,), got {size.shape}")
-        if np.any(~(size > 0)):
-            raise ParameterError("size_cm: element sizes must be positive")
+        if np.any(~(size > 0)) or not np.all(np.isfinite(size)):
+            raise ParameterError("size_cm: element sizes must be positive and finite")
         if area_cm2 is None:
             area = size[:, 0] * size[:, 1]
         else:
             area = np.broadcast_to(np.asarray(area_cm2, dtype=np.float64), (n,))
-            if np.any(~(area > 0)):
-                raise ParameterError("area_cm2: element areas must be positive")
+            if np.any(~(area > 0)) or not np.all(np.isfinite(area)):
+                raise ParameterError("area_cm2: element areas must be positive and finite")
         self._xy = _readonly(xy)
         self._size = _readonly(size)
         self._area = _readonly(area)
@@ -156,7 +163,7 @@ class Layout:
 
         self._regions: dict[str, _IntArray] = {}
         for name, members in (regions or {}).items():
-            m = np.asarray(members, dtype=np.int64).ravel()
+            m = whole_numbers(members, f"region {name!r}").ravel()
             if m.size and (m.min() < 0 or m.max() >= n):
                 raise ParameterError(f"region {name!r}: element indices must lie in 0..{n - 1}")
             self._regions[str(name)] = _readonly(m)
@@ -490,6 +497,11 @@ class Layout:
             )
         except KeyError as e:
             raise ParameterError(f"layout description lacks the field {e.args[0]!r}") from None
+        except ParameterError:
+            raise
+        except (OverflowError, TypeError, ValueError) as e:  # a description from a file:
+            # a number beyond float64 (a 400-digit integer), text or a ragged list
+            raise ParameterError(f"layout description: {e}") from None
 
     def __eq__(self, other: object) -> bool:
         """Equal geometry, topology, names and regions (the orientation only labels the
@@ -554,6 +566,34 @@ def _grid_neighbours(
     return indptr, found[linked]
 
 
+def whole_numbers(values: Any, what: str) -> _IntArray:
+    """``values`` as int64 indices, or :class:`ParameterError` naming ``what``: whole numbers
+    only. Indices come from files and messages (a layout line, HDF5 datasets, a device's
+    announcement): a ``1.5`` is refused, not truncated, and ``inf``, ``NaN``, text or a
+    number beyond int64 are refused, not a traceback."""
+    try:
+        a = np.asarray(values)
+    except (ValueError, TypeError, OverflowError) as e:  # ragged lists, odd objects
+        raise ParameterError(f"{what}: expected whole numbers ({e})") from None
+    if a.size == 0:
+        return np.zeros(a.shape, dtype=np.int64)
+    limit = np.iinfo(np.int64).max
+    if a.dtype.kind == "i" or (a.dtype.kind == "u" and int(a.max()) <= limit):
+        return a.astype(np.int64, copy=False)
+    flat = a.ravel()
+    if a.dtype.kind == "f":
+        whole = np.isfinite(flat) & (np.abs(np.nan_to_num(flat)) < 2.0**62)
+        whole[whole] = flat[whole] == np.round(flat[whole])
+        if whole.all():
+            return a.astype(np.int64)
+        raise ParameterError(f"{what}: expected whole numbers, found {flat[np.argmin(whole)]}")
+    if a.dtype.kind == "u":
+        raise ParameterError(f"{what}: expected whole numbers, found {flat.max()} (too large)")
+    kinds = sorted({"an integer beyond int64" if type(v) is int else type(v).__name__
+                    for v in flat[:1000].tolist()})  # fmt: skip
+    raise ParameterError(f"{what}: expected whole numbers, found {', '.join(kinds)}")
+
+
 def _grid_of(
     n: int,
     shape: tuple[int, int] | None,
@@ -567,7 +607,10 @@ def _grid_of(
         raise ParameterError("pitch_cm is only meaningful for a grid layout")
     if shape is None:
         return None, None, None
-    rows, cols = (int(shape[0]), int(shape[1]))
+    dims = whole_numbers(shape, "shape")
+    if dims.shape != (2,):
+        raise ParameterError(f"shape: expected rows and cols, got {shape}")
+    rows, cols = int(dims[0]), int(dims[1])
     if rows < 1 or cols < 1:
         raise ParameterError(f"shape: rows and cols must be >= 1, got {shape}")
     if rows * cols > MAX_EMPTY_CELLS + SPARSE_FACTOR * n:
@@ -575,7 +618,7 @@ def _grid_of(
             f"shape: a grid of {rows} x {cols} cells for {n} elements (a map of it would be "
             f"mostly empty; at most {SPARSE_FACTOR} cells per element plus {MAX_EMPTY_CELLS})"
         )
-    c = np.asarray(cells, dtype=np.int64)
+    c = whole_numbers(cells, "cells")
     if c.shape != (n,):
         raise ParameterError(f"cells: expected shape ({n},), got {c.shape}")
     if n and (c.min() < 0 or c.max() >= rows * cols):
@@ -586,8 +629,8 @@ def _grid_of(
     pitch = None
     if pitch_cm is not None:
         pitch = (float(pitch_cm[0]), float(pitch_cm[1]))
-        if not (pitch[0] > 0 and pitch[1] > 0):
-            raise ParameterError(f"pitch_cm must be positive, got {pitch_cm}")
+        if not (0 < pitch[0] < np.inf and 0 < pitch[1] < np.inf):
+            raise ParameterError(f"pitch_cm must be positive and finite, got {pitch_cm}")
     return (rows, cols), _readonly(c), pitch
 
 
@@ -597,8 +640,8 @@ def _neighbours_of(
     """The checked neighbour graph (CSR: indptr, indices) of n elements (none by default)."""
     if neighbours is None:
         return np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    indptr = np.asarray(neighbours[0], dtype=np.int64)
-    indices = np.asarray(neighbours[1], dtype=np.int64)
+    indptr = whole_numbers(neighbours[0], "neighbours: indptr")
+    indices = whole_numbers(neighbours[1], "neighbours: indices")
     if indptr.shape != (n + 1,) or indptr[0] != 0 or np.any(np.diff(indptr) < 0):
         raise ParameterError(
             f"neighbours: indptr must be non-decreasing, start at 0, have {n + 1} entries"

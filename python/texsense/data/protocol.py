@@ -59,7 +59,8 @@ import numpy.typing as npt
 
 from texsense._core import parse_json_numbers
 from texsense.data import units
-from texsense.data.layout import Layout, parse_orientation
+from texsense.data.files import json_loads
+from texsense.data.layout import Layout, parse_orientation, whole_numbers
 from texsense.exceptions import ParameterError
 
 if TYPE_CHECKING:
@@ -240,7 +241,7 @@ def _splice(b: bytes) -> tuple[dict[str, Any], bytes] | None:
     if b"\\" in rest or rest.find(b'"values"', i + 1) >= 0:  # another key may be "values"
         return None
     try:
-        d = json.loads(rest.decode("utf-8"))
+        d = json_loads(rest.decode("utf-8"))
     except (ValueError, UnicodeDecodeError):
         return None
     if not isinstance(d, dict) or d.get("values") != 0:  # not the payload's own key
@@ -297,7 +298,7 @@ def _parse_whole(payload: bytes | str, n_elements: int) -> Frame:
     except UnicodeDecodeError:
         raise ProtocolError("payload is not JSON: not UTF-8 text") from None
     try:
-        d: Any = json.loads(text)
+        d: Any = json_loads(text)
     except ValueError as e:
         raise ProtocolError(f"payload is not JSON: {e}") from None
     if not isinstance(d, dict):
@@ -416,13 +417,13 @@ def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | Non
     if len(line) > MAX_LINE:
         raise ProtocolError(f"announcement longer than {MAX_LINE} characters")
     try:
-        d = json.loads(line[len(ANNOUNCE) - 1 :])
+        d = json_loads(line[len(ANNOUNCE) - 1 :])
     except ValueError as e:
         raise ProtocolError(f"layout announcement is not JSON: {e}") from None
     if not isinstance(d, dict):
         raise ProtocolError("layout announcement must be a JSON object")
     try:
-        rows, cols = (int(v) for v in d["grid"])
+        rows, cols = (int(v) for v in whole_numbers(d["grid"], "grid"))
         pitch = tuple(float(v) for v in d["pitch_cm"])
         element = tuple(float(v) for v in d.get("element_cm", pitch))
         if not (0 < rows <= 4096 and 0 < cols <= 4096) or len(pitch) != 2 or len(element) != 2:
@@ -441,7 +442,7 @@ def parse_announcement(line: str | bytes) -> tuple[Layout, dict[str, Any]] | Non
             layout = layout.with_orientation(parse_orientation(d["orientation"]))
     except ParameterError as e:
         raise ProtocolError(f"layout announcement: {e}") from None
-    except (KeyError, TypeError, ValueError) as e:
+    except (KeyError, TypeError, ValueError, OverflowError) as e:
         what = f"lacks {e}" if isinstance(e, KeyError) else str(e)
         raise ProtocolError(f"layout announcement {what}") from None
     if "elements" in d and d["elements"] != layout.n_elements:

@@ -49,7 +49,7 @@ import numpy.typing as npt
 from texsense._core import __version__
 from texsense._progress import logger
 from texsense.data import budget, units
-from texsense.data.files import atomic_path, signals_held
+from texsense.data.files import atomic_path, json_loads, signals_held
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError
@@ -132,7 +132,7 @@ def _read_layout(group: h5py.Group) -> Layout:
     shape = None
     cells = None
     if group.attrs.get("kind") == "grid":
-        shape = (int(group.attrs["rows"]), int(group.attrs["cols"]))
+        shape = (group.attrs["rows"], group.attrs["cols"])  # whole numbers: checked by Layout
         cells = _whole(group["cells"])
     pitch = None
     if "pitch_cm" in group.attrs:
@@ -145,7 +145,7 @@ def _read_layout(group: h5py.Group) -> Layout:
         regions[_text(ds.attrs.get("name", key))] = _whole(ds)
     orientation = None
     if "orientation" in group.attrs:
-        orientation = json.loads(_text(group.attrs["orientation"]))
+        orientation = json_loads(_text(group.attrs["orientation"]))
     return Layout(
         _whole(group["xy_cm"]),
         _whole(group["size_cm"]),
@@ -560,7 +560,7 @@ class HDF5Reader(RecordingReader):
                 f"texsense reads version {FORMAT_VERSION}",
             )
         try:
-            meta = json.loads(f.attrs.get("meta", "{}"))
+            meta = json_loads(f.attrs.get("meta", "{}"))
         except (json.JSONDecodeError, TypeError) as e:
             raise FormatError(path, f"the attribute 'meta' is not JSON ({e})") from None
         if not isinstance(meta, dict):

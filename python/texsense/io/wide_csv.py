@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from texsense.data import units
-from texsense.data.files import atomic_open
+from texsense.data.files import atomic_open, json_loads
 from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import FormatError, ParameterError, UnitError
@@ -108,7 +108,7 @@ def _layout(path: Path, info: dict[str, str], where: dict[str, int], names: list
     n = len(names)
     if "layout" in info:
         try:
-            layout = Layout.from_dict(json.loads(info["layout"]))
+            layout = Layout.from_dict(json_loads(info["layout"]))
         except (json.JSONDecodeError, ParameterError, TypeError, ValueError, KeyError) as e:
             raise FormatError(path, f"bad layout line: {e}", where["layout"]) from None
         if layout.n_elements != n:
@@ -191,7 +191,7 @@ class WideCSVReader(RecordingReader):
         meta: dict[str, Any] = {"format": "wide-csv", "source": str(path)}
         if "meta" in info:
             try:
-                meta = json.loads(info["meta"])
+                meta = json_loads(info["meta"])
             except json.JSONDecodeError as e:
                 raise FormatError(path, f"bad meta line: {e}", where["meta"]) from None
             if not isinstance(meta, dict):

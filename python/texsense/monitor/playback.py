@@ -48,8 +48,8 @@ hold at most half of the budget, and the next one is opened within what is left.
 
 from __future__ import annotations
 
-import json
 import logging
+import os
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -63,10 +63,16 @@ from texsense.apps import stats
 from texsense.apps.clinical import POSTURE_LABEL
 from texsense.apps.report import write_report
 from texsense.apps.review import block_of, decimate, open_review
-from texsense.apps.roi import load_rois, parse_rois, roi_elements, save_rois
+from texsense.apps.roi import load_rois, parse_rois, roi_elements, rois_path, save_rois
 from texsense.apps.views import orientation_of
 from texsense.data import budget, units
-from texsense.data.files import check_regular, make_folder, real_path, regular_files
+from texsense.data.files import (
+    check_regular,
+    json_loads,
+    make_folder,
+    real_path,
+    regular_files,
+)
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 from texsense.io import open_recording, sniff_format
 from texsense.io.hdf5 import read_bounds
@@ -362,14 +368,18 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
     if len(body) > MAX_ROI_BYTES:
         raise HTTPException(413, f"regions: at most {MAX_ROI_BYTES // 1024} KiB")
     try:
-        data = json.loads(body)
+        data = json_loads(body)
     except (ValueError, UnicodeDecodeError) as e:
         raise HTTPException(400, f"regions: not JSON ({e})") from None
     try:
         rois = parse_rois(data)
     except ParameterError as e:
         raise _status_of(e) from None
-    save_rois(path, rois)
+    _named(rois_path(path))
+    try:
+        save_rois(path, rois)
+    except (OSError, WriteError) as e:
+        raise HTTPException(507, f"cannot write the regions: {e}") from None
     try:  # a recording read on demand: a damaged chunk is said, not a 500
         stats_ = await folder.lane.run(_roi_stats, review, rois)
     except (FormatError, ParameterError) as e:
@@ -380,7 +390,15 @@ async def _put_rois(folder: _Folder, name: str, request: Request) -> dict[str, A
 def _report_path(folder: _Folder, name: str, format: str) -> Path:
     if format not in ("pdf", "html"):
         raise HTTPException(422, "format must be pdf or html")
-    return folder.path / "reports" / f"{folder.path_of(name).name}-report.{format}"
+    return _named(folder.path / "reports" / f"{folder.path_of(name).name}-report.{format}")
+
+
+def _named(out: Path) -> Path:
+    """``out``, a file named after a recording (its report, its regions), if the file system
+    can hold its name; else a 422 (an OSError would be a 500)."""
+    if len(os.fsencode(out.name)) > 255:
+        raise HTTPException(422, f"the recording's name is too long to name {out.name[-24:]!r}")
+    return out
 
 
 async def _make_report(folder: _Folder, name: str, format: str) -> Any:

@@ -140,12 +140,23 @@ def _is_ip(name: str) -> bool:
 
 def host_name(host: str) -> str:
     """The name part of a Host header or an origin's network location (no port, no brackets,
-    lower case): ``[::1]:8765`` -> ``::1``."""
+    lower case): ``[::1]:8765`` -> ``::1``. What is not a name with an optional port of digits
+    (``127.0.0.1:80.evil.example``, ``[::1``, ``localhost:abc``) is ``""``, which no server
+    is named."""
     host = host.strip().lower()
+    port = ""
     if host.startswith("["):
-        return host[1 : host.find("]")] if "]" in host else host[1:]
-    if host.count(":") == 1:
-        host = host.split(":", 1)[0]
+        end = host.find("]")
+        if end < 0:
+            return ""
+        host, rest = host[1:end], host[end + 1 :]
+        if rest and not rest.startswith(":"):
+            return ""
+        port = rest[1:] if rest else ""
+    elif host.count(":") == 1:
+        host, port = host.split(":", 1)
+    if port and not (port.isascii() and port.isdigit()):
+        return ""
     return host.rstrip(".")
 
 
@@ -155,7 +166,10 @@ def safe_file(folder: Path, name: str) -> Path | None:
         return None
     base = real_path(folder)
     path = real_path(base / name)
-    if path.parent != base or not path.is_file():
+    try:
+        if path.parent != base or not path.is_file():
+            return None
+    except OSError:  # a name the file system refuses (too long, ...): no such file
         return None
     return path
 

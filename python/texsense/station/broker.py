@@ -40,13 +40,12 @@ import socket
 import subprocess
 import tempfile
 import time
-import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
 
-from texsense.data.files import atomic_path, read_regular
+from texsense.data.files import atomic_path, read_regular, toml_loads
 from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor.sources import blocking
 
@@ -373,8 +372,8 @@ def read_mat_credentials(path: Path) -> dict[str, str]:
     if not os.path.lexists(path):
         return {}
     try:
-        doc = tomllib.loads(read_regular(path, "the mats' credentials").decode("utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        doc = toml_loads(read_regular(path, "the mats' credentials"))
+    except (OSError, ValueError) as e:  # not TOML, not UTF-8, nested too deeply
         raise FormatError(path, f"cannot read the mats' credentials: {e}") from None
     mats = doc.get("mats", {})
     if not isinstance(mats, dict) or not all(isinstance(v, str) for v in mats.values()):
