@@ -357,7 +357,7 @@ def frame_bounds(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`bounds` of one frame (N,) whose unmeasured values are repaired, in one compiled
     pass (``texsense._core.frame_bounds``: the same operations in the same order, so the same
-    bits; tests/test_intervals_frame.py): what a station runs for every frame of every mat."""
+    bits; tests/test_frame_compiled.py): what a station runs for every frame of every mat."""
     edges, scale = held_out._arrays
     mult = _per_band(float(level), context)
     m = None if multiplier_value is None else float(multiplier_value)
