@@ -44,6 +44,7 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError
 from texsense.io._base import Piece
+from texsense.io.policy import DAMAGED
 
 __all__ = ["CACHE", "CACHE_SHARE", "FrameCache", "LazyRecording"]
 
@@ -168,7 +169,7 @@ class _Source:
                     if self._reader.n_frames < self.n:
                         raise FormatError(self.path, "the file changed: it holds fewer frames")
                 piece = self._reader.frames_at(a, b)
-            except OSError as e:
+            except DAMAGED as e:
                 raise FormatError(self.path, f"frames {a + 1}..{b} cannot be read ({e})") from None
         et = piece.element_times
         return Piece(piece.values, piece.times, {}, valid=piece.valid,
