@@ -2,6 +2,9 @@
 hours of cycling (hysteresis only vs hysteresis + drift).
 
 Run:  .venv/bin/python benchmarks/drift_accuracy.py       (writes docs/img/drift_*.png)
+      .venv/bin/python benchmarks/drift_accuracy.py --float32
+      (the cycling table's predictions through the experimental float32 banks of issue 34,
+      benchmarks/_float32.py; no figures written)
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _float32 import FLOAT32, apply, predict
 from _realdata import vhb_relaxation
 from texsense.compensation.drift import DriftModel, fit_gamma, prony_kernel, split_steps
 from texsense.compensation.hysteresis import HysteresisModel
@@ -53,7 +57,8 @@ def virtual_steps() -> None:
     ax.set_title("virtual 6 mm textile spacer, specimen 0 (cf. thesis fig. 5.6/5.7)", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.savefig(IMG / "drift_steps.png", dpi=100)
+    if not FLOAT32:
+        fig.savefig(IMG / "drift_steps.png", dpi=100)
     plt.close(fig)
 
 
@@ -96,7 +101,8 @@ def vhb() -> None:
     ax.set_title("VHB 4910 relaxation: where the logarithm does not hold", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.savefig(IMG / "drift_vhb.png", dpi=100)
+    if not FLOAT32:
+        fig.savefig(IMG / "drift_vhb.png", dpi=100)
     plt.close(fig)
 
 
@@ -124,8 +130,8 @@ def _cycling_run(seed: int, hours: float) -> tuple[np.ndarray, ...]:
     t = rec.times[keep]
     if t[-1] < hours * 3600 - 60:
         raise RuntimeError(f"specimen {seed}: the cycles ended at {t[-1]:.0f} s")
-    h = model.predict(u)
-    return t, p, h, drift.apply(h, t), drift.gamma
+    h = predict(model, u)
+    return t, p, h, apply(drift, h, t), drift.gamma
 
 
 def _record_figure(run: tuple, cyc: DriftModel) -> None:
@@ -170,7 +176,7 @@ def cycling(hours: float = 4.0, specimens: int = 4) -> None:
     windows = np.arange(0, hours * 3600, 900.0)
     curves = []
     for seed, (t, p, h, hd, g) in enumerate(runs):
-        hc = cyc.apply(h, t)
+        hc = apply(cyc, h, t)
         for k in range(int(hours)):
             sel = (t >= 3600 * k) & (t < 3600 * (k + 1))
             e = [_band_error(x, p, sel) for x in (h, hd, hc)]
@@ -178,6 +184,8 @@ def cycling(hours: float = 4.0, specimens: int = 4) -> None:
         curves.append(
             [[_band_error(x, p, (t >= w) & (t < w + 900)) for x in (h, hd, hc)] for w in windows]
         )
+    if FLOAT32:
+        return
     _record_figure(runs[0], cyc)
     errs = 100 * np.asarray(curves)  # specimen, window, variant
     mid = (windows + 450) / 60

@@ -1,6 +1,9 @@
 """Accuracy of the Preisach compensation: virtual spacers (thesis §4.5) and real records.
 
 Run:  .venv/bin/python benchmarks/hysteresis_accuracy.py       (writes docs/img/hyst_*.png)
+      .venv/bin/python benchmarks/hysteresis_accuracy.py --float32
+      (every prediction through the experimental float32 bank of issue 34, benchmarks/_float32.py;
+      no figures written)
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _float32 import FLOAT32, predict
 from _realdata import elastomer_sawtooth, vhb_cycle
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.hysteresis._identify import identify_thesis
@@ -87,16 +91,19 @@ def virtual(name: str = "textile-6mm", seeds=(0, 1, 2, 3), figure: bool = True) 
             (
                 "Preisach, thesis method",
                 "calibration (3 falling curves)",
-                from_ident(thesis).predict(u),
+                predict(from_ident(thesis), u),
             ),
             (
                 "Preisach, thesis method, 200 x 200",
                 "4 falling curves (100/60/30/13 %)",
-                from_ident(
-                    identify_thesis(
-                        cal4.labels["compression_mm"], cal4.labels["pressure_ncm2"], grid=200
-                    )
-                ).predict(u),
+                predict(
+                    from_ident(
+                        identify_thesis(
+                            cal4.labels["compression_mm"], cal4.labels["pressure_ncm2"], grid=200
+                        )
+                    ),
+                    u,
+                ),
             ),
         ]
         for source, (ui, pi) in (
@@ -104,10 +111,10 @@ def virtual(name: str = "textile-6mm", seeds=(0, 1, 2, 3), figure: bool = True) 
             ("65 s random sawtooth", (us, ps)),
         ):
             m = HysteresisModel().fit(ui, pi)
-            rows.append((f"Preisach, default ({m.method_})", source, m.predict(u)))
+            rows.append((f"Preisach, default ({m.method_})", source, predict(m, u)))
         for label, source, pm in rows:
             print(f"| {seed} | {label} | {source} | " + " | ".join(band_errors(p, pm)) + " |")
-        if figure and seed == 0:
+        if figure and seed == 0 and not FLOAT32:
             pm = from_ident(thesis).predict(u)
             n = u.size // 50  # one validation cycle
             validation_figure(
@@ -140,7 +147,7 @@ def real() -> None:
     m = HysteresisModel(input_name="displacement_mm", output_name="force_n", output_unit="N").fit(
         fit_u, fit_y
     )
-    full = m.predict(test_u)
+    full = predict(m, test_u)
     for label, pred in (("mean of branches", base(test_u)), ("Preisach, default", full)):
         y, pm = test_y[cut:], pred[cut:]
         mean, p95 = rel_err(y, pm)
@@ -148,16 +155,17 @@ def real() -> None:
             f"| elastomer sawtooth, last 40 % (fit on first 60 %) | {label} | "
             f"{nrmse(y, pm):.3f} | {mean:.1%} | {p95:.1%} |"
         )
-    validation_figure(
-        test_u,
-        test_y,
-        full,
-        IMG / "hyst_elastomer.png",
-        input_label="displacement [mm]",
-        output_label="force [N]",
-        title="elastomer random sawtooth: default identification on the first 60 %, "
-        "predicted over the whole record",
-    )
+    if not FLOAT32:
+        validation_figure(
+            test_u,
+            test_y,
+            full,
+            IMG / "hyst_elastomer.png",
+            input_label="displacement [mm]",
+            output_label="force [N]",
+            title="elastomer random sawtooth: default identification on the first 60 %, "
+            "predicted over the whole record",
+        )
     # VHB 4910 at 0.01 /s: identify on stretches 1.5, 2.5, 3.0, predict 2.0
     parts = [vhb_cycle(n) for n in ("0d01_3d0", "0d01_2d5", "0d01_1d5")]
     uu = np.concatenate([p[1] for p in parts])
@@ -172,14 +180,16 @@ def real() -> None:
     )
     for label, pm in (
         ("mean of branches", base(ut)),
-        ("Preisach, thesis method", thesis.predict(ut)),
-        (f"Preisach, default ({lsq.method_})", lsq.predict(ut)),
+        ("Preisach, thesis method", predict(thesis, ut)),
+        (f"Preisach, default ({lsq.method_})", predict(lsq, ut)),
     ):
         mean, p95 = rel_err(yt, pm)
         print(
             f"| VHB 4910, stretch 2.0 (fit on 1.5/2.5/3.0, 0.01 /s) | {label} | "
             f"{nrmse(yt, pm):.3f} | {mean:.1%} | {p95:.1%} |"
         )
+    if FLOAT32:
+        return
     validation_figure(
         ut,
         yt,

@@ -1,6 +1,6 @@
 """Speed of the compiled pipeline against the physical yardstick of this machine: the rate at
 which it copies the same array (``np.multiply(x, 1.0, out=y)``), measured in the same run,
-on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd``).
+on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd_path``).
 
 Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|cpu] [--quick]
 
@@ -12,7 +12,9 @@ Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|c
   4096 elements with 2 % failed readings;
 - ``Pipeline.step`` latency on a real stream (every frame different), median and p99, and
   its compiled part alone (``Chain.step`` into arrays held);
-- the state kept per element.
+- the state kept per element;
+- the experimental float32 Preisach bank (``PreisachBank32``, eight lanes on AVX2; issue 34,
+  seventh round) on the same walk, and its largest difference from the float64 bank.
 
 Every path runs on both kernel paths, scalar and SIMD, back to back; the whole set is
 repeated ``--repeat`` times (each repetition measures the copy rate anew) and the table gives
@@ -121,6 +123,23 @@ def chain_latency(pipe: Pipeline, cap: np.ndarray, dt: float) -> np.ndarray:
     return lat[100:]
 
 
+def f32_bank(model: object, n: int) -> _core.PreisachBank32:
+    """The experimental float32 bank (eight lanes on AVX2) of the model."""
+    table = np.ascontiguousarray(model.everett_, dtype=np.float64)
+    return _core.PreisachBank32(model.u_min_, model.u_max_, table, n, model.offset_, model.sign_)
+
+
+def f32_difference(model: object, walk: np.ndarray) -> tuple[float, float]:
+    """Largest |float32 bank - float64 bank| on the walk (N/cm²), and the largest relative
+    difference where the float64 output exceeds 0.1 N/cm²."""
+    ok = np.ones(walk.shape, bool)
+    y64 = model.bank(walk.shape[1]).run(walk, ok)
+    y32 = f32_bank(model, walk.shape[1]).run(walk, ok)
+    d = np.abs(y32 - y64)
+    big = np.abs(y64) > 0.1
+    return float(d.max()), float((d[big] / np.abs(y64[big])).max())
+
+
 def cases(
     cal: StageChain, frames: int, walk: np.ndarray
 ) -> list[tuple[str, Callable[[], object], int]]:
@@ -144,6 +163,15 @@ def cases(
                 walk.size,
             )
         )
+    bank32 = f32_bank(model, walk.shape[1])
+    out.append(
+        (
+            "Preisach kernel in float32 (experimental `PreisachBank32`), one thread, frame "
+            "after frame",
+            lambda: (bank32.reset(), bank32.run(walk, ok, out=into)),
+            walk.size,
+        )
+    )
     out.append(("Preisach `HysteresisModel.predict`", lambda: model.predict(walk), walk.size))
     for rows, cols in ((8, 12), (32, 32), (64, 64)):
         n = rows * cols
@@ -177,7 +205,7 @@ def main() -> None:
     CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     frames = 400 if args.quick else 4000
     _, best = _core.simd_path()
-    paths = ["scalar", best] if best != "scalar" else ["scalar"]
+    paths = ["scalar", "avx2", "avx512"][: ["scalar", "avx2", "avx512"].index(best) + 1]
     cal = seat_calibration(mat_seed=5)
     walk = random_walk(cal["hysteresis"].model_, frames, 4096)
     batch = cases(cal, frames, walk)
@@ -200,12 +228,12 @@ def main() -> None:
             copies.append(copy)
             for label, run, size in batch:
                 for p in paths:
-                    _core.set_simd(p != "scalar")
+                    _core.set_simd_path(p)
                     t = timed(run)
                     rates[label, p].append(size / t)
                     shares[label, p].append(size / t / copy)
             for p in paths:
-                _core.set_simd(p != "scalar")
+                _core.set_simd_path(p)
                 lat = step_latency(step_pipe, cap, rec.times)
                 lat_med[p].append(float(np.median(lat)))
                 lat_p99[p].append(float(np.percentile(lat, 99)))
@@ -220,8 +248,10 @@ def main() -> None:
     )
     print()
     head = " | ".join(f"{p}: rate | {p}: share of the copy rate" for p in paths)
-    print(f"| path | {head} |" + (" SIMD / scalar |" if len(paths) > 1 else ""))
-    print("|---|" + "---:|---:|" * len(paths) + ("---:|" if len(paths) > 1 else ""))
+    pairs = [("scalar", p) for p in paths[1:]] + ([("avx2", "avx512")] if len(paths) > 2 else [])
+    ratios = "".join(f" {b} / {a} |" for a, b in pairs)
+    print(f"| path | {head} |{ratios}")
+    print("|---|" + "---:|---:|" * len(paths) + "---:|" * len(pairs))
     for label, _, _ in batch:
         cells = " | ".join(
             f"{median_row(rates[label, p]) / 1e6:.1f} M/s | "
@@ -229,9 +259,9 @@ def main() -> None:
             for p in paths
         )
         ratio = ""
-        if len(paths) > 1:
-            r = [b / a for a, b in zip(rates[label, "scalar"], rates[label, paths[1]], strict=True)]
-            ratio = f" {median_row(r):.2f} x |"
+        for a, b in pairs:
+            r = [y / x for x, y in zip(rates[label, a], rates[label, b], strict=True)]
+            ratio += f" {median_row(r):.2f} x |"
         print(f"| {label} | {cells} |{ratio}")
     print()
     print(
@@ -242,6 +272,12 @@ def main() -> None:
     for p in paths:
         med, p99 = median_row(lat_med[p]) * 1e6, median_row(lat_p99[p]) * 1e6
         print(f"| {p} | {med:.0f} µs | {p99:.0f} µs | {median_row(lat_chain[p]) * 1e6:.0f} µs |")
+    d_abs, d_rel = f32_difference(cal["hysteresis"].model_, walk)
+    print()
+    print(
+        f"float32 bank against the float64 bank on the walk: max |difference| {d_abs:.1e} "
+        f"N/cm², max relative {d_rel:.1e} where p > 0.1 N/cm²"
+    )
     state = getattr(step_pipe, "state_bytes_per_element", None)
     if state is not None:
         print()

@@ -31,14 +31,39 @@ def simd_back_on() -> Iterator[None]:
     _core.set_simd(True)
 
 
+def same_bits(a: Any, b: Any) -> None:
+    """Arrays (or tuples of arrays and numbers) equal bit for bit."""
+    if isinstance(a, tuple):
+        for x, y in zip(a, b, strict=True):
+            same_bits(x, y)
+    else:
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape and a.dtype == b.dtype
+        np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8))
+
+
 def both_paths(run: Callable[[], Any]) -> tuple[Any, Any]:
-    """``run()`` on the scalar kernels, then on the SIMD path."""
+    """``run()`` on the scalar kernels, then on the best SIMD path; on an AVX-512 processor
+    also with the AVX2 kernels forced in between, which must give the scalar bits too."""
     _core.set_simd(False)
     assert _core.simd_path()[0] == "scalar"
     scalar = run()
+    if BEST == "avx512":
+        _core.set_simd_path("avx2")
+        assert _core.simd_path()[0] == "avx2"
+        same_bits(scalar, run())
     _core.set_simd(True)
     assert _core.simd_path()[0] == BEST
     return scalar, run()
+
+
+def test_the_path_can_be_limited():
+    _core.set_simd_path("scalar")
+    assert _core.simd_path()[0] == "scalar"
+    _core.set_simd_path("avx512")
+    assert _core.simd_path()[0] == BEST
+    with pytest.raises(ValueError, match="one of scalar, avx2, avx512"):
+        _core.set_simd_path("sse2")
 
 
 def spoil(x: np.ndarray, rng: np.random.Generator, lo: float, hi: float) -> np.ndarray:
@@ -78,6 +103,55 @@ def test_preisach_bank_same_bits_on_both_paths(cal):
     np.testing.assert_array_equal(scalar[0].view(np.uint64), scalar[1].view(np.uint64))
     for a, b in zip(scalar, simd, strict=True):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+def test_float32_bank_same_bits_on_both_paths_and_close_to_float64(cal):
+    # the experimental float32 bank (eight lanes): its lanes give its scalar kernel's bits,
+    # and the seat model's outputs stay within 1e-5 |p| + 2e-5 N/cm² of the float64 bank's
+    # (the microcontroller's float32 bound, docs/embedded.md)
+    model = cal["hysteresis"].model_
+    lo, hi = model.u_min_, model.u_max_
+    table = np.ascontiguousarray(model.everett_, dtype=np.float64)
+    rng = np.random.default_rng(5)
+    walk = lo + np.abs(np.cumsum(rng.normal(0, 0.05, (300, 203)), axis=0)) % (hi - lo)
+    ok = rng.random(walk.shape) > 0.05
+    spoilt = spoil(walk, rng, lo, hi)
+
+    def run() -> tuple[np.ndarray, ...]:
+        bank = _core.PreisachBank32(lo, hi, table, walk.shape[1], model.offset_, model.sign_)
+        clean = bank.run(walk, ok)
+        bank.reset()
+        given = np.full(walk.shape, 7.0)
+        assert bank.run(spoilt, ok, out=given) is given
+        return clean, given
+
+    scalar, simd = both_paths(run)
+    for a, b in zip(scalar, simd, strict=True):
+        np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+    y64 = model.bank(walk.shape[1]).run(walk, ok)
+    assert np.array_equal(np.isnan(y64), np.isnan(simd[0]))
+    assert np.nanmax(np.abs(simd[0] - y64) - 1e-5 * np.abs(y64)) <= 2e-5
+    assert np.isnan(simd[1]).any() and np.isfinite(simd[1]).mean() > 0.5
+
+
+def test_float32_drift_same_bits_on_both_paths_and_close_to_float64():
+    # the experimental float32 drift bank (eq. 5.8, time clock): its lanes give its scalar
+    # kernel's bits; on 500 frames its outputs stay within 1e-4 N/cm² of the float64 bank's
+    rng = np.random.default_rng(6)
+    w, taus = rng.random(14), 2.0 ** np.arange(14)
+    h = np.clip(2 + np.cumsum(rng.normal(0, 0.2, (500, 203)), axis=0), 0, 10)
+    h[rng.random(h.shape) < 0.03] = np.nan
+    ok = rng.random(h.shape) > 0.05
+    dt = np.full(500, 0.1)
+
+    def run() -> np.ndarray:
+        return _core.DriftBank32(w, taus, -0.025, h.shape[1]).run(dt, h, ok)
+
+    scalar, simd = both_paths(run)
+    np.testing.assert_array_equal(scalar.view(np.uint64), simd.view(np.uint64))
+    y64 = _core.DriftBank(w, taus, -0.025, h.shape[1]).run(dt, h, ok)
+    assert np.array_equal(np.isnan(y64), np.isnan(simd))
+    assert np.nanmax(np.abs(simd - y64)) < 1e-4
 
 
 def test_preisach_out_must_be_a_separate_float64_array_of_the_batch(cal):

@@ -19,20 +19,26 @@ __all__ = [
     "Converter",
     "Curve",
     "DriftBank",
+    "DriftBank32",
     "FailureDetector",
     "GridStats",
     "LocalRepair",
+    "MotionTest",
     "NeighbourIndexError",
     "ParameterError",
     "PreisachBank",
+    "PreisachBank32",
     "ShapeError",
     "SpacerBank",
     "__version__",
     "everett_terms",
+    "exposure_advance",
+    "frame_bounds",
     "mcu_blob_info",
     "parse_json_numbers",
     "parse_row",
     "set_simd",
+    "set_simd_path",
     "simd_path",
 ]
 
@@ -124,6 +130,25 @@ class PreisachBank:
     def outputs(self) -> _F64: ...
 
 @final
+class PreisachBank32:
+    """Experimental: the Preisach model in float32, eight elements per AVX2 register
+    (crates/core/src/preisach/f32x8.rs); 28 turning points per element, one thread."""
+
+    def __new__(
+        cls,
+        u_min: float,
+        u_max: float,
+        table: _F64,
+        n_elements: int,
+        offset: float = 0.0,
+        sign: float = 1.0,
+    ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, inputs: _F64, valid: _Bools, out: _F64 | None = None) -> _F64: ...
+
+@final
 class DriftBank:
     """Recursive drift superposition of N elements (crates/core/src/drift.rs)."""
 
@@ -138,6 +163,17 @@ class DriftBank:
         gamma_time: float = 0.0,
         exponent: float = 1.0,
     ) -> Self: ...
+    @property
+    def n_elements(self) -> int: ...
+    def reset(self) -> None: ...
+    def run(self, dt: _F64, h: _F64, valid: _Bools) -> _F64: ...
+
+@final
+class DriftBank32:
+    """Experimental: eq. 5.8 on the time clock in float32, eight elements per AVX2 register
+    (crates/core/src/drift/f32x8.rs), one thread."""
+
+    def __new__(cls, weights: _F64, taus: _F64, gamma: float, n_elements: int) -> Self: ...
     @property
     def n_elements(self) -> int: ...
     def reset(self) -> None: ...
@@ -254,15 +290,71 @@ class GridStats:
     ) -> tuple[float, float, float, float, float, float, float, float] | None:
         """(load, contact area, peak, ppi, cof x, cof y, cof row, cof column), or None."""
 
+@final
+class MotionTest:
+    """The in-use drift estimator's empty count and movement test (crates/core/src/live.rs)."""
+
+    def __new__(cls, blocks: _I64, area: _F64) -> Self: ...
+    def forget(self) -> None:
+        """Forget the last frame."""
+
+    def step(
+        self,
+        x: _F64,
+        gain: _F64,
+        ok: _Bools,
+        empty: float,
+        empty_count: int,
+        floor: float,
+        motion: float,
+    ) -> tuple[_F64, str]:
+        """``x * gain`` and "empty", "moved" or "still"."""
+
+def frame_bounds(
+    values: _F64,
+    ok: _Bools,
+    drift: float,
+    edges: _F64,
+    scale: _F64,
+    mult_edges: _F64,
+    mult: _F64,
+    multiplier: float | None,
+    r_repaired: float,
+    range_max: float | None,
+) -> tuple[_F64, _F64]:
+    """The lower and upper bounds of one frame (``intervals.bounds``, the same bits)."""
+
+def exposure_advance(
+    pressure: _F64,
+    lower: _F64 | None,
+    upper: _F64 | None,
+    threshold: float,
+    count_possible: bool,
+    offload_s: float,
+    reposition_s: float,
+    dt: float,
+    skipped: bool,
+    exposure: _F64,
+    relief: _F64,
+    loaded_last: _Bools,
+    confident: _Bools,
+    possible: _Bools,
+) -> tuple[bool, int, float]:
+    """One exposure step of single elements, in place: (any loaded, at the reposition time,
+    largest exposure)."""
+
 def mcu_blob_info(blob: bytes) -> tuple[int, list[str], int, int, int, int]:
     """(elements, stage names, memory bytes, state bytes per element, scratch bytes per
     element, fixed bytes) of a model blob, checked as the C side checks it."""
 
 def simd_path() -> tuple[str, str]:
-    """(path in use, best path of this processor): "avx2" or "scalar" each."""
+    """(path in use, best path of this processor): "avx512", "avx2" or "scalar" each."""
 
 def set_simd(enabled: bool) -> None:
     """Allow (True, the default) or forbid the SIMD kernels process-wide (same numbers)."""
+
+def set_simd_path(best: str) -> None:
+    """The best SIMD path batches may take: "avx512" (default), "avx2" or "scalar"."""
 
 def parse_row(line: str, sep: str, expected: int) -> npt.NDArray[np.float32] | None:
     """Exactly ``expected`` numbers separated by ``sep``, as float32, or None (the fast path)."""

@@ -1,5 +1,7 @@
 //! Timing of the Preisach bank on a random walk (the benchmark's input shape), for profiling:
-//! `cargo run --release -p texsense-core --example preisach_time -- [avx2|scalar] [frames|blocks] [T] [N]`.
+//! `cargo run --release -p texsense-core --example preisach_time -- [avx512|avx2|scalar|f32] [frames|blocks] [T] [N]`
+//! (`f32`: the experimental float32 bank, eight lanes, frame order; `f32-scalar`: its
+//! scalar kernel).
 
 extern "C" {
     fn clock_gettime(clock: i32, ts: *mut [i64; 2]) -> i32;
@@ -13,11 +15,15 @@ fn cpu() -> f64 {
     ts[0] as f64 + ts[1] as f64 * 1e-9
 }
 
+use texsense_core::preisach::f32x8::Bank32;
 use texsense_core::preisach::{Everett, PreisachBank, Schedule};
+use texsense_core::simd::Path;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let simd = args.get(1).map_or("avx2", |s| s) != "scalar";
+    let path = args.get(1).map_or("avx512", |s| s.as_str());
+    let simd = !path.ends_with("scalar");
+    let f32 = path.starts_with("f32");
     let schedule = match args.get(2).map_or("frames", |s| s) {
         "blocks" => Schedule::Blocks,
         "parallel" => Schedule::Parallel,
@@ -25,7 +31,11 @@ fn main() {
     };
     let t: usize = args.get(3).map_or(4000, |s| s.parse().unwrap());
     let n: usize = args.get(4).map_or(4096, |s| s.parse().unwrap());
-    texsense_core::simd::set_enabled(simd);
+    texsense_core::simd::set_limit(match path {
+        "avx2" => Path::Avx2,
+        _ if !simd => Path::Scalar,
+        _ => Path::Avx512,
+    });
     let k = 100;
     let (lo, hi) = (0.0, 2.212);
     let mut table = vec![0.0; k * k];
@@ -36,6 +46,7 @@ fn main() {
         }
     }
     let e = Everett::new(k, lo, hi, table).unwrap();
+    let mut bank32 = Bank32::new(&e, n).unwrap();
     let mut bank = PreisachBank::new(e, n, 64).unwrap();
     let mut state = 0x1234_5678_9abc_def0u64;
     let mut rnd = move || {
@@ -62,16 +73,26 @@ fn main() {
     let mut best = f64::INFINITY;
     for _ in 0..reps {
         bank.reset();
+        bank32.reset();
         let s = cpu();
-        bank.run_scheduled(&inputs, &valid, &mut out, schedule)
-            .unwrap();
+        if f32 {
+            for ((u, v), o) in inputs
+                .chunks_exact(n)
+                .zip(valid.chunks_exact(n))
+                .zip(out.chunks_exact_mut(n))
+            {
+                bank32.row(u, v, o);
+            }
+        } else {
+            bank.run_scheduled(&inputs, &valid, &mut out, schedule)
+                .unwrap();
+        }
         best = best.min(cpu() - s);
     }
     let sum: f64 = out.iter().filter(|v| v.is_finite()).sum();
     println!(
-        "{} {:?}: {:.1} M/s (best of {reps}), checksum {sum:.6e}",
-        if simd { "avx2" } else { "scalar" },
-        schedule,
+        "{path} {:?}: {:.1} M/s (best of {reps}), checksum {sum:.6e}",
+        if f32 { Schedule::FrameOrder } else { schedule },
         (t * n) as f64 / best / 1e6
     );
     let mut copy = vec![1.0; t * n];

@@ -108,7 +108,7 @@ impl ConverterView<'_> {
 
     /// The stage over elements `start .. start + x.len()` of a frame: readings `x` and
     /// their validity `ok` -> values `out` (the validity stays `ok`); on AVX2 four elements
-    /// at a time ([`crate::simd`]; the same bits as [`ConverterView::stage`]).
+    /// at a time (eight on AVX-512: `avx512`) ([`crate::simd`]; the same bits as [`ConverterView::stage`]).
     ///
     /// # Panics
     /// When the slices differ in length or the view has too few elements.
@@ -117,6 +117,12 @@ impl ConverterView<'_> {
             x.len() == ok.len() && x.len() == out.len(),
             "one per element"
         );
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx512() {
+            // SAFETY: the processor has AVX2 and AVX-512 F/DQ/VL (detected by `simd::avx512`)
+            unsafe { avx512::row(self, start, x, ok, out) };
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() {
             // SAFETY: the processor has AVX2 (detected by `simd::avx2`)
@@ -202,3 +208,5 @@ impl Converter {
 }
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;

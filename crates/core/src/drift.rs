@@ -171,7 +171,7 @@ impl DriftBlock<'_> {
 
     /// One frame of the block: element `i` reads `h[i]` (`ok[i]` false: skipped) into
     /// `out[i]`; on AVX2 with the time clock and the linear level (eq. 5.8 as printed),
-    /// four elements at a time, one vector per kernel term (`avx2`: the scalar kernel's
+    /// four elements at a time (eight on AVX-512: `avx512`, the same bits), one vector per kernel term (`avx2`: the scalar kernel's
     /// operations in the same order, so the same bits); the rest clock (an `exp` per
     /// element and term) and a level power (a `powf`) run the scalar kernel.
     ///
@@ -185,18 +185,35 @@ impl DriftBlock<'_> {
         );
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() && self.settings.rest().0 == 0.0 && self.settings.exponent() == 1.0 {
+            let (mut pairs, k) = (0, self.settings.terms());
+            if crate::simd::avx512() {
+                pairs = n / avx512::LANES * avx512::LANES;
+                // SAFETY: the processor has AVX-512 F/DQ (detected by `simd::avx512`);
+                // `pairs` elements are whole pairs of groups, the slices hold n >= pairs
+                unsafe {
+                    avx512::groups(
+                        &self.settings,
+                        self.elements,
+                        self.z,
+                        &self.decay,
+                        &h[..pairs],
+                        &ok[..pairs],
+                        &mut out[..pairs],
+                    )
+                };
+            }
             let whole = n / GROUP * GROUP;
             // SAFETY: the processor has AVX2 (detected by `simd::avx2`); `whole` elements
             // are whole groups of the block's layout, the slices hold n >= whole values
             unsafe {
                 avx2::groups(
                     &self.settings,
-                    self.elements,
-                    self.z,
+                    &mut self.elements[pairs..],
+                    &mut self.z[pairs * k..],
                     &self.decay,
-                    &h[..whole],
-                    &ok[..whole],
-                    &mut out[..whole],
+                    &h[pairs..whole],
+                    &ok[pairs..whole],
+                    &mut out[pairs..whole],
                 )
             };
             for i in whole..n {
@@ -530,5 +547,8 @@ pub(crate) fn check_time_steps(dt: &[f64]) -> Result<(), CoreError> {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
+pub mod f32x8;
 #[cfg(test)]
 mod tests;

@@ -31,6 +31,7 @@ pub mod detect;
 pub mod drift;
 pub mod error;
 pub mod everett;
+pub mod live;
 pub mod mcu;
 pub mod par;
 pub mod preisach;

@@ -37,7 +37,10 @@ use crate::snapshot::{Reader, Writer};
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 mod element;
+pub mod f32x8;
 
 use element::Element;
 pub(crate) use element::Heads;
@@ -107,8 +110,8 @@ impl PreisachBlock<'_> {
     }
 
     /// One frame of the block: inputs `u` and their validity `ok` (one per element) ->
-    /// outputs `out` (NaN where skipped); on AVX2 four elements at a time
-    /// ([`crate::simd`]), with the scalar kernel's results bit for bit.
+    /// outputs `out` (NaN where skipped); on AVX2 four elements at a time, on AVX-512
+    /// eight (`avx512`; [`crate::simd`]), with the scalar kernel's results bit for bit.
     ///
     /// # Panics
     /// When a slice does not hold one value per element.
@@ -118,6 +121,25 @@ impl PreisachBlock<'_> {
             u.len() == n && ok.len() == n && out.len() == n,
             "one per element"
         );
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx512() {
+            // SAFETY: the processor has AVX2 and AVX-512 F/DQ/VL (detected by
+            // `simd::avx512`); lengths checked
+            unsafe {
+                avx512::row(
+                    &self.everett,
+                    self.cells,
+                    self.capacity,
+                    self.output,
+                    self.elements,
+                    self.heads,
+                    u,
+                    ok,
+                    out,
+                )
+            };
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() {
             // SAFETY: the processor has AVX2 (detected by `simd::avx2`); lengths checked

@@ -7,65 +7,94 @@
 //! term of four elements per register: `drift::avx2`) and the conversion across elements
 //! (`convert::avx2`); all give the scalar kernels' results bit for bit (no fused
 //! multiply-add, the same operations in the same order; property tests in
-//! `preisach/tests.rs`, `drift/tests.rs` and `convert/avx2.rs`). Elsewhere, or after [`set_enabled`]`(false)`, the scalar kernels run.
+//! `preisach/tests.rs`, `drift/tests.rs` and `convert/avx2.rs`). A processor with AVX-512
+//! F/DQ/VL runs the same three in eight f64 lanes (`preisach::avx512`, `drift::avx512`,
+//! `convert::avx512`; the same bits, tested against the scalar kernels and the AVX2 path
+//! forced by [`set_limit`]). Elsewhere, or after [`set_enabled`]`(false)`, the scalar kernels run.
 //!
 //! The choice is made per call from a flag and the CPU detection that `std` caches
 //! (`is_x86_feature_detected!`), so switching it between two batches is safe.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU8, Ordering};
 
-static ENABLED: AtomicBool = AtomicBool::new(true);
+/// The best path batches may take ([`Path`] as `u8`; [`set_limit`]).
+static LIMIT: AtomicU8 = AtomicU8::new(Path::Avx512 as u8);
 
-/// The kernel path a batch runs on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The kernel path a batch runs on (ordered: each path's processor has the ones before).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Path {
     /// The scalar kernels of `texsense-kernels`.
-    Scalar,
+    Scalar = 0,
     /// AVX2 (x86-64): four f64 lanes.
-    Avx2,
+    Avx2 = 1,
+    /// AVX-512 F/DQ/VL (x86-64): eight f64 lanes and mask registers, for the kernels that
+    /// have such a build (the Preisach row and the drift row); the others run on AVX2.
+    Avx512 = 2,
 }
 
 impl Path {
-    /// `"scalar"` or `"avx2"`.
+    /// `"scalar"`, `"avx2"` or `"avx512"`.
     pub fn name(self) -> &'static str {
         match self {
             Path::Scalar => "scalar",
             Path::Avx2 => "avx2",
+            Path::Avx512 => "avx512",
+        }
+    }
+
+    fn of(v: u8) -> Path {
+        match v {
+            0 => Path::Scalar,
+            1 => Path::Avx2,
+            _ => Path::Avx512,
         }
     }
 }
 
-/// The best path this processor has (whether enabled or not).
+/// The best path this processor has (whether allowed or not).
 pub fn detected() -> Path {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx2") {
+        use std::arch::is_x86_feature_detected as has;
+        if has!("avx512f") && has!("avx512dq") && has!("avx512vl") && has!("avx2") {
+            return Path::Avx512;
+        }
+        if has!("avx2") {
             return Path::Avx2;
         }
     }
     Path::Scalar
 }
 
-/// The path batches run on now: [`detected`] unless disabled by [`set_enabled`].
+/// The path batches run on now: [`detected`], at most the limit of [`set_limit`].
 #[inline]
 pub fn path() -> Path {
-    if ENABLED.load(Ordering::Relaxed) {
-        detected()
-    } else {
-        Path::Scalar
-    }
+    detected().min(Path::of(LIMIT.load(Ordering::Relaxed)))
 }
 
 /// Allow (default) or forbid the SIMD paths, process-wide (for benchmarks and tests that
-/// compare the two paths on the same input).
+/// compare the two paths on the same input): `set_limit(Avx512)` or `set_limit(Scalar)`.
 pub fn set_enabled(on: bool) {
-    ENABLED.store(on, Ordering::Relaxed);
+    set_limit(if on { Path::Avx512 } else { Path::Scalar });
 }
 
-/// True when batches run on AVX2 now.
+/// The best path batches may take from now on, process-wide (`Avx2` forces the AVX2
+/// kernels on an AVX-512 processor, for tests and the benchmark).
+pub fn set_limit(best: Path) {
+    LIMIT.store(best as u8, Ordering::Relaxed);
+}
+
+/// True when batches run on AVX2 (or better) now: the AVX2 kernels serve where no AVX-512
+/// build exists.
 #[inline]
 pub fn avx2() -> bool {
-    path() == Path::Avx2
+    path() >= Path::Avx2
+}
+
+/// True when batches run on AVX-512 now.
+#[inline]
+pub fn avx512() -> bool {
+    path() == Path::Avx512
 }
 
 #[cfg(test)]

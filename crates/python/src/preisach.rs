@@ -5,6 +5,7 @@ use numpy::{
     PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
+use texsense_core::preisach::f32x8::Bank32;
 use texsense_core::preisach::Schedule;
 use texsense_core::{everett_terms, CoreError, Everett, PreisachBank};
 
@@ -30,16 +31,7 @@ element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
         offset: f64,
         sign: f64,
     ) -> PyResult<Self> {
-        let shape = table.shape();
-        if shape[0] != shape[1] {
-            return Err(to_py(CoreError::Shape {
-                what: "everett table",
-                expected: "a square (K, K) table".into(),
-                got: format!("{shape:?}"),
-            }));
-        }
-        let everett =
-            Everett::new(shape[0], u_min, u_max, table.as_slice()?.to_vec()).map_err(to_py)?;
+        let everett = square_table(&table, u_min, u_max)?;
         let inner = PreisachBank::new(everett, n_elements, capacity)
             .and_then(|b| b.with_output(offset, sign))
             .map_err(to_py)?;
@@ -93,44 +85,9 @@ element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
         };
         let b = Batch::new("inputs", self.inner.len(), None, &inputs, &valid)?;
         let inner = &mut self.inner;
-        let Some(out) = out else {
-            return run_detached(py, b.t, b.n, |out| {
-                inner.run_scheduled(b.values, b.valid, out, schedule)
-            });
-        };
-        let wrong = |got: String| {
-            to_py(CoreError::Shape {
-                what: "out",
-                expected: format!(
-                    "a C-contiguous float64 array ({}, {}), not an input",
-                    b.t, b.n
-                ),
-                got,
-            })
-        };
-        let out = out.cast_into::<PyArray2<f64>>().map_err(|e| {
-            let obj = e.into_inner();
-            wrong(match obj.getattr("dtype") {
-                Ok(d) => format!("dtype {d}"),
-                Err(_) => format!("{}", obj.get_type()),
-            })
-        })?;
-        if out.shape() != [b.t, b.n] || !out.is_c_contiguous() {
-            return Err(wrong(format!(
-                "shape {:?}, strides {:?}",
-                out.shape(),
-                out.strides()
-            )));
-        }
-        {
-            let mut w = out
-                .try_readwrite()
-                .map_err(|e| wrong(format!("an array it cannot write into ({e})")))?;
-            let o = w.as_slice_mut()?;
-            py.detach(|| inner.run_scheduled(b.values, b.valid, o, schedule))
-                .map_err(to_py)?;
-        }
-        Ok(out)
+        into_out(py, &b, out, |o| {
+            inner.run_scheduled(b.values, b.valid, o, schedule)
+        })
     }
 
     /// Bytes of state of the whole bank (elements and stacks moved to the heap).
@@ -179,6 +136,112 @@ element_bank!(PyPreisachBank, reset = "Back to lower saturation.", {
     /// Last output per element.
     fn outputs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         self.inner.last_outputs().into_pyarray(py)
+    }
+});
+
+/// The Everett function of a square (K, K) table over [u_min, u_max].
+fn square_table(table: &PyReadonlyArray2<'_, f64>, u_min: f64, u_max: f64) -> PyResult<Everett> {
+    let shape = table.shape();
+    if shape[0] != shape[1] {
+        return Err(to_py(CoreError::Shape {
+            what: "everett table",
+            expected: "a square (K, K) table".into(),
+            got: format!("{shape:?}"),
+        }));
+    }
+    Everett::new(shape[0], u_min, u_max, table.as_slice()?.to_vec()).map_err(to_py)
+}
+
+/// A batch's outputs into `out` (a C-contiguous float64 array (T, N), not an input), or
+/// into a new array: `kernel` runs with the GIL released.
+fn into_out<'py, F>(
+    py: Python<'py>,
+    b: &Batch<'_>,
+    out: Option<Bound<'py, PyAny>>,
+    kernel: F,
+) -> PyResult<Bound<'py, PyArray2<f64>>>
+where
+    F: FnOnce(&mut [f64]) -> Result<(), CoreError> + Send,
+{
+    let Some(out) = out else {
+        return run_detached(py, b.t, b.n, kernel);
+    };
+    let wrong = |got: String| {
+        to_py(CoreError::Shape {
+            what: "out",
+            expected: format!(
+                "a C-contiguous float64 array ({}, {}), not an input",
+                b.t, b.n
+            ),
+            got,
+        })
+    };
+    let out = out.cast_into::<PyArray2<f64>>().map_err(|e| {
+        let obj = e.into_inner();
+        wrong(match obj.getattr("dtype") {
+            Ok(d) => format!("dtype {d}"),
+            Err(_) => format!("{}", obj.get_type()),
+        })
+    })?;
+    if out.shape() != [b.t, b.n] || !out.is_c_contiguous() {
+        return Err(wrong(format!(
+            "shape {:?}, strides {:?}",
+            out.shape(),
+            out.strides()
+        )));
+    }
+    {
+        let mut w = out
+            .try_readwrite()
+            .map_err(|e| wrong(format!("an array it cannot write into ({e})")))?;
+        let o = w.as_slice_mut()?;
+        py.detach(|| kernel(o)).map_err(to_py)?;
+    }
+    Ok(out)
+}
+
+/// Experimental (issue 34): the Preisach model of N elements in float32, eight elements
+/// in the lanes of one AVX2 register (`texsense_core::preisach::f32x8`), a memory of 28
+/// turning points per element, frame after frame on one thread. Its outputs are the
+/// float32 scalar kernel's bit for bit, and differ from `PreisachBank`'s by float32's
+/// rounding; no pipeline uses it.
+#[pyclass(name = "PreisachBank32", module = "texsense._core")]
+pub(crate) struct PyPreisachBank32 {
+    inner: Bank32,
+}
+
+element_bank!(PyPreisachBank32, reset = "Back to lower saturation.", {
+    /// The model's output is `sign (h + offset)`, in float32.
+    #[new]
+    #[pyo3(signature = (u_min, u_max, table, n_elements, offset=0.0, sign=1.0))]
+    fn new(
+        u_min: f64,
+        u_max: f64,
+        table: PyReadonlyArray2<'_, f64>,
+        n_elements: usize,
+        offset: f64,
+        sign: f64,
+    ) -> PyResult<Self> {
+        let everett = square_table(&table, u_min, u_max)?;
+        let inner = Bank32::new(&everett, n_elements)
+            .and_then(|b| b.with_output(offset, sign))
+            .map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// Batch: inputs (T, N), valid (T, N) -> outputs (T, N) as float64, NaN where
+    /// skipped; `out` as for `PreisachBank.run`.
+    #[pyo3(signature = (inputs, valid, out=None))]
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        inputs: PyReadonlyArray2<'py, f64>,
+        valid: PyReadonlyArray2<'py, bool>,
+        out: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let b = Batch::new("inputs", self.inner.len(), None, &inputs, &valid)?;
+        let inner = &mut self.inner;
+        into_out(py, &b, out, |o| inner.run(b.values, b.valid, o))
     }
 });
 

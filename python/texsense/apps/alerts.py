@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import exposure_advance as _exposure_advance
 from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
@@ -174,6 +175,10 @@ class ExposureTracker:
         reposition alert too (default: only those above it with the bounds' confidence).
     """
 
+    #: A step of single elements (no regions) in one compiled pass
+    #: (``texsense._core.exposure_advance``; False: the numpy reference, the same bits, tested).
+    compiled = True
+
     def __init__(
         self,
         layout: Layout,
@@ -285,11 +290,45 @@ class ExposureTracker:
         dt = 0.0 if self._last_t is None else t - self._last_t
         self._last_t = t
         events: list[Event] = []
+        if self.compiled and self._groups is None and not self.waiting_empty:
+            any_load, n_over, top = self._advance_compiled(p, lower, upper, dt, skipped)
+        else:
+            if self.waiting_empty:  # the calibration load: no person, no exposure, no events
+                if (self._values(p) > self.threshold_ncm2).any():
+                    return events
+                self.waiting_empty, self.seated = False, False
+            any_load = self._loaded_step(p, lower, upper, dt, skipped)
+            n_over, top = -1, float(self.exposure_s.max())
+        events += self._occupancy(t, any_load)
+        alert = self.open_alert
+        if alert is None:
+            over = np.flatnonzero(self.exposure_s >= self.reposition_s) if n_over else None
+            if over is not None and over.size and not self.hold:
+                alert = Alert(next(self._ids), t, over.tolist(), float(self.exposure_s.max()))
+                detail: dict[str, Any] = {"where": [self.names[i] for i in over]}
+                if lower is not None and upper is not None:
+                    alert.certainty = "confident" if self.confident[over].any() else "possible"
+                    detail["certainty"] = alert.certainty
+                self.alerts.append(alert)
+                events.append(Event("reposition", t, alert.id, detail))
+        else:
+            alert.peak_exposure_s = max(alert.peak_exposure_s, top)
+            if not np.any(self.exposure_s[alert.elements] > 0):
+                alert.cleared_t, alert.cleared_by = t, "offloaded"
+                events.append(Event("cleared", t, alert.id, {"by": "offloaded"}))
+        return events
+
+    def _loaded_step(
+        self,
+        p: np.ndarray,
+        lower: npt.ArrayLike | None,
+        upper: npt.ArrayLike | None,
+        dt: float,
+        skipped: bool,
+    ) -> bool:
+        """Which places are loaded and their exposure advanced over ``dt`` (numpy: the
+        reference of the compiled step); True when any is loaded."""
         loaded = self._values(p) > self.threshold_ncm2
-        if self.waiting_empty:  # the calibration load: no person, no exposure, no events
-            if loaded.any():
-                return events
-            self.waiting_empty, self.seated = False, False
         if lower is not None and upper is not None:
             self.confident = self._values(np.asarray(lower, np.float64)) > self.threshold_ncm2
             self.possible = (
@@ -304,24 +343,30 @@ class ExposureTracker:
         else:
             self._advance(loaded, dt)
         self._loaded_last = loaded
-        events += self._occupancy(t, bool(loaded.any()))
-        alert = self.open_alert
-        if alert is None:
-            over = np.flatnonzero(self.exposure_s >= self.reposition_s)
-            if over.size and not self.hold:
-                alert = Alert(next(self._ids), t, over.tolist(), float(self.exposure_s.max()))
-                detail: dict[str, Any] = {"where": [self.names[i] for i in over]}
-                if lower is not None and upper is not None:
-                    alert.certainty = "confident" if self.confident[over].any() else "possible"
-                    detail["certainty"] = alert.certainty
-                self.alerts.append(alert)
-                events.append(Event("reposition", t, alert.id, detail))
-        else:
-            alert.peak_exposure_s = max(alert.peak_exposure_s, float(self.exposure_s.max()))
-            if not np.any(self.exposure_s[alert.elements] > 0):
-                alert.cleared_t, alert.cleared_by = t, "offloaded"
-                events.append(Event("cleared", t, alert.id, {"by": "offloaded"}))
-        return events
+        return bool(loaded.any())
+
+    def _advance_compiled(
+        self,
+        p: np.ndarray,
+        lower: npt.ArrayLike | None,
+        upper: npt.ArrayLike | None,
+        dt: float,
+        skipped: bool,
+    ) -> tuple[bool, int, float]:
+        """:meth:`_loaded_step` of single elements in one compiled pass, in place
+        (``texsense._core.exposure_advance``: the same bits); also how many elements have
+        reached the reposition time and the largest exposure."""
+        bounded = lower is not None and upper is not None
+        lo = np.ascontiguousarray(lower, np.float64) if bounded else None
+        hi = np.ascontiguousarray(upper, np.float64) if bounded else None
+        for name in ("confident", "possible", "_loaded_last"):  # owned, as the core writes them
+            a = getattr(self, name)
+            if not (a.flags.c_contiguous and a.flags.writeable and a.dtype == bool):
+                setattr(self, name, np.array(a, dtype=bool))
+        return _exposure_advance(np.ascontiguousarray(p), lo, hi, self.threshold_ncm2,
+                                 self.count_possible, self.offload_s, self.reposition_s, dt,
+                                 bool(skipped), self.exposure_s, self._relief_s,
+                                 self._loaded_last, self.confident, self.possible)  # fmt: skip
 
     def _advance(self, loaded: np.ndarray, dt: float | np.ndarray) -> None:
         """``dt`` (s, per element or one for all) in the state ``loaded``: exposure grows

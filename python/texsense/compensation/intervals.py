@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import frame_bounds as _frame_bounds
 from texsense.exceptions import ParameterError
 
 __all__ = [
@@ -63,6 +64,7 @@ __all__ = [
     "bounds",
     "conformal_quantiles",
     "drift_share",
+    "frame_bounds",
     "multiplier",
 ]
 
@@ -340,3 +342,25 @@ def bounds(
         m = np.asarray(float(multiplier_value))
     hw = m * sigma
     return v - hw, v + hw
+
+
+def frame_bounds(
+    values: np.ndarray,
+    measured: np.ndarray,
+    level: float,
+    held_out: HeldOut,
+    *,
+    drift: float,
+    range_max: float | None = None,
+    context: str = "mat",
+    multiplier_value: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`bounds` of one frame (N,) whose unmeasured values are repaired, in one compiled
+    pass (``texsense._core.frame_bounds``: the same operations in the same order, so the same
+    bits; tests/test_intervals_frame.py): what a station runs for every frame of every mat."""
+    edges, scale = held_out._arrays
+    mult = _per_band(float(level), context)
+    m = None if multiplier_value is None else float(multiplier_value)
+    return _frame_bounds(np.ascontiguousarray(values, np.float64),
+                         np.ascontiguousarray(measured, bool), float(drift), edges, scale,
+                         _BAND_EDGES, mult, m, R_REPAIRED, range_max)  # fmt: skip

@@ -71,6 +71,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import MotionTest
 from texsense.compensation.inuse_state import InUseState
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
@@ -149,6 +150,10 @@ class InUseDrift:
         Bouc–Wen nights and one foam night were worse per element: docs/drift.md).
     """
 
+    #: The empty count and the movement test of a frame in one compiled pass
+    #: (``texsense._core.MotionTest``; False: the numpy reference, the same bits, tested).
+    compiled = True
+
     def __init__(
         self,
         curve_input: npt.ArrayLike,
@@ -207,6 +212,7 @@ class InUseDrift:
         self._empty_count = max(2, int(0.002 * n))
         # the smallest load a movement is judged against: 20 elements at the empty threshold
         self._floor_n = 20.0 * float(np.mean(self.area)) * self.empty_ncm2
+        self._test = MotionTest(self._blocks.astype(np.int64), np.ascontiguousarray(self.area))
         self.forget()
 
     # ------------------------------------------------------------------ the stream
@@ -215,6 +221,7 @@ class InUseDrift:
         n = self.layout.n_elements
         self._last_t: float | None = None
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # last map, block loads
+        self._test.forget()  # (the compiled test's last map)
         self._still_since: float | None = None
         self._period: dict[str, Any] | None = None  # the present still period
         self._empty_since: float | None = None
@@ -279,23 +286,29 @@ class InUseDrift:
         """One frame of hysteresis outputs (N/cm²) with the mask of measured elements at ``t``
         (s) -> the corrected frame (elements not measured keep their value, corrected);
         ``raw``: the frame's raw readings, for the zero of an empty mat (with ``converter``)."""
-        x = np.asarray(values, dtype=np.float64)  # (read, never written to)
+        x = np.ascontiguousarray(values, dtype=np.float64)  # (read, never written to)
         if not np.isfinite(x).all():
             x = np.nan_to_num(x)
-        ok = np.asarray(valid, dtype=bool)
+        ok = np.ascontiguousarray(valid, dtype=bool)
         t = float(t)
         dt = 0.0 if self._last_t is None else t - self._last_t
         if dt < 0:
             raise ParameterError("frame times must not decrease")
         self._last_t = t
-        c = x * self._gain
-        if np.count_nonzero((c > self.empty_ncm2) & ok) <= self._empty_count:
+        if self.compiled:  # the empty count and the movement test in one compiled pass
+            c, verdict = self._test.step(x, self._gain, ok, self.empty_ncm2, self._empty_count,
+                                         self._floor_n, self.motion)  # fmt: skip
+        else:
+            c = x * self._gain
+            empty = np.count_nonzero((c > self.empty_ncm2) & ok) <= self._empty_count
+            verdict = "empty" if empty else ""  # "": the movement test below
+        if verdict == "empty":
             self._empty(ok, dt, t, raw)
             return c
         if self._zeroing:  # the mat was empty and is loaded again: the set read is the creep
             self._take_zero()
         self._empty_since, self._zeroing = None, False
-        if self._moved(c, ok):
+        if verdict == "moved" or (verdict == "" and self._moved(c, ok)):
             self._still_since, self._period = None, None
             return c
         if self._still_since is None:  # the first still frame: the gains at this load
@@ -309,6 +322,7 @@ class InUseDrift:
         """An empty mat: nothing moves; settled, the compression it reads (its set) is
         smoothed over ``update_s``."""
         self._still_since, self._period, self._prev = None, None, None
+        self._test.forget()
         self._empty_since = t if self._empty_since is None else self._empty_since
         self._returned = True
         if not (self.zero and self.converter is not None and raw is not None):

@@ -47,7 +47,7 @@ import numpy.typing as npt
 from texsense._core import Chain, Compensation, __version__
 from texsense.compensation.health import FailureDetector
 from texsense.compensation.hysteresis import DEFAULT_CAPACITY
-from texsense.compensation.intervals import bounds, drift_share, multiplier
+from texsense.compensation.intervals import bounds, drift_share, frame_bounds, multiplier
 from texsense.compensation.inuse import InUseDrift, InUseState
 from texsense.compensation.repair import GLOBAL_METHODS, METHODS, Repair, local_repair
 from texsense.compensation.stage import Stage, time_steps
@@ -136,6 +136,10 @@ class Pipeline:
         ``bounds_`` holds the lower and upper maps of the last frames. The calibration's
         hysteresis model needs held-out residuals (a preset's, or a held-out record).
     """
+
+    #: A frame of the stream gets its bounds in one compiled pass (False: the numpy reference,
+    #: :func:`~texsense.compensation.intervals.bounds`; the same bits, tested).
+    compiled_bounds = True
 
     def __init__(
         self,
@@ -448,6 +452,13 @@ class Pipeline:
         est = self.estimator
         corr = est.corrections_ if est is not None else np.full(hours.shape, np.nan)
         ages = est.ages_ if est is not None else np.zeros(hours.shape)
+        if hours.size == 1 and self.compiled_bounds:  # a frame of the stream: one compiled pass
+            c0 = float(corr[0])
+            d0 = drift_share(float(hours[0]), None if c0 != c0 else c0, float(ages[0]))
+            lo, hi = frame_bounds(values[0], ok[0], self.interval, self._held_out, drift=d0,
+                                  range_max=self._range_max,
+                                  multiplier_value=self.interval_multiplier)  # fmt: skip
+            return lo[None, :], hi[None, :]
         rows = zip(
             hours.tolist(), np.asarray(corr).tolist(), np.asarray(ages).tolist(), strict=True
         )

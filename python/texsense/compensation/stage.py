@@ -73,7 +73,8 @@ def _plain_param(value: Any, hint: Any) -> Any:
         raise TypeError(f"expected {'a number' if kind in ('int', 'float') else kind}, "
                         f"got {type(value).__name__}")  # fmt: skip
     if kind == "int":
-        if value != value or abs(value) > 2**62 or value != int(value):
+        number = typing.cast(float, value)  # an int or a float here (checked above)
+        if number != number or abs(number) > 2**62 or number != int(number):
             raise ValueError(f"expected a whole number, got {value}")
         return int(value)
     return value

@@ -47,6 +47,7 @@ import signal
 import stat
 import tempfile
 import threading
+import tomllib
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import ModuleType
@@ -524,8 +525,6 @@ def toml_loads(raw: bytes) -> dict[str, Any]:
     not TOML is a ``ValueError`` (``tomllib.TOMLDecodeError``, ``UnicodeDecodeError``), also
     arrays or inline tables nested deeper than ``tomllib`` recurses (a ``RecursionError``) and
     an integer of more digits than Python converts (a bare ``ValueError`` from ``int``)."""
-    import tomllib
-
     text = raw.decode("utf-8-sig")
     try:
         return tomllib.loads(text)

@@ -357,7 +357,10 @@ def _frame_of(d: dict[str, Any], values: np.ndarray, n_elements: int) -> Frame:
             raise ProtocolError("'dt' must be a number >= 0")
         if not _finite(dt):
             raise ProtocolError("'t' + 'dt' x elements is not a finite time")
-        times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
+        if dt == 0:  # every element at t (the same bits as the sum below, one array)
+            times = np.full(n_elements, float(t) + 0.0)
+        else:
+            times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
         if not np.isfinite(times[-1]):
             raise ProtocolError("'t' + 'dt' x elements is not a finite time")
     return Frame(seq, times, values, unit)

@@ -162,7 +162,7 @@ class Monitor:
         self._latest_text: str | None = "null"
         self._subscribers: set[asyncio.Queue[str]] = set()
         self._t_first: float | None = None  # the time of the first frame
-        self._cof_trace: list[list[float]] = []
+        self._cof_trace: list[tuple[float, float]] = []
         self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
         self._skimmed = False  # frames skimmed since the last frame processed (keep_time)
         self.clock = FrameClock()
@@ -175,7 +175,9 @@ class Monitor:
 
         self._vote = WindowVote(POSTURE_WINDOW_S)
         #: the statistics of the last :data:`HISTORY` frames (the page's charts)
-        self.history: deque[list[Any]] = deque(maxlen=HISTORY)
+        #: (rows are tuples of numbers: the collector leaves them, issue 38: as lists, 1,200 a
+        #: mat were most of a station's objects, and a full collection at 1,000 mats took 0.1 s)
+        self.history: deque[tuple[Any, ...]] = deque(maxlen=HISTORY)
         self.calibrated_wall: float | None = None  # when the calibration came into use
         self._adopt_orientation(pipeline)
         #: called with every frame on the mat's clock, before it is processed (the page's
@@ -397,61 +399,62 @@ class Monitor:
         alerts and events — and through nothing that only shows it (statistics, maps,
         snapshot, charts, viewers, a bed's regions). The exposure timers and alerts are those
         of processing every frame (issue 38). False when its time is off the clock."""
+        return self._take(frame, wall, full=False) is not None
+
+    def _take(self, frame: Frame, wall: float, *, full: bool) -> tuple[Any, ...] | None:
+        """What :meth:`follow` and :meth:`process` share: the clock, the taps, the first
+        frame's time, a raw mat's floor, the pressure and its bounds, the bed's side, the
+        exposure and its events (stored). None when the frame's time is off the clock;
+        ``full``: with the statistics, the posture and a bed's regions (what a snapshot
+        shows), else ``()`` for a raw mat (nothing else of it outlives the frame)."""
         if not self._in_step(frame, wall):
-            return False
+            return None
+        if full:
+            self.last_wall = wall
         for tap in self.taps:
             tap(frame)
         if self._t_first is None:
             self._t_first = frame.t
         if self.raw_only:  # nothing of a raw frame outlives it but the clock and the floor
-            floor = self._raw_floor
-            raw = frame.values
+            floor, raw = self._raw_floor, frame.values
             self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
-            return True
-        pressure, _, _ = self._pressure_of(frame)
+            if not full:
+                return ()
+        pressure, measured, codes = self._pressure_of(frame)
         bounds = self._bounds_of()
-        posture = None
-        if self.bed is not None:  # the side's vote feeds the turning schedule
+        frame_stats, posture = None, None
+        if full:
+            frame_stats, load = self._stats_of(frame.t, pressure)
+            posture = self._posture_of(frame.t, pressure, load)
+        elif self.bed is not None:  # the side's vote feeds the turning schedule
             load = _finite(stats.one_frame_stats(pressure, self.layout, threshold=0.05)["load_N"])
             posture = self._posture_of(frame.t, pressure, load)
-        events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=False)
-        if events:
+        events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=full)
+        if events or full:
             self._events(events, wall)
             self.changes += 1
-        return True
+        return pressure, measured, codes, bounds, frame_stats, posture
 
     def process(self, frame: Frame, wall: float | None = None) -> dict[str, Any] | None:
         """One frame through everything; returns the snapshot, or None for a frame whose
         time is off the mat's clock (skipped: see :class:`FrameClock`). ``wall``: when it
         arrived (Unix s, default now)."""
         received_at = time.time() if wall is None else wall
-        if not self._in_step(frame, received_at):
+        taken = self._take(frame, received_at, full=True)
+        if taken is None:
             return None
-        self.last_wall = received_at
-        for tap in self.taps:
-            tap(frame)
-        pressure, measured, codes = self._pressure_of(frame)
-        bounds = self._bounds_of()
-        if self._t_first is None:
-            self._t_first = frame.t
-        frame_stats, load = self._stats_of(frame.t, pressure)
-        posture = self._posture_of(frame.t, pressure, load)
-        events = self._exposure(frame.t, pressure, posture, received_at, bounds)
+        pressure, measured, codes, bounds, frame_stats, posture = taken
         bed = self.bed.status(frame.t) if self.bed is not None else None
         if bed is not None and bounds is not None:
             self._bound_regions(bed["regions"], pressure, bounds)
-        self._events(events, received_at)
         if self.recorder is not None:
             label = posture["label"] if posture else None
             self.recorder.append(frame, pressure, measured, received_at, label, bounds)
         self.frames += 1
-        self.changes += 1
         self.last_pressure = np.array(pressure, dtype=np.float64)
         raw = frame.values
         raw_stats = None
-        if self.raw_only:  # no pressure: no load, area, peak pressure or PPI, but the rise
-            floor = self._raw_floor
-            self._raw_floor = np.array(raw, np.float64) if floor is None else np.fmin(floor, raw)
+        if self.raw_only and self._raw_floor is not None:  # no pressure: the rise, no load...
             raw_stats = {"unit": frame.unit, **raw_rise(raw, self._raw_floor)}
         self._remember(frame.t, frame_stats, raw_stats)
         alert = self.tracker.open_alert
@@ -575,9 +578,9 @@ class Monitor:
         and without a calibration the peak rise and the elements responding."""
         cof = st.get("cof_cm") or [None, None]
         rise = raw or {}
-        self.history.append([round(t, 3), st.get("load_N"), st.get("peak_ncm2"),
+        self.history.append((round(t, 3), st.get("load_N"), st.get("peak_ncm2"),
                              st.get("contact_area_cm2"), cof[0], cof[1],
-                             rise.get("peak_rise"), rise.get("responding")])  # fmt: skip
+                             rise.get("peak_rise"), rise.get("responding")))  # fmt: skip
 
     def _stats_of(self, t: float, pressure: np.ndarray) -> tuple[dict[str, Any], float]:
         """The frame's statistics for the snapshot (null for a mat with no calibration) and
@@ -591,7 +594,7 @@ class Monitor:
         fs, cof = live(pressure)
         load = _finite(fs["load_N"])
         if np.all(np.isfinite(cof)):
-            self._cof_trace = [*self._cof_trace[-59:], [float(cof[0]), float(cof[1])]]
+            self._cof_trace = [*self._cof_trace[-59:], (float(cof[0]), float(cof[1]))]
         cof_cm = fs["cof_cm"]
         return {
             "load_N": round(load, 2),

@@ -58,6 +58,10 @@ CHECKPOINTS_PER_S = 100.0
 #: First full checkpoints (the sensor's state) of mats just taken, at most this many a second
 #: (a member that takes 300 mats does not copy 300 pipelines in one turn of its loop).
 FULL_PER_S = 20.0
+#: The checkpoints after events (an alert, a mat loaded) take at most about this long of a turn
+#: of the watch, s; the rest wait for the next turn (1,000 mats loaded at once each raise an
+#: event: their checkpoints in one turn held the loop for ~0.5 s, issue 38).
+SOON_S = 0.005
 
 
 def ward_digest(mats: list[MatConfig]) -> str:
@@ -344,10 +348,16 @@ class GroupStation(Station):
     def checkpoints(self, now: float) -> int:
         """Checkpoint the held mats that are due (every :meth:`interval`, the sensor's state
         every :data:`SENSOR_EVERY`-th time; a mat that has not changed since its last one is
-        not written again), those with a new alert event, and the first full checkpoints of
-        mats just taken (at most :data:`FULL_PER_S` a second); returns how many."""
-        soon, self._soon_mats = self._soon_mats, set()
-        n = sum(self._checkpoint(m, now) for m in soon if m in self.held)
+        not written again), those with a new event (for at most :data:`SOON_S`, the rest in the
+        next turns), and the first full checkpoints of mats just taken (at most
+        :data:`FULL_PER_S` a second); returns how many."""
+        soon: set[str] = set()  # (at most :data:`SOON_S` of them in one turn)
+        n, budget = 0, time.monotonic() + SOON_S
+        while self._soon_mats and (not soon or time.monotonic() < budget):
+            m = self._soon_mats.pop()
+            soon.add(m)
+            if m in self.held:
+                n += self._checkpoint(m, now)
         self._allowance = min(self._allowance + (now - self._full_t) * FULL_PER_S, FULL_PER_S)
         self._full_t = now
         while self._full and self._allowance >= 1:

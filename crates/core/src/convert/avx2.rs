@@ -132,6 +132,7 @@ unsafe fn at(c: &Curve<'_, f64>, v: __m256d) -> __m256d {
 mod tests {
     use crate::convert::{Converter, Curve};
     use crate::preisach::tests::Rng;
+    use crate::simd::Path;
 
     #[test]
     fn lanes_equal_the_scalar_stage_bit_for_bit() {
@@ -178,14 +179,17 @@ mod tests {
             let ok: Vec<bool> = (0..n).map(|_| !rng.next().is_multiple_of(9)).collect();
             let start = (rng.next() % 3) as usize;
             let m = n - start;
-            let run = |simd: bool| {
-                crate::simd::set_enabled(simd);
+            let run = |best: Path| {
+                crate::simd::set_limit(best);
                 let mut out = vec![0.0; m];
                 view.row(start, &readings[start..], &ok[start..], &mut out);
                 crate::simd::set_enabled(true);
                 out.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
             };
-            assert_eq!(run(false), run(true), "case {case}");
+            // the AVX2 lanes forced, then the best path (AVX-512 where the processor has it)
+            let scalar = run(Path::Scalar);
+            assert_eq!(scalar, run(Path::Avx2), "case {case}, AVX2");
+            assert_eq!(scalar, run(Path::Avx512), "case {case}, best path");
         }
     }
 }

@@ -1,6 +1,7 @@
 //! Tests of the drift module.
 
 use super::*;
+use crate::simd::Path;
 
 fn log_kernel() -> Kernel {
     // a crude 2-per-decade approximation is enough for the exactness tests below,
@@ -204,9 +205,9 @@ fn two_clocks_add_the_two_superpositions() {
     assert!(base().with_time_component(f64::NAN).is_err());
 }
 
-/// Outputs and state bytes of a batch of a bank on the path asked (AVX2 or scalar).
-fn on_path(simd: bool, bank: &DriftBank, dt: &[f64], h: &[f64], ok: &[bool]) -> Vec<u8> {
-    crate::simd::set_enabled(simd);
+/// Outputs and state bytes of a batch of a bank on the best path up to `best`.
+fn on_path(best: Path, bank: &DriftBank, dt: &[f64], h: &[f64], ok: &[bool]) -> Vec<u8> {
+    crate::simd::set_limit(best);
     let mut b = bank.clone();
     let mut out = vec![0.0; h.len()];
     b.run(dt, h, ok, &mut out).unwrap();
@@ -220,7 +221,7 @@ fn on_path(simd: bool, bank: &DriftBank, dt: &[f64], h: &[f64], ok: &[bool]) -> 
 }
 
 #[test]
-fn the_avx2_build_of_the_kernel_equals_the_scalar_one_bit_for_bit() {
+fn the_avx2_and_avx512_builds_of_the_kernel_equal_the_scalar_one_bit_for_bit() {
     let _guard = crate::simd::testing::lock();
     let mut rng = crate::preisach::tests::Rng(7);
     // cases 24.. on the time clock with the linear level (the path across elements in
@@ -229,6 +230,7 @@ fn the_avx2_build_of_the_kernel_equals_the_scalar_one_bit_for_bit() {
         let terms = if case < 24 { 1 + case % 17 } else { case - 21 };
         let weights: Vec<f64> = (0..terms).map(|_| rng.unit()).collect();
         let taus: Vec<f64> = (0..terms).map(|_| 0.01 + 100.0 * rng.unit()).collect();
+        // n from 1: pairs of groups, a lone group and a scalar tail
         let n = 1 + (rng.next() % 70) as usize;
         let t = 1 + (rng.next() % 60) as usize;
         let mut bank = DriftBank::new(Kernel::new(weights, taus).unwrap(), -0.03, n).unwrap();
@@ -245,11 +247,12 @@ fn the_avx2_build_of_the_kernel_equals_the_scalar_one_bit_for_bit() {
         let dt: Vec<f64> = (0..t)
             .map(|r| if r % 7 == 3 { 0.0 } else { 2.0 * rng.unit() })
             .collect();
-        assert_eq!(
-            on_path(false, &bank, &dt, &h, &ok),
-            on_path(true, &bank, &dt, &h, &ok),
-            "case {case}"
-        );
+        let scalar = on_path(Path::Scalar, &bank, &dt, &h, &ok);
+        // AVX2 forced, then the best path (AVX-512 on a processor that has it)
+        for best in [Path::Avx2, Path::Avx512] {
+            let got = on_path(best, &bank, &dt, &h, &ok);
+            assert!(got == scalar, "case {case}, {best:?}");
+        }
     }
 }
 

@@ -243,7 +243,7 @@ unsafe fn everett(c: &Consts, alpha: __m256d, beta: __m256d) -> __m256d {
 /// caller discards: `β >= α`) reads a cell of the next row, still inside the table.
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn cell_corners(
+pub(super) unsafe fn cell_corners(
     cells: *const f64,
     i0: __m128i,
     j0: __m128i,

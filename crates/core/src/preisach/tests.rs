@@ -1,6 +1,7 @@
 //! Tests of the preisach module.
 
 use super::*;
+use crate::simd::Path;
 use proptest::prelude::*;
 
 /// The Everett function of a uniform (non-negative) Preisach density: F = (α - β)² / 2.
@@ -318,20 +319,21 @@ pub(crate) fn hostile_history(
 }
 
 /// A random Everett table over [lo, hi] (non-negative, not symmetric in any way).
-fn random_everett(rng: &mut Rng, k: usize, lo: f64, hi: f64) -> Everett {
+pub(crate) fn random_everett(rng: &mut Rng, k: usize, lo: f64, hi: f64) -> Everett {
     let t: Vec<f64> = (0..k * k).map(|_| rng.unit() * 3.0).collect();
     Everett::new(k, lo, hi, t).unwrap()
 }
 
-/// Outputs, counters and the state's bytes of a bank after a batch (on the path asked).
+/// Outputs, counters and the state's bytes of a bank after a batch (on the best path up
+/// to `best`).
 fn simd_run(
-    simd: bool,
+    best: Path,
     bank: &PreisachBank,
     u: &[f64],
     ok: &[bool],
     schedule: Schedule,
 ) -> (Vec<u64>, Vec<u64>, Vec<u64>, Vec<u8>) {
-    crate::simd::set_enabled(simd);
+    crate::simd::set_limit(best);
     let mut b = bank.clone();
     let mut out = vec![0.0; u.len()];
     b.run_scheduled(u, ok, &mut out, schedule).unwrap();
@@ -366,21 +368,31 @@ proptest! {
             .and_then(|b| b.with_output(rng.unit() - 0.5, sign))
             .unwrap();
         let (u, ok) = hostile_history(&mut rng, t, n, lo, hi);
-        let scalar = simd_run(false, &bank, &u, &ok, Schedule::Blocks);
-        let simd = simd_run(true, &bank, &u, &ok, Schedule::Blocks);
-        prop_assert!(scalar == simd, "outputs, counters or states differ");
+        let scalar = simd_run(Path::Scalar, &bank, &u, &ok, Schedule::Blocks);
+        // AVX2 forced (also on an AVX-512 processor), then the best path
+        let avx2 = simd_run(Path::Avx2, &bank, &u, &ok, Schedule::Blocks);
+        prop_assert!(scalar == avx2, "AVX2: outputs, counters or states differ");
+        let simd = simd_run(Path::Avx512, &bank, &u, &ok, Schedule::Blocks);
+        prop_assert!(scalar == simd, "best path: outputs, counters or states differ");
         // and both are the frame-order kernel's
-        let frames = simd_run(false, &bank, &u, &ok, Schedule::FrameOrder);
+        let frames = simd_run(Path::Scalar, &bank, &u, &ok, Schedule::FrameOrder);
         prop_assert!(frames == simd);
-        prop_assert!(simd_run(true, &bank, &u, &ok, Schedule::FrameOrder) == simd);
+        prop_assert!(simd_run(Path::Avx512, &bank, &u, &ok, Schedule::FrameOrder) == simd);
     }
 }
 
 #[test]
-fn this_machine_runs_the_avx2_path_when_it_has_avx2() {
+fn this_machine_runs_the_best_path_it_has() {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
-        assert_eq!(crate::simd::detected(), crate::simd::Path::Avx2);
+        assert!(crate::simd::detected() >= crate::simd::Path::Avx2);
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512dq")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+    {
+        assert_eq!(crate::simd::detected(), crate::simd::Path::Avx512);
     }
 }
 
@@ -418,9 +430,9 @@ proptest! {
         }
         let bank = PreisachBank::new(e.clone(), n, capacity).unwrap();
         let want: Vec<u64> = want.iter().map(|v| v.to_bits()).collect();
-        for simd in [false, true] {
-            let (bits, _, _, _) = simd_run(simd, &bank, &u, &ok, Schedule::FrameOrder);
-            prop_assert!(bits == want, "simd {}: outputs differ from the kernel", simd);
+        for best in [Path::Scalar, Path::Avx2, Path::Avx512] {
+            let (bits, _, _, _) = simd_run(best, &bank, &u, &ok, Schedule::FrameOrder);
+            prop_assert!(bits == want, "{:?}: outputs differ from the kernel", best);
         }
     }
 }

@@ -1,0 +1,145 @@
+//! The drift step of eq. 5.8 (time clock, linear level) for eight elements at once: two
+//! groups of the states' layout (`super::at`, [`GROUP`] = 4 elements per group) in one
+//! AVX-512 register of eight f64, so a kernel term costs a multiply, an add and the
+//! weighted add for eight elements (the loads and stores stay two halves: the layout is
+//! the AVX2 path's). The operations are the scalar kernel's (`texsense_kernels::drift::step`,
+//! as in `super::avx2`) in the same order, without fused multiply-adds, so every output and
+//! state is the scalar kernel's, bit for bit.
+
+use std::arch::x86_64::*;
+
+use texsense_kernels::drift::{Element, Settings};
+
+use super::GROUP;
+
+/// Elements per step: two groups.
+pub(super) const LANES: usize = 2 * GROUP;
+
+/// Whole pairs of groups of a block (the arguments of `super::avx2::groups`, `h` a whole
+/// number of [`LANES`]).
+///
+/// # Safety
+/// The processor must have AVX-512 F and DQ.
+///
+/// # Panics
+/// When `h` is not whole pairs of groups, or a slice is shorter than the block needs.
+#[target_feature(enable = "avx512f,avx512dq")]
+pub(super) unsafe fn groups(
+    s: &Settings<'_, f64>,
+    elements: &mut [Element<f64>],
+    z: &mut [f64],
+    decay: &[f64],
+    h: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) {
+    let (n, k) = (h.len(), s.terms());
+    assert!(n.is_multiple_of(LANES) && ok.len() == n && out.len() == n);
+    assert!(elements.len() >= n && z.len() >= n * k && decay.len() == k);
+    for g in 0..n / LANES {
+        let at = g * LANES;
+        // SAFETY: AVX-512 F/DQ (this function's feature); the two groups' states are
+        // z[at * k .. (at + LANES) * k] (checked above)
+        unsafe {
+            pair(
+                s,
+                &mut elements[at..at + LANES],
+                &mut z[at * k..(at + LANES) * k],
+                decay,
+                &h[at..at + LANES],
+                &ok[at..at + LANES],
+                &mut out[at..at + LANES],
+            )
+        };
+    }
+}
+
+/// Eight f64 from one field of eight elements.
+#[inline(always)]
+fn lanes(els: &[Element<f64>], f: impl Fn(&Element<f64>) -> f64) -> [f64; LANES] {
+    std::array::from_fn(|l| f(&els[l]))
+}
+
+/// Two groups of four elements (the arguments of [`groups`], one pair's share).
+#[inline]
+#[target_feature(enable = "avx512f,avx512dq")]
+unsafe fn pair(
+    s: &Settings<'_, f64>,
+    els: &mut [Element<f64>],
+    z: &mut [f64],
+    decay: &[f64],
+    h: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) {
+    let k = s.terms();
+    let w = s.weights();
+    let hv = _mm512_loadu_pd(h.as_ptr());
+    let ok_k = ok
+        .iter()
+        .enumerate()
+        .fold(0u8, |m, (l, &b)| m | u8::from(b) << l);
+    // valid and finite (h - h is 0 for a finite h, NaN otherwise)
+    let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(hv, hv), _mm512_setzero_pd());
+    let live = ok_k & finite;
+    let started = els
+        .iter()
+        .enumerate()
+        .fold(0u8, |m, (l, e)| m | u8::from(e.started != 0) << l);
+    let last = _mm512_loadu_pd(lanes(els, |e| e.last_h).as_ptr());
+    let total = _mm512_loadu_pd(lanes(els, |e| e.total).as_ptr());
+    // the level is h itself (power 1); the first valid level is a step from 0
+    let change = _mm512_mask_sub_pd(hv, started, hv, last);
+    let total = _mm512_add_pd(total, change);
+    // z_j <- z_j d_j + change (live), z_j d_j + -0 (time passes; see `super::avx2`)
+    let cm = _mm512_mask_blend_pd(live, _mm512_set1_pd(-0.0), change);
+    let p = z.as_mut_ptr();
+    let term = |j: usize| {
+        // SAFETY: term j of the first group at z[4 j ..], of the second at z[4 k + 4 j ..]
+        // (z holds 8 k; j < k = decay.len() = w.len(), checked by the caller's asserts and
+        // `Settings`)
+        unsafe {
+            let (a, b) = (p.add(GROUP * j), p.add(GROUP * (k + j)));
+            let zv = _mm512_insertf64x4::<1>(
+                _mm512_castpd256_pd512(_mm256_loadu_pd(a)),
+                _mm256_loadu_pd(b),
+            );
+            let zd = _mm512_mul_pd(zv, _mm512_set1_pd(*decay.get_unchecked(j)));
+            let zn = _mm512_add_pd(zd, cm);
+            _mm256_storeu_pd(a, _mm512_castpd512_pd256(zn));
+            _mm256_storeu_pd(b, _mm512_extractf64x4_pd::<1>(zn));
+            _mm512_mul_pd(_mm512_set1_pd(*w.get_unchecked(j)), zn)
+        }
+    };
+    let zero = _mm512_setzero_pd();
+    let (mut a0, mut a1, mut a2, mut a3) = (zero, zero, zero, zero);
+    let whole = k / 4 * 4;
+    for j in (0..whole).step_by(4) {
+        a0 = _mm512_add_pd(a0, term(j));
+        a1 = _mm512_add_pd(a1, term(j + 1));
+        a2 = _mm512_add_pd(a2, term(j + 2));
+        a3 = _mm512_add_pd(a3, term(j + 3));
+    }
+    let mut tail = zero;
+    for j in whole..k {
+        tail = _mm512_add_pd(tail, term(j));
+    }
+    let weighted = _mm512_add_pd(
+        _mm512_add_pd(_mm512_add_pd(a0, a1), _mm512_add_pd(a2, a3)),
+        tail,
+    );
+    let wsum = _mm512_set1_pd(s.weight_sum());
+    let drift = _mm512_sub_pd(_mm512_mul_pd(total, wsum), weighted);
+    let y = _mm512_add_pd(hv, _mm512_mul_pd(_mm512_set1_pd(s.gamma()), drift));
+    let nan = _mm512_set1_pd(f64::NAN);
+    _mm512_storeu_pd(out.as_mut_ptr(), _mm512_mask_blend_pd(live, nan, y));
+    let mut totals = [0.0; LANES];
+    _mm512_storeu_pd(totals.as_mut_ptr(), total);
+    for (l, el) in els.iter_mut().enumerate() {
+        if live >> l & 1 != 0 {
+            el.started = 1;
+            el.last_h = h[l];
+            el.total = totals[l];
+        }
+    }
+}

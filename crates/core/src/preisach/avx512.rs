@@ -1,0 +1,361 @@
+//! The Preisach step (eq. 4.16-4.22) across eight elements at once, in the lanes of
+//! AVX-512 registers: `super::avx2`'s lane program (the scalar kernel's operations in the
+//! same order, without fused multiply-adds, so every output and state is the scalar
+//! kernel's, bit for bit) on two groups of heads, with the lane conditions in mask
+//! registers (masked adds, blends and gathers instead of all-ones vectors).
+//!
+//! Only the common case runs here: two whole groups whose stacks are all in place with room
+//! for a turning point. Anything else (a stack on the heap, a stack at its room, the last
+//! group of a block) goes through `super::avx2::row` for those elements, which also takes
+//! care of moving stacks between the heap and their place.
+
+use std::arch::x86_64::*;
+
+use texsense_kernels::everett::Everett as EverettView;
+use texsense_kernels::preisach::Output;
+
+use super::{avx2, Element, Heads, INLINE_EXTREMA, LANES};
+
+/// Elements per step: two groups of heads.
+const WIDE: usize = 2 * LANES;
+
+/// One frame of a block (the arguments and results of `super::avx2::row`).
+///
+/// # Safety
+/// The processor must have AVX2 and AVX-512 F, DQ and VL. `u`, `ok` and `out` hold
+/// `elements.len()` values, `heads` one group per four elements.
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+pub(super) unsafe fn row(
+    e: &EverettView<'_, f64>,
+    cells: &[f64],
+    capacity: usize,
+    output: Output<f64>,
+    elements: &mut [Element],
+    heads: &mut [Heads],
+    u: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) {
+    let n = elements.len();
+    assert!(u.len() == n && ok.len() == n && out.len() == n);
+    assert!(heads.len() == n.div_ceil(LANES));
+    let consts = Consts::new(e, cells, output);
+    let room = INLINE_EXTREMA.min(capacity) as i64;
+    let step = (std::mem::size_of::<Element>() / 8) as i64;
+    let off = _mm512_mullo_epi64(
+        _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0),
+        _mm512_set1_epi64(step),
+    );
+    let mut i = 0;
+    while i < n {
+        let g = i / LANES;
+        let wide = i + WIDE <= n
+            && elements[i..i + WIDE].iter().all(|el| el.spill.is_none())
+            && heads[g..g + 2]
+                .iter()
+                .all(|hd| hd.len.iter().all(|&l| l != room));
+        let m = if wide { WIDE } else { LANES.min(n - i) };
+        if !wide {
+            // SAFETY: AVX2 (this function's features); one group (or the block's last
+            // elements) with its heads
+            unsafe {
+                avx2::row(
+                    e,
+                    cells,
+                    capacity,
+                    output,
+                    &mut elements[i..i + m],
+                    &mut heads[g..g + 1],
+                    &u[i..i + m],
+                    &ok[i..i + m],
+                    &mut out[i..i + m],
+                )
+            };
+        } else {
+            let base = elements[i].inline.as_mut_ptr().cast::<f64>();
+            let (h0, h1) = heads[g..g + 2].split_at_mut(1);
+            // SAFETY: AVX-512 (this function's features); eight elements one after the other
+            // (`off` apart), their stacks in place with room for a turning point
+            unsafe {
+                pair(
+                    &consts,
+                    &mut h0[0],
+                    &mut h1[0],
+                    base,
+                    off,
+                    &u[i..i + WIDE],
+                    &ok[i..i + WIDE],
+                    &mut out[i..i + WIDE],
+                )
+            };
+        }
+        i += m;
+    }
+}
+
+/// The bank's constants in registers.
+struct Consts {
+    u_min: __m512d,
+    u_max: __m512d,
+    inv_step: __m512d,
+    last: __m512d,
+    top: __m256i,
+    k: __m512i,
+    offset: __m512d,
+    sign: __m512d,
+    /// The table, and the table by cell (null: gathered from the table).
+    table: *const f64,
+    cells: *const f64,
+}
+
+impl Consts {
+    #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+    unsafe fn new(e: &EverettView<'_, f64>, cells: &[f64], output: Output<f64>) -> Self {
+        let k = e.size();
+        Self {
+            u_min: _mm512_set1_pd(e.u_min()),
+            u_max: _mm512_set1_pd(e.u_max()),
+            inv_step: _mm512_set1_pd(e.inv_step()),
+            last: _mm512_set1_pd((k - 1) as f64),
+            top: _mm256_set1_epi32((k - 2) as i32),
+            k: _mm512_set1_epi64(k as i64),
+            offset: _mm512_set1_pd(output.offset),
+            sign: _mm512_set1_pd(output.sign),
+            table: e.table().as_ptr(),
+            cells: if cells.is_empty() {
+                std::ptr::null()
+            } else {
+                cells.as_ptr()
+            },
+        }
+    }
+}
+
+/// `f64::clamp(x, lo, hi)` per lane (as `super::avx2`'s).
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn clamp(x: __m512d, lo: __m512d, hi: __m512d) -> __m512d {
+    let x = _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_LT_OQ>(x, lo), x, lo);
+    _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(x, hi), x, hi)
+}
+
+/// An input in grid steps (`super::avx2::grid`).
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn grid(c: &Consts, v: __m512d) -> __m512d {
+    _mm512_min_pd(_mm512_mul_pd(_mm512_sub_pd(v, c.u_min), c.inv_step), c.last)
+}
+
+/// `Everett::value_of_numbers` per lane for `u_min <= alpha, beta` (`super::avx2::everett`).
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn everett(c: &Consts, alpha: __m512d, beta: __m512d) -> __m512d {
+    let zero = _mm512_setzero_pd();
+    let one = _mm512_set1_pd(1.0);
+    let (a, b) = (grid(c, alpha), grid(c, beta));
+    let zero_i = _mm256_setzero_si256();
+    let i0 = _mm256_max_epi32(_mm256_min_epi32(_mm512_cvttpd_epi32(a), c.top), zero_i);
+    let j0 = _mm256_max_epi32(_mm256_min_epi32(_mm512_cvttpd_epi32(b), c.top), zero_i);
+    let wa = _mm512_sub_pd(a, _mm512_cvtepi32_pd(i0));
+    let wb = _mm512_sub_pd(b, _mm512_cvtepi32_pd(j0));
+    let (i64a, i64b) = (_mm512_cvtepi32_epi64(i0), _mm512_cvtepi32_epi64(j0));
+    let (f00, f01, f10, f11) = if c.cells.is_null() {
+        let table = c.table;
+        let q = _mm512_add_epi64(_mm512_mul_epi32(i64a, c.k), i64b);
+        let one_i = _mm512_set1_epi64(1);
+        let qk = _mm512_add_epi64(q, c.k);
+        (
+            _mm512_i64gather_pd::<8>(q, table),
+            _mm512_i64gather_pd::<8>(_mm512_add_epi64(q, one_i), table),
+            _mm512_i64gather_pd::<8>(qk, table),
+            _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk, one_i), table),
+        )
+    } else {
+        // each half's four cells (`super::avx2::cell_corners`), then side by side
+        let lo = |v: __m256i| _mm256_castsi256_si128(v);
+        let hi = |v: __m256i| _mm256_extracti128_si256::<1>(v);
+        // SAFETY: i0, j0 <= K - 2 (clamped above)
+        let (a0, a1, a2, a3) = unsafe { avx2::cell_corners(c.cells, lo(i0), lo(j0)) };
+        let (b0, b1, b2, b3) = unsafe { avx2::cell_corners(c.cells, hi(i0), hi(j0)) };
+        let join = |x: __m256d, y: __m256d| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(x), y);
+        (join(a0, b0), join(a1, b1), join(a2, b2), join(a3, b3))
+    };
+    let (owa, owb) = (_mm512_sub_pd(one, wa), _mm512_sub_pd(one, wb));
+    let low = _mm512_add_pd(_mm512_mul_pd(owb, f00), _mm512_mul_pd(wb, f01));
+    let high = _mm512_add_pd(_mm512_mul_pd(owb, f10), _mm512_mul_pd(wb, f11));
+    let bilinear = _mm512_add_pd(_mm512_mul_pd(owa, low), _mm512_mul_pd(wa, high));
+    let diagonal = _mm512_mul_pd(_mm512_sub_pd(wa, wb), f10);
+    let on_diagonal = _mm512_cmpeq_epi64_mask(i64a, i64b);
+    let v = _mm512_mask_blend_pd(on_diagonal, bilinear, diagonal);
+    _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(b, a), v, zero)
+}
+
+/// One field of two groups of heads as eight lanes.
+#[inline(always)]
+unsafe fn ld(a: &[f64; LANES], b: &[f64; LANES]) -> __m512d {
+    // SAFETY: AVX-512 F (the caller's feature); two arrays of four f64
+    unsafe {
+        _mm512_insertf64x4::<1>(
+            _mm512_castpd256_pd512(_mm256_loadu_pd(a.as_ptr())),
+            _mm256_loadu_pd(b.as_ptr()),
+        )
+    }
+}
+
+/// Eight lanes into one field of two groups of heads.
+#[inline(always)]
+unsafe fn st(a: &mut [f64; LANES], b: &mut [f64; LANES], v: __m512d) {
+    // SAFETY: AVX-512 F (the caller's feature); two arrays of four f64
+    unsafe {
+        _mm256_storeu_pd(a.as_mut_ptr(), _mm512_castpd512_pd256(v));
+        _mm256_storeu_pd(b.as_mut_ptr(), _mm512_extractf64x4_pd::<1>(v));
+    }
+}
+
+/// Eight elements whose stacks are in place (lane `l`'s `off[l]` f64 from `base`) with room
+/// for a turning point (`super::avx2::group` on two groups of heads).
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn pair(
+    c: &Consts,
+    h0: &mut Heads,
+    h1: &mut Heads,
+    base: *mut f64,
+    off: __m512i,
+    u: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) {
+    let zero = _mm512_setzero_pd();
+    let (one_i, two_i) = (_mm512_set1_epi64(1), _mm512_set1_epi64(2));
+    let as_i = |a: &[i64; LANES]| -> &[f64; LANES] {
+        // SAFETY: the same bytes, read as f64 only to move them
+        unsafe { &*(a as *const [i64; LANES]).cast::<[f64; LANES]>() }
+    };
+    // the kernel's `prepare`
+    let len0 = _mm512_castpd_si512(ld(as_i(&h0.len), as_i(&h1.len)));
+    let last_u = ld(&h0.last_u, &h1.last_u);
+    let last_h = ld(&h0.last_h, &h1.last_h);
+    let u_in = _mm512_loadu_pd(u.as_ptr());
+    let ok_k = ok
+        .iter()
+        .enumerate()
+        .fold(0u8, |m, (l, &b)| m | u8::from(b) << l);
+    let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(u_in, u_in), zero);
+    let live = ok_k & finite;
+    let clamped = clamp(u_in, c.u_min, c.u_max);
+    let uc = _mm512_mask_blend_pd(live, c.u_min, clamped);
+    let rising = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(uc, last_u);
+    let moving = !_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(uc, last_u) & live;
+    let odd0 = _mm512_test_epi64_mask(len0, one_i);
+    let turned = rising ^ odd0;
+    // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
+    let top_u = ld(&h0.top_u, &h1.top_u);
+    let top_h = ld(&h0.top_h, &h1.top_h);
+    let below_u = ld(&h0.below_u, &h1.below_u);
+    let mut len = _mm512_mask_add_epi64(len0, turned, len0, one_i);
+    let mut t_u = _mm512_mask_blend_pd(turned, top_u, last_u);
+    let mut t_h = _mm512_mask_blend_pd(turned, top_h, last_h);
+    let mut b_u = _mm512_mask_blend_pd(turned, below_u, top_u);
+    let dir = _mm512_mask_blend_pd(rising, _mm512_set1_pd(-1.0), _mm512_set1_pd(1.0));
+    let passes = |s: __m512d| {
+        let d = _mm512_mul_pd(_mm512_sub_pd(uc, s), dir);
+        _mm512_cmp_pd_mask::<_CMP_GE_OQ>(d, zero)
+    };
+    let wiped = _mm512_cmpgt_epi64_mask(len, two_i) & passes(b_u) & moving;
+    let base = base as *const f64;
+    if wiped != 0 {
+        let slot = |s: __m512i| _mm512_add_epi64(_mm512_add_epi64(s, s), off);
+        len = _mm512_mask_sub_epi64(len, wiped, len, two_i);
+        let mut wipes = wiped;
+        loop {
+            let can = wipes & _mm512_cmpgt_epi64_mask(len, two_i);
+            if can == 0 {
+                break;
+            }
+            let at = slot(_mm512_sub_epi64(len, two_i));
+            let s = _mm512_mask_i64gather_pd::<8>(zero, can, at, base);
+            wipes = can & passes(s);
+            len = _mm512_mask_sub_epi64(len, wipes, len, two_i);
+        }
+        let top = slot(_mm512_sub_epi64(len, one_i));
+        t_u = _mm512_mask_i64gather_pd::<8>(t_u, wiped, top, base);
+        t_h = _mm512_mask_i64gather_pd::<8>(t_h, wiped, _mm512_add_epi64(top, one_i), base);
+        let below = _mm512_max_epi64(len, two_i);
+        b_u = _mm512_mask_i64gather_pd::<8>(b_u, wiped, slot(_mm512_sub_epi64(below, two_i)), base);
+    }
+    // back at lower saturation
+    let at_sat =
+        _mm512_cmpeq_epi64_mask(len, two_i) & moving & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(uc, b_u);
+    if at_sat != 0 {
+        len = _mm512_mask_mov_epi64(len, at_sat, one_i);
+        t_u = _mm512_mask_blend_pd(at_sat, t_u, b_u);
+        t_h = _mm512_mask_i64gather_pd::<8>(t_h, at_sat, _mm512_add_epi64(off, one_i), base);
+    }
+    let odd = _mm512_test_epi64_mask(len, one_i);
+    let alpha = _mm512_mask_blend_pd(odd, t_u, uc);
+    let beta = _mm512_mask_blend_pd(odd, uc, t_u);
+    let sign = _mm512_mask_blend_pd(odd, _mm512_set1_pd(-2.0), _mm512_set1_pd(2.0));
+    let f = everett(c, alpha, beta);
+    let h = _mm512_add_pd(t_h, _mm512_mul_pd(sign, f));
+    let sum = _mm512_mask_blend_pd(moving, last_h, h);
+    let y = _mm512_mul_pd(c.sign, _mm512_add_pd(sum, c.offset));
+    let nan = _mm512_set1_pd(f64::NAN);
+    _mm512_storeu_pd(out.as_mut_ptr(), _mm512_mask_blend_pd(live, nan, y));
+    // the turning point into the slot above the old top of each stack
+    let mut offs = [0i64; WIDE];
+    _mm512_storeu_si512(offs.as_mut_ptr().cast(), off);
+    for (l, &o) in offs.iter().enumerate() {
+        let hd: &Heads = if l < LANES { h0 } else { h1 };
+        let q = l % LANES;
+        let at = o as usize + 2 * hd.len[q] as usize;
+        // SAFETY: slot len0 of a stack in place with room for it (see above)
+        unsafe {
+            *base.cast_mut().add(at) = hd.last_u[q];
+            *base.cast_mut().add(at + 1) = hd.last_h[q];
+        }
+    }
+    // the heads of the lanes that moved
+    let len = _mm512_mask_blend_epi64(moving, len0, len);
+    let lens = _mm512_castsi512_pd(len);
+    let as_f = |a: &mut [i64; LANES]| -> &mut [f64; LANES] {
+        // SAFETY: the same bytes, written as f64 only to move them
+        unsafe { &mut *(a as *mut [i64; LANES]).cast::<[f64; LANES]>() }
+    };
+    st(as_f(&mut h0.len), as_f(&mut h1.len), lens);
+    st(
+        &mut h0.last_u,
+        &mut h1.last_u,
+        _mm512_mask_blend_pd(moving, last_u, uc),
+    );
+    st(
+        &mut h0.last_h,
+        &mut h1.last_h,
+        _mm512_mask_blend_pd(moving, last_h, h),
+    );
+    st(
+        &mut h0.top_u,
+        &mut h1.top_u,
+        _mm512_mask_blend_pd(moving, top_u, t_u),
+    );
+    st(
+        &mut h0.top_h,
+        &mut h1.top_h,
+        _mm512_mask_blend_pd(moving, top_h, t_h),
+    );
+    st(
+        &mut h0.below_u,
+        &mut h1.below_u,
+        _mm512_mask_blend_pd(moving, below_u, b_u),
+    );
+    let was_clamped = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(clamped, u_in) & live;
+    let as_u = |a: &mut [u64; LANES]| -> &mut [f64; LANES] {
+        // SAFETY: the same bytes, moved as f64
+        unsafe { &mut *(a as *mut [u64; LANES]).cast::<[f64; LANES]>() }
+    };
+    let (c0, c1) = (as_u(&mut h0.clamped), as_u(&mut h1.clamped));
+    let counts = _mm512_castpd_si512(ld(c0, c1));
+    let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
+    st(c0, c1, _mm512_castsi512_pd(counts));
+}
