@@ -44,7 +44,6 @@ from texsense.data.layout import Layout
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError
 from texsense.io._base import Piece
-from texsense.io.policy import DAMAGED
 
 __all__ = ["CACHE", "CACHE_SHARE", "FrameCache", "LazyRecording"]
 
@@ -161,6 +160,7 @@ class _Source:
 
     def _read(self, a: int, b: int) -> Piece:
         from texsense.io.hdf5 import HDF5Reader
+        from texsense.io.policy import DAMAGED  # (loads h5py, as the reader does)
 
         with self._lock:
             try:
