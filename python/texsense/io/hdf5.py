@@ -56,7 +56,7 @@ from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
 from texsense.io._registry import Probe, writer
-from texsense.io.policy import check_text, link_name, named, open_hdf5
+from texsense.io.policy import DAMAGED, check_text, link_name, named, open_hdf5
 
 __all__ = [
     "FORMAT_NAME",
@@ -474,7 +474,7 @@ def _readable_rows(ds: h5py.Dataset, n: int) -> int:
         try:
             ds[start:stop]
             return stop
-        except OSError:
+        except DAMAGED:
             stop = start
     return 0
 
@@ -491,7 +491,7 @@ def _held_rows(ds: h5py.Dataset) -> int | None:
             return ds.id.get_storage_size() // row if row and ds.dtype.kind != "O" else None
         bands = math.prod(-(-s // c) for s, c in zip(shape[1:], ds.chunks[1:], strict=True))
         return ds.id.get_num_chunks() // max(bands, 1) * ds.chunks[0]
-    except (AttributeError, OSError, ValueError, TypeError):
+    except (AttributeError, ValueError, TypeError, *DAMAGED):
         return None
 
 
@@ -542,7 +542,7 @@ class HDF5Reader(RecordingReader):
         self._file = open_hdf5(self.path)
         try:
             return self._header(self._file)
-        except (KeyError, OSError, ValueError, TypeError) as e:
+        except (KeyError, ValueError, TypeError, *DAMAGED) as e:
             raise FormatError(self.path, f"damaged or incomplete recording: {e}") from None
 
     def _header(self, f: h5py.File) -> Header:
@@ -679,7 +679,7 @@ class HDF5Reader(RecordingReader):
             try:
                 t = np.asarray(self._sets["times"][a:b], dtype=np.float64)
                 labels = _labels(self._file["labels"], a, b)
-            except OSError as e:
+            except DAMAGED as e:
                 raise FormatError(self.path, f"frames {a + 1}..{b} cannot be read ({e})") from None
             self.frames_read = a
             self._check_times(Piece(np.zeros((b - a, 0), np.float32), t, labels))
@@ -691,7 +691,7 @@ class HDF5Reader(RecordingReader):
             b = min(self.n_frames, a + self._block)
             try:
                 yield self._piece(a, b, labels=True)
-            except OSError as e:
+            except DAMAGED as e:
                 self._cut(f"frames {a + 1}..{b} cannot be read ({e}): the file is damaged")
                 return
 

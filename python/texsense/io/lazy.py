@@ -160,6 +160,7 @@ class _Source:
 
     def _read(self, a: int, b: int) -> Piece:
         from texsense.io.hdf5 import HDF5Reader
+        from texsense.io.policy import DAMAGED  # (loads h5py, as the reader does)
 
         with self._lock:
             try:
@@ -168,7 +169,7 @@ class _Source:
                     if self._reader.n_frames < self.n:
                         raise FormatError(self.path, "the file changed: it holds fewer frames")
                 piece = self._reader.frames_at(a, b)
-            except OSError as e:
+            except DAMAGED as e:
                 raise FormatError(self.path, f"frames {a + 1}..{b} cannot be read ({e})") from None
         et = piece.element_times
         return Piece(piece.values, piece.times, {}, valid=piece.valid,

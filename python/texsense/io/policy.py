@@ -52,6 +52,7 @@ from texsense.data.files import check_regular
 from texsense.exceptions import FormatError, ParameterError
 
 __all__ = [
+    "DAMAGED",
     "DTYPE_KINDS",
     "FILTERS",
     "MAX_OBJECTS",
@@ -72,6 +73,10 @@ FILTERS = {
 #: The dtypes a dataset may have (numpy kinds): bool, integers, floats, strings (fixed or
 #: variable length; h5py reads variable-length strings as objects).
 DTYPE_KINDS = {"b": "bool", "i": "integer", "u": "integer", "f": "float", "S": "string"}
+#: What h5py raises when a file's storage is damaged: an OSError, or a RuntimeError for a
+#: flipped byte in a B-tree ("wrong B-tree signature"), which was a traceback: every read
+#: of a file's content catches both and says the file is damaged, in one line naming it.
+DAMAGED = (OSError, RuntimeError)
 #: The most objects (groups, datasets) a file may hold; a recording has a few dozen.
 MAX_OBJECTS = 100_000
 _LAYOUTS = {h5d.CONTIGUOUS: "contiguous", h5d.CHUNKED: "chunked", h5d.COMPACT: "compact"}
