@@ -139,6 +139,39 @@ def test_a_large_mat_runs_in_parallel_blocks_with_the_same_result(seat):
     assert (~ok).sum() > 1000 and np.isfinite(batch).all()
 
 
+def test_chain_step_new_gives_what_run_gives_in_new_arrays(seat):
+    """`Chain.step_new` (what `Pipeline.step` calls when the caller keeps its frames, issue 34
+    ninth round): new arrays per frame with the values, codes and measured flags of `run`,
+    none of them the array of another frame; a frame of the wrong shape is one ShapeError
+    line."""
+    from texsense.exceptions import ShapeError
+
+    cal, rec = seat
+    chain = Pipeline(cal, rec.layout, repair="neighbour-mean").compiled()
+    dt = np.diff(rec.times, prepend=rec.times[0])
+    frames = np.ascontiguousarray(rec.frames, dtype=np.float64)
+    valid = rec.valid.copy()
+    valid[::2] = True  # the frames stepped with None
+    batch, codes = chain.run(dt, frames, valid)
+    chain.reset()
+    kept = []
+    for k in range(rec.n_frames):
+        out, got, measured = chain.step_new(dt[k], frames[k], valid[k] if k % 2 else None)
+        assert (out.dtype, got.dtype, measured.dtype) == (np.float64, np.uint8, np.bool_)
+        np.testing.assert_array_equal(out, batch[k])
+        np.testing.assert_array_equal(got, codes[k])
+        np.testing.assert_array_equal(measured, codes[k] == 0)
+        kept.append(out)
+    np.testing.assert_array_equal(np.stack(kept), batch)  # no frame overwritten by the next
+    assert (codes != 0).any()
+    for bad in (frames[0][:-1], frames[0][:1]):
+        with pytest.raises(ShapeError) as e:
+            chain.step_new(0.1, bad, None)
+        assert "\n" not in str(e.value)
+    with pytest.raises(ShapeError):
+        chain.step_new(0.1, frames[0], np.ones(3, bool))
+
+
 def test_chain_step_writes_what_run_gives_into_the_arrays_held(seat):
     """`Chain.step` (the live path of `Pipeline.step`, issue 34): one frame into arrays the
     caller holds gives the values and codes of `run`, frame after frame; an array of the

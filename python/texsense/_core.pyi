@@ -274,6 +274,10 @@ class Chain:
         measured: _Bools,
     ) -> None:
         """One frame into arrays the caller holds: values, codes and measured (code 0)."""
+    def step_new(
+        self, dt: float, readings: _F64, valid: _Bools | None
+    ) -> tuple[_F64, _U8, _Bools]:
+        """One frame into new arrays: (values, codes, measured)."""
     def snapshot(self) -> bytes: ...
     def restore(self, state: bytes) -> None: ...
     def mcu_blob(self) -> bytes: ...

@@ -283,7 +283,7 @@ impl Chain {
                         At::Out => &mut *out,
                         At::Scratch => &mut scratch.values,
                     };
-                    r.run(values, |idx| codes[idx] == code::OK, None)?;
+                    r.run_coded(values, codes, code::OK)?;
                 }
                 _ => unreachable!("element-wise stages run as a segment"),
             }
@@ -381,12 +381,6 @@ fn segment(
 ) {
     let size = block_size(n);
     let n_blocks = n.div_ceil(size);
-    let mut blocks: Vec<SegmentBlock<'_>> = (0..n_blocks)
-        .map(|b| SegmentBlock {
-            start: b * size,
-            parts: Vec::with_capacity(stages.len()),
-        })
-        .collect();
     if let Some(&first) = dt.first() {
         for s in stages.iter_mut() {
             match s {
@@ -396,6 +390,30 @@ fn segment(
             }
         }
     }
+    if let [Stage::Convert(conv), Stage::Compensation(comp)] = stages {
+        // conversion then compensation, the usual segment: one step without a dispatch,
+        // its blocks made without a list of parts each (a live step makes them every frame)
+        let conv = conv.view();
+        let usual = comp
+            .blocks()
+            .into_iter()
+            .enumerate()
+            .map(|(b, comp)| UsualBlock {
+                start: b * size,
+                conv,
+                comp,
+            })
+            .collect();
+        run_frames_coded(dst, n, usual, dt, src, codes, code::OK);
+        crate::lanes::code_not_finite(dst, codes, code::OK, code::OUT_OF_RANGE);
+        return;
+    }
+    let mut blocks: Vec<SegmentBlock<'_>> = (0..n_blocks)
+        .map(|b| SegmentBlock {
+            start: b * size,
+            parts: Vec::with_capacity(stages.len()),
+        })
+        .collect();
     for s in stages.iter_mut() {
         match s {
             Stage::Convert(c) => {
@@ -423,21 +441,8 @@ fn segment(
             Stage::Detect(_) | Stage::Repair(_) => unreachable!("not element-wise"),
         }
     }
-    if blocks.iter().all(SegmentBlock::is_usual) {
-        // conversion then compensation, the usual segment: one step without a dispatch
-        let usual = blocks
-            .into_iter()
-            .filter_map(SegmentBlock::into_usual)
-            .collect();
-        run_frames_coded(dst, n, usual, dt, src, codes, code::OK);
-    } else {
-        run_frames_coded(dst, n, blocks, dt, src, codes, code::OK);
-    }
-    for (c, v) in codes.iter_mut().zip(dst.iter()) {
-        if *c == code::OK && !v.is_finite() {
-            *c = code::OUT_OF_RANGE;
-        }
-    }
+    run_frames_coded(dst, n, blocks, dt, src, codes, code::OK);
+    crate::lanes::code_not_finite(dst, codes, code::OK, code::OUT_OF_RANGE);
 }
 
 /// One element-wise stage of a block.
@@ -452,27 +457,6 @@ enum Part<'a> {
 struct SegmentBlock<'a> {
     start: usize,
     parts: Vec<Part<'a>>,
-}
-
-impl<'a> SegmentBlock<'a> {
-    fn is_usual(&self) -> bool {
-        matches!(
-            self.parts.as_slice(),
-            [Part::Convert(_), Part::Compensation(_)]
-        )
-    }
-
-    fn into_usual(self) -> Option<UsualBlock<'a>> {
-        let mut parts = self.parts.into_iter();
-        match (parts.next(), parts.next()) {
-            (Some(Part::Convert(conv)), Some(Part::Compensation(comp))) => Some(UsualBlock {
-                start: self.start,
-                conv,
-                comp,
-            }),
-            _ => None,
-        }
-    }
 }
 
 /// A block of the usual segment: conversion, then compensation (the same rules as

@@ -207,13 +207,19 @@ impl FailureDetector {
         let n = self.len();
         let t = readings.len() / n;
         let chunks: Vec<_> = self.elements.chunks_mut(block_size(n)).collect();
-        let lanes = simd_lanes();
+        let (lanes, wide) = (simd_lanes(), simd_wide());
         for_blocks(delta, n, chunks, par, |block, o| {
             let start = o.start();
             for r in 0..t {
                 let row = r * n + start;
                 let out = o.row(r);
                 let c = &readings[row..row + out.len()];
+                #[cfg(target_arch = "x86_64")]
+                if wide {
+                    // SAFETY: `crate::simd::avx512` found AVX-512 F/DQ/VL and AVX2
+                    unsafe { avx512::changes_row(block, c, out) };
+                    continue;
+                }
                 #[cfg(target_arch = "x86_64")]
                 if lanes {
                     // SAFETY: `simd_lanes` found AVX2
@@ -395,6 +401,20 @@ impl FailureDetector {
                 max: self.max.as_deref().map(|m| &m[i..i + whole]),
             };
             let at = at..at + whole;
+            if simd_wide() {
+                // SAFETY: `crate::simd::avx512` found AVX-512 F/DQ/VL and AVX2
+                return unsafe {
+                    avx512::codes_row(
+                        &self.params,
+                        &lim,
+                        &readings[at.clone()],
+                        &delta[at.clone()],
+                        &valid[at],
+                        &mut els[..whole],
+                        &mut out[..whole],
+                    )
+                };
+            }
             // SAFETY: `simd_lanes` found AVX2 before the caller came here
             unsafe {
                 avx2::codes_row(
@@ -485,8 +505,22 @@ fn simd_lanes() -> bool {
     }
 }
 
+/// Whether the passes run eight elements at a time in AVX-512 lanes ([`crate::simd`]).
+fn simd_wide() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        crate::simd::avx512()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 
 #[cfg(test)]
 mod tests;

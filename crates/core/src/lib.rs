@@ -17,6 +17,8 @@
 //! - [`compensation`]: Preisach then drift in one pass;
 //! - [`chain`]: detect -> convert -> compensation -> repair, the whole mat in one pass;
 //! - [`par`]: the one parallel loop over blocks of elements;
+//! - [`lanes`]: the chain's glue between kernels (inputs from codes, repair's first pass) in
+//!   SIMD lanes;
 //! - [`simd`]: runtime choice between the scalar kernels and their AVX2 paths;
 //! - [`spacer`]: the spacer mechanics of the virtual sensor (backbone, friction, creep);
 //! - [`bouc_wen`]: a second spacer law of another family (Bouc–Wen friction, Norton creep);
@@ -31,6 +33,7 @@ pub mod detect;
 pub mod drift;
 pub mod error;
 pub mod everett;
+pub mod lanes;
 pub mod live;
 pub mod mcu;
 pub mod par;

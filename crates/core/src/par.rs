@@ -225,11 +225,7 @@ pub fn run_frames_coded<B>(
             block.frame(d);
             let at = r * n + start;
             let (s, c) = (&src[at..at + width], &codes[at..at + width]);
-            for li in 0..width {
-                let good = c[li] == ok_code;
-                ok[li] = good;
-                x[li] = if good { s[li] } else { f64::NAN };
-            }
+            crate::lanes::coded_inputs(s, c, ok_code, x, ok);
             block.row(d, x, ok, o.row(r));
         }
     });

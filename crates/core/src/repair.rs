@@ -120,12 +120,7 @@ impl LocalRepair {
 
     /// The kernels' view of the method.
     pub fn view(&self) -> kernel::Method<'_, f64> {
-        match &self.method {
-            Method::Zero => kernel::Method::Zero,
-            Method::LastValue => kernel::Method::LastValue,
-            Method::NeighbourMean(nb) => kernel::Method::NeighbourMean(nb.graph()),
-            Method::Weighted(nb, w) => kernel::Method::Weighted(nb.graph(), w),
-        }
+        self.method.kernel()
     }
 
     /// Every element's state into a snapshot.
@@ -170,18 +165,63 @@ impl LocalRepair {
             fills,
             failed,
         } = self;
-        let method = match method {
-            Method::Zero => kernel::Method::Zero,
-            Method::LastValue => kernel::Method::LastValue,
-            Method::NeighbourMean(nb) => kernel::Method::NeighbourMean(nb.graph()),
-            Method::Weighted(nb, w) => kernel::Method::Weighted(nb.graph(), w),
-        };
+        let method = method.kernel();
         for (r, frame) in values.chunks_exact_mut(n).enumerate() {
             let row = r * n;
             let o = outcome.as_deref_mut().map(|o| &mut o[row..row + n]);
             repair_listed(&method, last, frame, |j| ok(row + j), fills, failed, o);
         }
         Ok(())
+    }
+
+    /// [`LocalRepair::run`] in a chain, without outcomes: a reading is flagged valid when its
+    /// code is `ok_code`; the first pass over each frame (keep the last value of every
+    /// available reading, list the others) in SIMD lanes ([`crate::lanes::keep_available`]).
+    /// The same values and last values as `run`.
+    pub fn run_coded(
+        &mut self,
+        values: &mut [f64],
+        codes: &[u8],
+        ok_code: u8,
+    ) -> Result<(), CoreError> {
+        let n = self.len();
+        if n == 0 {
+            return Ok(());
+        }
+        frames_of("values", values.len(), n)?;
+        check_len("codes", codes.len(), values.len())?;
+        let Self {
+            method,
+            last,
+            fills,
+            failed,
+        } = self;
+        let method = method.kernel();
+        for (frame, c) in values.chunks_exact_mut(n).zip(codes.chunks_exact(n)) {
+            crate::lanes::keep_available(frame, c, ok_code, last, failed);
+            fill_listed(
+                &method,
+                last,
+                frame,
+                |j| c[j] == ok_code,
+                fills,
+                failed,
+                None,
+            );
+        }
+        Ok(())
+    }
+}
+
+impl Method {
+    /// The kernel's method of this one.
+    fn kernel(&self) -> kernel::Method<'_, f64> {
+        match self {
+            Method::Zero => kernel::Method::Zero,
+            Method::LastValue => kernel::Method::LastValue,
+            Method::NeighbourMean(nb) => kernel::Method::NeighbourMean(nb.graph()),
+            Method::Weighted(nb, w) => kernel::Method::Weighted(nb.graph(), w),
+        }
     }
 }
 
@@ -209,6 +249,20 @@ fn repair_listed(
             failed.push(i);
         }
     }
+    fill_listed(method, last, frame, ok, fills, failed, outcome);
+}
+
+/// The second part of [`repair_listed`]: the readings listed in `failed` filled (their
+/// last values and outcomes kept), from the frame as it came in.
+fn fill_listed(
+    method: &kernel::Method<'_, f64>,
+    last: &mut [f64],
+    frame: &mut [f64],
+    ok: impl Fn(usize) -> bool,
+    fills: &mut [f64],
+    failed: &[usize],
+    mut outcome: Option<&mut [u8]>,
+) {
     if failed.is_empty() {
         return;
     }
@@ -402,6 +456,46 @@ mod tests {
                 prop_assert_eq!(bits(&out), bits(&frame));
                 prop_assert_eq!(&oc, &oc_k);
                 prop_assert_eq!(bits(rep.last_values()), bits(&last));
+            }
+        }
+
+        /// The chain's path (`run_coded`: validity from codes, the first pass in SIMD
+        /// lanes) gives `run`'s values and last values bit for bit on every path.
+        #[test]
+        fn coded_repair_equals_run_on_every_path(
+            vals in proptest::collection::vec(
+                prop_oneof![
+                    8 => -5.0f64..5.0,
+                    1 => Just(f64::NAN),
+                    1 => Just(f64::INFINITY),
+                    1 => Just(f64::NEG_INFINITY),
+                ],
+                4 * 20,
+            ),
+            codes in proptest::collection::vec(prop_oneof![6 => Just(0u8), 1 => Just(2u8), 1 => Just(255u8)], 4 * 20),
+            which in 0usize..4,
+        ) {
+            let _guard = crate::simd::testing::lock();
+            let (n, g) = (20, Neighbours::grid4(4, 5));
+            let weights: Vec<f64> = (0..g.nnz()).map(|q| 0.5 + (q % 3) as f64).collect();
+            let method = [
+                Method::Zero,
+                Method::LastValue,
+                Method::NeighbourMean(g.clone()),
+                Method::Weighted(g, weights),
+            ][which].clone();
+            let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            let mut rep = LocalRepair::new(method, n).unwrap();
+            let mut want = vals.clone();
+            rep.run(&mut want, |i| codes[i] == 0, None).unwrap();
+            let want = (bits(&want), bits(rep.last_values()));
+            for path in [crate::simd::Path::Scalar, crate::simd::Path::Avx2, crate::simd::Path::Avx512] {
+                crate::simd::set_limit(path);
+                rep.reset();
+                let mut got = vals.clone();
+                rep.run_coded(&mut got, &codes, 0).unwrap();
+                crate::simd::set_enabled(true);
+                prop_assert_eq!((bits(&got), bits(rep.last_values())), want.clone(), "{:?}", path);
             }
         }
 

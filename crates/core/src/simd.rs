@@ -10,7 +10,9 @@
 //! `preisach/tests.rs`, `drift/tests.rs` and `convert/avx2.rs`). A processor with AVX-512
 //! F/DQ/VL runs the same three in eight f64 lanes (`preisach::avx512`, `drift::avx512`,
 //! `convert::avx512`; the same bits, tested against the scalar kernels and the AVX2 path
-//! forced by [`set_limit`]). Elsewhere, or after [`set_enabled`]`(false)`, the scalar kernels run.
+//! forced by [`set_limit`]), and the detector's two passes (`detect::avx512`); the chain's
+//! glue between kernels ([`crate::lanes`]) has eight- and four-lane paths. Elsewhere, or
+//! after [`set_enabled`]`(false)`, the scalar kernels run.
 //!
 //! The choice is made per call from a flag and the CPU detection that `std` caches
 //! (`is_x86_feature_detected!`), so switching it between two batches is safe.

@@ -168,6 +168,62 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
         Ok(())
     }
 
+    /// One frame into new arrays: `dt`, readings (N,) and their validity (N,; None: all
+    /// valid) -> (values (N,) float64, codes (N,) uint8, measured (N,) bool). What `step`
+    /// does into arrays held, then copies of them, without the copies: the arrays are made
+    /// here and written once (a live stream that keeps its frames).
+    #[pyo3(signature = (dt, readings, valid))]
+    #[allow(clippy::type_complexity)]
+    fn step_new<'py>(
+        &mut self,
+        py: Python<'py>,
+        dt: f64,
+        readings: PyReadonlyArray1<'py, f64>,
+        valid: Option<PyReadonlyArray1<'py, bool>>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<u8>>,
+        Bound<'py, PyArray1<bool>>,
+    )> {
+        let n = self.inner.len();
+        let shape = |what: &'static str, got: &[usize]| {
+            to_py(CoreError::Shape {
+                what,
+                expected: format!("({n},), C-contiguous"),
+                got: format!("{got:?}"),
+            })
+        };
+        let valid = match &valid {
+            Some(v) if v.shape() != [n] => return Err(shape("valid", v.shape())),
+            Some(v) => v.as_slice()?,
+            None => &self.all_valid,
+        };
+        if readings.shape() != [n] {
+            return Err(shape("readings", readings.shape()));
+        }
+        let out = PyArray1::<f64>::zeros(py, [n], false);
+        let codes = PyArray1::<u8>::zeros(py, [n], false);
+        let measured = PyArray1::<bool>::zeros(py, [n], false);
+        {
+            // SAFETY: the three arrays were made just above, contiguous, of n elements, and
+            // no other reference to them exists yet, so no borrow can conflict
+            let (o, c, m) = unsafe {
+                (
+                    out.as_slice_mut()?,
+                    codes.as_slice_mut()?,
+                    measured.as_slice_mut()?,
+                )
+            };
+            self.inner
+                .run(&[dt], readings.as_slice()?, valid, o, c)
+                .map_err(to_py)?;
+            for (m, &c) in m.iter_mut().zip(c.iter()) {
+                *m = c == 0;
+            }
+        }
+        Ok((out, codes, measured))
+    }
+
     /// The state of every stage as bytes (versioned).
     fn snapshot<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
         PyBytes::new(py, &self.inner.snapshot())

@@ -39,6 +39,7 @@ from __future__ import annotations
 import inspect
 import json
 import struct
+from math import isfinite
 from typing import Any
 
 import numpy as np
@@ -489,18 +490,20 @@ class Pipeline:
         if v is not None and v.shape != (n,):
             raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
         t = float(t)
-        dt = 0.0 if self._last_t is None else t - self._last_t
-        if not (dt >= 0 and -np.inf < t < np.inf):
+        last = self._last_t
+        dt = 0.0 if last is None else t - last
+        if not (dt >= 0 and isfinite(t)):
             raise ParameterError("frame times must be numbers and must not decrease")
-        if self._live is not None:  # one compiled pass: into the arrays held (copies kept)
-            out, codes, ok = self._held
-            self._live.step(dt, x, v, out, codes, ok)
-            self._last_t = t
-            if not keep:
+        live = self._live
+        if live is not None:  # one compiled pass
+            if keep:  # new arrays, written once by the chain (the caller may keep them)
+                out, self.codes_, ok = live.step_new(dt, x, v)
+            else:  # into the arrays held, overwritten by the next step
+                out, codes, ok = self._held
+                live.step(dt, x, v, out, codes, ok)
                 self.codes_ = codes
-                return out, ok
-            self.codes_ = codes.copy()
-            return out.copy(), ok.copy()
+            self._last_t = t
+            return out, ok
         self._dt1[0] = dt
         v = self._all_valid if v is None else v
         # the same compiled chain as a batch, with one frame (no per-frame numpy glue)

@@ -125,8 +125,8 @@ fn lanes_give_the_scalar_codes_and_states() {
         let given: Vec<u8> = (0..t * n)
             .map(|_| [0, 0, 0, 2, 9][(rng.next() % 5) as usize])
             .collect();
-        let run = |simd: bool| {
-            crate::simd::set_enabled(simd);
+        let run = |path: crate::simd::Path| {
+            crate::simd::set_limit(path);
             let (mut a, mut b) = (mk(), mk());
             let mut codes = vec![0u8; t * n];
             a.run(&readings, &valid, &mut codes, &mut Changes::default())
@@ -143,8 +143,11 @@ fn lanes_give_the_scalar_codes_and_states() {
             };
             (codes, merged, bits(&a), bits(&b))
         };
-        let (scalar, lanes) = (run(false), run(true));
-        assert_eq!(scalar, lanes, "case {case}");
+        use crate::simd::Path;
+        let scalar = run(Path::Scalar);
+        // the AVX2 lanes forced, then the best path (eight AVX-512 lanes where present)
+        assert_eq!(scalar, run(Path::Avx2), "case {case}, AVX2");
+        assert_eq!(scalar, run(Path::Avx512), "case {case}, best path");
         seen.extend(scalar.0.iter().chain(&scalar.1));
     }
     assert_eq!(seen.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
