@@ -31,9 +31,9 @@ def _figure_writer(path: Path) -> None:
 
 
 def _chain(path: Path) -> None:
-    from texsense.compensation.stages import Linear
-
     import numpy as np
+
+    from texsense.compensation.stages import Linear
 
     StageChain([Linear("capacitance", "pF", "pressure", "N/cm2").fit(np.zeros(6), np.ones(6))]
                ).save(path)  # fmt: skip
@@ -87,7 +87,7 @@ def test_every_writer_refuses_every_bad_place_with_a_write_error(tmp_path, fault
                 if said not in str(e):
                     wrong.append(f"{kind} / {name}: {said!r} not in {str(e)[:200]}")
                 continue
-            except BaseException as e:  # noqa: BLE001 - what else escapes is the failure
+            except BaseException as e:  # what else escapes is the failure
                 wrong.append(f"{kind} / {name}: {type(e).__name__}: {str(e)[:160]}")
                 continue
             wrong.append(f"{kind} / {name}: written")

@@ -43,6 +43,7 @@ import contextlib
 import errno
 import json
 import os
+import re
 import signal
 import stat
 import tempfile
@@ -547,17 +548,52 @@ def read_regular(path: str | Path, what: str) -> bytes:
         return f.read(size + 1)
 
 
+class _DuplicateKeyError(ValueError):
+    """A key met twice in one JSON object (raised inside the parser, said by json_loads)."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    d: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in d:
+            raise _DuplicateKeyError(key)
+        d[key] = value
+    return d
+
+
 def json_loads(text: str | bytes | bytearray) -> Any:
-    """``json.loads`` of text that came from outside (a file, an attribute, a message, a
-    request): every way it is not JSON is a ``ValueError`` (:class:`json.JSONDecodeError`),
-    text nested deeper than the parser's recursion included, which ``json`` raises as a
-    ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
-    of a device's reading thread)."""
+    """``json.loads`` of text that came from outside (a file, an attribute, a label, a
+    message, a request body): every way it is not JSON is a ``ValueError``
+    (:class:`json.JSONDecodeError`), also
+
+    - text nested deeper than the parser's recursion, which ``json`` raises as a
+      ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
+      of a device's reading thread);
+    - an object with a key twice (``{"gain": 1, "gain": 1e9}``), which ``json`` takes
+      silently, keeping the last: what one reader of the text sees would not be what another
+      sees (a hash, a viewer, another parser keeping the first).
+
+    >>> json_loads('{"a": 1, "a": 2}')
+    Traceback (most recent call last):
+    ...
+    json.decoder.JSONDecodeError: the key 'a' twice in one object: line 1 column 10 (char 9)
+    """
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=_unique_keys)
     except RecursionError:
         doc = text if isinstance(text, str) else ""
         raise json.JSONDecodeError("nested too deeply", doc, 0) from None
+    except _DuplicateKeyError as e:
+        doc = text if isinstance(text, str) else bytes(text).decode("utf-8", "replace")
+        marks = [m.start() for m in re.finditer(re.escape(json.dumps(e.key)) + r"\s*:", doc)]
+        pos = marks[1] if len(marks) > 1 else 0  # the second time (best effort: escapes)
+        raise json.JSONDecodeError(
+            f"the key {e.key[:80]!r} twice in one object", doc, pos
+        ) from None
 
 
 def toml_loads(raw: bytes) -> dict[str, Any]:

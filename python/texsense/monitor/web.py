@@ -60,7 +60,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from texsense._progress import STOPPING, StoppingError, check_stopping
-from texsense.data.files import read_small_text, real_path
+from texsense.data.files import json_loads, read_small_text, real_path
 from texsense.exceptions import ParameterError
 from texsense.monitor.sources import blocking
 
@@ -326,40 +326,40 @@ class Guard:
         await self.app(scope, receive, send_with_headers)
 
     async def _bounded(self, headers: dict[str, str], receive: Any, send: Any) -> Any:
-        """``receive`` for a body within :data:`MAX_BODY` (read here when it comes in chunks,
-        then handed on), or None once a larger one is refused (413)."""
+        """``receive`` for a body within :data:`MAX_BODY` that is JSON (read here, checked by
+        :func:`texsense.data.files.json_loads`, then handed on), or None once a body is
+        refused: larger (413, by its ``Content-Length`` before it is read), or not JSON, with a
+        key twice or nested too deeply (422). Every body of both servers is JSON, so this is
+        the one parser every body meets before a route reads it again."""
+        host = headers.get("host", "")
         too_big = (413, f"the request body is larger than {MAX_BODY // 1024} KiB")
         length = headers.get("content-length")
         if length is not None:
             if not length.strip().isdigit() or int(length) > MAX_BODY:
-                await self._refuse(send, too_big, headers.get("host", ""))
+                await self._refuse(send, too_big, host)
                 return None
-            return receive
-        if "chunked" not in headers.get("transfer-encoding", ""):
+        elif "chunked" not in headers.get("transfer-encoding", ""):
             return receive
         chunks, size = [], 0
         while True:
             message = await receive()
             if message["type"] != "http.request":
-                break
+                return _replay_then(message, receive)  # gone before the body ended
             chunks.append(message.get("body", b""))
             size += len(chunks[-1])
             if size > MAX_BODY:
-                await self._refuse(send, too_big, headers.get("host", ""))
+                await self._refuse(send, too_big, host)
                 return None
             if not message.get("more_body", False):
                 break
         body = b"".join(chunks)
-        done = False
-
-        async def replay() -> dict[str, Any]:
-            nonlocal done
-            if done:
-                return await receive()
-            done = True
-            return {"type": "http.request", "body": body, "more_body": False}
-
-        return replay
+        if body.strip():
+            try:
+                json_loads(body)
+            except (ValueError, UnicodeDecodeError) as e:
+                await self._refuse(send, (422, f"the request body is not JSON: {e}"[:300]), host)
+                return None
+        return _replay_then({"type": "http.request", "body": body, "more_body": False}, receive)
 
     async def _refuse(self, send: Any, refused: tuple[int, str], host: str) -> None:
         status, reason = refused
@@ -381,6 +381,20 @@ class Guard:
             client = scope.get("client") or ("?", 0)
             what = "WebSocket" if scope["type"] == "websocket" else method
             log.warning("refused %s %s from %s: %s", what, scope.get("path", ""), client[0], reason)
+
+
+def _replay_then(first: dict[str, Any], receive: Any) -> Any:
+    """A ``receive`` that gives ``first`` once, then what ``receive`` gives."""
+    done = False
+
+    async def replay() -> dict[str, Any]:
+        nonlocal done
+        if done:
+            return dict(await receive())
+        done = True
+        return first
+
+    return replay
 
 
 def _csp(path: str, host: str) -> list[tuple[bytes, bytes]]:
