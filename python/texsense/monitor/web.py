@@ -50,6 +50,7 @@ import ipaddress
 import json
 import logging
 import os
+import re
 import signal
 import socket
 import sys
@@ -57,7 +58,7 @@ import time
 from collections.abc import Awaitable, Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from texsense._progress import STOPPING, StoppingError, check_stopping
 from texsense.data.files import json_loads, read_small_text, real_path
@@ -160,6 +161,56 @@ def host_name(host: str) -> str:
     return host.rstrip(".")
 
 
+#: An origin as browsers send it (RFC 6454, serialised): a lower-case scheme and host, no
+#: user, path, query, fragment, space or trailing dot or slash; a port of digits.
+_ORIGIN = re.compile(
+    r"(?P<scheme>https?)://(?P<host>\[[0-9a-f:.]+\]|[a-z0-9](?:[a-z0-9.-]*[a-z0-9])?)"
+    r"(?::(?P<port>[1-9][0-9]{0,4}))?"
+)
+_DEFAULT_PORT = {"http": 80, "https": 443}
+
+
+def parse_origin(text: str) -> tuple[str, str, int] | None:
+    """``(scheme, host, port)`` of an ``Origin`` header exactly as a browser serialises it
+    (``http://127.0.0.1:8765``; the default port may be left out), else None: the one parser
+    of origins of both servers, for the header and for ``--allow-origin``. Nothing is
+    stripped or lowered: a space around it, a trailing slash or dot, a user, a path, upper
+    case, ``null``, a port beyond 65535 or with a leading zero are not origins a browser
+    sends, so they are no origin this server trusts.
+
+    >>> parse_origin("http://127.0.0.1:8765"), parse_origin("https://portal.example")
+    (('http', '127.0.0.1', 8765), ('https', 'portal.example', 443))
+    >>> parse_origin("http://127.0.0.1:8765 "), parse_origin("null")
+    (None, None)
+    """
+    m = _ORIGIN.fullmatch(text)
+    if m is None:
+        return None
+    host = m["host"]
+    if host.startswith("["):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            return None
+    port = int(m["port"]) if m["port"] else _DEFAULT_PORT[m["scheme"]]
+    if port > 65535:
+        return None
+    return m["scheme"], host.strip("[]"), port
+
+
+def host_port(host: str, default: int = 80) -> tuple[str, int] | None:
+    """``(name, port)`` of a Host header (:func:`host_name`, the port ``default`` when none
+    is given), None when it is no name with an optional port."""
+    name = host_name(host)
+    if not name:
+        return None
+    rest = host.strip().rsplit("]", 1)[-1] if host.strip().startswith("[") else host.strip()
+    port = rest.rsplit(":", 1)[1] if rest.count(":") == 1 else ""
+    if port and not (port.isascii() and port.isdigit() and 0 < int(port) <= 65535):
+        return None
+    return name, int(port) if port else default
+
+
 def safe_file(folder: Path, name: str) -> Path | None:
     """``folder / name`` if it is a plain file inside ``folder`` (no traversal), else None."""
     if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
@@ -209,6 +260,18 @@ def resolve_token(
     return token
 
 
+def _allowed_origin(text: str) -> tuple[str, str, int]:
+    """An ``--allow-origin`` URL (a trailing slash allowed) as :func:`parse_origin` gives it;
+    anything else is a :class:`~texsense.exceptions.ParameterError`."""
+    parsed = parse_origin(text.strip().removesuffix("/"))
+    if parsed is None:
+        raise ParameterError(
+            f"--allow-origin {text[:80]!r}: expected an origin as a browser sends it, "
+            "scheme://host[:port] in lower case (e.g. https://portal.example)"
+        )
+    return parsed
+
+
 class Access:
     """The rules of :class:`Guard`: who may ask what.
 
@@ -239,7 +302,7 @@ class Access:
         self.hosts = {host_name(h) for h in hosts}
         if not self.loopback:
             self.hosts |= {host_name(socket.gethostname()), host_name(socket.getfqdn())}
-        self.origins = {o.rstrip("/").lower() for o in origins}
+        self.origins = {_allowed_origin(o) for o in origins}
 
     def host_ok(self, host: str) -> bool:
         """Whether a Host header names this server."""
@@ -251,12 +314,17 @@ class Access:
         return not self.loopback and _is_ip(name)
 
     def origin_ok(self, origin: str, host: str) -> bool:
-        """Whether a page of ``origin`` may talk to this server reached as ``host``."""
-        origin = origin.strip().rstrip("/").lower()
-        if origin in self.origins:
+        """Whether a page of ``origin`` may talk to this server reached as ``host``: an
+        origin (:func:`parse_origin`, strictly) listed with ``--allow-origin``, or this
+        server's own: ``http`` (the servers speak plain HTTP; a page of ``https://`` is another
+        origin) with the Host header's name and port."""
+        parsed = parse_origin(origin)
+        if parsed is None:
+            return False
+        if parsed in self.origins:
             return True
-        parts = urlsplit(origin)
-        return parts.scheme in ("http", "https") and parts.netloc == host.strip().lower()
+        own = host_port(host)
+        return own is not None and parsed == ("http", *own)
 
     def token_ok(self, headers: dict[str, str], query: str) -> bool:
         """The token rule: ``?token=``, ``X-Texsense-Token`` or a bearer header."""
