@@ -26,7 +26,13 @@ from texsense.commands.monitor import (
 )
 from texsense.compensation.stages import load_chain
 from texsense.data import budget
-from texsense.data.files import check_writable, kept_or_made, open_regular, toml_loads
+from texsense.data.files import (
+    check_writable,
+    kept_or_made,
+    named_path,
+    open_regular,
+    toml_loads,
+)
 from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
@@ -116,7 +122,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _layout(spec: Any, where: str) -> Any:
+def _layout(spec: Any, where: str, named: Any) -> Any:
     from texsense.io import load
 
     if isinstance(spec, str) and spec.startswith("grid:"):
@@ -128,13 +134,19 @@ def _layout(spec: Any, where: str) -> Any:
         except ParameterError as e:  # 0 rows, a grid beyond the budget: the ward file named
             raise ParameterError(f"{where}: layout {spec!r}: {e}") from None
     if isinstance(spec, str):
-        return load(spec).layout
+        return load(named("layout", spec, "recording")).layout
     raise ParameterError(f"{where}: layout must be 'grid:ROWSxCOLS' or a recording's path")
 
+
+#: The keys of a ``[[mat]]`` of a ward file that name a path, and the kind each must be
+#: (:data:`texsense.data.files.PATH_KINDS`; ``source``: its source's, e.g. replay: a recording).
+#: Every path in a ward file is relative to the ward file's folder (docs/station.md).
+PATH_KEYS = {"layout": "recording", "calibration": "file", "model": "file", "source": "source"}
 
 #: The keys of a ``[[mat]]`` of a ward file and their TOML types.
 MAT_KEYS: dict[str, type | tuple[type, ...]] = {
     "id": str, "layout": str, "calibration": str, "source": str, "bed": bool, "model": str,
+    "orientation": str,
     "reposition_min": (int, float), "turn_every_min": (int, float),
 }  # fmt: skip
 
@@ -159,6 +171,23 @@ def _known_keys(
             raise FormatError(path, f"{where}: {key} must be {want}, got {value!r}")
 
 
+def _paths_of(ward: Path, k: int) -> Any:
+    """``named(key, value, kind)``: the path ``value`` of the key ``key`` of the ward file's
+    ``[[mat]]`` number ``k`` (from 0), relative to the ward file's folder and of ``kind``
+    (:func:`texsense.data.files.named_path`; ``"source"``: a source's spec, its path
+    resolved), or one :class:`FormatError` naming the file, the ``[[mat]]`` and the key."""
+
+    def named(key: str, value: Any, kind: str) -> Any:
+        try:
+            if kind == "source":
+                return sources.resolve_spec(str(value), ward)
+            return named_path(str(value), ward, kind)
+        except ParameterError as e:
+            raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {str(value)[:200]!r}: {e}") from None
+
+    return named
+
+
 def read_config(
     path: Path, reposition_min: float, turn_every_min: float = 120.0
 ) -> tuple[list[Any], dict[str, Any]]:
@@ -167,6 +196,7 @@ def read_config(
     [[mat]]
     id = "bed12"                      # the topic segment: <prefix>/bed12/frames
     layout = "grid:64x32"             # or the path of a recording of the mat
+                                      # (every path: relative to this file's folder)
     orientation = "bed"               # how it lies: bed, seat, foot, bed:bottom, top=head,...
                                       # (default: the calibration's, else none declared)
     calibration = "bed12.json"        # omit for a mat that sends pressure
@@ -179,6 +209,8 @@ def read_config(
         with open_regular(path) as f:  # a regular file only: no FIFO, no device
             budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
             doc = toml_loads(f.read())
+    except FormatError:
+        raise  # missing, a folder, a FIFO: said by open_regular, not "not TOML"
     except OSError as e:
         raise FormatError(path, f"cannot read: {e.strerror}") from None
     except UnicodeDecodeError:
@@ -194,6 +226,7 @@ def read_config(
         if not isinstance(m, dict) or "id" not in m or "layout" not in m:
             raise FormatError(path, f"[[mat]] #{k + 1} needs an id and a layout")
         _known_keys(path, f"[[mat]] #{k + 1}", m, MAT_KEYS)
+        named = _paths_of(path, k)
         for key, option in (
             ("reposition_min", "--reposition-min"),
             ("turn_every_min", "--turn-every"),
@@ -206,10 +239,10 @@ def read_config(
             check_mat_id(m["id"])
         except ParameterError as e:
             raise FormatError(path, f"[[mat]] #{k + 1}: {e}") from None
-        layout = _layout(m["layout"], where)
+        layout = _layout(m["layout"], where, named)
         cal = None
         if m.get("calibration"):
-            key = str(m["calibration"])
+            key = str(named("calibration", m["calibration"], "file"))
             if key not in calibrations:
                 calibrations[key] = load_chain(key)
             cal = calibrations[key]
@@ -223,6 +256,7 @@ def read_config(
             layout = layout.with_orientation(cal.orientation)
         spec = str(m.get("source", "mqtt"))
         if spec != "mqtt":  # a source of this machine, from the registry (docs/station.md)
+            spec = named("source", spec, "source")
             try:
                 local[m["id"]] = sources.open_source(spec, sources.SourceOptions(grid=layout))
             except ParameterError as e:
@@ -242,9 +276,9 @@ def read_config(
             if not m.get("model"):
                 raise FormatError(path, f"[[mat]] #{k + 1}: a bed needs model = \"FILE\", a "
                                   "posture model of sides (texsense posture train)")  # fmt: skip
-            model = PostureModel.load(str(m["model"]))
+            model = PostureModel.load(named("model", m["model"], "file"))
         every = float(m.get("turn_every_min", turn_every_min))
-        mats.append(MatConfig(str(m["id"]), layout, cal, quantity, str(m.get("source", "mqtt")),
+        mats.append(MatConfig(str(m["id"]), layout, cal, quantity, spec,
                               float(m.get("reposition_min", reposition_min)), bed=bed,
                               posture_model=model, turn_every_min=every))  # fmt: skip
     return mats, local

@@ -45,6 +45,13 @@ class SerialSource(Source):
     name = "serial"
     scheme = "serial"
     argument = "PORT"
+    path_kind = "device"
+
+    @classmethod
+    def argument_path(cls, argument: str) -> str:
+        """A device's path; a pySerial URL (``socket://``, ``rfc2217://``) is none."""
+        return "" if "://" in argument else cls.path_kind
+
     summary = "a mat on a serial line in the texsense line protocol (a device or pySerial URL)"
 
     @classmethod
@@ -176,6 +183,7 @@ class IIOSource(Source):
     name = "iio"
     scheme = "iio"
     argument = "DEVICE_DIR"
+    path_kind = "folder"
     summary = "a Linux IIO AD7745/46 converter behind a multiplexer (needs --grid)"
 
     @classmethod

@@ -136,6 +136,14 @@ class Source:
     argument: ClassVar[str] = ""
     #: one line of help
     summary: ClassVar[str] = ""
+    #: what the argument is when it is a path (a kind of :data:`texsense.data.files.PATH_KINDS`:
+    #: a file named in a ward file is found beside it); empty: not a path
+    path_kind: ClassVar[str] = ""
+
+    @classmethod
+    def argument_path(cls, argument: str) -> str:
+        """The kind of path ``argument`` is (:attr:`path_kind`; empty: none, e.g. a URL)."""
+        return cls.path_kind
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -219,6 +227,7 @@ class ReplaySource(Source):
     name = "replay"
     scheme = "replay"
     argument = "FILE"
+    path_kind = "recording"
     summary = "a recording of any readable format, at --speed times real time"
 
     @classmethod
@@ -285,6 +294,21 @@ def source_help() -> str:
     return " | ".join(
         f"{s}:{c.argument}" if c.argument else s for s, c in available_sources().items()
     )
+
+
+def resolve_spec(spec: str, named_in: str | Path) -> str:
+    """``spec`` as named in the file ``named_in`` (a ward file's ``source =``): its path, if
+    its source takes one, found by the rule for paths in files (beside ``named_in``) and of
+    the kind the source reads (:func:`texsense.data.files.named_path`). Raises
+    ``ParameterError`` (the caller names the file and the key)."""
+    from texsense.data.files import named_path
+
+    scheme, _, argument = spec.partition(":")
+    cls = available_sources().get(scheme)
+    kind = cls.argument_path(argument) if cls is not None and argument else ""
+    if not kind:
+        return spec
+    return f"{scheme}:{named_path(argument, named_in, kind)}"
 
 
 def open_source(spec: str, options: SourceOptions | None = None) -> Source:
