@@ -1,7 +1,7 @@
 """Family "a path inside a file" (harden9 items 1 and 2): every path a ward file names
 (``layout``, ``calibration``, ``model``, and the file, folder or device of its ``source``:
 ``replay:``, ``iio:``, ``serial:``) is found by one rule, relative to the ward file's folder
-(:func:`texsense.data.files.named_path`), never to the folder the station runs in, and is of
+(:func:`texsense.io.named.named_path`), never to the folder the station runs in, and is of
 the kind its key reads: a file, a recording (a file or a format's folder, not any folder tree:
 ``layout = "/tmp"`` read the whole tree as recordings), a folder, a device. Anything else is
 one error naming the ward file, the ``[[mat]]`` and the key.
@@ -115,7 +115,7 @@ def test_paths_are_relative_to_the_ward_file(place, monkeypatch, fault_row):
         except (FormatError, OSError) as e:
             wrong.append(f"{key} = {good!r} (--config relative): {e}")
     assert wrong == [], f"{len(wrong)} of {tried}:\n" + "\n".join(wrong)
-    fault_row("settings", f"every path a ward file names ({', '.join(VALID)}): relative to "
+    fault_row("paths in files", f"every path a ward file names ({', '.join(VALID)}): relative to "
               "the ward file's folder", "read", f"{tried} spellings from another working "
               "folder", cases=tried)  # fmt: skip
 
@@ -141,7 +141,7 @@ def test_a_path_of_the_wrong_kind_is_one_error(place, monkeypatch, fault_row):
                 continue
             wrong.append(f"{key} = {value!r}: taken")
     assert wrong == [], f"{len(wrong)} of {tried}:\n" + "\n".join(wrong)
-    fault_row("settings", "every path a ward file names x a folder tree, a file for a folder "
+    fault_row("paths in files", "every path a ward file names x a folder tree, a file for a folder "
               "or device, a FIFO, missing", "clear error", "the ward file, the [[mat]] and the "
               "key named", cases=tried)  # fmt: skip
 

@@ -46,7 +46,7 @@ def test_only_the_exact_origin_passes(fault_row):
     assert access.origin_ok("http://127.0.0.1:80", "127.0.0.1")
     assert access.origin_ok("http://[::1]:8765", "[::1]:8765")
     assert not access.origin_ok("https://127.0.0.1:443", "127.0.0.1:443")
-    fault_row("web", f"{len(origins)} origins almost this server's (scheme, host, port, what "
+    fault_row("origins", f"{len(origins)} origins almost this server's (scheme, host, port, what "
               "comes before and after)", "refused", "all but the exact origin",
               cases=len(origins))  # fmt: skip
 
@@ -92,6 +92,6 @@ def test_both_servers_refuse_them(kind, tmp_path, fault_row):
             if (r.status_code == 200) != (origin == f"http://{host}"):
                 wrong.append(f"{origin!r}: {r.status_code}")
     assert wrong == [], "\n".join(wrong)
-    fault_row("web", f"{kind}: origins almost its own, sent", "refused",
+    fault_row("origins", f"{kind}: origins almost its own, sent", "refused",
               f"{len(sample)} requests: 403 but for the exact origin",
               cases=len(sample))  # fmt: skip

@@ -177,6 +177,29 @@ def _display_unit(rec: Recording, mode: Mode, unit: str | None) -> tuple[str, fl
     return want, units.factor(rec.unit, want)
 
 
+def _settings_apply(
+    mode: str, alerts: bool, model: Any, turn_every: Any, threshold: Any, reposition: Any
+) -> None:
+    """Refuse a setting given where it does nothing (it would be taken and ignored): a side
+    model and a turning schedule outside a bed, exposure settings without exposure alerts (a
+    foot, a recording of no pressure)."""
+    given = [f for f, v in (("--model", model), ("--turn-every", turn_every)) if v is not None]
+    if given and mode != "bed":
+        raise ParameterError(
+            f"{' and '.join(given)} {'has' if len(given) == 1 else 'have'} no effect here: "
+            f"{'it applies' if len(given) == 1 else 'they apply'} to a bed; this recording is "
+            f"shown as {mode} (--mode bed shows it as a bed)"
+        )
+    given = [f for f, v in (("--threshold", threshold), ("--reposition-min", reposition))
+             if v is not None]  # fmt: skip
+    if given and not alerts:
+        raise ParameterError(
+            f"{' and '.join(given)} {'has' if len(given) == 1 else 'have'} no effect here: "
+            f"{'it applies' if len(given) == 1 else 'they apply'} to exposure alerts, which a "
+            f"recording shown as {mode} has none of (a pressure recording as seat, bed, generic)"
+        )
+
+
 def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
     """The alert settings: given, else what the recording declares, else the defaults."""
     defaults = {
@@ -283,6 +306,8 @@ def open_review(
     if mode not in MODES:
         raise ParameterError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
     m = MODES[mode]
+    _settings_apply(mode, rec.quantity == "pressure" and m.alerts, model, turn_every_min,
+                    threshold_mmhg, reposition_min)  # fmt: skip
     shown, factor = _display_unit(rec, m, unit)
     settings = _settings(
         rec.meta,

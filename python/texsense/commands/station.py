@@ -16,6 +16,7 @@ from typing import Any
 from texsense.apps.posture.model import PostureModel
 from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.commands._options import RANGES
 from texsense.commands.monitor import (
     add_web_options,
@@ -26,13 +27,7 @@ from texsense.commands.monitor import (
 )
 from texsense.compensation.stages import load_chain
 from texsense.data import budget
-from texsense.data.files import (
-    check_writable,
-    kept_or_made,
-    named_path,
-    open_regular,
-    toml_loads,
-)
+from texsense.data.files import check_writable, kept_or_made, open_regular, toml_loads
 from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
 from texsense.exceptions import FormatError, ParameterError
@@ -120,6 +115,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "event; default 2 s)")  # fmt: skip
     add_web_options(p, 8766)
     p.set_defaults(run=run)
+    only_where(p, STATION_RULES)
+
+
+#: Where the station's options apply (:mod:`texsense.commands._applies`).
+STATION_RULES = [
+    *(Rule(flag, lambda a: a.virtual_mats > 0, "virtual mats (--virtual-mats N)") for flag in
+      ("--virtual-beds", "--speed", "--virtual-calibrations", "--virtual-prefix")),
+    *(Rule(flag, lambda a: bool(a.broker), "a site broker (--broker)") for flag in
+      ("--broker-password-file", "--broker-ca", "--broker-cert", "--broker-key")),
+    Rule("--mat-credentials", lambda a: not a.broker,
+         "the station's own broker (without --broker: a site broker keeps its own)"),
+    *(Rule(flag, lambda a: bool(a.group), "a group (--group NAME)") for flag in
+      ("--member", "--checkpoint-every")),
+]  # fmt: skip
 
 
 def _layout(spec: Any, where: str, named: Any) -> Any:
@@ -139,7 +148,7 @@ def _layout(spec: Any, where: str, named: Any) -> Any:
 
 
 #: The keys of a ``[[mat]]`` of a ward file that name a path, and the kind each must be
-#: (:data:`texsense.data.files.PATH_KINDS`; ``source``: its source's, e.g. replay: a recording).
+#: (:data:`texsense.io.named.PATH_KINDS`; ``source``: its source's, e.g. replay: a recording).
 #: Every path in a ward file is relative to the ward file's folder (docs/station.md).
 PATH_KEYS = {"layout": "recording", "calibration": "file", "model": "file", "source": "source"}
 
@@ -174,18 +183,39 @@ def _known_keys(
 def _paths_of(ward: Path, k: int) -> Any:
     """``named(key, value, kind)``: the path ``value`` of the key ``key`` of the ward file's
     ``[[mat]]`` number ``k`` (from 0), relative to the ward file's folder and of ``kind``
-    (:func:`texsense.data.files.named_path`; ``"source"``: a source's spec, its path
+    (:func:`texsense.io.named.named_path`; ``"source"``: a source's spec, its path
     resolved), or one :class:`FormatError` naming the file, the ``[[mat]]`` and the key."""
 
     def named(key: str, value: Any, kind: str) -> Any:
         try:
             if kind == "source":
                 return sources.resolve_spec(str(value), ward)
+            from texsense.io.named import named_path  # (h5py: with the recordings)
+
             return named_path(str(value), ward, kind)
         except ParameterError as e:
             raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {str(value)[:200]!r}: {e}") from None
 
     return named
+
+
+def _ward_document(path: Path) -> dict[str, Any]:
+    """The TOML of the ward file ``path`` (a regular file within the memory budget), its
+    top-level keys checked; anything else is one :class:`FormatError` naming it."""
+    try:
+        with open_regular(path) as f:  # a regular file only: no FIFO, no device
+            budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
+            doc = toml_loads(f.read())
+    except FormatError:
+        raise  # missing, a folder, a FIFO: said by open_regular, not "not TOML"
+    except OSError as e:
+        raise FormatError(path, f"cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
+    except ValueError as e:  # tomllib's, and nested too deeply, too many digits
+        raise FormatError(path, f"not TOML: {e}") from None
+    _known_keys(path, "the ward file", doc, {"mat": list})
+    return doc
 
 
 def read_config(
@@ -205,19 +235,7 @@ def read_config(
     model = "sides.joblib"            # ... on the sides this posture model reports
     turn_every_min = 120              # default: --turn-every
     """
-    try:
-        with open_regular(path) as f:  # a regular file only: no FIFO, no device
-            budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
-            doc = toml_loads(f.read())
-    except FormatError:
-        raise  # missing, a folder, a FIFO: said by open_regular, not "not TOML"
-    except OSError as e:
-        raise FormatError(path, f"cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
-    except ValueError as e:  # tomllib's, and nested too deeply, too many digits
-        raise FormatError(path, f"not TOML: {e}") from None
-    _known_keys(path, "the ward file", doc, {"mat": list})
+    doc = _ward_document(path)
     mats: list[Any] = []
     local: dict[str, sources.Source] = {}
     calibrations: dict[str, Any] = {}  # a file named by many mats is read once

@@ -41,20 +41,18 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import json
 import os
-import re
 import signal
 import stat
 import tempfile
 import threading
-import tomllib
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any
 
 from texsense.data import budget
+from texsense.data.outside import json_loads, toml_loads
 from texsense.exceptions import FormatError, ParameterError, WriteError
 
 if TYPE_CHECKING:
@@ -70,7 +68,6 @@ __all__ = [
     "kept_or_made",
     "made_once",
     "make_folder",
-    "named_path",
     "open_regular",
     "read_regular",
     "read_small_text",
@@ -535,66 +532,6 @@ def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | Non
     return None
 
 
-#: What a path named in a file may have to be (:func:`named_path`), in the words of errors.
-PATH_KINDS = {
-    "file": "a file",
-    "folder": "a folder",
-    "recording": "a recording (a file, or a folder of a format such as PhysioNet PMD)",
-    "device": "a device (or a link to one)",
-}
-
-
-def named_path(value: str, named_in: str | Path, kind: str) -> Path:
-    """The path ``value`` that the file ``named_in`` names (a ward file's ``layout``,
-    ``calibration``, ``model``, a source's file, folder or device), by the one rule for paths
-    inside files: relative to the folder of the file that names it (absolute as it is, ``~``
-    the home folder), never to the folder the program runs in; checked to be of ``kind``
-    (:data:`PATH_KINDS`): a file where a file is expected (not a folder, FIFO or device), a
-    folder where a folder is, a recording (a file, or a folder a reader knows: not any folder
-    tree), a device where one is (when it exists: not a file or folder).
-
-    Raises
-    ------
-    ParameterError
-        Saying what was found and what was expected (the caller names the file and key).
-    """
-    if kind not in PATH_KINDS:
-        raise ParameterError(f"unknown kind of path {kind!r}; known: {', '.join(PATH_KINDS)}")
-    if not value or "\x00" in value:
-        raise ParameterError(f"{value!r} is no path")
-    path = Path(value).expanduser()
-    if not path.is_absolute():
-        path = Path(named_in).parent / path
-    want = PATH_KINDS[kind]
-    try:
-        st: os.stat_result | None = os.stat(path)
-    except FileNotFoundError:
-        st = None
-    except OSError as e:
-        raise ParameterError(f"{path}: {_place_error(e)}") from None
-    if st is None:
-        if kind == "device":
-            return path  # the source says it is missing (a device may come later)
-        raise ParameterError(f"{path}: no such {'folder' if kind == 'folder' else 'file'}")
-    mode = st.st_mode
-    folder = stat.S_ISDIR(mode)
-    found = "a folder" if folder else "a file" if stat.S_ISREG(mode) else _kind(mode)
-    fits = {"folder": folder, "device": stat.S_ISCHR(mode), "file": stat.S_ISREG(mode),
-            "recording": stat.S_ISREG(mode) or folder}[kind]  # fmt: skip
-    if not fits:
-        raise ParameterError(f"{path}: expected {want}, found {found}")
-    if folder and kind == "recording":
-        from texsense.io import sniff_format
-
-        try:
-            fmt = sniff_format(path)
-        except FormatError as e:
-            raise ParameterError(e.detail) from None
-        if fmt == "folder":
-            raise ParameterError(f"{path}: expected {want}, found a folder that is none")
-    return path
-
-
 def read_regular(path: str | Path, what: str) -> bytes:
     """The bytes of a regular file that an option names (a model, a calibration, regions,
     credentials), read without ever waiting on it (:func:`open_regular`) and only when its
@@ -607,70 +544,6 @@ def read_regular(path: str | Path, what: str) -> bytes:
         size = os.fstat(f.fileno()).st_size
         budget.check(size, what, p)
         return f.read(size + 1)
-
-
-class _DuplicateKeyError(ValueError):
-    """A key met twice in one JSON object (raised inside the parser, said by json_loads)."""
-
-    def __init__(self, key: str) -> None:
-        super().__init__(key)
-        self.key = key
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    d: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in d:
-            raise _DuplicateKeyError(key)
-        d[key] = value
-    return d
-
-
-def json_loads(text: str | bytes | bytearray) -> Any:
-    """``json.loads`` of text that came from outside (a file, an attribute, a label, a
-    message, a request body): every way it is not JSON is a ``ValueError``
-    (:class:`json.JSONDecodeError`), also
-
-    - text nested deeper than the parser's recursion, which ``json`` raises as a
-      ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
-      of a device's reading thread);
-    - an object with a key twice (``{"gain": 1, "gain": 1e9}``), which ``json`` takes
-      silently, keeping the last: what one reader of the text sees would not be what another
-      sees (a hash, a viewer, another parser keeping the first).
-
-    >>> json_loads('{"a": 1, "a": 2}')
-    Traceback (most recent call last):
-    ...
-    json.decoder.JSONDecodeError: the key 'a' twice in one object: line 1 column 10 (char 9)
-    """
-    try:
-        return json.loads(text, object_pairs_hook=_unique_keys)
-    except RecursionError:
-        doc = text if isinstance(text, str) else ""
-        raise json.JSONDecodeError("nested too deeply", doc, 0) from None
-    except _DuplicateKeyError as e:
-        doc = text if isinstance(text, str) else bytes(text).decode("utf-8", "replace")
-        marks = [m.start() for m in re.finditer(re.escape(json.dumps(e.key)) + r"\s*:", doc)]
-        pos = marks[1] if len(marks) > 1 else 0  # the second time (best effort: escapes)
-        raise json.JSONDecodeError(
-            f"the key {e.key[:80]!r} twice in one object", doc, pos
-        ) from None
-
-
-def toml_loads(raw: bytes) -> dict[str, Any]:
-    """The TOML document of a file's bytes (UTF-8, a byte-order mark allowed): every way it is
-    not TOML is a ``ValueError`` (``tomllib.TOMLDecodeError``, ``UnicodeDecodeError``), also
-    arrays or inline tables nested deeper than ``tomllib`` recurses (a ``RecursionError``) and
-    an integer of more digits than Python converts (a bare ``ValueError`` from ``int``)."""
-    text = raw.decode("utf-8-sig")
-    try:
-        return tomllib.loads(text)
-    except RecursionError:
-        raise ValueError("nested too deeply") from None
-    except tomllib.TOMLDecodeError:
-        raise
-    except ValueError as e:  # int(): "Exceeds the limit (4300 digits) ..."
-        raise ValueError(str(e).split(";")[0]) from None
 
 
 def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:

@@ -46,6 +46,7 @@ class SerialSource(Source):
     scheme = "serial"
     argument = "PORT"
     path_kind = "device"
+    reads = frozenset({"--grid"})
 
     @classmethod
     def argument_path(cls, argument: str) -> str:
@@ -184,6 +185,7 @@ class IIOSource(Source):
     scheme = "iio"
     argument = "DEVICE_DIR"
     path_kind = "folder"
+    reads = frozenset({"--grid", "--sampling-frequency", "--multiplexer", "--capdac-pf"})
     summary = "a Linux IIO AD7745/46 converter behind a multiplexer (needs --grid)"
 
     @classmethod
@@ -317,6 +319,7 @@ class MQTTSource(Source):
     name = "mqtt"
     scheme = "mqtt"
     argument = "HOST[:PORT]"
+    reads = frozenset({"--grid"})
     summary = "frames from an MQTT broker, topic texsense/+/frames (needs --grid)"
 
     @classmethod

@@ -136,9 +136,12 @@ class Source:
     argument: ClassVar[str] = ""
     #: one line of help
     summary: ClassVar[str] = ""
-    #: what the argument is when it is a path (a kind of :data:`texsense.data.files.PATH_KINDS`:
+    #: what the argument is when it is a path (a kind of :data:`texsense.io.named.PATH_KINDS`:
     #: a file named in a ward file is found beside it); empty: not a path
     path_kind: ClassVar[str] = ""
+    #: the command line's source options it reads (``--speed``, ``--grid``, ...): another
+    #: one given with it has no effect, and is refused (:mod:`texsense.commands._applies`)
+    reads: ClassVar[frozenset[str]] = frozenset()
 
     @classmethod
     def argument_path(cls, argument: str) -> str:
@@ -228,6 +231,7 @@ class ReplaySource(Source):
     scheme = "replay"
     argument = "FILE"
     path_kind = "recording"
+    reads = frozenset({"--speed"})
     summary = "a recording of any readable format, at --speed times real time"
 
     @classmethod
@@ -299,9 +303,9 @@ def source_help() -> str:
 def resolve_spec(spec: str, named_in: str | Path) -> str:
     """``spec`` as named in the file ``named_in`` (a ward file's ``source =``): its path, if
     its source takes one, found by the rule for paths in files (beside ``named_in``) and of
-    the kind the source reads (:func:`texsense.data.files.named_path`). Raises
+    the kind the source reads (:func:`texsense.io.named.named_path`). Raises
     ``ParameterError`` (the caller names the file and the key)."""
-    from texsense.data.files import named_path
+    from texsense.io.named import named_path  # (h5py: with the recordings)
 
     scheme, _, argument = spec.partition(":")
     cls = available_sources().get(scheme)
