@@ -62,7 +62,7 @@ from urllib.parse import parse_qs
 
 from texsense._progress import STOPPING, StoppingError, check_stopping
 from texsense.data.files import json_loads, read_small_text, real_path
-from texsense.exceptions import ParameterError
+from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor.sources import blocking
 
 __all__ = [
@@ -522,7 +522,10 @@ async def _until_disconnect(websocket: Any) -> None:
 def plain_errors(app: Any) -> Any:
     """Answer a request whose parameters or body do not validate with 422 and one line (where
     and what), never echoing the input: FastAPI's own answer repeats it and fails on a value
-    JSON cannot hold (``{"frames": NaN}`` was a 500). Every app of both servers calls this."""
+    JSON cannot hold (``{"frames": NaN}`` was a 500). A ``ParameterError`` or ``FormatError``
+    that no route turned into its own answer is a 422 with its line too (a parameter the event
+    store cannot hold, ``?session=99999999999999999999999``, was a 500). Every app of both
+    servers calls this."""
     from fastapi.exceptions import RequestValidationError
     from fastapi.responses import JSONResponse
 
@@ -533,7 +536,12 @@ def plain_errors(app: Any) -> Any:
         text = str(first.get("msg", "invalid request"))[:200]
         return JSONResponse({"detail": f"{where}: {text}"}, status_code=422)
 
+    async def refused(_request: Any, exc: Exception) -> Any:
+        return JSONResponse({"detail": str(exc)[:300]}, status_code=422)
+
     app.add_exception_handler(RequestValidationError, invalid)
+    app.add_exception_handler(ParameterError, refused)
+    app.add_exception_handler(FormatError, refused)
     return app
 
 
