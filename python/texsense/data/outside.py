@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 import tomllib
 from typing import Any
 
@@ -19,6 +20,22 @@ class _DuplicateKeyError(ValueError):
     def __init__(self, key: str) -> None:
         super().__init__(key)
         self.key = key
+
+
+class _BeyondFloatError(ValueError):
+    """A JSON integer no float holds (raised inside the parser, said by json_loads)."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+
+def _whole(text: str) -> int:
+    """A JSON integer, if a float can hold it (beyond, every reader that takes it as a real
+    number raised ``OverflowError``; thousands of digits, Python's own ``ValueError``)."""
+    if len(text.lstrip("-")) > 310 or abs(value := int(text)) > sys.float_info.max:
+        raise _BeyondFloatError(text)
+    return value
 
 
 def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -38,6 +55,9 @@ def json_loads(text: str | bytes | bytearray) -> Any:
     - text nested deeper than the parser's recursion, which ``json`` raises as a
       ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
       of a device's reading thread);
+    - an integer beyond any float (``1`` and 400 zeros), which every reader that takes it as
+      a real number raised as ``OverflowError`` (a regions file, a recording's alert
+      settings: a traceback);
     - an object with a key twice (``{"gain": 1, "gain": 1e9}``), which ``json`` takes
       silently, keeping the last: what one reader of the text sees would not be what another
       sees (a hash, a viewer, another parser keeping the first).
@@ -48,10 +68,17 @@ def json_loads(text: str | bytes | bytearray) -> Any:
     json.decoder.JSONDecodeError: the key 'a' twice in one object: line 1 column 10 (char 9)
     """
     try:
-        return json.loads(text, object_pairs_hook=_unique_keys)
+        return json.loads(text, object_pairs_hook=_unique_keys, parse_int=_whole)
     except RecursionError:
         doc = text if isinstance(text, str) else ""
         raise json.JSONDecodeError("nested too deeply", doc, 0) from None
+    except _BeyondFloatError as e:
+        doc = text if isinstance(text, str) else bytes(text).decode("utf-8", "replace")
+        raise json.JSONDecodeError(
+            f"a number of {len(e.text)} digits, beyond any real number",
+            doc,
+            max(doc.find(e.text), 0),
+        ) from None
     except _DuplicateKeyError as e:
         doc = text if isinstance(text, str) else bytes(text).decode("utf-8", "replace")
         marks = [m.start() for m in re.finditer(re.escape(json.dumps(e.key)) + r"\s*:", doc)]
