@@ -24,6 +24,7 @@ few values per frame), so a recording longer than the memory budget plays.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.apps import stats
+from texsense.apps.alerts import REPOSITION_RANGE_MIN
 from texsense.apps.clinical import frame_walls, live_events, start_state
 from texsense.apps.review_events import (
     BLOCK,
@@ -200,8 +202,22 @@ def _settings_apply(
         )
 
 
-def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
-    """The alert settings: given, else what the recording declares, else the defaults."""
+#: Where each alert setting may lie (lower, upper, lower excluded): those of the options that
+#: set it (``--threshold``, ``--reposition-min``, ``--offload-min``, ``--turn-every``; a test
+#: keeps them equal), for a value a recording declares as for a value given.
+SETTING_RANGES = {
+    "threshold_mmhg": (0.0, 1e4, True),
+    "reposition_min": (*REPOSITION_RANGE_MIN, False),
+    "offload_min": (0.0, 7 * 24 * 60.0, False),
+    "turn_every_min": (0.0, 7 * 24 * 60.0, True),
+}
+
+
+def _settings(meta: dict[str, Any], label: str = "", **given: float | None) -> dict[str, float]:
+    """The alert settings: given, else what the recording declares, else the defaults; each a
+    real number within :data:`SETTING_RANGES` (a recording's ``true``, ``NaN``, ``-5`` or
+    ``1e308`` was taken: clamped, or a run of warnings), else a ``ParameterError`` naming
+    the recording (``label``) and the setting."""
     defaults = {
         "threshold_mmhg": 32.0,
         "reposition_min": 20.0,
@@ -213,12 +229,17 @@ def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
     out = {}
     for k, v in defaults.items():
         chosen = given.get(k)
+        where = f"the setting {k}"
         if chosen is None:
             chosen = declared.get(k, v)
-        try:
-            out[k] = float(chosen)
-        except (TypeError, ValueError):
-            raise ParameterError(f"the setting {k} must be a number, got {chosen!r}") from None
+            where = f"{label or 'the recording'}: the alert setting {k} it declares"
+        lo, hi, lo_open = SETTING_RANGES[k]
+        number = isinstance(chosen, int | float) and not isinstance(chosen, bool)
+        value = float(min(max(chosen, -1e300), 1e300)) if number else math.nan
+        if not (value <= hi and (value > lo if lo_open else value >= lo)):  # NaN: never
+            room = f"{lo:g}..{hi:g}" + (f", above {lo:g}" if lo_open else "")
+            raise ParameterError(f"{where} must be a number in {room}, got {chosen!r}"[:200])
+        out[k] = value
     return out
 
 
@@ -311,6 +332,7 @@ def open_review(
     shown, factor = _display_unit(rec, m, unit)
     settings = _settings(
         rec.meta,
+        label,
         threshold_mmhg=threshold_mmhg,
         reposition_min=reposition_min,
         turn_every_min=turn_every_min,
