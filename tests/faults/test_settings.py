@@ -91,9 +91,10 @@ def _misspellings(key: str) -> list[str]:
 
 WARD_KEYS = {"id": '"a"', "layout": '"grid:4x4"', "calibration": '"c.json"', "source": '"mqtt"',
              "bed": "false", "model": '"m.joblib"', "reposition_min": "20",
-             "turn_every_min": "120"}  # fmt: skip
+             "turn_every_min": "120", "orientation": '"bed"'}  # fmt: skip
 WRONG_TYPES = {"id": "3", "layout": "[4, 4]", "calibration": "true", "source": "1", "bed": '"yes"',
-               "model": "0", "reposition_min": '"20"', "turn_every_min": "true"}  # fmt: skip
+               "model": "0", "reposition_min": '"20"', "turn_every_min": "true",
+               "orientation": "1"}  # fmt: skip
 BAD_IDS = ["texsense-station", "TEXSENSE-STATION", "a/b", "../x", "", ".hidden", "a b",
            "x" * 65, "é", "-a", "a#", "a+"]  # fmt: skip
 
@@ -103,7 +104,9 @@ def _ward(path, extra: str, mat_id: str = '"a"') -> None:
 
 
 def test_every_ward_key_is_checked(tmp_path, fault_row):
-    from texsense.commands.station import read_config
+    from texsense.commands.station import MAT_KEYS, read_config
+
+    assert set(WARD_KEYS) == set(MAT_KEYS)  # (orientation, documented, was refused as unknown)
 
     path = tmp_path / "ward.toml"
     tried = 0
