@@ -3,7 +3,7 @@ equal keys without a word, so ``{"gain": 1, "gain": 1e9}`` meant to one reader w
 (a hash, a viewer, a parser that keeps the first) did not see. Every JSON texsense reads from
 outside goes through :func:`texsense.data.files.json_loads`, which refuses it, so that it is
 one line naming the file (every place a file's JSON is read, the model files), a
-``ProtocolError`` (MQTT payloads, a device's ``#layout`` line) or a 422 (every route of both
+``ProtocolError`` (MQTT payloads, a device's ``#layout`` line) or a 400 (every route of both
 servers that takes a body: :class:`texsense.monitor.web.Guard` checks every body with it).
 """
 
@@ -114,7 +114,7 @@ def test_a_key_twice_in_a_message_is_a_protocol_error(fault_row):
 
 
 @pytest.mark.parametrize("kind", ["monitor", "station"])
-def test_a_key_twice_in_a_request_body_is_a_422(kind, tmp_path, fault_row):
+def test_a_key_twice_in_a_request_body_is_a_400(kind, tmp_path, fault_row):
     from faults.test_web import loaded_monitor, loaded_station
     from texsense.monitor.server import create_app
     from texsense.station.server import create_ward_app
@@ -136,8 +136,8 @@ def test_a_key_twice_in_a_request_body_is_a_422(kind, tmp_path, fault_row):
                 for headers in ({"Content-Type": "application/json"}, {}):
                     r = client.request(method, _fill(path, alert), content=body, headers=headers)
                     tried += 1
-                    if r.status_code != 422 or "twice" not in r.text:
+                    if r.status_code != 400 or "twice" not in r.text:
                         wrong.append(f"{method} {path} {body!r}: {r.status_code} {r.text[:120]}")
     assert wrong == [], f"{len(wrong)} of {tried}:\n" + "\n".join(wrong)
     fault_row("duplicate keys", f"{kind}: {len(unsafe)} routes that take a body x a key twice",
-              "refused", f"{tried} requests: 422 naming the key", cases=tried)  # fmt: skip
+              "refused", f"{tried} requests: 400 naming the key", cases=tried)  # fmt: skip

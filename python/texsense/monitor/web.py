@@ -397,7 +397,8 @@ class Guard:
         """``receive`` for a body within :data:`MAX_BODY` that is JSON (read here, checked by
         :func:`texsense.data.files.json_loads`, then handed on), or None once a body is
         refused: larger (413, by its ``Content-Length`` before it is read), or not JSON, with a
-        key twice or nested too deeply (422). Every body of both servers is JSON, so this is
+        key twice, nested too deeply or a number beyond any float (400, as the routes answer text
+        that is not JSON). Every body of both servers is JSON, so this is
         the one parser every body meets before a route reads it again."""
         host = headers.get("host", "")
         too_big = (413, f"the request body is larger than {MAX_BODY // 1024} KiB")
@@ -425,7 +426,7 @@ class Guard:
             try:
                 json_loads(body)
             except (ValueError, UnicodeDecodeError) as e:
-                await self._refuse(send, (422, f"the request body is not JSON: {e}"[:300]), host)
+                await self._refuse(send, (400, f"the request body is not JSON: {e}"[:300]), host)
                 return None
         return _replay_then({"type": "http.request", "body": body, "more_body": False}, receive)
 
