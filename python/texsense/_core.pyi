@@ -274,9 +274,7 @@ class Chain:
         measured: _Bools,
     ) -> None:
         """One frame into arrays the caller holds: values, codes and measured (code 0)."""
-    def step_new(
-        self, dt: float, readings: _F64, valid: _Bools | None
-    ) -> tuple[_F64, _U8, _Bools]:
+    def step_new(self, dt: float, readings: _F64, valid: _Bools | None) -> tuple[_F64, _U8, _Bools]:
         """One frame into new arrays: (values, codes, measured)."""
     def snapshot(self) -> bytes: ...
     def restore(self, state: bytes) -> None: ...
