@@ -241,6 +241,9 @@ def test_a_member_checkpoints_what_changed_and_less_often_with_many_mats(db, mon
     assert st.skipped == 3
     monkeypatch.setattr(group, "CHECKPOINTS_PER_S", 1.0)  # 4 mats held: every 4 s
     assert st.interval() == 4.0
+    st.share = 0.5  # a worker of two (--workers 2): half its member's checkpoints a second
+    assert st.interval() == 8.0
+    st.share = 1.0
     written.clear()
     for k in range(2, 14):  # every mat reads a frame every second
         for m in mats:

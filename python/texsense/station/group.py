@@ -117,7 +117,8 @@ def _restored(entry: MatEntry, g: Grant) -> dict[str, Any]:
 class GroupStation(Station):
     """A :class:`~texsense.station.ward.Station` that is a member of a group (see the
     module). ``db``: the PostgreSQL URL; ``page``: this member's ward page (for the others'
-    links)."""
+    links); ``share``: this process's share of its member's checkpoint budget (a worker of
+    ``--workers N``: 1/N, :mod:`texsense.station.workers`)."""
 
     entry_class = GroupMatEntry
 
@@ -136,6 +137,7 @@ class GroupStation(Station):
         min_stale_s: float = MIN_STALE_S,
         refuse_after_s: float = 10.0,
         token: str | None = None,
+        share: float = 1.0,
     ) -> None:
         for m in mats:
             mat_topic(topic, m.id)  # a group subscribes to each mat's own topic
@@ -144,6 +146,9 @@ class GroupStation(Station):
         self.name, self.member, self.page, self.token = group, member, page, token
         self.prefix = topic.split("/+/")[0]
         self.checkpoint_s = float(checkpoint_s)
+        if not 0 < share <= 1:
+            raise ParameterError(f"a member's share of its checkpoints is in (0, 1], got {share}")
+        self.share = float(share)
         self.journal = Journal(db, group, member, self._from_thread(self.lost))
         store = GroupStore(db, self.journal)
         super().__init__(broker, mats, topic=topic, store=store, record_dir=record_dir,
@@ -342,8 +347,9 @@ class GroupStation(Station):
 
     def interval(self) -> float:
         """Seconds between two checkpoints of a held mat: ``checkpoint_s``, or longer when
-        this member holds more than ``checkpoint_s`` x :data:`CHECKPOINTS_PER_S` mats."""
-        return max(self.checkpoint_s, len(self.held) / CHECKPOINTS_PER_S)
+        this member holds more than ``checkpoint_s`` x :data:`CHECKPOINTS_PER_S` (its share of
+        them) mats."""
+        return max(self.checkpoint_s, len(self.held) / (CHECKPOINTS_PER_S * self.share))
 
     def checkpoints(self, now: float) -> int:
         """Checkpoint the held mats that are due (every :meth:`interval`, the sensor's state
@@ -358,7 +364,8 @@ class GroupStation(Station):
             soon.add(m)
             if m in self.held:
                 n += self._checkpoint(m, now)
-        self._allowance = min(self._allowance + (now - self._full_t) * FULL_PER_S, FULL_PER_S)
+        per_s = FULL_PER_S * self.share
+        self._allowance = min(self._allowance + (now - self._full_t) * per_s, per_s)
         self._full_t = now
         while self._full and self._allowance >= 1:
             m = self._full.popleft()
