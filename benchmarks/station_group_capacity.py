@@ -188,8 +188,16 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         }  # fmt: skip
     finally:
         for proc, _ in members.values():
-            proc.kill()
-            proc.wait()
+            if workers > 1:  # the supervisor stops its workers (and reaps them)
+                proc.terminate()
+            else:
+                proc.kill()
+        for proc, _ in members.values():
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 def main() -> None:
