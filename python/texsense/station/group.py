@@ -8,11 +8,11 @@ every ``checkpoint_s`` and after every alert event, and when it takes a mat over
 from the mat's last checkpoint and the alert events stored after it.
 
 The ward page of any member shows every mat of the group: the member publishes the tiles of
-its mats that changed, once a second, in one message per 200 kB to
-``<prefix>/_group/<group>/<member>`` (a mat id never starts with ``_``), and reads the
-others'. A mat is shown with the member that holds it; a mat that no alive member holds is
-shown as *unwatched* (red, on top of the ward), and one whose holder has sent no word for
-:data:`~texsense.station.group_view.SILENT_S` as stale.
+its mats that changed, once a second (at most :data:`TILES_PER_S` of them), in one message
+per 200 kB to ``<prefix>/_group/<group>/<member>`` (a mat id never starts with ``_``), and
+reads the others'. A mat is shown with the member that holds it; a mat that no alive member
+holds is shown as *unwatched* (red, on top of the ward), and one whose holder has sent no
+word for :data:`~texsense.station.group_view.SILENT_S` as stale.
 """
 
 from __future__ import annotations
