@@ -63,7 +63,8 @@ def shared_chromium() -> str:
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     lines: queue.Queue[str] = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(x) for x in proc.stderr], daemon=True).start()
+    reader = threading.Thread(target=lambda: [lines.put(x) for x in proc.stderr], daemon=True)
+    reader.start()
     seen: list[str] = []
     while True:
         try:
@@ -76,16 +77,22 @@ def shared_chromium() -> str:
         if found:
             break
     _SHARED.update(proc=proc, ws=found.group(1))
-    atexit.register(_stop_chromium, proc, profile)
+    atexit.register(_stop_chromium, proc, reader, profile)
     return found.group(1)
 
 
-def _stop_chromium(proc: subprocess.Popen, profile: str) -> None:
+def _stop_chromium(proc: subprocess.Popen, reader: threading.Thread, profile: str) -> None:
+    """Stop it, let the reader of its error output see the end, close that pipe (left open,
+    it was the `ResourceWarning: unclosed file` at each test worker's exit)."""
     proc.terminate()
     try:
         proc.wait(timeout=10)
     except subprocess.TimeoutExpired:
         proc.kill()
+        proc.wait()
+    reader.join(timeout=10)
+    if proc.stderr is not None and not reader.is_alive():
+        proc.stderr.close()
     shutil.rmtree(profile, ignore_errors=True)
 
 
