@@ -24,6 +24,7 @@ class PatternSource(Source):
     name = "test pattern"
     scheme = "pattern"  # --source pattern
     summary = "a load that moves across the mat (a test pattern)"
+    reads = frozenset({"--grid", "--speed"})  # the source options it uses (others: refused)
     quantity, unit = "pressure", "N/cm2"
 
     @classmethod

@@ -16,11 +16,12 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from texsense._core import __version__
 from texsense.commands import COMMANDS
+from texsense.commands._applies import check_given
 from texsense.commands._options import check_numbers
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 
@@ -76,7 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.argv = argv  # the command line as given (a station's workers run it again)
     with _terminate_as_interrupt():
-        code = _run(args)
+        code = _run(args, lambda: check_given(parser, args, argv))
     if from_command_line:
         _leave_busy_workers(code)
     return code
@@ -95,11 +96,13 @@ def _leave_busy_workers(code: int) -> None:
         os._exit(code)
 
 
-def _run(args: argparse.Namespace) -> int:
-    """Run a parsed command: every failure is one line on stderr and exit 1 (one clean way
-    out: a bad file or option, an output place that cannot be written, a database that cannot
-    be opened, the memory budget); SIGTERM and Ctrl-C clean up as they stop."""
+def _run(args: argparse.Namespace, check: Callable[[], None] = lambda: None) -> int:
+    """Run a parsed command after ``check`` (an option given where it has no effect:
+    :mod:`texsense.commands._applies`): every failure is one line on stderr and exit 1 (one
+    clean way out: a bad file or option, an output place that cannot be written, a database
+    that cannot be opened, the memory budget); SIGTERM and Ctrl-C clean up as they stop."""
     try:
+        check()
         return int(args.run(args) or 0)
     except (FormatError, ParameterError, UnitError, WriteError) as e:
         print(f"texsense {args.command}: error: {e}", file=sys.stderr)

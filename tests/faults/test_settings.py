@@ -91,9 +91,10 @@ def _misspellings(key: str) -> list[str]:
 
 WARD_KEYS = {"id": '"a"', "layout": '"grid:4x4"', "calibration": '"c.json"', "source": '"mqtt"',
              "bed": "false", "model": '"m.joblib"', "reposition_min": "20",
-             "turn_every_min": "120"}  # fmt: skip
+             "turn_every_min": "120", "orientation": '"bed"'}  # fmt: skip
 WRONG_TYPES = {"id": "3", "layout": "[4, 4]", "calibration": "true", "source": "1", "bed": '"yes"',
-               "model": "0", "reposition_min": '"20"', "turn_every_min": "true"}  # fmt: skip
+               "model": "0", "reposition_min": '"20"', "turn_every_min": "true",
+               "orientation": "1"}  # fmt: skip
 BAD_IDS = ["texsense-station", "TEXSENSE-STATION", "a/b", "../x", "", ".hidden", "a b",
            "x" * 65, "é", "-a", "a#", "a+"]  # fmt: skip
 
@@ -103,7 +104,9 @@ def _ward(path, extra: str, mat_id: str = '"a"') -> None:
 
 
 def test_every_ward_key_is_checked(tmp_path, fault_row):
-    from texsense.commands.station import read_config
+    from texsense.commands.station import MAT_KEYS, read_config
+
+    assert set(WARD_KEYS) == set(MAT_KEYS)  # (orientation, documented, was refused as unknown)
 
     path = tmp_path / "ward.toml"
     tried = 0
@@ -202,6 +205,68 @@ def test_a_calibration_for_another_mat_is_refused(fault_row):
     Pipeline(cal, made_for)  # its own mat
     fault_row("settings", f"a mat calibration applied to {len(others)} mats of the same element "
               "count in other places", "refused", ", ".join(others), cases=len(others))  # fmt: skip
+
+
+def _moved(lay: Layout, xy: np.ndarray) -> Layout:
+    """``lay`` with its elements' centres at ``xy`` (cells, shape, pitch kept)."""
+    return Layout(xy, lay.size_cm, shape=lay.shape, cells=lay.cells, pitch_cm=lay.pitch_cm)
+
+
+def _rearranged(xy: np.ndarray, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Generated arrangements of the same elements in other places."""
+    span = np.ptp(xy, axis=0)
+    i, j = rng.choice(len(xy), 2, replace=False)
+    moved = xy.copy()
+    moved[i] += span * rng.uniform(0.05, 0.3, 2) * rng.choice([-1, 1], 2)
+    swapped = xy.copy()
+    swapped[[i, j]] = swapped[[j, i]]
+    return {"one moved": moved, "two swapped": swapped,
+            "mirrored in x": np.c_[-xy[:, 0], xy[:, 1]],
+            "mirrored in y": np.c_[xy[:, 0], -xy[:, 1]],
+            "shuffled": xy[rng.permutation(len(xy))]}  # fmt: skip
+
+
+def test_a_calibration_for_the_same_count_in_other_places_is_refused(fault_row):
+    """Generated: element centres moved, swapped, mirrored, shuffled (same count, same grid and
+    cells) are another mat; the same places at another offset, pitch or within 0.1 % are not."""
+    from texsense.calibration.workflows import seat_calibration
+    from texsense.compensation.pipeline import Pipeline, layout_mismatch
+
+    cal = seat_calibration()
+    grid = next(s.layout for s in cal.stages if getattr(s, "layout", None) is not None)
+    rng = np.random.default_rng(9)
+    refused = accepted = 0
+    wrong = []
+    for k in range(12):
+        points = Layout.points(rng.uniform(0, 40, (96, 2)))
+        for base, check in ((points, lambda a, b: layout_mismatch(a, b)),
+                            (grid, lambda _a, b: _pipeline_refuses(Pipeline, cal, b))):  # fmt: skip
+            xy = np.asarray(base.xy_cm)
+            for name, other in _rearranged(xy, rng).items():
+                if not check(base, _moved(base, other)):
+                    wrong.append(f"#{k} {base.kind} {name}: taken")
+                refused += 1
+            scale = rng.uniform(0.5, 3.0, 2)
+            for name, same in {"shifted": xy + rng.uniform(-50, 50, 2), "another pitch": xy * scale,
+                               "within 0.1 %": xy + rng.normal(0, 1e-3 * np.ptp(xy), xy.shape)
+                               }.items():  # fmt: skip
+                if check(base, _moved(base, same)):
+                    wrong.append(f"#{k} {base.kind} {name}: refused")
+                accepted += 1
+    assert wrong == [], f"{len(wrong)} of {refused + accepted}:\n" + "\n".join(wrong)
+    fault_row("settings", "a calibration applied to the same elements in other places "
+              "(generated: moved, swapped, mirrored, shuffled; points and a grid)", "refused",
+              f"{refused} refused; {accepted} at another offset or pitch accepted",
+              cases=refused + accepted)  # fmt: skip
+
+
+def _pipeline_refuses(pipeline, cal, layout: Layout) -> bool:
+    try:
+        pipeline(cal, layout)
+    except ParameterError as e:
+        assert "another mat" in str(e), e
+        return True
+    return False
 
 
 IMPOSSIBLE = {"pressure": [np.inf, -np.inf, np.nan, -5.0, 3e38, 2e5],

@@ -24,6 +24,7 @@ few values per frame), so a recording longer than the memory budget plays.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.apps import stats
+from texsense.apps.alerts import REPOSITION_RANGE_MIN
 from texsense.apps.clinical import frame_walls, live_events, start_state
 from texsense.apps.review_events import (
     BLOCK,
@@ -177,8 +179,45 @@ def _display_unit(rec: Recording, mode: Mode, unit: str | None) -> tuple[str, fl
     return want, units.factor(rec.unit, want)
 
 
-def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
-    """The alert settings: given, else what the recording declares, else the defaults."""
+def _settings_apply(
+    mode: str, alerts: bool, model: Any, turn_every: Any, threshold: Any, reposition: Any
+) -> None:
+    """Refuse a setting given where it does nothing (it would be taken and ignored): a side
+    model and a turning schedule outside a bed, exposure settings without exposure alerts (a
+    foot, a recording of no pressure)."""
+    given = [f for f, v in (("--model", model), ("--turn-every", turn_every)) if v is not None]
+    if given and mode != "bed":
+        raise ParameterError(
+            f"{' and '.join(given)} {'has' if len(given) == 1 else 'have'} no effect here: "
+            f"{'it applies' if len(given) == 1 else 'they apply'} to a bed; this recording is "
+            f"shown as {mode} (--mode bed shows it as a bed)"
+        )
+    given = [f for f, v in (("--threshold", threshold), ("--reposition-min", reposition))
+             if v is not None]  # fmt: skip
+    if given and not alerts:
+        raise ParameterError(
+            f"{' and '.join(given)} {'has' if len(given) == 1 else 'have'} no effect here: "
+            f"{'it applies' if len(given) == 1 else 'they apply'} to exposure alerts, which a "
+            f"recording shown as {mode} has none of (a pressure recording as seat, bed, generic)"
+        )
+
+
+#: Where each alert setting may lie (lower, upper, lower excluded): those of the options that
+#: set it (``--threshold``, ``--reposition-min``, ``--offload-min``, ``--turn-every``; a test
+#: keeps them equal), for a value a recording declares as for a value given.
+SETTING_RANGES = {
+    "threshold_mmhg": (0.0, 1e4, True),
+    "reposition_min": (*REPOSITION_RANGE_MIN, False),
+    "offload_min": (0.0, 7 * 24 * 60.0, False),
+    "turn_every_min": (0.0, 7 * 24 * 60.0, True),
+}
+
+
+def _settings(meta: dict[str, Any], label: str = "", **given: float | None) -> dict[str, float]:
+    """The alert settings: given, else what the recording declares, else the defaults; each a
+    real number within :data:`SETTING_RANGES` (a recording's ``true``, ``NaN``, ``-5`` or
+    ``1e308`` was taken: clamped, or a run of warnings), else a ``ParameterError`` naming
+    the recording (``label``) and the setting."""
     defaults = {
         "threshold_mmhg": 32.0,
         "reposition_min": 20.0,
@@ -190,12 +229,17 @@ def _settings(meta: dict[str, Any], **given: float | None) -> dict[str, float]:
     out = {}
     for k, v in defaults.items():
         chosen = given.get(k)
+        where = f"the setting {k}"
         if chosen is None:
             chosen = declared.get(k, v)
-        try:
-            out[k] = float(chosen)
-        except (TypeError, ValueError):
-            raise ParameterError(f"the setting {k} must be a number, got {chosen!r}") from None
+            where = f"{label or 'the recording'}: the alert setting {k} it declares"
+        lo, hi, lo_open = SETTING_RANGES[k]
+        number = isinstance(chosen, int | float) and not isinstance(chosen, bool)
+        value = float(min(max(chosen, -1e300), 1e300)) if number else math.nan
+        if not (value <= hi and (value > lo if lo_open else value >= lo)):  # NaN: never
+            room = f"{lo:g}..{hi:g}" + (f", above {lo:g}" if lo_open else "")
+            raise ParameterError(f"{where} must be a number in {room}, got {chosen!r}"[:200])
+        out[k] = value
     return out
 
 
@@ -283,9 +327,12 @@ def open_review(
     if mode not in MODES:
         raise ParameterError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
     m = MODES[mode]
+    _settings_apply(mode, rec.quantity == "pressure" and m.alerts, model, turn_every_min,
+                    threshold_mmhg, reposition_min)  # fmt: skip
     shown, factor = _display_unit(rec, m, unit)
     settings = _settings(
         rec.meta,
+        label,
         threshold_mmhg=threshold_mmhg,
         reposition_min=reposition_min,
         turn_every_min=turn_every_min,

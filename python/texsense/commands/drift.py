@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.compensation.drift import DriftModel, read_steps
 from texsense.compensation.drift_structure import (
     LEVEL_EXPONENTS,
@@ -98,6 +99,10 @@ def add_clock_arguments(parser: argparse.ArgumentParser, prefix: str = "") -> No
         default=REST_RATE,
         help=f"rest clock: reading velocity (N/cm² per s) that halves the clock ({REST_RATE})",
     )
+    key = prefix.replace("-", "_")
+    only_where(parser, [Rule(f"--{prefix}rest-rate",
+                             lambda a: getattr(a, f"{key}clock") not in ("thesis", "time"),
+                             f"the rest clock (not --{prefix}clock thesis or time)")])  # fmt: skip
 
 
 def rest_rate_of(args: argparse.Namespace, prefix: str = "") -> float:

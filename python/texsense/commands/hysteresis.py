@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.commands.drift import add_clock_arguments, load_model, rest_rate_of
 from texsense.compensation.drift import DriftModel, read_steps
 from texsense.compensation.hysteresis import HysteresisModel
@@ -92,6 +93,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_clock_arguments(f, "drift-")
     f.add_argument("--json", action="store_true", help="print a JSON summary")
     f.set_defaults(run=run_fit)
+    only_where(f, FIT_RULES)
     a = hs.add_parser(
         "apply",
         help="apply a model to a CSV",
@@ -159,6 +161,15 @@ def error_summary(
             "max_relative_error": float(rel.max()) if sel.any() else None,
         }
     return out
+
+
+#: Where the options of ``hysteresis fit`` apply (:mod:`texsense.commands._applies`).
+FIT_RULES = [
+    *(Rule(flag, lambda a: a.drift is not None, "a drift stage (--drift STEPS.csv)")
+      for flag in ("--drift-kind", "--drift-clock", "--drift-rest-rate")),
+    *(Rule(flag, lambda a: a.method != "thesis", "--method auto, lsq or relay (the "
+           "thesis method has none)") for flag in ("--cells", "--smoothing", "--folds")),
+]  # fmt: skip
 
 
 def run_fit(args: argparse.Namespace) -> int:

@@ -15,6 +15,7 @@ from texsense.apps.bed import BedWatch
 from texsense.apps.posture.model import PostureModel
 from texsense.apps.views import guess_mode
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, no_effect, only_where
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
 from texsense.data.files import cache_folder, check_writable, kept_or_made
@@ -109,6 +110,50 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_web_options(p, 8765)
     p.set_defaults(run=run_monitor)
+    only_where(p, MONITOR_RULES)
+
+
+_CALIBRATED = "a calibrated capacitance mat (--calibration, or --source virtual, virtual-bed)"
+#: Where ``monitor``'s own options apply (:mod:`texsense.commands._applies`).
+MONITOR_RULES = [
+    Rule("--turn-every", lambda a: a.bed or a.source == "virtual-bed",
+         "a bed (--bed, or --source virtual-bed)"),
+    Rule("--no-posture", lambda a: a.model is None, "the virtual mats' own posture "
+         "model: a --model is used whatever it says"),
+    *(Rule(flag, lambda a: _calibrated(a), _CALIBRATED)
+      for flag in ("--in-use-drift", "--interval", "--count-possible")),
+    Rule("--count-possible", lambda a: a.interval != "off", "bounds (--interval LEVEL)"),
+]  # fmt: skip
+
+
+def _calibrated(args: argparse.Namespace) -> bool:
+    """Whether the monitor's source is compensated: a ``--calibration``, or a virtual mat's
+    own (a replay of pressure, checked once it is read: :func:`build_monitor`)."""
+    if args.calibration is not None:
+        return True
+    cls = sources.available_sources().get(str(args.source).partition(":")[0])
+    return cls is None or cls.default_calibration.__func__ is not (  # type: ignore[attr-defined]
+        Source.default_calibration.__func__  # type: ignore[attr-defined]
+    )
+
+
+#: The source options of ``monitor``, ``record`` and ``calibrate wizard``, and the sources
+#: that read each (every source declares what it reads: ``Source.reads``).
+SOURCE_OPTIONS = {
+    "--speed": "--source virtual, virtual-bed or replay:FILE",
+    "--grid": "--source serial, iio or mqtt",
+    "--sampling-frequency": "--source iio",
+    "--multiplexer": "--source iio",
+    "--capdac-pf": "--source iio",
+}
+
+
+def _reads(flag: str) -> Callable[[argparse.Namespace], bool]:
+    def applies(args: argparse.Namespace) -> bool:
+        cls = sources.available_sources().get(str(args.source).partition(":")[0])
+        return cls is None or flag in cls.reads  # (an unknown source: its own error)
+
+    return applies
 
 
 def add_source_options(p: argparse.ArgumentParser) -> None:
@@ -157,6 +202,7 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
         metavar="PF",
         help="iio: CAPDAC offset subtracted before conversion (pF)",
     )
+    only_where(p, [Rule(flag, _reads(flag), where) for flag, where in SOURCE_OPTIONS.items()])
 
 
 def add_web_options(p: argparse.ArgumentParser, port: int) -> None:
@@ -275,6 +321,11 @@ def build_monitor(args: argparse.Namespace) -> Monitor:
     else:
         calibration = default_calibration(args.source)
     pipeline = None
+    if args.calibration is not None and source.quantity != "capacitance":
+        raise ParameterError(
+            f"{no_effect('--calibration', 'a source of capacitance')}; {source.name} sends "
+            f"{source.quantity} ({source.unit})"
+        )
     if source.quantity == "capacitance" and calibration is not None:
         pipeline = monitor_pipeline(args, calibration, source, _mode(args, source, None))
     raw_only = source.quantity == "capacitance" and pipeline is None

@@ -14,6 +14,7 @@ import numpy as np
 from texsense.apps.views import checked_words
 from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, no_effect, only_where
 from texsense.commands._options import add_accept_truncated, refuse_replacing
 from texsense.commands._tables import text_table
 from texsense.commands.wizard import register_wizard
@@ -158,6 +159,9 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
     )
     add_accept_truncated(p)
     p.set_defaults(run=run_process)
+    only_where(p, [Rule("--workers", lambda a: not _single(a) and a.scheduler is None,
+                        "an archive processed here (several inputs or a folder, without "
+                        "--scheduler)")])  # fmt: skip
 
 
 def _register_repair_and_health(sub: argparse._SubParsersAction) -> None:
@@ -193,6 +197,11 @@ def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
     ``calibration`` (``stages``: e.g. ``hysteresis=False, drift=False``; no repair), a
     pressure recording as it is."""
     if rec.quantity != "capacitance":
+        if calibration is not None:  # taken and ignored, the user would think it applied
+            raise ParameterError(
+                f"{no_effect('--calibration', 'a capacitance recording')}; this one holds "
+                f"{rec.quantity} ({rec.unit})"
+            )
         return rec
     if calibration is None:
         raise ParameterError("a capacitance recording needs --calibration")
@@ -276,16 +285,20 @@ def _options(args: argparse.Namespace) -> ProcessOptions:
     )
 
 
-def run_process(args: argparse.Namespace) -> int:
-    """Run ``texsense process``: one file in blocks, or an archive on Dask."""
-    options = _options(args)
-    single = (
+def _single(args: argparse.Namespace) -> bool:
+    """Whether ``process`` reads one file in blocks (not an archive)."""
+    return (
         len(args.inputs) == 1
         and Path(args.inputs[0]).is_file()
         and not args.output.is_dir()
         and args.scheduler is None
     )
-    if single:
+
+
+def run_process(args: argparse.Namespace) -> int:
+    """Run ``texsense process``: one file in blocks, or an archive on Dask."""
+    options = _options(args)
+    if _single(args):
         src = Path(args.inputs[0])
         cal = load_chain(args.calibration)
         if args.output.suffix.lower() in (".h5", ".hdf5"):

@@ -18,6 +18,7 @@ from texsense.apps.posture.model import PostureModel
 from texsense.apps.posture.smoothing import window_vote
 from texsense.apps.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.commands._options import add_accept_truncated
 from texsense.commands._tables import confusion_lines, natural_key, text_table
 from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
@@ -66,6 +67,7 @@ def _feature_args(p: argparse.ArgumentParser) -> None:
                    "MAP the map the recording declares. Default: on when the recording "
                    "declares one (PMD does)")  # fmt: skip
     g.add_argument("--no-mirror", action="store_true", help="no mirrored training copies")
+    only_where(p, [Rule("--rotate", lambda a: a.align, "--align (a map is turned once centred)")])
 
 
 def describe_defaults() -> str:

@@ -10,6 +10,7 @@ from texsense.apps.posture.model import PostureModel
 from texsense.apps.report import write_report
 from texsense.apps.roi import parse_rois
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.data.files import json_loads, read_regular
 from texsense.exceptions import FormatError, ParameterError
 
@@ -35,6 +36,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, help="bed: a posture model of sides for the time per side")
     p.add_argument("--rois", type=Path, help="regions of interest (default: RECORDING.rois.json)")
     p.set_defaults(run=run_report)
+    # (a mode guessed from the recording: the same refused once it is read, apps.review)
+    only_where(p, [
+        *(Rule(flag, lambda a: a.mode in (None, "bed"), "a bed (--mode bed)")
+          for flag in ("--model", "--turn-every")),
+        *(Rule(flag, lambda a: a.mode != "foot", "exposure alerts (not --mode foot)")
+          for flag in ("--threshold", "--reposition-min")),
+    ])  # fmt: skip
 
 
 def _scale(text: str | None) -> tuple[float, float] | None:

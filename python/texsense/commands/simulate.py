@@ -19,6 +19,7 @@ from texsense._progress import progress
 from texsense.calibration.night import night_calibration
 from texsense.calibration.workflows import seat_calibration
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.data.files import check_not_input, make_folder, real_path
 from texsense.exceptions import ParameterError
 from texsense.io import save
@@ -122,7 +123,34 @@ def register(sub: argparse._SubParsersAction) -> None:
     mats.add_argument("--beds", type=int, metavar="K", help="mats: only the first K "
                       "even-numbered mats are beds (default: every second one)")  # fmt: skip
     p.set_defaults(run=run)
+    only_where(p, [Rule(flag, _protocol_in(modes), "simulate " + ", ".join(sorted(modes)))
+                   for flag, modes in _simulate_modes().items()])  # fmt: skip
     register_sessions(sub)
+
+
+#: The modes of ``simulate`` besides the test-machine protocols.
+_OTHERS = ("device", "mats", "night")
+
+
+def _simulate_modes() -> dict[str, set[str]]:
+    """Every option of ``simulate`` -> the protocols and modes it does something in."""
+    protocols = set(_ACCEPTS)
+    modes = {f"--{flag}": {p for p, takes in _ACCEPTS.items() if flag in takes}
+             for flag in _OPTIONS}  # fmt: skip
+    modes["--speed"] |= {"device", "mats"}
+    modes.update({
+        "--spacer": protocols | {"night"}, "--seed": protocols | {"device", "night"},
+        "--output": protocols | {"night"}, "--csv": set(protocols),
+        "--sample-hz": set(protocols), "--truth": {"device", "night"},
+        **{f: {"device"} for f in ("--mat", "--link", "--load", "--failures")},
+        **{f: {"night"} for f in ("--hours", "--calibration")},
+        **{f: {"mats"} for f in ("--count", "--broker", "--prefix", "--beds")},
+    })  # fmt: skip
+    return modes
+
+
+def _protocol_in(modes: set[str]) -> Any:
+    return lambda args: args.protocol in modes
 
 
 def run(args: argparse.Namespace) -> int:
@@ -133,8 +161,6 @@ def run(args: argparse.Namespace) -> int:
         return run_mats(args)
     if args.protocol == "night":
         return run_night(args)
-    if args.calibration is not None or args.hours != 8.0:
-        raise ParameterError("--calibration and --hours are for 'simulate night'")
     args.spacer = args.spacer or "textile-6mm"
     if args.output is None and args.csv is None:
         raise ParameterError("give an output: -o FILE.h5 and/or --csv FILE.csv")
@@ -143,11 +169,8 @@ def run(args: argparse.Namespace) -> int:
     options: dict[str, Any] = {}
     for flag, keyword in _OPTIONS.items():
         value = getattr(args, flag)
-        if value in (None, False):
-            continue
-        if flag not in _ACCEPTS[args.protocol]:
-            raise ParameterError(f"--{flag} does not apply to the {args.protocol} protocol")
-        options[keyword] = value
+        if value not in (None, False):  # (given elsewhere: refused, _simulate_modes)
+            options[keyword] = value
     rec = run_protocol(
         args.protocol, args.spacer, seed=args.seed, sample_hz=args.sample_hz, **options
     )

@@ -18,6 +18,7 @@ from typing import Any
 from texsense.apps.posture.model import PostureModel
 from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where
 from texsense.commands._options import RANGES
 from texsense.commands.monitor import (
     add_web_options,
@@ -121,9 +122,23 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "restarts a worker that dies: a member on N cores (default 1)")  # fmt: skip
     add_web_options(p, 8766)
     p.set_defaults(run=run)
+    only_where(p, STATION_RULES)
 
 
-def _layout(spec: Any, where: str) -> Any:
+#: Where the station's options apply (:mod:`texsense.commands._applies`).
+STATION_RULES = [
+    *(Rule(flag, lambda a: a.virtual_mats > 0, "virtual mats (--virtual-mats N)") for flag in
+      ("--virtual-beds", "--speed", "--virtual-calibrations", "--virtual-prefix")),
+    *(Rule(flag, lambda a: bool(a.broker), "a site broker (--broker)") for flag in
+      ("--broker-password-file", "--broker-ca", "--broker-cert", "--broker-key")),
+    Rule("--mat-credentials", lambda a: not a.broker,
+         "the station's own broker (without --broker: a site broker keeps its own)"),
+    *(Rule(flag, lambda a: bool(a.group), "a group (--group NAME)") for flag in
+      ("--member", "--checkpoint-every")),
+]  # fmt: skip
+
+
+def _layout(spec: Any, where: str, named: Any) -> Any:
     from texsense.io import load
 
     if isinstance(spec, str) and spec.startswith("grid:"):
@@ -135,13 +150,19 @@ def _layout(spec: Any, where: str) -> Any:
         except ParameterError as e:  # 0 rows, a grid beyond the budget: the ward file named
             raise ParameterError(f"{where}: layout {spec!r}: {e}") from None
     if isinstance(spec, str):
-        return load(spec).layout
+        return load(named("layout", spec, "recording")).layout
     raise ParameterError(f"{where}: layout must be 'grid:ROWSxCOLS' or a recording's path")
 
+
+#: The keys of a ``[[mat]]`` of a ward file that name a path, and the kind each must be
+#: (:data:`texsense.io.named.PATH_KINDS`; ``source``: its source's, e.g. replay: a recording).
+#: Every path in a ward file is relative to the ward file's folder (docs/station.md).
+PATH_KEYS = {"layout": "recording", "calibration": "file", "model": "file", "source": "source"}
 
 #: The keys of a ``[[mat]]`` of a ward file and their TOML types.
 MAT_KEYS: dict[str, type | tuple[type, ...]] = {
     "id": str, "layout": str, "calibration": str, "source": str, "bed": bool, "model": str,
+    "orientation": str,
     "reposition_min": (int, float), "turn_every_min": (int, float),
 }  # fmt: skip
 
@@ -166,6 +187,44 @@ def _known_keys(
             raise FormatError(path, f"{where}: {key} must be {want}, got {value!r}")
 
 
+def _paths_of(ward: Path, k: int) -> Any:
+    """``named(key, value, kind)``: the path ``value`` of the key ``key`` of the ward file's
+    ``[[mat]]`` number ``k`` (from 0), relative to the ward file's folder and of ``kind``
+    (:func:`texsense.io.named.named_path`; ``"source"``: a source's spec, its path
+    resolved), or one :class:`FormatError` naming the file, the ``[[mat]]`` and the key."""
+
+    def named(key: str, value: Any, kind: str) -> Any:
+        try:
+            if kind == "source":
+                return sources.resolve_spec(str(value), ward)
+            from texsense.io.named import named_path  # (h5py: with the recordings)
+
+            return named_path(str(value), ward, kind)
+        except ParameterError as e:
+            raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {str(value)[:200]!r}: {e}") from None
+
+    return named
+
+
+def _ward_document(path: Path) -> dict[str, Any]:
+    """The TOML of the ward file ``path`` (a regular file within the memory budget), its
+    top-level keys checked; anything else is one :class:`FormatError` naming it."""
+    try:
+        with open_regular(path) as f:  # a regular file only: no FIFO, no device
+            budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
+            doc = toml_loads(f.read())
+    except FormatError:
+        raise  # missing, a folder, a FIFO: said by open_regular, not "not TOML"
+    except OSError as e:
+        raise FormatError(path, f"cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
+    except ValueError as e:  # tomllib's, and nested too deeply, too many digits
+        raise FormatError(path, f"not TOML: {e}") from None
+    _known_keys(path, "the ward file", doc, {"mat": list})
+    return doc
+
+
 def read_config(
     path: Path, reposition_min: float, turn_every_min: float = 120.0
 ) -> tuple[list[Any], dict[str, Any]]:
@@ -174,6 +233,7 @@ def read_config(
     [[mat]]
     id = "bed12"                      # the topic segment: <prefix>/bed12/frames
     layout = "grid:64x32"             # or the path of a recording of the mat
+                                      # (every path: relative to this file's folder)
     orientation = "bed"               # how it lies: bed, seat, foot, bed:bottom, top=head,...
                                       # (default: the calibration's, else none declared)
     calibration = "bed12.json"        # omit for a mat that sends pressure
@@ -182,17 +242,7 @@ def read_config(
     model = "sides.joblib"            # ... on the sides this posture model reports
     turn_every_min = 120              # default: --turn-every
     """
-    try:
-        with open_regular(path) as f:  # a regular file only: no FIFO, no device
-            budget.check(os.fstat(f.fileno()).st_size, "the ward file", path)
-            doc = toml_loads(f.read())
-    except OSError as e:
-        raise FormatError(path, f"cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
-    except ValueError as e:  # tomllib's, and nested too deeply, too many digits
-        raise FormatError(path, f"not TOML: {e}") from None
-    _known_keys(path, "the ward file", doc, {"mat": list})
+    doc = _ward_document(path)
     mats: list[Any] = []
     local: dict[str, sources.Source] = {}
     calibrations: dict[str, Any] = {}  # a file named by many mats is read once
@@ -201,6 +251,7 @@ def read_config(
         if not isinstance(m, dict) or "id" not in m or "layout" not in m:
             raise FormatError(path, f"[[mat]] #{k + 1} needs an id and a layout")
         _known_keys(path, f"[[mat]] #{k + 1}", m, MAT_KEYS)
+        named = _paths_of(path, k)
         for key, option in (
             ("reposition_min", "--reposition-min"),
             ("turn_every_min", "--turn-every"),
@@ -213,10 +264,10 @@ def read_config(
             check_mat_id(m["id"])
         except ParameterError as e:
             raise FormatError(path, f"[[mat]] #{k + 1}: {e}") from None
-        layout = _layout(m["layout"], where)
+        layout = _layout(m["layout"], where, named)
         cal = None
         if m.get("calibration"):
-            key = str(m["calibration"])
+            key = str(named("calibration", m["calibration"], "file"))
             if key not in calibrations:
                 calibrations[key] = load_chain(key)
             cal = calibrations[key]
@@ -230,6 +281,7 @@ def read_config(
             layout = layout.with_orientation(cal.orientation)
         spec = str(m.get("source", "mqtt"))
         if spec != "mqtt":  # a source of this machine, from the registry (docs/station.md)
+            spec = named("source", spec, "source")
             try:
                 local[m["id"]] = sources.open_source(spec, sources.SourceOptions(grid=layout))
             except ParameterError as e:
@@ -249,9 +301,9 @@ def read_config(
             if not m.get("model"):
                 raise FormatError(path, f"[[mat]] #{k + 1}: a bed needs model = \"FILE\", a "
                                   "posture model of sides (texsense posture train)")  # fmt: skip
-            model = PostureModel.load(str(m["model"]))
+            model = PostureModel.load(named("model", m["model"], "file"))
         every = float(m.get("turn_every_min", turn_every_min))
-        mats.append(MatConfig(str(m["id"]), layout, cal, quantity, str(m.get("source", "mqtt")),
+        mats.append(MatConfig(str(m["id"]), layout, cal, quantity, spec,
                               float(m.get("reposition_min", reposition_min)), bed=bed,
                               posture_model=model, turn_every_min=every))  # fmt: skip
     return mats, local

@@ -36,6 +36,7 @@ import numpy as np
 
 from texsense.calibration.checks import edge_of_press, parse_pressure, typical_reading
 from texsense.calibration.session import CalibrationSession
+from texsense.commands._applies import Rule, only_where
 from texsense.commands._options import refuse_replacing
 from texsense.commands.monitor import add_source_options, open_source
 from texsense.data.files import unused_name
@@ -84,6 +85,8 @@ def register_wizard(cs: argparse._SubParsersAction) -> None:
     w.add_argument("--yes", action="store_true", help="no questions: for scripts")
     w.add_argument("--replace", action="store_true", help="write over an existing calibration file")
     w.set_defaults(run=run_wizard)
+    only_where(w, [Rule("--check", lambda a: not a.no_check, "the check step (not with "
+                        "--no-check)")])  # fmt: skip
 
 
 class _Feed:

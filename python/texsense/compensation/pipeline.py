@@ -60,10 +60,24 @@ from texsense.exceptions import ParameterError
 __all__ = ["Pipeline", "layout_mismatch"]
 
 
+def _arrangement(layout: Layout) -> np.ndarray:
+    """The element centres with the layout's offset and scale taken out (each axis onto 0..1):
+    what stays the same when a mat's layout is given with another origin or pitch
+    (``grid:8x12`` at 1 cm, its recording at its real pitch) and differs when an element sits
+    elsewhere among the others (moved, swapped, mirrored)."""
+    xy = np.asarray(layout.xy_cm, dtype=np.float64)
+    if xy.size == 0:
+        return xy
+    low, span = xy.min(axis=0), np.ptp(xy, axis=0)
+    return (xy - low) / np.where(span > 0, span, 1.0)
+
+
 def layout_mismatch(expected: Layout, given: Layout) -> str | None:
     """How the elements of ``given`` differ from those of ``expected`` (None: the same
-    elements): their count, the grid's shape, the cells they sit in; a calibration per element
-    applied to elements in other places would put each element's curve on another."""
+    elements): their count, the grid's shape, the cells they sit in, their places among each
+    other (centres, up to the layout's offset and scale on each axis: 1 % of the mat's
+    extent); a calibration per element applied to elements in other places would put each
+    element's curve on another."""
     if expected.n_elements != given.n_elements:
         return f"{expected.n_elements} elements, not {given.n_elements}"
     if (expected.shape is None) != (given.shape is None):
@@ -75,6 +89,14 @@ def layout_mismatch(expected: Layout, given: Layout) -> str | None:
         given.cells is None or not np.array_equal(expected.cells, given.cells)
     ):
         return "the same grid with its elements in other cells"
+    off = np.abs(_arrangement(expected) - _arrangement(given)).max(axis=1, initial=0.0)
+    if off.size and off.max() > 0.01:
+        k = int(np.argmax(off))
+        (x, y), (gx, gy) = expected.xy_cm[k], given.xy_cm[k]
+        return (
+            f"the same count with its elements in other places (element {k} at "
+            f"({gx:g}, {gy:g}) cm among the others, not ({x:g}, {y:g}))"
+        )
     return None
 
 

@@ -41,19 +41,18 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import json
 import os
 import signal
 import stat
 import tempfile
 import threading
-import tomllib
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any
 
 from texsense.data import budget
+from texsense.data.outside import json_loads, toml_loads
 from texsense.exceptions import FormatError, ParameterError, WriteError
 
 if TYPE_CHECKING:
@@ -146,6 +145,54 @@ def _fsync_dir(folder: Path) -> None:
             os.close(fd)
 
 
+def _place_error(e: OSError) -> str:
+    """What an ``OSError`` of a status asked before a write says, in the words of the errors."""
+    if e.errno == errno.ELOOP:
+        return "a loop of symbolic links"
+    if e.errno == errno.ENAMETOOLONG:
+        return "a name too long for the file system"
+    return _reason(e)
+
+
+def _is_file(path: Path) -> bool:
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except OSError:
+        return False
+
+
+def _write_place(target: Path) -> Path:
+    """The folder of ``target`` once it is a place a file can be written to: an existing
+    folder, and ``target`` nothing or a regular file. Every other place (a NUL in the name, a
+    name too long, a loop of links, a file or a missing folder on the way, a folder or a
+    device at ``target``) is a :class:`WriteError` naming it, never another ``OSError``."""
+    if "\x00" in str(target):
+        raise WriteError(target, "a name with a NUL character, which no file system holds")
+    folder = target.parent if str(target.parent) else Path(".")
+    try:
+        folder_mode = os.stat(folder).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        on_way = next((p for p in [*reversed(folder.parents), folder] if _is_file(p)), None)
+        where = f"{on_way} is a file, not a folder" if on_way is not None else (
+            f"the folder {folder} does not exist")  # fmt: skip
+        raise WriteError(target, where) from None
+    except OSError as e:
+        raise WriteError(target, f"the folder {folder}: {_place_error(e)}") from None
+    if not stat.S_ISDIR(folder_mode):
+        raise WriteError(target, f"{folder} is a file, not a folder")
+    try:
+        mode: int | None = os.stat(target).st_mode
+    except FileNotFoundError:
+        mode = None  # a new file (or a link to nothing, which is replaced)
+    except OSError as e:
+        raise WriteError(target, _place_error(e)) from None
+    if mode is not None and stat.S_ISDIR(mode):
+        raise WriteError(target, "is a folder, expected a file name")
+    if mode is not None and not stat.S_ISREG(mode):
+        raise WriteError(target, "is not a regular file (a device, a FIFO, ...): not replaced")
+    return folder
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path]:
     """A temporary path beside ``path``; on a clean exit it is synced and renamed to ``path``.
@@ -165,15 +212,7 @@ def atomic_path(path: str | Path, *, suffix: str | None = None) -> Iterator[Path
         at ``path``, if any, is unchanged and the temporary file is removed.
     """
     target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        where = f"{folder} is a file, not a folder" if folder.exists() else (
-            f"the folder {folder} does not exist")  # fmt: skip
-        raise WriteError(target, where)
-    if target.is_dir():
-        raise WriteError(target, "is a folder, expected a file name")
-    if target.exists() and not target.is_file():
-        raise WriteError(target, "is not a regular file (a device, a FIFO, ...): not replaced")
+    folder = _write_place(target)
     mode = _mode_of(target)
     with signals_held() as release:  # a stop signal between the file and the try: no leftover
         try:
@@ -505,35 +544,6 @@ def read_regular(path: str | Path, what: str) -> bytes:
         size = os.fstat(f.fileno()).st_size
         budget.check(size, what, p)
         return f.read(size + 1)
-
-
-def json_loads(text: str | bytes | bytearray) -> Any:
-    """``json.loads`` of text that came from outside (a file, an attribute, a message, a
-    request): every way it is not JSON is a ``ValueError`` (:class:`json.JSONDecodeError`),
-    text nested deeper than the parser's recursion included, which ``json`` raises as a
-    ``RecursionError`` (a few kB of ``[`` would otherwise be a traceback, a 500, or the end
-    of a device's reading thread)."""
-    try:
-        return json.loads(text)
-    except RecursionError:
-        doc = text if isinstance(text, str) else ""
-        raise json.JSONDecodeError("nested too deeply", doc, 0) from None
-
-
-def toml_loads(raw: bytes) -> dict[str, Any]:
-    """The TOML document of a file's bytes (UTF-8, a byte-order mark allowed): every way it is
-    not TOML is a ``ValueError`` (``tomllib.TOMLDecodeError``, ``UnicodeDecodeError``), also
-    arrays or inline tables nested deeper than ``tomllib`` recurses (a ``RecursionError``) and
-    an integer of more digits than Python converts (a bare ``ValueError`` from ``int``)."""
-    text = raw.decode("utf-8-sig")
-    try:
-        return tomllib.loads(text)
-    except RecursionError:
-        raise ValueError("nested too deeply") from None
-    except tomllib.TOMLDecodeError:
-        raise
-    except ValueError as e:  # int(): "Exceeds the limit (4300 digits) ..."
-        raise ValueError(str(e).split(";")[0]) from None
 
 
 def read_small_text(path: str | Path, what: str, limit: int = 65536) -> str:

@@ -50,7 +50,7 @@ import numpy as np
 
 from texsense._core import __version__
 from texsense.data import legacy
-from texsense.data.files import read_regular, write_text
+from texsense.data.files import json_loads, read_regular, write_text
 from texsense.exceptions import FormatError
 
 __all__ = [
@@ -132,11 +132,9 @@ def read_json(path: str | Path) -> Any:
     except UnicodeDecodeError:
         raise FormatError(path, "not UTF-8 text, expected a JSON model file") from None
     try:
-        return json.loads(text)
+        return json_loads(text)  # a key twice, nested too deeply: not JSON
     except json.JSONDecodeError as e:
         raise FormatError(path, f"not JSON: {e.msg}", line=e.lineno) from None
-    except RecursionError:
-        raise FormatError(path, "not JSON: nested too deeply") from None
 
 
 def _kind(d: Any) -> str:

@@ -369,7 +369,7 @@ class RecordingWriter:
     def update_meta(self, extra: Mapping[str, Any]) -> None:
         """Add ``extra`` to the file's ``meta`` (e.g. a state known only at the end: the
         in-use drift correction)."""
-        meta = json.loads(self._file.attrs["meta"])
+        meta = json_loads(self._file.attrs["meta"])
         meta.update(extra)
         self._file.attrs["meta"] = json.dumps(meta)
 

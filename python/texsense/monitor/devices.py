@@ -45,6 +45,14 @@ class SerialSource(Source):
     name = "serial"
     scheme = "serial"
     argument = "PORT"
+    path_kind = "device"
+    reads = frozenset({"--grid"})
+
+    @classmethod
+    def argument_path(cls, argument: str) -> str:
+        """A device's path; a pySerial URL (``socket://``, ``rfc2217://``) is none."""
+        return "" if "://" in argument else cls.path_kind
+
     summary = "a mat on a serial line in the texsense line protocol (a device or pySerial URL)"
 
     @classmethod
@@ -176,6 +184,8 @@ class IIOSource(Source):
     name = "iio"
     scheme = "iio"
     argument = "DEVICE_DIR"
+    path_kind = "folder"
+    reads = frozenset({"--grid", "--sampling-frequency", "--multiplexer", "--capdac-pf"})
     summary = "a Linux IIO AD7745/46 converter behind a multiplexer (needs --grid)"
 
     @classmethod
@@ -309,6 +319,7 @@ class MQTTSource(Source):
     name = "mqtt"
     scheme = "mqtt"
     argument = "HOST[:PORT]"
+    reads = frozenset({"--grid"})
     summary = "frames from an MQTT broker, topic texsense/+/frames (needs --grid)"
 
     @classmethod

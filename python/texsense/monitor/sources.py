@@ -136,6 +136,17 @@ class Source:
     argument: ClassVar[str] = ""
     #: one line of help
     summary: ClassVar[str] = ""
+    #: what the argument is when it is a path (a kind of :data:`texsense.io.named.PATH_KINDS`:
+    #: a file named in a ward file is found beside it); empty: not a path
+    path_kind: ClassVar[str] = ""
+    #: the command line's source options it reads (``--speed``, ``--grid``, ...): another
+    #: one given with it has no effect, and is refused (:mod:`texsense.commands._applies`)
+    reads: ClassVar[frozenset[str]] = frozenset()
+
+    @classmethod
+    def argument_path(cls, argument: str) -> str:
+        """The kind of path ``argument`` is (:attr:`path_kind`; empty: none, e.g. a URL)."""
+        return cls.path_kind
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -219,6 +230,8 @@ class ReplaySource(Source):
     name = "replay"
     scheme = "replay"
     argument = "FILE"
+    path_kind = "recording"
+    reads = frozenset({"--speed"})
     summary = "a recording of any readable format, at --speed times real time"
 
     @classmethod
@@ -285,6 +298,21 @@ def source_help() -> str:
     return " | ".join(
         f"{s}:{c.argument}" if c.argument else s for s, c in available_sources().items()
     )
+
+
+def resolve_spec(spec: str, named_in: str | Path) -> str:
+    """``spec`` as named in the file ``named_in`` (a ward file's ``source =``): its path, if
+    its source takes one, found by the rule for paths in files (beside ``named_in``) and of
+    the kind the source reads (:func:`texsense.io.named.named_path`). Raises
+    ``ParameterError`` (the caller names the file and the key)."""
+    from texsense.io.named import named_path  # (h5py: with the recordings)
+
+    scheme, _, argument = spec.partition(":")
+    cls = available_sources().get(scheme)
+    kind = cls.argument_path(argument) if cls is not None and argument else ""
+    if not kind:
+        return spec
+    return f"{scheme}:{named_path(argument, named_in, kind)}"
 
 
 def open_source(spec: str, options: SourceOptions | None = None) -> Source:

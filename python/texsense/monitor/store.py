@@ -40,6 +40,16 @@ CREATE INDEX IF NOT EXISTS events_session ON events(session);
 """
 
 
+def _held(args: tuple[Any, ...]) -> tuple[Any, ...]:
+    """``args`` of a query if the database can hold every number among them (a whole number
+    within 64 bits: ``?session=99999999999999999999999`` of a request was an ``OverflowError``
+    out of SQLite), else a :class:`ParameterError` saying which."""
+    for a in args:
+        if isinstance(a, int) and not -(2**63) <= a < 2**63:
+            raise ParameterError(f"{str(a)[:40]} lies beyond the event store's whole numbers")
+    return args
+
+
 class EventStore:
     """SQLite store of sessions (a monitor run, or one mat of a station) and their events.
     Every write commits at once (a killed monitor keeps every event written before)."""
@@ -74,12 +84,12 @@ class EventStore:
 
     def _rows(self, sql: str, args: tuple[Any, ...] = ()) -> list[dict[str, Any]]:
         with self._lock:
-            return [dict(r) for r in self._db.execute(self._sql(sql), args).fetchall()]
+            return [dict(r) for r in self._db.execute(self._sql(sql), _held(args)).fetchall()]
 
     def _write(self, sql: str, args: tuple[Any, ...]) -> int:
         """Run an INSERT or UPDATE and commit; returns the new row's id for an INSERT."""
         with self._lock, self._db:
-            cur = self._db.execute(self._sql(sql), args)
+            cur = self._db.execute(self._sql(sql), _held(args))
         return int(cur.lastrowid or 0)
 
     def _sql(self, sql: str) -> str:
@@ -189,12 +199,14 @@ class PostgresEventStore(EventStore):
 
     def _rows(self, sql: str, args: tuple[Any, ...] = ()) -> list[dict[str, Any]]:
         with self._lock:
-            return list(self._db.execute(self._sql(sql), args).fetchall())
+            return list(self._db.execute(self._sql(sql), _held(args)).fetchall())
 
     def _write(self, sql: str, args: tuple[Any, ...]) -> int:
         returning = sql.lstrip().upper().startswith("INSERT")
         with self._lock:
-            cur = self._db.execute(self._sql(sql) + (" RETURNING id" if returning else ""), args)
+            cur = self._db.execute(
+                self._sql(sql) + (" RETURNING id" if returning else ""), _held(args)
+            )
             return int(cur.fetchone()["id"]) if returning else 0
 
 

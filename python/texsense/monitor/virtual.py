@@ -33,6 +33,7 @@ class VirtualSeatSource(Source):
 
     name = "virtual seat"
     scheme = "virtual"
+    reads = frozenset({"--speed"})
     summary = "a simulated person on the thesis's 96-element textile seat (the default)"
 
     @classmethod
@@ -119,6 +120,7 @@ class VirtualBedSource(Source):
 
     name = "virtual bed"
     scheme = "virtual-bed"
+    reads = frozenset({"--speed"})
     summary = "a simulated sleeper on the virtual 64 x 32 bed mat"
 
     @classmethod

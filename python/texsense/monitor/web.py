@@ -50,6 +50,7 @@ import ipaddress
 import json
 import logging
 import os
+import re
 import signal
 import socket
 import sys
@@ -57,11 +58,11 @@ import time
 from collections.abc import Awaitable, Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from texsense._progress import STOPPING, StoppingError, check_stopping
-from texsense.data.files import read_small_text, real_path
-from texsense.exceptions import ParameterError
+from texsense.data.files import json_loads, read_small_text, real_path
+from texsense.exceptions import FormatError, ParameterError
 from texsense.monitor.sources import blocking
 
 __all__ = [
@@ -160,6 +161,56 @@ def host_name(host: str) -> str:
     return host.rstrip(".")
 
 
+#: An origin as browsers send it (RFC 6454, serialised): a lower-case scheme and host, no
+#: user, path, query, fragment, space or trailing dot or slash; a port of digits.
+_ORIGIN = re.compile(
+    r"(?P<scheme>https?)://(?P<host>\[[0-9a-f:.]+\]|[a-z0-9](?:[a-z0-9.-]*[a-z0-9])?)"
+    r"(?::(?P<port>[1-9][0-9]{0,4}))?"
+)
+_DEFAULT_PORT = {"http": 80, "https": 443}
+
+
+def parse_origin(text: str) -> tuple[str, str, int] | None:
+    """``(scheme, host, port)`` of an ``Origin`` header exactly as a browser serialises it
+    (``http://127.0.0.1:8765``; the default port may be left out), else None: the one parser
+    of origins of both servers, for the header and for ``--allow-origin``. Nothing is
+    stripped or lowered: a space around it, a trailing slash or dot, a user, a path, upper
+    case, ``null``, a port beyond 65535 or with a leading zero are not origins a browser
+    sends, so they are no origin this server trusts.
+
+    >>> parse_origin("http://127.0.0.1:8765"), parse_origin("https://portal.example")
+    (('http', '127.0.0.1', 8765), ('https', 'portal.example', 443))
+    >>> parse_origin("http://127.0.0.1:8765 "), parse_origin("null")
+    (None, None)
+    """
+    m = _ORIGIN.fullmatch(text)
+    if m is None:
+        return None
+    host = m["host"]
+    if host.startswith("["):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            return None
+    port = int(m["port"]) if m["port"] else _DEFAULT_PORT[m["scheme"]]
+    if port > 65535:
+        return None
+    return m["scheme"], host.strip("[]"), port
+
+
+def host_port(host: str, default: int = 80) -> tuple[str, int] | None:
+    """``(name, port)`` of a Host header (:func:`host_name`, the port ``default`` when none
+    is given), None when it is no name with an optional port."""
+    name = host_name(host)
+    if not name:
+        return None
+    rest = host.strip().rsplit("]", 1)[-1] if host.strip().startswith("[") else host.strip()
+    port = rest.rsplit(":", 1)[1] if rest.count(":") == 1 else ""
+    if port and not (port.isascii() and port.isdigit() and 0 < int(port) <= 65535):
+        return None
+    return name, int(port) if port else default
+
+
 def safe_file(folder: Path, name: str) -> Path | None:
     """``folder / name`` if it is a plain file inside ``folder`` (no traversal), else None."""
     if not name or "/" in name or "\\" in name or name.startswith(".") or "\x00" in name:
@@ -209,6 +260,18 @@ def resolve_token(
     return token
 
 
+def _allowed_origin(text: str) -> tuple[str, str, int]:
+    """An ``--allow-origin`` URL (a trailing slash allowed) as :func:`parse_origin` gives it;
+    anything else is a :class:`~texsense.exceptions.ParameterError`."""
+    parsed = parse_origin(text.strip().removesuffix("/"))
+    if parsed is None:
+        raise ParameterError(
+            f"--allow-origin {text[:80]!r}: expected an origin as a browser sends it, "
+            "scheme://host[:port] in lower case (e.g. https://portal.example)"
+        )
+    return parsed
+
+
 class Access:
     """The rules of :class:`Guard`: who may ask what.
 
@@ -239,7 +302,7 @@ class Access:
         self.hosts = {host_name(h) for h in hosts}
         if not self.loopback:
             self.hosts |= {host_name(socket.gethostname()), host_name(socket.getfqdn())}
-        self.origins = {o.rstrip("/").lower() for o in origins}
+        self.origins = {_allowed_origin(o) for o in origins}
 
     def host_ok(self, host: str) -> bool:
         """Whether a Host header names this server."""
@@ -251,12 +314,17 @@ class Access:
         return not self.loopback and _is_ip(name)
 
     def origin_ok(self, origin: str, host: str) -> bool:
-        """Whether a page of ``origin`` may talk to this server reached as ``host``."""
-        origin = origin.strip().rstrip("/").lower()
-        if origin in self.origins:
+        """Whether a page of ``origin`` may talk to this server reached as ``host``: an
+        origin (:func:`parse_origin`, strictly) listed with ``--allow-origin``, or this
+        server's own: ``http`` (the servers speak plain HTTP; a page of ``https://`` is another
+        origin) with the Host header's name and port."""
+        parsed = parse_origin(origin)
+        if parsed is None:
+            return False
+        if parsed in self.origins:
             return True
-        parts = urlsplit(origin)
-        return parts.scheme in ("http", "https") and parts.netloc == host.strip().lower()
+        own = host_port(host)
+        return own is not None and parsed == ("http", *own)
 
     def token_ok(self, headers: dict[str, str], query: str) -> bool:
         """The token rule: ``?token=``, ``X-Texsense-Token`` or a bearer header."""
@@ -326,40 +394,41 @@ class Guard:
         await self.app(scope, receive, send_with_headers)
 
     async def _bounded(self, headers: dict[str, str], receive: Any, send: Any) -> Any:
-        """``receive`` for a body within :data:`MAX_BODY` (read here when it comes in chunks,
-        then handed on), or None once a larger one is refused (413)."""
+        """``receive`` for a body within :data:`MAX_BODY` that is JSON (read here, checked by
+        :func:`texsense.data.files.json_loads`, then handed on), or None once a body is
+        refused: larger (413, by its ``Content-Length`` before it is read), or not JSON, with a
+        key twice, nested too deeply or a number beyond any float (400, as the routes answer text
+        that is not JSON). Every body of both servers is JSON, so this is
+        the one parser every body meets before a route reads it again."""
+        host = headers.get("host", "")
         too_big = (413, f"the request body is larger than {MAX_BODY // 1024} KiB")
         length = headers.get("content-length")
         if length is not None:
             if not length.strip().isdigit() or int(length) > MAX_BODY:
-                await self._refuse(send, too_big, headers.get("host", ""))
+                await self._refuse(send, too_big, host)
                 return None
-            return receive
-        if "chunked" not in headers.get("transfer-encoding", ""):
+        elif "chunked" not in headers.get("transfer-encoding", ""):
             return receive
         chunks, size = [], 0
         while True:
             message = await receive()
             if message["type"] != "http.request":
-                break
+                return _replay_then(message, receive)  # gone before the body ended
             chunks.append(message.get("body", b""))
             size += len(chunks[-1])
             if size > MAX_BODY:
-                await self._refuse(send, too_big, headers.get("host", ""))
+                await self._refuse(send, too_big, host)
                 return None
             if not message.get("more_body", False):
                 break
         body = b"".join(chunks)
-        done = False
-
-        async def replay() -> dict[str, Any]:
-            nonlocal done
-            if done:
-                return await receive()
-            done = True
-            return {"type": "http.request", "body": body, "more_body": False}
-
-        return replay
+        if body.strip():
+            try:
+                json_loads(body)
+            except (ValueError, UnicodeDecodeError) as e:
+                await self._refuse(send, (400, f"the request body is not JSON: {e}"[:300]), host)
+                return None
+        return _replay_then({"type": "http.request", "body": body, "more_body": False}, receive)
 
     async def _refuse(self, send: Any, refused: tuple[int, str], host: str) -> None:
         status, reason = refused
@@ -381,6 +450,20 @@ class Guard:
             client = scope.get("client") or ("?", 0)
             what = "WebSocket" if scope["type"] == "websocket" else method
             log.warning("refused %s %s from %s: %s", what, scope.get("path", ""), client[0], reason)
+
+
+def _replay_then(first: dict[str, Any], receive: Any) -> Any:
+    """A ``receive`` that gives ``first`` once, then what ``receive`` gives."""
+    done = False
+
+    async def replay() -> dict[str, Any]:
+        nonlocal done
+        if done:
+            return dict(await receive())
+        done = True
+        return first
+
+    return replay
 
 
 def _csp(path: str, host: str) -> list[tuple[bytes, bytes]]:
@@ -440,7 +523,10 @@ async def _until_disconnect(websocket: Any) -> None:
 def plain_errors(app: Any) -> Any:
     """Answer a request whose parameters or body do not validate with 422 and one line (where
     and what), never echoing the input: FastAPI's own answer repeats it and fails on a value
-    JSON cannot hold (``{"frames": NaN}`` was a 500). Every app of both servers calls this."""
+    JSON cannot hold (``{"frames": NaN}`` was a 500). A ``ParameterError`` or ``FormatError``
+    that no route turned into its own answer is a 422 with its line too (a parameter the event
+    store cannot hold, ``?session=99999999999999999999999``, was a 500). Every app of both
+    servers calls this."""
     from fastapi.exceptions import RequestValidationError
     from fastapi.responses import JSONResponse
 
@@ -451,7 +537,12 @@ def plain_errors(app: Any) -> Any:
         text = str(first.get("msg", "invalid request"))[:200]
         return JSONResponse({"detail": f"{where}: {text}"}, status_code=422)
 
+    async def refused(_request: Any, exc: Exception) -> Any:
+        return JSONResponse({"detail": str(exc)[:300]}, status_code=422)
+
     app.add_exception_handler(RequestValidationError, invalid)
+    app.add_exception_handler(ParameterError, refused)
+    app.add_exception_handler(FormatError, refused)
     return app
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.apps.alerts import Event
+from texsense.data.files import json_loads
 from texsense.exceptions import ParameterError
 from texsense.monitor.store import PostgresEventStore
 from texsense.station import checkpoint
@@ -434,7 +435,7 @@ class GroupStation(Station):
             return
         lines = payload.split(b"\n")
         try:
-            head = json.loads(lines[0])
+            head = json_loads(lines[0])
             arrived = time.time()
             for mat in head.get("held", []):
                 old = self._tiles.get(mat)
@@ -442,7 +443,7 @@ class GroupStation(Station):
                     self._tiles[mat] = (old[0], old[1], arrived)
             for line in lines[1:]:
                 text = line.decode()
-                mat = json.loads(text)["id"]
+                mat = json_loads(text)["id"]
                 if mat in self.mats and mat not in self.held:
                     self._tiles[mat] = (None, text, arrived)
                     self.mats[mat].version += 1
@@ -457,7 +458,7 @@ class GroupStation(Station):
             return None, None, 0.0
         tile, text, wall = got
         if tile is None:
-            tile = json.loads(text)
+            tile = json_loads(text)
             self._tiles[mat] = (tile, text, wall)
         return tile, text, wall
 
@@ -573,7 +574,7 @@ class GroupStation(Station):
 
         def post() -> dict[str, Any]:
             with urllib.request.urlopen(request, timeout=5) as r:
-                return dict(json.load(r))
+                return dict(json_loads(r.read()))
 
         try:
             return await asyncio.to_thread(post)
