@@ -116,9 +116,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     group.add_argument("--checkpoint-every", type=float, default=2.0, metavar="S",
                        help="checkpoint each held mat this often (and after every alert "
                        "event; default 2 s)")  # fmt: skip
-    group.add_argument("--workers", type=int, default=1, metavar="N",
-                       help="run this member as N processes, each a member of the group named "
-                       "MEMBER.wK on port PORT+K (K = 0..N-1), under one supervisor that "
+    group.add_argument("--workers", type=int, default=1, metavar="N", help="this member as N "
+                       "processes (members MEMBER.wK on PORT+K) under a supervisor that "
                        "restarts a worker that dies: a member on N cores (default 1)")  # fmt: skip
     add_web_options(p, 8766)
     p.set_defaults(run=run)
