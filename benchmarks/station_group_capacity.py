@@ -23,6 +23,7 @@ import argparse
 import asyncio
 import json
 import os
+import socket
 import subprocess
 import sys
 import tempfile
@@ -41,6 +42,7 @@ from postgres_server import PostgresServer
 from station_load import PUBLISHER, cpu_seconds, viewer
 from texsense.station.broker import Broker
 from texsense.station.lease import preferred
+from texsense.station.workers import worker_name
 
 
 def get(url: str, timeout: float = 30.0):
@@ -48,33 +50,65 @@ def get(url: str, timeout: float = 30.0):
         return json.load(r)
 
 
-def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[str]) -> dict:
-    """The members' processes and page URLs (started together)."""
+def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[str],
+                  workers: int = 1) -> dict:  # fmt: skip
+    """The members' processes and their group members' (name, page URL): one each, or its
+    workers' with ``--workers`` (ports PORT..PORT+W-1); started together."""
     out = {}
     for name in names:
-        port = free_port()
+        port = free_port() if workers == 1 else free_ports(workers)
         log = (tmp / f"{name}.log").open("wb")
+        more = ["--workers", str(workers)] if workers > 1 else []
         proc = subprocess.Popen(
             [sys.executable, "-m", "texsense.cli", "station", "--group", "cap", "--member", name,
              "--config", str(ward), "--broker", f"mqtt://127.0.0.1:{broker.port}", "--db", db,
-             "--port", str(port), "--record-dir", str(tmp / f"rec-{name}")],
+             "--port", str(port), "--record-dir", str(tmp / f"rec-{name}"), *more],
             stdout=log, stderr=subprocess.STDOUT,
         )  # fmt: skip
-        out[name] = (proc, f"http://127.0.0.1:{port}/")
+        parts = [(name, port)] if workers == 1 else [
+            (worker_name(name, k), port + k) for k in range(workers)]  # fmt: skip
+        out[name] = (proc, [(w, f"http://127.0.0.1:{p}/") for w, p in parts])
     return out
 
 
+def free_ports(n: int) -> int:
+    """The first of ``n`` consecutive free ports."""
+    for _ in range(100):
+        first = free_port()
+        if all(port_free(first + k) for k in range(1, n)):
+            return first
+    raise SystemExit(f"no {n} consecutive free ports")
+
+
+def port_free(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def tree_cpu(pid: int) -> float:
+    """CPU seconds of a process and its children (a member's workers)."""
+    kids = Path(f"/proc/{pid}/task/{pid}/children")
+    children = [int(c) for c in kids.read_text().split()] if kids.exists() else []
+    return cpu_seconds(pid) + sum(tree_cpu(c) for c in children)
+
+
 def settle(members: dict, mats: list[str], timeout: float = 600.0) -> float:
-    """Wait until every mat is held by the member rendezvous hashing names; seconds taken."""
-    names = sorted(members)
+    """Wait until every mat is held by the group member rendezvous hashing names; seconds
+    taken."""
+    names = sorted(w for _, parts in members.values() for w, _ in parts)
     want = {m: preferred(m, names) for m in mats}
+    first = next(iter(members.values()))[1][0][1]
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         for name, (proc, _) in members.items():
             if proc.poll() is not None:
                 raise SystemExit(f"member {name} exited: see its log")
         try:
-            rows = get(members[names[0]][1] + "api/mats", timeout=10)
+            rows = get(first + "api/mats", timeout=10)
             if {r["id"]: r.get("holder") for r in rows} == want:
                 return time.monotonic() - t0
         except OSError:
@@ -84,7 +118,7 @@ def settle(members: dict, mats: list[str], timeout: float = 600.0) -> float:
 
 
 def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: float,
-        seconds: float, db_k: int) -> dict:  # fmt: skip
+        seconds: float, db_k: int, workers: int = 1) -> dict:  # fmt: skip
     ward = tmp / f"ward-{mats}.toml"
     ward.write_text("".join(
         f'[[mat]]\nid = "m{m:03d}"\nlayout = "grid:32x32"\ncalibration = "{tmp / "cal.json"}"\n\n'
@@ -95,11 +129,11 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         c.execute(f"CREATE DATABASE {db}")
     url = pg.url.rsplit("/", 1)[0] + "/" + db
     ids = [f"m{m:03d}" for m in range(mats)]
-    members = start_members(tmp, broker, url, ward, [f"s{k + 1}" for k in range(n)])
+    members = start_members(tmp, broker, url, ward, [f"s{k + 1}" for k in range(n)], workers)
     try:
         took = settle(members, ids)
-        holder = {r["id"]: r["holder_url"] for r in get(next(iter(members.values()))[1] +
-                                                          "api/mats")}  # fmt: skip
+        first = next(iter(members.values()))[1][0][1]
+        holder = {r["id"]: r["holder_url"] for r in get(first + "api/mats")}
         pub = subprocess.Popen(
             [sys.executable, "-c", PUBLISHER, str(broker.port), str(mats), str(hz),
              str(seconds), str(tmp / "cal.npz")],
@@ -112,18 +146,18 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         cpu: dict[str, float] = {}
         per_frame: dict[str, float] = {}
 
-        def frames_of(name: str) -> int:
-            rows = get(members[name][1] + "api/mats")
-            return sum(r["frames"] for r in rows if r["holder"] == name)
+        def frames_of(name: str) -> int:  # of every group member (worker) it runs
+            return sum(r["frames"] for w, page in members[name][1] for r in get(page + "api/mats")
+                       if r["holder"] == w)  # fmt: skip
 
         async def members_cpu() -> None:
             await asyncio.sleep(5.0)
             t0 = time.time()
-            c0 = {k: cpu_seconds(p.pid) for k, (p, _) in members.items()}
+            c0 = {k: tree_cpu(p.pid) for k, (p, _) in members.items()}
             f0 = {k: await asyncio.to_thread(frames_of, k) for k in members}
             await asyncio.sleep(max(stop - time.time(), 0.0))
             for k, (p, _) in members.items():
-                used = cpu_seconds(p.pid) - c0[k]
+                used = tree_cpu(p.pid) - c0[k]
                 cpu[k] = used / (time.time() - t0)
                 done = await asyncio.to_thread(frames_of, k) - f0[k]
                 per_frame[k] = 1e3 * used / max(done, 1)
@@ -141,9 +175,7 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         asyncio.run(view_all())
         sent = json.loads(pub.communicate(timeout=120)[0])
         time.sleep(1.0)  # the members drain what is in flight
-        processed = 0
-        for name, (_, page) in members.items():
-            processed += sum(r["frames"] for r in get(page + "api/mats") if r["holder"] == name)
+        processed = sum(frames_of(name) for name in members)
         lat = np.asarray(latencies[len(latencies) // 10 :]) * 1e3  # after the start
         return {
             "members": n, "mats": mats, "hz": hz, "settle_s": took, "sent": sent["sent"],
@@ -156,8 +188,16 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         }  # fmt: skip
     finally:
         for proc, _ in members.values():
-            proc.kill()
-            proc.wait()
+            if workers > 1:  # the supervisor stops its workers (and reaps them)
+                proc.terminate()
+            else:
+                proc.kill()
+        for proc, _ in members.values():
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 def main() -> None:
@@ -165,6 +205,12 @@ def main() -> None:
     ap.add_argument("--members", default="1,2,3")
     ap.add_argument("--loads", default="200x1,400x1", help="MATSxHZ,...")
     ap.add_argument("--seconds", type=float, default=30.0)
+    ap.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="each member as W worker processes (texsense station --workers W)",
+    )
     args = ap.parse_args()
     counts = [int(v) for v in args.members.split(",")]
     loads = [(int(m), float(h)) for m, h in (x.split("x") for x in args.loads.split(","))]
@@ -187,7 +233,7 @@ def main() -> None:
             for mats, hz in loads:
                 for n in counts:
                     k += 1
-                    r = run(tmp, broker, pg, n, mats, hz, args.seconds, k)
+                    r = run(tmp, broker, pg, n, mats, hz, args.seconds, k, args.workers)
                     print(f"| {mats} | {hz:g} Hz | {n} | {r['settle_s']:.0f} s | {r['sent']} | "
                           f"{r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
                           f"{r['p99']:.0f} ms | {r['cpu']} | {r['ms_frame']} | "

@@ -75,6 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = _command_of(argv)
     parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)
+    args.argv = argv  # the command line as given (a station's workers run it again)
     with _terminate_as_interrupt():
         code = _run(args, lambda: check_given(parser, args, argv))
     if from_command_line:

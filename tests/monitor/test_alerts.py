@@ -120,6 +120,40 @@ def test_event_store_keeps_sessions_and_events(tmp_path):
     assert again.events(kind="cleared") == []
 
 
+def test_the_event_file_is_a_write_ahead_log_read_by_others_and_kept_by_a_killed_writer(
+    tmp_path,
+):
+    """The file store commits to SQLite's write-ahead log (one sync a commit, issue 38):
+    another process reads the events while the writer runs, and every event committed
+    before the writer was killed (no close, no checkpoint of the log) is there after it."""
+    import sqlite3
+    import subprocess
+    import sys
+
+    path = tmp_path / "m.sqlite"
+    writer = (
+        "import os, sys\n"
+        "from texsense.monitor import Event, EventStore\n"
+        "store = EventStore(sys.argv[1])\n"
+        "sid = store.start_session('mat')\n"
+        "for k in range(5):\n"
+        "    store.add_event(sid, Event('seated', float(k), None, {'k': k}))\n"
+        "print(store._db.execute('PRAGMA journal_mode').fetchone()[0], flush=True)\n"
+        "sys.stdin.readline()\n"  # held open until the test has read the file
+        "os._exit(0)\n"  # killed: no close
+    )
+    with subprocess.Popen([sys.executable, "-c", writer, str(path)], stdin=subprocess.PIPE,
+                          stdout=subprocess.PIPE, text=True) as proc:  # fmt: skip
+        assert proc.stdout.readline().strip() == "wal"
+        other = sqlite3.connect(path)  # another program, while the writer holds the file
+        assert other.execute("SELECT count(*) FROM events").fetchone()[0] == 5
+        other.close()
+        proc.communicate("\n", timeout=30)
+    again = EventStore(path)
+    assert sorted(e["detail"]["k"] for e in again.events(kind="seated")) == [0, 1, 2, 3, 4]
+    again.close()
+
+
 def test_possibly_above_counts_only_when_the_user_chooses_so():
     # element 0: lower bound above 32 mmHg (confident); element 1: only its upper bound is
     lay = Layout.grid(1, 3)

@@ -241,6 +241,9 @@ def test_a_member_checkpoints_what_changed_and_less_often_with_many_mats(db, mon
     assert st.skipped == 3
     monkeypatch.setattr(group, "CHECKPOINTS_PER_S", 1.0)  # 4 mats held: every 4 s
     assert st.interval() == 4.0
+    st.share = 0.5  # a worker of two (--workers 2): half its member's checkpoints a second
+    assert st.interval() == 8.0
+    st.share = 1.0
     written.clear()
     for k in range(2, 14):  # every mat reads a frame every second
         for m in mats:
@@ -251,4 +254,39 @@ def test_a_member_checkpoints_what_changed_and_less_often_with_many_mats(db, mon
     # whose alert event (loaded) came between two
     assert all(3 <= n <= 4 for n in per_mat.values()), written
     assert sum(per_mat.values()) <= 14
+    st.store.close()
+
+
+def test_a_member_sends_at_most_its_tiles_budget_changed_states_first(db, monkeypatch):
+    """Tiles for the other members cost the event loop: at most group.TILES_PER_S a second,
+    a mat whose shown state changed first, then the longest unsent; an unchanged mat never."""
+    from texsense.data.layout import Layout
+    from texsense.station import group
+    from texsense.station.broker import BrokerURL
+    from texsense.station.ward import MatConfig
+
+    mats = [MatConfig(f"m{k}", Layout.grid(2, 2), quantity="pressure") for k in range(5)]
+    st = group.GroupStation(BrokerURL("127.0.0.1", 9), mats, group="g", member="a", db=db,
+                            page="http://a/", record_dir=".")  # fmt: skip
+    st.grant([lease.Grant(m.id, 1, 0) for m in mats])  # no loop: held at once
+    sent: list[bytes] = []
+
+    class Client:
+        def publish(self, topic: str, payload: bytes) -> None:
+            sent.append(payload)
+
+    st._client, st.connected = Client(), True
+    st.view = lease.View(members={"a": {"alive": True}, "b": {"alive": True}}, holders={})
+    monkeypatch.setattr(group, "TILES_PER_S", 3.0)
+    now = st.mats["m0"].revision
+    # m0 was last sent as "live" (now "waiting": its state changed); m1-m3 only changed,
+    # sent last at 3, 1, 2 s; m4 has not changed since its last tile
+    st._sent = {"m0": (now - 1, "live", 9.0), "m1": (now - 1, "waiting", 3.0),
+                "m2": (now - 1, "waiting", 1.0), "m3": (now - 1, "waiting", 2.0),
+                "m4": (st.mats["m4"].revision, "waiting", 0.0)}  # fmt: skip
+    assert [m for m, _ in st._due_tiles(3)] == ["m0", "m2", "m3"]
+    assert st.publish_tiles(10.0) == 3
+    assert [line.count(b'"id"') for line in sent[-1].split(b"\n")] == [0, 1, 1, 1]
+    assert st.publish_tiles(11.0) == 1  # m1, the one left
+    assert st.publish_tiles(12.0) == 0
     st.store.close()

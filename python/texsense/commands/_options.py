@@ -177,6 +177,7 @@ RANGES: dict[str, Range] = {
     "--stale-after": Range(0.0, 3600.0),  # s: the station's floor before a mat is stale
     "--virtual-beds": Range(0, 500),  # at most every second one of --virtual-mats
     "--checkpoint-every": Range(0.0, 3600.0, lo_open=True),  # a group's checkpoints, s
+    "station --workers": Range(1, 64),  # a group member's worker processes
     "simulate --count": Range(1, 1000),  # simulate mats: as many as --virtual-mats
     "simulate --beds": Range(0, 500),
 }

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import gc
 import logging
 import os
 import re
 import signal
 import socket
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -37,6 +39,7 @@ from texsense.monitor.web import resolve_token, stop_on_sigterm
 from texsense.station.broker import check_mat_id, mat_topic, parse_broker_url, station_broker
 from texsense.station.virtual import VirtualMats
 from texsense.station.ward import MIN_STALE_S, MatConfig, Station
+from texsense.station.workers import Supervisor, watch_parent, worker_env, worker_name
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -113,6 +116,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     group.add_argument("--checkpoint-every", type=float, default=2.0, metavar="S",
                        help="checkpoint each held mat this often (and after every alert "
                        "event; default 2 s)")  # fmt: skip
+    group.add_argument("--workers", type=int, default=1, metavar="N", help="this member as N "
+                       "processes (members MEMBER.wK on PORT+K) under a supervisor that "
+                       "restarts a worker that dies: a member on N cores (default 1)")  # fmt: skip
     add_web_options(p, 8766)
     p.set_defaults(run=run)
     only_where(p, STATION_RULES)
@@ -345,7 +351,10 @@ def own_broker(args: argparse.Namespace, mats: list[Any], local: dict[str, Any],
 def run(args: argparse.Namespace) -> int:
     """Run ``texsense station`` (until Ctrl-C or SIGTERM; its own broker stops with it)."""
 
+    worker = as_worker(args)
     access = web_access(args, "ward")
+    if worker is None and args.workers > 1:
+        return supervise(args)
     check_port_free(args.host, args.port)
     check_writable(args.record_dir, "--record-dir", folder=True)  # now, not at the first recording
     if not str(args.db).startswith(("postgresql://", "postgres://")):
@@ -363,6 +372,40 @@ def run(args: argparse.Namespace) -> int:
     if stopped is not None:
         print(f"texsense station: stopped ({signal.Signals(stopped).name})", flush=True)
     return 0
+
+
+def as_worker(args: argparse.Namespace) -> Any:
+    """When this process is a worker of a member (:mod:`texsense.station.workers`): its
+    member name and port set in ``args``, its supervisor watched; the worker, else None."""
+    try:
+        worker = worker_env()
+    except ValueError as e:
+        raise ParameterError(str(e)) from None
+    if worker is None:
+        return None
+    member = args.member or f"{socket.gethostname()}:{args.port}"
+    args.member = worker_name(member, worker.index)
+    args.port += worker.index
+    args.workers_share = 1.0 / worker.count
+    watch_parent(worker.parent)
+    return worker
+
+
+def supervise(args: argparse.Namespace) -> int:
+    """``--workers N``: check what every worker needs, then run them
+    (:class:`~texsense.station.workers.Supervisor`) until Ctrl-C or SIGTERM."""
+    if not args.group:
+        raise ParameterError("--workers needs --group: the workers are members of a group")
+    check_group(args, {})
+    for k in range(args.workers):
+        check_port_free(args.host, args.port + k)
+    argv = getattr(args, "argv", None)
+    if argv is None:
+        raise ParameterError("--workers: the command line is not known (run it as a command)")
+    print(f"texsense station: {args.workers} workers of member "
+          f"{args.member or f'{socket.gethostname()}:{args.port}'!r} on ports "
+          f"{args.port}-{args.port + args.workers - 1}", flush=True)  # fmt: skip
+    return Supervisor([sys.executable, "-m", "texsense.cli", *argv], args.workers).run()
 
 
 def virtual_calibration(folder: Path | None, kind: str, make: Any) -> Any:
@@ -414,9 +457,19 @@ def group_station(
                            page=f"http://{host}:{args.port}/", topic=args.mats,
                            record_dir=args.record_dir, checkpoint_s=args.checkpoint_every,
                            min_stale_s=args.stale_after, refuse_after_s=args.refuse_after,
-                           token=token)  # fmt: skip
+                           token=token, share=getattr(args, "workers_share", 1.0))  # fmt: skip
     print(f"texsense station: member {member!r} of the group {args.group!r}", flush=True)
     return station
+
+
+def freeze_built() -> None:
+    """Leave what the station has built (every mat's pipeline, tracker and monitor: ~90,000
+    objects at 1,000 mats) out of the garbage collector's full collections: one of them took
+    ~260 ms of the event loop (issue 38: 1,000 mats on a loaded 2-core machine), a stall of
+    every frame waiting meanwhile; after :func:`gc.freeze` it scans only what came since.
+    Frozen objects are still freed when nothing refers to them."""
+    gc.collect()
+    gc.freeze()
 
 
 def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | None:
@@ -465,6 +518,7 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
                           record_dir=args.record_dir, min_stale_s=args.stale_after,
                           refuse_after_s=args.refuse_after)  # fmt: skip
     background += [station.consume(mat_id, src) for mat_id, src in local.items()]
+    freeze_built()
     print(f"texsense station: {len(mats)} mats -> {page_url(args, access.token)}", flush=True)
     stopped: int | None = serve_ward(station, host=args.host, port=args.port, access=access,
                                      background=background)  # fmt: skip

@@ -8,11 +8,11 @@ every ``checkpoint_s`` and after every alert event, and when it takes a mat over
 from the mat's last checkpoint and the alert events stored after it.
 
 The ward page of any member shows every mat of the group: the member publishes the tiles of
-its mats that changed, once a second, in one message per 200 kB to
-``<prefix>/_group/<group>/<member>`` (a mat id never starts with ``_``), and reads the
-others'. A mat is shown with the member that holds it; a mat that no alive member holds is
-shown as *unwatched* (red, on top of the ward), and one whose holder has sent no word for
-:data:`~texsense.station.group_view.SILENT_S` as stale.
+its mats that changed, once a second (at most :data:`TILES_PER_S` of them), in one message
+per 200 kB to ``<prefix>/_group/<group>/<member>`` (a mat id never starts with ``_``), and
+reads the others'. A mat is shown with the member that holds it; a mat that no alive member
+holds is shown as *unwatched* (red, on top of the ward), and one whose holder has sent no
+word for :data:`~texsense.station.group_view.SILENT_S` as stale.
 """
 
 from __future__ import annotations
@@ -47,6 +47,11 @@ log = logging.getLogger("texsense.station")
 
 #: Tiles of the mats that changed go to the others this often, s.
 TILE_S = 1.0
+#: A member sends at most this many tiles a second; with more of its mats changing, each
+#: changed mat in turn (the longest unsent first), a mat whose state changed (an alert, stale)
+#: before all: 500 mats at 1 Hz each every 2 s (a tile costs ~0.12 ms of the event loop;
+#: issue 38, a member of two workers of 500 mats spent 8 % of its samples on tiles).
+TILES_PER_S = 250.0
 #: A message of tiles holds at most this many bytes (a site broker's packet limit is 256 kB).
 TILE_BATCH_BYTES = 200_000
 #: The sensor's state (the ``rarely`` parts) goes with every this many checkpoints.
@@ -118,7 +123,8 @@ def _restored(entry: MatEntry, g: Grant) -> dict[str, Any]:
 class GroupStation(Station):
     """A :class:`~texsense.station.ward.Station` that is a member of a group (see the
     module). ``db``: the PostgreSQL URL; ``page``: this member's ward page (for the others'
-    links)."""
+    links); ``share``: this process's share of its member's checkpoint budget (a worker of
+    ``--workers N``: 1/N, :mod:`texsense.station.workers`)."""
 
     entry_class = GroupMatEntry
 
@@ -137,6 +143,7 @@ class GroupStation(Station):
         min_stale_s: float = MIN_STALE_S,
         refuse_after_s: float = 10.0,
         token: str | None = None,
+        share: float = 1.0,
     ) -> None:
         for m in mats:
             mat_topic(topic, m.id)  # a group subscribes to each mat's own topic
@@ -145,6 +152,9 @@ class GroupStation(Station):
         self.name, self.member, self.page, self.token = group, member, page, token
         self.prefix = topic.split("/+/")[0]
         self.checkpoint_s = float(checkpoint_s)
+        if not 0 < share <= 1:
+            raise ParameterError(f"a member's share of its checkpoints is in (0, 1], got {share}")
+        self.share = float(share)
         self.journal = Journal(db, group, member, self._from_thread(self.lost))
         store = GroupStore(db, self.journal)
         super().__init__(broker, mats, topic=topic, store=store, record_dir=record_dir,
@@ -173,7 +183,7 @@ class GroupStation(Station):
         self.skipped = 0  # checkpoints not written: the mat had not changed since its last
         self._soon_mats: set[str] = set()
         self._tiles: dict[str, tuple[dict[str, Any] | None, str, float]] = {}
-        self._sent: dict[str, int] = {}
+        self._sent: dict[str, tuple[int, str, float]] = {}  # mat -> revision, state, when
         self._next_tiles = 0.0
         self._next_check = 0.0
         self._unwatched: dict[str, float] = {}
@@ -343,8 +353,9 @@ class GroupStation(Station):
 
     def interval(self) -> float:
         """Seconds between two checkpoints of a held mat: ``checkpoint_s``, or longer when
-        this member holds more than ``checkpoint_s`` x :data:`CHECKPOINTS_PER_S` mats."""
-        return max(self.checkpoint_s, len(self.held) / CHECKPOINTS_PER_S)
+        this member holds more than ``checkpoint_s`` x :data:`CHECKPOINTS_PER_S` (its share of
+        them) mats."""
+        return max(self.checkpoint_s, len(self.held) / (CHECKPOINTS_PER_S * self.share))
 
     def checkpoints(self, now: float) -> int:
         """Checkpoint the held mats that are due (every :meth:`interval`, the sensor's state
@@ -359,7 +370,8 @@ class GroupStation(Station):
             soon.add(m)
             if m in self.held:
                 n += self._checkpoint(m, now)
-        self._allowance = min(self._allowance + (now - self._full_t) * FULL_PER_S, FULL_PER_S)
+        per_s = FULL_PER_S * self.share
+        self._allowance = min(self._allowance + (now - self._full_t) * per_s, per_s)
         self._full_t = now
         while self._full and self._allowance >= 1:
             m = self._full.popleft()
@@ -451,7 +463,8 @@ class GroupStation(Station):
         return tile, text, wall
 
     def publish_tiles(self, now: float) -> int:
-        """Send the tiles of the held mats that changed (in messages of at most
+        """Send the tiles of the held mats that changed (at most :data:`TILES_PER_S` x
+        :data:`TILE_S`, :meth:`_due_tiles`; in messages of at most
         :data:`TILE_BATCH_BYTES`); returns how many."""
         client = self._client
         if client is None or not self.connected:
@@ -467,20 +480,33 @@ class GroupStation(Station):
         lines: list[str] = []
         size, sent = 0, 0
         topic = f"{self.tiles_topic}/{self.member}"
-        for m in list(self.held):
+        for m, state in self._due_tiles(max(1, round(TILES_PER_S * TILE_S))):
             e = self.mats[m]
-            if self._sent.get(m) == e.revision:
-                continue
             text = e.tile()
             if lines and size + len(text) > TILE_BATCH_BYTES:
                 client.publish(topic, "\n".join([head, *lines]).encode())
                 lines, size = [], 0
             lines.append(text)
             size += len(text) + 1
-            self._sent[m] = e.revision
+            self._sent[m] = (e.revision, state, now)
             sent += 1
         client.publish(topic, "\n".join([head, *lines]).encode())
         return sent
+
+    def _due_tiles(self, budget: int) -> list[tuple[str, str]]:
+        """The held mats whose tiles are sent now, with the state each shows: those that
+        changed since their last tile, a changed state (an alert, stale) first, then the
+        longest unsent; at most ``budget``."""
+        due = []
+        for m in self.held:
+            e = self.mats[m]
+            last = self._sent.get(m)
+            if last is not None and last[0] == e.revision:
+                continue
+            state = e.view_state()[0]
+            due.append((last is not None and last[1] == state, last[2] if last else 0.0, m, state))
+        due.sort(key=lambda d: (d[0], d[1]))
+        return [(m, state) for _, _, m, state in due[:budget]]
 
     # ---------------------------------------------------------------- running
     def start(self) -> None:
