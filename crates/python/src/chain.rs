@@ -50,6 +50,41 @@ fn stage_of(item: &Bound<'_, PyAny>, position: usize) -> PyResult<ChainStage> {
 
 /// A mat's compiled chain: `stages`, kernels of `n_elements` elements in the order they run
 /// (copied, their state as it is).
+/// A frame's array of the wrong shape, or not C-contiguous: one `ShapeError` line.
+fn shape_error(n: usize, what: &'static str, got: &[usize]) -> PyErr {
+    to_py(CoreError::Shape {
+        what,
+        expected: format!("({n},), C-contiguous"),
+        got: format!("{got:?}"),
+    })
+}
+
+/// The inputs of one frame (`Chain.step`, `Chain.step_new`) checked against the chain's
+/// `n` elements: the validity to run with (`all_valid` when none is given).
+fn frame_inputs<'a>(
+    n: usize,
+    all_valid: &'a [bool],
+    readings: &PyReadonlyArray1<'_, f64>,
+    valid: &'a Option<PyReadonlyArray1<'_, bool>>,
+) -> PyResult<&'a [bool]> {
+    let valid = match valid {
+        Some(v) if v.shape() != [n] => return Err(shape_error(n, "valid", v.shape())),
+        Some(v) => v.as_slice()?,
+        None => all_valid,
+    };
+    if readings.shape() != [n] {
+        return Err(shape_error(n, "readings", readings.shape()));
+    }
+    Ok(valid)
+}
+
+/// `measured`: the elements whose failure code is 0.
+fn set_measured(measured: &mut [bool], codes: &[u8]) {
+    for (m, &c) in measured.iter_mut().zip(codes) {
+        *m = c == 0;
+    }
+}
+
 #[pyclass(name = "Chain", module = "texsense._core")]
 pub(crate) struct PyChain {
     inner: Chain,
@@ -117,28 +152,14 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
         measured: &Bound<'py, PyArray1<bool>>,
     ) -> PyResult<()> {
         let n = self.inner.len();
-        let shape = |what: &'static str, got: &[usize]| {
-            to_py(CoreError::Shape {
-                what,
-                expected: format!("({n},), C-contiguous"),
-                got: format!("{got:?}"),
-            })
-        };
-        let valid = match &valid {
-            Some(v) if v.shape() != [n] => return Err(shape("valid", v.shape())),
-            Some(v) => v.as_slice()?,
-            None => &self.all_valid,
-        };
-        if readings.shape() != [n] {
-            return Err(shape("readings", readings.shape()));
-        }
+        let valid = frame_inputs(n, &self.all_valid, &readings, &valid)?;
         for (what, got, contiguous) in [
             ("out", out.shape(), out.is_c_contiguous()),
             ("codes", codes.shape(), codes.is_c_contiguous()),
             ("measured", measured.shape(), measured.is_c_contiguous()),
         ] {
             if got != [n] || !contiguous {
-                return Err(shape(what, got));
+                return Err(shape_error(n, what, got));
             }
         }
         // a borrow conflict (an output that is an input, or read-only) is one ShapeError line
@@ -162,9 +183,7 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
                 codes,
             )
             .map_err(to_py)?;
-        for (m, &c) in measured.iter_mut().zip(codes.iter()) {
-            *m = c == 0;
-        }
+        set_measured(measured, codes);
         Ok(())
     }
 
@@ -186,21 +205,7 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
         Bound<'py, PyArray1<bool>>,
     )> {
         let n = self.inner.len();
-        let shape = |what: &'static str, got: &[usize]| {
-            to_py(CoreError::Shape {
-                what,
-                expected: format!("({n},), C-contiguous"),
-                got: format!("{got:?}"),
-            })
-        };
-        let valid = match &valid {
-            Some(v) if v.shape() != [n] => return Err(shape("valid", v.shape())),
-            Some(v) => v.as_slice()?,
-            None => &self.all_valid,
-        };
-        if readings.shape() != [n] {
-            return Err(shape("readings", readings.shape()));
-        }
+        let valid = frame_inputs(n, &self.all_valid, &readings, &valid)?;
         let out = PyArray1::<f64>::zeros(py, [n], false);
         let codes = PyArray1::<u8>::zeros(py, [n], false);
         let measured = PyArray1::<bool>::zeros(py, [n], false);
@@ -217,9 +222,7 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
             self.inner
                 .run(&[dt], readings.as_slice()?, valid, o, c)
                 .map_err(to_py)?;
-            for (m, &c) in m.iter_mut().zip(c.iter()) {
-                *m = c == 0;
-            }
+            set_measured(m, c);
         }
         Ok((out, codes, measured))
     }
