@@ -2,12 +2,15 @@
 //! AVX-512 registers: `super::avx2`'s lane program (the scalar kernel's operations in the
 //! same order, without fused multiply-adds, so every output and state is the scalar
 //! kernel's, bit for bit) on two groups of heads, with the lane conditions in mask
-//! registers (masked adds, blends and gathers instead of all-ones vectors).
+//! registers (masked adds, blends and gathers instead of all-ones vectors). The Everett
+//! corners are gathered from the table (four gathers; on AVX-512 faster than a load per lane
+//! from the table by cell and its transpose, 1.14 x on the timing binary).
 //!
-//! Only the common case runs here: two whole groups whose stacks are all in place with room
-//! for a turning point. Anything else (a stack on the heap, a stack at its room, the last
-//! group of a block) goes through `super::avx2::row` for those elements, which also takes
-//! care of moving stacks between the heap and their place.
+//! Only the common case runs here: two whole groups whose stacks are all in place. A stack
+//! at its room steps here too unless its input turns (a turning point it has no room for);
+//! anything else (a stack on the heap, a turning point onto a full stack, the last group of
+//! a block) goes through `super::avx2::row` for those elements, which also takes care of
+//! moving stacks between the heap and their place.
 
 use std::arch::x86_64::*;
 
@@ -40,8 +43,8 @@ pub(super) unsafe fn row(
     let n = elements.len();
     assert!(u.len() == n && ok.len() == n && out.len() == n);
     assert!(heads.len() == n.div_ceil(LANES));
-    let consts = Consts::new(e, cells, output);
-    let room = INLINE_EXTREMA.min(capacity) as i64;
+    let consts = Consts::new(e, output);
+    let room = _mm512_set1_epi64(INLINE_EXTREMA.min(capacity) as i64);
     let step = (std::mem::size_of::<Element>() / 8) as i64;
     let off = _mm512_mullo_epi64(
         _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0),
@@ -50,13 +53,28 @@ pub(super) unsafe fn row(
     let mut i = 0;
     while i < n {
         let g = i / LANES;
-        let wide = i + WIDE <= n
-            && elements[i..i + WIDE].iter().all(|el| el.spill.is_none())
-            && heads[g..g + 2]
-                .iter()
-                .all(|hd| hd.len.iter().all(|&l| l != room));
-        let m = if wide { WIDE } else { LANES.min(n - i) };
-        if !wide {
+        let wide = i + WIDE <= n && elements[i..i + WIDE].iter().all(|el| el.spill.is_none());
+        let stepped = wide && {
+            let base = elements[i].inline.as_mut_ptr().cast::<f64>();
+            let (h0, h1) = heads[g..g + 2].split_at_mut(1);
+            // SAFETY: AVX-512 (this function's features); eight elements one after the other
+            // (`off` apart), their stacks in place (`room` extrema, plus the spare slot)
+            unsafe {
+                pair(
+                    &consts,
+                    &mut h0[0],
+                    &mut h1[0],
+                    base,
+                    off,
+                    room,
+                    &u[i..i + WIDE],
+                    &ok[i..i + WIDE],
+                    &mut out[i..i + WIDE],
+                )
+            }
+        };
+        let m = if stepped { WIDE } else { LANES.min(n - i) };
+        if !stepped {
             // SAFETY: AVX2 (this function's features); one group (or the block's last
             // elements) with its heads
             unsafe {
@@ -70,23 +88,6 @@ pub(super) unsafe fn row(
                     &u[i..i + m],
                     &ok[i..i + m],
                     &mut out[i..i + m],
-                )
-            };
-        } else {
-            let base = elements[i].inline.as_mut_ptr().cast::<f64>();
-            let (h0, h1) = heads[g..g + 2].split_at_mut(1);
-            // SAFETY: AVX-512 (this function's features); eight elements one after the other
-            // (`off` apart), their stacks in place with room for a turning point
-            unsafe {
-                pair(
-                    &consts,
-                    &mut h0[0],
-                    &mut h1[0],
-                    base,
-                    off,
-                    &u[i..i + WIDE],
-                    &ok[i..i + WIDE],
-                    &mut out[i..i + WIDE],
                 )
             };
         }
@@ -104,14 +105,13 @@ struct Consts {
     k: __m512i,
     offset: __m512d,
     sign: __m512d,
-    /// The table, and the table by cell (null: gathered from the table).
+    /// The table (row-major).
     table: *const f64,
-    cells: *const f64,
 }
 
 impl Consts {
     #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-    unsafe fn new(e: &EverettView<'_, f64>, cells: &[f64], output: Output<f64>) -> Self {
+    unsafe fn new(e: &EverettView<'_, f64>, output: Output<f64>) -> Self {
         let k = e.size();
         Self {
             u_min: _mm512_set1_pd(e.u_min()),
@@ -123,11 +123,6 @@ impl Consts {
             offset: _mm512_set1_pd(output.offset),
             sign: _mm512_set1_pd(output.sign),
             table: e.table().as_ptr(),
-            cells: if cells.is_empty() {
-                std::ptr::null()
-            } else {
-                cells.as_ptr()
-            },
         }
     }
 }
@@ -160,27 +155,18 @@ unsafe fn everett(c: &Consts, alpha: __m512d, beta: __m512d) -> __m512d {
     let wa = _mm512_sub_pd(a, _mm512_cvtepi32_pd(i0));
     let wb = _mm512_sub_pd(b, _mm512_cvtepi32_pd(j0));
     let (i64a, i64b) = (_mm512_cvtepi32_epi64(i0), _mm512_cvtepi32_epi64(j0));
-    let (f00, f01, f10, f11) = if c.cells.is_null() {
-        let table = c.table;
-        let q = _mm512_add_epi64(_mm512_mul_epi32(i64a, c.k), i64b);
-        let one_i = _mm512_set1_epi64(1);
-        let qk = _mm512_add_epi64(q, c.k);
-        (
-            _mm512_i64gather_pd::<8>(q, table),
-            _mm512_i64gather_pd::<8>(_mm512_add_epi64(q, one_i), table),
-            _mm512_i64gather_pd::<8>(qk, table),
-            _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk, one_i), table),
-        )
-    } else {
-        // each half's four cells (`super::avx2::cell_corners`), then side by side
-        let lo = |v: __m256i| _mm256_castsi256_si128(v);
-        let hi = |v: __m256i| _mm256_extracti128_si256::<1>(v);
-        // SAFETY: i0, j0 <= K - 2 (clamped above)
-        let (a0, a1, a2, a3) = unsafe { avx2::cell_corners(c.cells, lo(i0), lo(j0)) };
-        let (b0, b1, b2, b3) = unsafe { avx2::cell_corners(c.cells, hi(i0), hi(j0)) };
-        let join = |x: __m256d, y: __m256d| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(x), y);
-        (join(a0, b0), join(a1, b1), join(a2, b2), join(a3, b3))
-    };
+    // four gathers from the table (on this path they beat a load per lane from the table
+    // by cell and its transpose: fewer instructions, and no lane's index through a
+    // general register)
+    let q = _mm512_add_epi64(_mm512_mul_epi32(i64a, c.k), i64b);
+    let one_i = _mm512_set1_epi64(1);
+    let qk = _mm512_add_epi64(q, c.k);
+    let (f00, f01, f10, f11) = (
+        _mm512_i64gather_pd::<8>(q, c.table),
+        _mm512_i64gather_pd::<8>(_mm512_add_epi64(q, one_i), c.table),
+        _mm512_i64gather_pd::<8>(qk, c.table),
+        _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk, one_i), c.table),
+    );
     let (owa, owb) = (_mm512_sub_pd(one, wa), _mm512_sub_pd(one, wb));
     let low = _mm512_add_pd(_mm512_mul_pd(owb, f00), _mm512_mul_pd(wb, f01));
     let high = _mm512_add_pd(_mm512_mul_pd(owb, f10), _mm512_mul_pd(wb, f11));
@@ -223,10 +209,11 @@ unsafe fn pair(
     h1: &mut Heads,
     base: *mut f64,
     off: __m512i,
+    room: __m512i,
     u: &[f64],
     ok: &[bool],
     out: &mut [f64],
-) {
+) -> bool {
     let zero = _mm512_setzero_pd();
     let (one_i, two_i) = (_mm512_set1_epi64(1), _mm512_set1_epi64(2));
     let as_i = |a: &[i64; LANES]| -> &[f64; LANES] {
@@ -238,10 +225,16 @@ unsafe fn pair(
     let last_u = ld(&h0.last_u, &h1.last_u);
     let last_h = ld(&h0.last_h, &h1.last_h);
     let u_in = _mm512_loadu_pd(u.as_ptr());
-    let ok_k = ok
-        .iter()
-        .enumerate()
-        .fold(0u8, |m, (l, &b)| m | u8::from(b) << l);
+    // the eight flags as bytes, then one mask bit per lane (a bool is 0 or 1)
+    let flags = u64::from_le_bytes(
+        ok[..WIDE]
+            .try_into()
+            .map_or([0; 8], |b: [bool; WIDE]| b.map(u8::from)),
+    );
+    let ok_k = _mm512_test_epi64_mask(
+        _mm512_cvtepu8_epi64(_mm_cvtsi64_si128(flags as i64)),
+        _mm512_set1_epi64(1),
+    );
     let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(u_in, u_in), zero);
     let live = ok_k & finite;
     let clamped = clamp(u_in, c.u_min, c.u_max);
@@ -250,6 +243,10 @@ unsafe fn pair(
     let moving = !_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(uc, last_u) & live;
     let odd0 = _mm512_test_epi64_mask(len0, one_i);
     let turned = rising ^ odd0;
+    // a turning point onto a stack at its room: the scalar step (it grows or forgets)
+    if _mm512_mask_cmpeq_epi64_mask(turned & moving, len0, room) != 0 {
+        return false;
+    }
     // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
     let top_u = ld(&h0.top_u, &h1.top_u);
     let top_h = ld(&h0.top_h, &h1.top_h);
@@ -355,7 +352,10 @@ unsafe fn pair(
         unsafe { &mut *(a as *mut [u64; LANES]).cast::<[f64; LANES]>() }
     };
     let (c0, c1) = (as_u(&mut h0.clamped), as_u(&mut h1.clamped));
-    let counts = _mm512_castpd_si512(ld(c0, c1));
-    let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
-    st(c0, c1, _mm512_castsi512_pd(counts));
+    if was_clamped != 0 {
+        let counts = _mm512_castpd_si512(ld(c0, c1));
+        let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
+        st(c0, c1, _mm512_castsi512_pd(counts));
+    }
+    true
 }
