@@ -6,11 +6,11 @@
 //! corners are gathered from the table (four gathers; on AVX-512 faster than a load per lane
 //! from the table by cell and its transpose, 1.14 x on the timing binary).
 //!
-//! Only the common case runs here: two whole groups whose stacks are all in place. A stack
-//! at its room steps here too unless its input turns (a turning point it has no room for);
-//! anything else (a stack on the heap, a turning point onto a full stack, the last group of
-//! a block) goes through `super::avx2::row` for those elements, which also takes care of
-//! moving stacks between the heap and their place.
+//! Two whole groups step here, their stacks in place or on the heap (each lane's stack
+//! from its own offset; a stack on the heap that is shallow again goes back in place
+//! afterwards), a stack at its room too unless its input turns. A turning point onto a full
+//! stack and the last group of a block go through `super::avx2::row` for those elements,
+//! which grows the stack on the heap or forgets a loop.
 
 use std::arch::x86_64::*;
 
@@ -53,25 +53,50 @@ pub(super) unsafe fn row(
     let mut i = 0;
     while i < n {
         let g = i / LANES;
-        let wide = i + WIDE <= n && elements[i..i + WIDE].iter().all(|el| el.spill.is_none());
-        let stepped = wide && {
-            let base = elements[i].inline.as_mut_ptr().cast::<f64>();
+        let stepped = i + WIDE <= n && {
+            let els = &mut elements[i..i + WIDE];
+            let base = els[0].inline.as_mut_ptr().cast::<f64>();
+            let spilled = els.iter().any(|el| el.spill.is_some());
+            let (offs, rooms) = if spilled {
+                // each stack from lane 0's place in f64 (the distance of two f64 arrays),
+                // and its own room
+                let (mut o, mut r) = ([0i64; WIDE], [0i64; WIDE]);
+                for (l, el) in els.iter_mut().enumerate() {
+                    r[l] = el.room(capacity) as i64;
+                    o[l] = (el.stack_mut().as_mut_ptr() as isize - base as isize) as i64 >> 3;
+                }
+                let load = |v: &[i64; WIDE]| _mm512_loadu_si512(v.as_ptr().cast());
+                (load(&o), load(&r))
+            } else {
+                (off, room)
+            };
             let (h0, h1) = heads[g..g + 2].split_at_mut(1);
-            // SAFETY: AVX-512 (this function's features); eight elements one after the other
-            // (`off` apart), their stacks in place (`room` extrema, plus the spare slot)
-            unsafe {
+            // SAFETY: AVX-512 (this function's features); eight elements, lane `l`'s stack
+            // `offs[l]` f64 from `base` with `rooms[l]` extrema plus the spare slot
+            let moved = unsafe {
                 pair(
                     &consts,
                     &mut h0[0],
                     &mut h1[0],
                     base,
-                    off,
-                    room,
+                    offs,
+                    rooms,
                     &u[i..i + WIDE],
                     &ok[i..i + WIDE],
                     &mut out[i..i + WIDE],
                 )
+            };
+            if let (Some(moved), true) = (moved, spilled) {
+                // a stack on the heap that is shallow again goes back in place
+                // (`Element::step`)
+                for (l, el) in els.iter_mut().enumerate() {
+                    let len = heads[g + l / LANES].len[l % LANES] as usize;
+                    if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
+                        el.unspill(len);
+                    }
+                }
             }
+            moved.is_some()
         };
         let m = if stepped { WIDE } else { LANES.min(n - i) };
         if !stepped {
@@ -199,8 +224,10 @@ unsafe fn st(a: &mut [f64; LANES], b: &mut [f64; LANES], v: __m512d) {
     }
 }
 
-/// Eight elements whose stacks are in place (lane `l`'s `off[l]` f64 from `base`) with room
-/// for a turning point (`super::avx2::group` on two groups of heads).
+/// Eight elements (`super::avx2::group` on two groups of heads): lane `l`'s stack starts
+/// `off[l]` f64 from `base` and holds `room[l]` extrema plus the spare slot. Returns the
+/// lanes that moved, or `None` before touching anything when an input turns on a stack at
+/// its room (the scalar step grows the stack or forgets a loop).
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn pair(
@@ -213,7 +240,7 @@ unsafe fn pair(
     u: &[f64],
     ok: &[bool],
     out: &mut [f64],
-) -> bool {
+) -> Option<__mmask8> {
     let zero = _mm512_setzero_pd();
     let (one_i, two_i) = (_mm512_set1_epi64(1), _mm512_set1_epi64(2));
     let as_i = |a: &[i64; LANES]| -> &[f64; LANES] {
@@ -245,7 +272,7 @@ unsafe fn pair(
     let turned = rising ^ odd0;
     // a turning point onto a stack at its room: the scalar step (it grows or forgets)
     if _mm512_mask_cmpeq_epi64_mask(turned & moving, len0, room) != 0 {
-        return false;
+        return None;
     }
     // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
     let top_u = ld(&h0.top_u, &h1.top_u);
@@ -300,19 +327,13 @@ unsafe fn pair(
     let y = _mm512_mul_pd(c.sign, _mm512_add_pd(sum, c.offset));
     let nan = _mm512_set1_pd(f64::NAN);
     _mm512_storeu_pd(out.as_mut_ptr(), _mm512_mask_blend_pd(live, nan, y));
-    // the turning point into the slot above the old top of each stack
-    let mut offs = [0i64; WIDE];
-    _mm512_storeu_si512(offs.as_mut_ptr().cast(), off);
-    for (l, &o) in offs.iter().enumerate() {
-        let hd: &Heads = if l < LANES { h0 } else { h1 };
-        let q = l % LANES;
-        let at = o as usize + 2 * hd.len[q] as usize;
-        // SAFETY: slot len0 of a stack in place with room for it (see above)
-        unsafe {
-            *base.cast_mut().add(at) = hd.last_u[q];
-            *base.cast_mut().add(at + 1) = hd.last_h[q];
-        }
-    }
+    // the turning point into the slot above the old top of each stack (only where it is
+    // kept: a lane that moved and turned; the slot above the top is never read)
+    let at = _mm512_add_epi64(_mm512_add_epi64(len0, len0), off);
+    let push = turned & moving;
+    let base = base.cast_mut();
+    _mm512_mask_i64scatter_pd::<8>(base.cast(), push, at, last_u);
+    _mm512_mask_i64scatter_pd::<8>(base.cast(), push, _mm512_add_epi64(at, one_i), last_h);
     // the heads of the lanes that moved
     let len = _mm512_mask_blend_epi64(moving, len0, len);
     let lens = _mm512_castsi512_pd(len);
@@ -357,5 +378,5 @@ unsafe fn pair(
         let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
         st(c0, c1, _mm512_castsi512_pd(counts));
     }
-    true
+    Some(moving)
 }
