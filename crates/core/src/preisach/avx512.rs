@@ -291,23 +291,33 @@ unsafe fn pair(
     let base = base as *const f64;
     if wiped != 0 {
         let slot = |s: __m512i| _mm512_add_epi64(_mm512_add_epi64(s, s), off);
+        // the new top and the extremum below it, gathered at once (their addresses depend
+        // on the depth alone, not on each other)
+        let tops = |t_u, t_h, b_u, lanes, len: __m512i| {
+            let top = slot(_mm512_sub_epi64(len, one_i));
+            let below = slot(_mm512_sub_epi64(_mm512_max_epi64(len, two_i), two_i));
+            (
+                _mm512_mask_i64gather_pd::<8>(t_u, lanes, top, base),
+                _mm512_mask_i64gather_pd::<8>(t_h, lanes, _mm512_add_epi64(top, one_i), base),
+                _mm512_mask_i64gather_pd::<8>(b_u, lanes, below, base),
+            )
+        };
         len = _mm512_mask_sub_epi64(len, wiped, len, two_i);
-        let mut wipes = wiped;
-        loop {
-            let can = wipes & _mm512_cmpgt_epi64_mask(len, two_i);
-            if can == 0 {
-                break;
+        (t_u, t_h, b_u) = tops(t_u, t_h, b_u, wiped, len);
+        // deeper: while a lane passes the extremum below its new top (which is `b_u`
+        // while above depth 2), the gathers again for those lanes
+        let deep = wiped & _mm512_cmpgt_epi64_mask(len, two_i) & passes(b_u);
+        if deep != 0 {
+            let mut wipes = deep;
+            while wipes != 0 {
+                len = _mm512_mask_sub_epi64(len, wipes, len, two_i);
+                let can = wipes & _mm512_cmpgt_epi64_mask(len, two_i);
+                let at = slot(_mm512_sub_epi64(len, two_i));
+                let s = _mm512_mask_i64gather_pd::<8>(zero, can, at, base);
+                wipes = can & passes(s);
             }
-            let at = slot(_mm512_sub_epi64(len, two_i));
-            let s = _mm512_mask_i64gather_pd::<8>(zero, can, at, base);
-            wipes = can & passes(s);
-            len = _mm512_mask_sub_epi64(len, wipes, len, two_i);
+            (t_u, t_h, b_u) = tops(t_u, t_h, b_u, deep, len);
         }
-        let top = slot(_mm512_sub_epi64(len, one_i));
-        t_u = _mm512_mask_i64gather_pd::<8>(t_u, wiped, top, base);
-        t_h = _mm512_mask_i64gather_pd::<8>(t_h, wiped, _mm512_add_epi64(top, one_i), base);
-        let below = _mm512_max_epi64(len, two_i);
-        b_u = _mm512_mask_i64gather_pd::<8>(b_u, wiped, slot(_mm512_sub_epi64(below, two_i)), base);
     }
     // back at lower saturation
     let at_sat =
