@@ -54,8 +54,12 @@ pub const INLINE_EXTREMA: usize = 12;
 /// [`Schedule::Parallel`] schedules (64 frames of 4096 elements).
 const TILE_SAMPLES: usize = 1 << 18;
 
-/// Elements per group of heads ([`Heads`]): the lanes of an AVX2 register of f64.
+/// Elements per AVX2 register of f64 (`avx2`'s lanes).
 pub(crate) const LANES: usize = 4;
+
+/// Elements per group of heads ([`Heads`]): the lanes of an AVX-512 register of f64 (two
+/// AVX2 registers).
+pub(crate) const GROUP: usize = 8;
 
 /// How a batch walks through the frames and elements (all give identical outputs; the
 /// benchmark shows what each step gains).
@@ -84,7 +88,7 @@ pub struct PreisachBank {
 }
 
 /// The elements `start .. start + len` of a bank, for a parallel batch (`start` a multiple
-/// of [`LANES`]: their heads are `heads`).
+/// of [`GROUP`]: their heads are `heads`).
 pub struct PreisachBlock<'a> {
     everett: EverettView<'a, f64>,
     /// The Everett table by cell (empty: gathered from the table).
@@ -101,8 +105,8 @@ impl PreisachBlock<'_> {
     #[inline(always)]
     pub fn step(&mut self, i: usize, u: f64, valid: bool) -> f64 {
         if valid && u.is_finite() {
-            let heads = &mut self.heads[i / LANES];
-            let h = self.elements[i].step(heads, i % LANES, &self.everett, self.capacity, u);
+            let heads = &mut self.heads[i / GROUP];
+            let h = self.elements[i].step(heads, i % GROUP, &self.everett, self.capacity, u);
             self.output.of(h)
         } else {
             f64::NAN
@@ -198,7 +202,7 @@ impl PreisachBank {
         let (element, _) = Element::new(everett.u_min);
         Ok(Self {
             elements: vec![element; n],
-            heads: vec![Heads::new(everett.u_min); n.div_ceil(LANES)],
+            heads: vec![Heads::new(everett.u_min); n.div_ceil(GROUP)],
             capacity,
             everett: Arc::new(everett),
             output: Output::identity(),
@@ -254,8 +258,8 @@ impl PreisachBank {
         w.u32(self.len() as u32);
         w.u32(self.capacity as u32);
         for (i, e) in self.elements.iter().enumerate() {
-            let heads = &self.heads[i / LANES];
-            e.save(&heads.head(i % LANES), heads.clamped[i % LANES], w);
+            let heads = &self.heads[i / GROUP];
+            e.save(&heads.head(i % GROUP), heads.clamped[i % GROUP], w);
         }
     }
 
@@ -268,9 +272,9 @@ impl PreisachBank {
         let mut elements = Vec::with_capacity(self.len());
         for i in 0..self.len() {
             let (el, head, clamped) = Element::load(r, u_min, self.capacity)?;
-            let g = &mut heads[i / LANES];
-            g.set(i % LANES, &head, el.stack());
-            g.clamped[i % LANES] = clamped;
+            let g = &mut heads[i / GROUP];
+            g.set(i % GROUP, &head, el.stack());
+            g.clamped[i % GROUP] = clamped;
             elements.push(el);
         }
         self.elements = elements;
@@ -280,13 +284,13 @@ impl PreisachBank {
 
     /// The head of element `i`.
     fn head(&self, i: usize) -> Head<f64> {
-        self.heads[i / LANES].head(i % LANES)
+        self.heads[i / GROUP].head(i % GROUP)
     }
 
     /// Samples clamped into the input range, per element.
     pub fn clamped(&self) -> Vec<u64> {
         (0..self.len())
-            .map(|i| self.heads[i / LANES].clamped[i % LANES])
+            .map(|i| self.heads[i / GROUP].clamped[i % GROUP])
             .collect()
     }
 
@@ -338,23 +342,23 @@ impl PreisachBank {
         let e = self.everett.view();
         let el = &mut self.elements[i];
         el.spill = None;
-        let heads = &mut self.heads[i / LANES];
-        let mut head = heads.head(i % LANES);
+        let heads = &mut self.heads[i / GROUP];
+        let mut head = heads.head(i % GROUP);
         let h = kernel::set_sum(&mut head, &mut el.inline, &e, u, target);
-        heads.set(i % LANES, &head, &el.inline);
+        heads.set(i % GROUP, &head, &el.inline);
         h
     }
 
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter; a
-    /// block's first element is a multiple of [`LANES`]).
+    /// block's first element is a multiple of [`GROUP`]).
     pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
         let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
         let cells = self.everett.cells();
         let size = block_size(self.len());
-        debug_assert!(size.is_multiple_of(LANES));
+        debug_assert!(size.is_multiple_of(GROUP));
         self.elements
             .chunks_mut(size)
-            .zip(self.heads.chunks_mut(size / LANES))
+            .zip(self.heads.chunks_mut(size / GROUP))
             .map(|(elements, heads)| PreisachBlock {
                 everett,
                 cells,

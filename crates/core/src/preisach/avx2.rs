@@ -5,7 +5,7 @@
 //!
 //! What differs is how the data-dependent outcomes are taken: rising or falling, turning
 //! or not, wiping out a loop or not, which Everett cell — all are lane masks and blends, so
-//! a random walk costs no mispredicted branch per element. The four heads are one group
+//! a random walk costs no mispredicted branch per element. The four heads are half a group
 //! ([`Heads`], field after field), with copies of each stack's top extremum and of the
 //! input below it, so a step that wipes out no loop reads and writes the heads with plain
 //! vector loads and stores, and touches the stacks only to push the turning point; the
@@ -19,14 +19,14 @@ use std::arch::x86_64::*;
 use texsense_kernels::everett::Everett as EverettView;
 use texsense_kernels::preisach::Output;
 
-use super::{Element, Heads, INLINE_EXTREMA, LANES};
+use super::{Element, Heads, GROUP, INLINE_EXTREMA, LANES};
 
 /// One frame of a block: inputs `u`, validity `ok` -> outputs `out` (NaN where invalid or
 /// not finite), the elements' states stepped; identical to the scalar step per element.
 ///
 /// # Safety
 /// The processor must have AVX2. `u`, `ok` and `out` hold `elements.len()` values, `heads`
-/// one group per four elements.
+/// one group per eight elements.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn row(
@@ -42,20 +42,22 @@ pub(super) unsafe fn row(
 ) {
     let n = elements.len();
     assert!(u.len() == n && ok.len() == n && out.len() == n);
-    assert!(heads.len() == n.div_ceil(LANES));
+    assert!(heads.len() == n.div_ceil(GROUP));
     let consts = Consts::new(e, cells, output);
     // the room of a stack in place (`Element::room`)
     let room = _mm256_set1_epi64x(INLINE_EXTREMA.min(capacity) as i64);
     let step = (std::mem::size_of::<Element>() / 8) as i64;
     let in_place = _mm256_set_epi64x(3 * step, 2 * step, step, 0);
-    for (g, hd) in heads.iter_mut().enumerate() {
-        let i = g * LANES;
+    for q in 0..n.div_ceil(LANES) {
+        // lanes `h .. h + 4` of a group of heads
+        let (hd, h) = (&mut heads[q / 2], q % 2 * LANES);
+        let i = q * LANES;
         if i + LANES > n {
             for j in i..n {
                 out[j] = scalar(
                     &mut elements[j],
                     hd,
-                    j - i,
+                    h + j - i,
                     e,
                     capacity,
                     output,
@@ -71,7 +73,7 @@ pub(super) unsafe fn row(
         let (at_room, off) = if spilled {
             let mut at_room = false;
             for (l, el) in els.iter_mut().enumerate() {
-                at_room |= hd.len[l] as usize == el.room(capacity);
+                at_room |= hd.len[h + l] as usize == el.room(capacity);
                 stacks[l] = el.stack_mut().as_mut_ptr().cast::<f64>();
             }
             // each stack from lane 0's, in f64 (the distance of two f64 arrays)
@@ -82,14 +84,14 @@ pub(super) unsafe fn row(
             for (l, el) in els.iter_mut().enumerate() {
                 stacks[l] = el.inline.as_mut_ptr().cast::<f64>();
             }
-            let len = _mm256_load_si256(hd.len.as_ptr().cast());
+            let len = _mm256_load_si256(hd.len[h..].as_ptr().cast());
             let full = _mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpeq_epi64(len, room)));
             (full != 0, in_place)
         };
         if at_room {
             for l in 0..LANES {
                 let (x, v) = (u[i + l], ok[i + l]);
-                out[i + l] = scalar(&mut els[l], hd, l, e, capacity, output, x, v);
+                out[i + l] = scalar(&mut els[l], hd, h + l, e, capacity, output, x, v);
             }
             continue;
         }
@@ -99,6 +101,7 @@ pub(super) unsafe fn row(
             group(
                 &consts,
                 hd,
+                h,
                 &stacks,
                 off,
                 &u[i..i + LANES],
@@ -108,7 +111,7 @@ pub(super) unsafe fn row(
         };
         if spilled {
             for (l, el) in els.iter_mut().enumerate() {
-                let len = hd.len[l] as usize;
+                let len = hd.len[h + l] as usize;
                 if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
                     el.unspill(len);
                 }
@@ -272,13 +275,16 @@ pub(super) unsafe fn cell_corners(
     )
 }
 
-/// Four elements whose stacks all have room for a turning point (`stacks`: each one's
-/// extrema, input and output after each other, `off` lane `l`'s from lane 0's in f64): the outputs into `out`, the heads and the
+/// Four elements, lanes `h0 .. h0 + 4` of the group of heads `hd`, whose stacks all have
+/// room for a turning point (`stacks`: each one's extrema, input and output after each
+/// other, `off` lane `l`'s from lane 0's in f64): the outputs into `out`, the heads and the
 /// pushed turning points stored; returns the lanes that moved (bit `l` for lane `l`).
+#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
 unsafe fn group(
     c: &Consts,
     hd: &mut Heads,
+    h0: usize,
     stacks: &[*mut f64; LANES],
     off: __m256i,
     u: &[f64],
@@ -288,9 +294,9 @@ unsafe fn group(
     let zero = _mm256_setzero_pd();
     let (one_i, two_i) = (_mm256_set1_epi64x(1), _mm256_set1_epi64x(2));
     // the kernel's `prepare`
-    let len0 = _mm256_load_si256(hd.len.as_ptr().cast());
-    let last_u = _mm256_load_pd(hd.last_u.as_ptr());
-    let last_h = _mm256_load_pd(hd.last_h.as_ptr());
+    let len0 = _mm256_load_si256(hd.len[h0..].as_ptr().cast());
+    let last_u = _mm256_load_pd(hd.last_u[h0..].as_ptr());
+    let last_h = _mm256_load_pd(hd.last_h[h0..].as_ptr());
     let u_in = _mm256_loadu_pd(u.as_ptr());
     let bytes = i32::from_le_bytes([ok[0], ok[1], ok[2], ok[3]].map(u8::from));
     let ok_m = _mm256_cmpgt_epi64(
@@ -308,11 +314,11 @@ unsafe fn group(
     let turned = _mm256_xor_si256(_mm256_castpd_si256(rising), odd0);
     let turned_pd = _mm256_castsi256_pd(turned);
     // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
-    let top_u = _mm256_load_pd(hd.top_u.as_ptr());
+    let top_u = _mm256_load_pd(hd.top_u[h0..].as_ptr());
     let mut len = _mm256_sub_epi64(len0, turned);
     let mut t_u = _mm256_blendv_pd(top_u, last_u, turned_pd);
-    let mut t_h = _mm256_blendv_pd(_mm256_load_pd(hd.top_h.as_ptr()), last_h, turned_pd);
-    let mut b_u = _mm256_blendv_pd(_mm256_load_pd(hd.below_u.as_ptr()), top_u, turned_pd);
+    let mut t_h = _mm256_blendv_pd(_mm256_load_pd(hd.top_h[h0..].as_ptr()), last_h, turned_pd);
+    let mut b_u = _mm256_blendv_pd(_mm256_load_pd(hd.below_u[h0..].as_ptr()), top_u, turned_pd);
     // wiping-out: the input passes the extremum below the top
     let dir = _mm256_blendv_pd(_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0), rising);
     let passes = |s: __m256d| {
@@ -374,33 +380,33 @@ unsafe fn group(
     // the turning point into the slot above the old top (kept on a turn; a stack has
     // room + 1 >= len + 1 slots)
     for (l, &p) in stacks.iter().enumerate() {
-        let at = 2 * hd.len[l] as usize;
+        let at = 2 * hd.len[h0 + l] as usize;
         // SAFETY: slot len0 of a stack with room for it (see above)
         unsafe {
-            *p.add(at) = hd.last_u[l];
-            *p.add(at + 1) = hd.last_h[l];
+            *p.add(at) = hd.last_u[h0 + l];
+            *p.add(at + 1) = hd.last_h[h0 + l];
         }
     }
     // the heads of the lanes that moved
     let keep = |old: __m256d, new: __m256d| _mm256_blendv_pd(old, new, moving);
     _mm256_store_si256(
-        hd.len.as_mut_ptr().cast(),
+        hd.len[h0..].as_mut_ptr().cast(),
         _mm256_blendv_epi8(len0, len, moving_i),
     );
-    _mm256_store_pd(hd.last_u.as_mut_ptr(), keep(last_u, uc));
-    _mm256_store_pd(hd.last_h.as_mut_ptr(), keep(last_h, h));
-    _mm256_store_pd(hd.top_u.as_mut_ptr(), keep(top_u, t_u));
+    _mm256_store_pd(hd.last_u[h0..].as_mut_ptr(), keep(last_u, uc));
+    _mm256_store_pd(hd.last_h[h0..].as_mut_ptr(), keep(last_h, h));
+    _mm256_store_pd(hd.top_u[h0..].as_mut_ptr(), keep(top_u, t_u));
     _mm256_store_pd(
-        hd.top_h.as_mut_ptr(),
-        keep(_mm256_load_pd(hd.top_h.as_ptr()), t_h),
+        hd.top_h[h0..].as_mut_ptr(),
+        keep(_mm256_load_pd(hd.top_h[h0..].as_ptr()), t_h),
     );
     _mm256_store_pd(
-        hd.below_u.as_mut_ptr(),
-        keep(_mm256_load_pd(hd.below_u.as_ptr()), b_u),
+        hd.below_u[h0..].as_mut_ptr(),
+        keep(_mm256_load_pd(hd.below_u[h0..].as_ptr()), b_u),
     );
     let was_clamped = _mm256_and_pd(_mm256_cmp_pd::<_CMP_NEQ_UQ>(clamped, u_in), live);
-    let counts = _mm256_load_si256(hd.clamped.as_ptr().cast());
+    let counts = _mm256_load_si256(hd.clamped[h0..].as_ptr().cast());
     let counts = _mm256_sub_epi64(counts, _mm256_castpd_si256(was_clamped));
-    _mm256_store_si256(hd.clamped.as_mut_ptr().cast(), counts);
+    _mm256_store_si256(hd.clamped[h0..].as_mut_ptr().cast(), counts);
     _mm256_movemask_pd(moving)
 }

@@ -17,16 +17,16 @@ use std::arch::x86_64::*;
 use texsense_kernels::everett::Everett as EverettView;
 use texsense_kernels::preisach::Output;
 
-use super::{avx2, Element, Heads, INLINE_EXTREMA, LANES};
+use super::{avx2, Element, Heads, GROUP, INLINE_EXTREMA};
 
-/// Elements per step: two groups of heads.
-const WIDE: usize = 2 * LANES;
+/// Elements per step: a group of heads.
+const WIDE: usize = GROUP;
 
 /// One frame of a block (the arguments and results of `super::avx2::row`).
 ///
 /// # Safety
 /// The processor must have AVX2 and AVX-512 F, DQ and VL. `u`, `ok` and `out` hold
-/// `elements.len()` values, `heads` one group per four elements.
+/// `elements.len()` values, `heads` one group per eight elements.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 pub(super) unsafe fn row(
@@ -42,7 +42,7 @@ pub(super) unsafe fn row(
 ) {
     let n = elements.len();
     assert!(u.len() == n && ok.len() == n && out.len() == n);
-    assert!(heads.len() == n.div_ceil(LANES));
+    assert!(heads.len() == n.div_ceil(GROUP));
     let consts = Consts::new(e, output);
     let room = _mm512_set1_epi64(INLINE_EXTREMA.min(capacity) as i64);
     let step = (std::mem::size_of::<Element>() / 8) as i64;
@@ -52,7 +52,7 @@ pub(super) unsafe fn row(
     );
     let mut i = 0;
     while i < n {
-        let g = i / LANES;
+        let g = i / GROUP;
         let stepped = i + WIDE <= n && {
             let els = &mut elements[i..i + WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
@@ -70,14 +70,12 @@ pub(super) unsafe fn row(
             } else {
                 (off, room)
             };
-            let (h0, h1) = heads[g..g + 2].split_at_mut(1);
             // SAFETY: AVX-512 (this function's features); eight elements, lane `l`'s stack
             // `offs[l]` f64 from `base` with `rooms[l]` extrema plus the spare slot
             let moved = unsafe {
                 pair(
                     &consts,
-                    &mut h0[0],
-                    &mut h1[0],
+                    &mut heads[g],
                     base,
                     offs,
                     rooms,
@@ -90,7 +88,7 @@ pub(super) unsafe fn row(
                 // a stack on the heap that is shallow again goes back in place
                 // (`Element::step`)
                 for (l, el) in els.iter_mut().enumerate() {
-                    let len = heads[g + l / LANES].len[l % LANES] as usize;
+                    let len = heads[g].len[l] as usize;
                     if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
                         el.unspill(len);
                     }
@@ -98,7 +96,7 @@ pub(super) unsafe fn row(
             }
             moved.is_some()
         };
-        let m = if stepped { WIDE } else { LANES.min(n - i) };
+        let m = WIDE.min(n - i);
         if !stepped {
             // SAFETY: AVX2 (this function's features); one group (or the block's last
             // elements) with its heads
@@ -202,29 +200,7 @@ unsafe fn everett(c: &Consts, alpha: __m512d, beta: __m512d) -> __m512d {
     _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(b, a), v, zero)
 }
 
-/// One field of two groups of heads as eight lanes.
-#[inline(always)]
-unsafe fn ld(a: &[f64; LANES], b: &[f64; LANES]) -> __m512d {
-    // SAFETY: AVX-512 F (the caller's feature); two arrays of four f64
-    unsafe {
-        _mm512_insertf64x4::<1>(
-            _mm512_castpd256_pd512(_mm256_loadu_pd(a.as_ptr())),
-            _mm256_loadu_pd(b.as_ptr()),
-        )
-    }
-}
-
-/// Eight lanes into one field of two groups of heads.
-#[inline(always)]
-unsafe fn st(a: &mut [f64; LANES], b: &mut [f64; LANES], v: __m512d) {
-    // SAFETY: AVX-512 F (the caller's feature); two arrays of four f64
-    unsafe {
-        _mm256_storeu_pd(a.as_mut_ptr(), _mm512_castpd512_pd256(v));
-        _mm256_storeu_pd(b.as_mut_ptr(), _mm512_extractf64x4_pd::<1>(v));
-    }
-}
-
-/// Eight elements (`super::avx2::group` on two groups of heads): lane `l`'s stack starts
+/// Eight elements (`super::avx2::group` on a group of eight heads): lane `l`'s stack starts
 /// `off[l]` f64 from `base` and holds `room[l]` extrema plus the spare slot. Returns the
 /// lanes that moved, or `None` before touching anything when an input turns on a stack at
 /// its room (the scalar step grows the stack or forgets a loop).
@@ -232,8 +208,7 @@ unsafe fn st(a: &mut [f64; LANES], b: &mut [f64; LANES], v: __m512d) {
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn pair(
     c: &Consts,
-    h0: &mut Heads,
-    h1: &mut Heads,
+    hd: &mut Heads,
     base: *mut f64,
     off: __m512i,
     room: __m512i,
@@ -243,14 +218,10 @@ unsafe fn pair(
 ) -> Option<__mmask8> {
     let zero = _mm512_setzero_pd();
     let (one_i, two_i) = (_mm512_set1_epi64(1), _mm512_set1_epi64(2));
-    let as_i = |a: &[i64; LANES]| -> &[f64; LANES] {
-        // SAFETY: the same bytes, read as f64 only to move them
-        unsafe { &*(a as *const [i64; LANES]).cast::<[f64; LANES]>() }
-    };
-    // the kernel's `prepare`
-    let len0 = _mm512_castpd_si512(ld(as_i(&h0.len), as_i(&h1.len)));
-    let last_u = ld(&h0.last_u, &h1.last_u);
-    let last_h = ld(&h0.last_h, &h1.last_h);
+    // the kernel's `prepare` (the heads aligned, a field per register)
+    let len0 = _mm512_load_si512(hd.len.as_ptr().cast());
+    let last_u = _mm512_load_pd(hd.last_u.as_ptr());
+    let last_h = _mm512_load_pd(hd.last_h.as_ptr());
     let u_in = _mm512_loadu_pd(u.as_ptr());
     // the eight flags as bytes, then one mask bit per lane (a bool is 0 or 1)
     let flags = u64::from_le_bytes(
@@ -275,9 +246,9 @@ unsafe fn pair(
         return None;
     }
     // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
-    let top_u = ld(&h0.top_u, &h1.top_u);
-    let top_h = ld(&h0.top_h, &h1.top_h);
-    let below_u = ld(&h0.below_u, &h1.below_u);
+    let top_u = _mm512_load_pd(hd.top_u.as_ptr());
+    let top_h = _mm512_load_pd(hd.top_h.as_ptr());
+    let below_u = _mm512_load_pd(hd.below_u.as_ptr());
     let mut len = _mm512_mask_add_epi64(len0, turned, len0, one_i);
     let mut t_u = _mm512_mask_blend_pd(turned, top_u, last_u);
     let mut t_h = _mm512_mask_blend_pd(turned, top_h, last_h);
@@ -345,48 +316,19 @@ unsafe fn pair(
     _mm512_mask_i64scatter_pd::<8>(base.cast(), push, at, last_u);
     _mm512_mask_i64scatter_pd::<8>(base.cast(), push, _mm512_add_epi64(at, one_i), last_h);
     // the heads of the lanes that moved
+    let keep = |old: __m512d, new: __m512d| _mm512_mask_blend_pd(moving, old, new);
     let len = _mm512_mask_blend_epi64(moving, len0, len);
-    let lens = _mm512_castsi512_pd(len);
-    let as_f = |a: &mut [i64; LANES]| -> &mut [f64; LANES] {
-        // SAFETY: the same bytes, written as f64 only to move them
-        unsafe { &mut *(a as *mut [i64; LANES]).cast::<[f64; LANES]>() }
-    };
-    st(as_f(&mut h0.len), as_f(&mut h1.len), lens);
-    st(
-        &mut h0.last_u,
-        &mut h1.last_u,
-        _mm512_mask_blend_pd(moving, last_u, uc),
-    );
-    st(
-        &mut h0.last_h,
-        &mut h1.last_h,
-        _mm512_mask_blend_pd(moving, last_h, h),
-    );
-    st(
-        &mut h0.top_u,
-        &mut h1.top_u,
-        _mm512_mask_blend_pd(moving, top_u, t_u),
-    );
-    st(
-        &mut h0.top_h,
-        &mut h1.top_h,
-        _mm512_mask_blend_pd(moving, top_h, t_h),
-    );
-    st(
-        &mut h0.below_u,
-        &mut h1.below_u,
-        _mm512_mask_blend_pd(moving, below_u, b_u),
-    );
+    _mm512_store_si512(hd.len.as_mut_ptr().cast(), len);
+    _mm512_store_pd(hd.last_u.as_mut_ptr(), keep(last_u, uc));
+    _mm512_store_pd(hd.last_h.as_mut_ptr(), keep(last_h, h));
+    _mm512_store_pd(hd.top_u.as_mut_ptr(), keep(top_u, t_u));
+    _mm512_store_pd(hd.top_h.as_mut_ptr(), keep(top_h, t_h));
+    _mm512_store_pd(hd.below_u.as_mut_ptr(), keep(below_u, b_u));
     let was_clamped = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(clamped, u_in) & live;
-    let as_u = |a: &mut [u64; LANES]| -> &mut [f64; LANES] {
-        // SAFETY: the same bytes, moved as f64
-        unsafe { &mut *(a as *mut [u64; LANES]).cast::<[f64; LANES]>() }
-    };
-    let (c0, c1) = (as_u(&mut h0.clamped), as_u(&mut h1.clamped));
     if was_clamped != 0 {
-        let counts = _mm512_castpd_si512(ld(c0, c1));
+        let counts = _mm512_load_si512(hd.clamped.as_ptr().cast());
         let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
-        st(c0, c1, _mm512_castsi512_pd(counts));
+        _mm512_store_si512(hd.clamped.as_mut_ptr().cast(), counts);
     }
     Some(moving)
 }

@@ -1,47 +1,47 @@
 //! One element of a Preisach bank: its stack of extrema (in place, or on the heap when
-//! deep) and the heads of four neighbouring elements kept field after field for the SIMD
+//! deep) and the heads of eight neighbouring elements kept field after field for the SIMD
 //! path (eq. 4.16-4.22 by the kernel's `prepare` and `finish`).
 
 use texsense_kernels::everett::Everett as EverettView;
 use texsense_kernels::preisach::{self as kernel, Head, Prepared, CLAMPED};
 
-use super::{INLINE_EXTREMA, LANES};
+use super::{GROUP, INLINE_EXTREMA};
 use crate::error::CoreError;
 use crate::snapshot::{Reader, Writer};
 
-/// The heads of four neighbouring elements, field after field (structure of arrays): the
+/// The heads of eight neighbouring elements, field after field (structure of arrays): the
 /// kernel's head (depth, last input and output), copies of the stack's top extremum (input
 /// and output) and of the input of the extremum below it, and the clamping counter. The
 /// copies make the common step (no loop wiped out) a step of plain vector loads and stores
 /// on the SIMD path; every step, on either path, keeps them equal to the stack
 /// ([`Heads::set`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[repr(C, align(32))]
+#[repr(C, align(64))]
 pub(crate) struct Heads {
     /// Extrema on the stack (>= 1).
-    pub(super) len: [i64; LANES],
-    pub(super) last_u: [f64; LANES],
-    pub(super) last_h: [f64; LANES],
+    pub(super) len: [i64; GROUP],
+    pub(super) last_u: [f64; GROUP],
+    pub(super) last_h: [f64; GROUP],
     /// `stack[len - 1]`: the top extremum's input and output.
-    pub(super) top_u: [f64; LANES],
-    pub(super) top_h: [f64; LANES],
+    pub(super) top_u: [f64; GROUP],
+    pub(super) top_h: [f64; GROUP],
     /// `stack[max(len, 2) - 2]`'s input: the extremum below the top (the lower saturation
     /// at depth 1).
-    pub(super) below_u: [f64; LANES],
-    pub(super) clamped: [u64; LANES],
+    pub(super) below_u: [f64; GROUP],
+    pub(super) clamped: [u64; GROUP],
 }
 
 impl Heads {
-    /// Four elements at lower saturation.
+    /// Eight elements at lower saturation.
     pub(super) fn new(u_min: f64) -> Self {
         Self {
-            len: [1; LANES],
-            last_u: [u_min; LANES],
-            last_h: [0.0; LANES],
-            top_u: [u_min; LANES],
-            top_h: [0.0; LANES],
-            below_u: [u_min; LANES],
-            clamped: [0; LANES],
+            len: [1; GROUP],
+            last_u: [u_min; GROUP],
+            last_h: [0.0; GROUP],
+            top_u: [u_min; GROUP],
+            top_h: [0.0; GROUP],
+            below_u: [u_min; GROUP],
+            clamped: [0; GROUP],
         }
     }
 

@@ -405,7 +405,7 @@ proptest! {
         t in 1usize..90,
         capacity in prop::sample::select(vec![4usize, 7, 16, 64]),
     ) {
-        // the bank (heads in groups of four, stacks in place or on the heap) against the
+        // the bank (heads in groups of eight, stacks in place or on the heap) against the
         // microcontroller's kernel on one plain stack per element
         let _guard = crate::simd::testing::lock();
         let mut rng = Rng(seed);
