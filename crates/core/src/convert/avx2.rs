@@ -138,7 +138,7 @@ mod tests {
     fn lanes_equal_the_scalar_stage_bit_for_bit() {
         let _guard = crate::simd::testing::lock();
         let mut rng = Rng(3);
-        for case in 0..40 {
+        for case in 0..200 {
             let points = 2 + (rng.next() % 60) as usize;
             // uneven spacing: several points in one bucket, empty buckets
             let mut x = vec![1.0 + rng.unit()];

@@ -89,27 +89,55 @@ unsafe fn at(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
     let mut j = _mm512_cvtepu32_epi64(bucket);
     let (zero_i, one_i) = (_mm512_setzero_si512(), _mm512_set1_epi64(1));
     let xp = xs.as_ptr();
-    let mut xj;
-    loop {
-        xj = _mm512_i64gather_pd::<8>(j, xp);
-        let down =
-            inside & _mm512_cmpgt_epi64_mask(j, zero_i) & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(xj, vin);
-        if down == 0 {
-            break;
-        }
-        j = _mm512_mask_sub_epi64(j, down, j, one_i);
-    }
     let below_last = _mm512_set1_epi64(last as i64);
-    loop {
+    // x[j], x[j + 1] and x[j + 2] gathered at once (their addresses are known from the
+    // bucket); the kernel's steps from the bucket's start are selected from them, and only a
+    // step back or a third step forward (both rare) walks on one gather at a time
+    let mut xj = _mm512_i64gather_pd::<8>(j, xp);
+    let ahead = |k: i64| _mm512_min_epi64(_mm512_add_epi64(j, _mm512_set1_epi64(k)), below_last);
+    let x1 = _mm512_i64gather_pd::<8>(ahead(1), xp);
+    let x2 = _mm512_i64gather_pd::<8>(ahead(2), xp);
+    let up_walk = |mut j: __m512i, mut xj: __m512d| loop {
         let next = _mm512_add_epi64(j, one_i);
         let can = inside & _mm512_cmpgt_epi64_mask(below_last, next);
         let xn = _mm512_mask_i64gather_pd::<8>(_mm512_setzero_pd(), can, next, xp);
         let up = can & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(xn, vin);
         if up == 0 {
-            break;
+            break (j, xj);
         }
         j = _mm512_mask_add_epi64(j, up, j, one_i);
         xj = _mm512_mask_blend_pd(up, xj, xn);
+    };
+    let back = |j: __m512i, xj: __m512d| {
+        inside & _mm512_cmpgt_epi64_mask(j, zero_i) & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(xj, vin)
+    };
+    let down = back(j, xj);
+    if down != 0 {
+        // the kernel's loops: back, then forward
+        j = _mm512_mask_sub_epi64(j, down, j, one_i);
+        loop {
+            xj = _mm512_i64gather_pd::<8>(j, xp);
+            let down = back(j, xj);
+            if down == 0 {
+                break;
+            }
+            j = _mm512_mask_sub_epi64(j, down, j, one_i);
+        }
+        (j, xj) = up_walk(j, xj);
+    } else {
+        let step = |j: __m512i, can: __mmask8, xn: __m512d| {
+            can & _mm512_cmpgt_epi64_mask(below_last, _mm512_add_epi64(j, one_i))
+                & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(xn, vin)
+        };
+        let up1 = step(j, inside, x1);
+        j = _mm512_mask_add_epi64(j, up1, j, one_i);
+        xj = _mm512_mask_blend_pd(up1, xj, x1);
+        let up2 = step(j, up1, x2);
+        j = _mm512_mask_add_epi64(j, up2, j, one_i);
+        xj = _mm512_mask_blend_pd(up2, xj, x2);
+        if up2 != 0 {
+            (j, xj) = up_walk(j, xj);
+        }
     }
     let yj = _mm512_i64gather_pd::<8>(j, ys.as_ptr());
     let sj = _mm512_i64gather_pd::<8>(j, slope.as_ptr());

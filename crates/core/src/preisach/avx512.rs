@@ -1,7 +1,7 @@
 //! The Preisach step (eq. 4.16-4.22) across eight elements at once, in the lanes of
 //! AVX-512 registers: `super::avx2`'s lane program (the scalar kernel's operations in the
 //! same order, without fused multiply-adds, so every output and state is the scalar
-//! kernel's, bit for bit) on two groups of heads, with the lane conditions in mask
+//! kernel's, bit for bit) on a group of eight heads, with the lane conditions in mask
 //! registers (masked adds, blends and gathers instead of all-ones vectors). The Everett
 //! corners are gathered from the table (four gathers; on AVX-512 faster than a load per lane
 //! from the table by cell and its transpose, 1.14 x on the timing binary).
