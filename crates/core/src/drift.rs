@@ -102,9 +102,10 @@ impl DriftSettings {
 
 /// Elements per group of the states' layout: the K states of a group of [`GROUP`]
 /// neighbouring elements are stored term-major (`[group][term][element]`), so that the
-/// AVX2 path reads one term of four elements as one vector (the last group is padded).
-/// Block boundaries fall on group boundaries ([`crate::par::block_size`] is a multiple).
-pub const GROUP: usize = 4;
+/// AVX-512 path reads one term of eight elements as one vector, and the AVX2 path one term
+/// of four (half a group; the last group is padded). Block boundaries fall on group
+/// boundaries ([`crate::par::block_size`] is a multiple).
+pub const GROUP: usize = 8;
 
 /// Position of element `i`'s term `j` (of `k`) in the grouped layout.
 #[inline(always)]
@@ -171,7 +172,8 @@ impl DriftBlock<'_> {
 
     /// One frame of the block: element `i` reads `h[i]` (`ok[i]` false: skipped) into
     /// `out[i]`; on AVX2 with the time clock and the linear level (eq. 5.8 as printed),
-    /// four elements at a time (eight on AVX-512: `avx512`, the same bits), one vector per kernel term (`avx2`: the scalar kernel's
+    /// four elements at a time (eight on AVX-512: `avx512`, the same bits), one vector per
+    /// kernel term (`avx2`: the scalar kernel's
     /// operations in the same order, so the same bits); the rest clock (an `exp` per
     /// element and term) and a level power (a `powf`) run the scalar kernel.
     ///
@@ -185,35 +187,36 @@ impl DriftBlock<'_> {
         );
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() && self.settings.rest().0 == 0.0 && self.settings.exponent() == 1.0 {
-            let (mut pairs, k) = (0, self.settings.terms());
+            let (mut wide, k) = (0, self.settings.terms());
             if crate::simd::avx512() {
-                pairs = n / avx512::LANES * avx512::LANES;
+                wide = n / avx512::LANES * avx512::LANES;
                 // SAFETY: the processor has AVX-512 F/DQ (detected by `simd::avx512`);
-                // `pairs` elements are whole pairs of groups, the slices hold n >= pairs
+                // `wide` elements are whole groups, the slices hold n >= wide
                 unsafe {
                     avx512::groups(
                         &self.settings,
                         self.elements,
                         self.z,
                         &self.decay,
-                        &h[..pairs],
-                        &ok[..pairs],
-                        &mut out[..pairs],
+                        &h[..wide],
+                        &ok[..wide],
+                        &mut out[..wide],
                     )
                 };
             }
-            let whole = n / GROUP * GROUP;
-            // SAFETY: the processor has AVX2 (detected by `simd::avx2`); `whole` elements
-            // are whole groups of the block's layout, the slices hold n >= whole values
+            let whole = n / avx2::LANES * avx2::LANES;
+            // SAFETY: the processor has AVX2 (detected by `simd::avx2`); `wide` is whole
+            // groups of the block's layout, `whole` elements are whole halves of groups, the
+            // slices hold n >= whole values
             unsafe {
                 avx2::groups(
                     &self.settings,
-                    &mut self.elements[pairs..],
-                    &mut self.z[pairs * k..],
+                    &mut self.elements[wide..],
+                    &mut self.z[wide * k..],
                     &self.decay,
-                    &h[pairs..whole],
-                    &ok[pairs..whole],
-                    &mut out[pairs..whole],
+                    &h[wide..whole],
+                    &ok[wide..whole],
+                    &mut out[wide..whole],
                 )
             };
             for i in whole..n {

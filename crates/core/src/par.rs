@@ -22,8 +22,8 @@ pub const PARALLEL_MIN: usize = 1 << 15;
 
 /// Elements per block for a bank of `n`: at most [`MAX_BLOCK`], and small enough that every
 /// thread of the pool gets a block (a 96-element seat runs on both cores); a multiple of 8
-/// (the drift states' groups of four, `drift::GROUP`, and the Preisach heads' groups of
-/// eight, `preisach::GROUP`, never straddle two blocks). The outputs do not
+/// (the drift states' and the Preisach heads' groups of eight, `drift::GROUP` and
+/// `preisach::GROUP`, never straddle two blocks). The outputs do not
 /// depend on it: every element is computed by the same code in any block.
 #[inline]
 pub fn block_size(n: usize) -> usize {

@@ -12,6 +12,9 @@ use texsense_kernels::drift::{Element, Settings};
 
 use super::GROUP;
 
+/// Elements per step: half a group, the four f64 lanes of a register.
+pub(super) const LANES: usize = 4;
+
 /// Whole groups of a block: levels `h` and their validity `ok` -> outputs `out` (NaN where
 /// invalid or not finite; time still passes for those elements' states), for a stage on
 /// the time clock with level power 1 and `decay` of the frame.
@@ -32,21 +35,24 @@ pub(super) unsafe fn groups(
     out: &mut [f64],
 ) {
     let (n, k) = (h.len(), s.terms());
-    assert!(n.is_multiple_of(GROUP) && ok.len() == n && out.len() == n);
-    assert!(elements.len() >= n && z.len() >= n * k && decay.len() == k);
-    for g in 0..n / GROUP {
-        let at = g * GROUP;
-        // SAFETY: AVX2 (this function's feature); the group's states are
-        // z[at * k .. (at + GROUP) * k] (checked above)
+    assert!(n.is_multiple_of(LANES) && ok.len() == n && out.len() == n);
+    assert!(elements.len() >= n && z.len() >= n.div_ceil(GROUP) * GROUP * k);
+    assert!(decay.len() == k);
+    for at in (0..n).step_by(LANES) {
+        // half `at % GROUP / LANES` of group `at / GROUP`: its terms from
+        // z[at / GROUP * GROUP * k + at % GROUP], `GROUP` apart
+        let first = at / GROUP * GROUP * k + at % GROUP;
+        // SAFETY: AVX2 (this function's feature); the half group's states are within
+        // z[first .. first + GROUP (k - 1) + LANES] (checked above)
         unsafe {
             group(
                 s,
-                &mut elements[at..at + GROUP],
-                &mut z[at * k..(at + GROUP) * k],
+                &mut elements[at..at + LANES],
+                &mut z[first..first + GROUP * (k - 1) + LANES],
                 decay,
-                &h[at..at + GROUP],
-                &ok[at..at + GROUP],
-                &mut out[at..at + GROUP],
+                &h[at..at + LANES],
+                &ok[at..at + LANES],
+                &mut out[at..at + LANES],
             )
         };
     }
@@ -89,7 +95,7 @@ unsafe fn group(
     let cm = _mm256_blendv_pd(_mm256_set1_pd(-0.0), change, live);
     let p = z.as_mut_ptr();
     let term = |j: usize| {
-        // SAFETY: term j of the group's four elements: z[4 j .. 4 j + 4] (z holds 4 k;
+        // SAFETY: term j of the four elements: z[8 j .. 8 j + 4] (z holds 8 (k - 1) + 4;
         // j < k = decay.len() = w.len(), checked by the caller's asserts and `Settings`)
         unsafe {
             let at = p.add(GROUP * j);
@@ -121,7 +127,7 @@ unsafe fn group(
     let y = _mm256_add_pd(hv, _mm256_mul_pd(_mm256_set1_pd(s.gamma()), drift));
     let nan = _mm256_set1_pd(f64::NAN);
     _mm256_storeu_pd(out.as_mut_ptr(), _mm256_blendv_pd(nan, y, live));
-    let mut totals = [0.0; GROUP];
+    let mut totals = [0.0; LANES];
     _mm256_storeu_pd(totals.as_mut_ptr(), total);
     let lives = _mm256_movemask_pd(live);
     for (l, el) in els.iter_mut().enumerate() {

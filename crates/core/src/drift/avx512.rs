@@ -1,8 +1,7 @@
-//! The drift step of eq. 5.8 (time clock, linear level) for eight elements at once: two
-//! groups of the states' layout (`super::at`, [`GROUP`] = 4 elements per group) in one
-//! AVX-512 register of eight f64, so a kernel term costs a multiply, an add and the
-//! weighted add for eight elements (the loads and stores stay two halves: the layout is
-//! the AVX2 path's). The operations are the scalar kernel's (`texsense_kernels::drift::step`,
+//! The drift step of eq. 5.8 (time clock, linear level) for eight elements at once: a
+//! group of the states' layout (`super::at`, [`GROUP`] = 8 elements per group) in one
+//! AVX-512 register of eight f64, so a kernel term costs a load, a multiply, an add, a
+//! store and the weighted add for eight elements. The operations are the scalar kernel's (`texsense_kernels::drift::step`,
 //! as in `super::avx2`) in the same order, without fused multiply-adds, so every output and
 //! state is the scalar kernel's, bit for bit.
 
@@ -12,17 +11,17 @@ use texsense_kernels::drift::{Element, Settings};
 
 use super::GROUP;
 
-/// Elements per step: two groups.
-pub(super) const LANES: usize = 2 * GROUP;
+/// Elements per step: a group.
+pub(super) const LANES: usize = GROUP;
 
-/// Whole pairs of groups of a block (the arguments of `super::avx2::groups`, `h` a whole
+/// Whole groups of a block (the arguments of `super::avx2::groups`, `h` a whole
 /// number of [`LANES`]).
 ///
 /// # Safety
 /// The processor must have AVX-512 F and DQ.
 ///
 /// # Panics
-/// When `h` is not whole pairs of groups, or a slice is shorter than the block needs.
+/// When `h` is not whole groups, or a slice is shorter than the block needs.
 #[target_feature(enable = "avx512f,avx512dq")]
 pub(super) unsafe fn groups(
     s: &Settings<'_, f64>,
@@ -60,7 +59,7 @@ fn lanes(els: &[Element<f64>], f: impl Fn(&Element<f64>) -> f64) -> [f64; LANES]
     std::array::from_fn(|l| f(&els[l]))
 }
 
-/// Two groups of four elements (the arguments of [`groups`], one pair's share).
+/// A group of eight elements (the arguments of [`groups`], one group's share).
 #[inline]
 #[target_feature(enable = "avx512f,avx512dq")]
 unsafe fn pair(
@@ -95,19 +94,13 @@ unsafe fn pair(
     let cm = _mm512_mask_blend_pd(live, _mm512_set1_pd(-0.0), change);
     let p = z.as_mut_ptr();
     let term = |j: usize| {
-        // SAFETY: term j of the first group at z[4 j ..], of the second at z[4 k + 4 j ..]
-        // (z holds 8 k; j < k = decay.len() = w.len(), checked by the caller's asserts and
-        // `Settings`)
+        // SAFETY: term j of the group at z[8 j .. 8 j + 8] (z holds 8 k; j < k =
+        // decay.len() = w.len(), checked by the caller's asserts and `Settings`)
         unsafe {
-            let (a, b) = (p.add(GROUP * j), p.add(GROUP * (k + j)));
-            let zv = _mm512_insertf64x4::<1>(
-                _mm512_castpd256_pd512(_mm256_loadu_pd(a)),
-                _mm256_loadu_pd(b),
-            );
-            let zd = _mm512_mul_pd(zv, _mm512_set1_pd(*decay.get_unchecked(j)));
+            let at = p.add(GROUP * j);
+            let zd = _mm512_mul_pd(_mm512_loadu_pd(at), _mm512_set1_pd(*decay.get_unchecked(j)));
             let zn = _mm512_add_pd(zd, cm);
-            _mm256_storeu_pd(a, _mm512_castpd512_pd256(zn));
-            _mm256_storeu_pd(b, _mm512_extractf64x4_pd::<1>(zn));
+            _mm512_storeu_pd(at, zn);
             _mm512_mul_pd(_mm512_set1_pd(*w.get_unchecked(j)), zn)
         }
     };
