@@ -56,7 +56,8 @@ pub(super) unsafe fn row(
         let stepped = i + WIDE <= n && {
             let els = &mut elements[i..i + WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
-            let spilled = els.iter().any(|el| el.spill.is_some());
+            let spilled = heads[g].spilled != 0;
+            debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
             let (offs, rooms) = if spilled {
                 // each stack from lane 0's place in f64 (the distance of two f64 arrays),
                 // and its own room
@@ -91,6 +92,7 @@ pub(super) unsafe fn row(
                     let len = heads[g].len[l] as usize;
                     if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
                         el.unspill(len);
+                        heads[g].mark(l, false);
                     }
                 }
             }
