@@ -3,6 +3,7 @@ which it copies the same array (``np.multiply(x, 1.0, out=y)``), measured in the
 on the scalar kernels and on their SIMD paths (issue 34; ``texsense._core.set_simd_path``).
 
 Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|cpu] [--quick]
+      [--paths avx512]
 
 - Preisach batch: the Rust ``PreisachBank`` behind ``HysteresisModel.predict`` on a
   4000 x 4096 random walk (one thread, frame order; one thread, element blocks; all threads),
@@ -200,12 +201,20 @@ def main() -> None:
         "processes fall into wall-clock timings; rows on several threads then give the rate "
         "per core)",
     )
+    ap.add_argument(
+        "--paths",
+        default="",
+        help="comma-separated kernel paths to time (scalar, avx2, avx512; default: every path "
+        "this processor has), e.g. avx512 for a short run",
+    )
     args = ap.parse_args()
     global CLOCK
     CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     frames = 400 if args.quick else 4000
     _, best = _core.simd_path()
     paths = ["scalar", "avx2", "avx512"][: ["scalar", "avx2", "avx512"].index(best) + 1]
+    if args.paths:
+        paths = [p for p in paths if p in args.paths.split(",")]
     cal = seat_calibration(mat_seed=5)
     walk = random_walk(cal["hysteresis"].model_, frames, 4096)
     batch = cases(cal, frames, walk)
