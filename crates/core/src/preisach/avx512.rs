@@ -59,15 +59,7 @@ pub(super) unsafe fn row(
             let spilled = heads[g].spilled != 0;
             debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
             let (offs, rooms) = if spilled {
-                // each stack from lane 0's place in f64 (the distance of two f64 arrays),
-                // and its own room
-                let (mut o, mut r) = ([0i64; WIDE], [0i64; WIDE]);
-                for (l, el) in els.iter_mut().enumerate() {
-                    r[l] = el.room(capacity) as i64;
-                    o[l] = (el.stack_mut().as_mut_ptr() as isize - base as isize) as i64 >> 3;
-                }
-                let load = |v: &[i64; WIDE]| _mm512_loadu_si512(v.as_ptr().cast());
-                (load(&o), load(&r))
+                heap_stacks(els, base, capacity)
             } else {
                 (off, room)
             };
@@ -86,15 +78,7 @@ pub(super) unsafe fn row(
                 )
             };
             if let (Some(moved), true) = (moved, spilled) {
-                // a stack on the heap that is shallow again goes back in place
-                // (`Element::step`)
-                for (l, el) in els.iter_mut().enumerate() {
-                    let len = heads[g].len[l] as usize;
-                    if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
-                        el.unspill(len);
-                        heads[g].mark(l, false);
-                    }
-                }
+                back_in_place(els, &mut heads[g], moved);
             }
             moved.is_some()
         };
@@ -117,6 +101,33 @@ pub(super) unsafe fn row(
             };
         }
         i += m;
+    }
+}
+
+/// Each stack of a group with a stack on the heap: its offset from lane 0's place in f64
+/// (the distance of two f64 arrays) and its room.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn heap_stacks(els: &mut [Element], base: *mut f64, capacity: usize) -> (__m512i, __m512i) {
+    let (mut o, mut r) = ([0i64; WIDE], [0i64; WIDE]);
+    for (l, el) in els.iter_mut().enumerate() {
+        r[l] = el.room(capacity) as i64;
+        o[l] = (el.stack_mut().as_mut_ptr() as isize - base as isize) as i64 >> 3;
+    }
+    let load = |v: &[i64; WIDE]| _mm512_loadu_si512(v.as_ptr().cast());
+    (load(&o), load(&r))
+}
+
+/// A stack on the heap that is shallow again after a step that `moved` it goes back in
+/// place (`Element::step`).
+#[inline]
+fn back_in_place(els: &mut [Element], hd: &mut Heads, moved: __mmask8) {
+    for (l, el) in els.iter_mut().enumerate() {
+        let len = hd.len[l] as usize;
+        if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
+            el.unspill(len);
+            hd.mark(l, false);
+        }
     }
 }
 
