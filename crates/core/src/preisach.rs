@@ -275,7 +275,6 @@ impl PreisachBank {
             let g = &mut heads[i / GROUP];
             g.set(i % GROUP, &head, el.stack());
             g.clamped[i % GROUP] = clamped;
-            g.mark(i % GROUP, el.spill.is_some());
             elements.push(el);
         }
         self.elements = elements;
@@ -347,7 +346,6 @@ impl PreisachBank {
         let mut head = heads.head(i % GROUP);
         let h = kernel::set_sum(&mut head, &mut el.inline, &e, u, target);
         heads.set(i % GROUP, &head, &el.inline);
-        heads.mark(i % GROUP, false);
         h
     }
 

@@ -69,8 +69,7 @@ pub(super) unsafe fn row(
         }
         let els = &mut elements[i..i + LANES];
         let mut stacks = [std::ptr::null_mut::<f64>(); LANES];
-        let spilled = hd.spilled >> h & 0xF != 0;
-        debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
+        let spilled = els.iter().any(|el| el.spill.is_some());
         let (at_room, off) = if spilled {
             let mut at_room = false;
             for (l, el) in els.iter_mut().enumerate() {
@@ -115,7 +114,6 @@ pub(super) unsafe fn row(
                 let len = hd.len[h + l] as usize;
                 if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
                     el.unspill(len);
-                    hd.mark(h + l, false);
                 }
             }
         }

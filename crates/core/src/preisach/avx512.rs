@@ -56,8 +56,7 @@ pub(super) unsafe fn row(
         let stepped = i + WIDE <= n && {
             let els = &mut elements[i..i + WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
-            let spilled = heads[g].spilled != 0;
-            debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
+            let spilled = els.iter().any(|el| el.spill.is_some());
             let (offs, rooms) = if spilled {
                 heap_stacks(els, base, capacity)
             } else {
@@ -78,7 +77,7 @@ pub(super) unsafe fn row(
                 )
             };
             if let (Some(moved), true) = (moved, spilled) {
-                back_in_place(els, &mut heads[g], moved);
+                back_in_place(els, &heads[g], moved);
             }
             moved.is_some()
         };
@@ -121,12 +120,11 @@ unsafe fn heap_stacks(els: &mut [Element], base: *mut f64, capacity: usize) -> (
 /// A stack on the heap that is shallow again after a step that `moved` it goes back in
 /// place (`Element::step`).
 #[inline]
-fn back_in_place(els: &mut [Element], hd: &mut Heads, moved: __mmask8) {
+fn back_in_place(els: &mut [Element], hd: &Heads, moved: __mmask8) {
     for (l, el) in els.iter_mut().enumerate() {
         let len = hd.len[l] as usize;
         if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
             el.unspill(len);
-            hd.mark(l, false);
         }
     }
 }

@@ -29,9 +29,6 @@ pub(crate) struct Heads {
     /// at depth 1).
     pub(super) below_u: [f64; GROUP],
     pub(super) clamped: [u64; GROUP],
-    /// Bit `l`: lane `l`'s stack is on the heap (kept with `Element::spill` by every path,
-    /// so that the SIMD rows find a group's stacks in place without reading its elements).
-    pub(super) spilled: u64,
 }
 
 impl Heads {
@@ -45,14 +42,7 @@ impl Heads {
             top_h: [0.0; GROUP],
             below_u: [u_min; GROUP],
             clamped: [0; GROUP],
-            spilled: 0,
         }
-    }
-
-    /// Lane `l`'s stack is on the heap (`on`) or in place.
-    #[inline(always)]
-    pub(super) fn mark(&mut self, l: usize, on: bool) {
-        self.spilled = self.spilled & !(1 << l) | u64::from(on) << l;
     }
 
     /// Lane `l`'s kernel head.
@@ -166,7 +156,6 @@ impl Element {
             self.unspill(head.len as usize);
         }
         heads.set(l, &head, self.stack());
-        heads.mark(l, self.spill.is_some());
         h
     }
 
