@@ -259,7 +259,7 @@ impl PreisachBank {
         w.u32(self.capacity as u32);
         for (i, e) in self.elements.iter().enumerate() {
             let heads = &self.heads[i / GROUP];
-            e.save(&heads.head(i % GROUP), heads.clamped[i % GROUP], w);
+            e.save(&heads.head(i % GROUP), heads.count(i % GROUP), w);
         }
     }
 
@@ -274,7 +274,8 @@ impl PreisachBank {
             let (el, head, clamped) = Element::load(r, u_min, self.capacity)?;
             let g = &mut heads[i / GROUP];
             g.set(i % GROUP, &head, el.stack());
-            g.clamped[i % GROUP] = clamped;
+            g.clamped[i % GROUP] = clamped & !element::HEAP;
+            g.mark(i % GROUP, el.spill.is_some());
             elements.push(el);
         }
         self.elements = elements;
@@ -290,7 +291,7 @@ impl PreisachBank {
     /// Samples clamped into the input range, per element.
     pub fn clamped(&self) -> Vec<u64> {
         (0..self.len())
-            .map(|i| self.heads[i / GROUP].clamped[i % GROUP])
+            .map(|i| self.heads[i / GROUP].count(i % GROUP))
             .collect()
     }
 
@@ -346,6 +347,7 @@ impl PreisachBank {
         let mut head = heads.head(i % GROUP);
         let h = kernel::set_sum(&mut head, &mut el.inline, &e, u, target);
         heads.set(i % GROUP, &head, &el.inline);
+        heads.mark(i % GROUP, false);
         h
     }
 

@@ -69,7 +69,10 @@ pub(super) unsafe fn row(
         }
         let els = &mut elements[i..i + LANES];
         let mut stacks = [std::ptr::null_mut::<f64>(); LANES];
-        let spilled = els.iter().any(|el| el.spill.is_some());
+        // the heads' bit per stack on the heap (`element::HEAP`: the counters' sign bits)
+        let counts = _mm256_load_pd(hd.clamped[h..].as_ptr().cast());
+        let spilled = _mm256_movemask_pd(counts) != 0;
+        debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
         let (at_room, off) = if spilled {
             let mut at_room = false;
             for (l, el) in els.iter_mut().enumerate() {
@@ -114,6 +117,7 @@ pub(super) unsafe fn row(
                 let len = hd.len[h + l] as usize;
                 if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
                     el.unspill(len);
+                    hd.mark(h + l, false);
                 }
             }
         }

@@ -56,7 +56,10 @@ pub(super) unsafe fn row(
         let stepped = i + WIDE <= n && {
             let els = &mut elements[i..i + WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
-            let spilled = els.iter().any(|el| el.spill.is_some());
+            // the heads' bit per stack on the heap (`element::HEAP`: the counters' sign bits)
+            let counts = _mm512_load_si512(heads[g].clamped.as_ptr().cast());
+            let spilled = _mm512_movepi64_mask(counts) != 0;
+            debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
             let (offs, rooms) = if spilled {
                 heap_stacks(els, base, capacity)
             } else {
@@ -77,7 +80,7 @@ pub(super) unsafe fn row(
                 )
             };
             if let (Some(moved), true) = (moved, spilled) {
-                back_in_place(els, &heads[g], moved);
+                back_in_place(els, &mut heads[g], moved);
             }
             moved.is_some()
         };
@@ -120,11 +123,12 @@ unsafe fn heap_stacks(els: &mut [Element], base: *mut f64, capacity: usize) -> (
 /// A stack on the heap that is shallow again after a step that `moved` it goes back in
 /// place (`Element::step`).
 #[inline]
-fn back_in_place(els: &mut [Element], hd: &Heads, moved: __mmask8) {
+fn back_in_place(els: &mut [Element], hd: &mut Heads, moved: __mmask8) {
     for (l, el) in els.iter_mut().enumerate() {
         let len = hd.len[l] as usize;
         if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
             el.unspill(len);
+            hd.mark(l, false);
         }
     }
 }

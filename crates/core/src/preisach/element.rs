@@ -28,8 +28,15 @@ pub(crate) struct Heads {
     /// `stack[max(len, 2) - 2]`'s input: the extremum below the top (the lower saturation
     /// at depth 1).
     pub(super) below_u: [f64; GROUP],
+    /// The clamping counter, and in its top bit ([`HEAP`]) whether the lane's stack is on the
+    /// heap (kept with `Element::spill` by every path, so that the SIMD rows find a group's
+    /// stacks in place without reading its elements, at no extra byte of state).
     pub(super) clamped: [u64; GROUP],
 }
+
+/// The bit of a lane's `Heads::clamped` word that says its stack is on the heap (a counter
+/// of samples never reaches it).
+pub(super) const HEAP: u64 = 1 << 63;
 
 impl Heads {
     /// Eight elements at lower saturation.
@@ -43,6 +50,18 @@ impl Heads {
             below_u: [u_min; GROUP],
             clamped: [0; GROUP],
         }
+    }
+
+    /// Lane `l`'s stack is on the heap (`on`) or in place.
+    #[inline(always)]
+    pub(super) fn mark(&mut self, l: usize, on: bool) {
+        self.clamped[l] = self.clamped[l] & !HEAP | if on { HEAP } else { 0 };
+    }
+
+    /// Lane `l`'s clamping counter.
+    #[inline(always)]
+    pub(super) fn count(&self, l: usize) -> u64 {
+        self.clamped[l] & !HEAP
     }
 
     /// Lane `l`'s kernel head.
@@ -156,6 +175,7 @@ impl Element {
             self.unspill(head.len as usize);
         }
         heads.set(l, &head, self.stack());
+        heads.mark(l, self.spill.is_some());
         h
     }
 
