@@ -64,6 +64,7 @@ function tile(mat) {
   if (!el) {
     el = document.createElement("div");
     el.dataset.id = mat.id;
+    tiles.set(mat.id, el);
     el.innerHTML = `
     <div class="top"><span class="id"></span><span class="state"></span></div>
     <canvas width="160" height="120"></canvas>
@@ -152,8 +153,8 @@ function render(msg) {
   $("broker").textContent = `${h.broker || "local sources"} · ${h.connected ? "connected" : "disconnected — retrying"}${trouble} · ${h.topic}${group}`;
   for (const mat of msg.mats) {
     mats.set(mat.id, mat);
-    if (!tiles.has(mat.id)) $("tiles").appendChild(tiles.set(mat.id, tile(mat)).get(mat.id));
-    else tile(mat);
+    const fresh = !tiles.has(mat.id), el = tile(mat);
+    if (fresh) $("tiles").appendChild(el);
   }
   for (const [id, el] of tiles) el.querySelector(".ago").textContent = ago(mats.get(id));
   reorder();
