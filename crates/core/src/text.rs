@@ -469,7 +469,7 @@ mod frame_tests {
             if point < token.len() && point > 0 {
                 token.insert(point, '.');
             }
-            if state % 3 == 0 {
+            if state.is_multiple_of(3) {
                 token = format!("{token}e{}", (state >> 40) as i64 % 30 - 15);
             }
             let mut out = Vec::new();
