@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 from texsense._core import __version__
 from texsense.commands import COMMANDS
 from texsense.commands._applies import check_given
-from texsense.commands._options import check_numbers
+from texsense.commands._options import check_numbers, check_words
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 
 if TYPE_CHECKING:
@@ -62,6 +62,7 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
             registered.add(module)
     if wanted:
         check_numbers(parser)  # every numeric option refuses what lies outside its range
+        check_words(parser)  # and every path or text an empty word (ignored otherwise)
     return parser
 
 
