@@ -13,12 +13,17 @@ line (harden10). The commands and their options are walked from the argparse tre
    folder where a file is wanted, a missing file, the command's input as its output): exit 0,
    1 or 2 and never a traceback; exit 1 is one line. The commands that serve only parse and
    check their options here (started, they would serve).
+
+Figures are not rendered here (matplotlib's layout is most of a plotting command's time):
+``Figure.savefig`` writes a digest of what the figure shows (its lines, images, collections,
+texts, limits), so that an option that changes a figure still changes the file.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import hashlib
 import io
 import json
@@ -29,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from faults._families import small_recording, two_postures
 from texsense import Layout, Recording
@@ -68,6 +74,18 @@ BASE = {
     "report": ["report", "rec.h5", "-o", "o.html"],
     "export mcu": ["export", "mcu", "mat.json", "-o", "o.bin"],
     "rehash": ["rehash", "model.json"],
+}  # fmt: skip
+#: more runs of some commands, where options act otherwise (each option is given on each)
+ALSO = {
+    "health": [["health", "cap.h5", "--json"]],
+    "export mcu": [["export", "mcu", "lin.json", "--like", "cap.h5", "-o", "o.c"]],
+    "process": [["process", "cap.h5", "--calibration", "lin.json", "-o", "o.csv"]],
+    "drift fit": [["drift", "fit", "r.csv", "--history", "model.json"]],
+    "posture evaluate": [["posture", "evaluate", "post.h5", "--classifier", "naive-bayes"]],
+    "posture train": [["posture", "train", "post.h5", "-o", "o.joblib", "--classifier",
+                       "naive-bayes"]],
+    "report": [["report", "rec.h5", "-o", "o.html", "--mode", "foot"]],
+    "simulate": [["simulate", "steps", "-o", "o.h5"]],
 }  # fmt: skip
 #: a value of an option that differs from its default, by "COMMAND --option" or "--option"
 #: (flags and choices are found: a flag given, the first choice that is not the default)
@@ -111,7 +129,7 @@ VALUES = {
     "stocking simulate --hours": "0.4", "stocking simulate --output": "so2",
     "muscle detect --calibration": "lin.json", "muscle detect --threshold": "0.3",
     "--minutes": "1", "muscle simulate --output": "mo2",
-    "report --output": "o2.html", "report --unit": "kPa", "--scale": "0,5",
+    "report --output": "o2.html", "report --unit": "mmHg", "--scale": "0,5",
     "report --threshold": "40", "--reposition-min": "30", "--turn-every": "60",
     "report --model": "post.joblib", "--rois": "rois.json",
     "export mcu --output": "o2.bin", "--capacity": "8", "export mcu --like": "cap.h5",
@@ -149,6 +167,7 @@ PATHS = ["", ".", "missing.h5", "INPUT"]
 HOSTILE = NUMBERS[:-1] + PATHS
 
 
+@functools.cache
 def leaves() -> dict[str, argparse.ArgumentParser]:
     """Every command that runs (``"hysteresis fit"``) -> its parser."""
     out: dict[str, argparse.ArgumentParser] = {}
@@ -192,6 +211,34 @@ def _with(base: list[str], action: argparse.Action, value: str) -> list[str]:
         argv[named[0] + 1] = value
         return argv
     return [*argv, action.option_strings[-1], *([] if action.nargs == 0 else [value])]
+
+
+def _digest(fig: Figure) -> bytes:
+    """What a figure shows, without drawing it."""
+    h = hashlib.sha1()
+    for ax in fig.axes:
+        h.update(repr((ax.get_title(), ax.get_xlabel(), ax.get_ylabel(), ax.get_xlim(),
+                       ax.get_ylim())).encode())  # fmt: skip
+        for artist in [*ax.lines, *ax.images, *ax.collections, *ax.patches, *ax.texts]:
+            for name in ("get_xydata", "get_array", "get_offsets", "get_text", "get_xy"):
+                value = getattr(artist, name, lambda: None)()
+                h.update(repr(np.asarray(value, dtype=object).tolist()).encode())
+    for text in fig.texts:
+        h.update(text.get_text().encode())
+    return h.hexdigest().encode()
+
+
+@pytest.fixture(autouse=True)
+def undrawn_figures(monkeypatch):
+    """``Figure.savefig`` writes :func:`_digest` (to a file or a buffer)."""
+
+    def savefig(fig: Figure, fname, **_kw) -> None:
+        if hasattr(fname, "write"):
+            fname.write(_digest(fig))
+        else:
+            Path(fname).write_bytes(_digest(fig))
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
 
 
 def _run(argv: list[str]) -> tuple[int, str, str]:
@@ -287,28 +334,29 @@ def test_every_option_of_a_served_command_has_a_rule_or_always_acts():
 def test_every_option_acts_or_is_refused(command, inputs, fault_row):
     fixed = {str(f.relative_to(inputs)) for f in inputs.rglob("*")}
     p = leaves()[command]
+    wrong, counted = [], 0
     with contextlib.chdir(inputs):
-        _clean(inputs, fixed)
-        base = _run(BASE[command])
-        assert base[0] == 0, base
-        before = _outcome(inputs, fixed, base)
-        wrong, counted = [], 0
-        for action in _options(p):
-            flag = action.option_strings[-1]
-            value = _value(command, action)
-            assert value is not None, f"give {command} {flag} a value in VALUES"
-            argv = _with(BASE[command], action, value)
-            if argv == BASE[command] or flag == "--scheduler":  # (the base gives it; a dial)
-                continue
+        for base_argv in [BASE[command], *ALSO.get(command, [])]:
             _clean(inputs, fixed)
-            result = _run(argv)
-            counted += 1
-            problem = _one_line_or_usage(result[0], result[2])
-            if problem:
-                wrong.append(f"{' '.join(argv)}: {problem}")
-            elif (result[0] == 0 and _outcome(inputs, fixed, result) == before
-                  and not {f"{command} {flag}", flag} & set(DATA_DEPENDENT)):  # fmt: skip
-                wrong.append(f"{' '.join(argv)}: taken and ignored (same outcome)")
+            base = _run(base_argv)
+            assert base[0] == 0, (base_argv, base)
+            before = _outcome(inputs, fixed, base)
+            for action in _options(p):
+                flag = action.option_strings[-1]
+                value = _value(command, action)
+                assert value is not None, f"give {command} {flag} a value in VALUES"
+                argv = _with(base_argv, action, value)
+                if argv == base_argv or flag == "--scheduler":  # (the base gives it; a dial)
+                    continue
+                _clean(inputs, fixed)
+                result = _run(argv)
+                counted += 1
+                problem = _one_line_or_usage(result[0], result[2])
+                if problem:
+                    wrong.append(f"{' '.join(argv)}: {problem}")
+                elif (result[0] == 0 and _outcome(inputs, fixed, result) == before
+                      and not {f"{command} {flag}", flag} & set(DATA_DEPENDENT)):  # fmt: skip
+                    wrong.append(f"{' '.join(argv)}: taken and ignored (same outcome)")
         _clean(inputs, fixed)
     assert wrong == [], "\n".join(wrong)
     fault_row("no effect", f"{command}: each of its options acts or is refused", "clear error",
