@@ -246,9 +246,12 @@ def nonempty(text: str) -> str:
     """An argparse type: a word that is not empty (nor only spaces). An empty path reads as
     the current folder (``texsense process ""`` would process the folder it runs in), and an
     empty text as the option left out (``--unit ""``, ``--broker ""``, ``--group ""``,
-    ``--orientation ""``): taken and ignored, the user would believe it acted."""
+    ``--orientation ""``): taken and ignored, the user would believe it acted. Nor a NUL
+    character, which no name holds."""
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty value: give one, or leave the option out")
+    if "\0" in text:  # (no file name holds one: os.stat raised ValueError)
+        raise argparse.ArgumentTypeError(f"a NUL character in {text!r}")
     return text
 
 
