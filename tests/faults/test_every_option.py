@@ -14,6 +14,8 @@ line (harden10). The commands and their options are walked from the argparse tre
    with a newline): exit 0, 1 or 2 and never a traceback; exit 1 is one line; an empty value
    is refused (taken, it was the option left out, or the current folder). The commands that
    serve only parse and check their options here (started, they would serve).
+3. Hypothesis: command lines of 1-4 options at once, each valid, hostile or another of the
+   fixture's files (what one option alone does not show: two that contradict each other).
 
 Figures are not rendered here (matplotlib's layout is most of a plotting command's time):
 ``Figure.savefig`` writes a digest of what the figure shows (its lines, images, collections,
@@ -35,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from matplotlib.figure import Figure
 
 from faults._families import small_recording, two_postures
@@ -443,3 +447,49 @@ def test_hostile_values_of_a_served_command_are_checked_before_it_serves(command
                     if type(e).__name__ != "ParameterError":
                         wrong.append(f"{argv}: {type(e).__name__}: {e}")
     assert wrong == [], "\n".join(wrong)
+
+
+#: commands whose run time grows with a value (hours, minutes, sessions): not drawn in 3.
+_LONG = {"seat-sessions", "stocking simulate", "muscle simulate", "simulate"}
+
+
+@st.composite
+def command_lines(draw, files: list[str]) -> list[str]:
+    """A base run with 1-4 of its options, each given a valid, hostile or file value."""
+    command = draw(st.sampled_from(sorted(set(BASE) - _LONG)))
+    argv = list(draw(st.sampled_from([BASE[command], *ALSO.get(command, [])])))
+    actions = [a for a in _options(leaves()[command]) if a.dest != "scheduler"]
+    if not actions:
+        return argv
+    for action in draw(st.lists(st.sampled_from(actions), min_size=1, max_size=4,
+                                unique_by=id)):  # fmt: skip
+        valid = _value(command, action)
+        choices = [str(c) for c in action.choices or []]
+        value = draw(st.sampled_from([*HOSTILE, *files, *choices,
+                                      *([] if valid is None else [valid])]))  # fmt: skip
+        argv = _with(argv, action, "" if action.nargs == 0 else value)
+    return argv
+
+
+def test_command_lines_of_several_options_never_a_traceback(inputs, fault_row):
+    fixed = {str(f.relative_to(inputs)) for f in inputs.rglob("*")}
+    files = sorted(f for f in fixed if "." in f)
+    tried: list[str] = []
+
+    @settings(max_examples=120, deadline=None, database=None,
+              suppress_health_check=list(HealthCheck))  # fmt: skip
+    @given(command_lines(files))
+    def run(argv: list[str]) -> None:
+        _clean(inputs, fixed)
+        rc, _out, err = _run(argv)
+        tried.append(" ".join(argv))
+        problem = _one_line_or_usage(rc, err)
+        assert problem is None, f"{argv!r}: {problem}"
+
+    with contextlib.chdir(inputs):
+        try:
+            run()
+        finally:
+            _clean(inputs, fixed)
+    fault_row("hostile value", "command lines of 1-4 options (hypothesis)", "no traceback",
+              cases=len(tried))  # fmt: skip
