@@ -157,7 +157,7 @@ SERVED = {
                 "--token-file", "--allow-host", "--allow-origin", "--threshold",
                 "--threshold-unit", "--reposition-min", "--offload-min"},
     "station": {"--virtual-mats", "--config", "--broker", "--stale-after", "--refuse-after",
-                "--mats", "--reposition-min", "--db", "--record-dir", "--group", "--workers",
+                "--mats", "--reposition-min", "--db", "--record-dir", "--group",
                 "--host", "--port", "--token", "--token-file", "--allow-host",
                 "--allow-origin"},
     "record": {"--source", "--orientation", "--output", "--duration", "--frames"},

@@ -90,6 +90,7 @@ ROWS = [
                            "--mat-credentials", "c.toml"]),
     ("--member", ["station", "--virtual-mats", "1", "--member", "a"]),
     ("--checkpoint-every", ["station", "--virtual-mats", "1", "--checkpoint-every", "5"]),
+    ("--workers", ["station", "--virtual-mats", "1", "--workers", "2"]),
     # fits and processing
     ("--drift-kind", ["hysteresis", "fit", "c.csv", "-o", "m.json", "--drift-kind", "prony"]),
     ("--drift-clock", ["hysteresis", "fit", "c.csv", "-o", "m.json", "--drift-clock", "time"]),
@@ -130,6 +131,8 @@ ROWS = [
     ("--all", ["health", "cap.h5", "--json", "--all"]),
     ("--chunk-frames", ["process", "cap0.h5", "--calibration", "mat.json", "-o", "o.csv",
                         "--chunk-frames", "2"]),
+    ("--interval", ["process", "cap0.h5", "--calibration", "mat.json", "-o", "o.csv",
+                    "--interval", "0.9"]),
     ("--no-hysteresis", ["process", "cap.h5", "--calibration", "lin.json", "-o", "o.h5",
                          "--no-hysteresis"]),
     ("--no-drift", ["process", "cap.h5", "--calibration", "lin.json", "-o", "o.h5",

@@ -173,6 +173,8 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
         Rule("--chunk-frames", lambda a: not _single(a) or _hdf5(a.output),
              "a recording processed in blocks (an HDF5 output, or an archive): any other "
              "output is made in memory"),
+        Rule("--interval", lambda a: not _single(a) or _hdf5(a.output),
+             "an HDF5 output (.h5: the lower and upper maps are stored beside the frames)"),
     ])  # fmt: skip
 
 
@@ -367,8 +369,6 @@ def run_process(args: argparse.Namespace) -> int:
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
     check_not_input(output, [src])
-    if options.interval is not None:
-        raise ParameterError("--interval stores lower and upper maps: write an HDF5 output (.h5)")
     raw = load(src, accept_truncated=options.accept_truncated)
     pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)

@@ -135,7 +135,7 @@ STATION_RULES = [
     Rule("--mat-credentials", lambda a: not a.broker,
          "the station's own broker (without --broker: a site broker keeps its own)"),
     *(Rule(flag, lambda a: bool(a.group), "a group (--group NAME)") for flag in
-      ("--member", "--checkpoint-every")),
+      ("--member", "--checkpoint-every", "--workers")),
     Rule("--turn-every", lambda a: a.config is not None or _virtual_beds(a) > 0, _BEDS),
 ]  # fmt: skip
 
@@ -402,9 +402,7 @@ def as_worker(args: argparse.Namespace) -> Any:
 def supervise(args: argparse.Namespace) -> int:
     """``--workers N``: check what every worker needs, then run them
     (:class:`~texsense.station.workers.Supervisor`) until Ctrl-C or SIGTERM."""
-    if not args.group:
-        raise ParameterError("--workers needs --group: the workers are members of a group")
-    check_group(args, {})
+    check_group(args, {})  # (without --group, --workers is refused: STATION_RULES)
     for k in range(args.workers):
         check_port_free(args.host, args.port + k)
     argv = getattr(args, "argv", None)
