@@ -211,7 +211,7 @@ def test_cli_single_file_and_errors(sessions, tmp_path, capsys):
 def test_cli_seat_sessions_write_capacitance_and_the_chain(tmp_path, capsys):
     from texsense.compensation.stages import load_chain
 
-    assert main(["seat-sessions", "-n", "2", "--rest-s", "5", "-o", str(tmp_path)]) == 0
+    assert main(["seat-sessions", "-n", "2", "-o", str(tmp_path)]) == 0
     assert "wrote 2 sessions" in capsys.readouterr().out
     chain = load_chain(tmp_path / "calibration.json")
     assert [s.name for s in chain.stages] == ["detect", "convert", "hysteresis", "drift"]

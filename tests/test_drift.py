@@ -256,7 +256,7 @@ def test_cli_fits_gamma_over_a_cycling_history(tmp_path, capsys):
     assert -0.02 < fit["gamma"] < 0
     assert load_chain(out)["drift"].model_.gamma == pytest.approx(fit["gamma"])
     assert main(["drift", "fit", str(cyc), "-o", str(out)]) == 1
-    assert "needs --history" in capsys.readouterr().err
+    assert "--output has no effect here: it applies to --history" in capsys.readouterr().err
 
 
 def test_rest_clock_is_time_on_holds_and_nearly_stops_on_cycles():

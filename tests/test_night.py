@@ -46,7 +46,7 @@ def test_simulate_night_writes_the_raw_night_and_its_truth(tmp_path: Path) -> No
 @pytest.fixture(scope="module")
 def seat(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("seat")
-    assert main(["seat-sessions", "-n", "1", "--rest-s", "20", "-o", str(root / "s")]) == 0
+    assert main(["seat-sessions", "-n", "1", "-o", str(root / "s")]) == 0
     return root
 
 

@@ -35,6 +35,7 @@ __all__ = [
     "exposure_advance",
     "frame_bounds",
     "mcu_blob_info",
+    "parse_json_frame",
     "parse_json_numbers",
     "parse_row",
     "set_simd",
@@ -360,6 +361,12 @@ def set_simd_path(best: str) -> None:
 
 def parse_row(line: str, sep: str, expected: int) -> npt.NDArray[np.float32] | None:
     """Exactly ``expected`` numbers separated by ``sep``, as float32, or None (the fast path)."""
+
+def parse_json_frame(
+    payload: bytes, expected: int
+) -> tuple[int, float, str | None, float | None, npt.NDArray[np.float64]] | None:
+    """A whole frame payload of the plain form: (seq, t, unit, dt, values), or None (the
+    station's JSON parse then reads it)."""
 
 def parse_json_numbers(text: bytes, expected: int) -> npt.NDArray[np.float64] | None:
     """The inside of a JSON list of ``expected`` numbers or nulls (NaN), or None (the fast

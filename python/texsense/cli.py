@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 from texsense._core import __version__
 from texsense.commands import COMMANDS
 from texsense.commands._applies import check_given
-from texsense.commands._options import check_numbers
+from texsense.commands._options import check_numbers, check_words
 from texsense.exceptions import FormatError, ParameterError, UnitError, WriteError
 
 if TYPE_CHECKING:
@@ -62,6 +62,7 @@ def build_parser(commands: Collection[str] = ()) -> argparse.ArgumentParser:
             registered.add(module)
     if wanted:
         check_numbers(parser)  # every numeric option refuses what lies outside its range
+        check_words(parser)  # and every path or text an empty word (ignored otherwise)
     return parser
 
 
@@ -105,33 +106,38 @@ def _run(args: argparse.Namespace, check: Callable[[], None] = lambda: None) -> 
         check()
         return int(args.run(args) or 0)
     except (FormatError, ParameterError, UnitError, WriteError) as e:
-        print(f"texsense {args.command}: error: {e}", file=sys.stderr)
+        _say(args, f"error: {e}")
         return 1
     except Terminated:
-        print(f"texsense {args.command}: stopped (SIGTERM)", file=sys.stderr)
+        _say(args, "stopped (SIGTERM)")
         return 128 + signal.SIGTERM
     except KeyboardInterrupt:
-        print(f"texsense {args.command}: interrupted", file=sys.stderr)
+        _say(args, "interrupted")
         return 1
     except BrokenPipeError:  # the reader went away (`texsense ... | head`): not an error
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
     except OSError as e:  # an output place: no permission, a folder or a file in the way
-        print(f"texsense {args.command}: error: {_os_error(e)}", file=sys.stderr)
+        _say(args, f"error: {_os_error(e)}")
         return 1
     except MemoryError:
-        print(
-            f"texsense {args.command}: error: out of memory; set the memory budget "
-            "$TEXSENSE_MAX_MEMORY below what the machine has (docs/reliability.md)",
-            file=sys.stderr,
-        )
+        _say(args, "error: out of memory; set the memory budget $TEXSENSE_MAX_MEMORY below "
+             "what the machine has (docs/reliability.md)")  # fmt: skip
         return 1
     except Exception as e:
         if type(e).__module__.split(".")[0] not in ("sqlite3", "psycopg"):
             raise
-        print(f"texsense {args.command}: error: the event store: {e}", file=sys.stderr)
+        _say(args, f"error: the event store: {e}")
         return 1
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    """The command's one line on stderr. What the user named (a file name, a value) is
+    shown with its control characters escaped: a newline or a record separator in a name
+    would break the line in two (``W\\x1e3: the folder W does not exist``)."""
+    shown = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    print(f"texsense {args.command}: {shown}", file=sys.stderr)
 
 
 class Terminated(KeyboardInterrupt):

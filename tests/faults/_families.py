@@ -93,6 +93,20 @@ def small_recording(frames: int = 5) -> Recording:
                      labels={"posture": np.array(["sit"] * frames)})  # fmt: skip
 
 
+def two_postures(frames: int = 40) -> Recording:
+    """A 4 x 4 pressure recording of two postures (``a`` and ``b`` in turn: ``--every 2``
+    leaves one) by two subjects, with a number label ``back`` and a boolean ``seated``."""
+    rng = np.random.default_rng(0)
+    values = rng.random((frames, 16))
+    posture = np.array(["a", "b"] * (frames // 2))
+    values[posture == "a", :8] += 2.0
+    subject = np.repeat(["s1", "s2"], frames // 2)
+    labels = {"posture": posture, "subject": subject, "back": rng.random(frames),
+              "seated": np.ones(frames, bool)}  # fmt: skip
+    return Recording(values, np.arange(frames) * 0.5, Layout.grid(4, 4), "pressure", "N/cm2",
+                     labels=labels)  # fmt: skip
+
+
 def no_override():
     """A preexec function that takes from root the capabilities that let it write anywhere
     (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER: dropped from the bounding set, so the

@@ -10,6 +10,7 @@ alerts are compared with."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -26,6 +27,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from group_cluster import Cluster
 from texsense.station.lease import preferred
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "monitor"))
+from test_browser import open_page
 
 MEMBERS = ["a", "b", "c"]
 #: 60 mats at 4x, each publishing every 4th frame of its seat (a frame every 6.4 simulated s,
@@ -191,6 +195,15 @@ def test_a_killed_member_s_mats_are_taken_over(cluster, fault_row):
     off = {k: round(abs(after[k] - start[k]), 1) for k in victims}
     assert max(off.values()) <= 10.0, (off, start, after)
     assert any(v > 0 for k, v in timers(cluster, "ref").items() if k in victims)  # someone sat
+    # what a nurse sees on a survivor's ward page: every mat watched, none by the dead member
+    from playwright.sync_api import expect
+
+    with open_page(cluster.url("a"), 1240, 900) as (page, errors):
+        expect(page.locator(".tile")).to_have_count(len(before), timeout=20_000)
+        held = page.locator(".tile .holder", has_text=re.compile(r"^watched by (a \(here\)|c)$"))
+        expect(held).to_have_count(len(before), timeout=10_000)
+        expect(page.locator(".tile.is-unwatched, .tile.is-stale")).to_have_count(0)
+        assert not errors, errors
     fault_row(
         "group",
         "SIGKILL of a member",

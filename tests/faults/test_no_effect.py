@@ -18,7 +18,7 @@ import argparse
 import numpy as np
 import pytest
 
-from faults._families import batch, one_line, small_recording
+from faults._families import batch, one_line, small_recording, two_postures
 from texsense import Layout, Recording
 from texsense.cli import COMMANDS, build_parser
 from texsense.commands._applies import check_given, leaf_parser, rules_of
@@ -90,6 +90,7 @@ ROWS = [
                            "--mat-credentials", "c.toml"]),
     ("--member", ["station", "--virtual-mats", "1", "--member", "a"]),
     ("--checkpoint-every", ["station", "--virtual-mats", "1", "--checkpoint-every", "5"]),
+    ("--workers", ["station", "--virtual-mats", "1", "--workers", "2"]),
     # fits and processing
     ("--drift-kind", ["hysteresis", "fit", "c.csv", "-o", "m.json", "--drift-kind", "prony"]),
     ("--drift-clock", ["hysteresis", "fit", "c.csv", "-o", "m.json", "--drift-clock", "time"]),
@@ -109,6 +110,47 @@ ROWS = [
                    "--workers", "2"]),
     ("--rotate", ["posture", "evaluate", "rec.h5", "--rotate"]),
     ("--rotate", ["posture", "train", "rec.h5", "--rotate", "-o", "m.joblib"]),
+    # harden10: the commands audited since
+    ("--back-label", ["posture", "evaluate", "post.h5", "--back-label", "b"]),
+    ("--back-label", ["posture", "train", "post.h5", "--back-label", "b", "-o", "m.joblib"]),
+    ("--c", ["posture", "evaluate", "post.h5", "--classifier", "naive-bayes", "--c", "2"]),
+    ("--c", ["posture", "train", "post.h5", "--classifier", "lda", "--c", "2", "-o", "m.joblib"]),
+    ("--group", ["posture", "train", "post.h5", "--group", "subject", "-o", "m.joblib"]),
+    ("--no-mirror", ["posture", "evaluate", "post.h5", "--no-mirror"]),
+    ("--mirror", ["posture", "evaluate", "post.h5", "--mirror", "left:right"]),
+    *((flag, ["posture", command, "post.h5", "--features", "centre,areas4", flag, *value,
+              *(["-o", "m.joblib"] if command == "train" else [])])
+      for command in ("evaluate", "train")
+      for flag, value in (("--align", []), ("--log", []), ("--pool", ["2"]))),
+    ("--range", ["study", "post.h5", "--range", "3", "-o", "st"]),
+    ("--name", ["export", "mcu", "mat.json", "-o", "m.bin", "--name", "mat"]),
+    ("--accept-truncated", ["export", "mcu", "mat.json", "-o", "m.bin", "--accept-truncated"]),
+    ("--like", ["export", "mcu", "mat.json", "-o", "m.bin", "--like", "cap0.h5"]),
+    ("--capacity", ["export", "mcu", "lin.json", "--like", "cap.h5", "-o", "m.bin",
+                    "--capacity", "8"]),
+    ("--all", ["health", "cap.h5", "--json", "--all"]),
+    ("--chunk-frames", ["process", "cap0.h5", "--calibration", "mat.json", "-o", "o.csv",
+                        "--chunk-frames", "2"]),
+    ("--interval", ["process", "cap0.h5", "--calibration", "mat.json", "-o", "o.csv",
+                    "--interval", "0.9"]),
+    ("--no-hysteresis", ["process", "cap.h5", "--calibration", "lin.json", "-o", "o.h5",
+                         "--no-hysteresis"]),
+    ("--no-drift", ["process", "cap.h5", "--calibration", "lin.json", "-o", "o.h5",
+                    "--no-drift"]),
+    ("--in-use-drift", ["process", "cap.h5", "--calibration", "lin.json", "-o", "o.h5",
+                        "--in-use-drift", "off"]),
+    ("--thickness-mm", ["calibrate", "mat", "--material", "textile-3mm", "--baseline", "cap0.h5",
+                        "--uniform", "cap1.h5", "--pressure", "1", "--thickness-mm", "3",
+                        "-o", "c.json"]),
+    ("--rest-s", ["seat-sessions", "-n", "1", "--rest-s", "5", "-o", "ss"]),
+    ("--kind", ["drift", "fit", "r.csv", "--history", "model.json", "--kind", "prony"]),
+    ("--output", ["drift", "fit", "r.csv", "-o", "d.json"]),
+    ("--turn-every", ["station", "--virtual-mats", "1", "--turn-every", "30", "--port", "PORT"]),
+    ("--turn-every", ["station", "--config", "w.toml", "--turn-every", "30", "--port", "PORT"]),
+    *((flag, ["monitor", "--mode", "foot", flag, value, "--port", "PORT"])
+      for flag, value in (("--threshold", "40"), ("--threshold-unit", "kPa"),
+                          ("--reposition-min", "30"), ("--offload-min", "2"))),
+    ("--count-possible", ["monitor", "--mode", "foot", "--count-possible", "--port", "PORT"]),
 ]  # fmt: skip
 
 #: the source options of monitor, record and the wizard x a source that does not read it
@@ -139,7 +181,20 @@ ACCEPTED = [
      "--member", "a", "--db", "postgresql://x"],
     ["hysteresis", "fit", "c.csv", "-o", "m.json", "--drift", "s.csv", "--drift-kind", "prony"],
     ["hysteresis", "fit", "c.csv", "-o", "m.json", "--method", "lsq", "--cells", "8"],
-    ["drift", "fit", "s.csv", "-o", "d.json", "--rest-rate", "0.5"],
+    ["drift", "fit", "s.csv", "--history", "m.json", "-o", "d.json", "--rest-rate", "0.5"],
+    ["drift", "fit", "s.csv", "--kind", "prony"],
+    ["export", "mcu", "m.json", "-o", "m.c", "--name", "mat", "--like", "r.h5",
+     "--accept-truncated"],
+    ["health", "cap.h5", "--all"],
+    ["process", "a.h5", "--calibration", "lin.json", "-o", "o.h5", "--chunk-frames", "2"],
+    ["seat-sessions", "--rounds", "3", "--rest-s", "5", "-o", "s"],
+    ["posture", "train", "r.h5", "--classifier", "auto", "--group", "subject", "-o", "m"],
+    ["posture", "evaluate", "r.h5", "--features", "elements,back", "--back-label", "b", "--log",
+     "--pool", "2", "--c", "2"],
+    ["posture", "evaluate", "r.h5", "--log"],
+    ["station", "--virtual-mats", "2", "--turn-every", "30"],
+    ["station", "--config", "w.toml", "--turn-every", "30"],
+    ["monitor", "--mode", "seat", "--threshold", "40", "--offload-min", "2"],
     ["process", "a.h5", "b.h5", "--calibration", "lin.json", "-o", "out", "--workers", "2"],
     ["calibrate", "wizard", "--check", "2", "-o", "c.json"],
     ["posture", "evaluate", "rec.h5", "--align", "--rotate"],
@@ -164,7 +219,7 @@ def _all_rules() -> dict[str, list[str]]:
 
 
 def test_every_rule_has_a_row():
-    nested = ("hysteresis", "drift", "calibrate", "muscle", "stocking", "posture")
+    nested = ("hysteresis", "drift", "calibrate", "muscle", "stocking", "posture", "export")
     rows = {(flag, " ".join(argv[:2]) if argv[0] in nested else argv[0]) for flag, argv in ROWS}
     missing = [f"{command} {flag}" for command, flags in _all_rules().items() for flag in flags
                if (flag, command) not in rows]  # fmt: skip
@@ -181,6 +236,17 @@ def folder(tmp_path):
     assert main(["calibrate", "linear", "--like", str(tmp_path / "cap.h5"), "--gain", "2",
                  "--to", "pressure:N/cm2", "-o", str(tmp_path / "lin.json")]) == 0  # fmt: skip
     (tmp_path / "w.toml").write_text('[[mat]]\nid = "a"\nlayout = "grid:3x4"\n')
+    for name, level in (("cap0.h5", 10.0), ("cap1.h5", 12.0)):  # (a mat calibration's)
+        values = level + 0.01 * np.random.default_rng(int(level)).standard_normal((6, 12))
+        save(Recording(values, np.arange(6.0), Layout.grid(3, 4), "capacitance", "pF"),
+             tmp_path / name)  # fmt: skip
+    assert main(["calibrate", "mat", "--material", "textile-3mm", "--baseline",
+                 str(tmp_path / "cap0.h5"), "--uniform", str(tmp_path / "cap1.h5"), "--pressure",
+                 "1", "-o", str(tmp_path / "mat.json")]) == 0  # fmt: skip
+    save(two_postures(), tmp_path / "post.h5")
+    assert main(["simulate", "calibration", "--csv", str(tmp_path / "r.csv")]) == 0
+    assert main(["hysteresis", "fit", str(tmp_path / "r.csv"), "--method", "thesis", "--grid",
+                 "20", "-o", str(tmp_path / "model.json")]) == 0  # fmt: skip
     return tmp_path
 
 

@@ -257,6 +257,39 @@ def test_a_member_checkpoints_what_changed_and_less_often_with_many_mats(db, mon
     st.store.close()
 
 
+def test_checkpoints_that_come_due_together_are_spread_over_turns_in_order(db, monkeypatch):
+    """Mats taken together come due spread over one interval (group.due_phase), and a turn of
+    the watch writes the due ones for at most group.DUE_S (at least one), the rest in the
+    next turns, in their order, none lost."""
+    from texsense.data.layout import Layout
+    from texsense.station import group
+    from texsense.station.broker import BrokerURL
+    from texsense.station.ward import MatConfig
+
+    mats = [MatConfig(f"m{k}", Layout.grid(2, 2), quantity="pressure") for k in range(6)]
+    st = group.GroupStation(BrokerURL("127.0.0.1", 9), mats, group="g", member="a", db=db,
+                            page="http://a/", record_dir=".", checkpoint_s=2.0)  # fmt: skip
+    written: list[str] = []
+    monkeypatch.setattr(st.journal, "checkpoint", lambda mat, *a, **k: written.append(mat))
+    st.grant([lease.Grant(m.id, 1, 0) for m in mats])
+    t0 = time.monotonic() + 1.0
+    assert st.checkpoints(t0) == 6  # (a budget of 5 ms: six small mats in one turn)
+    due = sorted(when - t0 for when, _ in st._due)  # their first due ones: at their phases
+    assert due == pytest.approx(sorted(2.0 * group.due_phase(m.id) for m in mats))
+    assert len(set(due)) == 6
+    frame = b'{"seq":%d,"t":%.1f,"values":[1,2,0,0],"unit":"N/cm2"}'
+    for m in mats:
+        st.mats[m.id].handle(frame % (1, 1.0), 1.0)
+    st._soon_mats.clear()  # (their first frames' events: not what is looked at here)
+    order = [m for _, m in sorted(st._due)]
+    written.clear()
+    monkeypatch.setattr(group, "DUE_S", 0.0)  # a turn's budget spent by one checkpoint
+    assert [st.checkpoints(t0 + 2.1) for _ in range(6)] == [1] * 6
+    assert written == order and len(set(written)) == 6
+    assert st.checkpoints(t0 + 2.1) == 0  # none due any more: each in an interval again
+    st.store.close()
+
+
 def test_a_member_sends_at_most_its_tiles_budget_changed_states_first(db, monkeypatch):
     """Tiles for the other members cost the event loop: at most group.TILES_PER_S a second,
     a mat whose shown state changed first, then the longest unsent; an unchanged mat never."""

@@ -428,3 +428,29 @@ def test_plain_payloads_take_the_compiled_values_read():
         protocol._parse_whole = whole
     np.testing.assert_array_equal(frame.values, [0.1, -2.0, np.nan, 1e-7])
     assert (frame.seq, frame.t, frame.unit) == (3, 1.5, "pF")
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b'{"seq":3,"t":1764329000.123456,"values":[0.1,-2,null,1e-7],"unit":"pF"}',
+        b'{ "values" : [1, 2, 3, 4] , "dt": 0.25, "unit": "kPa", "t": -0, "seq": 0 }',
+        b'{"seq":9223372036854775807,"t":5,"values":[1,2,3,4],"dt":0}',
+    ],
+)
+def test_the_payloads_mats_send_are_read_whole_by_the_compiled_core(payload):
+    """A payload of the plain form (seq, t, values, unit, dt: what mats send) is read in one
+    compiled call, neither by json nor by the splice of its values list, to the frame the
+    parse by json alone gives."""
+    import texsense.data.protocol as protocol
+
+    want = protocol._parse_whole(payload, 4)
+    splice, whole = protocol._splice, protocol._parse_whole
+    try:
+        protocol._splice = protocol._parse_whole = None  # type: ignore[assignment]
+        frame = protocol.parse_mqtt_payload(payload, 4)
+    finally:
+        protocol._splice, protocol._parse_whole = splice, whole
+    assert (frame.seq, frame.t, frame.unit) == (want.seq, want.t, want.unit)
+    assert frame.element_times.tobytes() == want.element_times.tobytes()
+    assert frame.values.tobytes() == want.values.tobytes()

@@ -322,8 +322,8 @@ def test_ward_page_in_headless_chromium(broker, station, tmp_path):
         assert shot.stat().st_size > 20_000
         if os.environ.get("TEXSENSE_SCREENSHOT_WARD"):
             shutil.copyfile(shot, os.environ["TEXSENSE_SCREENSHOT_WARD"])
-        mat_id = alert.get_attribute("data-id")
-        alert.locator("button.ack").click()
+        mat_id = alert.get_attribute("data-id")  # the tile itself: ".first" may be another by now
+        page.locator(f'.tile[data-id="{mat_id}"] button.ack').click()
         expect(page.locator(f'.tile[data-id="{mat_id}"]')).to_have_attribute(
             "data-state", "acknowledged", timeout=5_000
         )

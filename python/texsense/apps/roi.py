@@ -125,7 +125,9 @@ def roi_elements(roi: dict[str, Any], layout: Layout) -> npt.NDArray[np.int64]:
 def rois_path(recording: str | Path) -> Path:
     """The sidecar file of a recording: ``<file name>.rois.json`` beside it."""
     p = Path(recording)
-    return p.with_name(p.name + ".rois.json")
+    if not p.name:  # ".", "..", "/": a folder named by where it is
+        p = p.resolve()
+    return p.with_name(p.name + ".rois.json") if p.name else p / ".rois.json"
 
 
 def load_rois(recording: str | Path) -> list[dict[str, Any]]:

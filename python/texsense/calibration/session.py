@@ -64,10 +64,10 @@ def load_material(
     path = Path(material)
     if material in SPACER_PRESETS and not path.exists():
         record, thickness, preset_drift = material_preset(material)
-        if thickness_mm is not None and thickness_mm != thickness:
+        if thickness_mm is not None:  # a preset knows its own: taken and ignored otherwise
             raise ParameterError(
-                f"--thickness-mm {thickness_mm:g}: the preset {material} is {thickness:g} mm "
-                "thick (leave --thickness-mm out with a preset)"
+                "--thickness-mm has no effect here: it applies to a test-machine record "
+                f"(--material RECORD.csv); the preset {material} is {thickness:g} mm thick"
             )
         found: list[Any] | Drift = preset_drift if drift is None else read_steps(drift)
         return record, thickness, found, f"the preset {material}"

@@ -9,7 +9,8 @@ A command declares its rules where it declares its options: :func:`only_where` a
 where its rule says it does nothing. An option is *given* when its value differs from its
 default or its name is on the command line. What can only be known once a file is read (a
 ``--calibration`` for a recording that already holds pressure) is refused where it is known,
-in the same words (:func:`no_effect`).
+in the same words (:func:`refuse_unless`, or :func:`no_effect` where the option's value
+alone says it was given).
 
 Examples
 --------
@@ -30,7 +31,16 @@ from typing import Any
 
 from texsense.exceptions import ParameterError
 
-__all__ = ["Rule", "check_given", "given_flags", "no_effect", "only_where", "rules_of"]
+__all__ = [
+    "Rule",
+    "check_given",
+    "given",
+    "given_flags",
+    "no_effect",
+    "only_where",
+    "refuse_unless",
+    "rules_of",
+]
 
 
 @dataclass(frozen=True)
@@ -107,11 +117,33 @@ def given_flags(parser: argparse.ArgumentParser, args: argparse.Namespace,
 def check_given(parser: argparse.ArgumentParser, args: argparse.Namespace,
                 argv: Sequence[str]) -> None:  # fmt: skip
     """Refuse (:class:`ParameterError`, one line) the first option given where its rule
-    says it has no effect."""
-    rules: list[Rule] = list(getattr(args, "option_rules", None) or [])
-    if not rules:
-        return
-    given = given_flags(parser, args, argv)
-    for rule in rules:
-        if rule.flag in given and not rule.applies(args):
+    says it has no effect; keep the options given in ``args`` (:func:`given`) for the checks
+    a file read later makes (:func:`refuse_unless`)."""
+    flags = given_flags(parser, args, argv)
+    args.given_flags = frozenset(flags)
+    for rule in getattr(args, "option_rules", None) or []:
+        if rule.flag in flags and not rule.applies(args):
             raise ParameterError(no_effect(rule.flag, rule.where))
+
+
+def given(args: argparse.Namespace, flag: str) -> bool:
+    """Whether ``flag`` was given on the command line ``args`` was parsed from (named, or a
+    value other than its default; :func:`check_given` keeps them)."""
+    return flag in getattr(args, "given_flags", ())
+
+
+def refuse_unless(args: argparse.Namespace, flag: str, applies: bool, where: str,
+                  why: str = "") -> None:  # fmt: skip
+    """Where only a file tells whether ``flag`` does something: refuse it, in the words of
+    :func:`no_effect` (and ``why``: what the file holds), when it was given and does not
+    apply.
+
+    >>> args = argparse.Namespace(given_flags=frozenset({"--range"}))
+    >>> try:
+    ...     refuse_unless(args, "--range", False, "a recording of capacitance", "this is pressure")
+    ... except ParameterError as e:
+    ...     print(e)
+    --range has no effect here: it applies to a recording of capacitance; this is pressure
+    """
+    if not applies and given(args, flag):
+        raise ParameterError(no_effect(flag, where) + (f"; {why}" if why else ""))

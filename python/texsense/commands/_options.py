@@ -30,6 +30,8 @@ __all__ = [
     "Range",
     "add_accept_truncated",
     "check_numbers",
+    "check_words",
+    "nonempty",
     "numeric_options",
     "refuse_replacing",
 ]
@@ -238,3 +240,37 @@ def check_numbers(parser: argparse.ArgumentParser, command: str = "") -> None:
             raise LookupError(f"texsense {cmd} {name}: no range declared in RANGES")
         assert action.type is int or action.type is float  # (numeric_options chose it)
         action.type = _Checked(action.type, allowed, name)
+
+
+def nonempty(text: str) -> str:
+    """An argparse type: a word that is not empty (nor only spaces). An empty path reads as
+    the current folder (``texsense process ""`` would process the folder it runs in), and an
+    empty text as the option left out (``--unit ""``, ``--broker ""``, ``--group ""``,
+    ``--orientation ""``): taken and ignored, the user would believe it acted. Nor a NUL
+    character, which no name holds."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty value: give one, or leave the option out")
+    if "\0" in text:  # (no file name holds one: os.stat raised ValueError)
+        raise argparse.ArgumentTypeError(f"a NUL character in {text!r}")
+    return text
+
+
+def _path(text: str) -> Path:
+    return Path(nonempty(text))
+
+
+_path.__name__ = "path"  # argparse's "invalid path value"
+
+
+def check_words(parser: argparse.ArgumentParser) -> None:
+    """Give every argument of ``parser`` (and its sub-commands) that takes a path
+    (``type=Path``) or a text (no type, no choices) the type that refuses an empty word, with
+    argparse's one line and exit 2."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                check_words(sub)
+        elif action.type is Path:
+            action.type = _path
+        elif action.type is None and action.nargs != 0 and not action.choices:
+            action.type = nonempty

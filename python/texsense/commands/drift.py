@@ -71,6 +71,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_clock_arguments(f)
     f.add_argument("--json", action="store_true", help="print JSON")
     f.set_defaults(run=run_fit)
+    only_where(f, [
+        Rule("--kind", lambda a: a.history is None, "held steps (without --history: over a "
+             "load history the kernel is the logarithm of eq. 5.2)"),
+        Rule("--output", lambda a: a.history is not None, "--history MODEL.json (the chain of "
+             "the model and the drift fitted over it)"),
+    ])  # fmt: skip
 
 
 #: Default rest rate of the rest clock (N/cm² per s; the velocity is averaged over 0.5 s).
@@ -241,8 +247,6 @@ def run_fit(args: argparse.Namespace) -> int:
     """Run ``texsense drift fit``."""
     if args.history is not None:
         return run_fit_history(args)
-    if args.output is not None:
-        raise ParameterError("drift fit: -o/--output needs --history MODEL.json")
     if len(args.steps) != 1:
         raise ParameterError("drift fit: one step-and-hold CSV (several need --history)")
     if args.clock == "rest+time":
@@ -278,6 +282,10 @@ def run_fit(args: argparse.Namespace) -> int:
     print(
         f"  fit error (share of the step): one step {fit.max_error_single:.2%}, common "
         f"{fit.max_error_common:.2%}"
+    )
+    print(
+        f"  kernel: {model.kind}, as {summary['kernel_terms']} exponential terms "
+        f"(largest deviation {model.kernel.max_error:.2g} in units of ln(1 + t))"
     )
     verdict = "proportional" if fit.proportional else "NOT proportional (eq. 5.1 fails)"
     print(f"  spread between steps {fit.proportionality_spread:.2%}: {verdict}")

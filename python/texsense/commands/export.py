@@ -10,9 +10,11 @@ from pathlib import Path
 
 from texsense._core import mcu_blob_info
 from texsense.commands import HELP
+from texsense.commands._applies import Rule, only_where, refuse_unless
 from texsense.commands._options import add_accept_truncated
 from texsense.compensation.pipeline import Pipeline
-from texsense.compensation.stages import load_chain
+from texsense.compensation.repair import Repair
+from texsense.compensation.stages import Hysteresis, load_chain
 from texsense.data.files import check_not_input, write_bytes, write_text
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
@@ -61,6 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--name", help="the C array's name (default: from the output file's name)")
     add_accept_truncated(m)
     m.set_defaults(run=run_export_mcu)
+    only_where(m, [
+        Rule("--name", lambda a: a.output.suffix.lower() == ".c", "a C source (-o NAME.c)"),
+        Rule("--accept-truncated", lambda a: a.like is not None, "the recording of --like"),
+    ])  # fmt: skip
 
 
 def c_source(blob: bytes, name: str) -> str:
@@ -88,6 +94,14 @@ def run_export_mcu(args: argparse.Namespace) -> int:
     chain = load_chain(args.calibration)
     layouts = [getattr(s, "layout", None) for s in chain.stages]
     layout = next((x for x in layouts if isinstance(x, Layout)), None)
+    held = f"{args.calibration} holds the stages {', '.join(chain.names)}"
+    refuse_unless(args, "--like", layout is None, "a calibration whose stages do not know the "
+                  f"mat's layout; {held}, which do")  # fmt: skip
+    refuse_unless(args, "--capacity", chain.find(Hysteresis) is not None,
+                  "a calibration with a hysteresis stage", held)  # fmt: skip
+    refuse_unless(args, "--repair", chain.find(Repair) is None or args.repair == "none",
+                  "a calibration without a repair stage of its own (or --repair none, which "
+                  "leaves it out)", held)  # fmt: skip
     if args.like is not None:
         layout = load(args.like, accept_truncated=args.accept_truncated).layout
     if layout is None:

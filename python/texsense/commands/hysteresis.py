@@ -295,8 +295,9 @@ def _model_and_record(
     in_name = args.input or model.input_name
     out_name = args.output or model.output_name
     # the columns named (validate needs the measured output too; apply compares when it is
-    # there): a CSV whose header holds them is a column table
-    named = (in_name, out_name) if need_output else (in_name,)
+    # there, and an --output named must be there: taken and ignored, the user would believe
+    # it compared): a CSV whose header holds them is a column table
+    named = (in_name, out_name) if need_output or args.output else (in_name,)
     cols = read_columns(args.data, required=named)
     u = _column(cols, in_name, args.data)
     if args.input and _unit_of(in_name) != "1":

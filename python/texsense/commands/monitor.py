@@ -123,6 +123,9 @@ MONITOR_RULES = [
     *(Rule(flag, lambda a: _calibrated(a), _CALIBRATED)
       for flag in ("--in-use-drift", "--interval", "--count-possible")),
     Rule("--count-possible", lambda a: a.interval != "off", "bounds (--interval LEVEL)"),
+    *(Rule(flag, lambda a: a.mode != "foot", "exposure alerts (not --mode foot)")
+      for flag in ("--threshold", "--threshold-unit", "--reposition-min", "--offload-min",
+                   "--count-possible")),
 ]  # fmt: skip
 
 

@@ -14,8 +14,8 @@ import numpy as np
 from texsense.apps.views import checked_words
 from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
-from texsense.commands._applies import Rule, no_effect, only_where
-from texsense.commands._options import add_accept_truncated, refuse_replacing
+from texsense.commands._applies import Rule, no_effect, only_where, refuse_unless
+from texsense.commands._options import add_accept_truncated, nonempty, refuse_replacing
 from texsense.commands._tables import text_table
 from texsense.commands.wizard import register_wizard
 from texsense.compensation.archive import (
@@ -27,7 +27,14 @@ from texsense.compensation.archive import (
 from texsense.compensation.health import FailureDetector, health_report
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.repair import METHODS, Repair
-from texsense.compensation.stages import Convert, Linear, StageChain, load_chain
+from texsense.compensation.stages import (
+    Convert,
+    Drift,
+    Hysteresis,
+    Linear,
+    StageChain,
+    load_chain,
+)
 from texsense.data.files import check_not_input
 from texsense.data.layout import parse_orientation
 from texsense.exceptions import FormatError, ParameterError
@@ -121,8 +128,9 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
         "reported at the end and the others go on.",
     )
     p.add_argument(
-        "inputs", nargs="+", help="recording(s), folder(s) or glob pattern(s) (quote them)"
-    )
+        "inputs", nargs="+", type=nonempty,
+        help="recording(s), folder(s) or glob pattern(s) (quote them)",
+    )  # fmt: skip
     p.add_argument("--calibration", type=Path, required=True, help="calibration file")
     p.add_argument(
         "-o", "--output", type=Path, required=True, help="output file, or folder for an archive"
@@ -159,9 +167,15 @@ def _register_process(sub: argparse._SubParsersAction) -> None:
     )
     add_accept_truncated(p)
     p.set_defaults(run=run_process)
-    only_where(p, [Rule("--workers", lambda a: not _single(a) and a.scheduler is None,
-                        "an archive processed here (several inputs or a folder, without "
-                        "--scheduler)")])  # fmt: skip
+    only_where(p, [
+        Rule("--workers", lambda a: not _single(a) and a.scheduler is None,
+             "an archive processed here (several inputs or a folder, without --scheduler)"),
+        Rule("--chunk-frames", lambda a: not _single(a) or _hdf5(a.output),
+             "a recording processed in blocks (an HDF5 output, or an archive): any other "
+             "output is made in memory"),
+        Rule("--interval", lambda a: not _single(a) or _hdf5(a.output),
+             "an HDF5 output (.h5: the lower and upper maps are stored beside the frames)"),
+    ])  # fmt: skip
 
 
 def _register_repair_and_health(sub: argparse._SubParsersAction) -> None:
@@ -190,6 +204,8 @@ def _register_repair_and_health(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--json", action="store_true")
     add_accept_truncated(h)
     h.set_defaults(run=run_health)
+    only_where(h, [Rule("--all", lambda a: not a.json, "the table (without --json: the JSON "
+                        "lists every element)")])  # fmt: skip
 
 
 def to_pressure(rec: Any, calibration: Path | None, **stages: Any) -> Any:
@@ -295,13 +311,31 @@ def _single(args: argparse.Namespace) -> bool:
     )
 
 
+def _hdf5(path: Path) -> bool:
+    return path.suffix.lower() in (".h5", ".hdf5")
+
+
+def _stages_asked(args: argparse.Namespace, cal: StageChain) -> None:
+    """Refuse a stage switched off that the calibration does not have (lin.json: no
+    hysteresis, no drift, no spacer model for the in-use drift correction)."""
+    held = f"{args.calibration} holds the stages {', '.join(cal.names)}"
+    spacer = cal.find(Hysteresis) is not None and isinstance(cal.conversion, Convert)
+    refuse_unless(args, "--no-hysteresis", cal.find(Hysteresis) is not None,
+                  "a calibration with a hysteresis stage", held)  # fmt: skip
+    refuse_unless(args, "--no-drift", cal.find(Drift) is not None,
+                  "a calibration with a drift stage", held)  # fmt: skip
+    refuse_unless(args, "--in-use-drift", spacer,
+                  "a calibration with a spacer model (convert and hysteresis)", held)  # fmt: skip
+
+
 def run_process(args: argparse.Namespace) -> int:
     """Run ``texsense process``: one file in blocks, or an archive on Dask."""
     options = _options(args)
+    cal = load_chain(args.calibration)
+    _stages_asked(args, cal)
     if _single(args):
         src = Path(args.inputs[0])
-        cal = load_chain(args.calibration)
-        if args.output.suffix.lower() in (".h5", ".hdf5"):
+        if _hdf5(args.output):
             report = process_file(src, cal, args.output, options)
             if report.status == "skipped":
                 print(f"{args.output} is up to date (same calibration {cal.id} and input)")
@@ -335,8 +369,6 @@ def run_process(args: argparse.Namespace) -> int:
 def _process_in_memory(src: Path, cal: Any, output: Path, options: ProcessOptions) -> int:
     """Any output format other than HDF5: the whole recording in memory."""
     check_not_input(output, [src])
-    if options.interval is not None:
-        raise ParameterError("--interval stores lower and upper maps: write an HDF5 output (.h5)")
     raw = load(src, accept_truncated=options.accept_truncated)
     pipe = options.pipeline(cal, raw.layout)
     out = pipe.run(raw)

@@ -12,13 +12,19 @@ from typing import Any
 import numpy as np
 
 from texsense.apps.posture.defaults import DEFAULT_C, DEFAULT_CLASSIFIER, DEFAULT_FEATURES
-from texsense.apps.posture.evaluate import CLASSIFIERS, loso, make_classifier
+from texsense.apps.posture.evaluate import (
+    C_PARAMETER,
+    CLASSIFIERS,
+    check_classes,
+    loso,
+    make_classifier,
+)
 from texsense.apps.posture.features import KINDS, FeatureSet, mirror_samples, reduce_maps
 from texsense.apps.posture.model import PostureModel
 from texsense.apps.posture.smoothing import window_vote
 from texsense.apps.posture.study import ErrorStudy, plot_study, sensor_hysteresis_model
 from texsense.commands import HELP
-from texsense.commands._applies import Rule, only_where
+from texsense.commands._applies import Rule, given, only_where, refuse_unless
 from texsense.commands._options import add_accept_truncated
 from texsense.commands._tables import confusion_lines, natural_key, text_table
 from texsense.data.files import check_not_input, make_folder, pyplot, save_figure, write_text
@@ -67,7 +73,16 @@ def _feature_args(p: argparse.ArgumentParser) -> None:
                    "MAP the map the recording declares. Default: on when the recording "
                    "declares one (PMD does)")  # fmt: skip
     g.add_argument("--no-mirror", action="store_true", help="no mirrored training copies")
-    only_where(p, [Rule("--rotate", lambda a: a.align, "--align (a map is turned once centred)")])
+    only_where(p, [
+        Rule("--rotate", lambda a: a.align, "--align (a map is turned once centred)"),
+        Rule("--back-label", lambda a: "back" in _feature_set(a).kinds,
+             "the back feature (--features ...,back)"),
+        *(Rule(flag, lambda a: "elements" in _feature_set(a).kinds,
+               "the element values (--features with elements: the others are computed from "
+               "the map as it is)") for flag in ("--align", "--log", "--pool")),
+        Rule("--c", lambda a: (a.classifier or DEFAULT_CLASSIFIER) in C_PARAMETER,
+             f"a classifier with a regularisation C ({', '.join(C_PARAMETER)})"),
+    ])  # fmt: skip
 
 
 def describe_defaults() -> str:
@@ -110,6 +125,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "without it, its first candidate)")  # fmt: skip
     t.add_argument("-o", "--output", type=Path, required=True, help="model file (joblib)")
     t.set_defaults(run=run_train)
+    only_where(t, [Rule("--group", lambda a: a.classifier == "auto",
+                        "--classifier auto (it chooses its set-up by subject)")])  # fmt: skip
 
     s = sub.add_parser(
         "study",
@@ -148,6 +165,8 @@ def _frames(args: argparse.Namespace) -> tuple[Recording, np.ndarray, np.ndarray
     idx = np.flatnonzero(keep)[:: args.every]
     if idx.size == 0:
         raise ParameterError("no frames left after --where/--drop")
+    check_classes(y[idx], f"{args.recording}: the frames selected (--where, --drop, --every) "
+                  f"of label {args.label!r}")  # fmt: skip
     return rec, idx, y[idx]
 
 
@@ -168,6 +187,9 @@ def _mirror_map(args: argparse.Namespace, rec: Recording) -> dict[str, str] | No
     if args.no_mirror:
         if args.mirror is not None:
             raise ParameterError("--mirror and --no-mirror contradict each other")
+        refuse_unless(args, "--no-mirror", args.label in rec.meta.get("mirror", {}),
+                      "a recording that declares a mirror map for the label",
+                      f"{args.recording} declares none for {args.label!r}")  # fmt: skip
         return None
     if args.mirror is None:
         declared = rec.meta.get("mirror", {}).get(args.label)
@@ -180,8 +202,18 @@ def _mirror_map(args: argparse.Namespace, rec: Recording) -> dict[str, str] | No
                 "pass one: --mirror '2:3,4:6,1'"
             )
         return {str(k): str(v) for k, v in declared[args.label].items()}
+    table = _mirror_table(args.mirror)
+    values = sorted({str(v) for v in np.asarray(rec.labels[args.label])}, key=natural_key)
+    refuse_unless(args, "--mirror", bool(set(table) & set(values)),
+                  f"a map that names values of the label {args.label!r}",
+                  f"{args.recording} holds {', '.join(values[:10])}")  # fmt: skip
+    return table
+
+
+def _mirror_table(text: str) -> dict[str, str]:
+    """The label -> mirror image table of ``--mirror A:B,C``."""
     table: dict[str, str] = {}
-    for item in args.mirror.split(","):
+    for item in text.split(","):
         a, sep, b = (part.strip() for part in item.partition(":"))
         if not a or (sep and not b):
             raise ParameterError(f"--mirror: cannot read {item!r} (expected A:B or A)")
@@ -278,6 +310,8 @@ def run_train(args: argparse.Namespace) -> int:
     name, estimator = _classifier(args)
     model = PostureModel(fs, rec.layout, estimator, mirror=_mirror_map(args, rec))
     model.classifier_name = name
+    if args.group not in rec.labels and given(args, "--group"):
+        raise ParameterError(f"{args.recording}: no label {args.group!r} naming the subjects")
     groups = np.asarray(rec.labels[args.group])[idx] if args.group in rec.labels else None
     model.fit(rec.frames[idx], y, _back(args, rec, fs, idx), groups=groups)
     model.save(args.output)
@@ -300,6 +334,8 @@ def run_study(args: argparse.Namespace) -> int:
     classes = np.unique(y)
     refs = np.vstack([frames[y == c].mean(axis=0) for c in classes])
     scaled = rec.quantity != "pressure"
+    refuse_unless(args, "--range", scaled, "a recording that is not pressure (its values "
+                  "scaled to N/cm²)", f"{args.recording} holds pressure")  # fmt: skip
     if scaled:
         refs *= args.range / refs.max()
     study = ErrorStudy(refs, layout, classes.tolist(), hysteresis_model=sensor_hysteresis_model())

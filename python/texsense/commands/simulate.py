@@ -326,10 +326,13 @@ def register_sessions(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("-n", "--sessions", type=int, default=4, help="number of sessions")
     p.add_argument("--rounds", type=int, default=1, help="posture rounds per session")
-    p.add_argument("--rest-s", type=float, default=60.0, help="unloaded rest before the last round")
+    p.add_argument("--rest-s", type=float, default=60.0,
+                   help="unloaded rest before the third round (--rounds 3 or more)")  # fmt: skip
     p.add_argument("--mat-seed", type=int, default=5, help="the physical mat (same for all)")
     p.add_argument("-o", "--output", type=Path, required=True, help="folder to write")
     p.set_defaults(run=run_sessions)
+    only_where(p, [Rule("--rest-s", lambda a: a.rounds >= 3, "three rounds or more (--rounds 3: "
+                        "the rest comes before the third)")])  # fmt: skip
 
 
 def run_sessions(args: argparse.Namespace) -> int:

@@ -18,7 +18,7 @@ from typing import Any
 from texsense.apps.posture.model import PostureModel
 from texsense.calibration.workflows import bed_calibration, seat_calibration
 from texsense.commands import HELP
-from texsense.commands._applies import Rule, only_where
+from texsense.commands._applies import Rule, only_where, refuse_unless
 from texsense.commands._options import RANGES
 from texsense.commands.monitor import (
     add_web_options,
@@ -124,6 +124,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     only_where(p, STATION_RULES)
 
 
+_BEDS = "beds (a mat of --config with bed = true, or a virtual bed: --virtual-mats 2 or more)"
+
 #: Where the station's options apply (:mod:`texsense.commands._applies`).
 STATION_RULES = [
     *(Rule(flag, lambda a: a.virtual_mats > 0, "virtual mats (--virtual-mats N)") for flag in
@@ -133,8 +135,14 @@ STATION_RULES = [
     Rule("--mat-credentials", lambda a: not a.broker,
          "the station's own broker (without --broker: a site broker keeps its own)"),
     *(Rule(flag, lambda a: bool(a.group), "a group (--group NAME)") for flag in
-      ("--member", "--checkpoint-every")),
+      ("--member", "--checkpoint-every", "--workers")),
+    Rule("--turn-every", lambda a: a.config is not None or _virtual_beds(a) > 0, _BEDS),
 ]  # fmt: skip
+
+
+def _virtual_beds(args: argparse.Namespace) -> int:
+    """How many of the virtual mats are beds (every second one unless --virtual-beds)."""
+    return args.virtual_mats // 2 if args.virtual_beds is None else args.virtual_beds
 
 
 def _layout(spec: Any, where: str, named: Any) -> Any:
@@ -394,9 +402,7 @@ def as_worker(args: argparse.Namespace) -> Any:
 def supervise(args: argparse.Namespace) -> int:
     """``--workers N``: check what every worker needs, then run them
     (:class:`~texsense.station.workers.Supervisor`) until Ctrl-C or SIGTERM."""
-    if not args.group:
-        raise ParameterError("--workers needs --group: the workers are members of a group")
-    check_group(args, {})
+    check_group(args, {})  # (without --group, --workers is refused: STATION_RULES)
     for k in range(args.workers):
         check_port_free(args.host, args.port + k)
     argv = getattr(args, "argv", None)
@@ -478,6 +484,8 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
     mats, local = (
         read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
     )
+    refuse_unless(args, "--turn-every", any(m.bed for m in mats) or _virtual_beds(args) > 0,
+                  _BEDS, f"{args.config} names no bed")  # fmt: skip
     if not mats and not args.virtual_mats:
         if args.config:
             raise FormatError(args.config, "no [[mat]]: a ward file names at least one mat")

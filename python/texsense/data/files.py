@@ -361,6 +361,8 @@ def check_regular(path: str | Path, *, folder_ok: bool = False) -> os.stat_resul
     """
 
     p = Path(path)
+    if "\x00" in str(p):
+        raise FormatError(p, "a name with a NUL character, which no file has")
     try:
         st = os.stat(p)
     except FileNotFoundError:
@@ -624,7 +626,9 @@ def pyplot() -> ModuleType:
 
 def save_figure(fig: Figure, path: str | Path, **savefig: object) -> Path:
     """Write ``fig`` to ``path`` in the format its extension names (PNG without one), under a
-    temporary name that is renamed when complete; returns the path.
+    temporary name that is renamed when complete; returns the path. The figure is closed,
+    written or not (pyplot keeps every open figure: one left open by a refused output stays
+    for the life of the process, and a server's or a test's process collects them).
 
     Raises
     ------
@@ -633,11 +637,14 @@ def save_figure(fig: Figure, path: str | Path, **savefig: object) -> Path:
     WriteError
         If the file could not be written (the previous file is kept).
     """
-    path = Path(path)
-    fmt = path.suffix.lstrip(".").lower() or "png"
-    if fmt not in fig.canvas.get_supported_filetypes():
-        known = ", ".join(sorted(fig.canvas.get_supported_filetypes()))
-        raise ParameterError(f"{path}: cannot write a figure as .{fmt}; use one of {known}")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=fmt, **savefig)  # type: ignore[arg-type]
-    return path
+    try:
+        path = Path(path)
+        fmt = path.suffix.lstrip(".").lower() or "png"
+        if fmt not in fig.canvas.get_supported_filetypes():
+            known = ", ".join(sorted(fig.canvas.get_supported_filetypes()))
+            raise ParameterError(f"{path}: cannot write a figure as .{fmt}; use one of {known}")
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=fmt, **savefig)  # type: ignore[arg-type]
+        return path
+    finally:
+        pyplot().close(fig)

@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from texsense._core import parse_json_numbers
+from texsense._core import parse_json_frame, parse_json_numbers
 from texsense.data import units
 from texsense.data.files import json_loads
 from texsense.data.layout import Layout, parse_orientation, whole_numbers
@@ -277,18 +277,63 @@ def parse_mqtt_payload(
 ) -> Frame:
     """Parse one MQTT message (JSON, see the module docstring); ``max_bytes`` (default
     :func:`payload_limit`) is checked first, before anything is parsed. A payload of the
-    plain form (one flat list of numbers or nulls) has its values read by the compiled core
-    (:func:`texsense._core.parse_json_numbers`, JSON's number grammar) and the rest by
-    :mod:`json`; anything else, and anything the core does not read, is parsed whole, which
-    names what is wrong. Both give the same frame (tested on generated payloads)."""
+    plain form is read whole by the compiled core in one call (:func:`_parse_plain`: the keys
+    ``seq``, ``t``, ``values``, ``unit`` and ``dt`` only); one with other keys has its values
+    list read by the core (:func:`texsense._core.parse_json_numbers`, JSON's number grammar)
+    and the rest by :mod:`json`; anything else, and anything the core does not read, is
+    parsed whole, which names what is wrong. All give the same frame (tested on generated
+    payloads)."""
     limit = payload_limit(n_elements) if max_bytes is None else max_bytes
     if len(payload) > limit:
         raise PayloadSizeError(len(payload), limit)
+    plain = _parse_plain(payload, n_elements) if isinstance(payload, bytes) else None
+    if plain is not None:
+        return plain
     got = _splice(payload) if isinstance(payload, bytes) else None
     values = None if got is None else parse_json_numbers(got[1], n_elements)
     if got is not None and values is not None:
         return _frame_of(got[0], values, n_elements)
     return _parse_whole(payload, n_elements)
+
+
+#: The canonical units of the unit texts plain payloads have carried (None: not a frame's).
+_PLAIN_UNITS: dict[str | None, str | None] = {}
+
+
+def _plain_unit(text: str | None) -> str | None:
+    """A plain payload's unit (``None``: not given, pF) as :func:`_frame_of` reads it, or None
+    when that would refuse it (then the full parse says why); remembered per text."""
+    if text in _PLAIN_UNITS:
+        return _PLAIN_UNITS[text]
+    try:
+        unit: str | None = units.canonical("pF" if text is None else text)
+    except ValueError:
+        unit = None
+    if unit is not None and units.quantity_of(unit) not in ("capacitance", "pressure"):
+        unit = None
+    if len(_PLAIN_UNITS) < 64:  # (a mat sends one or two)
+        _PLAIN_UNITS[text] = unit
+    return unit
+
+
+def _parse_plain(payload: bytes, n_elements: int) -> Frame | None:
+    """A payload of the plain form (the keys ``seq``, ``t``, ``values``, ``unit``, ``dt``,
+    each once, no escapes; what mats send) read in one compiled call
+    (:func:`texsense._core.parse_json_frame`, without the interpreter lock), the frame being
+    the one :func:`_frame_of` makes of it; None for anything else or anything it would
+    refuse (the caller's parse then reads it or names the error)."""
+    got = parse_json_frame(payload, n_elements)
+    if got is None:
+        return None
+    seq, t, text, dt, values = got
+    unit = _plain_unit(text)
+    if unit is None:
+        return None
+    try:
+        times = _element_times(t, 0.0 if dt is None else dt, n_elements)
+    except ProtocolError:
+        return None
+    return Frame(seq, times, values, unit)
 
 
 def _parse_whole(payload: bytes | str, n_elements: int) -> Frame:
@@ -352,18 +397,23 @@ def _frame_of(d: dict[str, Any], values: np.ndarray, n_elements: int) -> Frame:
             raise ProtocolError(f"'element_times' must be {n_elements} finite numbers")
         times = np.asarray(et, dtype=np.float64)
     else:
-        dt = d.get("dt", 0.0)
-        if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt >= 0:
-            raise ProtocolError("'dt' must be a number >= 0")
-        if not _finite(dt):
-            raise ProtocolError("'t' + 'dt' x elements is not a finite time")
-        if dt == 0:  # every element at t (the same bits as the sum below, one array)
-            times = np.full(n_elements, float(t) + 0.0)
-        else:
-            times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
-        if not np.isfinite(times[-1]):
-            raise ProtocolError("'t' + 'dt' x elements is not a finite time")
+        times = _element_times(t, d.get("dt", 0.0), n_elements)
     return Frame(seq, times, values, unit)
+
+
+def _element_times(t: float, dt: Any, n_elements: int) -> np.ndarray:
+    """The element times of a frame at ``t`` whose elements are ``dt`` apart, checked."""
+    if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt >= 0:
+        raise ProtocolError("'dt' must be a number >= 0")
+    if not _finite(dt):
+        raise ProtocolError("'t' + 'dt' x elements is not a finite time")
+    if dt == 0:  # every element at t (the same bits as the sum below, one array)
+        times = np.full(n_elements, float(t) + 0.0)
+    else:
+        times = np.asarray(float(t) + float(dt) * np.arange(n_elements), dtype=np.float64)
+    if not np.isfinite(times[-1]):
+        raise ProtocolError("'t' + 'dt' x elements is not a finite time")
+    return times
 
 
 ANNOUNCE = "#layout "

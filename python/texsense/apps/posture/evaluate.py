@@ -39,6 +39,7 @@ __all__ = [
     "CLASSIFIERS",
     "LosoReport",
     "SubjectSelect",
+    "check_classes",
     "class_distances",
     "loso",
     "make_classifier",
@@ -246,6 +247,15 @@ class LosoReport:
         }
 
 
+def check_classes(y: npt.ArrayLike, what: str) -> None:
+    """Refuse training frames of one class (scikit-learn's classifiers raise deep inside
+    their fit): ``what`` names the frames (``"the frames without subject 's1'"``)."""
+    values = np.unique(np.asarray(y).astype(str))
+    if values.size < 2:
+        one = f"one class, '{values[0]}'" if values.size else "no class"
+        raise ParameterError(f"{what} hold {one}: a classifier needs two or more")
+
+
 def _check_xy(
     X: npt.ArrayLike, y: npt.ArrayLike, groups: npt.ArrayLike, min_groups: int = 2
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -311,6 +321,10 @@ def loso(
     for s in it if show_progress else subjects:
         test = ga == s
         train_extra = ge != s
+        check_classes(
+            np.concatenate([ya[~test], ye[train_extra]]),
+            f"the training frames without subject {str(s)!r}",
+        )
         model = clone(template)
         kwargs = {"groups": np.concatenate([ga[~test], ge[train_extra]])} if takes_groups(
             model) else {}  # fmt: skip

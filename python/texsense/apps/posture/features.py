@@ -150,6 +150,8 @@ def mirror_samples(
     y = np.asarray(labels)
     table = {str(k): v for k, v in mapping.items()}
     index = np.flatnonzero([str(v) in table for v in y])
+    if index.size == 0:  # no label of the map: nothing to mirror
+        return np.asarray(frames)[:0], y[:0], index
     mirrored = mirror_frames(np.asarray(frames)[index], layout)
     new = np.array([table[str(v)] for v in y[index]], dtype=object)
     return mirrored, new.astype(y.dtype), index

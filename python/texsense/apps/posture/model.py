@@ -114,8 +114,9 @@ class PostureModel:
             X = np.vstack([X, self.features_of(flipped, b)])
             y = np.concatenate([y, y_m])
             g = None if g is None else np.concatenate([g, g[source]])
-        from texsense.apps.posture.evaluate import takes_groups
+        from texsense.apps.posture.evaluate import check_classes, takes_groups
 
+        check_classes(y, "the training frames")
         if takes_groups(self.estimator):
             self.estimator.fit(X, y, groups=g)
         else:

@@ -56,13 +56,16 @@ async function post(url) {
   const r = await fetch(withToken(url), { method: "POST" });
   if (!r.ok) $("counts").textContent = `${url}: ${r.status}`;
 }
+// A tile is made once per mat and then filled in place: its buttons stay the same elements
+// between messages, so a click that lands while the ward updates is never lost (a button
+// replaced between mouse-down and mouse-up gets no click) and never hits another mat.
 function tile(mat) {
-  const el = document.createElement("div");
-  el.className = `tile is-${mat.state}${mat.bed || mat.mode === "bed" ? " is-bed" : ""}`;  // not the monitor's .alert band style
-  el.dataset.id = mat.id;
-  el.setAttribute("data-state", mat.state);
-  const skipped = mat.malformed + mat.skipped;
-  el.innerHTML = `
+  let el = tiles.get(mat.id);
+  if (!el) {
+    el = document.createElement("div");
+    el.dataset.id = mat.id;
+    tiles.set(mat.id, el);
+    el.innerHTML = `
     <div class="top"><span class="id"></span><span class="state"></span></div>
     <canvas width="160" height="120"></canvas>
     <div class="line"><span class="occupancy"></span><span class="peak"></span></div>
@@ -70,51 +73,76 @@ function tile(mat) {
     <div class="line bed-line" hidden></div>
     <div class="line problem" hidden></div>
     <div class="line holder" hidden></div>
-    <div class="line"><span>${mat.frames} frames · <span class="ago"></span></span><span>${skipped ? skipped + " skipped" : ""}</span></div>`;
+    <div class="line"><span><span class="frames"></span> frames · <span class="ago"></span></span><span class="skipped"></span></div>
+    <button class="ack" hidden>acknowledge</button><button class="admit" hidden>admit again</button>`;
+    // each button acts on the mat's data at the time of the click
+    el.querySelector("button.ack").onclick = (e) => {
+      e.stopPropagation();
+      const now = mats.get(mat.id);
+      if (now.alert) post(`/api/mats/${encodeURIComponent(now.id)}/alerts/${now.alert.id}/ack`);
+    };
+    el.querySelector("button.admit").onclick = (e) => {
+      e.stopPropagation();
+      post(`/api/mats/${encodeURIComponent(mat.id)}/admit`);
+    };
+    el.onclick = () => {
+      const now = mats.get(mat.id), id = encodeURIComponent(now.id);
+      const base = now.holder_url && now.holder !== member ? now.holder_url : "";  // its holder's dashboard
+      location.href = withToken(`${base}mats/${id}/`);
+    };
+  }
+  fill(el, mat);
+  return el;
+}
+function fill(el, mat) {
+  el.className = `tile is-${mat.state}${mat.bed || mat.mode === "bed" ? " is-bed" : ""}`;  // not the monitor's .alert band style
+  el.setAttribute("data-state", mat.state);
+  const skipped = mat.malformed + mat.skipped;
+  el.querySelector(".frames").textContent = mat.frames;
+  el.querySelector(".skipped").textContent = skipped ? skipped + " skipped" : "";
   el.querySelector(".occupancy").textContent = mat.occupied ? "occupied" : "empty";
   el.querySelector(".peak").textContent = mat.peak_mmhg === null ? "" : `peak ${Math.round(mat.peak_mmhg)} mmHg`;
   el.querySelector(".above").textContent = `above ${mat.threshold_mmhg} mmHg for`;
   el.querySelector(".big").textContent = mat.minutes_since_reposition.toFixed(1);
+  const bedLine = el.querySelector(".bed-line");
+  bedLine.hidden = !mat.bed;
   if (mat.bed) {  // a bed: its side and the turning schedule, in the dashboard's words
-    const line = el.querySelector(".bed-line"), b = mat.bed, now = b.turn_due || mat.state === "alert";
-    line.hidden = false;
-    line.classList.toggle("turn-due", now);
+    const b = mat.bed, now = b.turn_due || mat.state === "alert";
+    bedLine.classList.toggle("turn-due", now);
     // two parts that never break inside ("turn due in 1:56 h" whole on the next line)
     const parts = b.side === null ? ["out of bed"]
       : [`${b.side} for ${hm(b.since_turn_s)}`, now ? "turn now" : `turn due in ${hm(b.due_in_s)}`];
-    line.replaceChildren(...parts.map((text) => Object.assign(document.createElement("span"), { textContent: text })));
+    bedLine.replaceChildren(...parts.map((text) => Object.assign(document.createElement("span"), { textContent: text })));
   }
-  const trouble = mat.refused || mat.problem;
-  if (trouble) {  // a refused mat, a missing or silent device: said on the tile
-    const line = el.querySelector(".problem");
-    line.hidden = false;
-    line.textContent = trouble;
-    el.title = trouble;
-  }
+  const trouble = mat.refused || mat.problem, problem = el.querySelector(".problem");
+  problem.hidden = !trouble;  // a refused mat, a missing or silent device: said on the tile
+  problem.textContent = trouble || "";
+  el.title = trouble || "";
+  const holder = el.querySelector(".holder");
+  holder.hidden = mat.holder === undefined;
   if (mat.holder !== undefined) {  // a group: which station watches the mat (docs/station.md)
-    const line = el.querySelector(".holder");
-    line.hidden = false;
-    line.textContent = mat.holder === null ? "no station watches it" : `watched by ${mat.holder}${mat.holder === member ? " (here)" : ""}`;
+    holder.textContent = mat.holder === null ? "no station watches it" : `watched by ${mat.holder}${mat.holder === member ? " (here)" : ""}`;
   }
   el.querySelector(".id").textContent = mat.id;
   el.querySelector(".state").textContent = mat.state === "alert" ? `${mat.action} now!` : STATE_TEXT[mat.state] || mat.state;
   el.querySelector(".ago").textContent = ago(mat);
   drawMini(el.querySelector("canvas"), mat.map, mat);
-  const button = (text, cls, url) => {
-    const b = document.createElement("button");
-    b.textContent = text;
-    b.className = cls;
-    b.onclick = (e) => { e.stopPropagation(); post(url); };
-    el.appendChild(b);
-  };
-  const id = encodeURIComponent(mat.id);
-  if (mat.alert && mat.alert.active) button("acknowledge", "ack", `/api/mats/${id}/alerts/${mat.alert.id}/ack`);
-  if (mat.refused) button("admit again", "admit", `/api/mats/${id}/admit`);
-  const base = mat.holder_url && mat.holder !== member ? mat.holder_url : "";  // its holder's dashboard
-  el.onclick = () => { location.href = withToken(`${base}mats/${id}/`); };
-  return el;
+  el.querySelector("button.ack").hidden = !(mat.alert && mat.alert.active);
+  el.querySelector("button.admit").hidden = !mat.refused;
 }
 const order = (a, b) => b.urgency - a.urgency || b.minutes_since_reposition - a.minutes_since_reposition || (a.id < b.id ? -1 : a.id > b.id ? 1 : 0);
+// Most urgent first, but tiles never move under a pointer that is aiming: while it moved over
+// the tiles in the last HOLD_MS the order waits, then catches up (a parked mouse holds nothing)
+const HOLD_MS = 1500;
+let aimedAt = -Infinity, pending = null;
+for (const kind of ["pointermove", "pointerdown"]) $("tiles").addEventListener(kind, () => { aimedAt = performance.now(); });
+function reorder() {
+  const wait = aimedAt + HOLD_MS - performance.now();
+  if (wait > 0) { if (pending === null) pending = setTimeout(() => { pending = null; reorder(); }, wait); return; }
+  const sorted = [...mats.values()].sort(order).map((m) => tiles.get(m.id));
+  const now = [...$("tiles").children];
+  if (sorted.some((el, k) => now[k] !== el)) $("tiles").replaceChildren(...sorted);
+}
 function render(msg) {
   const h = msg.header;
   wall = msg.wall;
@@ -125,14 +153,11 @@ function render(msg) {
   $("broker").textContent = `${h.broker || "local sources"} · ${h.connected ? "connected" : "disconnected — retrying"}${trouble} · ${h.topic}${group}`;
   for (const mat of msg.mats) {
     mats.set(mat.id, mat);
-    const el = tile(mat), old = tiles.get(mat.id);
-    if (old) old.replaceWith(el); else $("tiles").appendChild(el);
-    tiles.set(mat.id, el);
+    const fresh = !tiles.has(mat.id), el = tile(mat);
+    if (fresh) $("tiles").appendChild(el);
   }
   for (const [id, el] of tiles) el.querySelector(".ago").textContent = ago(mats.get(id));
-  const sorted = [...mats.values()].sort(order).map((m) => tiles.get(m.id));
-  const now = [...$("tiles").children];
-  if (sorted.some((el, k) => now[k] !== el)) $("tiles").replaceChildren(...sorted);
+  reorder();
   const all = [...mats.values()];
   const alerts = all.filter((m) => m.state === "alert").length;
   const stale = all.filter((m) => m.state === "stale" || m.state === "refused" || m.state === "unwatched").length;
