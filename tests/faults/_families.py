@@ -4,25 +4,43 @@ its peak memory), the one-line check, a small valid recording to spoil."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import subprocess
 import sys
+import traceback
 from pathlib import Path
 
 import numpy as np
 
 from texsense import Layout, Recording
+from texsense.cli import main
 
 #: Runs each argv of stdin's JSON through texsense.cli.main in this one process; prints the
 #: results and the peak resident memory after the warm-up argv and at the end (KiB).
 _BATCH = r"""
-import contextlib, io, json, resource, sys, time, traceback
-from texsense.cli import main
+import json, resource, sys, time
+sys.path.insert(0, TESTS)
+from faults._families import call_main
 warm, argvs = json.load(sys.stdin)
 def run(argv):
     print("#", json.dumps(argv), file=sys.__stderr__, flush=True)  # which one, if it hangs
     start = time.monotonic()
+    return [*call_main(argv), time.monotonic() - start]
+for argv in warm:
+    run(argv)
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+results = [run(argv) for argv in argvs]
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+json.dump({"results": results, "base_kib": base, "peak_kib": peak}, sys.stdout)
+""".replace("TESTS", repr(str(Path(__file__).resolve().parents[1])))
+
+
+def call_main(argv: list[str]) -> tuple[int, str, str]:
+    """``texsense.cli.main(argv)`` in this process: (exit code, stdout, stderr), a traceback
+    (what the fault tests look for) printed into the stderr it returns, exit code -1."""
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -32,14 +50,7 @@ def run(argv):
         except BaseException:
             traceback.print_exc()
             rc = -1
-    return [rc, out.getvalue(), err.getvalue(), time.monotonic() - start]
-for argv in warm:
-    run(argv)
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-results = [run(argv) for argv in argvs]
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-json.dump({"results": results, "base_kib": base, "peak_kib": peak}, sys.stdout)
-"""
+    return rc, out.getvalue(), err.getvalue()
 
 
 def batch(

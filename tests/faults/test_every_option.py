@@ -32,7 +32,6 @@ import io
 import json
 import re
 import shutil
-import traceback
 from pathlib import Path
 
 import numpy as np
@@ -41,9 +40,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from matplotlib.figure import Figure
 
-from faults._families import small_recording, two_postures
+from faults._families import call_main, small_recording, two_postures
 from texsense import Layout, Recording
-from texsense.cli import COMMANDS, build_parser, main
+from texsense.cli import COMMANDS, build_parser
 from texsense.commands._applies import check_given, rules_of
 from texsense.io import save
 
@@ -246,19 +245,6 @@ def undrawn_figures(monkeypatch):
     monkeypatch.setattr(Figure, "savefig", savefig)
 
 
-def _run(argv: list[str]) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main(argv)
-        except SystemExit as e:
-            rc = e.code if isinstance(e.code, int) else 1
-        except BaseException:  # (a traceback is what the test looks for)
-            traceback.print_exc()
-            rc = -1
-    return rc, out.getvalue(), err.getvalue()
-
-
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory):
     """The files the base runs read."""
@@ -284,7 +270,7 @@ def inputs(tmp_path_factory):
     ]  # fmt: skip
     with contextlib.chdir(root):
         for argv in made:
-            assert _run(argv)[0] == 0, argv
+            assert call_main(argv)[0] == 0, argv
     return root
 
 
@@ -343,7 +329,7 @@ def test_every_option_acts_or_is_refused(command, inputs, fault_row):
     with contextlib.chdir(inputs):
         for base_argv in [BASE[command], *ALSO.get(command, [])]:
             _clean(inputs, fixed)
-            base = _run(base_argv)
+            base = call_main(base_argv)
             assert base[0] == 0, (base_argv, base)
             before = _outcome(inputs, fixed, base)
             for action in _options(p):
@@ -354,7 +340,7 @@ def test_every_option_acts_or_is_refused(command, inputs, fault_row):
                 if argv == base_argv or flag == "--scheduler":  # (the base gives it; a dial)
                     continue
                 _clean(inputs, fixed)
-                result = _run(argv)
+                result = call_main(argv)
                 counted += 1
                 problem = _one_line_or_usage(result[0], result[2])
                 if problem:
@@ -410,7 +396,7 @@ def test_hostile_values_never_a_traceback(command, inputs, fault_row):
             for value in _hostile(action):
                 argv = _hostile_argv(command, p, action, value)
                 _clean(inputs, fixed)
-                rc, _out, err = _run(argv)
+                rc, _out, err = call_main(argv)
                 counted += 1
                 problem = _one_line_or_usage(rc, err)
                 if value == "" and rc == 0:  # an empty word is never the option left out
@@ -481,7 +467,7 @@ def test_command_lines_of_several_options_never_a_traceback(inputs, fault_row):
     @given(command_lines(files))
     def run(argv: list[str]) -> None:
         _clean(inputs, fixed)
-        rc, _out, err = _run(argv)
+        rc, _out, err = call_main(argv)
         tried.append(" ".join(argv))
         problem = _one_line_or_usage(rc, err)
         assert problem is None, f"{argv!r}: {problem}"

@@ -23,39 +23,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from faults._families import batch
 from faults._file_cases import ISCAN, ROWS, Case, all_cases
 from faults.conftest import assert_clear_error, run_cli
 
 CASES = all_cases()
 
-_BATCH = r"""
-import contextlib, io, json, sys, traceback
-from texsense.cli import main
-results = []
-for argv in json.load(sys.stdin):
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main(argv)
-        except SystemExit as e:
-            rc = e.code if isinstance(e.code, int) else 1
-        except BaseException:
-            traceback.print_exc()
-            rc = -1
-    results.append([rc, out.getvalue(), err.getvalue()])
-json.dump(results, sys.stdout)
-"""
-
 
 def cli_batch(argvs: list[list[str]], cwd: Path) -> list[tuple[int, str, str]]:
     """``texsense ARGV`` for each ARGV, in one child process: (exit code, stdout, stderr)."""
-    env = dict(os.environ, TEXSENSE_NO_PROGRESS="1")
-    proc = subprocess.run(
-        [sys.executable, "-c", _BATCH], input=json.dumps(argvs), capture_output=True,
-        text=True, cwd=cwd, env=env, timeout=900,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return [tuple(r) for r in json.loads(proc.stdout)]
+    return batch(argvs, cwd, timeout=900)[0]
 
 
 @pytest.fixture(scope="module")
