@@ -306,10 +306,8 @@ def _plain_unit(text: str | None) -> str | None:
     if text in _PLAIN_UNITS:
         return _PLAIN_UNITS[text]
     try:
-        unit: str | None = units.canonical("pF" if text is None else text)
-    except ValueError:
-        unit = None
-    if unit is not None and units.quantity_of(unit) not in ("capacitance", "pressure"):
+        unit: str | None = _frame_unit("pF" if text is None else text)
+    except ProtocolError:
         unit = None
     if len(_PLAIN_UNITS) < 64:  # (a mat sends one or two)
         _PLAIN_UNITS[text] = unit
@@ -375,11 +373,8 @@ def _seq_and_t(d: dict[str, Any]) -> tuple[int, float]:
     return seq, t
 
 
-def _frame_of(d: dict[str, Any], values: np.ndarray, n_elements: int) -> Frame:
-    """The frame of a payload's object ``d`` whose values were read: its seq, time, unit
-    and element times, checked."""
-    seq, t = _seq_and_t(d)
-    unit = d.get("unit", "pF")
+def _frame_unit(unit: Any) -> str:
+    """A frame's unit, canonical, checked: a text naming a capacitance or a pressure."""
     if not isinstance(unit, str):
         raise ProtocolError("'unit' must be a string")
     try:
@@ -388,6 +383,14 @@ def _frame_of(d: dict[str, Any], values: np.ndarray, n_elements: int) -> Frame:
         raise ProtocolError(str(e)) from None
     if units.quantity_of(unit) not in ("capacitance", "pressure"):
         raise ProtocolError(f"unit {unit!r} is neither capacitance nor pressure")
+    return str(unit)
+
+
+def _frame_of(d: dict[str, Any], values: np.ndarray, n_elements: int) -> Frame:
+    """The frame of a payload's object ``d`` whose values were read: its seq, time, unit
+    and element times, checked."""
+    seq, t = _seq_and_t(d)
+    unit = _frame_unit(d.get("unit", "pF"))
     if "element_times" in d:
         et = d["element_times"]
         ok = isinstance(et, list) and len(et) == n_elements
