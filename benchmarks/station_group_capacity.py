@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from archive_scale import big_calibration
 from conftest import free_port
 from postgres_server import PostgresServer
-from station_load import PUBLISHER, cpu_seconds, viewer
+from station_load import PUBLISHER, cpu_seconds, receive, viewer
 from texsense.station.broker import Broker
 from texsense.station.lease import preferred
 from texsense.station.workers import worker_name
@@ -51,16 +51,23 @@ def get(url: str, timeout: float = 30.0):
 
 
 def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[str],
-                  workers: int = 1) -> dict:  # fmt: skip
+                  workers: int = 1, probe: Path | None = None) -> dict:  # fmt: skip
     """The members' processes and their group members' (name, page URL): one each, or its
-    workers' with ``--workers`` (ports PORT..PORT+W-1); started together."""
+    workers' with ``--workers`` (ports PORT..PORT+W-1); started together. ``probe``: each
+    member's event loop timed by :mod:`loop_probe`, its long callbacks written to
+    ``probe/<member>.tsv``."""
     out = {}
     for name in names:
         port = free_port() if workers == 1 else free_ports(workers)
         log = (tmp / f"{name}.log").open("wb")
         more = ["--workers", str(workers)] if workers > 1 else []
+        start = ["-m", "texsense.cli"]
+        if probe is not None:
+            start = ["-c", f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+                     f"import loop_probe; loop_probe.run_module('texsense.cli', "
+                     f"{str(probe / f'{name}.tsv')!r})"]  # fmt: skip
         proc = subprocess.Popen(
-            [sys.executable, "-m", "texsense.cli", "station", "--group", "cap", "--member", name,
+            [sys.executable, *start, "station", "--group", "cap", "--member", name,
              "--config", str(ward), "--broker", f"mqtt://127.0.0.1:{broker.port}", "--db", db,
              "--port", str(port), "--record-dir", str(tmp / f"rec-{name}"), *more],
             stdout=log, stderr=subprocess.STDOUT,
@@ -118,7 +125,8 @@ def settle(members: dict, mats: list[str], timeout: float = 600.0) -> float:
 
 
 def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: float,
-        seconds: float, db_k: int, workers: int = 1) -> dict:  # fmt: skip
+        seconds: float, db_k: int, workers: int = 1, probe: Path | None = None,
+        dump: Path | None = None) -> dict:  # fmt: skip
     ward = tmp / f"ward-{mats}.toml"
     ward.write_text("".join(
         f'[[mat]]\nid = "m{m:03d}"\nlayout = "grid:32x32"\ncalibration = "{tmp / "cal.json"}"\n\n'
@@ -129,7 +137,8 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         c.execute(f"CREATE DATABASE {db}")
     url = pg.url.rsplit("/", 1)[0] + "/" + db
     ids = [f"m{m:03d}" for m in range(mats)]
-    members = start_members(tmp, broker, url, ward, [f"s{k + 1}" for k in range(n)], workers)
+    names = [f"s{k + 1}" for k in range(n)]
+    members = start_members(tmp, broker, url, ward, names, workers, probe)
     try:
         took = settle(members, ids)
         first = next(iter(members.values()))[1][0][1]
@@ -162,10 +171,22 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
                 done = await asyncio.to_thread(frames_of, k) - f0[k]
                 per_frame[k] = 1e3 * used / max(done, 1)
 
+        samples: list[str] = []
+
+        def seen(w: str, text: str) -> None:  # a viewer's sample, kept for --dump
+            now, snap = time.time(), json.loads(text)
+            latencies.append(now - snap["t"])
+            samples.append(json.dumps({"mat": w, "viewer": now, "t": snap["t"],
+                                       "received_at": snap.get("received_at"),
+                                       "processed_ms": snap.get("processed_ms")}))  # fmt: skip
+
         async def view(w: str) -> None:
             url = holder[w].replace("http", "ws", 1) + f"mats/{w}/ws"
             try:
-                await viewer(url, latencies, stop)
+                if dump is None:
+                    await viewer(url, latencies, stop)
+                else:
+                    await receive(url, stop, lambda text: seen(w, text))
             except Exception as e:  # said, and the row goes on with the other viewers
                 print(f"viewer of {w} at {url}: {type(e).__name__}: {e}", file=sys.stderr)
 
@@ -174,6 +195,8 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
 
         asyncio.run(view_all())
         sent = json.loads(pub.communicate(timeout=120)[0])
+        if dump is not None:
+            dump.write_text("\n".join(samples) + "\n")
         time.sleep(1.0)  # the members drain what is in flight
         processed = sum(frames_of(name) for name in members)
         lat = np.asarray(latencies[len(latencies) // 10 :]) * 1e3  # after the start
@@ -211,7 +234,18 @@ def main() -> None:
         default=1,
         help="each member as W worker processes (texsense station --workers W)",
     )
+    ap.add_argument(
+        "--probe",
+        type=Path,
+        help="a folder: each member's long event-loop callbacks (loop_probe.py)",
+    )
+    ap.add_argument(
+        "--dump", type=Path, help="a folder: every viewer's sample of each row (JSON lines)"
+    )
     args = ap.parse_args()
+    for folder in (args.probe, args.dump):
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
     counts = [int(v) for v in args.members.split(",")]
     loads = [(int(m), float(h)) for m, h in (x.split("x") for x in args.loads.split(","))]
     print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared)")
@@ -233,7 +267,12 @@ def main() -> None:
             for mats, hz in loads:
                 for n in counts:
                     k += 1
-                    r = run(tmp, broker, pg, n, mats, hz, args.seconds, k, args.workers)
+                    dump = args.dump / f"row{k}.jsonl" if args.dump else None
+                    probe = args.probe / f"row{k}" if args.probe else None
+                    if probe is not None:
+                        probe.mkdir(exist_ok=True)
+                    r = run(tmp, broker, pg, n, mats, hz, args.seconds, k, args.workers, probe,
+                            dump)  # fmt: skip
                     print(f"| {mats} | {hz:g} Hz | {n} | {r['settle_s']:.0f} s | {r['sent']} | "
                           f"{r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
                           f"{r['p99']:.0f} ms | {r['cpu']} | {r['ms_frame']} | "

@@ -422,3 +422,43 @@ def test_the_station_counts_the_pages_it_is_serving(monkeypatch):
             assert json.loads(ws.receive_text())["type"] == "ward"
             assert st.serving == 0  # the viewer has its first message
     assert during == [1] and st.serving == 0 and st.served_at > 0  # pages first a while after
+
+
+def test_a_dashboard_opened_before_its_mats_first_frame_does_not_hold_the_inbox():
+    """A viewer of a mat that has sent nothing yet waits for the mat's frames, which are in
+    the inbox: it is no page being served (issue 38: viewers opened as 1,000 mats started
+    kept the inbox waiting 0.5 s at a time until their mats' first frames were read). With a
+    frame, its first message is sent at once and it counted until then."""
+    from fastapi.testclient import TestClient
+
+    from texsense.station.server import create_ward_app
+
+    st = station("bed1", "bed2")
+    with TestClient(create_ward_app(st), base_url="http://127.0.0.1:8766") as client:
+        with client.websocket_connect("ws://127.0.0.1:8766/mats/bed1/ws"):
+            assert st.serving == 0  # (before its accept: the handshake is one step)
+            deadline = time.monotonic() + 5.0
+            while st.pages_first() and time.monotonic() < deadline:
+                time.sleep(0.05)  # (the grace after the handshake)
+            assert not st.pages_first()  # the inbox reads while the viewer waits
+        st.handle("texsense/bed2/frames", payload(0))
+        with client.websocket_connect("ws://127.0.0.1:8766/mats/bed2/ws") as ws:
+            assert json.loads(ws.receive_text())["seq"] == 0
+            assert st.serving == 0
+
+
+def test_the_inbox_waits_a_while_after_a_page_not_after_an_api_answer():
+    """After a page (the ward's, its files) the inbox waits :data:`PAGE_GRACE_S` for the
+    requests that follow it; after an API call's answer (a script polling ``/api/mats``) it
+    reads at once (issue 38)."""
+    from fastapi.testclient import TestClient
+
+    from texsense.station.server import create_ward_app
+
+    st = station("bed1")
+    with TestClient(create_ward_app(st), base_url="http://127.0.0.1:8766") as client:
+        assert client.get("/api/mats").status_code == 200
+        assert client.get("/mats/bed1/api/status").status_code == 200
+        assert st.serving == 0 and not st.pages_first() and st.served_at < 0
+        assert client.get("/").status_code == 200
+        assert st.pages_first() and st.served_at > 0

@@ -71,6 +71,7 @@ __all__ = [
     "Guard",
     "Lane",
     "finish",
+    "idle",
     "is_loopback",
     "plain_errors",
     "resolve_token",
@@ -485,6 +486,22 @@ async def finish(tasks: list[asyncio.Task[Any]]) -> None:
     for t in tasks:
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await t
+
+
+#: The ASGI scope's key of a callable that says a request is no longer being served: a viewer
+#: that has nothing to be sent until its source sends (the station's ``Serving`` middleware
+#: lets its inbox wait while pages are served, :mod:`texsense.station.server`).
+SERVED = "texsense.served"
+
+
+def idle(websocket: Any) -> None:
+    """Say that this viewer waits for its source, not for the server: a dashboard opened
+    before its mat's first frame (issue 38: five viewers opened as 1,000 mats started kept the
+    station's inbox waiting for pages, 0.5 s at a time, until each mat's first frame was
+    read). A no-op without the station's middleware."""
+    served = websocket.scope.get(SERVED)
+    if callable(served):
+        served()
 
 
 async def stream(

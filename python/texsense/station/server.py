@@ -38,6 +38,7 @@ from texsense.monitor.routes.static import STATIC as MONITOR_STATIC
 from texsense.monitor.routes.static import file_response
 from texsense.monitor.server import create_app
 from texsense.monitor.web import (
+    SERVED,
     Access,
     Guard,
     finish,
@@ -138,7 +139,11 @@ class Serving:
     """ASGI middleware: counts the HTTP requests being served and the WebSocket viewers until
     their first message (``Station.serving``): the station's inbox waits for them
     (:mod:`texsense.station.inbox`), so a page opens as fast on a busy station as on a quiet
-    one."""
+    one. A viewer that has nothing to be sent yet (a mat's dashboard before its first frame:
+    :func:`texsense.monitor.web.idle`) is not waited for: the frames it waits for are in that
+    inbox (issue 38). The inbox waits a while after a page, its files or a viewer's first
+    message (:data:`~texsense.station.ward.PAGE_GRACE_S`: the page's next requests follow),
+    not after an API call's answer."""
 
     def __init__(self, app: Any, station: Station) -> None:
         self.app, self.station = app, station
@@ -149,18 +154,24 @@ class Serving:
             return
         station, counted = self.station, [True]
         station.serving += 1
+        # a page, its files or its WebSocket: a burst follows (the grace); an API call's
+        # answer does not make one (a script polling GET /api/mats of 1,000 mats held the
+        # inbox 0.3 s after each answer, issue 38)
+        grace = scope["type"] == "websocket" or "/api/" not in scope.get("path", "")
 
         def release() -> None:
             if counted[0]:
                 counted[0] = False
                 station.serving -= 1
-                station.served_at = time.monotonic()
+                if grace:
+                    station.served_at = time.monotonic()
 
         async def sending(message: dict[str, Any]) -> None:
             if message["type"] == "websocket.send":
                 release()  # a viewer's first message is out: it waits like the others now
             await send(message)
 
+        scope[SERVED] = release  # a viewer with nothing to send yet says so (monitor.web.idle)
         try:
             await self.app(scope, receive, sending if scope["type"] == "websocket" else send)
         finally:

@@ -9,7 +9,7 @@ from fastapi import APIRouter, HTTPException, WebSocket
 from fastapi.responses import Response
 
 from texsense.monitor.live import Monitor
-from texsense.monitor.web import stream
+from texsense.monitor.web import idle, stream
 
 __all__ = ["router"]
 
@@ -75,6 +75,8 @@ def router(monitor: Monitor) -> APIRouter:
         q = monitor.subscribe()
         try:
             first = monitor.latest_text if monitor.latest is not None else None
+            if first is None:  # nothing to send before the mat's first frame
+                idle(websocket)
             await stream(websocket, first, q.get)
         finally:
             monitor.unsubscribe(q)
