@@ -49,18 +49,18 @@ GAPS = (1, 3, 6, 12)
 RULES = ("next frame", "loaded")
 
 
-def payloads(seed: int, start: int, frames: int) -> list[tuple[bytes, float]]:
-    """A person's frames ``start`` ... as MQTT payloads numbered from 0, with their arrival
-    (wall s) at real time."""
+def payloads(seed: int, start: int, frames: int, every: int = 1) -> list[tuple[bytes, float]]:
+    """A person's frames ``start`` ... (every ``every``-th: a mat that scans less often) as
+    MQTT payloads numbered from 0, with their arrival (wall s) at real time."""
     source = VirtualSeatSource(speed=0, seed=seed)
 
     async def take() -> list:
         out = []
         async for f in source.frames():
             out.append(f)
-            if len(out) == start + frames:
+            if len(out) == start + frames * every:
                 break
-        return out[start:]
+        return out[start::every]
 
     taken = asyncio.run(take())
     t0 = taken[0].t
@@ -109,15 +109,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--people", type=int, default=3, help="simulated people (seeds)")
     ap.add_argument("--stride", type=int, default=2, help="every n-th takeover position")
+    ap.add_argument("--every", type=int, default=1,
+                    help="every n-th frame of the seat (a mat that scans less often: the group "
+                    "fault test's mats publish every 4th)")  # fmt: skip
     args = ap.parse_args()
     config = VirtualMats(1, None, speed=1.0).configs(seat_calibration(), None, REPOSITION_MIN)[0]
     folder = Path(tempfile.mkdtemp(prefix="texsense-gap-"))
-    frames_n = int(REPOSITION_MIN * 60 / FRAME_S) + 2 * max(GAPS) + 30
+    period = FRAME_S * args.every
+    frames_n = int(REPOSITION_MIN * 60 / period) + 2 * max(GAPS) + 30
     diffs: dict[tuple[str, int], list[float]] = {}
     t_start = time.monotonic()
     for seed in range(args.people):
         for start in (0, 400):  # two stretches of each person's sitting
-            frames = payloads(seed, start, frames_n)
+            frames = payloads(seed, start, frames_n, args.every)
             want, blobs, times = reference(config, frames, folder)
             if want is None:
                 continue
@@ -141,7 +145,7 @@ def main() -> None:
             d = np.array(diffs[(rule, g)])
             moved = np.abs(d) > 0.01
             late, early = abs(max(d.max(), 0.0)), abs(max(-d.min(), 0.0))
-            print(f"| {g} ({g * FRAME_S:.1f} s) | {rule} | {d.size} | {moved.mean():.0%} | "
+            print(f"| {g} ({g * period:.1f} s) | {rule} | {d.size} | {moved.mean():.0%} | "
                   f"{late:.1f} s | {early:.1f} s |")  # fmt: skip
 
 
