@@ -32,7 +32,7 @@ from texsense.data import budget
 from texsense.data.files import check_writable, kept_or_made, open_regular, toml_loads
 from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 from texsense.monitor import sources
 from texsense.monitor.store import open_store
 from texsense.monitor.web import resolve_token, stop_on_sigterm
@@ -209,7 +209,7 @@ def _paths_of(ward: Path, k: int) -> Any:
 
             return named_path(str(value), ward, kind)
         except ParameterError as e:
-            raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {str(value)[:200]!r}: {e}") from None
+            raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {shown(value, 200)}: {e}") from None
 
     return named
 

@@ -169,10 +169,12 @@ def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
     if "*" in line:
         body, _, check = line.rpartition("*")
         if len(check) != 2 or check.upper() != _checksum(body):
-            raise ProtocolError(f"checksum mismatch ({check[:4]!r}, expected {_checksum(body)})")
+            raise ProtocolError(
+                f"checksum mismatch ({shown(check, 4)}, expected {_checksum(body)})"
+            )
     parts = body.split(",")
     if parts[0] != "F":
-        raise ProtocolError(f"unknown record type {parts[0][:8]!r} (expected 'F')")
+        raise ProtocolError(f"unknown record type {shown(parts[0], 8)} (expected 'F')")
     if len(parts) != 4 + n_elements:
         raise ProtocolError(f"expected {n_elements} values, got {max(len(parts) - 4, 0)}")
     seq = _int(parts[1], "frame counter")
