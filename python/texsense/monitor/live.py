@@ -167,7 +167,7 @@ class Monitor:
         self._skimmed = False  # frames not read since the last frame processed
         self.last_seq: int | None = None  # of the last frame on the time line
         self.missed = 0  # frames never seen: gaps in the frames' numbers (seq)
-        self.clock = FrameClock()
+        self.clock = FrameClock(rate=source.rate)
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
         self.last_pressure: np.ndarray | None = None  # N/cm², NaN where unknown
