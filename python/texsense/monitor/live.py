@@ -470,6 +470,7 @@ class Monitor:
         snap = {
             "seq": frame.seq,
             "frames": self.frames,
+            "missed": self.missed,  # frames never seen (gaps in seq)
             "t": frame.t,
             "raw": None,  # the maps: made from _maps when somebody asks (no viewer: no cost)
             "raw_unit": frame.unit,
