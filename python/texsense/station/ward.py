@@ -109,6 +109,7 @@ class _FedSource(Source):
         self.quantity = config.quantity
         self.unit = "pF" if config.quantity == "capacitance" else "N/cm2"
         self.name = f"mat {config.id} ({config.source})"
+        self.rate = config.rate
 
     def frames(self) -> AsyncIterator[Frame]:  # pragma: no cover - never iterated
         raise NotImplementedError("the station hands frames to the monitor")
@@ -226,9 +227,9 @@ class MatEntry:
         only its time is taken, which keeps the mat's clock in step (a burst of buffered
         frames skipped in the middle is no jump of the clock) and the mat heard (not silent);
         counted as ``behind`` and ``peeked``. The next frame read carries the exposure over
-        the frames peeked at (integrated over the frames' times, a change put midway): the
-        exposure and the pipeline's state are no longer exactly those of reading every
-        frame."""
+        the frames peeked at (their time counted as loaded where either frame read is,
+        :meth:`~texsense.apps.alerts.ExposureTracker.step`): the exposure and the pipeline's
+        state are no longer exactly those of reading every frame."""
         if frame.values.size != self.config.layout.n_elements:
             self._malformed("count", f"a frame of {frame.values.size} values")
             return False
@@ -406,6 +407,7 @@ class MatEntry:
             "ignored": self.ignored,
             "behind": self.behind,
             "peeked": self.peeked,
+            "missed": self.monitor.missed,
             "last_error": self.last_error,
             "problem": self.problem,
             "last_frame_wall": self.last_wall,
