@@ -19,7 +19,24 @@ __all__ = [
     "ShapeError",
     "UnitError",
     "WriteError",
+    "shown",
 ]
+
+
+def shown(value: object, limit: int = 40) -> str:
+    """A value as an error message shows it: quoted (``repr``, so that control characters
+    and quotes are seen as what they are), and when longer than ``limit`` characters cut
+    with the cut said, so that a cut value is never taken for the value itself.
+
+    >>> shown("x")
+    "'x'"
+    >>> shown(10**30, 20)
+    "'10000000000000000000'... (31 characters)"
+    """
+    text = str(value)
+    if len(text) <= limit:
+        return repr(text)
+    return f"{text[:limit]!r}... ({len(text)} characters)"
 
 
 class UnitError(ValueError):

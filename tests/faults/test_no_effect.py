@@ -20,6 +20,8 @@ import pytest
 
 from faults._families import batch, one_line, small_recording, two_postures
 from texsense import Layout, Recording
+from texsense.apps.posture.features import FeatureSet
+from texsense.apps.posture.model import PostureModel
 from texsense.cli import COMMANDS, build_parser
 from texsense.commands._applies import check_given, leaf_parser, rules_of
 from texsense.exceptions import ParameterError
@@ -147,6 +149,10 @@ ROWS = [
     ("--output", ["drift", "fit", "r.csv", "-o", "d.json"]),
     ("--turn-every", ["station", "--virtual-mats", "1", "--turn-every", "30", "--port", "PORT"]),
     ("--turn-every", ["station", "--config", "w.toml", "--turn-every", "30", "--port", "PORT"]),
+    # a ward file whose every mat sets it itself: the option reaches none
+    ("--turn-every", ["station", "--config", "own.toml", "--turn-every", "30", "--port", "PORT"]),
+    ("--reposition-min", ["station", "--config", "own.toml", "--reposition-min", "30", "--port",
+                          "PORT"]),
     *((flag, ["monitor", "--mode", "foot", flag, value, "--port", "PORT"])
       for flag, value in (("--threshold", "40"), ("--threshold-unit", "kPa"),
                           ("--reposition-min", "30"), ("--offload-min", "2"))),
@@ -236,6 +242,14 @@ def folder(tmp_path):
     assert main(["calibrate", "linear", "--like", str(tmp_path / "cap.h5"), "--gain", "2",
                  "--to", "pressure:N/cm2", "-o", str(tmp_path / "lin.json")]) == 0  # fmt: skip
     (tmp_path / "w.toml").write_text('[[mat]]\nid = "a"\nlayout = "grid:3x4"\n')
+    y = np.array(["left", "right"] * 10)  # a bed's side model (its sides are all it needs here)
+    frames = np.random.default_rng(0).random((20, 12))
+    PostureModel(FeatureSet(("elements",)), Layout.grid(3, 4), "logistic").fit(frames, y).save(
+        tmp_path / "sides.joblib"
+    )
+    (tmp_path / "own.toml").write_text('[[mat]]\nid = "a"\nlayout = "grid:3x4"\nbed = true\n'
+                                       'model = "sides.joblib"\nturn_every_min = 60\n'
+                                       'reposition_min = 15\n')  # fmt: skip
     for name, level in (("cap0.h5", 10.0), ("cap1.h5", 12.0)):  # (a mat calibration's)
         values = level + 0.01 * np.random.default_rng(int(level)).standard_normal((6, 12))
         save(Recording(values, np.arange(6.0), Layout.grid(3, 4), "capacitance", "pF"),

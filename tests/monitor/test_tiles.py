@@ -72,9 +72,12 @@ def test_the_feed_sends_what_changed_within_its_budget_and_starves_nobody():
         clock += 0.2
         feed.message(now=clock)
     assert all(feed.sent[e.id] == e.revision for e in st.mats.values())
-    clock += 0.2
+    # (the last message, a tile or a heartbeat, went out at feed.last: the next is due a
+    # second after it, wherever the 0.2 s ticks fell)
+    clock = feed.last + 0.5
     assert feed.message(now=clock) is None  # nothing changed: nothing to say ...
-    beat = json.loads(feed.message(now=clock + 1.0))  # ... but a heartbeat a second
+    clock += 0.5
+    beat = json.loads(feed.message(now=clock))  # ... but a heartbeat a second
     assert beat["mats"] == [] and not beat["reset"]
     st.mats["m007"].feed(Frame(5, np.full(1024, 5.0), np.ones(1024), "N/cm2"), clock)
     one = json.loads(feed.message(now=clock + 1.2))

@@ -279,8 +279,11 @@ fn advance(e: &mut f64, r: &mut f64, loaded: bool, dt: f64, offload_s: f64) {
 }
 
 /// One step of the tracker over `dt` s with the pressure `p` (NaN: unloaded) and, with bounds,
-/// their lower and upper maps; `skipped`: frames since the last step were not read, so an
-/// element that changed state changed midway. `None` when the lengths differ.
+/// their lower and upper maps; `skipped`: frames since the last step were not read (a station
+/// behind, a takeover, frames lost on the way), so the time between the two frames read is not
+/// known: it counts as loaded for an element loaded at either of them, never as relief (an
+/// alert is never later than reading every frame would raise it, but for the frames not read).
+/// `None` when the lengths differ.
 pub fn exposure_advance(
     p: &[f64],
     bounds: Option<(&[f64], &[f64])>,
@@ -298,7 +301,6 @@ pub fn exposure_advance(
     }
     // (NaN > threshold is false: a missing reading is unloaded, as numpy's NaN -> 0)
     let thr = rule.threshold;
-    let mut any_changed = false;
     if let Some((lo, hi)) = bounds {
         for i in 0..n {
             let sure = lo[i] > thr;
@@ -307,33 +309,15 @@ pub fn exposure_advance(
             st.possible[i] = maybe;
         }
     }
-    let now_of = |i: usize, st: &Exposure<'_>| match bounds {
-        None => p[i] > thr,
-        Some(_) => st.confident[i] | (st.possible[i] & rule.count_possible),
-    };
-    if skipped && dt > 0.0 {
-        any_changed = (0..n).any(|i| now_of(i, &st) != st.loaded_last[i]);
-    }
-    let split = skipped && dt > 0.0 && any_changed;
-    let half = 0.5 * dt;
     let (mut any_loaded, mut over, mut top, mut nan) = (false, 0usize, f64::NEG_INFINITY, false);
-    for i in 0..n {
-        let now = now_of(i, &st);
-        let was = st.loaded_last[i];
+    for (i, &pi) in p.iter().enumerate() {
+        let now = match bounds {
+            None => pi > thr,
+            Some(_) => st.confident[i] | (st.possible[i] & rule.count_possible),
+        };
+        let unseen_load = skipped & st.loaded_last[i];
         let (e, r) = (&mut st.exposure[i], &mut st.relief[i]);
-        if split {
-            let changed = now != was;
-            advance(
-                e,
-                r,
-                if changed { was } else { now },
-                if changed { half } else { dt },
-                rule.offload_s,
-            );
-            advance(e, r, now, if changed { half } else { 0.0 }, rule.offload_s);
-        } else {
-            advance(e, r, now, dt, rule.offload_s);
-        }
+        advance(e, r, now | unseen_load, dt, rule.offload_s);
         st.loaded_last[i] = now;
         any_loaded |= now;
         over += usize::from(*e >= rule.reposition_s);

@@ -275,10 +275,14 @@ class ExposureTracker:
         values, as a stage's ``step(values, valid, t)``.) With the bounds ``lower`` and
         ``upper`` (issue 37) an element is above the threshold when its lower bound is,
         *possibly* above when only its upper bound is (counted with ``count_possible``).
-        ``skipped``: frames since the last step were not read (a station behind skims them):
-        an element that changed between the two frames read changed midway between them, not
-        at the first frame skipped (the time since the last step is counted in this frame's
-        state otherwise, as between two frames in a row)."""
+        ``skipped``: frames since the last step were not read (a station behind skims them, a
+        takeover, frames lost on the way), so what happened between the two frames read is not
+        known: that time counts as loaded for an element loaded at either of them, never as
+        relief (otherwise the time since the last step counts in this frame's state, as
+        between two frames in a row). So an element's exposure is never below that of reading
+        every frame, unless a load came and went wholly inside the frames not read, and an
+        alert is never later but for the frames not read (docs/station.md, "What is lost at
+        worst")."""
         t = frame_time(t)
         p = np.asarray(pressure_ncm2, dtype=np.float64)
         if p.shape != (self.layout.n_elements,):
@@ -335,13 +339,8 @@ class ExposureTracker:
                 self._values(np.asarray(upper, np.float64)) > self.threshold_ncm2
             ) & ~self.confident
             loaded = self.confident | (self.possible & self.count_possible)
-        changed = loaded != self._loaded_last
-        if skipped and dt > 0 and changed.any():  # half the skipped time in the old state
-            half = 0.5 * dt
-            self._advance(np.where(changed, self._loaded_last, loaded), np.where(changed, half, dt))
-            self._advance(loaded, np.where(changed, half, 0.0))
-        else:
-            self._advance(loaded, dt)
+        # frames not read: the time between is loaded where either frame read is, never relief
+        self._advance(loaded | self._loaded_last if skipped else loaded, dt)
         self._loaded_last = loaded
         return bool(loaded.any())
 

@@ -32,7 +32,7 @@ from texsense.data import budget
 from texsense.data.files import check_writable, kept_or_made, open_regular, toml_loads
 from texsense.data.layout import Layout, parse_orientation
 from texsense.data.protocol import payload_limit
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 from texsense.monitor import sources
 from texsense.monitor.store import open_store
 from texsense.monitor.web import resolve_token, stop_on_sigterm
@@ -125,6 +125,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 _BEDS = "beds (a mat of --config with bed = true, or a virtual bed: --virtual-mats 2 or more)"
+_REPOSITION = "mats whose ward file entry has no reposition_min of its own, or virtual mats"
 
 #: Where the station's options apply (:mod:`texsense.commands._applies`).
 STATION_RULES = [
@@ -208,7 +209,7 @@ def _paths_of(ward: Path, k: int) -> Any:
 
             return named_path(str(value), ward, kind)
         except ParameterError as e:
-            raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {str(value)[:200]!r}: {e}") from None
+            raise FormatError(ward, f"[[mat]] #{k + 1}: {key} {shown(value, 200)}: {e}") from None
 
     return named
 
@@ -310,9 +311,10 @@ def read_config(
                                   "posture model of sides (texsense posture train)")  # fmt: skip
             model = PostureModel.load(named("model", m["model"], "file"))
         every = float(m.get("turn_every_min", turn_every_min))
+        own = frozenset(key for key in ("reposition_min", "turn_every_min") if key in m)
         mats.append(MatConfig(str(m["id"]), layout, cal, quantity, spec,
                               float(m.get("reposition_min", reposition_min)), bed=bed,
-                              posture_model=model, turn_every_min=every))  # fmt: skip
+                              posture_model=model, turn_every_min=every, own=own))  # fmt: skip
     return mats, local
 
 
@@ -484,8 +486,12 @@ def _serve(args: argparse.Namespace, access: Any, started: list[Any]) -> int | N
     mats, local = (
         read_config(args.config, args.reposition_min, args.turn_every) if args.config else ([], {})
     )
-    refuse_unless(args, "--turn-every", any(m.bed for m in mats) or _virtual_beds(args) > 0,
-                  _BEDS, f"{args.config} names no bed")  # fmt: skip
+    refuse_unless(args, "--turn-every", _virtual_beds(args) > 0 or
+                  any(m.bed and "turn_every_min" not in m.own for m in mats), _BEDS,
+                  f"{args.config} names no bed without its own turn_every_min")  # fmt: skip
+    refuse_unless(args, "--reposition-min", bool(args.virtual_mats) or
+                  any("reposition_min" not in m.own for m in mats), _REPOSITION,
+                  f"every mat of {args.config} has its own reposition_min")  # fmt: skip
     if not mats and not args.virtual_mats:
         if args.config:
             raise FormatError(args.config, "no [[mat]]: a ward file names at least one mat")

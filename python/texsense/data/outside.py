@@ -11,6 +11,8 @@ import sys
 import tomllib
 from typing import Any
 
+from texsense.exceptions import shown
+
 __all__ = ["json_loads", "toml_loads"]
 
 
@@ -84,7 +86,7 @@ def json_loads(text: str | bytes | bytearray) -> Any:
         marks = [m.start() for m in re.finditer(re.escape(json.dumps(e.key)) + r"\s*:", doc)]
         pos = marks[1] if len(marks) > 1 else 0  # the second time (best effort: escapes)
         raise json.JSONDecodeError(
-            f"the key {e.key[:80]!r} twice in one object", doc, pos
+            f"the key {shown(e.key, 80)} twice in one object", doc, pos
         ) from None
 
 

@@ -61,7 +61,7 @@ from texsense._core import parse_json_frame, parse_json_numbers
 from texsense.data import units
 from texsense.data.files import json_loads
 from texsense.data.layout import Layout, parse_orientation, whole_numbers
-from texsense.exceptions import ParameterError
+from texsense.exceptions import ParameterError, shown
 
 if TYPE_CHECKING:
     from texsense.data.layout import Layout
@@ -147,9 +147,9 @@ def _int(text: str, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise ProtocolError(f"{what} is not an integer: {text[:20]!r}") from None
+        raise ProtocolError(f"{what} is not an integer: {shown(text, 20)}") from None
     if abs(value) > MAX_INT:
-        raise ProtocolError(f"{what} is out of range: {text[:20]!r}")
+        raise ProtocolError(f"{what} is out of range: {shown(text, 20)}")
     return value
 
 
@@ -169,10 +169,12 @@ def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
     if "*" in line:
         body, _, check = line.rpartition("*")
         if len(check) != 2 or check.upper() != _checksum(body):
-            raise ProtocolError(f"checksum mismatch ({check[:4]!r}, expected {_checksum(body)})")
+            raise ProtocolError(
+                f"checksum mismatch ({shown(check, 4)}, expected {_checksum(body)})"
+            )
     parts = body.split(",")
     if parts[0] != "F":
-        raise ProtocolError(f"unknown record type {parts[0][:8]!r} (expected 'F')")
+        raise ProtocolError(f"unknown record type {shown(parts[0], 8)} (expected 'F')")
     if len(parts) != 4 + n_elements:
         raise ProtocolError(f"expected {n_elements} values, got {max(len(parts) - 4, 0)}")
     seq = _int(parts[1], "frame counter")
@@ -188,9 +190,9 @@ def parse_serial_line(line: str | bytes, n_elements: int) -> Frame | None:
         try:
             values[i] = float(text)
         except ValueError:
-            raise ProtocolError(f"value {i + 1} is not a number: {text[:20]!r}") from None
+            raise ProtocolError(f"value {i + 1} is not a number: {shown(text, 20)}") from None
         if not math.isfinite(values[i]):
-            raise ProtocolError(f"value {i + 1} is not finite: {text[:20]!r}")
+            raise ProtocolError(f"value {i + 1} is not finite: {shown(text, 20)}")
     times = (float(t0) + float(dt) * np.arange(n_elements)) * 1e-6
     return Frame(seq, times, values, "pF")
 
@@ -367,9 +369,9 @@ def _seq_and_t(d: dict[str, Any]) -> tuple[int, float]:
             raise ProtocolError(f"payload lacks {key!r}")
     seq, t = d["seq"], d["t"]
     if not isinstance(seq, int) or isinstance(seq, bool) or not 0 <= seq <= MAX_INT:
-        raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {str(seq)[:20]!r}")
+        raise ProtocolError(f"'seq' must be an integer in 0..2**63-1, got {shown(seq, 20)}")
     if not isinstance(t, (int, float)) or isinstance(t, bool) or not _finite(t):
-        raise ProtocolError(f"'t' must be a finite number, got {str(t)[:20]!r}")
+        raise ProtocolError(f"'t' must be a finite number, got {shown(t, 20)}")
     return seq, t
 
 

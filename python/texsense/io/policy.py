@@ -49,7 +49,7 @@ from h5py import h5d, h5z
 
 from texsense.data import budget
 from texsense.data.files import check_regular
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 
 __all__ = [
     "DAMAGED",
@@ -234,9 +234,9 @@ def check_text(value: str, what: str) -> str:
     there, no lone surrogate); a :class:`~texsense.exceptions.ParameterError` naming
     ``what`` before anything is written otherwise."""
     if "\x00" in value:
-        raise ParameterError(f"{what} {value[:40]!r} holds a NUL character, which HDF5 cannot keep")
+        raise ParameterError(f"{what} {shown(value)} holds a NUL character, which HDF5 cannot keep")
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:
-        raise ParameterError(f"{what} {value[:40]!r} is not valid Unicode text") from None
+        raise ParameterError(f"{what} {shown(value)} is not valid Unicode text") from None
     return value

@@ -22,7 +22,7 @@ from texsense.data import units
 from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
-from texsense.exceptions import FormatError, ParameterError, UnitError
+from texsense.exceptions import FormatError, ParameterError, UnitError, shown
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
 from texsense.io._registry import Probe, writer
 from texsense.io._text import Line, TextLines, format_float
@@ -73,7 +73,7 @@ def _parse_header(path: Path, lines: TextLines) -> tuple[dict[str, str], dict[st
             header[last_key] = (header[last_key] + "\n" + line).strip()
         else:
             raise FormatError(
-                path, f"expected a 'KEY value' header line, found {line[:40]!r}", raw.number
+                path, f"expected a 'KEY value' header line, found {shown(line)}", raw.number
             )
     raise FormatError(path, "no 'ASCII_DATA @@' line: not a Tekscan ASCII export or truncated")
 
@@ -214,7 +214,7 @@ class TekscanReader(RecordingReader):
             return None
         m = _FRAME.match(text)
         if not m:
-            self._bad_line(line, f"expected 'Frame <k>' or '@@', found {text[:40]!r}")
+            self._bad_line(line, f"expected 'Frame <k>' or '@@', found {shown(text)}")
             return None
         number = int(m.group(1))
         t = _frame_time(self.path, line, m.group(2))

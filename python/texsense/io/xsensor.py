@@ -30,7 +30,7 @@ import numpy as np
 
 from texsense.data import units
 from texsense.data.layout import Layout
-from texsense.exceptions import FormatError, UnitError
+from texsense.exceptions import FormatError, UnitError, shown
 from texsense.io._base import FrameRow, Header, RecordingReader, check_declared_size
 from texsense.io._registry import Probe
 from texsense.io._text import Line, TextLines, is_number, parse_float
@@ -183,7 +183,7 @@ class XSensorReader(RecordingReader):
         f = _fields(start.text)
         if f[0] != "FRAME":
             raise FormatError(
-                self.path, f"expected 'FRAME,<number>', found {start.text[:40]!r}", start.number
+                self.path, f"expected 'FRAME,<number>', found {shown(start.text)}", start.number
             )
         try:
             frame = _Frame(int(f[1] if len(f) > 1 else ""), start.number)

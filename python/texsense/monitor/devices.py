@@ -25,7 +25,7 @@ from texsense.data.protocol import (
     parse_mqtt_payload,
     parse_serial_line,
 )
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 from texsense.monitor.sources import RETRY_S, Source, SourceOptions, blocking, reason
 
 __all__ = ["IIOSource", "MQTTSource", "SerialSource"]
@@ -273,7 +273,7 @@ class IIOSource(Source):
                 try:
                     return float(text)
                 except ValueError:
-                    raise FormatError(p, f"not a number: {text[:20]!r}") from None
+                    raise FormatError(p, f"not a number: {shown(text, 20)}") from None
         return default
 
     def read_frame(self) -> tuple[np.ndarray, np.ndarray]:

@@ -164,7 +164,9 @@ class Monitor:
         self._t_first: float | None = None  # the time of the first frame
         self._cof_trace: list[tuple[float, float]] = []
         self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
-        self._skimmed = False  # frames skimmed since the last frame processed (keep_time)
+        self._skimmed = False  # frames not read since the last frame processed
+        self.last_seq: int | None = None  # of the last frame on the time line
+        self.missed = 0  # frames never seen: gaps in the frames' numbers (seq)
         self.clock = FrameClock()
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
@@ -172,7 +174,6 @@ class Monitor:
         self._raw_floor: np.ndarray | None = None  # each element's lowest raw reading so far
         self.changes = 0  # grows with every frame, acknowledgement and recording start/stop
         self.feed: dict[str, Any] = {"state": "waiting", "text": f"waiting for {source.name}"}
-
         self._vote = WindowVote(POSTURE_WINDOW_S)
         #: the statistics of the last :data:`HISTORY` frames (the page's charts)
         #: (rows are tuples of numbers: the collector leaves them, issue 38: as lists, 1,200 a
@@ -364,7 +365,11 @@ class Monitor:
 
     def _in_step(self, frame: Frame, wall: float) -> bool:
         """Place the frame on the mat's time line (:class:`FrameClock`); False when it is
-        skipped (counted and logged once)."""
+        skipped (counted and logged once). A frame whose number (``seq``) is more than one
+        past the last one's says that frames were never seen here (lost on the way, skipped
+        by the clock, published while no station held the mat): counted as ``missed``, and
+        the exposure of the next frame processed spans them (:meth:`ExposureTracker.step`,
+        ``skipped``). A number that goes back (the mat restarted) is no gap."""
         verdict, t, jump = self.clock.place(frame.t, wall)
         if verdict in ("ahead", "backwards"):
             self.source.errors += 1
@@ -373,6 +378,10 @@ class Monitor:
             text = f"skipped frame {frame.seq}: its time {frame.t:.6g} s is {jump:+.4g} s off"
             self.quiet.warn(self.source.name, "clock", f"{text} the mat's clock ({what})")
             return False
+        if self.last_seq is not None and frame.seq > self.last_seq + 1:  # frames not seen
+            self.missed += frame.seq - self.last_seq - 1
+            self._skimmed = True
+        self.last_seq = frame.seq
         source_t, shift = frame.t, t - frame.t
         if shift != 0.0:
             frame.element_times = frame.element_times + shift

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from texsense.apps.alerts import Event
-from texsense.exceptions import ParameterError, WriteError
+from texsense.exceptions import ParameterError, WriteError, shown
 
 __all__ = ["EventStore", "PostgresEventStore", "open_store"]
 
@@ -46,7 +46,7 @@ def _held(args: tuple[Any, ...]) -> tuple[Any, ...]:
     out of SQLite), else a :class:`ParameterError` saying which."""
     for a in args:
         if isinstance(a, int) and not -(2**63) <= a < 2**63:
-            raise ParameterError(f"{str(a)[:40]} lies beyond the event store's whole numbers")
+            raise ParameterError(f"{shown(a)} lies beyond the event store's whole numbers")
     return args
 
 

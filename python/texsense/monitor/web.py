@@ -62,7 +62,7 @@ from urllib.parse import parse_qs
 
 from texsense._progress import STOPPING, StoppingError, check_stopping
 from texsense.data.files import json_loads, read_small_text, real_path
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 from texsense.monitor.sources import blocking
 
 __all__ = [
@@ -266,7 +266,7 @@ def _allowed_origin(text: str) -> tuple[str, str, int]:
     parsed = parse_origin(text.strip().removesuffix("/"))
     if parsed is None:
         raise ParameterError(
-            f"--allow-origin {text[:80]!r}: expected an origin as a browser sends it, "
+            f"--allow-origin {shown(text, 80)}: expected an origin as a browser sends it, "
             "scheme://host[:port] in lower case (e.g. https://portal.example)"
         )
     return parsed
@@ -340,11 +340,11 @@ class Access:
         """None when the request may pass, else (HTTP status, reason)."""
         host = headers.get("host", "")
         if not self.host_ok(host):
-            return 403, f"unknown Host {host[:80]!r}: this server answers to its own address " \
+            return 403, f"unknown Host {shown(host, 80)}: this server answers to its own address " \
                 "(add a name with --allow-host)"  # fmt: skip
         origin = headers.get("origin")
         if origin is not None and not self.origin_ok(origin, host):
-            return 403, f"cross-origin request from {origin[:80]!r} refused"
+            return 403, f"cross-origin request from {shown(origin, 80)} refused"
         site = headers.get("sec-fetch-site", "")
         if method in UNSAFE_METHODS and site in ("cross-site", "same-site"):
             return 403, f"a {site} {method} is refused"

@@ -46,7 +46,7 @@ from typing import Any
 from urllib.parse import unquote, urlsplit
 
 from texsense.data.files import atomic_path, read_regular, toml_loads
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 from texsense.monitor.sources import blocking
 
 __all__ = [
@@ -357,7 +357,7 @@ def check_mat_id(mat_id: str) -> str:
     not starting with a sign)."""
     if not isinstance(mat_id, str) or not MAT_ID.match(mat_id):
         raise ParameterError(
-            f"mat id {str(mat_id)[:80]!r}: use letters, digits, '.', '_' and '-' only (at most "
+            f"mat id {shown(mat_id, 80)}: use letters, digits, '.', '_' and '-' only (at most "
             "64, starting with a letter or digit)"
         )
     if mat_id.lower() in RESERVED_IDS:

@@ -206,6 +206,8 @@ def _save_monitor(entry: MatEntry) -> Callable[[], dict[str, Any]]:
         "version": MONITOR_VERSION,
         "frames": m.frames,
         "t_first": m._t_first,
+        "seq": m.last_seq,
+        "missed": m.missed,
         "clock": m.clock.state(),
         "tracker": m.tracker.state_packed(),
         "bed": None if m.bed is None else m.bed.schedule.state(),
@@ -238,6 +240,11 @@ def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     m.clock = clock
     m.frames = int(state["frames"])
     m._t_first = state.get("t_first")
+    seq = state.get("seq")  # (a checkpoint of an earlier version has none)
+    m.last_seq, m.missed = (None if seq is None else int(seq)), int(state.get("missed", 0))
+    # what came between the checkpoint and the next frame read here is not known unless the
+    # numbers say that nothing did (the frames the old holder read after it are lost too)
+    m._skimmed = m.last_seq is None
     mat = state["mat"]
     entry.messages, entry.malformed = int(mat["messages"]), int(mat["malformed"])
     entry.ignored, entry.failed = int(mat["ignored"]), int(mat["failed"])

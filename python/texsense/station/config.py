@@ -35,3 +35,6 @@ class MatConfig:
     bed: bool = False
     posture_model: PostureModel | None = None
     turn_every_min: float = 120.0
+    #: the settings its ward file's entry sets itself (``reposition_min``, ``turn_every_min``):
+    #: the command line's defaults for them do not reach this mat
+    own: frozenset[str] = frozenset()

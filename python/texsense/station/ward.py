@@ -226,9 +226,9 @@ class MatEntry:
         only its time is taken, which keeps the mat's clock in step (a burst of buffered
         frames skipped in the middle is no jump of the clock) and the mat heard (not silent);
         counted as ``behind`` and ``peeked``. The next frame read carries the exposure over
-        the frames peeked at (integrated over the frames' times, a change put midway): the
-        exposure and the pipeline's state are no longer exactly those of reading every
-        frame."""
+        the frames peeked at (their time counted as loaded where either frame read is,
+        :meth:`~texsense.apps.alerts.ExposureTracker.step`): the exposure and the pipeline's
+        state are no longer exactly those of reading every frame."""
         if frame.values.size != self.config.layout.n_elements:
             self._malformed("count", f"a frame of {frame.values.size} values")
             return False
@@ -406,6 +406,7 @@ class MatEntry:
             "ignored": self.ignored,
             "behind": self.behind,
             "peeked": self.peeked,
+            "missed": self.monitor.missed,
             "last_error": self.last_error,
             "problem": self.problem,
             "last_frame_wall": self.last_wall,
