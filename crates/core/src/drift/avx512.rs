@@ -81,28 +81,8 @@ unsafe fn pair(
     // valid and finite (h - h is 0 for a finite h, NaN otherwise)
     let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(hv, hv), _mm512_setzero_pd());
     let live = ok_k & finite;
-    // the eight elements' fields gathered (an element is `ELEMENT_WORDS` words apart), not
-    // stored lane by lane and loaded as a register (a forwarding stall each, issue 34
-    // eleventh round)
-    let base = els.as_ptr().cast::<u8>();
-    let words = _mm512_mullo_epi64(
-        _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
-        _mm512_set1_epi64(ELEMENT_WORDS as i64),
-    );
-    // SAFETY: lane l reads the field of els[l] (l < 8 = els.len(), asserted), an f64 at
-    // its offset in the #[repr(C)] element, and the u32 `started`
-    let (last, total, started) = unsafe {
-        let field = |offset: usize| base.add(offset).cast::<f64>();
-        let last = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, last_h)));
-        let total = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, total)));
-        let at = base.add(offset_of!(Element<f64>, started)).cast::<i32>();
-        let quads = _mm256_mullo_epi32(
-            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-            _mm256_set1_epi32(2 * ELEMENT_WORDS as i32),
-        );
-        let st = _mm256_i32gather_epi32::<4>(at, quads);
-        (last, total, _mm256_test_epi32_mask(st, st))
-    };
+    // SAFETY: AVX2, AVX-512 F/DQ/VL (this function's features); els holds 8 (asserted)
+    let (last, total, started) = unsafe { heads(els) };
     // the level is h itself (power 1); the first valid level is a step from 0
     let change = _mm512_mask_sub_pd(hv, started, hv, last);
     let total = _mm512_add_pd(total, change);
@@ -150,5 +130,39 @@ unsafe fn pair(
             el.last_h = h[l];
             el.total = totals[l];
         }
+    }
+}
+
+/// The last level, the sum of steps and the `started` flags of eight elements, gathered
+/// (an element is `ELEMENT_WORDS` words apart), not stored lane by lane and loaded as a
+/// register (a store-forwarding stall each; issue 34, eleventh round).
+///
+/// # Safety
+/// The processor must have AVX2 and AVX-512 F/DQ/VL.
+///
+/// # Panics
+/// When `els` is not eight elements.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn heads(els: &[Element<f64>]) -> (__m512d, __m512d, __mmask8) {
+    assert_eq!(els.len(), LANES);
+    let base = els.as_ptr().cast::<u8>();
+    let words = _mm512_mullo_epi64(
+        _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
+        _mm512_set1_epi64(ELEMENT_WORDS as i64),
+    );
+    let quads = _mm256_mullo_epi32(
+        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        _mm256_set1_epi32(2 * ELEMENT_WORDS as i32),
+    );
+    // SAFETY: lane l reads the field of els[l] (l < 8 = els.len(), asserted), an f64 at
+    // its offset in the #[repr(C)] element, and the u32 `started` (quads of bytes)
+    unsafe {
+        let field = |offset: usize| base.add(offset).cast::<f64>();
+        let last = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, last_h)));
+        let total = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, total)));
+        let at = base.add(offset_of!(Element<f64>, started)).cast::<i32>();
+        let st = _mm256_i32gather_epi32::<4>(at, quads);
+        (last, total, _mm256_test_epi32_mask(st, st))
     }
 }
