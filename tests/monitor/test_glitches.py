@@ -73,6 +73,28 @@ def test_the_clock_follows_sped_up_and_slow_sources():
     assert all(burst.place(k * 1.0, wall=100.0)[0] == "ok" for k in range(100))
 
 
+def test_a_source_that_knows_its_speed_loses_no_frame_at_the_start():
+    """A night of a frame every 10 s replayed at 100x (0.1 s apart on the wall clock): the
+    clock starts from the replay's rate, so its second frame is not taken for one from the
+    future (it was, and was lost with a warning); a frame far ahead is still refused."""
+    from texsense.monitor.clock import FrameClock
+
+    night = Recording(np.full((30, 6), 0.5), np.arange(30) * 10.0, LAY, "pressure", "N/cm2")
+    source = ReplaySource(night, speed=100.0)
+    assert source.rate == 100.0
+    m = Monitor(source, tracker=ExposureTracker(LAY, reposition_min=5))
+    assert m.clock.rate_hint == 100.0
+    for k in range(30):
+        assert m.process(frame(k, k * 10.0), wall=1000.0 + k * 0.1) is not None
+    assert m.clock.skipped == 0 and m.missed == 0 and m.frames == 30
+    hinted = FrameClock(rate=100.0)
+    assert hinted.place(0.0, wall=0.0)[0] == "ok"
+    assert hinted.place(1e9, wall=0.1)[0] == "ahead"  # a glitch is still one
+    assert hinted.place(10.0, wall=0.1)[0] == "ok"
+    unhinted = FrameClock()  # (a live mat's: the second frame, 10 s ahead in 0.1 s, refused)
+    assert unhinted.place(0.0, wall=0.0)[0] == "ok" and unhinted.place(10.0, wall=0.1)[0] == "ahead"
+
+
 def test_a_frame_from_the_future_keeps_the_alert_and_the_mat_live():
     m = pressure_monitor()
     for k in range(320):  # 5 min 20 s under load: the reposition alert opens

@@ -67,10 +67,15 @@ class FrameClock:
     ----------
     slack_s : float
         The least jump ahead that counts as out of step, s of source time.
+    rate : float
+        The source's seconds per wall second until the frames tell (default 1: a live mat;
+        a replay's or a virtual mat's ``--speed``): a sped-up source whose frames are further
+        apart than ``slack_s`` does not lose its second frame as "from the future".
     """
 
-    def __init__(self, slack_s: float = 5.0) -> None:
+    def __init__(self, slack_s: float = 5.0, rate: float = 1.0) -> None:
         self.slack_s = float(slack_s)
+        self.rate_hint = float(rate) if rate > 0 and rate == rate else 1.0
         self.offset = 0.0
         self.last_t: float | None = None  # last accepted time, on the monitor's time line
         self._last: tuple[float, float] | None = None  # (source time, wall) of that frame
@@ -82,12 +87,13 @@ class FrameClock:
 
     @property
     def rate(self) -> float:
-        """Source seconds per wall second over the recent accepted frames (1 until known)."""
+        """Source seconds per wall second over the recent accepted frames (``rate`` of the
+        constructor until known)."""
         if len(self._history) < 2:
-            return 1.0
+            return self.rate_hint
         (s0, w0), (s1, w1) = self._history[0], self._history[-1]
         if w1 - w0 < 0.05 or s1 <= s0:  # too short to tell
-            return 1.0
+            return self.rate_hint
         return (s1 - s0) / (w1 - w0)
 
     def _limit(self, wall_gap: float) -> float:

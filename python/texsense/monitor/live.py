@@ -167,7 +167,7 @@ class Monitor:
         self._skimmed = False  # frames not read since the last frame processed
         self.last_seq: int | None = None  # of the last frame on the time line
         self.missed = 0  # frames never seen: gaps in the frames' numbers (seq)
-        self.clock = FrameClock()
+        self.clock = FrameClock(rate=source.rate)
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
         self.last_pressure: np.ndarray | None = None  # N/cm², NaN where unknown
@@ -470,6 +470,7 @@ class Monitor:
         snap = {
             "seq": frame.seq,
             "frames": self.frames,
+            "missed": self.missed,  # frames never seen (gaps in seq)
             "t": frame.t,
             "raw": None,  # the maps: made from _maps when somebody asks (no viewer: no cost)
             "raw_unit": frame.unit,

@@ -184,7 +184,7 @@ async def _consume(
     max_frames: int | None,
     on_progress: Callable[[RecordStats], None] | None,
 ) -> None:
-    clock = FrameClock()
+    clock = FrameClock(rate=source.rate)
     errors_before = source.errors
     last_seq: int | None = None
     async for frame in frames:

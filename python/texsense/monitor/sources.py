@@ -142,6 +142,9 @@ class Source:
     #: the command line's source options it reads (``--speed``, ``--grid``, ...): another
     #: one given with it has no effect, and is refused (:mod:`texsense.commands._applies`)
     reads: ClassVar[frozenset[str]] = frozenset()
+    #: source seconds per wall second, when the source knows it (a replay's or a virtual
+    #: mat's ``--speed``; 0: as fast as possible, not known): the mat's clock starts from it
+    rate: float = 1.0
 
     @classmethod
     def argument_path(cls, argument: str) -> str:
@@ -261,6 +264,7 @@ class ReplaySource(Source):
         self.layout = recording.layout
         self.quantity, self.unit = recording.quantity, recording.unit
         self.speed, self.loop = float(speed), loop
+        self.rate = self.speed
 
     async def frames(self) -> AsyncIterator[Frame]:
         """The recording's frames, paced, looping if asked."""

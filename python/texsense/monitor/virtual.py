@@ -64,6 +64,7 @@ class VirtualSeatSource(Source):
         self.layout = self.mat.layout
         self.subject = Subject.random(seed, seed=101)
         self.speed, self.hold_s, self.away_s = float(speed), float(hold_s), float(away_s)
+        self.rate = self.speed
         self.per_sitting = int(postures_per_sitting)
         self._rng = np.random.default_rng(seed)
         self.frame_s = self.mat.cdc.frame_time_s(self.layout.n_elements)
@@ -150,6 +151,7 @@ class VirtualBedSource(Source):
         self.mat = bed_mat()
         self.layout = self.mat.layout
         self.speed, self.hold_s, self.away_s = float(speed), float(hold_s), float(away_s)
+        self.rate = self.speed
         self.per_stay = int(positions_per_stay)
         self._rng = np.random.default_rng(seed)
         self.sleeper = Sleeper.random(seed, seed=202)

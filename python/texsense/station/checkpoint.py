@@ -232,7 +232,7 @@ def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     if state.get("version") not in (1, MONITOR_VERSION):  # 1: the exposure as rows
         raise ParameterError(f"monitor state of version {state.get('version')}")
     m = entry.monitor
-    clock = FrameClock().restore(state["clock"])
+    clock = FrameClock(rate=m.clock.rate_hint).restore(state["clock"])
     m.tracker.restore(state["tracker"])
     if m.bed is not None and state.get("bed") is not None:
         m.bed.schedule.restore(state["bed"])
@@ -284,8 +284,8 @@ def fresh(entry: MatEntry) -> None:
     if m.bed is not None:
         m.bed.schedule.restore({})
     m._vote.reset()
-    m.clock = FrameClock()
-    m.frames, m._t_first = 0, None
+    m.clock = FrameClock(rate=m.clock.rate_hint)
+    m.frames, m._t_first, m.last_seq, m._skimmed = 0, None, None, False
     entry.state, entry.last_wall, entry.period_s, entry.refused = "waiting", None, None, None
     entry.last_seen = None
     entry.version += 1

@@ -38,3 +38,6 @@ class MatConfig:
     #: the settings its ward file's entry sets itself (``reposition_min``, ``turn_every_min``):
     #: the command line's defaults for them do not reach this mat
     own: frozenset[str] = frozenset()
+    #: source seconds per wall second of its frames when known (a virtual mat's ``--speed``):
+    #: the mat's clock starts from it (:class:`~texsense.monitor.clock.FrameClock`)
+    rate: float = 1.0

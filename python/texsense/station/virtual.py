@@ -126,7 +126,7 @@ class VirtualMats:
                     i, src.layout, bed_calibration if bed else seat_calibration,
                     source=f"mqtt ({src.name})", reposition_min=reposition_min,
                     bed=bed and bed_model is not None, posture_model=bed_model if bed else None,
-                    turn_every_min=turn_every_min,
+                    turn_every_min=turn_every_min, rate=self.speed,
                 )
             )  # fmt: skip
         return out

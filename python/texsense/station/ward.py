@@ -109,6 +109,7 @@ class _FedSource(Source):
         self.quantity = config.quantity
         self.unit = "pF" if config.quantity == "capacitance" else "N/cm2"
         self.name = f"mat {config.id} ({config.source})"
+        self.rate = config.rate
 
     def frames(self) -> AsyncIterator[Frame]:  # pragma: no cover - never iterated
         raise NotImplementedError("the station hands frames to the monitor")
