@@ -34,6 +34,16 @@ use texsense_kernels::stage as rules;
 /// Element-samples per tile of frames in a batch (a float64 array of a tile is 1 MiB).
 const TILE_SAMPLES: usize = 1 << 17;
 
+/// A batch's arguments checked: its time steps, and its readings, validity, values and codes
+/// (their lengths, in that order) each of `dt.len()` frames of `n` elements.
+fn check_batch(dt: &[f64], n: usize, lens: [usize; 4]) -> Result<(), CoreError> {
+    check_time_steps(dt)?;
+    for (name, len) in ["readings", "valid", "out", "codes"].into_iter().zip(lens) {
+        check_len(name, len, dt.len() * n)?;
+    }
+    Ok(())
+}
+
 /// A reading invalid on input that no detect stage has coded yet.
 const UNSET: u8 = u8::MAX;
 
@@ -200,13 +210,8 @@ impl Chain {
         out: &mut [f64],
         codes: &mut [u8],
     ) -> Result<(), CoreError> {
-        let n = self.len();
-        let t = dt.len();
-        check_time_steps(dt)?;
-        check_len("readings", readings.len(), t * n)?;
-        check_len("valid", valid.len(), t * n)?;
-        check_len("out", out.len(), t * n)?;
-        check_len("codes", codes.len(), t * n)?;
+        let (n, t) = (self.len(), dt.len());
+        check_batch(dt, n, [readings.len(), valid.len(), out.len(), codes.len()])?;
         if n == 0 {
             return Ok(());
         }
@@ -240,13 +245,8 @@ impl Chain {
         out: &mut [f32],
         codes: &mut [u8],
     ) -> Result<(), CoreError> {
-        let n = self.len();
-        let t = dt.len();
-        check_time_steps(dt)?;
-        check_len("readings", readings.len(), t * n)?;
-        check_len("valid", valid.len(), t * n)?;
-        check_len("out", out.len(), t * n)?;
-        check_len("codes", codes.len(), t * n)?;
+        let (n, t) = (self.len(), dt.len());
+        check_batch(dt, n, [readings.len(), valid.len(), out.len(), codes.len()])?;
         if n == 0 {
             return Ok(());
         }
