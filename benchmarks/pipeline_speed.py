@@ -10,7 +10,9 @@ Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|c
   writing into an array allocated beforehand as the copy does, and ``predict`` itself (which
   allocates its output);
 - the whole pipeline (detect -> convert -> Preisach + drift -> eq. 6.14 repair) at 96, 1024 and
-  4096 elements with 2 % failed readings;
+  4096 elements with 2 % failed readings (``run`` on the recording: float32 in and out since
+  issue 34's eleventh round), and at 4096 elements as before that round (``process``: the
+  frames copied to float64, the values back to float32);
 - ``Pipeline.step`` latency on a real stream (every frame different), median and p99, and
   its compiled part alone (``Chain.step`` into arrays held);
 - the state kept per element;
@@ -186,6 +188,15 @@ def cases(
                 rec.frames.size,
             )
         )
+    out.append(
+        (
+            f"pipeline through float64 (`process`, values to float32), {n} elements x {nf} frames",
+            lambda pipe=pipe, rec=rec: (
+                pipe.reset().process(rec.frames, rec.times, rec.valid)[0].astype(np.float32)
+            ),
+            rec.frames.size,
+        )
+    )
     return out
 
 

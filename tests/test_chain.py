@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from reference_pipeline import ReferenceDetector, ReferencePipeline
-from texsense import Layout
+from texsense import Layout, Recording
 from texsense.calibration.workflows import seat_calibration
 from texsense.compensation.health import FailureDetector
 from texsense.compensation.pipeline import Pipeline
@@ -225,3 +225,45 @@ def test_chain_step_writes_what_run_gives_into_the_arrays_held(seat):
         np.testing.assert_array_equal(pipe.codes_, twin.codes_)
         assert held is None or (got is held[0] and got_ok is held[1] and pipe.codes_ is held[2])
         held = got, got_ok, pipe.codes_
+
+
+def test_run_f32_gives_runs_values_rounded_to_float32_bit_for_bit(seat):
+    """`Chain.run_f32` (what `Pipeline.run` calls for a recording, issue 34 eleventh round):
+    float32 readings widened a tile at a time, the values rounded to float32 — `run`'s
+    values on the float32 readings, rounded, to the bit (NaN and infinite readings, readings
+    flagged invalid, several tiles of frames, a batch in two calls); the codes the same."""
+    cal, rec = seat
+    n = rec.n_elements
+    frames = np.tile(rec.frames, (6, 1))  # 1800 x 96: two tiles of 2**17 samples
+    frames[7, :5] = [np.nan, np.inf, -np.inf, 1e30, -0.0]
+    frames[700, 10:12] = np.nan
+    valid = np.tile(rec.valid, (6, 1))
+    valid[900:905, 20:40] = False
+    assert frames.dtype == np.float32 and frames.size > 2**17
+    dt = np.full(len(frames), float(rec.times[1] - rec.times[0]))
+    dt[0] = 0.0
+    pipe = Pipeline(cal, rec.layout, repair="neighbour-mean")
+    chain = pipe.compiled()
+    want, want_codes = chain.run(dt, frames.astype(np.float64), valid)
+    chain.reset()
+    got, codes = chain.run_f32(dt, frames, valid)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got.view(np.uint32), want.astype(np.float32).view(np.uint32))
+    np.testing.assert_array_equal(codes, want_codes)
+    assert (codes != 0).sum() > 100
+    chain.reset()
+    parts = [chain.run_f32(dt[a : a + 1000], frames[a : a + 1000], valid[a : a + 1000])[0]
+             for a in (0, 1000)]  # fmt: skip
+    np.testing.assert_array_equal(np.concatenate(parts).view(np.uint32), got.view(np.uint32))
+    # the pipeline's recording path: the values process gives, stored as float32
+    long = Recording(frames, np.cumsum(dt), rec.layout, rec.quantity, rec.unit, valid=valid)
+    values, ok, found = Pipeline(cal, rec.layout, repair="neighbour-mean").process(
+        frames, long.times, valid
+    )
+    out = pipe.reset().run(long)
+    np.testing.assert_array_equal(
+        out.frames.view(np.uint32), values.astype(np.float32).view(np.uint32)
+    )
+    np.testing.assert_array_equal(out.valid, ok)
+    np.testing.assert_array_equal(pipe.codes_, found)
+    assert chain.run_f32(dt[:0], frames[:0], valid[:0])[0].shape == (0, n)

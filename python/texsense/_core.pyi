@@ -10,6 +10,7 @@ import numpy.typing as npt
 _F64 = npt.NDArray[np.float64]
 _Bools = npt.NDArray[np.bool_]
 _U8 = npt.NDArray[np.uint8]
+_F32 = npt.NDArray[np.float32]
 _U64 = npt.NDArray[np.uint64]
 _I64 = npt.NDArray[np.int64]
 
@@ -265,6 +266,8 @@ class Chain:
     def reset(self) -> None: ...
     def state_bytes_per_element(self) -> int: ...
     def run(self, dt: _F64, readings: _F64, valid: _Bools) -> tuple[_F64, _U8]: ...
+    def run_f32(self, dt: _F64, readings: _F32, valid: _Bools) -> tuple[_F32, _U8]:
+        """``run`` on float32 readings: its values rounded to float32, bit for bit."""
     def step(
         self,
         dt: float,

@@ -34,6 +34,16 @@ use texsense_kernels::stage as rules;
 /// Element-samples per tile of frames in a batch (a float64 array of a tile is 1 MiB).
 const TILE_SAMPLES: usize = 1 << 17;
 
+/// A batch's arguments checked: its time steps, and its readings, validity, values and codes
+/// (their lengths, in that order) each of `dt.len()` frames of `n` elements.
+fn check_batch(dt: &[f64], n: usize, lens: [usize; 4]) -> Result<(), CoreError> {
+    check_time_steps(dt)?;
+    for (name, len) in ["readings", "valid", "out", "codes"].into_iter().zip(lens) {
+        check_len(name, len, dt.len() * n)?;
+    }
+    Ok(())
+}
+
 /// A reading invalid on input that no detect stage has coded yet.
 const UNSET: u8 = u8::MAX;
 
@@ -128,6 +138,9 @@ impl Stage {
 struct Scratch {
     values: Vec<f64>,
     changes: Changes,
+    /// A tile of float32 readings widened, and its values before they are narrowed
+    /// ([`Chain::run_f32`]).
+    wide: (Vec<f64>, Vec<f64>),
 }
 
 /// The chain of one mat.
@@ -197,13 +210,8 @@ impl Chain {
         out: &mut [f64],
         codes: &mut [u8],
     ) -> Result<(), CoreError> {
-        let n = self.len();
-        let t = dt.len();
-        check_time_steps(dt)?;
-        check_len("readings", readings.len(), t * n)?;
-        check_len("valid", valid.len(), t * n)?;
-        check_len("out", out.len(), t * n)?;
-        check_len("codes", codes.len(), t * n)?;
+        let (n, t) = (self.len(), dt.len());
+        check_batch(dt, n, [readings.len(), valid.len(), out.len(), codes.len()])?;
         if n == 0 {
             return Ok(());
         }
@@ -222,6 +230,46 @@ impl Chain {
             )?;
         }
         Ok(())
+    }
+
+    /// [`Chain::run`] for float32 readings and values, as a recording stores them: each tile
+    /// of frames is widened to float64 in the chain's scratch (exactly), runs as in `run`,
+    /// and its values are rounded to float32 (to nearest, as numpy's `astype(np.float32)`),
+    /// so they are `run`'s values rounded, bit for bit, without a float64 copy of the batch
+    /// on the way in or out (issue 34, eleventh round).
+    pub fn run_f32(
+        &mut self,
+        dt: &[f64],
+        readings: &[f32],
+        valid: &[bool],
+        out: &mut [f32],
+        codes: &mut [u8],
+    ) -> Result<(), CoreError> {
+        let (n, t) = (self.len(), dt.len());
+        check_batch(dt, n, [readings.len(), valid.len(), out.len(), codes.len()])?;
+        if n == 0 {
+            return Ok(());
+        }
+        let tile = (TILE_SAMPLES / n).max(1);
+        let (mut wide, mut values) = std::mem::take(&mut self.scratch.wide);
+        let mut done = Ok(());
+        for a in (0..t).step_by(tile) {
+            let b = (a + tile).min(t);
+            let rows = a * n..b * n;
+            wide.clear();
+            wide.extend(readings[rows.clone()].iter().map(|&r| f64::from(r)));
+            values.resize(rows.len(), 0.0);
+            let (v, c) = (&valid[rows.clone()], &mut codes[rows.clone()]);
+            done = self.run_tile(&dt[a..b], &wide, v, &mut values, c);
+            if done.is_err() {
+                break;
+            }
+            for (o, &x) in out[rows].iter_mut().zip(&values) {
+                *o = x as f32;
+            }
+        }
+        self.scratch.wide = (wide, values);
+        done
     }
 
     /// The passes over one tile of frames, stage after stage.

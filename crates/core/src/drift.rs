@@ -13,6 +13,8 @@
 //! same machinery runs any non-negative Prony series (a fitted kernel where the logarithm does
 //! not hold).
 
+use std::borrow::Cow;
+
 use texsense_kernels::drift::{self as kernel, Element, Settings};
 
 use crate::error::{check_len, CoreError};
@@ -136,7 +138,9 @@ pub struct DriftBlock<'a> {
     elements: &'a mut [Element<f64>],
     z: &'a mut [f64],
     z_time: &'a mut [f64],
-    decay: Vec<f64>,
+    /// The bank's memo of the first step while the block steps with it (no copy per block
+    /// and step: a live step makes its blocks every frame), the block's own after a change.
+    decay: Cow<'a, [f64]>,
     /// The time step of `decay` (NaN: none yet).
     decay_dt: f64,
 }
@@ -146,7 +150,7 @@ impl DriftBlock<'_> {
     #[inline]
     pub fn frame(&mut self, dt: f64) {
         if dt.to_bits() != self.decay_dt.to_bits() {
-            kernel::frame(&mut self.decay, self.settings.taus(), dt);
+            kernel::frame(self.decay.to_mut(), self.settings.taus(), dt);
             self.decay_dt = dt;
         }
     }
@@ -190,8 +194,8 @@ impl DriftBlock<'_> {
             let (mut wide, k) = (0, self.settings.terms());
             if crate::simd::avx512() {
                 wide = n / avx512::LANES * avx512::LANES;
-                // SAFETY: the processor has AVX-512 F/DQ (detected by `simd::avx512`);
-                // `wide` elements are whole groups, the slices hold n >= wide
+                // SAFETY: the processor has AVX2 and AVX-512 F/DQ/VL (detected by
+                // `simd::avx512`); `wide` elements are whole groups, the slices hold n >= wide
                 unsafe {
                     avx512::groups(
                         &self.settings,
@@ -483,7 +487,7 @@ impl DriftBank {
                 elements,
                 z,
                 z_time: z_time.next().unwrap_or_default(),
-                decay: self.memo.1.clone(),
+                decay: Cow::Borrowed(&self.memo.1),
                 decay_dt: self.memo.0,
             })
             .collect()

@@ -2,7 +2,9 @@
 //! ([`element_bank!`]), shapes of batches, outputs as numpy arrays, a neighbour graph from CSR
 //! arrays.
 
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    Element, IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use texsense_core::{CoreError, Neighbours};
 
@@ -115,20 +117,21 @@ fn batch_shape(
 /// The slices of a batch checked against a bank of `n` elements: values (T, N), a valid mask
 /// of the same shape (empty for [`Batch::unmasked`]) and, for stages that take time steps,
 /// `dt` (T,) (else empty).
-pub(crate) struct Batch<'a> {
+/// The values are float64 unless said (a chain's float32 batch: `Batch<f32>`).
+pub(crate) struct Batch<'a, T = f64> {
     pub(crate) t: usize,
     pub(crate) n: usize,
     pub(crate) dt: &'a [f64],
-    pub(crate) values: &'a [f64],
+    pub(crate) values: &'a [T],
     pub(crate) valid: &'a [bool],
 }
 
-impl<'a> Batch<'a> {
+impl<'a, T: Element> Batch<'a, T> {
     pub(crate) fn new(
         what: &'static str,
         n: usize,
         dt: Option<&'a PyReadonlyArray1<'_, f64>>,
-        values: &'a PyReadonlyArray2<'_, f64>,
+        values: &'a PyReadonlyArray2<'_, T>,
         valid: &'a PyReadonlyArray2<'_, bool>,
     ) -> PyResult<Self> {
         let (t, n) = batch_shape(
@@ -170,17 +173,19 @@ impl<'a> Batch<'a> {
     }
 }
 
-/// Run a kernel that fills a (T, N) f64 output, with the GIL released, and return the array.
-pub(crate) fn run_detached<'py, F>(
+/// Run a kernel that fills a (T, N) output (float64, or float32 for a chain's float32
+/// batch), with the GIL released, and return the array.
+pub(crate) fn run_detached<'py, T, F>(
     py: Python<'py>,
     t: usize,
     n: usize,
     kernel: F,
-) -> PyResult<Bound<'py, PyArray2<f64>>>
+) -> PyResult<Bound<'py, PyArray2<T>>>
 where
-    F: FnOnce(&mut [f64]) -> Result<(), CoreError> + Send,
+    T: Element + Copy + Default + Send,
+    F: FnOnce(&mut [T]) -> Result<(), CoreError> + Send,
 {
-    let mut out = vec![0.0; t * n];
+    let mut out = vec![T::default(); t * n];
     py.detach(|| kernel(&mut out)).map_err(to_py)?;
     to_2d(py, out, t, n)
 }

@@ -136,6 +136,26 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
         Ok((out, to_2d(py, codes, b.t, b.n)?))
     }
 
+    /// Batch of float32 readings (a recording's frames): dt (T,), readings (T, N) float32,
+    /// valid (T, N) -> (values (T, N) float32, codes (T, N)); `run`'s values rounded to
+    /// float32, bit for bit, without float64 copies of the batch.
+    #[allow(clippy::type_complexity)]
+    fn run_f32<'py>(
+        &mut self,
+        py: Python<'py>,
+        dt: PyReadonlyArray1<'py, f64>,
+        readings: PyReadonlyArray2<'py, f32>,
+        valid: PyReadonlyArray2<'py, bool>,
+    ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u8>>)> {
+        let b = Batch::new("chain run", self.inner.len(), Some(&dt), &readings, &valid)?;
+        let mut codes = vec![0u8; b.t * b.n];
+        let inner = &mut self.inner;
+        let out = run_detached(py, b.t, b.n, |out| {
+            inner.run_f32(b.dt, b.values, b.valid, out, &mut codes)
+        })?;
+        Ok((out, to_2d(py, codes, b.t, b.n)?))
+    }
+
     /// One frame, for a live stream: `dt` (s since the previous frame), readings (N,) and
     /// their validity (N,; None: all valid) into arrays the caller holds and reuses: values
     /// `out` (N,) float64, failure codes `codes` (N,) uint8 and `measured` (N,) bool (code

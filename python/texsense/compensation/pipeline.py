@@ -549,7 +549,10 @@ class Pipeline:
         if why:
             raise ParameterError(f"the recording is of another mat than the pipeline's: {why}")
         values = rec.to_unit(unit).frames if unit and rec.unit != unit else rec.frames
-        p, ok, _ = self.process(values, rec.times, rec.valid)
+        if self._live is not None and rec.n_frames:  # float32 in and out (issue 34)
+            p, ok = self._run_f32(values, rec.times, rec.valid)
+        else:
+            p, ok, _ = self.process(values, rec.times, rec.valid)
         meta = {**rec.meta, **self.provenance()}
         out_quantity, out_unit = self.output_quantity
         return rec._with(
@@ -559,6 +562,21 @@ class Pipeline:
             unit=out_unit or rec.unit,
             meta=meta,
         )
+
+    def _run_f32(
+        self, frames: np.ndarray, times: np.ndarray, valid: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """What ``process`` does for a pipeline of one compiled pass, on a recording's float32
+        frames: the chain reads and writes float32 a tile at a time (``Chain.run_f32``: the
+        float64 values rounded to float32, as the recording would store them, bit for bit),
+        so the batch is never copied to float64 and back."""
+        assert self._live is not None
+        t = np.asarray(times, dtype=np.float64)
+        dt = time_steps(t, self._last_t)
+        out, codes = self._live.run_f32(dt, frames, np.ascontiguousarray(valid, dtype=bool))
+        self._last_t = float(t[-1])
+        self.codes_ = codes
+        return out, codes == 0
 
     # ------------------------------------------------------------------ state
     def snapshot(self) -> bytes:

@@ -348,6 +348,32 @@ def _kind(mode: int) -> str:
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
+def kind_of(mode: int) -> str:
+    """What a path's status (``st_mode``) says it is, in the words of errors: ``a folder``,
+    ``a file`` (regular), ``a FIFO (named pipe)``, ``a character device``, ..."""
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    return "a file" if stat.S_ISREG(mode) else _kind(mode)
+
+
+def read_status(path: Path) -> os.stat_result | None:
+    """The status of a path to be read, following links; None when nothing is there (or a
+    link to nothing). Any other failure is a :class:`~texsense.exceptions.FormatError` naming
+    the path and saying why in the words of errors: the one reading of a failed ``stat`` for
+    every path texsense reads (:func:`check_regular`, the paths a ward file names)."""
+    try:
+        return os.stat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        why = {errno.ELOOP: "a loop of symbolic links",
+               errno.ENOTDIR: "a file on the way where a folder should be",
+               errno.ENAMETOOLONG: "a name too long for the file system",
+               errno.EACCES: "no permission to reach it",
+               errno.EPERM: "no permission to reach it"}.get(e.errno or 0)  # fmt: skip
+        raise FormatError(path, why or f"cannot be read ({e.strerror or e})") from None
+
+
 def check_regular(path: str | Path, *, folder_ok: bool = False) -> os.stat_result:
     """The status of ``path`` if it is a regular file (a folder too with ``folder_ok``),
     following links; anything else is a :class:`~texsense.exceptions.FormatError` naming it.
@@ -363,15 +389,10 @@ def check_regular(path: str | Path, *, folder_ok: bool = False) -> os.stat_resul
     p = Path(path)
     if "\x00" in str(p):
         raise FormatError(p, "a name with a NUL character, which no file has")
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
+    st = read_status(p)
+    if st is None:
         missing = "a link to nothing" if os.path.islink(p) else "no such file or folder"
-        raise FormatError(p, missing) from None
-    except OSError as e:
-        if e.errno == errno.ELOOP:
-            raise FormatError(p, "a loop of symbolic links") from None
-        raise FormatError(p, f"cannot be read ({e.strerror or e})") from None
+        raise FormatError(p, missing)
     if stat.S_ISDIR(st.st_mode):
         if folder_ok:
             return st

@@ -4,11 +4,10 @@ it, and of the kind its key reads (docs/station.md, "Paths in a ward file")."""
 
 from __future__ import annotations
 
-import os
 import stat
 from pathlib import Path
 
-from texsense.data.files import _kind, _place_error
+from texsense.data.files import kind_of, read_status
 from texsense.exceptions import FormatError, ParameterError
 from texsense.io import sniff_format
 
@@ -47,18 +46,16 @@ def named_path(value: str, named_in: str | Path, kind: str) -> Path:
         path = Path(named_in).parent / path
     want = PATH_KINDS[kind]
     try:
-        st: os.stat_result | None = os.stat(path)
-    except FileNotFoundError:
-        st = None
-    except OSError as e:
-        raise ParameterError(f"{path}: {_place_error(e)}") from None
+        st = read_status(path)
+    except FormatError as e:
+        raise ParameterError(str(e)) from None
     if st is None:
         if kind == "device":
             return path  # the source says it is missing (a device may come later)
         raise ParameterError(f"{path}: no such {'folder' if kind == 'folder' else 'file'}")
     mode = st.st_mode
     folder = stat.S_ISDIR(mode)
-    found = "a folder" if folder else "a file" if stat.S_ISREG(mode) else _kind(mode)
+    found = kind_of(mode)
     fits = {"folder": folder, "device": stat.S_ISCHR(mode), "file": stat.S_ISREG(mode),
             "recording": stat.S_ISREG(mode) or folder}[kind]  # fmt: skip
     if not fits:

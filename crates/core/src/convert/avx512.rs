@@ -33,11 +33,10 @@ pub(super) unsafe fn row(
     let whole = n / LANES * LANES;
     for i in (0..whole).step_by(LANES) {
         let xv = _mm512_loadu_pd(x[i..i + LANES].as_ptr());
-        let o = &ok[i..i + LANES];
-        let ok_k = o
-            .iter()
-            .enumerate()
-            .fold(0u8, |m, (l, &b)| m | u8::from(b) << l);
+        // the eight validity bytes (0 or 1) as lane bits, in one load
+        // SAFETY: i + 8 <= whole <= n = ok.len()
+        let bytes = unsafe { _mm_loadl_epi64(ok.as_ptr().add(i).cast()) };
+        let ok_k = _mm512_test_epi64_mask(_mm512_cvtepu8_epi64(bytes), _mm512_set1_epi64(1));
         let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(xv, xv), _mm512_setzero_pd());
         let live = ok_k & finite;
         let off = _mm512_loadu_pd(offset[i..i + LANES].as_ptr());

@@ -38,12 +38,30 @@ fn spread8(m: u8) -> u64 {
 /// element `l`) on the word `at` of each element (0 `last`, 1 `still`, 2 `moved`).
 #[inline(always)]
 fn word_masks(bits: u8, at: usize) -> [u8; 3] {
-    let mut m = 0u32;
-    for l in 0..LANES {
-        m |= u32::from(bits >> l & 1) << (l * WORDS + at);
-    }
+    let m = WORD_MASKS[at][usize::from(bits)];
     [m as u8, (m >> 8) as u8, (m >> 16) as u8]
 }
+
+/// [`word_masks`] of every 8-bit mask for each word of an element, made when compiling (a
+/// load per group instead of a loop over the lanes; issue 34, eleventh round).
+const WORD_MASKS: [[u32; 256]; WORDS] = {
+    let mut table = [[0u32; 256]; WORDS];
+    let mut at = 0;
+    while at < WORDS {
+        let mut bits = 0usize;
+        while bits < 256 {
+            let (mut m, mut l) = (0u32, 0);
+            while l < LANES {
+                m |= (((bits >> l) & 1) as u32) << (l * WORDS + at);
+                l += 1;
+            }
+            table[at][bits] = m;
+            bits += 1;
+        }
+        at += 1;
+    }
+    table
+};
 
 /// The change of each reading since the element's last finite one (as `avx2::changes_row`),
 /// eight elements at a time; the rest through the AVX2 row.
@@ -179,11 +197,11 @@ pub(super) unsafe fn codes_row(
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2")]
 unsafe fn write_moving(lanes: u8, word: u64, out: &mut [u8], els: &mut [Element<f64>]) {
     assert!(out.len() == LANES && els.len() == LANES);
-    for (l, (slot, &k)) in out.iter_mut().zip(&word.to_le_bytes()).enumerate() {
-        if lanes >> l & 1 != 0 {
-            *slot = k;
-        }
-    }
+    // the lanes' bytes of `word` over the eight codes, the others kept: one load and store
+    // (a byte each, spread8(lanes) * 0xff, instead of a test and a store per lane)
+    let keep = spread8(lanes) * 0xff;
+    let old = u64::from_le_bytes(out[..LANES].try_into().expect("eight codes"));
+    out.copy_from_slice(&((old & !keep) | (word & keep)).to_le_bytes());
     let [ms, mm, mt] = word_masks(lanes, 1);
     let [ns, nm, nt] = word_masks(lanes, 2);
     let zero = _mm512_setzero_pd();

@@ -6,6 +6,7 @@
 //! state is the scalar kernel's, bit for bit.
 
 use std::arch::x86_64::*;
+use std::mem::{offset_of, size_of};
 
 use texsense_kernels::drift::{Element, Settings};
 
@@ -18,11 +19,11 @@ pub(super) const LANES: usize = GROUP;
 /// number of [`LANES`]).
 ///
 /// # Safety
-/// The processor must have AVX-512 F and DQ.
+/// The processor must have AVX2 and AVX-512 F, DQ and VL.
 ///
 /// # Panics
 /// When `h` is not whole groups, or a slice is shorter than the block needs.
-#[target_feature(enable = "avx512f,avx512dq")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 pub(super) unsafe fn groups(
     s: &Settings<'_, f64>,
     elements: &mut [Element<f64>],
@@ -37,7 +38,7 @@ pub(super) unsafe fn groups(
     assert!(elements.len() >= n && z.len() >= n * k && decay.len() == k);
     for g in 0..n / LANES {
         let at = g * LANES;
-        // SAFETY: AVX-512 F/DQ (this function's feature); the two groups' states are
+        // SAFETY: AVX2, AVX-512 F/DQ/VL (this function's features); the group's states are
         // z[at * k .. (at + LANES) * k] (checked above)
         unsafe {
             pair(
@@ -53,15 +54,13 @@ pub(super) unsafe fn groups(
     }
 }
 
-/// Eight f64 from one field of eight elements.
-#[inline(always)]
-fn lanes(els: &[Element<f64>], f: impl Fn(&Element<f64>) -> f64) -> [f64; LANES] {
-    std::array::from_fn(|l| f(&els[l]))
-}
+/// Words of 8 bytes from one element to the next (the fields are gathered with it).
+const ELEMENT_WORDS: usize = size_of::<Element<f64>>() / 8;
+const _: () = assert!(size_of::<Element<f64>>() == 8 * ELEMENT_WORDS);
 
 /// A group of eight elements (the arguments of [`groups`], one group's share).
 #[inline]
-#[target_feature(enable = "avx512f,avx512dq")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn pair(
     s: &Settings<'_, f64>,
     els: &mut [Element<f64>],
@@ -73,20 +72,17 @@ unsafe fn pair(
 ) {
     let k = s.terms();
     let w = s.weights();
+    assert!(els.len() == LANES && ok.len() == LANES);
     let hv = _mm512_loadu_pd(h.as_ptr());
-    let ok_k = ok
-        .iter()
-        .enumerate()
-        .fold(0u8, |m, (l, &b)| m | u8::from(b) << l);
+    // the eight validity bytes (0 or 1) as lane bits, in one load
+    // SAFETY: ok holds LANES = 8 bytes (asserted)
+    let bytes = unsafe { _mm_loadl_epi64(ok.as_ptr().cast()) };
+    let ok_k = _mm512_test_epi64_mask(_mm512_cvtepu8_epi64(bytes), _mm512_set1_epi64(1));
     // valid and finite (h - h is 0 for a finite h, NaN otherwise)
     let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(hv, hv), _mm512_setzero_pd());
     let live = ok_k & finite;
-    let started = els
-        .iter()
-        .enumerate()
-        .fold(0u8, |m, (l, e)| m | u8::from(e.started != 0) << l);
-    let last = _mm512_loadu_pd(lanes(els, |e| e.last_h).as_ptr());
-    let total = _mm512_loadu_pd(lanes(els, |e| e.total).as_ptr());
+    // SAFETY: AVX2, AVX-512 F/DQ/VL (this function's features); els holds 8 (asserted)
+    let (last, total, started) = unsafe { heads(els) };
     // the level is h itself (power 1); the first valid level is a step from 0
     let change = _mm512_mask_sub_pd(hv, started, hv, last);
     let total = _mm512_add_pd(total, change);
@@ -134,5 +130,39 @@ unsafe fn pair(
             el.last_h = h[l];
             el.total = totals[l];
         }
+    }
+}
+
+/// The last level, the sum of steps and the `started` flags of eight elements, gathered
+/// (an element is `ELEMENT_WORDS` words apart), not stored lane by lane and loaded as a
+/// register (a store-forwarding stall each; issue 34, eleventh round).
+///
+/// # Safety
+/// The processor must have AVX2 and AVX-512 F/DQ/VL.
+///
+/// # Panics
+/// When `els` is not eight elements.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn heads(els: &[Element<f64>]) -> (__m512d, __m512d, __mmask8) {
+    assert_eq!(els.len(), LANES);
+    let base = els.as_ptr().cast::<u8>();
+    let words = _mm512_mullo_epi64(
+        _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
+        _mm512_set1_epi64(ELEMENT_WORDS as i64),
+    );
+    let quads = _mm256_mullo_epi32(
+        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        _mm256_set1_epi32(2 * ELEMENT_WORDS as i32),
+    );
+    // SAFETY: lane l reads the field of els[l] (l < 8 = els.len(), asserted), an f64 at
+    // its offset in the #[repr(C)] element, and the u32 `started` (quads of bytes)
+    unsafe {
+        let field = |offset: usize| base.add(offset).cast::<f64>();
+        let last = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, last_h)));
+        let total = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, total)));
+        let at = base.add(offset_of!(Element<f64>, started)).cast::<i32>();
+        let st = _mm256_i32gather_epi32::<4>(at, quads);
+        (last, total, _mm256_test_epi32_mask(st, st))
     }
 }
