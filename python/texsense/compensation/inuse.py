@@ -263,8 +263,11 @@ class InUseDrift:
         """The gain of every element at the readings ``x0`` (the creep changed, or the load
         did); returns the corrected frame."""
         c = self.corrected(x0)
-        big = x0 > 1e-6
-        self._gain = np.where(big, c / np.where(big, x0, 1.0), 1.0)
+        # a gain only where the element is loaded (where its creep is read), and never below 0:
+        # a ratio over a reading near zero is no gain, and times a later load it was one
+        # (-82 N/cm² at a sit-down, docs/drift.md)
+        big = x0 > self.loaded_ncm2
+        self._gain = np.where(big, np.maximum(c / np.where(big, x0, 1.0), 0.0), 1.0)
         return c
 
     def _slope(self, c: np.ndarray) -> np.ndarray:
@@ -322,6 +325,7 @@ class InUseDrift:
         """An empty mat: nothing moves; settled, the compression it reads (its set) is
         smoothed over ``update_s``."""
         self._still_since, self._period, self._prev = None, None, None
+        self._gain[:] = 1.0  # the gains were of a load that is gone
         self._test.forget()
         self._empty_since = t if self._empty_since is None else self._empty_since
         self._returned = True
