@@ -325,9 +325,10 @@ class InUseDrift:
         """An empty mat: nothing moves; settled, the compression it reads (its set) is
         smoothed over ``update_s``."""
         self._still_since, self._period, self._prev = None, None, None
-        self._gain[:] = 1.0  # the gains were of a load that is gone
         self._test.forget()
-        self._empty_since = t if self._empty_since is None else self._empty_since
+        if self._empty_since is None:  # it just became empty
+            self._empty_since = t
+            self._gain[:] = 1.0  # the gains were of a load that is gone
         self._returned = True
         if not (self.zero and self.converter is not None and raw is not None):
             return
