@@ -321,12 +321,58 @@ class Monitor:
             "calibration_id": pipeline.calibration_id,
             "file": None if path is None else str(path),
         }
-        self._events([Event("calibrated", t, None, detail)])
+        self.record_events([Event("calibrated", t, None, detail)])
         log.warning("%s: now showing pressure through the calibration %s", self.source.name,
                     path or pipeline.calibration_id)  # fmt: skip
 
+    # ------------------------------------------------------------------ checkpoints
+    def resume_state(self) -> dict[str, Any]:
+        """The state a takeover continues from (copies: the frame count, the first frame's
+        time, the last frame's number, the clock, the exposure as arrays' bytes, the bed's
+        schedule, the posture vote); :meth:`resume` takes it back."""
+        return {
+            "frames": self.frames,
+            "t_first": self._t_first,
+            "seq": self.last_seq,
+            "missed": self.missed,
+            "clock": self.clock.state(),
+            "tracker": self.tracker.state_packed(),
+            "bed": None if self.bed is None else self.bed.schedule.state(),
+            "vote": self._vote.state(),
+        }
+
+    def resume(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`resume_state` (of this process or another's). What came
+        between that state and the next frame read here is not known unless the frames'
+        numbers say that nothing did: the next step counts it as not read."""
+        clock = FrameClock(rate=self.clock.rate_hint).restore(state["clock"])
+        self.tracker.restore(state["tracker"])
+        if self.bed is not None and state.get("bed") is not None:
+            self.bed.schedule.restore(state["bed"])
+        self._vote.restore(state["vote"])
+        self.clock = clock
+        self.frames = int(state["frames"])
+        self._t_first = state.get("t_first")
+        seq = state.get("seq")  # (a checkpoint of an earlier version has none)
+        self.last_seq = None if seq is None else int(seq)
+        self.missed = int(state.get("missed", 0))
+        self._skimmed = self.last_seq is None
+        self.changes += 1
+
+    def start_afresh(self) -> None:
+        """Unloaded spacer states, no exposure, no alert, a new clock (no state to resume)."""
+        if self.pipeline is not None:
+            self.pipeline.reset()
+        self.tracker.restore({"size": len(self.tracker.names), "exposed": []})
+        if self.bed is not None:
+            self.bed.schedule.restore({})
+        self._vote.reset()
+        self.clock = FrameClock(rate=self.clock.rate_hint)
+        self.frames, self._t_first, self.last_seq, self._skimmed = 0, None, None, False
+        self.changes += 1
+
     # ------------------------------------------------------------------ processing
-    def _events(self, events: list[Event], wall: float | None = None) -> None:
+    def record_events(self, events: list[Event], wall: float | None = None) -> None:
         """Store and log events (and keep them for the recording's next frame)."""
         wall = time.time() if wall is None else wall
         for e in events:
@@ -359,7 +405,7 @@ class Monitor:
         """Acknowledge an alert."""
         t = self._latest["t"] if self._latest else 0.0
         e = self.tracker.acknowledge(alert_id, t)
-        self._events([e])
+        self.record_events([e])
         self.changes += 1
         return e
 
@@ -388,7 +434,7 @@ class Monitor:
         if verdict == "resync":
             detail = {"jump_s": round(jump, 3), "source_t": source_t, "seq": frame.seq}
             log.warning("%s: the clock jumped %+.4g s; re-synchronised", self.source.name, jump)
-            self._events([Event("clock", t, None, detail)])
+            self.record_events([Event("clock", t, None, detail)])
         return True
 
     def keep_time(self, frame: Frame, wall: float) -> bool:
@@ -440,7 +486,7 @@ class Monitor:
             posture = self._posture_of(frame.t, pressure, load)
         events = self._exposure(frame.t, pressure, posture, wall, bounds, regions=full)
         if events or full:
-            self._events(events, wall)
+            self.record_events(events, wall)
             self.changes += 1
         return pressure, measured, codes, bounds, frame_stats, posture
 

@@ -49,7 +49,6 @@ from typing import TYPE_CHECKING, Any
 
 from texsense.apps.alerts import Alert
 from texsense.exceptions import ParameterError
-from texsense.monitor.clock import FrameClock
 
 if TYPE_CHECKING:
     from texsense.station.ward import MatEntry
@@ -201,17 +200,9 @@ def _save_monitor(entry: MatEntry) -> Callable[[], dict[str, Any]]:
     """The monitor's state, taken now (copies; the exposure as arrays' bytes,
     :meth:`~texsense.apps.alerts.ExposureTracker.state_packed`), its JSON text made when
     called: in the journal's thread, not on the event loop."""
-    m = entry.monitor
     state = {
         "version": MONITOR_VERSION,
-        "frames": m.frames,
-        "t_first": m._t_first,
-        "seq": m.last_seq,
-        "missed": m.missed,
-        "clock": m.clock.state(),
-        "tracker": m.tracker.state_packed(),
-        "bed": None if m.bed is None else m.bed.schedule.state(),
-        "vote": m._vote.state(),
+        **entry.monitor.resume_state(),
         "mat": {
             "messages": entry.messages,
             "malformed": entry.malformed,
@@ -231,20 +222,7 @@ def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     state = json.loads(data)
     if state.get("version") not in (1, MONITOR_VERSION):  # 1: the exposure as rows
         raise ParameterError(f"monitor state of version {state.get('version')}")
-    m = entry.monitor
-    clock = FrameClock(rate=m.clock.rate_hint).restore(state["clock"])
-    m.tracker.restore(state["tracker"])
-    if m.bed is not None and state.get("bed") is not None:
-        m.bed.schedule.restore(state["bed"])
-    m._vote.restore(state["vote"])
-    m.clock = clock
-    m.frames = int(state["frames"])
-    m._t_first = state.get("t_first")
-    seq = state.get("seq")  # (a checkpoint of an earlier version has none)
-    m.last_seq, m.missed = (None if seq is None else int(seq)), int(state.get("missed", 0))
-    # what came between the checkpoint and the next frame read here is not known unless the
-    # numbers say that nothing did (the frames the old holder read after it are lost too)
-    m._skimmed = m.last_seq is None
+    entry.monitor.resume(state)
     mat = state["mat"]
     entry.messages, entry.malformed = int(mat["messages"]), int(mat["malformed"])
     entry.ignored, entry.failed = int(mat["ignored"]), int(mat["failed"])
@@ -255,7 +233,6 @@ def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     if entry.state == "live":  # stale once two of its periods pass without a frame here
         entry.last_wall = entry.last_seen = time.time()
     entry.version += 1
-    m.changes += 1
 
 
 def _save_pipeline(entry: MatEntry) -> bytes | None:
@@ -277,19 +254,10 @@ register_part(Part("pipeline", _save_pipeline, _restore_pipeline, often=False))
 def fresh(entry: MatEntry) -> None:
     """Start the mat afresh (no checkpoint of it anywhere): unloaded spacer states, no
     exposure, no alert, a new clock."""
-    m = entry.monitor
-    if m.pipeline is not None:
-        m.pipeline.reset()
-    m.tracker.restore({"size": len(m.tracker.names), "exposed": []})
-    if m.bed is not None:
-        m.bed.schedule.restore({})
-    m._vote.reset()
-    m.clock = FrameClock(rate=m.clock.rate_hint)
-    m.frames, m._t_first, m.last_seq, m._skimmed = 0, None, None, False
+    entry.monitor.start_afresh()
     entry.state, entry.last_wall, entry.period_s, entry.refused = "waiting", None, None, None
     entry.last_seen = None
     entry.version += 1
-    m.changes += 1
 
 
 # ------------------------------------------------------------------------ the events after

@@ -306,7 +306,7 @@ class GroupStation(Station):
             self._soon_mats.add(g.mat)
             topics.append(mat_topic(self.topic, g.mat))
             kind = "taken-over" if g.blobs else "watched"
-            entry.monitor._events(
+            entry.monitor.record_events(
                 [Event(kind, entry.monitor.clock.last_t or 0.0, None, details[g.mat])]
             )
             held.append(g.mat)

@@ -179,7 +179,7 @@ class MatEntry:
     # ---------------------------------------------------------------- messages
     def _event(self, kind: str, detail: dict[str, Any]) -> None:
         t = self.monitor.clock.last_t or 0.0
-        self.monitor._events([Event(kind, t, None, {"mat": self.id, **detail})])
+        self.monitor.record_events([Event(kind, t, None, {"mat": self.id, **detail})])
 
     def _malformed(self, kind: str, text: str) -> None:
         """Count a message that gave no frame and log it once (then once a minute)."""
