@@ -291,7 +291,8 @@ def main() -> None:
     print("|---|---:|---:|---:|")
     for p in paths:
         med, p99 = median_row(lat_med[p]) * 1e6, median_row(lat_p99[p]) * 1e6
-        print(f"| {p} | {med:.0f} µs | {p99:.0f} µs | {median_row(lat_chain[p]) * 1e6:.0f} µs |")
+        chain = median_row(lat_chain[p]) * 1e6
+        print(f"| {p} | {med:.1f} µs | {p99:.0f} µs | {chain:.1f} µs |")
     d_abs, d_rel = f32_difference(cal["hysteresis"].model_, walk)
     print()
     print(

@@ -74,9 +74,7 @@ impl CompensationBlock<'_> {
         let (mut h, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
         let (h, ok) = (&mut h[..w], &mut ok[..w]);
         self.preisach.row(u, valid, h);
-        for (o, v) in ok.iter_mut().zip(h.iter()) {
-            *o = v.is_finite();
-        }
+        crate::lanes::finite_flags(h, ok);
         match (&mut self.drift, &self.level) {
             (Some(d), Some(curve)) => {
                 for (i, slot) in out.iter_mut().enumerate() {

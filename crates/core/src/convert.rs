@@ -24,6 +24,8 @@ pub struct Curve {
     slope: Vec<f64>,
     bucket_start: Vec<u32>,
     inv_width: f64,
+    /// Per bucket, for the SIMD lanes ([`Curve::splits`]).
+    split: Vec<f64>,
 }
 
 impl Curve {
@@ -38,13 +40,25 @@ impl Curve {
                 why: "needs >= 2 finite points with strictly increasing x".into(),
             }
         })?;
+        let split = splits(&x, &bucket_start);
         Ok(Self {
             x,
             y,
             slope,
             bucket_start,
             inv_width,
+            split,
         })
+    }
+
+    /// Per bucket `b` of the segment table, where an input of the bucket steps once forward
+    /// from the bucket's start `j`: `x[j + 1]` (infinite when `j` is the last segment), or
+    /// NaN when an input of the bucket may step twice or more (a point after `x[j + 1]` within
+    /// the bucket, or close to its end). The AVX-512 conversion gathers it with the bucket's
+    /// start, so that the segment's `x`, `y` and slope are one gather level after the bucket
+    /// (issue 34, twelfth round); a lane with NaN walks as the kernel does.
+    pub fn splits(&self) -> &[f64] {
+        &self.split
     }
 
     /// The kernels' view (checked when the curve was built).
@@ -72,6 +86,29 @@ impl Curve {
     }
 }
 
+/// [`Curve::splits`] of a curve's points and bucket table ([`kernel::tables`]).
+fn splits(x: &[f64], bucket_start: &[u32]) -> Vec<f64> {
+    let last = x.len() - 1;
+    let buckets = (bucket_start.len() - 1) as f64;
+    let width = (x[last] - x[0]) / buckets;
+    bucket_start
+        .iter()
+        .enumerate()
+        .map(|(b, &start)| {
+            let j = start as usize;
+            // the bucket's end with a margin far above the rounding of an input's bucket
+            let end = x[0] + (b as f64 + 1.001) * width;
+            if j + 2 < last && x[j + 2] <= end {
+                f64::NAN
+            } else if j + 1 < last {
+                x[j + 1]
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect()
+}
+
 /// Capacitance -> compression per element (eq. 2.1): `C_ref = (C - offset_i) / gain_i`,
 /// then the material curve from `C_ref` to the compression (or, without a curve, the
 /// reading scaled per element: a linear calibration).
@@ -91,6 +128,8 @@ pub struct ConverterView<'a> {
     pub gain: &'a [f64],
     /// The material curve.
     pub curve: Option<kernel::Curve<'a, f64>>,
+    /// The curve's [`Curve::splits`] (empty without a curve).
+    pub split: &'a [f64],
 }
 
 impl ConverterView<'_> {
@@ -175,6 +214,7 @@ impl Converter {
             offset: &self.offset,
             gain: &self.gain,
             curve: self.curve.as_ref().map(Curve::view),
+            split: self.curve.as_ref().map_or(&[], Curve::splits),
         }
     }
 

@@ -44,7 +44,7 @@ pub(super) unsafe fn row(
         let scaled = _mm512_div_pd(_mm512_sub_pd(xv, off), g);
         let v = match &view.curve {
             // SAFETY: AVX-512 (this function's features)
-            Some(c) => unsafe { at(c, scaled) },
+            Some(c) => unsafe { at(c, view.split, scaled) },
             None => scaled,
         };
         let nan = _mm512_set1_pd(f64::NAN);
@@ -65,10 +65,64 @@ pub(super) unsafe fn row(
     };
 }
 
-/// `Curve::at` per lane (`super::avx2::at`).
+/// `Curve::at` per lane with the curve's `split` table (`super::Curve::splits`): the bucket's
+/// start and split gathered at once, the start stepped once where the input is at or past
+/// the split, then the segment's `x`, `y` and slope gathered at once — two levels of
+/// dependent gathers (the walk of [`at_walk`] has three). A group with a lane whose bucket
+/// may step twice (NaN split) or back goes through [`at_walk`]: the same segment as the
+/// kernel's walk in every lane, so the same bits.
+///
+/// # Panics
+/// When `split` is not one per bucket.
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn at(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
+unsafe fn at(c: &Curve<'_, f64>, split: &[f64], v: __m512d) -> __m512d {
+    let (xs, ys, slope, buckets) = (c.x(), c.y(), c.slopes(), c.bucket_starts());
+    assert_eq!(split.len(), buckets.len(), "one split per bucket");
+    let last = xs.len() - 1;
+    let (x0, xl) = (_mm512_set1_pd(xs[0]), _mm512_set1_pd(xs[last]));
+    let nan = _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(v, v);
+    let hi = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(v, xl);
+    let lo = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(v, x0);
+    let inside = !(nan | hi | lo);
+    let vin = _mm512_mask_blend_pd(inside, x0, v);
+    let top = _mm512_set1_pd((buckets.len() - 1) as f64);
+    let pos = _mm512_min_pd(
+        _mm512_mul_pd(_mm512_sub_pd(vin, x0), _mm512_set1_pd(c.inv_width())),
+        top,
+    );
+    // 0 <= pos <= top < 2^31: truncation is the floor
+    let b = _mm512_cvtepi32_epi64(_mm512_cvttpd_epi32(pos));
+    let bucket = _mm512_i64gather_epi32::<4>(b, buckets.as_ptr().cast::<i32>());
+    let cut = _mm512_i64gather_pd::<8>(b, split.as_ptr());
+    let twice = inside & _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(cut, cut);
+    // the kernel's first step forward (`x[j + 1] <= v`, `j + 1 < last`: the split)
+    let up = inside & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(cut, vin);
+    let j0 = _mm512_cvtepu32_epi64(bucket);
+    let j = _mm512_mask_add_epi64(j0, up, j0, _mm512_set1_epi64(1));
+    let xj = _mm512_i64gather_pd::<8>(j, xs.as_ptr());
+    let yj = _mm512_i64gather_pd::<8>(j, ys.as_ptr());
+    let sj = _mm512_i64gather_pd::<8>(j, slope.as_ptr());
+    // a step back (an input rounded into the bucket below its start's point): x[j] > v
+    // where j did not step (a lane that stepped has x[j] <= v)
+    let back = inside
+        & _mm512_cmpgt_epi64_mask(j, _mm512_setzero_si512())
+        & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(xj, vin);
+    if twice | back != 0 {
+        // SAFETY: AVX-512 (this function's features)
+        return unsafe { at_walk(c, v) };
+    }
+    let line = _mm512_add_pd(_mm512_mul_pd(sj, _mm512_sub_pd(vin, xj)), yj);
+    let mut r = _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(xj, vin), line, yj);
+    r = _mm512_mask_blend_pd(lo, r, _mm512_set1_pd(ys[0]));
+    r = _mm512_mask_blend_pd(hi, r, _mm512_set1_pd(ys[last]));
+    _mm512_mask_blend_pd(nan, r, _mm512_set1_pd(f64::NAN))
+}
+
+/// `Curve::at` per lane (`super::avx2::at`), walking from the bucket's start.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn at_walk(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
     let (xs, ys, slope, buckets) = (c.x(), c.y(), c.slopes(), c.bucket_starts());
     let last = xs.len() - 1;
     let (x0, xl) = (_mm512_set1_pd(xs[0]), _mm512_set1_pd(xs[last]));
@@ -145,4 +199,110 @@ unsafe fn at(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
     r = _mm512_mask_blend_pd(lo, r, _mm512_set1_pd(ys[0]));
     r = _mm512_mask_blend_pd(hi, r, _mm512_set1_pd(ys[last]));
     _mm512_mask_blend_pd(nan, r, _mm512_set1_pd(f64::NAN))
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::convert::{Converter, Curve};
+    use crate::preisach::tests::Rng;
+    use crate::simd::Path;
+
+    /// The points' x of case `case`: up to 400, spaced at random, smoothly uneven (as a
+    /// material curve), in clusters, or evenly from 0.5 (points on buckets' edges).
+    fn points(rng: &mut Rng, case: usize) -> Vec<f64> {
+        let points = 2 + (rng.next() % 400) as usize;
+        let mut x = vec![if case % 4 == 3 { 0.5 } else { 2.0 + rng.unit() }];
+        // even steps put points on buckets' edges: inputs an ulp below them step back
+        let even = [0.1, 0.25, 0.3, 1.7][(rng.next() % 4) as usize];
+        for k in 1..points {
+            let gap = match case % 4 {
+                3 => {
+                    x.push(x[0] + k as f64 * even);
+                    continue;
+                }
+                0 => 0.5 + rng.unit(),
+                1 => 0.02 + (k as f64 / points as f64).powi(2),
+                _ if rng.next().is_multiple_of(5) => 1e-3 * (0.01 + rng.unit()),
+                _ => 0.5 + rng.unit(),
+            };
+            x.push(x[k - 1] + gap);
+        }
+        x
+    }
+
+    /// Curves of up to 400 points spaced at random, smoothly uneven (as a material curve), in
+    /// clusters, or evenly (points on buckets' edges), readings inside them (most groups on
+    /// the split path), on their points and splits, an ulp or two below their points (a step
+    /// back), and a few beyond the ends or not numbers: the AVX-512 lanes give the scalar
+    /// kernel's bits, and most groups took the split path (no lane with a NaN split).
+    #[test]
+    fn split_lanes_equal_the_scalar_kernel_bit_for_bit() {
+        let _guard = crate::simd::testing::lock();
+        if !crate::simd::avx512() {
+            return; // nothing to compare on this processor
+        }
+        let mut rng = Rng(12);
+        let (mut groups, mut split_groups) = (0, 0);
+        for case in 0..300 {
+            let x = points(&mut rng, case);
+            let points = x.len();
+            // values of any size and sign (a line through a point then rarely rounds to it)
+            let y: Vec<f64> = x
+                .iter()
+                .map(|_| (rng.unit() - 0.3) * 10f64.powi((rng.next() % 6) as i32))
+                .collect();
+            let curve = Curve::new(x.clone(), y).unwrap();
+            let n = 8 * (1 + (rng.next() % 24) as usize);
+            let offset = vec![0.0; n];
+            let gain = vec![1.0; n];
+            let conv = Converter::new(offset, gain, Some(curve.clone())).unwrap();
+            let view = conv.view();
+            let (lo, hi) = (x[0], x[points - 1]);
+            let readings: Vec<f64> = (0..n)
+                .map(|_| match rng.next() % 40 {
+                    0 => x[(rng.next() % points as u64) as usize],
+                    // an ulp or two below a point (rounded into the bucket above its own)
+                    m @ 3..=29 if m <= 5 || case % 4 == 3 => {
+                        let p = x[(rng.next() % points as u64) as usize];
+                        f64::from_bits(p.to_bits() - rng.next() % 3)
+                    }
+                    1 => curve.splits()[(rng.next() % curve.splits().len() as u64) as usize],
+                    2 if case % 7 == 0 => [f64::NAN, lo - 1.0, hi + 1.0][(rng.next() % 3) as usize],
+                    _ => lo + (hi - lo) * rng.unit(),
+                })
+                .map(|v| {
+                    if v.is_infinite() {
+                        lo + 0.5 * (hi - lo)
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            let ok = vec![true; n];
+            // which groups go the split way: no lane's bucket with a NaN split
+            let c = curve.view();
+            let top = (c.bucket_starts().len() - 1) as f64;
+            for g in readings.chunks_exact(8) {
+                groups += 1;
+                let walk = g.iter().any(|&v| {
+                    let inside = v > lo && v < hi;
+                    let b = ((v - lo) * c.inv_width()).min(top) as usize;
+                    inside && curve.splits()[b].is_nan()
+                });
+                split_groups += usize::from(!walk);
+            }
+            let run = |best: Path| {
+                crate::simd::set_limit(best);
+                let mut out = vec![0.0; n];
+                view.row(0, &readings, &ok, &mut out);
+                crate::simd::set_enabled(true);
+                out.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+            };
+            assert_eq!(run(Path::Scalar), run(Path::Avx512), "case {case}");
+        }
+        assert!(
+            split_groups * 2 > groups,
+            "{split_groups} of {groups} groups on the split path"
+        );
+    }
 }

@@ -26,9 +26,16 @@ fn row(rng: &mut Rng, w: usize) -> (Vec<f64>, Vec<u8>) {
     (values, codes)
 }
 
-/// What the three functions give on one path: the inputs and flags, the codes, the last
-/// values and the list of readings not available.
-type Outputs = (Vec<u64>, Vec<bool>, Vec<u8>, Vec<u64>, Vec<usize>);
+/// What the four functions give on one path: the inputs and flags, the codes, the last
+/// values, the list of readings not available and the finite flags.
+type Outputs = (
+    Vec<u64>,
+    Vec<bool>,
+    Vec<u8>,
+    Vec<u64>,
+    Vec<usize>,
+    Vec<bool>,
+);
 
 /// What each function gives on one path.
 fn on(path: Path, values: &[f64], codes: &[u8], last: &[f64]) -> Outputs {
@@ -40,9 +47,11 @@ fn on(path: Path, values: &[f64], codes: &[u8], last: &[f64]) -> Outputs {
     code_not_finite(values, &mut c, 0, 2);
     let (mut l, mut failed) = (last.to_vec(), vec![99]);
     keep_available(values, codes, 0, &mut l, &mut failed);
+    let mut finite = vec![true; w];
+    finite_flags(values, &mut finite);
     simd::set_enabled(true);
     let bits = |v: &[f64]| v.iter().map(|a| a.to_bits()).collect::<Vec<_>>();
-    (bits(&x), ok, c, bits(&l), failed)
+    (bits(&x), ok, c, bits(&l), failed, finite)
 }
 
 #[test]
@@ -62,6 +71,7 @@ fn every_path_gives_the_scalar_loops_bits() {
             assert_eq!(scalar.1[i], good);
             let x = if good { values[i] } else { f64::NAN };
             assert_eq!(scalar.0[i], x.to_bits());
+            assert_eq!(scalar.5[i], values[i].is_finite());
         }
         for &p in &paths {
             assert_eq!(on(p, &values, &codes, &last), scalar, "case {case}, {p:?}");
