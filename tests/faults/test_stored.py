@@ -18,8 +18,12 @@ import random
 import numpy as np
 import pytest
 
+from faults._families import batch, small_recording
 from texsense.apps.alerts import Alert
+from texsense.apps.clinical import EVENTS_LABEL, STATE_VERSION
+from texsense.apps.review import open_review
 from texsense.exceptions import ParameterError
+from texsense.io import save
 from texsense.monitor.store import EventStore
 from texsense.station import checkpoint
 from texsense.station.ward import MatEntry
@@ -198,3 +202,46 @@ def test_events_stored_after_the_checkpoint_of_other_kinds_are_skipped(
     assert cases > 100 and skipped > cases // 3
     fault_row(AREA, "events after the checkpoint: every field x 11 values and deleted",
               "skipped, warned", f"{skipped} not applied", cases)  # fmt: skip
+
+
+def _live_recording(folder, state: dict, k: int):
+    """A seat recording made live (its events label) whose clinical state at the start is
+    ``state`` (an open alert, a bed's schedule: docs/data-model.md)."""
+    rec = small_recording()
+    rec.labels[EVENTS_LABEL] = np.array([""] * rec.n_frames)
+    rec.meta["clinical"] = {"version": STATE_VERSION, "t": 0.0, "wall": 1.7e9, **state}
+    return save(rec, folder / f"live-{k}.h5")
+
+
+def test_a_recordings_clinical_state_of_other_kinds_is_not_used_in_one_line(tmp_path, fault_row):
+    """The state the monitor had when a live recording started (its open alert, the turn
+    due), read by ``report`` and the playback (``open_review``): every field they read x 11
+    values and deleted is used or said not to be (a note), never an exception (a text for
+    the alert's opening time was a ``ValueError`` traceback out of ``report``)."""
+    alert = Alert(1, -5.0, [1, 2], 1300.0, None, None, ["left"], ["row 1"], 1.7e9 - 5)
+    good = {"exposure": {"t": 0.0, "by": "element", "size": 12, "exposed": [],
+                         "alert": alert.to_dict(), "next_id": 2},
+            "bed": {"side": "left", "since_t": -900.0, "due_since": -60.0, "turns": 1}}  # fmt: skip
+    read = [("exposure", "size"), *(("exposure", "alert", k) for k in alert.to_dict()),
+            ("bed", "side"), ("bed", "since_t"), ("bed", "due_since")]  # fmt: skip
+    cases, listed = 0, 0
+    for place in read:
+        for value, delete in [*((v, False) for v in ODD), (None, True)]:
+            path = _live_recording(tmp_path, _changed(good, place, value, delete), cases)
+            events = open_review(path, mode="bed" if place[0] == "bed" else "seat").events
+            listed += any(e["source"] == "before" for e in events)
+            cases += 1
+    assert cases > 150 and 0 < listed < cases
+    odd = _changed(good, ("exposure", "alert", "opened_t"), "x", False)
+    path = _live_recording(tmp_path, odd, 9000)
+    (rc, _out, err), _good = batch(
+        [["report", str(path), "-o", str(tmp_path / "bad.html")],
+         ["report", str(_live_recording(tmp_path, good, 9001)), "-o", str(tmp_path / "good.html")]],
+        tmp_path,
+    )[0]  # fmt: skip
+    assert rc == 0 and "Traceback" not in err
+    assert "not used" in (tmp_path / "bad.html").read_text()
+    assert "open when the recording started" in (tmp_path / "good.html").read_text()
+    fault_row(AREA, "a live recording's clinical state: every field read x 11 values and "
+              "deleted (the alert on a seat, the turn on a bed)", "read, warned",
+              f"{listed} listed open at start", cases)  # fmt: skip
