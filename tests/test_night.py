@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from texsense import Layout
+from texsense.apps import stats
 from texsense.cli import main
 from texsense.commands.hysteresis import _apply_bounds
 from texsense.compensation import intervals
@@ -146,3 +147,20 @@ def test_the_multiplier_is_taken_per_band_of_the_value(monkeypatch: pytest.Monke
     for b in (0, 4):
         assert 0.88 < inside[band == b].mean() < 0.92
     assert intervals.multiplier(0.9, "test", band=2) == intervals.multiplier(0.9, "test")
+
+
+def test_an_empty_mat_reads_zero_not_invalid_and_no_bound_is_below_zero(tmp_path: Path) -> None:
+    # the empty start of a night: every element's conversion read about -0.001 N/cm², which
+    # the file marked invalid, so the report's sensor health showed the empty mat "100 %
+    # invalid", `info` gave it no load, and every lower bound was below zero (-0.08 N/cm²)
+    assert main(["simulate", "night", "--hours", "0.1", "--seed", "3", "-o", str(tmp_path / "n.h5"),
+                 "--calibration", str(tmp_path / "mat.json")]) == 0  # fmt: skip
+    assert main(["process", str(tmp_path / "n.h5"), "--calibration", str(tmp_path / "mat.json"),
+                 "-o", str(tmp_path / "p.h5"), "--interval", "0.95"]) == 0  # fmt: skip
+    out = load(tmp_path / "p.h5")
+    lo, hi = read_bounds(tmp_path / "p.h5")
+    empty = slice(0, 25)  # the mat switched on empty for 5 min, a frame every 10 s
+    assert out.frames.min() >= 0 and lo.min() >= 0
+    assert np.all(lo <= out.frames) and np.all(out.frames <= hi)
+    assert out.valid[empty].mean() > 0.5  # only the failed elements are invalid
+    assert np.all(np.isfinite(stats.total_load(out)[empty]))
