@@ -164,3 +164,17 @@ def test_an_empty_mat_reads_zero_not_invalid_and_no_bound_is_below_zero(tmp_path
     assert np.all(lo <= out.frames) and np.all(out.frames <= hi)
     assert out.valid[empty].mean() > 0.5  # only the failed elements are invalid
     assert np.all(np.isfinite(stats.total_load(out)[empty]))
+
+
+def test_the_in_use_line_says_since_when_it_corrects_and_the_still_time_in_all() -> None:
+    # it said "from 2 min still since t = 410 s" at the end of a 530 s night: a still period
+    # that could not fit in the data (410 s is when the first correction was made, 150 s the
+    # still time of every period read), the minutes rounded (the report: 2 min 30 s)
+    from texsense.commands.pipeline import in_use_line
+
+    status = {"state": "correcting", "load_correction": -0.0336, "since_t": 410.0,
+              "still_s": 150.0, "zeroed": 1, "weighed": 0, "weight_n": 473.1,
+              "checked_t": 380.0, "checked_age_s": 150.0}  # fmt: skip
+    line = in_use_line(status)
+    assert "correcting since t = 410 s, from 2 min 30 s still in all; zero taken once" in line
+    assert "still since" not in line
