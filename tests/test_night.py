@@ -178,3 +178,18 @@ def test_the_in_use_line_says_since_when_it_corrects_and_the_still_time_in_all()
     line = in_use_line(status)
     assert "correcting since t = 410 s, from 2 min 30 s still in all; zero taken once" in line
     assert "still since" not in line
+
+
+def test_simulate_night_counts_turns_in_bed_not_getting_in_or_out() -> None:
+    # "1 turn" was printed for a 0.15 h night whose person only got into bed (every
+    # transition counted), "3 turns" for a 2 h night with none (the report: 0 turns)
+    from texsense.commands.simulate import night_turns
+
+    def sides(*s: str) -> np.ndarray:
+        return np.array(s, dtype=object)
+
+    assert night_turns(sides("out", "transition", "right", "right")) == 0
+    assert night_turns(sides("out", "transition", "right", "transition", "out",
+                             "transition", "supine")) == 0  # fmt: skip
+    assert night_turns(sides("out", "transition", "right", "transition", "supine",
+                             "transition", "left", "transition", "out")) == 2  # fmt: skip
