@@ -204,3 +204,12 @@ def test_health_finds_a_dead_element_inside_the_load_not_the_edges():
     h = element_health(Recording(lay.from_grid(m), np.arange(20.0), lay, valid=valid))
     assert np.flatnonzero(h["silent"]).tolist() == [lay.element_at(3, 4)]
     assert h["invalid_share"][lay.element_at(0, 0)] == 0.25 and h["invalid_share"].sum() == 0.25
+
+
+def test_out_of_bed_says_how_long_the_bed_was_empty_when_it_came_not_for_how_long() -> None:
+    # a night's report read "out of bed (for 1 min)" for a person out of bed 9 min: after_s
+    # is the offload time the event waits for
+    from texsense.apps.review_events import event_text
+
+    text = event_text("out-of-bed", {"after_s": 60.0})
+    assert text == "out of bed (empty for 1 min by then)" and "(for " not in text

@@ -345,6 +345,8 @@ class TurningSchedule:
                         "after_s": round(start - self.since_t, 1)}))  # fmt: skip
                     events += self._close(t, "turned")
                     self.since_t = start
+                else:  # corrected: the time held on the new side is that side's
+                    self._move_time(self.side, self._candidate, t - start)
                 self.side = self._candidate
         if (
             self.side is not None
@@ -356,6 +358,13 @@ class TurningSchedule:
             events.append(Event("turn-due", t, detail={
                 "side": self.side, "since_s": round(t - self.since_t, 1)}))  # fmt: skip
         return events
+
+    def _move_time(self, old: str | None, new: str, seconds: float) -> None:
+        have = self.time_per_side.get(old, 0.0) if old is not None else 0.0
+        moved = min(max(seconds, 0.0), have)
+        if old is not None and moved > 0:
+            self.time_per_side[old] = have - moved
+            self.time_per_side[new] = self.time_per_side.get(new, 0.0) + moved
 
     @property
     def turning(self) -> bool:

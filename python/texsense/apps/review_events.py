@@ -115,7 +115,8 @@ def event_text(kind: str, detail: dict[str, Any]) -> str:
     elif kind == "turn-due":
         text += f": {format_duration(detail.get('since_s'))} on {detail.get('side')}"
     elif kind == "out-of-bed" and detail.get("after_s") is not None:
-        text += f" (for {format_duration(detail['after_s'])})"
+        # the event comes once the bed has been empty this long: not how long it stayed empty
+        text += f" (empty for {format_duration(detail['after_s'])} by then)"
     elif kind == "cleared" and detail.get("by") == "turned":
         text = "alert cleared (turned)"
     if detail.get("open_at_start"):

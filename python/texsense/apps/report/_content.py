@@ -18,6 +18,7 @@ from texsense.apps.views import (
     format_duration,
     place_names,
     seat_zones,
+    times_words,
 )
 from texsense.data import units
 
@@ -150,10 +151,10 @@ def _certainty_rows(review: Review) -> list[list[str]]:
     if isinstance(iu, dict):
         if iu.get("state") == "correcting":
             text = (
-                f"load {100 * iu.get('load_correction', 0):+.1f} % at the end, from "
-                f"{format_duration(iu.get('still_s', 0))} still since "
-                f"{format_duration(iu.get('since_t') or 0)} into the data; zero taken "
-                f"{iu.get('zeroed', 0)} times"
+                f"load {100 * iu.get('load_correction', 0):+.1f} % at the end, correcting "
+                f"since {format_duration(iu.get('since_t') or 0)} into the data, from "
+                f"{format_duration(iu.get('still_s', 0))} still in all; zero taken "
+                f"{times_words(iu.get('zeroed', 0))}"
             )
             if iu.get("weight_n") is not None:
                 kept = iu.get("weighed", 0)
