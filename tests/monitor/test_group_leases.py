@@ -323,3 +323,14 @@ def test_a_member_sends_at_most_its_tiles_budget_changed_states_first(db, monkey
     assert st.publish_tiles(11.0) == 1  # m1, the one left
     assert st.publish_tiles(12.0) == 0
     st.store.close()
+
+
+def test_a_turns_budget_gives_one_turn_at_least_and_more_until_it_is_spent(monkeypatch):
+    """group.at_least_once_for: the loops of the watch's checkpoints (DUE_S, SOON_S)."""
+    from texsense.station import group
+
+    ticks = iter([0.0, 0.5, 0.9, 1.0, 1.5])
+    monkeypatch.setattr(group.time, "monotonic", lambda: next(ticks))
+    assert sum(1 for _ in group.at_least_once_for(1.0)) == 3  # at 0 (the first), 0.5, 0.9
+    ticks = iter([5.0, 5.0])
+    assert sum(1 for _ in group.at_least_once_for(0.0)) == 1

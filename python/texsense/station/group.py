@@ -28,6 +28,7 @@ import time
 import urllib.error
 import urllib.request
 import zlib
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -76,6 +77,15 @@ SOON_S = 0.005
 #: 30-35 ms of CPU, 60-120 ms of wall time on a loaded machine; now they are spread over the
 #: interval, :func:`due_phase`, and this bounds what is left of a burst, issue 38.)
 DUE_S = 0.005
+
+
+def at_least_once_for(seconds: float) -> Iterator[None]:
+    """Turns of a loop with a budget of time: the first always, more while ``seconds`` (on
+    the monotonic clock) have not passed since the first."""
+    end = time.monotonic() + seconds
+    yield
+    while time.monotonic() < end:
+        yield
 
 
 def due_phase(mat: str) -> float:
@@ -383,8 +393,10 @@ class GroupStation(Station):
         checkpoints of mats just taken (at most :data:`FULL_PER_S` a second); returns how
         many."""
         soon: set[str] = set()  # (at most :data:`SOON_S` of them in one turn)
-        n, budget = 0, time.monotonic() + SOON_S
-        while self._soon_mats and (not soon or time.monotonic() < budget):
+        n = 0
+        for _ in at_least_once_for(SOON_S):
+            if not self._soon_mats:
+                break
             m = self._soon_mats.pop()
             soon.add(m)
             if m in self.held:
@@ -398,9 +410,9 @@ class GroupStation(Station):
                 self._write(m, self.held[m], rarely=True)
                 self._allowance -= 1
                 n += 1
-        first, budget = True, time.monotonic() + DUE_S
-        while self._due and self._due[0][0] <= now and (first or time.monotonic() < budget):
-            first = False
+        for _ in at_least_once_for(DUE_S):
+            if not self._due or self._due[0][0] > now:
+                break
             _, m = heapq.heappop(self._due)
             self._scheduled.discard(m)
             if m in soon and m in self.held:  # written just now: the next one in an interval
