@@ -108,6 +108,8 @@ _inbox: list[Any] = []
 STALL_S = 0.15
 #: The watcher's period, s, and the window its lines sum the threads' CPU over, s.
 WATCH_S, WINDOW_S = 0.02, 0.5
+#: Every this many s the watcher writes each thread's CPU since its last such line (``threads``).
+EVERY_S = 5.0
 
 
 def _threads_cpu() -> dict[str, float]:
@@ -132,6 +134,12 @@ def _machine_busy() -> tuple[float, float]:
     return (sum(f) - f[3] - f[4]) / tick, sum(f) / tick
 
 
+def _shares(before: dict[str, float], after: dict[str, float], span: float) -> str:
+    """Each thread's CPU between two readings ``span`` s apart, % of a core."""
+    return " ".join(f"{k}={100 * (after[k] - before.get(k, 0.0)) / span:.0f}%"
+                    for k in sorted(after) if after[k] - before.get(k, 0.0) > 0)  # fmt: skip
+
+
 def _oldest(inbox: Any, now: float) -> tuple[float, int]:
     with inbox._lock:
         age = max((now - q[0][1] for q in inbox.pending.values() if q), default=0.0)
@@ -152,10 +160,12 @@ def _watch(out: Any) -> None:
     """Every WATCH_S: the inbox's oldest message's age; while it is over STALL_S, a line
     (kind ``stall``): its age, messages waiting, the watcher's own lateness (the GIL or the
     machine), pages being served, the CPU of each thread and of the machine (both cores) over
-    the last WINDOW_S, and where the loop's thread is."""
+    the last WINDOW_S, and where the loop's thread is; every EVERY_S a line (kind
+    ``threads``) of each thread's CPU since the last."""
     main = threading.main_thread().ident
     ring: deque[tuple[float, dict[str, float], tuple[float, float]]] = deque()
     late_max: deque[tuple[float, float]] = deque()
+    every: list[Any] = [time.monotonic(), _threads_cpu(), _machine_busy()]
     while True:
         t0 = time.monotonic()
         time.sleep(WATCH_S)
@@ -171,12 +181,18 @@ def _watch(out: Any) -> None:
             continue
         inbox = _inbox[0]
         age, waiting = _oldest(inbox, time.time())
+        if now_m - every[0] >= EVERY_S:  # the threads' CPU since the last such line
+            cpu, machine = ring[-1][1], ring[-1][2]
+            span = max(now_m - every[0], 1e-3)
+            out.write(f"{time.time():.3f}\tthreads\t{1e3 * age:.0f}\t{waiting}\t"
+                      f"machine={100 * (machine[0] - every[2][0]) / span:.0f}% "
+                      f"{_shares(every[1], cpu, span)}\n")  # fmt: skip
+            every[:] = [now_m, cpu, machine]
         if age < STALL_S or len(ring) < 2:
             continue
         (ta, ca, ma), (tb, cb, mb) = ring[0], ring[-1]
         span = max(tb - ta, 1e-3)
-        threads = " ".join(f"{k}={100 * (cb[k] - ca.get(k, 0.0)) / span:.0f}%"
-                           for k in sorted(cb) if cb[k] - ca.get(k, 0.0) > 0)  # fmt: skip
+        threads = _shares(ca, cb, span)
         station = getattr(getattr(inbox, "defer", None), "__self__", None)
         serving = getattr(station, "serving", "?")
         grace = time.monotonic() - getattr(station, "served_at", -1e9)

@@ -55,11 +55,14 @@ def get(url: str, timeout: float = 30.0):
 
 
 def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[str],
-                  workers: int = 1, probe: Path | None = None) -> dict:  # fmt: skip
+                  workers: int = 1, probe: Path | None = None, own_session: bool = False,
+                  ) -> dict:  # fmt: skip
     """The members' processes and their group members' (name, page URL): one each, or its
     workers' with ``--workers`` (ports PORT..PORT+W-1); started together. ``probe``: each
     member's event loop timed by :mod:`loop_probe`, its long callbacks written to
-    ``probe/<member>.tsv``."""
+    ``probe/<member>.tsv``. ``own_session``: each member in a session of its own (as a
+    service or a terminal of its own would start it; Linux's autogroups share the CPU between
+    sessions first, see ``--session``)."""
     out = {}
     for name in names:
         port = free_port() if workers == 1 else free_ports(workers)
@@ -74,7 +77,7 @@ def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[st
             [sys.executable, *start, "station", "--group", "cap", "--member", name,
              "--config", str(ward), "--broker", f"mqtt://127.0.0.1:{broker.port}", "--db", db,
              "--port", str(port), "--record-dir", str(tmp / f"rec-{name}"), *more],
-            stdout=log, stderr=subprocess.STDOUT,
+            stdout=log, stderr=subprocess.STDOUT, start_new_session=own_session,
         )  # fmt: skip
         parts = [(name, port)] if workers == 1 else [
             (worker_name(name, k), port + k) for k in range(workers)]  # fmt: skip
@@ -130,7 +133,8 @@ def settle(members: dict, mats: list[str], timeout: float = 600.0) -> float:
 
 def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: float,
         seconds: float, db_k: int, workers: int = 1, probe: Path | None = None,
-        dump: Path | None = None, viewers: int = 5) -> dict:  # fmt: skip
+        dump: Path | None = None, viewers: int = 5, own_session: bool = False,
+        ) -> dict:  # fmt: skip
     ward = tmp / f"ward-{mats}.toml"
     ward.write_text("".join(
         f'[[mat]]\nid = "m{m:03d}"\nlayout = "grid:32x32"\ncalibration = "{tmp / "cal.json"}"\n\n'
@@ -142,7 +146,7 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
     url = pg.url.rsplit("/", 1)[0] + "/" + db
     ids = [f"m{m:03d}" for m in range(mats)]
     names = [f"s{k + 1}" for k in range(n)]
-    members = start_members(tmp, broker, url, ward, names, workers, probe)
+    members = start_members(tmp, broker, url, ward, names, workers, probe, own_session)
     try:
         took = settle(members, ids)
         first = next(iter(members.values()))[1][0][1]
@@ -243,6 +247,14 @@ def main() -> None:
         "--viewers", type=int, default=5, help="dashboards watched (each a mat), default 5"
     )
     ap.add_argument(
+        "--session",
+        choices=("shared", "own"),
+        default="shared",
+        help="the members in the benchmark's session (with its publisher, broker and viewers) "
+        "or each in its own: with Linux's autogroup scheduling (/proc/sys/kernel/"
+        "sched_autogroup_enabled) the CPU is shared between sessions first",
+    )
+    ap.add_argument(
         "--probe",
         type=Path,
         help="a folder: each member's long event-loop callbacks (loop_probe.py)",
@@ -256,7 +268,9 @@ def main() -> None:
             folder.mkdir(parents=True, exist_ok=True)
     counts = [int(v) for v in args.members.split(",")]
     loads = [(int(m), float(h)) for m, h in (x.split("x") for x in args.loads.split(","))]
-    print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared)")
+    where = "their own sessions" if args.session == "own" else "the benchmark's session"
+    print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared); members in "
+          f"{where}")  # fmt: skip
     print(
         "| mats (1024 elements) | rate | members | settled after | frames published | "
         "processed | lost | frame-to-viewer p50 | p99 | samples | over 100 ms | "
@@ -281,7 +295,7 @@ def main() -> None:
                     if probe is not None:
                         probe.mkdir(exist_ok=True)
                     r = run(tmp, broker, pg, n, mats, hz, args.seconds, k, args.workers, probe,
-                            dump, args.viewers)  # fmt: skip
+                            dump, args.viewers, args.session == "own")  # fmt: skip
                     print(f"| {mats} | {hz:g} Hz | {n} | {r['settle_s']:.0f} s | {r['sent']} | "
                           f"{r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
                           f"{r['p99']:.0f} ms | {r['samples']} | {r['late']} | {r['cpu']} | "

@@ -174,7 +174,9 @@ class Serving:
     :func:`texsense.monitor.web.idle`) is not waited for: the frames it waits for are in that
     inbox (issue 38). The inbox waits a while after a page, its files or a viewer's first
     message (:data:`~texsense.station.ward.PAGE_GRACE_S`: the page's next requests follow),
-    not after an API call's answer."""
+    not after an API call's answer. ``GET /api/mats`` is not waited for at all: it says so
+    (through ``texsense.served``) and is built in chunks with the inbox read between
+    (:func:`mat_list`)."""
 
     def __init__(self, app: Any, station: Station) -> None:
         self.app, self.station = app, station
