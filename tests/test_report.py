@@ -213,3 +213,18 @@ def test_out_of_bed_says_how_long_the_bed_was_empty_when_it_came_not_for_how_lon
 
     text = event_text("out-of-bed", {"after_s": 60.0})
     assert text == "out of bed (empty for 1 min by then)" and "(for " not in text
+
+
+def test_the_summary_names_the_exposure_alert_in_the_modes_words() -> None:
+    # a bed's report counted "1 reposition" where the dashboard and docs/report.md's mode table
+    # say a bed's exposure alert asks for a turn: the pressure alert
+    from types import SimpleNamespace
+
+    from texsense.apps.report._content import _alert_count
+    from texsense.apps.views import MODES
+
+    events = [{"kind": "reposition", "source": "recomputed"}]
+    counts = {m: _alert_count(SimpleNamespace(events=events, mode=MODES[m])) for m in MODES}
+    assert counts["seat"] == "1 reposition, 0 turn due"
+    assert counts["bed"] == "1 pressure alert, 0 turn due"
+    assert counts["generic"] == "1 offload alert, 0 turn due"

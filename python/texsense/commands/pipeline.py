@@ -393,7 +393,7 @@ def in_use_line(status: dict[str, Any]) -> str:
     zeros = times_words(status["zeroed"])
     kept = status.get("weighed", 0)
     weight = (
-        f"; weight {status['weight_n']:.0f} N kept {kept} time{'' if kept == 1 else 's'}"
+        f"; reference load {status['weight_n']:.0f} N, held to it: {times_words(kept)}"
         if kept and status.get("weight_n") is not None
         else ""
     )
