@@ -8,12 +8,13 @@ member, the same ward file of M mats of 32 x 32 elements with the seat's spacer 
 per-element gains, as benchmarks/station_load.py uses) share the mats by rendezvous hashing;
 the benchmark waits until every mat is held where the hashing says, then the publisher of
 station_load.py sends every mat's frames at the rate (phases spread over the period), each
-stamped with its wall-clock send time. Viewers on the dashboards of five mats (at the member
-that holds each) measure frame-to-viewer latency; at the end every member's `GET /api/mats`
-says how many frames each mat it holds processed, against how many were published. The
-members' CPU is taken over the measuring window (also per frame processed: each member's
-CPU over the frames its mats processed in that window, in ms), and the publisher's per frame
-sent (its own count of CPU time). One machine: members beyond its cores add
+stamped with its wall-clock send time. Viewers on the dashboards of five mats (``--viewers``;
+at the member that holds each) measure frame-to-viewer latency (the p99 and how many samples
+were over :data:`LATE_MS`, after the first tenth of them: the start); at the end every member's
+`GET /api/mats` says how many frames each mat it holds processed, against how many were
+published. The members' CPU is taken over the measuring window (also per frame processed: each
+member's CPU over the frames its mats processed in that window, in ms), and the publisher's per
+frame sent (its own count of CPU time). One machine: members beyond its cores add
 no capacity here (they would on machines of their own).
 """
 
@@ -44,6 +45,9 @@ from texsense.station.broker import Broker
 from texsense.station.lease import preferred
 from texsense.station.workers import worker_name
 
+#: A sample later than this counts as late in the row, ms (issue 38's target is p99 < 100 ms).
+LATE_MS = 100.0
+
 
 def get(url: str, timeout: float = 30.0):
     with urllib.request.urlopen(url, timeout=timeout) as r:
@@ -51,11 +55,14 @@ def get(url: str, timeout: float = 30.0):
 
 
 def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[str],
-                  workers: int = 1, probe: Path | None = None) -> dict:  # fmt: skip
+                  workers: int = 1, probe: Path | None = None, own_session: bool = False,
+                  ) -> dict:  # fmt: skip
     """The members' processes and their group members' (name, page URL): one each, or its
     workers' with ``--workers`` (ports PORT..PORT+W-1); started together. ``probe``: each
     member's event loop timed by :mod:`loop_probe`, its long callbacks written to
-    ``probe/<member>.tsv``."""
+    ``probe/<member>.tsv``. ``own_session``: each member in a session of its own (as a
+    service or a terminal of its own would start it; Linux's autogroups share the CPU between
+    sessions first, see ``--session``)."""
     out = {}
     for name in names:
         port = free_port() if workers == 1 else free_ports(workers)
@@ -70,7 +77,7 @@ def start_members(tmp: Path, broker: Broker, db: str, ward: Path, names: list[st
             [sys.executable, *start, "station", "--group", "cap", "--member", name,
              "--config", str(ward), "--broker", f"mqtt://127.0.0.1:{broker.port}", "--db", db,
              "--port", str(port), "--record-dir", str(tmp / f"rec-{name}"), *more],
-            stdout=log, stderr=subprocess.STDOUT,
+            stdout=log, stderr=subprocess.STDOUT, start_new_session=own_session,
         )  # fmt: skip
         parts = [(name, port)] if workers == 1 else [
             (worker_name(name, k), port + k) for k in range(workers)]  # fmt: skip
@@ -126,7 +133,8 @@ def settle(members: dict, mats: list[str], timeout: float = 600.0) -> float:
 
 def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: float,
         seconds: float, db_k: int, workers: int = 1, probe: Path | None = None,
-        dump: Path | None = None) -> dict:  # fmt: skip
+        dump: Path | None = None, viewers: int = 5, own_session: bool = False,
+        ) -> dict:  # fmt: skip
     ward = tmp / f"ward-{mats}.toml"
     ward.write_text("".join(
         f'[[mat]]\nid = "m{m:03d}"\nlayout = "grid:32x32"\ncalibration = "{tmp / "cal.json"}"\n\n'
@@ -138,7 +146,7 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
     url = pg.url.rsplit("/", 1)[0] + "/" + db
     ids = [f"m{m:03d}" for m in range(mats)]
     names = [f"s{k + 1}" for k in range(n)]
-    members = start_members(tmp, broker, url, ward, names, workers, probe)
+    members = start_members(tmp, broker, url, ward, names, workers, probe, own_session)
     try:
         took = settle(members, ids)
         first = next(iter(members.values()))[1][0][1]
@@ -150,7 +158,7 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
         )  # fmt: skip
         start = time.time()
         stop = start + seconds
-        watched = [ids[k] for k in np.linspace(0, mats - 1, min(5, mats)).astype(int)]
+        watched = [ids[k] for k in np.linspace(0, mats - 1, min(viewers, mats)).astype(int)]
         latencies: list[float] = []
         cpu: dict[str, float] = {}
         per_frame: dict[str, float] = {}
@@ -205,6 +213,7 @@ def run(tmp: Path, broker: Broker, pg: PostgresServer, n: int, mats: int, hz: fl
             "processed": processed, "lost": sent["sent"] - processed,
             "p50": float(np.percentile(lat, 50)) if lat.size else float("nan"),
             "p99": float(np.percentile(lat, 99)) if lat.size else float("nan"),
+            "samples": int(lat.size), "late": int(np.sum(lat > LATE_MS)),
             "cpu": " / ".join(f"{100 * cpu[k]:.0f}" for k in sorted(cpu)),
             "ms_frame": " / ".join(f"{per_frame[k]:.2f}" for k in sorted(per_frame)),
             "pub_us": sent["cpu_us_per_frame"],
@@ -235,6 +244,17 @@ def main() -> None:
         help="each member as W worker processes (texsense station --workers W)",
     )
     ap.add_argument(
+        "--viewers", type=int, default=5, help="dashboards watched (each a mat), default 5"
+    )
+    ap.add_argument(
+        "--session",
+        choices=("shared", "own"),
+        default="shared",
+        help="the members in the benchmark's session (with its publisher, broker and viewers) "
+        "or each in its own: with Linux's autogroup scheduling (/proc/sys/kernel/"
+        "sched_autogroup_enabled) the CPU is shared between sessions first",
+    )
+    ap.add_argument(
         "--probe",
         type=Path,
         help="a folder: each member's long event-loop callbacks (loop_probe.py)",
@@ -248,13 +268,16 @@ def main() -> None:
             folder.mkdir(parents=True, exist_ok=True)
     counts = [int(v) for v in args.members.split(",")]
     loads = [(int(m), float(h)) for m, h in (x.split("x") for x in args.loads.split(","))]
-    print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared)")
+    where = "their own sessions" if args.session == "own" else "the benchmark's session"
+    print(f"load average {os.getloadavg()[0]:.1f} at the start (2 cores, shared); members in "
+          f"{where}")  # fmt: skip
     print(
         "| mats (1024 elements) | rate | members | settled after | frames published | "
-        "processed | lost | frame-to-viewer p50 | p99 | members' CPU (% of a core) | "
+        "processed | lost | frame-to-viewer p50 | p99 | samples | over 100 ms | "
+        "members' CPU (% of a core) | "
         "members' CPU per frame processed (ms) | publisher's CPU per frame (µs) |"
     )
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|")
     with tempfile.TemporaryDirectory() as d, Broker() as broker:
         tmp = Path(d)
         cal = big_calibration(1024, tmp / "cal.json")
@@ -272,10 +295,11 @@ def main() -> None:
                     if probe is not None:
                         probe.mkdir(exist_ok=True)
                     r = run(tmp, broker, pg, n, mats, hz, args.seconds, k, args.workers, probe,
-                            dump)  # fmt: skip
+                            dump, args.viewers, args.session == "own")  # fmt: skip
                     print(f"| {mats} | {hz:g} Hz | {n} | {r['settle_s']:.0f} s | {r['sent']} | "
                           f"{r['processed']} | {r['lost']} | {r['p50']:.0f} ms | "
-                          f"{r['p99']:.0f} ms | {r['cpu']} | {r['ms_frame']} | "
+                          f"{r['p99']:.0f} ms | {r['samples']} | {r['late']} | {r['cpu']} | "
+                          f"{r['ms_frame']} | "
                           f"{r['pub_us']:.0f} |", flush=True)  # fmt: skip
         finally:
             pg.close()

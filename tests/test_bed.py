@@ -165,6 +165,18 @@ def test_turning_schedule_counts_turns_time_per_side_and_alerts():
     assert not s.status(3660.0)["turn_due"]
 
 
+def test_a_side_corrected_on_getting_into_bed_gets_the_time_held_on_it():
+    # the virtual night's first frame in bed is "transition", then "right": the 60 s of
+    # settling on the right were counted to "transition" (1 min 10 s of a 4 min stay, 30 %,
+    # where the label says 10 s)
+    s = TurningSchedule(interval_min=120, settle_s=60)
+    steps = [(t, None) for t in range(0, 300, 10)] + [(300, "transition")]
+    steps += [(t, "right") for t in range(310, 540, 10)]
+    assert run(s, steps) == [("in-bed", 300.0)] and s.turns == 0
+    times = s.status(530.0)["time_per_side_s"]
+    assert times["transition"] == pytest.approx(10.0) and times["right"] == pytest.approx(220.0)
+
+
 def test_a_roll_that_comes_back_is_not_a_turn():
     s = TurningSchedule(interval_min=15, settle_s=60)
     steps = [(t, "supine") for t in range(0, 600, 10)]

@@ -40,6 +40,23 @@ def test_info_text_reads_well(shared_data, capsys):
     assert "load        mean" in out
 
 
+def test_info_of_a_processed_file_counts_its_repaired_readings(tmp_path, capsys):
+    # `process` flags a repaired element invalid but keeps its estimate; info left it out of
+    # the load (a processed night: max 428 N against the report's 494 N and the truth's 485 N)
+    lay = texsense.Layout.grid(1, 4, pitch_cm=(2.0, 2.0))
+    frames = np.array([[1.0, 1.0, 1.0, 1.0]], np.float32)
+    valid = np.array([[True, True, False, True]])
+    for stages, want in ((["convert", "repair:harmonic"], 16.0), (["convert"], 12.0)):
+        rec = texsense.Recording(frames, [0.0], lay, valid=valid, meta={"stages": stages})
+        rec.save(tmp_path / "p.h5")
+        assert main(["info", str(tmp_path / "p.h5"), "--json"]) == 0
+        info = json.loads(capsys.readouterr().out)
+        assert info["load_N"]["max"] == pytest.approx(want)
+        assert info["repairs_counted"] == (want == 16.0)
+    assert main(["info", str(tmp_path / "p.h5")]) == 0
+    assert "(repaired readings counted)" not in capsys.readouterr().out
+
+
 def test_convert_to_every_writable_format(shared_data, tmp_path, capsys):
     src = shared_data / "vendor-formats" / "iscan_test.csv"
     original = texsense.load(src)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from texsense import Layout
+from texsense.apps import stats
 from texsense.cli import main
 from texsense.commands.hysteresis import _apply_bounds
 from texsense.compensation import intervals
@@ -146,3 +147,49 @@ def test_the_multiplier_is_taken_per_band_of_the_value(monkeypatch: pytest.Monke
     for b in (0, 4):
         assert 0.88 < inside[band == b].mean() < 0.92
     assert intervals.multiplier(0.9, "test", band=2) == intervals.multiplier(0.9, "test")
+
+
+def test_an_empty_mat_reads_zero_not_invalid_and_no_bound_is_below_zero(tmp_path: Path) -> None:
+    # the empty start of a night: every element's conversion read about -0.001 N/cm², which
+    # the file marked invalid, so the report's sensor health showed the empty mat "100 %
+    # invalid", `info` gave it no load, and every lower bound was below zero (-0.08 N/cm²)
+    assert main(["simulate", "night", "--hours", "0.1", "--seed", "3", "-o", str(tmp_path / "n.h5"),
+                 "--calibration", str(tmp_path / "mat.json")]) == 0  # fmt: skip
+    assert main(["process", str(tmp_path / "n.h5"), "--calibration", str(tmp_path / "mat.json"),
+                 "-o", str(tmp_path / "p.h5"), "--interval", "0.95"]) == 0  # fmt: skip
+    out = load(tmp_path / "p.h5")
+    lo, hi = read_bounds(tmp_path / "p.h5")
+    empty = slice(0, 25)  # the mat switched on empty for 5 min, a frame every 10 s
+    assert out.frames.min() >= 0 and lo.min() >= 0
+    assert np.all(lo <= out.frames) and np.all(out.frames <= hi)
+    assert out.valid[empty].mean() > 0.5  # only the failed elements are invalid
+    assert np.all(np.isfinite(stats.total_load(out)[empty]))
+
+
+def test_the_in_use_line_says_since_when_it_corrects_and_the_still_time_in_all() -> None:
+    # it said "from 2 min still since t = 410 s" at the end of a 530 s night: a still period
+    # that could not fit in the data (410 s is when the first correction was made, 150 s the
+    # still time of every period read), the minutes rounded (the report: 2 min 30 s)
+    from texsense.commands.pipeline import in_use_line
+
+    status = {"state": "correcting", "load_correction": -0.0336, "since_t": 410.0,
+              "still_s": 150.0, "zeroed": 1, "weighed": 0, "weight_n": 473.1,
+              "checked_t": 380.0, "checked_age_s": 150.0}  # fmt: skip
+    line = in_use_line(status)
+    assert "correcting since t = 410 s, from 2 min 30 s still in all; zero taken once" in line
+    assert "still since" not in line
+
+
+def test_simulate_night_counts_turns_in_bed_not_getting_in_or_out() -> None:
+    # "1 turn" was printed for a 0.15 h night whose person only got into bed (every
+    # transition counted), "3 turns" for a 2 h night with none (the report: 0 turns)
+    from texsense.commands.simulate import night_turns
+
+    def sides(*s: str) -> np.ndarray:
+        return np.array(s, dtype=object)
+
+    assert night_turns(sides("out", "transition", "right", "right")) == 0
+    assert night_turns(sides("out", "transition", "right", "transition", "out",
+                             "transition", "supine")) == 0  # fmt: skip
+    assert night_turns(sides("out", "transition", "right", "transition", "supine",
+                             "transition", "left", "transition", "out")) == 2  # fmt: skip

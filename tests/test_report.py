@@ -204,3 +204,27 @@ def test_health_finds_a_dead_element_inside_the_load_not_the_edges():
     h = element_health(Recording(lay.from_grid(m), np.arange(20.0), lay, valid=valid))
     assert np.flatnonzero(h["silent"]).tolist() == [lay.element_at(3, 4)]
     assert h["invalid_share"][lay.element_at(0, 0)] == 0.25 and h["invalid_share"].sum() == 0.25
+
+
+def test_out_of_bed_says_how_long_the_bed_was_empty_when_it_came_not_for_how_long() -> None:
+    # a night's report read "out of bed (for 1 min)" for a person out of bed 9 min: after_s
+    # is the offload time the event waits for
+    from texsense.apps.review_events import event_text
+
+    text = event_text("out-of-bed", {"after_s": 60.0})
+    assert text == "out of bed (empty for 1 min by then)" and "(for " not in text
+
+
+def test_the_summary_names_the_exposure_alert_in_the_modes_words() -> None:
+    # a bed's report counted "1 reposition" where the dashboard and docs/report.md's mode table
+    # say a bed's exposure alert asks for a turn: the pressure alert
+    from types import SimpleNamespace
+
+    from texsense.apps.report._content import _alert_count
+    from texsense.apps.views import MODES
+
+    events = [{"kind": "reposition", "source": "recomputed"}]
+    counts = {m: _alert_count(SimpleNamespace(events=events, mode=MODES[m])) for m in MODES}
+    assert counts["seat"] == "1 reposition, 0 turn due"
+    assert counts["bed"] == "1 pressure alert, 0 turn due"
+    assert counts["generic"] == "1 offload alert, 0 turn due"

@@ -484,3 +484,41 @@ def test_the_inbox_waits_a_while_after_a_page_not_after_an_api_answer():
         assert st.serving == 0 and not st.pages_first() and st.served_at < 0
         assert client.get("/").status_code == 200
         assert st.pages_first() and st.served_at > 0
+
+
+def test_the_mat_list_is_built_in_chunks_with_the_loop_between(monkeypatch):
+    """``GET /api/mats`` builds its answer :data:`LIST_CHUNK` mats at a time and lets the
+    event loop run between (issue 38: 1,000 mats held the loop 51-60 ms in one piece, every
+    frame waiting); the inbox is not held for it; the answer is the same list, most urgent
+    first."""
+    import asyncio
+
+    from fastapi.testclient import TestClient
+
+    import texsense.station.server as server
+
+    monkeypatch.setattr(server, "LIST_CHUNK", 2)
+    st = station("bed1", "bed2", "bed3", "bed4", "bed5")
+    st.handle("texsense/bed3/frames", payload(0))
+    order: list[str] = []
+    for mat_id, entry in st.mats.items():
+        real = entry.status
+
+        def status(real=real, mat_id=mat_id) -> dict:
+            if not order:  # the first: some other work for the loop, now
+                asyncio.get_running_loop().call_soon(order.append, "loop")
+            order.append(f"{mat_id} serving={st.serving}")
+            return real()
+
+        monkeypatch.setattr(entry, "status", status)
+    with TestClient(server.create_ward_app(st), base_url="http://127.0.0.1:8766") as client:
+        got = client.get("/api/mats")
+    assert got.status_code == 200 and got.headers["content-type"] == "application/json"
+    assert order == ["bed1 serving=0", "bed2 serving=0", "loop", "bed3 serving=0",
+                     "bed4 serving=0", "bed5 serving=0"]  # fmt: skip
+    rows = got.json()
+    assert rows == sorted(
+        rows, key=lambda r: (-r["urgency"], -r["minutes_since_reposition"], r["id"])
+    )
+    assert {r["id"] for r in rows} == set(st.mats)
+    assert [r["frames"] for r in rows if r["id"] == "bed3"] == [1]

@@ -280,3 +280,27 @@ def test_the_raw_rise_of_a_mat_without_calibration():
     r = raw_rise(raw, floor)
     assert r == {"peak_rise": 0.5, "responding": 1, "working": 3, "respond_above": 0.0175}
     assert raw_rise(np.full(5, np.nan), floor)["peak_rise"] is None
+
+
+def test_a_live_recording_writes_an_empty_element_as_zero_and_no_bound_below_zero(tmp_path):
+    # the monitor's pressure recording: an empty element's estimate a hair below zero (about
+    # -0.001 N/cm² from the conversion) was flagged invalid; a model fault far below zero is
+    # still invalid
+    from types import SimpleNamespace
+
+    from texsense import Layout
+    from texsense.data.protocol import Frame
+    from texsense.io.hdf5 import read_bounds
+    from texsense.monitor.record import Recorder
+
+    source = SimpleNamespace(layout=Layout.grid(1, 4), quantity="capacitance", unit="pF")
+    rec = Recorder(tmp_path, "r", source, {}, bounds=True)
+    pressure = np.array([-0.001, 0.0, 0.5, -5.0])
+    frame = Frame(0, np.zeros(4), np.full(4, 3.0))
+    rec.append(frame, pressure, np.ones(4, bool), 0.0, bounds=(pressure - 0.08, pressure + 0.08))
+    rec.close()
+    out = load(tmp_path / "r.h5")
+    lo, _ = read_bounds(tmp_path / "r.h5")
+    assert out.frames[0].tolist() == [0.0, 0.0, 0.5, -5.0]
+    assert out.valid[0].tolist() == [True, True, True, False]
+    assert lo[0].min() >= 0

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from texsense.apps import stats
-from texsense.apps.alerts import REPOSITION_RANGE_MIN, Event, ExposureTracker
+from texsense.apps.alerts import REPOSITION_RANGE_MIN, Alert, Event, ExposureTracker
 from texsense.apps.bed import (
     BANDS,
     TurningSchedule,
@@ -31,7 +31,7 @@ from texsense.apps.bed import (
 )
 from texsense.apps.clinical import POSTURE_LABEL
 from texsense.apps.views import alert_places, format_duration, seat_zones
-from texsense.data import budget, units
+from texsense.data import budget, stored, units
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
@@ -115,7 +115,8 @@ def event_text(kind: str, detail: dict[str, Any]) -> str:
     elif kind == "turn-due":
         text += f": {format_duration(detail.get('since_s'))} on {detail.get('side')}"
     elif kind == "out-of-bed" and detail.get("after_s") is not None:
-        text += f" (for {format_duration(detail['after_s'])})"
+        # the event comes once the bed has been empty this long: not how long it stayed empty
+        text += f" (empty for {format_duration(detail['after_s'])} by then)"
     elif kind == "cleared" and detail.get("by") == "turned":
         text = "alert cleared (turned)"
     if detail.get("open_at_start"):
@@ -239,25 +240,45 @@ def recompute_events(
 
 def open_at_start(review: Review) -> list[dict[str, Any]]:
     """The alerts open when the recording started (from its clinical state), as events
-    before its first frame: a reposition alert with its places, a turn that was due."""
+    before its first frame: a reposition alert with its places, a turn that was due. A state
+    whose values are not of their kinds lists nothing (``_seeded``'s note says it is not
+    used)."""
     state = review.start or {}
     t0 = float(review.rec.times[0])
-    out = []
-    alert = (state.get("exposure") or {}).get("alert")
-    if isinstance(alert, dict) and review.pressure and review.mode.alerts:
-        detail = {k: alert.get(k) for k in ("where", "details", "elements")}
-        detail["open_at_start"] = True
-        e = {"kind": "reposition", "alert_id": alert.get("id"), "detail": detail}
-        t = float(alert.get("opened_t", t0))
-        out.append(_entry(0, t - t0, e, "before", alert.get("opened_wall")))
-    bed = state.get("bed") or {}
-    if bed.get("due_since") is not None and review.sides is not None:
-        since = float(bed.get("since_t") or bed["due_since"])
-        detail = {"side": bed.get("side"), "since_s": round(float(bed["due_since"]) - since, 1),
-                  "open_at_start": True}  # fmt: skip
+    out: list[dict[str, Any]] = []
+    try:
+        alert, due = _open_at_start(state)
+    except ParameterError:
+        return out
+    if alert is not None and review.pressure and review.mode.alerts:
+        detail: dict[str, Any] = {"where": alert.where, "details": alert.details,
+                                  "elements": alert.elements, "open_at_start": True}  # fmt: skip
+        e = {"kind": "reposition", "alert_id": alert.id, "detail": detail}
+        out.append(_entry(0, alert.opened_t - t0, e, "before", alert.opened_wall))
+    if due is not None and review.sides is not None:
+        side, since, due_since = due
+        detail = {"side": side, "since_s": round(due_since - since, 1), "open_at_start": True}
         e = {"kind": "turn-due", "detail": detail}
-        out.append(_entry(0, float(bed["due_since"]) - t0, e, "before", None))
+        out.append(_entry(0, due_since - t0, e, "before", None))
     return out
+
+
+def _open_at_start(
+    state: dict[str, Any],
+) -> tuple[Alert | None, tuple[str | None, float, float] | None]:
+    """The open alert and the turn due (side, since, due since) of a clinical state, each
+    value of its kind (or a :class:`ParameterError`)."""
+    exposure, bed = state.get("exposure") or {}, state.get("bed") or {}
+    alert = None
+    if exposure.get("alert") is not None:
+        size = stored.whole(exposure, "size", "exposure state")
+        alert = Alert.from_dict(stored.mapping(exposure, "alert", "exposure state"), places=size)
+    due_since = stored.optional_number(bed, "due_since", "turning schedule")
+    if due_since is None:
+        return alert, None
+    since = stored.optional_number(bed, "since_t", "turning schedule")
+    side = stored.optional_text(bed, "side", "turning schedule")
+    return alert, (side, due_since if since is None else since, due_since)
 
 
 def merge_events(

@@ -60,6 +60,7 @@ __all__ = [
     "seat_zones",
     "started_at",
     "threshold_mask",
+    "times_words",
 ]
 
 
@@ -422,6 +423,11 @@ def format_duration(seconds: float | None) -> str:
         return f"{sign}{m} min {s} s" if s else f"{sign}{m} min"
     h, m = divmod(m, 60)
     return f"{sign}{h} h {m:02d} min"
+
+
+def times_words(n: int) -> str:
+    """How often, in words: ``never``, ``once``, ``twice``, ``3 times``."""
+    return {0: "never", 1: "once", 2: "twice"}.get(int(n), f"{int(n)} times")
 
 
 def checked_words(status: dict[str, Any], when: str) -> str:

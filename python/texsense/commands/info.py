@@ -51,6 +51,13 @@ def describe(rec: Recording, path: Path, fmt: str) -> dict[str, Any]:
         if distinct.size <= 20:
             labels[name]["values"] = distinct.tolist()
     period = rec.frame_period_s
+    # a processed file flags its repaired readings invalid but keeps their estimates: its load
+    # and peak count them, as the report, the dashboard and the alerts do
+    repaired = any(str(s).startswith("repair") for s in rec.meta.get("stages") or [])
+    counted = rec
+    if repaired and rec.quantity == "pressure" and not rec.valid.all():
+        counted = Recording(rec.frames, rec.times, rec.layout, rec.quantity, rec.unit,
+                            valid=np.isfinite(rec.frames))  # fmt: skip
     info: dict[str, Any] = {
         "path": str(path),
         "format": fmt,
@@ -68,8 +75,9 @@ def describe(rec: Recording, path: Path, fmt: str) -> dict[str, Any]:
         "invalid_readings": int((~rec.valid).sum()),
         "regions": sorted(lay.regions),
         "labels": labels,
-        "peak": _summary(stats.peak_pressure(rec)),
-        "load_N": _summary(stats.total_load(rec)) if rec.quantity == "pressure" else None,
+        "peak": _summary(stats.peak_pressure(counted)),
+        "load_N": _summary(stats.total_load(counted)) if rec.quantity == "pressure" else None,
+        "repairs_counted": counted is not rec,
     }
     if "subject" in rec.labels:
         info["subjects"] = labels["subject"]["distinct"]
@@ -100,7 +108,8 @@ def _text(info: dict[str, Any]) -> str:
         lines.append(f"  label       {name} ({lab['distinct']} distinct){shown}")
     if info["load_N"]:
         ld = info["load_N"]
-        lines.append(f"  load        mean {ld['mean']:.4g} N, max {ld['max']:.4g} N")
+        note = " (repaired readings counted)" if info.get("repairs_counted") else ""
+        lines.append(f"  load        mean {ld['mean']:.4g} N, max {ld['max']:.4g} N{note}")
     if info["peak"]:
         pk = info["peak"]
         lines.append(f"  peak        mean {pk['mean']:.4g}, max {pk['max']:.4g} {info['unit']}")

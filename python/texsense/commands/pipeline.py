@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from texsense.apps.views import checked_words
+from texsense.apps.views import checked_words, format_duration, times_words
 from texsense.calibration.session import CalibrationSession
 from texsense.commands import HELP
 from texsense.commands._applies import Rule, no_effect, only_where, refuse_unless
@@ -390,17 +390,17 @@ def in_use_line(status: dict[str, Any]) -> str:
         return f"in-use drift correction off: {status['why']}"
     if status["state"] != "correcting":
         return "in-use drift correction: no still period seen, nothing corrected"
-    z = status["zeroed"]
-    zeros = {0: "never", 1: "once", 2: "twice"}.get(z, f"{z} times")
+    zeros = times_words(status["zeroed"])
     kept = status.get("weighed", 0)
     weight = (
-        f"; weight {status['weight_n']:.0f} N kept {kept} time{'' if kept == 1 else 's'}"
+        f"; reference load {status['weight_n']:.0f} N, held to it: {times_words(kept)}"
         if kept and status.get("weight_n") is not None
         else ""
     )
     return (
         f"in-use drift correction: load {100 * status['load_correction']:+.1f} % at the end, "
-        f"from {status['still_s'] / 60:.0f} min still since t = {status['since_t']:.0f} s; "
+        f"correcting since t = {status['since_t']:.0f} s, from "
+        f"{format_duration(status['still_s'])} still in all; "
         f"zero taken {zeros}{weight}; {checked_words(status, 'before the end')}"
     )
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import itertools
 import os
 import signal
 import sys
@@ -283,7 +284,7 @@ def run_night(args: argparse.Namespace) -> int:
         chain.save(args.calibration)
         print(f"wrote {args.calibration}")
     sides = night.truth.labels["side"]
-    turns = int(np.count_nonzero((sides[1:] == "transition") & (sides[:-1] != "transition")))
+    turns = night_turns(sides)
     outs = int(np.count_nonzero((sides[1:] == "out") & (sides[:-1] != "out")))
     print(
         f"night of {night.sleeper.name} ({night.sleeper.weight_kg:.0f} kg) on the {spacer} bed "
@@ -291,6 +292,15 @@ def run_night(args: argparse.Namespace) -> int:
         f"{turns} turn{'' if turns == 1 else 's'}, out of bed {_times(outs)}"
     )
     return 0
+
+
+def night_turns(sides: np.ndarray) -> int:
+    """Turns in a night's side labels: a side in bed followed by another side in bed (the
+    transitions between them skipped); getting into bed or out of it is not a turn (it
+    counted every transition: "1 turn" for a night whose person only got into bed)."""
+    held = [str(s) for s in sides if str(s) != "transition"]
+    runs = [s for k, s in enumerate(held) if k == 0 or s != held[k - 1]]
+    return sum(1 for a, b in itertools.pairwise(runs) if "out" not in (a, b))
 
 
 def _times(n: int) -> str:

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from texsense._progress import progress
+from texsense.compensation.intervals import no_negative
 from texsense.compensation.pipeline import Pipeline
 from texsense.compensation.stages import StageChain, load_chain
 from texsense.data.files import (
@@ -205,6 +206,7 @@ def process_file(
                 values = block.to_unit(unit).frames if block.unit != unit else block.frames
                 p, ok, codes = pipe.process(values, block.times, block.valid)
                 lo, hi = pipe.bounds_ if pipe.bounds_ is not None else (None, None)
+                p, lo = no_negative(p, lo)  # an empty element reads 0, not invalid
                 writer.append(
                     p,
                     block.times,

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, encode_events
+from texsense.compensation.intervals import no_negative
 from texsense.data.files import make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
@@ -318,13 +319,15 @@ class Recorder:
             labels=labels,
         )
         if self._pressure is not None:
+            lower = None if bounds is None else np.nan_to_num(bounds[0])
+            p, lower = no_negative(np.nan_to_num(pressure), lower)  # empty: 0, not invalid
             self._pressure.append(
-                np.nan_to_num(pressure)[None, :],
+                p[None, :],
                 times=t,
                 valid=measured[None, :],
                 element_times=et,
                 labels=labels,
-                lower=None if bounds is None else np.nan_to_num(bounds[0])[None, :],
+                lower=None if lower is None else lower[None, :],
                 upper=None if bounds is None else np.nan_to_num(bounds[1])[None, :],
             )
         self.pending = []

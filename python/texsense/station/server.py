@@ -25,12 +25,14 @@ headers) apply to every HTTP and WebSocket request, the mounted dashboards inclu
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, FastAPI, HTTPException, WebSocket
+from fastapi import APIRouter, FastAPI, HTTPException, Request, WebSocket
+from fastapi.encoders import jsonable_encoder
 from fastapi.responses import Response
 
 from texsense.exceptions import ParameterError
@@ -55,6 +57,11 @@ __all__ = ["create_ward_app", "serve_ward"]
 STATIC = Path(__file__).with_name("static")
 #: Where the ward page takes the tiles it is served with.
 FIRST_MARK = "<!-- first ward -->"
+#: ``GET /api/mats`` is built this many mats at a time, the loop's other work (the inbox's
+#: slices) between (:func:`mat_list`).
+LIST_CHUNK = 100
+#: The pause between two of its chunks, s: the inbox's next slice runs in it.
+LIST_PAUSE_S = 0.001
 
 
 def ward_page(station: Station, html: str) -> str:
@@ -66,6 +73,28 @@ def ward_page(station: Station, html: str) -> str:
     first = (WardFeed(station).message() or "null").replace("<", "\\u003c")
     block = f'<script type="application/json" id="first-ward">{first}</script>'
     return html.replace(FIRST_MARK, block, 1)
+
+
+async def mat_list(station: Station) -> str:
+    """Every mat's status (most urgent first) as the JSON of ``GET /api/mats``, built
+    :data:`LIST_CHUNK` mats at a time with a pause between (:data:`LIST_PAUSE_S`): the
+    inbox reads a slice in each. At 1,000 mats the answer held the event loop 51-60 ms
+    in one piece (27 µs a mat's status, 12 ms to encode it; on a loaded 2-core machine
+    its wall time is 2-3 times that), a stall of every frame waiting meanwhile (issue 38)."""
+    entries = list(station.mats.values())
+    rows: list[dict[str, Any]] = []
+    for k in range(0, len(entries), LIST_CHUNK):
+        if k:
+            await asyncio.sleep(LIST_PAUSE_S)
+        rows += [e.status() for e in entries[k : k + LIST_CHUNK]]
+    rows.sort(key=lambda r: (-r["urgency"], -r["minutes_since_reposition"], r["id"]))
+    parts = []
+    for k in range(0, len(rows), LIST_CHUNK):
+        if k:
+            await asyncio.sleep(LIST_PAUSE_S)
+        parts.append(json.dumps(rows[k : k + LIST_CHUNK], ensure_ascii=False, allow_nan=False,
+                                separators=(",", ":"), default=jsonable_encoder)[1:-1])  # fmt: skip
+    return "[" + ",".join(parts) + "]"
 
 
 def _pages(station: Station) -> APIRouter:
@@ -99,11 +128,13 @@ def _api(station: Station) -> APIRouter:
         """Broker connection, unknown mats, and every mat (most urgent first)."""
         return station.ward()
 
-    @r.get("/api/mats")
-    async def mats() -> list[dict[str, Any]]:
+    @r.get("/api/mats", response_model=list[dict[str, Any]])
+    async def mats(request: Request) -> Response:
         """Every mat: id, source, frames received, last frame time, state; most urgent first."""
-        rows = [e.status() for e in station.mats.values()]
-        return sorted(rows, key=lambda r: (-r["urgency"], -r["minutes_since_reposition"], r["id"]))
+        served = request.scope.get(SERVED)
+        if callable(served):  # built in chunks, the inbox read between: not waited for
+            served()
+        return Response(await mat_list(station), media_type="application/json")
 
     @r.get("/api/mats/{mat_id}")
     async def mat(mat_id: str) -> dict[str, Any]:
@@ -143,7 +174,9 @@ class Serving:
     :func:`texsense.monitor.web.idle`) is not waited for: the frames it waits for are in that
     inbox (issue 38). The inbox waits a while after a page, its files or a viewer's first
     message (:data:`~texsense.station.ward.PAGE_GRACE_S`: the page's next requests follow),
-    not after an API call's answer."""
+    not after an API call's answer. ``GET /api/mats`` is not waited for at all: it says so
+    (through ``texsense.served``) and is built in chunks with the inbox read between
+    (:func:`mat_list`)."""
 
     def __init__(self, app: Any, station: Station) -> None:
         self.app, self.station = app, station

@@ -18,6 +18,7 @@ from texsense.apps.views import (
     format_duration,
     place_names,
     seat_zones,
+    times_words,
 )
 from texsense.data import units
 
@@ -150,15 +151,15 @@ def _certainty_rows(review: Review) -> list[list[str]]:
     if isinstance(iu, dict):
         if iu.get("state") == "correcting":
             text = (
-                f"load {100 * iu.get('load_correction', 0):+.1f} % at the end, from "
-                f"{format_duration(iu.get('still_s', 0))} still since "
-                f"{format_duration(iu.get('since_t') or 0)} into the data; zero taken "
-                f"{iu.get('zeroed', 0)} times"
+                f"load {100 * iu.get('load_correction', 0):+.1f} % at the end, correcting "
+                f"since {format_duration(iu.get('since_t') or 0)} into the data, from "
+                f"{format_duration(iu.get('still_s', 0))} still in all; zero taken "
+                f"{times_words(iu.get('zeroed', 0))}"
             )
-            if iu.get("weight_n") is not None:
-                kept = iu.get("weighed", 0)
+            if iu.get("weight_n") is not None:  # (the load on the mat, not the person's weight)
                 text += (
-                    f"; weight {iu['weight_n']:.0f} N, kept {kept} time{'' if kept == 1 else 's'}"
+                    f"; reference load {iu['weight_n']:.0f} N (the first still period's), "
+                    f"held to it: {times_words(iu.get('weighed', 0))}"
                 )
             text += "; " + checked_words(iu, "before the end")
         elif iu.get("state") == "off":
@@ -244,9 +245,13 @@ def _summary(review: Review) -> Table:
 
 
 def _alert_count(review: Review) -> str:
-    """``1 reposition (open when the recording started), 0 turn due``."""
+    """``1 reposition (open when the recording started), 0 turn due``; on a bed the exposure
+    alert is the *pressure alert* (its action is a turn, as the dashboard says)."""
     parts = []
-    for kind, word in (("reposition", "reposition"), ("turn-due", "turn due")):
+    exposure = {"turn": "pressure alert", "offload": "offload alert"}.get(
+        review.mode.action, "reposition"
+    )
+    for kind, word in (("reposition", exposure), ("turn-due", "turn due")):
         found = [e for e in review.events if e["kind"] == kind]
         before = sum(e["source"] == "before" for e in found)
         text = f"{len(found)} {word}"
