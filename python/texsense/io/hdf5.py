@@ -56,7 +56,7 @@ from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
 from texsense.io._registry import Probe, writer
-from texsense.io.policy import DAMAGED, check_text, link_name, named, open_hdf5
+from texsense.io.policy import DAMAGED, check_text, link_name, named, open_hdf5, text_of
 
 __all__ = [
     "FORMAT_NAME",
@@ -160,8 +160,7 @@ def _read_layout(group: h5py.Group) -> Layout:
     )
 
 
-def _text(value: Any) -> str:
-    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+_text = text_of  # every text of the file (bytes not UTF-8 become U+FFFD)
 
 
 def _label_dtype(values: np.ndarray) -> Any:
@@ -560,7 +559,7 @@ class HDF5Reader(RecordingReader):
                 f"texsense reads version {FORMAT_VERSION}",
             )
         try:
-            meta = json_loads(f.attrs.get("meta", "{}"))
+            meta = json_loads(_text(f.attrs.get("meta", "{}")))
         except (json.JSONDecodeError, TypeError) as e:
             raise FormatError(path, f"the attribute 'meta' is not JSON ({e})") from None
         if not isinstance(meta, dict):
@@ -579,8 +578,8 @@ class HDF5Reader(RecordingReader):
         self.n_frames = self._known_complete = n
         return Header(
             layout,
-            str(f.attrs["quantity"]),
-            units.canonical(str(f.attrs["unit"])),
+            _text(f.attrs["quantity"]),
+            units.canonical(_text(f.attrs["unit"])),
             meta,
             declared_frames=max(ds.shape[0] for ds in self._sets.values()),
             label_dtypes={
