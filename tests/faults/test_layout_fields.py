@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import json
 
+import h5py
+import numpy as np
 import pytest
 
 from faults._families import batch, small_recording
@@ -85,3 +87,14 @@ def test_every_layout_field_checked(tmp_path, fault_row):
     fault_row("layout fields", f"{len(lay)} fields of a layout x {len(ODD)} odd values, "
               f"{len(extremes)} extreme sizes (from_dict, info, report, plot)",
               "clear error or read", cases=cases)  # fmt: skip
+
+
+def test_hdf5_layout_error_names_the_file_once(tmp_path):
+    """A damaged /layout of an HDF5 recording: one line, the file named once (it was twice:
+    ``x.h5: damaged or incomplete recording: x.h5: /layout is damaged: ...``)."""
+    path = tmp_path / "pitch.h5"
+    save(small_recording(), path)
+    with h5py.File(path, "a") as f:
+        f["layout"].attrs["pitch_cm"] = np.zeros(0)
+    (rc, _out, err), *_ = batch([["info", str(path)]], tmp_path)[0]
+    assert rc == 1 and err.count(str(path)) == 1 and "pitch_cm" in err, err

@@ -541,6 +541,8 @@ class HDF5Reader(RecordingReader):
         self._file = open_hdf5(self.path)
         try:
             return self._header(self._file)
+        except FormatError:  # names the file and what already
+            raise
         except (KeyError, ValueError, TypeError, *DAMAGED) as e:
             raise FormatError(self.path, f"damaged or incomplete recording: {e}") from None
 
