@@ -137,3 +137,26 @@ def test_json_refuses_lone_surrogates_only(fault_row):
     assert json_loads('["\\ud83d\\ude00", "\\u00e9"]') == ["\U0001f600", "é"]
     assert json.loads(json.dumps(json_loads(b'{"a": "\\u20ac"}'))) == {"a": "€"}
     fault_row("not Unicode", "a lone surrogate escaped in JSON from outside", "refused", cases=4)
+
+
+@pytest.mark.slow
+def test_a_folder_entry_named_in_bytes_that_are_not_utf8(tmp_path, fault_row):
+    """A file whose name is not UTF-8 inside a folder texsense lists (``data.files.
+    regular_files``: a folder read as one recording, an archive, the monitor's recordings):
+    passed over and said, as a FIFO is (the monitor's listing was a 500)."""
+    from conftest import ChildServer
+
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    save(small_recording(), folder / "ok.h5")
+    save(small_recording(), folder / os.fsdecode(b"\xff\xfe.h5"))
+    (rc, _out, err), *_ = batch([["info", str(folder)]], tmp_path)[0]
+    assert rc == 0 and "not UTF-8" in err and "Traceback" not in err, err
+    m = ChildServer(tmp_path, "monitor", "--source", "virtual", "--record-dir", str(folder))
+    try:
+        m.until(lambda: m.get("api/status")["frames"], lambda n: n > 0, 60)
+        assert [r["name"] for r in m.get("api/playback")] == ["ok.h5"]
+    finally:
+        m.stop()
+    fault_row("not Unicode", "a file named in bytes that are not UTF-8 in a folder read as one "
+              "recording and in the monitor's recordings", "read, warned", cases=2)  # fmt: skip

@@ -493,7 +493,8 @@ def regular_files(
 ) -> tuple[list[Path], list[tuple[Path, str]]]:
     """The regular files in ``folder`` (and its subfolders with ``recursive``; the subfolders
     themselves with ``folders``), sorted, and what was passed over with why: links that lead
-    out of the folder, dangling links, loops of links, FIFOs, devices and sockets. Nothing is
+    out of the folder, dangling links, loops of links, FIFOs, devices and sockets, names that
+    are not UTF-8 text (a listing of them was a 500 from the monitor). Nothing is
     opened (only the status of each entry is asked), so nothing can wait on an entry that
     does not answer; a subfolder reached through a link is not entered.
 
@@ -534,6 +535,11 @@ def regular_files(
 def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | None:
     """None for a regular file inside ``base``, "folder" for a real subfolder, else why the
     entry is passed over."""
+    if not entry.name.isascii():
+        try:  # a name of bytes that are not UTF-8 (lone surrogates to Python): no page,
+            entry.name.encode("utf-8")  # report or file texsense writes can hold it
+        except UnicodeEncodeError:
+            return "a name that is not UTF-8 text"
     try:
         if entry.is_symlink():
             real = Path(os.path.realpath(path))
