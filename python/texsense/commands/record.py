@@ -65,14 +65,12 @@ class _Progress:
 
 def run_record(args: argparse.Namespace) -> int:
     """Run ``texsense record``."""
+    from texsense.io.hdf5 import check_new  # (h5py: loaded when a recording is made)
 
     kind, _, rest = args.source.partition(":")
     if kind == "replay":
         check_not_input(args.output, [rest], what="recording")
-    if args.output.exists():
-        raise ParameterError(
-            f"{args.output} exists: recordings are never written over; choose a new name"
-        )
+    check_new(args.output)
     if not args.output.parent.is_dir():
         raise ParameterError(f"the folder {args.output.parent} does not exist")
     source = open_source(args, loop=False)

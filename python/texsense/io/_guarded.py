@@ -33,9 +33,11 @@ class GuardedFile(io.RawIOBase):
     True
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, new: bool = False) -> None:
         super().__init__()
-        self._f = open(path, "w+b", buffering=0)  # noqa: SIM115 (closed by close())
+        # new: the file must not exist (a FileExistsError, also for a link at the path)
+        mode = "x+b" if new else "w+b"
+        self._f = open(path, mode, buffering=0)  # noqa: SIM115 (closed by close())
         self.error: OSError | None = None
 
     def readable(self) -> bool:
