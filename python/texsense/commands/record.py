@@ -14,7 +14,7 @@ from typing import Any
 
 from texsense.commands import HELP
 from texsense.commands.monitor import add_source_options, open_source
-from texsense.data.files import check_not_input
+from texsense.data.files import check_new, check_not_input
 from texsense.exceptions import ParameterError
 from texsense.monitor.record import SILENT_S, record
 
@@ -65,7 +65,6 @@ class _Progress:
 
 def run_record(args: argparse.Namespace) -> int:
     """Run ``texsense record``."""
-    from texsense.io.hdf5 import check_new  # (h5py: loaded when a recording is made)
 
     kind, _, rest = args.source.partition(":")
     if kind == "replay":

@@ -61,6 +61,7 @@ if TYPE_CHECKING:
 __all__ = [
     "atomic_open",
     "atomic_path",
+    "check_new",
     "check_not_input",
     "check_regular",
     "check_writable",
@@ -559,6 +560,16 @@ def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | Non
     if not stat.S_ISREG(st.st_mode):
         return _kind(st.st_mode)
     return None
+
+
+def check_new(path: str | Path) -> Path:
+    """``path`` if nothing is there (not even a link to nothing, which ``exists()`` passes and
+    an open follows: a live recording would be made where it points), else the one line of
+    every live recorder. ``io._guarded.GuardedFile(new=True)`` creates the file exclusively
+    anyway; this says it before a recorder starts."""
+    if os.path.lexists(path):
+        raise ParameterError(f"{path} exists: recordings are never written over; choose a new name")
+    return Path(path)
 
 
 def read_regular(path: str | Path, what: str) -> bytes:

@@ -15,6 +15,8 @@ import io
 from pathlib import Path
 from typing import Any
 
+from texsense.data.files import check_new
+
 __all__ = ["GuardedFile"]
 
 
@@ -35,9 +37,11 @@ class GuardedFile(io.RawIOBase):
 
     def __init__(self, path: Path, *, new: bool = False) -> None:
         super().__init__()
-        # new: the file must not exist (a FileExistsError, also for a link at the path)
-        mode = "x+b" if new else "w+b"
-        self._f = open(path, mode, buffering=0)  # noqa: SIM115 (closed by close())
+        try:  # new: a file made here (O_EXCL: nothing there, not even a link to nothing)
+            self._f = open(path, "x+b" if new else "w+b", buffering=0)  # noqa: SIM115
+        except FileExistsError:  # (closed by close())
+            check_new(path)
+            raise
         self.error: OSError | None = None
 
     def readable(self) -> bool:

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -64,7 +63,6 @@ __all__ = [
     "FORMAT_VERSION",
     "HDF5Reader",
     "RecordingWriter",
-    "check_new",
     "read_bounds",
     "write_hdf5",
 ]
@@ -169,16 +167,6 @@ def _label_dtype(values: np.ndarray) -> Any:
     return _STR if values.dtype.kind == "U" else values.dtype
 
 
-def check_new(path: str | Path) -> Path:
-    """``path`` if nothing is there (not even a link to nothing, which ``exists()`` passes and
-    an open follows: the recording would be made where it points), else the one line of every
-    live recorder. :class:`RecordingWriter` creates a live recording exclusively anyway; this
-    says it before a recorder starts."""
-    if os.path.lexists(path):
-        raise ParameterError(f"{path} exists: recordings are never written over; choose a new name")
-    return Path(path)
-
-
 class RecordingWriter:
     """Append frames to an HDF5 recording while it is being made.
 
@@ -192,9 +180,8 @@ class RecordingWriter:
     Parameters
     ----------
     path : str or Path
-        The file to create: a live recording refuses a path that exists (a
-        :class:`~texsense.exceptions.ParameterError`: recordings are never written over); one
-        written in one go (``live=False``, under a temporary name) overwrites it.
+        The file to create: a live one refuses a path where anything is (never written over:
+        :func:`texsense.io._guarded.check_new`); ``live=False`` (a temporary name) overwrites.
     layout : Layout
         Element layout.
     quantity, unit : str
@@ -258,11 +245,7 @@ class RecordingWriter:
         self._last_flush = time.monotonic()
         _check_texts(layout, probe)
         self._label_keys: dict[str, str] = {}
-        try:  # a live recording is a new file: never one written over (nor a link followed)
-            self._guard = GuardedFile(self.path, new=live)
-        except FileExistsError:
-            check_new(self.path)  # its line
-            raise
+        self._guard = GuardedFile(self.path, new=live)  # live: a new file (never written over)
         try:
             self._file = h5py.File(self._guard, "w")
             self._create(layout, probe, element_times, compress, live)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, encode_events
-from texsense.data.files import make_folder, unused_name
+from texsense.data.files import check_new, make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock
@@ -119,7 +119,6 @@ async def record(
     RecordStats
         What was recorded; the file holds every frame counted in ``frames``.
     """
-    from texsense.io.hdf5 import check_new
 
     path = check_new(path)
     if duration_s is not None and not duration_s > 0:
