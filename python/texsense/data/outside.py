@@ -113,8 +113,10 @@ def json_loads(text: str | bytes | bytearray) -> Any:
         raise json.JSONDecodeError(
             f"the key {shown(e.key, 80)} twice in one object", doc, pos
         ) from None
-    pattern = _SURROGATE if isinstance(text, str) else _SURROGATE_BYTES
-    if pattern.search(text) and (bad := lone_surrogate(doc)) is not None:
+    escape = (
+        _SURROGATE.search(text) if isinstance(text, str) else _SURROGATE_BYTES.search(bytes(text))
+    )
+    if escape and (bad := lone_surrogate(doc)) is not None:
         raw = text if isinstance(text, str) else bytes(text).decode("utf-8", "replace")
         escaped = bad.encode("utf-8", "backslashreplace").decode("ascii", "replace")
         raise json.JSONDecodeError(
