@@ -42,6 +42,8 @@ def max_line_bytes() -> int:
     """The longest line a text export may have: :data:`MAX_LINE_BYTES`, or less under a
     smaller memory budget."""
     return int(max(4096, min(MAX_LINE_BYTES, budget.max_memory() // LINE_COST)))
+
+
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 
 
