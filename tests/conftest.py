@@ -313,3 +313,28 @@ def device(tmp_path: Path):
         if p.poll() is None:
             p.send_signal(signal.SIGINT)
         p.communicate(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def seat_mat():
+    """A ward's virtual seat (its mat config, 8x real time) and 60 of its MQTT payloads with
+    their arrival times, as `texsense station` would receive them."""
+    import asyncio
+
+    from texsense.calibration.workflows import seat_calibration
+    from texsense.monitor.virtual import VirtualSeatSource
+    from texsense.station.virtual import VirtualMats, frame_payload
+
+    speed = 8.0
+    config = VirtualMats(1, None, speed=speed).configs(seat_calibration(), None, 5.0, None, 120.0)
+    src = VirtualSeatSource(speed=0, seed=3)
+
+    async def take() -> list[tuple[bytes, float]]:
+        out = []
+        async for f in src.frames():
+            out.append((frame_payload(f), 1000.0 + float(f.element_times[0]) / speed))
+            if len(out) == 60:
+                break
+        return out
+
+    return config[0], asyncio.run(take())

@@ -4,44 +4,19 @@ member goes on from. One virtual seat, fed the same frames as `texsense station`
 
 from __future__ import annotations
 
-import asyncio
 import json
 
 import numpy as np
 import pytest
 
-from texsense.calibration.workflows import seat_calibration
 from texsense.exceptions import ParameterError
 from texsense.monitor.store import EventStore
-from texsense.monitor.virtual import VirtualSeatSource
 from texsense.station import checkpoint
-from texsense.station.virtual import VirtualMats, frame_payload
 from texsense.station.ward import MatEntry
 
-SPEED = 8.0
 
-
-@pytest.fixture(scope="module")
-def seat():
-    """A seat's config and 60 of its payloads with their arrival times."""
-    config = VirtualMats(1, None, speed=SPEED).configs(seat_calibration(), None, 5.0, None, 120.0)[
-        0
-    ]
-    src = VirtualSeatSource(speed=0, seed=3)
-
-    async def take() -> list[tuple[bytes, float]]:
-        out = []
-        async for f in src.frames():
-            out.append((frame_payload(f), 1000.0 + float(f.element_times[0]) / SPEED))
-            if len(out) == 60:
-                return out
-        return out
-
-    return config, asyncio.run(take())
-
-
-def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat, tmp_path):
-    config, payloads = seat
+def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat_mat, tmp_path):
+    config, payloads = seat_mat
     a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)
     for p, now in payloads[:40]:
         a.handle(p, now)
@@ -66,8 +41,8 @@ def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat, tmp_path):
     assert c.state == "live" and b.state == "live" and b.last_seen is not None
 
 
-def test_the_tracker_s_packed_state_is_its_state_exactly(seat, tmp_path):
-    config, payloads = seat
+def test_the_tracker_s_packed_state_is_its_state_exactly(seat_mat, tmp_path):
+    config, payloads = seat_mat
     a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)
     for p, now in payloads[:30]:
         a.handle(p, now)

@@ -41,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense._core import exposure_advance as _exposure_advance
-from texsense.data import units
+from texsense.data import stored, units
 from texsense.data.layout import Layout
 from texsense.exceptions import ParameterError
 
@@ -50,6 +50,8 @@ __all__ = ["REPOSITION_RANGE_MIN", "Alert", "Event", "ExposureTracker", "frame_t
 #: Allowed reposition intervals, minutes (§1.1: 5-20 min obstruct the blood flow; bed-care
 #: turning schedules reach 2 h).
 REPOSITION_RANGE_MIN = (5.0, 120.0)
+#: What an alert says of its places with bounds (:attr:`Alert.certainty`).
+CERTAINTIES = ("confident", "possible")
 
 
 def frame_time(t: object) -> float:
@@ -126,23 +128,23 @@ class Alert:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Alert:
-        """The alert of :meth:`to_dict` (a recording's stored state)."""
-        try:
-            return cls(
-                int(d["id"]),
-                float(d["opened_t"]),
-                [int(i) for i in d["elements"]],
-                float(d["peak_exposure_s"]),
-                None if d.get("acknowledged_t") is None else float(d["acknowledged_t"]),
-                None,
-                [str(w) for w in d.get("where") or []],
-                [str(w) for w in d.get("details") or []],
-                None if d.get("opened_wall") is None else float(d["opened_wall"]),
-                certainty=None if d.get("certainty") is None else str(d["certainty"]),
-            )
-        except (KeyError, TypeError, ValueError) as e:
-            raise ParameterError(f"a stored alert lacks or mangles {e}") from None
+    def from_dict(cls, d: dict[str, Any], places: int | None = None) -> Alert:
+        """The alert of :meth:`to_dict` (a recording's or a checkpoint's stored state; each
+        value of the type it must have, its elements within ``places``, or a
+        :class:`ParameterError` naming it)."""
+        what = "alert"
+        return cls(
+            stored.whole(d, "id", what, lo=1),
+            stored.number(d, "opened_t", what),
+            stored.wholes(d, "elements", what, hi=places),
+            stored.number(d, "peak_exposure_s", what, lo=0),
+            stored.optional_number(d, "acknowledged_t", what),
+            None,
+            stored.texts(d, "where", what, default=[]),
+            stored.texts(d, "details", what, default=[]),
+            stored.optional_number(d, "opened_wall", what),
+            certainty=stored.optional_text(d, "certainty", what, choices=CERTAINTIES),
+        )
 
 
 class ExposureTracker:
@@ -436,29 +438,40 @@ class ExposureTracker:
     def restore(self, state: dict[str, Any]) -> None:
         """Go on from a :meth:`state` (of a tracker of the same layout and regions); a state
         that does not fit raises :class:`ParameterError` naming what."""
-        try:
-            size = int(state["size"])
-            index, exposure, relief = _exposed_arrays(state["exposed"])
-            t = None if state.get("t") is None else float(state["t"])
-            next_id = int(state.get("next_id", 1))
-        except (KeyError, TypeError, ValueError) as e:
-            raise ParameterError(f"the stored exposure state lacks or mangles {e}") from None
-        if size != len(self.names) or np.any((index < 0) | (index >= size)):
+        what = "exposure state"
+        size = stored.whole(state, "size", what)
+        if size != len(self.names):
             raise ParameterError(
                 f"the stored exposure state is of {size} places, the tracker has {len(self.names)}"
             )
+        try:
+            index, exposure, relief = _exposed_arrays(state["exposed"])
+        except (KeyError, TypeError, ValueError, OverflowError) as e:
+            raise ParameterError(f"the stored exposure state lacks or mangles {e}") from None
+        if np.any((index < 0) | (index >= size)):
+            raise ParameterError(f"the stored exposure state names places beyond its {size}")
+        times = np.concatenate([exposure, relief])
+        if not np.all(np.isfinite(times) & (times >= 0)):
+            raise ParameterError("the stored exposure state has a time that is not finite or < 0")
+        t = stored.optional_number(state, "t", what)
+        next_id = stored.whole(state, "next_id", what, lo=1, default=1)
+        seated = stored.flag(state, "loaded", what, default=False)
+        waiting_empty = stored.flag(state, "waiting_empty", what, default=False)
+        alert = state.get("alert")
+        if alert is not None:
+            alert = Alert.from_dict(stored.mapping(state, "alert", what), places=size)
         self.exposure_s[:] = 0.0
         self._relief_s[:] = self.offload_s
         self.exposure_s[index], self._relief_s[index] = exposure, relief
         self._loaded_last = self._relief_s == 0.0  # (loaded at its last step: no relief)
         self._last_t = t
-        self.seated = bool(state.get("loaded", False))
+        self.seated = seated
         self._occupancy_since = None
-        self.waiting_empty = bool(state.get("waiting_empty", False))
+        self.waiting_empty = waiting_empty
         self.alerts = []
-        if isinstance(state.get("alert"), dict):
-            self.alerts.append(Alert.from_dict(state["alert"]))
-            next_id = max(next_id, self.alerts[0].id + 1)
+        if alert is not None:
+            self.alerts.append(alert)
+            next_id = max(next_id, alert.id + 1)
         self._ids = itertools.count(next_id)
 
     def _occupancy(self, t: float, any_load: bool) -> list[Event]:

@@ -46,9 +46,9 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.apps.alerts import Event, ExposureTracker, frame_time
-from texsense.data import units
+from texsense.data import stored, units
 from texsense.data.layout import Layout
-from texsense.exceptions import ParameterError
+from texsense.exceptions import ParameterError, shown
 
 __all__ = [
     "BANDS",
@@ -379,23 +379,22 @@ class TurningSchedule:
 
     def restore(self, state: dict[str, Any]) -> None:
         """Go on from a :meth:`state`; one that does not fit raises :class:`ParameterError`."""
-
-        def opt(key: str) -> float | None:
-            v = state.get(key)
-            return None if v is None else float(v)
-
-        try:
-            side, candidate = state.get("side"), state.get("candidate")
-            self.side = None if side is None else str(side)
-            self._candidate = None if candidate is None else str(candidate)
-            self.since_t, self.due_since, self._last_t = opt("since_t"), opt("due_since"), opt("t")
-            self._candidate_t = float(state.get("candidate_t") or 0.0)
-            self.time_per_side = {
-                str(k): float(v) for k, v in dict(state.get("time_per_side_s") or {}).items()
-            }
-            self.turns = int(state.get("turns", 0))
-        except (TypeError, ValueError) as e:
-            raise ParameterError(f"the stored turning schedule is not readable: {e}") from None
+        what = "turning schedule"
+        per_side = state.get("time_per_side_s") or {} if isinstance(state, dict) else None
+        if not isinstance(per_side, dict):
+            raise ParameterError(f"the stored {what}'s time_per_side_s is {shown(per_side)}")
+        values = (
+            stored.optional_text(state, "side", what),
+            stored.optional_text(state, "candidate", what),
+            stored.optional_number(state, "since_t", what),
+            stored.optional_number(state, "due_since", what),
+            stored.optional_number(state, "t", what),
+            stored.optional_number(state, "candidate_t", what) or 0.0,
+            {str(k): stored.number(per_side, k, what, lo=0) for k in per_side},
+            stored.whole(state, "turns", what, default=0),
+        )
+        (self.side, self._candidate, self.since_t, self.due_since, self._last_t,
+         self._candidate_t, self.time_per_side, self.turns) = values  # fmt: skip
 
     def _close(self, t: float, why: str) -> list[Event]:
         if self.due_since is None:

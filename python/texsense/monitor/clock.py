@@ -43,6 +43,7 @@ Examples
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import deque
 from typing import Any
@@ -155,18 +156,30 @@ class FrameClock:
         """Go on from a :meth:`state`; one that does not fit raises ``ValueError`` naming
         what (a :class:`~texsense.exceptions.ParameterError`)."""
 
+        def finite(v: Any) -> float:
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise ValueError(f"a time of {v!r}")
+            return float(v)
+
         def pair(v: Any) -> tuple[float, float] | None:
-            return None if v is None else (float(v[0]), float(v[1]))
+            return None if v is None else (finite(v[0]), finite(v[1]))
 
         def opt(v: Any) -> float | None:
-            return None if v is None else float(v)
+            return None if v is None else finite(v)
+
+        def count(v: Any) -> int:
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"a count of {v!r}")
+            return v
 
         try:
-            history = [(float(t), float(w)) for t, w in state["history"]]
-            values = (float(state["offset"]), opt(state["last_t"]), pair(state["last"]),
-                      opt(state["period"]), pair(state["pending"]), int(state["skipped"]),
-                      int(state["resyncs"]))  # fmt: skip
-        except (KeyError, TypeError, ValueError, IndexError) as e:
+            if not isinstance(state["history"], list):
+                raise TypeError("a history that is not a list")
+            history = [(finite(t), finite(w)) for t, w in state["history"]]
+            values = (finite(state["offset"]), opt(state["last_t"]), pair(state["last"]),
+                      opt(state["period"]), pair(state["pending"]), count(state["skipped"]),
+                      count(state["resyncs"]))  # fmt: skip
+        except (KeyError, TypeError, ValueError, IndexError, OverflowError) as e:
             raise ParameterError(f"the stored frame clock lacks or mangles {e}") from None
         self._history = deque(history, maxlen=self._history.maxlen)
         (self.offset, self.last_t, self._last, self._period, self._pending, self.skipped,

@@ -35,7 +35,7 @@ from texsense.apps.clinical import clinical_state
 from texsense.apps.posture.smoothing import WindowVote
 from texsense.apps.stats import raw_rise
 from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
-from texsense.data import units
+from texsense.data import stored, units
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock, Quiet
@@ -344,25 +344,27 @@ class Monitor:
     def resume(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`resume_state` (of this process or another's). What came
         between that state and the next frame read here is not known unless the frames'
-        numbers say that nothing did: the next step counts it as not read."""
-        clock = FrameClock(rate=self.clock.rate_hint).restore(state["clock"])
-        self.tracker.restore(state["tracker"])
+        numbers say that nothing did: the next step counts it as not read. A state that does
+        not fit raises :class:`ParameterError` (the monitor is then partly restored: start it
+        afresh)."""
+        what = "monitor"
+        frames = stored.whole(state, "frames", what)
+        t_first = stored.optional_number(state, "t_first", what)
+        seq = stored.optional_whole(state, "seq", what)  # (an earlier version's has none)
+        missed = stored.whole(state, "missed", what, default=0)
+        clock = FrameClock(rate=self.clock.rate_hint).restore(stored.mapping(state, "clock", what))
+        self.tracker.restore(stored.mapping(state, "tracker", what))
         if self.bed is not None and state.get("bed") is not None:
-            self.bed.schedule.restore(state["bed"])
-        self._vote.restore(state["vote"])
-        self.clock = clock
-        self.frames = int(state["frames"])
-        self._t_first = state.get("t_first")
-        seq = state.get("seq")  # (a checkpoint of an earlier version has none)
-        self.last_seq = None if seq is None else int(seq)
-        self.missed = int(state.get("missed", 0))
+            self.bed.schedule.restore(stored.mapping(state, "bed", what))
+        self._vote.restore(stored.mapping(state, "vote", what))
+        self.clock, self.frames, self._t_first = clock, frames, t_first
+        self.last_seq, self.missed = seq, missed
         self._skimmed = self.last_seq is None
         self.changes += 1
 
     def start_afresh(self) -> None:
-        """Unloaded spacer states, no exposure, no alert, a new clock (no state to resume)."""
-        if self.pipeline is not None:
-            self.pipeline.reset()
+        """No exposure, no alert, a new clock (no state to resume; the pipeline's, the
+        sensor's state, is its own: ``pipeline.reset()``)."""
         self.tracker.restore({"size": len(self.tracker.names), "exposed": []})
         if self.bed is not None:
             self.bed.schedule.restore({})

@@ -48,7 +48,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from texsense.apps.alerts import Alert
-from texsense.exceptions import ParameterError
+from texsense.data import stored
+from texsense.exceptions import ParameterError, shown
 
 if TYPE_CHECKING:
     from texsense.station.ward import MatEntry
@@ -75,6 +76,12 @@ MAGIC = b"TXSCKPT\x00"
 VERSION = 1
 #: The monitor part's own version.
 MONITOR_VERSION = 2
+#: The most bytes a part may unpack to (a 4096-element mat's sensor state is ~2 MB): a part
+#: that inflates further is a damaged checkpoint, refused before it fills the memory.
+MAX_PART_BYTES = 64 << 20
+#: What a part's restore raises on data that does not fit it (a checkpoint of another
+#: version, a damaged row): the part starts afresh (:class:`Part`).
+NOT_FITTING = (ValueError, TypeError, KeyError, AttributeError, IndexError, OverflowError)
 
 
 @dataclass(frozen=True)
@@ -82,12 +89,14 @@ class Part:
     """A named part of a mat's checkpoint: ``save(entry)`` gives its bytes, or a function
     of copies taken now that makes a JSON-ready dict later, off the event loop (None: nothing
     to save), ``restore(entry, data)`` goes on from the bytes (raising ``ValueError`` when
-    they do not fit); ``often``: written with every checkpoint, else with every
-    ``sensor_every``-th."""
+    they do not fit), ``fresh(entry)`` starts the part as if nothing were stored (also after
+    a restore that did not fit: never half of one); ``often``: written with every
+    checkpoint, else with every ``sensor_every``-th."""
 
     name: str
     save: Callable[[MatEntry], bytes | Callable[[], dict[str, Any]] | None]
     restore: Callable[[MatEntry, bytes], None]
+    fresh: Callable[[MatEntry], None]
     often: bool = True
 
 
@@ -125,13 +134,25 @@ def unpack(blob: bytes) -> tuple[dict[str, Any], dict[str, bytes]]:
         at = start + size
         parts: dict[str, bytes] = {}
         for name, length in head.pop("parts"):
-            parts[str(name)] = zlib.decompress(blob[at : at + int(length)])
+            parts[str(name)] = _inflated(blob[at : at + int(length)], str(name))
             at += int(length)
-    except (ValueError, TypeError, KeyError, zlib.error) as e:
+    except (*NOT_FITTING, zlib.error) as e:
         raise ParameterError(f"a damaged checkpoint: {e}") from None
     if at != len(blob):
         raise ParameterError("a damaged checkpoint: bytes left over after its parts")
     return head, parts
+
+
+def _inflated(data: bytes, name: str) -> bytes:
+    """A part's bytes unpacked, at most :data:`MAX_PART_BYTES` of them."""
+    z = zlib.decompressobj()
+    out = z.decompress(data, MAX_PART_BYTES)
+    if z.unconsumed_tail:
+        raise ParameterError(f"a damaged checkpoint: its part {name!r} unpacks to more than "
+                             f"{MAX_PART_BYTES >> 20} MB")  # fmt: skip
+    if not z.eof:
+        raise ParameterError(f"a damaged checkpoint: its part {name!r} is cut short")
+    return out
 
 
 @dataclass(frozen=True)
@@ -188,10 +209,11 @@ def restore(entry: MatEntry, blobs: list[bytes]) -> dict[str, Any]:
         try:
             part.restore(entry, data)
             restored.append(name)
-        except ValueError as e:  # ParameterError too: that part starts afresh
+        except NOT_FITTING as e:  # ParameterError too: that part starts afresh, whole
             log.warning("mat %s: the checkpoint's %s does not fit (%s); it starts afresh",
                         entry.id, name, e)  # fmt: skip
             refused[name] = str(e)
+            part.fresh(entry)
     return {"t": head.get("t"), "wall": head.get("wall"), "parts": restored, "refused": refused}
 
 
@@ -218,26 +240,46 @@ def _save_monitor(entry: MatEntry) -> Callable[[], dict[str, Any]]:
     return lambda: state
 
 
+#: The states of a mat a checkpoint holds (the ward's ``alert`` and ``acknowledged`` are
+#: those of a live mat with an open alert).
+MAT_STATES = ("waiting", "live", "stale", "refused")
+
+
 def _restore_monitor(entry: MatEntry, data: bytes) -> None:
     state = json.loads(data)
-    if state.get("version") not in (1, MONITOR_VERSION):  # 1: the exposure as rows
-        raise ParameterError(f"monitor state of version {state.get('version')}")
+    version = state.get("version") if isinstance(state, dict) else None
+    if isinstance(version, bool) or version not in (1, MONITOR_VERSION):  # 1: exposure as rows
+        raise ParameterError(f"monitor state of version {shown(version)}")
+    mat, what = state.get("mat"), "mat"
+    counts = [stored.whole(mat, k, what) for k in ("messages", "malformed", "ignored", "failed")]
+    period_s = stored.optional_number(mat, "period_s", what, lo=0)
+    last_wall = stored.optional_number(mat, "last_wall", what)
+    refused = stored.optional_text(mat, "refused", what)
+    mat_state = stored.optional_text(mat, "state", what, choices=MAT_STATES) or "waiting"
     entry.monitor.resume(state)
-    mat = state["mat"]
-    entry.messages, entry.malformed = int(mat["messages"]), int(mat["malformed"])
-    entry.ignored, entry.failed = int(mat["ignored"]), int(mat["failed"])
-    entry.period_s, entry.last_wall = mat["period_s"], mat["last_wall"]
-    entry.last_seen = entry.last_wall
-    entry.refused = mat["refused"]
-    entry.state = str(mat.get("state", "waiting"))
+    entry.messages, entry.malformed, entry.ignored, entry.failed = counts
+    entry.period_s, entry.last_wall, entry.last_seen = period_s, last_wall, last_wall
+    entry.refused, entry.state = refused, mat_state
     if entry.state == "live":  # stale once two of its periods pass without a frame here
         entry.last_wall = entry.last_seen = time.time()
+    entry.version += 1
+
+
+def _fresh_monitor(entry: MatEntry) -> None:
+    entry.monitor.start_afresh()
+    entry.state, entry.last_wall, entry.period_s, entry.refused = "waiting", None, None, None
+    entry.last_seen = None
     entry.version += 1
 
 
 def _save_pipeline(entry: MatEntry) -> bytes | None:
     pipeline = entry.monitor.pipeline
     return None if pipeline is None else bytes(pipeline.snapshot())
+
+
+def _fresh_pipeline(entry: MatEntry) -> None:
+    if entry.monitor.pipeline is not None:
+        entry.monitor.pipeline.reset()
 
 
 def _restore_pipeline(entry: MatEntry, data: bytes) -> None:
@@ -247,34 +289,37 @@ def _restore_pipeline(entry: MatEntry, data: bytes) -> None:
     pipeline.restore(data)
 
 
-register_part(Part("monitor", _save_monitor, _restore_monitor, often=True))
-register_part(Part("pipeline", _save_pipeline, _restore_pipeline, often=False))
+register_part(Part("monitor", _save_monitor, _restore_monitor, _fresh_monitor, often=True))
+register_part(Part("pipeline", _save_pipeline, _restore_pipeline, _fresh_pipeline, often=False))
 
 
 def fresh(entry: MatEntry) -> None:
-    """Start the mat afresh (no checkpoint of it anywhere): unloaded spacer states, no
-    exposure, no alert, a new clock."""
-    entry.monitor.start_afresh()
-    entry.state, entry.last_wall, entry.period_s, entry.refused = "waiting", None, None, None
-    entry.last_seen = None
-    entry.version += 1
+    """Start the mat afresh (no checkpoint of it anywhere): every part as if nothing were
+    stored (unloaded spacer states, no exposure, no alert, a new clock)."""
+    for part in PARTS.values():
+        part.fresh(entry)
 
 
 # ------------------------------------------------------------------------ the events after
 def replay(entry: MatEntry, events: list[dict[str, Any]]) -> list[str]:
     """Apply the alert events stored after the checkpoint (oldest first; rows of the event
-    store: kind, t, alert, detail) to the restored state; returns the kinds applied."""
+    store: kind, t, alert, detail) to the restored state; returns the kinds applied. An
+    event whose values are not of their kinds is skipped, with a warning."""
     tracker = entry.monitor.tracker
     schedule = entry.monitor.bed.schedule if entry.monitor.bed is not None else None
     applied = []
     for e in events:
-        kind, t, alert_id, detail = e["kind"], float(e["t"]), e.get("alert"), e.get("detail") or {}
+        try:
+            kind, t, alert_id, detail = _event_row(e, len(tracker.names))
+        except ParameterError as err:
+            log.warning("mat %s: an event stored after the checkpoint is skipped: %s",
+                        entry.id, err)  # fmt: skip
+            continue
         known = {a.id: a for a in tracker.alerts}
         if kind == "reposition" and alert_id is not None and alert_id not in known:
             if tracker.open_alert is None:  # raised after the checkpoint: it stays raised
-                elements = [int(i) for i in detail.get("elements", [])]
-                alert = Alert(int(alert_id), t, elements, tracker.reposition_s,
-                              where=[str(w) for w in detail.get("where", [])])  # fmt: skip
+                alert = Alert(alert_id, t, detail["elements"], tracker.reposition_s,
+                              where=detail["where"])  # fmt: skip
                 tracker.alerts.append(alert)
                 tracker.restore({**tracker.state(), "next_id": int(alert_id) + 1})
         elif kind in ("acknowledged", "cleared") and alert_id in known:
@@ -289,7 +334,7 @@ def replay(entry: MatEntry, events: list[dict[str, Any]]) -> list[str]:
         elif schedule is not None and kind == "turn-done":
             schedule.due_since = None
         elif schedule is not None and kind in ("turn", "in-bed"):
-            schedule.side = detail.get("to", detail.get("side", schedule.side))
+            schedule.side = detail.get("to") or detail.get("side") or schedule.side
             schedule.since_t = t
             schedule.turns += kind == "turn"
         elif schedule is not None and kind == "out-of-bed":
@@ -302,3 +347,22 @@ def replay(entry: MatEntry, events: list[dict[str, Any]]) -> list[str]:
     if applied:
         entry.version += 1
     return applied
+
+
+def _event_row(e: Any, places: int) -> tuple[str, float, int | None, dict[str, Any]]:
+    """An event row's kind, time, alert id and the detail :func:`replay` reads, each of its
+    kind (``elements`` within ``places``), or a :class:`ParameterError` naming it."""
+    what = "event"
+    kind = stored.optional_text(e, "kind", what) or ""
+    t = stored.number(e, "t", what)
+    alert_id = stored.optional_whole(e, "alert", what, lo=1)
+    raw = e.get("detail") or {}
+    if not isinstance(raw, dict):
+        raise ParameterError(f"the stored event's detail is {shown(raw)}, not an object")
+    detail = {
+        "elements": stored.wholes(raw, "elements", what, hi=places) if "elements" in raw else [],
+        "where": stored.texts(raw, "where", what, default=[]),
+        "to": stored.optional_text(raw, "to", what),
+        "side": stored.optional_text(raw, "side", what),
+    }
+    return kind, t, alert_id, detail

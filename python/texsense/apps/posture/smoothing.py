@@ -70,9 +70,16 @@ class WindowVote:
     def restore(self, state: dict[str, Any]) -> WindowVote:
         """Go on from a :meth:`state` (the window's length stays this vote's own)."""
         try:
+            if not isinstance(state["votes"], list):
+                raise TypeError("votes that are not a list")
             votes = [(float(t), lab, float(w)) for t, lab, w in state["votes"]]
         except (KeyError, TypeError, ValueError) as e:
             raise ParameterError(f"the stored posture vote lacks or mangles {e}") from None
+        times = [t for t, _, _ in votes]
+        if not all(math.isfinite(t) and math.isfinite(w) for t, _, w in votes):
+            raise ParameterError("the stored posture vote has a time or weight that is not finite")
+        if any(not isinstance(lab, str) for _, lab, _ in votes) or times != sorted(times):
+            raise ParameterError("the stored posture vote's labels are not text in time order")
         self._votes = deque(votes)
         return self
 
