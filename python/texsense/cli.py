@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from collections.abc import Callable, Collection, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -77,11 +78,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(() if command is None else (command,))
     args = parser.parse_args(argv)
     args.argv = argv  # the command line as given (a station's workers run it again)
-    with _terminate_as_interrupt():
+    with _terminate_as_interrupt(), quiet_arithmetic():
         code = _run(args, lambda: check_given(parser, args, argv))
     if from_command_line:
         _leave_busy_workers(code)
     return code
+
+
+#: numpy's words for arithmetic on what a file holds (no valid reading in a frame, a number
+#: beyond a type): what they mean is said by the readers (invalid readings, counted)
+_ARITHMETIC = (
+    r"(Mean of empty slice|All-NaN (slice|axis) encountered|Degrees of freedom <= 0"
+    r"|(invalid value|overflow|divide by zero|underflow) encountered)"
+)
+
+
+@contextlib.contextmanager
+def quiet_arithmetic() -> Iterator[None]:
+    """numpy's ``RuntimeWarning`` of arithmetic on odd data off the command's stderr, whose
+    one line is the command's own: a recording whose readings are all invalid, NaN cells of a
+    layout in float16 printed two lines of numpy's source around the result (harden12)."""
+    with warnings.catch_warnings():  # (numpy's errors of arithmetic are warnings by default)
+        warnings.filterwarnings("ignore", _ARITHMETIC, RuntimeWarning)
+        yield
 
 
 def _leave_busy_workers(code: int) -> None:

@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from texsense.data.outside import lone_surrogate
 from texsense.exceptions import ParameterError
 
 __all__ = [
@@ -247,11 +248,18 @@ def nonempty(text: str) -> str:
     the current folder (``texsense process ""`` would process the folder it runs in), and an
     empty text as the option left out (``--unit ""``, ``--broker ""``, ``--group ""``,
     ``--orientation ""``): taken and ignored, the user would believe it acted. Nor a NUL
-    character, which no name holds."""
+    character, which no name holds, nor bytes that are not UTF-8 text."""
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty value: give one, or leave the option out")
     if "\0" in text:  # (no file name holds one: os.stat raised ValueError)
         raise argparse.ArgumentTypeError(f"a NUL character in {text!r}")
+    if not text.isascii() and lone_surrogate(text) is not None:
+        # bytes that are not UTF-8 (Python keeps them as lone surrogates): the name would go
+        # into a UTF-8 file, report, figure or page, which cannot hold it (was a traceback)
+        shown_text = text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+        raise argparse.ArgumentTypeError(
+            f"{shown_text!r} is not UTF-8 text (rename the file, or give another name)"
+        )
     return text
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 from texsense.commands import HELP
 from texsense.commands.monitor import add_source_options, open_source
-from texsense.data.files import check_not_input
+from texsense.data.files import check_new, check_not_input
 from texsense.exceptions import ParameterError
 from texsense.monitor.record import SILENT_S, record
 
@@ -69,10 +69,7 @@ def run_record(args: argparse.Namespace) -> int:
     kind, _, rest = args.source.partition(":")
     if kind == "replay":
         check_not_input(args.output, [rest], what="recording")
-    if args.output.exists():
-        raise ParameterError(
-            f"{args.output} exists: recordings are never written over; choose a new name"
-        )
+    check_new(args.output)
     if not args.output.parent.is_dir():
         raise ParameterError(f"the folder {args.output.parent} does not exist")
     source = open_source(args, loop=False)

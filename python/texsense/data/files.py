@@ -61,6 +61,7 @@ if TYPE_CHECKING:
 __all__ = [
     "atomic_open",
     "atomic_path",
+    "check_new",
     "check_not_input",
     "check_regular",
     "check_writable",
@@ -493,7 +494,8 @@ def regular_files(
 ) -> tuple[list[Path], list[tuple[Path, str]]]:
     """The regular files in ``folder`` (and its subfolders with ``recursive``; the subfolders
     themselves with ``folders``), sorted, and what was passed over with why: links that lead
-    out of the folder, dangling links, loops of links, FIFOs, devices and sockets. Nothing is
+    out of the folder, dangling links, loops of links, FIFOs, devices and sockets, names that
+    are not UTF-8 text (a listing of them was a 500 from the monitor). Nothing is
     opened (only the status of each entry is asked), so nothing can wait on an entry that
     does not answer; a subfolder reached through a link is not entered.
 
@@ -534,6 +536,11 @@ def regular_files(
 def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | None:
     """None for a regular file inside ``base``, "folder" for a real subfolder, else why the
     entry is passed over."""
+    if not entry.name.isascii():
+        try:  # a name of bytes that are not UTF-8 (lone surrogates to Python): no page,
+            entry.name.encode("utf-8")  # report or file texsense writes can hold it
+        except UnicodeEncodeError:
+            return "a name that is not UTF-8 text"
     try:
         if entry.is_symlink():
             real = Path(os.path.realpath(path))
@@ -553,6 +560,16 @@ def _entry_problem(entry: os.DirEntry[str], path: Path, base: Path) -> str | Non
     if not stat.S_ISREG(st.st_mode):
         return _kind(st.st_mode)
     return None
+
+
+def check_new(path: str | Path) -> Path:
+    """``path`` if nothing is there (not even a link to nothing, which ``exists()`` passes and
+    an open follows: a live recording would be made where it points), else the one line of
+    every live recorder. ``io._guarded.GuardedFile(new=True)`` creates the file exclusively
+    anyway; this says it before a recorder starts."""
+    if os.path.lexists(path):
+        raise ParameterError(f"{path} exists: recordings are never written over; choose a new name")
+    return Path(path)
 
 
 def read_regular(path: str | Path, what: str) -> bytes:

@@ -71,6 +71,12 @@ BYTES_PER_CELL = 200
 #: make each map 80 GB.
 SPARSE_FACTOR = 64
 MAX_EMPTY_CELLS = 1 << 20
+#: The largest coordinate, element size and pitch (cm) a layout may hold, and the smallest
+#: size: 1 km and 1 nm. A file may declare any finite number; beyond these a mat is no mat,
+#: and the arithmetic of its maps and plots overflows (element centres at 1e308 cm were a
+#: ``LinAlgError`` or an ``arange`` ``ValueError`` out of ``report``).
+MAX_CM = 1e5
+MIN_CM = 1e-7
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -131,21 +137,25 @@ class Layout:
         if xy.ndim != 2 or xy.shape[1] != 2:
             raise ParameterError(f"xy_cm: expected shape (N, 2), got {xy.shape}")
         n = xy.shape[0]
-        if not np.all(np.isfinite(xy)):
-            raise ParameterError("xy_cm: element centres must be finite")
+        if not np.all(np.abs(xy) <= MAX_CM):  # NaN too
+            raise ParameterError(f"xy_cm: element centres must lie within ±{MAX_CM:g} cm")
         size = np.asarray(size_cm, dtype=np.float64)
         if size.shape == (2,):
             size = np.broadcast_to(size, (n, 2))
         if size.shape != (n, 2):
             raise ParameterError(f"size_cm: expected shape ({n}, 2) or (2,), got {size.shape}")
-        if np.any(~(size > 0)) or not np.all(np.isfinite(size)):
-            raise ParameterError("size_cm: element sizes must be positive and finite")
+        if not np.all((size >= MIN_CM) & (size <= MAX_CM)):
+            raise ParameterError(
+                f"size_cm: element sizes must be positive, {MIN_CM:g} to {MAX_CM:g} cm"
+            )
         if area_cm2 is None:
             area = size[:, 0] * size[:, 1]
         else:
             area = np.broadcast_to(np.asarray(area_cm2, dtype=np.float64), (n,))
-            if np.any(~(area > 0)) or not np.all(np.isfinite(area)):
-                raise ParameterError("area_cm2: element areas must be positive and finite")
+            if not np.all((area >= MIN_CM**2) & (area <= MAX_CM**2)):
+                raise ParameterError(
+                    f"area_cm2: element areas must be positive, {MIN_CM**2:g} to {MAX_CM**2:g} cm2"
+                )
         self._xy = _readonly(xy)
         self._size = _readonly(size)
         self._area = _readonly(area)
@@ -162,6 +172,8 @@ class Layout:
         self._names: tuple[str, ...] | None = None if names is None else tuple(names)
 
         self._regions: dict[str, _IntArray] = {}
+        if not isinstance(regions or {}, Mapping):  # a list or text from a file's layout
+            raise ParameterError(f"regions: expected names and their elements, got {regions!r:.40}")
         for name, members in (regions or {}).items():
             m = whole_numbers(members, f"region {name!r}").ravel()
             if m.size and (m.min() < 0 or m.max() >= n):
@@ -628,9 +640,15 @@ def _grid_of(
         raise ParameterError("cells: two elements share one grid cell")
     pitch = None
     if pitch_cm is not None:
-        pitch = (float(pitch_cm[0]), float(pitch_cm[1]))
-        if not (0 < pitch[0] < np.inf and 0 < pitch[1] < np.inf):
-            raise ParameterError(f"pitch_cm must be positive and finite, got {pitch_cm}")
+        try:  # a pair of real numbers (a file's layout may hold anything)
+            pair = np.asarray(pitch_cm, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            pair = np.zeros(0)
+        if pair.shape != (2,):
+            raise ParameterError(f"pitch_cm: expected two numbers, got {pitch_cm!r:.40}")
+        pitch = (float(pair[0]), float(pair[1]))
+        if not (MIN_CM <= pitch[0] <= MAX_CM and MIN_CM <= pitch[1] <= MAX_CM):
+            raise ParameterError(f"pitch_cm must be {MIN_CM:g} to {MAX_CM:g} cm, got {pitch_cm}")
     return (rows, cols), _readonly(c), pitch
 
 

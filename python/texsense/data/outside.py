@@ -13,7 +13,7 @@ from typing import Any
 
 from texsense.exceptions import shown
 
-__all__ = ["json_loads", "toml_loads"]
+__all__ = ["json_loads", "lone_surrogate", "toml_loads"]
 
 
 class _DuplicateKeyError(ValueError):
@@ -40,6 +40,29 @@ def _whole(text: str) -> int:
     return value
 
 
+#: a surrogate: written as a JSON escape (``\\udcff``) or already in the text (an HDF5
+#: attribute h5py decoded with ``surrogateescape``)
+_SURROGATE = re.compile(r"\\u[dD][89a-fA-F][0-9a-fA-F]{2}|[\ud800-\udfff]")
+_SURROGATE_BYTES = re.compile(rb"\\u[dD][89a-fA-F][0-9a-fA-F]{2}")
+
+
+def lone_surrogate(value: Any) -> str | None:
+    """The first text (a key or a value) of a parsed JSON document that holds a lone
+    surrogate, which no UTF-8 file, page or HDF5 attribute can hold, or None."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, str):
+            if not item.isascii() and _SURROGATE.search(item):
+                return item
+        elif isinstance(item, dict):
+            stack.extend(item.keys())
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+    return None
+
+
 def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     d: dict[str, Any] = {}
     for key, value in pairs:
@@ -60,6 +83,8 @@ def json_loads(text: str | bytes | bytearray) -> Any:
     - an integer beyond any float (``1`` and 400 zeros), which every reader that takes it as
       a real number raised as ``OverflowError`` (a regions file, a recording's alert
       settings: a traceback);
+    - a text holding a lone surrogate (``"\\udcff"``), which no UTF-8 file, page or HDF5
+      attribute can hold (a report of it was a ``UnicodeEncodeError`` traceback);
     - an object with a key twice (``{"gain": 1, "gain": 1e9}``), which ``json`` takes
       silently, keeping the last: what one reader of the text sees would not be what another
       sees (a hash, a viewer, another parser keeping the first).
@@ -70,7 +95,7 @@ def json_loads(text: str | bytes | bytearray) -> Any:
     json.decoder.JSONDecodeError: the key 'a' twice in one object: line 1 column 10 (char 9)
     """
     try:
-        return json.loads(text, object_pairs_hook=_unique_keys, parse_int=_whole)
+        doc = json.loads(text, object_pairs_hook=_unique_keys, parse_int=_whole)
     except RecursionError:
         doc = text if isinstance(text, str) else ""
         raise json.JSONDecodeError("nested too deeply", doc, 0) from None
@@ -88,6 +113,16 @@ def json_loads(text: str | bytes | bytearray) -> Any:
         raise json.JSONDecodeError(
             f"the key {shown(e.key, 80)} twice in one object", doc, pos
         ) from None
+    escape = (
+        _SURROGATE.search(text) if isinstance(text, str) else _SURROGATE_BYTES.search(bytes(text))
+    )
+    if escape and (bad := lone_surrogate(doc)) is not None:
+        raw = text if isinstance(text, str) else bytes(text).decode("utf-8", "replace")
+        escaped = bad.encode("utf-8", "backslashreplace").decode("ascii", "replace")
+        raise json.JSONDecodeError(
+            f"the text '{escaped[:60]}' holds a lone surrogate: not Unicode text", raw, 0
+        )
+    return doc
 
 
 def toml_loads(raw: bytes) -> dict[str, Any]:

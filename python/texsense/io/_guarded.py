@@ -15,6 +15,8 @@ import io
 from pathlib import Path
 from typing import Any
 
+from texsense.data.files import check_new
+
 __all__ = ["GuardedFile"]
 
 
@@ -33,9 +35,13 @@ class GuardedFile(io.RawIOBase):
     True
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, new: bool = False) -> None:
         super().__init__()
-        self._f = open(path, "w+b", buffering=0)  # noqa: SIM115 (closed by close())
+        try:  # new: a file made here (O_EXCL: nothing there, not even a link to nothing)
+            self._f = open(path, "x+b" if new else "w+b", buffering=0)  # noqa: SIM115
+        except FileExistsError:  # (closed by close())
+            check_new(path)
+            raise
         self.error: OSError | None = None
 
     def readable(self) -> bool:

@@ -13,6 +13,7 @@ from typing import IO, NamedTuple
 
 import numpy as np
 
+from texsense.data import budget
 from texsense.data.files import open_regular
 from texsense.exceptions import FormatError
 
@@ -30,6 +31,19 @@ __all__ = [
 
 #: A line longer than this is not a text export (a binary file without NUL bytes, say).
 MAX_LINE_BYTES = 64 << 20
+#: Memory one byte of a line may take once the line is split into its fields (a field of one
+#: character is a Python string of ~50 bytes and a pointer): a line may hold at most the memory
+#: budget over this (:mod:`texsense.data.budget`). A 26 MB header of 3 million element names
+#: took 540 MB under a budget of 64 MiB (harden12).
+LINE_COST = 32
+
+
+def max_line_bytes() -> int:
+    """The longest line a text export may have: :data:`MAX_LINE_BYTES`, or less under a
+    smaller memory budget."""
+    return int(max(4096, min(MAX_LINE_BYTES, budget.max_memory() // LINE_COST)))
+
+
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 
 
@@ -80,6 +94,7 @@ class TextLines:
 
     def __init__(self, path: str | Path, *, skip: int = 0) -> None:
         self.path = Path(path)
+        self._longest = max_line_bytes()
         self._raw = open_binary(self.path)
         head = self._raw.read(4096)
         self._raw.seek(0)
@@ -103,23 +118,19 @@ class TextLines:
 
     def _next_line(self) -> Line | None:
         if self._text is not None:
-            text = self._text.readline(MAX_LINE_BYTES)
+            text = self._text.readline(self._longest)
             if not text:
                 return None
             ended = text.endswith(("\n", "\r"))
+            self._check_length(len(text), ended)
             text = text.rstrip("\r\n")
         else:
-            raw = self._raw.readline(MAX_LINE_BYTES)
+            raw = self._raw.readline(self._longest)
             if not raw:
                 return None
             ended = raw.endswith(b"\n")
             body = raw.rstrip(b"\r\n")
-            if len(raw) >= MAX_LINE_BYTES and not ended:
-                raise FormatError(
-                    self.path,
-                    f"a line longer than {MAX_LINE_BYTES >> 20} MiB: not a text export",
-                    self.number + 1,
-                )
+            self._check_length(len(raw), ended)
             try:
                 text = body.decode("utf-8")
             except UnicodeDecodeError:
@@ -128,6 +139,16 @@ class TextLines:
                 text = text.lstrip("\ufeff")
         self.number += 1
         return Line(self.number, text, ended)
+
+    def _check_length(self, size: int, ended: bool) -> None:
+        if size >= self._longest and not ended:
+            raise FormatError(
+                self.path,
+                f"a line longer than {budget.human(self._longest)}: not a text export (the "
+                f"longest line is 1/{LINE_COST} of the memory budget, ${budget.ENV}, "
+                f"at most {MAX_LINE_BYTES >> 20} MiB)",
+                self.number + 1,
+            )
 
     def __iter__(self) -> TextLines:
         return self

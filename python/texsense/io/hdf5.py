@@ -56,7 +56,7 @@ from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
 from texsense.io._registry import Probe, writer
-from texsense.io.policy import DAMAGED, check_text, link_name, named, open_hdf5
+from texsense.io.policy import DAMAGED, check_text, link_name, named, open_hdf5, text_of
 
 __all__ = [
     "FORMAT_NAME",
@@ -160,8 +160,7 @@ def _read_layout(group: h5py.Group) -> Layout:
     )
 
 
-def _text(value: Any) -> str:
-    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+_text = text_of  # every text of the file (bytes not UTF-8 become U+FFFD)
 
 
 def _label_dtype(values: np.ndarray) -> Any:
@@ -181,7 +180,8 @@ class RecordingWriter:
     Parameters
     ----------
     path : str or Path
-        The file to create (overwritten if it exists).
+        The file to create: a live one refuses a path where anything is (never written over:
+        :func:`texsense.io._guarded.check_new`); ``live=False`` (a temporary name) overwrites.
     layout : Layout
         Element layout.
     quantity, unit : str
@@ -245,7 +245,7 @@ class RecordingWriter:
         self._last_flush = time.monotonic()
         _check_texts(layout, probe)
         self._label_keys: dict[str, str] = {}
-        self._guard = GuardedFile(self.path)
+        self._guard = GuardedFile(self.path, new=live)  # live: a new file (never written over)
         try:
             self._file = h5py.File(self._guard, "w")
             self._create(layout, probe, element_times, compress, live)
@@ -542,6 +542,8 @@ class HDF5Reader(RecordingReader):
         self._file = open_hdf5(self.path)
         try:
             return self._header(self._file)
+        except FormatError:  # names the file and what already
+            raise
         except (KeyError, ValueError, TypeError, *DAMAGED) as e:
             raise FormatError(self.path, f"damaged or incomplete recording: {e}") from None
 
@@ -560,7 +562,7 @@ class HDF5Reader(RecordingReader):
                 f"texsense reads version {FORMAT_VERSION}",
             )
         try:
-            meta = json_loads(f.attrs.get("meta", "{}"))
+            meta = json_loads(_text(f.attrs.get("meta", "{}")))
         except (json.JSONDecodeError, TypeError) as e:
             raise FormatError(path, f"the attribute 'meta' is not JSON ({e})") from None
         if not isinstance(meta, dict):
@@ -579,8 +581,8 @@ class HDF5Reader(RecordingReader):
         self.n_frames = self._known_complete = n
         return Header(
             layout,
-            str(f.attrs["quantity"]),
-            units.canonical(str(f.attrs["unit"])),
+            _text(f.attrs["quantity"]),
+            units.canonical(_text(f.attrs["unit"])),
             meta,
             declared_frames=max(ds.shape[0] for ds in self._sets.values()),
             label_dtypes={

@@ -61,6 +61,7 @@ __all__ = [
     "link_name",
     "named",
     "open_hdf5",
+    "text_of",
 ]
 
 #: The filters a dataset may use (all built into HDF5 or h5py: no plugin is ever loaded).
@@ -219,13 +220,24 @@ def link_name(name: str, k: int) -> str:
     return name if plain else f"#{k}"
 
 
+def text_of(value: Any) -> str:
+    """A text an HDF5 file holds (an attribute, a string of a dataset) as Unicode text: bytes
+    that are not UTF-8, which h5py gives as bytes or, in an attribute, as a string with lone
+    surrogates (``surrogateescape``) that no UTF-8 file or page can hold, become U+FFFD."""
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    text = str(value)
+    if not text.isascii():
+        text = text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+    return text
+
+
 def named(group: h5py.Group) -> dict[str, Any]:
     """The members of a group of regions or labels by their names (the attribute ``name``
     if there is one, as :func:`link_name` stores them; else the link name)."""
     out: dict[str, Any] = {}
     for key, obj in group.items():
-        name = obj.attrs.get("name", key)
-        out[name.decode("utf-8", "replace") if isinstance(name, bytes) else str(name)] = obj
+        out[text_of(obj.attrs.get("name", key))] = obj
     return out
 
 

@@ -14,6 +14,7 @@ frames, gaps in the frame counter and malformed lines count as dropped.
 from __future__ import annotations
 
 import asyncio
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ import numpy as np
 
 from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, encode_events
 from texsense.compensation.intervals import no_negative
-from texsense.data.files import make_folder, unused_name
+from texsense.data.files import check_new, make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
 from texsense.monitor.clock import FrameClock
@@ -119,9 +120,8 @@ async def record(
     RecordStats
         What was recorded; the file holds every frame counted in ``frames``.
     """
-    path = Path(path)
-    if path.exists():
-        raise ParameterError(f"{path} exists: recordings are never written over; choose a new name")
+
+    path = check_new(path)
     if duration_s is not None and not duration_s > 0:
         raise ParameterError(f"--duration must be > 0 s, got {duration_s}")
     if max_frames is not None and max_frames < 1:
@@ -260,7 +260,7 @@ class Recorder:
         make_folder(folder, "recordings folder")
         lay = source.layout
         self.paths = recording_paths(folder, name, source.quantity, calibrated)
-        taken = [p.name for p in self.paths if p.exists()]
+        taken = [p.name for p in self.paths if os.path.lexists(p)]  # a link to nothing too
         if taken:  # never write over an earlier recording
             raise ParameterError(f"a recording named {name!r} exists already ({taken[0]})")
         self._raw = RecordingWriter(

@@ -223,13 +223,14 @@ class VirtualDevice:
         if link.exists() or link.is_symlink():
             raise ParameterError(f"{link} exists: the device's link must be a new path")
         stop = stop or threading.Event()
+        # the truth's file first: refused (it exists), it leaves no link or terminal behind
+        recorder = _TruthRecorder(truth, self.layout) if truth else None
         master, slave = os.openpty()
         _raw(slave)
         os.symlink(os.ttyname(slave), link)
         lines: queue.Queue[str] = queue.Queue(maxsize=2)
         writer = threading.Thread(target=_write_lines, args=(master, lines, stop), daemon=True)
         writer.start()
-        recorder = _TruthRecorder(truth, self.layout) if truth else None
         try:
             self._produce(lines, stop, recorder, max_frames)
         finally:
