@@ -2,29 +2,14 @@
 //! points, for profiling: `cargo run --release -p texsense-core --example convert_time --
 //! [avx512|avx2|scalar] [T] [N]`, frame after frame on one thread (`REPS`: best of).
 
-extern "C" {
-    fn clock_gettime(clock: i32, ts: *mut [i64; 2]) -> i32;
-}
+mod common;
+use common::{cpu, use_path};
 
-/// This process's CPU time in s (the machine is shared).
-fn cpu() -> f64 {
-    let mut ts = [0i64; 2];
-    // SAFETY: CLOCK_PROCESS_CPUTIME_ID (2) into a timespec (two 64-bit fields on x86-64 Linux)
-    unsafe { clock_gettime(2, &mut ts) };
-    ts[0] as f64 + ts[1] as f64 * 1e-9
-}
-
-use texsense_core::simd::Path;
 use texsense_core::{Converter, Curve};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("avx512", |s| s.as_str());
-    texsense_core::simd::set_limit(match path {
-        "avx2" => Path::Avx2,
-        "scalar" => Path::Scalar,
-        _ => Path::Avx512,
-    });
+    let path = use_path(&args);
     let t: usize = args.get(2).map_or(4000, |s| s.parse().unwrap());
     let n: usize = args.get(3).map_or(1024, |s| s.parse().unwrap());
     // points dense at low capacitance, 25 times wider at the top (as the seat's curve)

@@ -2,31 +2,16 @@
 //! profiling: `cargo run --release -p texsense-core --example drift_time -- [avx512|avx2|scalar|f32|f32-scalar] [T] [N]`
 //! (`f32`: the experimental float32 bank, eight lanes), frame after frame on one thread.
 
-extern "C" {
-    fn clock_gettime(clock: i32, ts: *mut [i64; 2]) -> i32;
-}
-
-/// This process's CPU time in s (the machine is shared).
-fn cpu() -> f64 {
-    let mut ts = [0i64; 2];
-    // SAFETY: CLOCK_PROCESS_CPUTIME_ID (2) into a timespec (two 64-bit fields on x86-64 Linux)
-    unsafe { clock_gettime(2, &mut ts) };
-    ts[0] as f64 + ts[1] as f64 * 1e-9
-}
+mod common;
+use common::{cpu, use_path};
 
 use texsense_core::drift::f32x8::Drift32;
 use texsense_core::drift::{DriftBank, Kernel};
 use texsense_core::par::block_size;
-use texsense_core::simd::Path;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("avx512", |s| s.as_str());
-    texsense_core::simd::set_limit(match path {
-        "avx2" => Path::Avx2,
-        p if p.ends_with("scalar") => Path::Scalar,
-        _ => Path::Avx512,
-    });
+    let path = use_path(&args);
     let f32 = path.starts_with("f32");
     let t: usize = args.get(2).map_or(1000, |s| s.parse().unwrap());
     let n: usize = args.get(3).map_or(4096, |s| s.parse().unwrap());

@@ -3,26 +3,15 @@
 //! (`f32`: the experimental float32 bank, eight lanes, frame order; `f32-scalar`: its
 //! scalar kernel).
 
-extern "C" {
-    fn clock_gettime(clock: i32, ts: *mut [i64; 2]) -> i32;
-}
-
-/// This process's CPU time in s (the machine is shared).
-fn cpu() -> f64 {
-    let mut ts = [0i64; 2];
-    // SAFETY: CLOCK_PROCESS_CPUTIME_ID (2) into a timespec (two 64-bit fields on x86-64 Linux)
-    unsafe { clock_gettime(2, &mut ts) };
-    ts[0] as f64 + ts[1] as f64 * 1e-9
-}
+mod common;
+use common::{cpu, use_path};
 
 use texsense_core::preisach::f32x8::Bank32;
 use texsense_core::preisach::{Everett, PreisachBank, Schedule};
-use texsense_core::simd::Path;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("avx512", |s| s.as_str());
-    let simd = !path.ends_with("scalar");
+    let path = use_path(&args);
     let f32 = path.starts_with("f32");
     let schedule = match args.get(2).map_or("frames", |s| s) {
         "blocks" => Schedule::Blocks,
@@ -31,11 +20,6 @@ fn main() {
     };
     let t: usize = args.get(3).map_or(4000, |s| s.parse().unwrap());
     let n: usize = args.get(4).map_or(4096, |s| s.parse().unwrap());
-    texsense_core::simd::set_limit(match path {
-        "avx2" => Path::Avx2,
-        _ if !simd => Path::Scalar,
-        _ => Path::Avx512,
-    });
     let k = 100;
     let (lo, hi) = (0.0, 2.212);
     let mut table = vec![0.0; k * k];

@@ -56,7 +56,15 @@ from texsense.exceptions import FormatError, ParameterError
 from texsense.io._base import Header, Piece, RecordingReader, plausible
 from texsense.io._guarded import GuardedFile
 from texsense.io._registry import Probe, writer
-from texsense.io.policy import DAMAGED, check_text, link_name, named, open_hdf5, text_of
+from texsense.io.policy import (
+    DAMAGED,
+    check_meta,
+    check_text,
+    link_name,
+    named,
+    open_hdf5,
+    text_of,
+)
 
 __all__ = [
     "FORMAT_NAME",
@@ -114,7 +122,7 @@ def _check_texts(layout: Layout, probe: Recording) -> None:
         check_text(name, "element name")
     for name in layout.regions:
         check_text(name, "region name")
-    for value in (probe.quantity, probe.unit, json.dumps(probe.meta)):
+    for value in (probe.quantity, probe.unit, check_meta(probe.meta)):
         check_text(value, "the recording's metadata")
 
 
@@ -371,7 +379,7 @@ class RecordingWriter:
         in-use drift correction)."""
         meta = json_loads(self._file.attrs["meta"])
         meta.update(extra)
-        self._file.attrs["meta"] = json.dumps(meta)
+        self._file.attrs["meta"] = check_meta(meta)
 
     def add_label(self, name: str, dtype: Any) -> None:
         """Create the (empty) label ``name`` of ``dtype`` (strings: a numpy ``U`` dtype)."""

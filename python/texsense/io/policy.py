@@ -39,6 +39,7 @@ Examples
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -49,6 +50,7 @@ from h5py import h5d, h5z
 
 from texsense.data import budget
 from texsense.data.files import check_regular
+from texsense.data.outside import lone_surrogate
 from texsense.exceptions import FormatError, ParameterError, shown
 
 __all__ = [
@@ -239,6 +241,17 @@ def named(group: h5py.Group) -> dict[str, Any]:
     for key, obj in group.items():
         out[text_of(obj.attrs.get("name", key))] = obj
     return out
+
+
+def check_meta(meta: Any, what: str = "the recording's metadata") -> str:
+    """The JSON text of ``meta`` (a recording's metadata) for a file, checked as every reader
+    reads it back (:func:`texsense.data.outside.json_loads`): a text holding a lone surrogate,
+    which ``json.dumps`` writes as an ASCII escape a reader then refuses, is a
+    :class:`~texsense.exceptions.ParameterError` before anything is written."""
+    bad = lone_surrogate(meta)
+    if bad is not None:
+        raise ParameterError(f"{what} holds {shown(bad)}, which is not Unicode text")
+    return json.dumps(meta, separators=(",", ":"))
 
 
 def check_text(value: str, what: str) -> str:
