@@ -151,3 +151,31 @@ def test_the_round_trip_table(fault_row):
         detail = f"{done} read back exactly, {refused} refused before writing"
         case = f"{fmt} writer x reader, {done + refused} generated recordings"
         fault_row("round trip", case, "read back", detail, cases=done + refused)
+
+
+@pytest.mark.parametrize("fmt", list(WRITERS))
+def test_a_lone_surrogate_anywhere_is_refused_before_writing_or_read_back(fmt, tmp_path):
+    """Every text a writer writes (meta keys and values, region and element names), holding a
+    lone surrogate: refused before anything is written, or read back as it was (the wide CSV
+    wrote the meta and layout JSON with the escape, which every reader refuses: the round
+    trip's generated cases found the meta, then the region name)."""
+    suffix, check = WRITERS[fmt]
+    bad = "a\ud800b"
+    lay = Layout.grid(1, 2)
+    places = {
+        "meta value": dict(meta={"note": bad}),
+        "meta key": dict(meta={bad: 1}),
+        "region name": dict(layout=Layout(lay.xy_cm, lay.size_cm, regions={bad: [0]})),
+        "element name": dict(layout=Layout(lay.xy_cm, lay.size_cm, names=[bad, "e1"])),
+    }
+    for k, (place, change) in enumerate(places.items()):
+        rec = Recording(np.ones((2, 2)), np.arange(2.0), change.get("layout", lay), "pressure",
+                        "N/cm2", meta=change.get("meta", {}))  # fmt: skip
+        folder = tmp_path / str(k)
+        folder.mkdir()
+        try:
+            save(rec, folder / f"r{suffix}", format=fmt)
+        except ParameterError:
+            assert list(folder.iterdir()) == [], place
+            continue
+        check(rec, load(folder / f"r{suffix}", format=fmt))

@@ -58,7 +58,7 @@ from texsense.io._guarded import GuardedFile
 from texsense.io._registry import Probe, writer
 from texsense.io.policy import (
     DAMAGED,
-    check_meta,
+    check_json,
     check_text,
     link_name,
     named,
@@ -95,7 +95,7 @@ def _chunk_rows(n_elements: int) -> int:
 def _write_layout(group: h5py.Group, layout: Layout) -> None:
     group.attrs["kind"] = layout.kind
     if layout.orientation:
-        group.attrs["orientation"] = json.dumps(layout.orientation)
+        group.attrs["orientation"] = check_json(layout.orientation, "the layout's orientation")
     if layout.shape is not None and layout.cells is not None:
         group.attrs["rows"], group.attrs["cols"] = layout.shape
         group.create_dataset("cells", data=layout.cells)
@@ -122,7 +122,7 @@ def _check_texts(layout: Layout, probe: Recording) -> None:
         check_text(name, "element name")
     for name in layout.regions:
         check_text(name, "region name")
-    for value in (probe.quantity, probe.unit, check_meta(probe.meta)):
+    for value in (probe.quantity, probe.unit, check_json(probe.meta)):
         check_text(value, "the recording's metadata")
 
 
@@ -274,7 +274,7 @@ class RecordingWriter:
         f.attrs["version"] = FORMAT_VERSION
         f.attrs["quantity"] = probe.quantity
         f.attrs["unit"] = probe.unit
-        f.attrs["meta"] = json.dumps(probe.meta)
+        f.attrs["meta"] = check_json(probe.meta)
         f.attrs["software"] = _software()
         f.attrs["open"] = 1  # cleared by close(): a file still open was interrupted
         f.attrs["live"] = int(live)
@@ -379,7 +379,7 @@ class RecordingWriter:
         in-use drift correction)."""
         meta = json_loads(self._file.attrs["meta"])
         meta.update(extra)
-        self._file.attrs["meta"] = check_meta(meta)
+        self._file.attrs["meta"] = check_json(meta)
 
     def add_label(self, name: str, dtype: Any) -> None:
         """Create the (empty) label ``name`` of ``dtype`` (strings: a numpy ``U`` dtype)."""

@@ -243,15 +243,16 @@ def named(group: h5py.Group) -> dict[str, Any]:
     return out
 
 
-def check_meta(meta: Any, what: str = "the recording's metadata") -> str:
-    """The JSON text of ``meta`` (a recording's metadata) for a file, checked as every reader
-    reads it back (:func:`texsense.data.outside.json_loads`): a text holding a lone surrogate,
-    which ``json.dumps`` writes as an ASCII escape a reader then refuses, is a
-    :class:`~texsense.exceptions.ParameterError` before anything is written."""
-    bad = lone_surrogate(meta)
+def check_json(value: Any, what: str = "the recording's metadata") -> str:
+    """The JSON text of ``value`` (a recording's metadata, its layout) for a file, checked as
+    every reader reads it back (:func:`texsense.data.outside.json_loads`): a text holding a
+    lone surrogate, which ``json.dumps`` writes as an ASCII escape a reader then refuses, is a
+    :class:`~texsense.exceptions.ParameterError` before anything is written. Every JSON text
+    a writer writes goes through it."""
+    bad = lone_surrogate(value)
     if bad is not None:
         raise ParameterError(f"{what} holds {shown(bad)}, which is not Unicode text")
-    return json.dumps(meta, separators=(",", ":"))
+    return json.dumps(value, separators=(",", ":"))
 
 
 def check_text(value: str, what: str) -> str:

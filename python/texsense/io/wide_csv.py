@@ -40,7 +40,7 @@ from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import FrameRow, Header, RecordingReader, plausible
 from texsense.io._registry import Probe, writer
 from texsense.io._text import Line, TextLines, format_float, is_number
-from texsense.io.policy import check_meta
+from texsense.io.policy import check_json
 
 __all__ = ["MAGIC", "WideCSVReader", "write_wide_csv"]
 
@@ -276,8 +276,8 @@ def write_wide_csv(rec: Recording, path: str | Path) -> Path:
         f"# quantity: {rec.quantity}",
         f"# unit: {rec.unit}",
         f"# frames: {rec.n_frames}",
-        f"# layout: {json.dumps(rec.layout.to_dict(), separators=(',', ':'))}",
-        f"# meta: {check_meta(rec.meta)}",
+        f"# layout: {check_json(rec.layout.to_dict(), 'the layout')}",
+        f"# meta: {check_json(rec.meta)}",
         "time_s," + ",".join(names) + "," + _MASK,
     ]
     with atomic_open(path, "w", encoding="utf-8") as out:
