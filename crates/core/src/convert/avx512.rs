@@ -80,20 +80,16 @@ unsafe fn at(c: &Curve<'_, f64>, split: &[f64], v: __m512d) -> __m512d {
     let (xs, ys, slope, buckets) = (c.x(), c.y(), c.slopes(), c.bucket_starts());
     assert_eq!(split.len(), buckets.len(), "one split per bucket");
     let last = xs.len() - 1;
-    let (x0, xl) = (_mm512_set1_pd(xs[0]), _mm512_set1_pd(xs[last]));
-    let nan = _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(v, v);
-    let hi = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(v, xl);
-    let lo = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(v, x0);
-    let inside = !(nan | hi | lo);
-    let vin = _mm512_mask_blend_pd(inside, x0, v);
-    let top = _mm512_set1_pd((buckets.len() - 1) as f64);
-    let pos = _mm512_min_pd(
-        _mm512_mul_pd(_mm512_sub_pd(vin, x0), _mm512_set1_pd(c.inv_width())),
-        top,
-    );
-    // 0 <= pos <= top < 2^31: truncation is the floor
-    let b = _mm512_cvtepi32_epi64(_mm512_cvttpd_epi32(pos));
-    let bucket = _mm512_i64gather_epi32::<4>(b, buckets.as_ptr().cast::<i32>());
+    // SAFETY: AVX-512 (this function's features)
+    let Lanes {
+        nan,
+        lo,
+        hi,
+        inside,
+        vin,
+        b,
+        bucket,
+    } = unsafe { lanes(c, v) };
     let cut = _mm512_i64gather_pd::<8>(b, split.as_ptr());
     let twice = inside & _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(cut, cut);
     // the kernel's first step forward (`x[j + 1] <= v`, `j + 1 < last`: the split)
@@ -119,13 +115,24 @@ unsafe fn at(c: &Curve<'_, f64>, split: &[f64], v: __m512d) -> __m512d {
     _mm512_mask_blend_pd(nan, r, _mm512_set1_pd(f64::NAN))
 }
 
-/// `Curve::at` per lane (`super::avx2::at`), walking from the bucket's start.
+/// Where eight inputs lie on a curve: not a number (`nan`), below its first point (`lo`), at or above its last
+/// (`hi`), inside it (`inside`, not NaN), the input clamped inside (`vin`: the first point
+/// where not inside), its bucket (`b`) and the bucket's first segment (`bucket`).
+struct Lanes {
+    nan: __mmask8,
+    lo: __mmask8,
+    hi: __mmask8,
+    inside: __mmask8,
+    vin: __m512d,
+    b: __m512i,
+    bucket: __m256i,
+}
+
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn at_walk(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
-    let (xs, ys, slope, buckets) = (c.x(), c.y(), c.slopes(), c.bucket_starts());
-    let last = xs.len() - 1;
-    let (x0, xl) = (_mm512_set1_pd(xs[0]), _mm512_set1_pd(xs[last]));
+unsafe fn lanes(c: &Curve<'_, f64>, v: __m512d) -> Lanes {
+    let (xs, buckets) = (c.x(), c.bucket_starts());
+    let (x0, xl) = (_mm512_set1_pd(xs[0]), _mm512_set1_pd(xs[xs.len() - 1]));
     let nan = _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(v, v);
     let hi = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(v, xl);
     let lo = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(v, x0);
@@ -139,6 +146,33 @@ unsafe fn at_walk(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
     // 0 <= pos <= top < 2^31: truncation is the floor
     let b = _mm512_cvtepi32_epi64(_mm512_cvttpd_epi32(pos));
     let bucket = _mm512_i64gather_epi32::<4>(b, buckets.as_ptr().cast::<i32>());
+    Lanes {
+        nan,
+        lo,
+        hi,
+        inside,
+        vin,
+        b,
+        bucket,
+    }
+}
+
+/// `Curve::at` per lane (`super::avx2::at`), walking from the bucket's start.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn at_walk(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
+    let (xs, ys, slope) = (c.x(), c.y(), c.slopes());
+    let last = xs.len() - 1;
+    // SAFETY: AVX-512 (this function's features)
+    let Lanes {
+        nan,
+        lo,
+        hi,
+        inside,
+        vin,
+        bucket,
+        ..
+    } = unsafe { lanes(c, v) };
     let mut j = _mm512_cvtepu32_epi64(bucket);
     let (zero_i, one_i) = (_mm512_setzero_si512(), _mm512_set1_epi64(1));
     let xp = xs.as_ptr();
