@@ -35,6 +35,7 @@ from texsense.apps.clinical import clinical_state
 from texsense.apps.posture.smoothing import WindowVote
 from texsense.apps.stats import raw_rise
 from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
+from texsense.compensation.intervals import no_negative
 from texsense.data import stored, units
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
@@ -590,7 +591,9 @@ class Monitor:
             # the frame is kept past the next step by a recorder only (last_pressure: a copy)
             keep = self.recorder is not None
             pressure, measured = self.pipeline.step(x, valid, frame.t, keep=keep)
-            return pressure, measured, self.pipeline.codes_
+            # an empty element's estimate just below zero is shown, counted and written as 0:
+            # the one rule of the map, the statistics and the pressure file (no_negative)
+            return no_negative(pressure)[0], measured, self.pipeline.codes_
         if self.raw_only:
             none = np.full(raw.shape, np.nan)
             return none, np.zeros(raw.shape, dtype=bool), np.zeros(raw.shape, dtype=np.int8)
