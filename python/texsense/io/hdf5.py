@@ -115,15 +115,18 @@ def _write_layout(group: h5py.Group, layout: Layout) -> None:
         ds.attrs["name"] = name
 
 
-def _check_texts(layout: Layout, probe: Recording) -> None:
+def _check_texts(layout: Layout, probe: Recording) -> str:
     """Every text HDF5 is to keep, checked before the file is made (a writer that cannot
-    represent something refuses before writing)."""
+    represent something refuses before writing); returns the metadata's JSON text, the one
+    the file keeps."""
     for name in layout.names or ():
         check_text(name, "element name")
     for name in layout.regions:
         check_text(name, "region name")
-    for value in (probe.quantity, probe.unit, check_json(probe.meta)):
+    meta = check_json(probe.meta)
+    for value in (probe.quantity, probe.unit, meta):
         check_text(value, "the recording's metadata")
+    return meta
 
 
 def _whole(ds: h5py.Dataset) -> Any:
@@ -251,12 +254,12 @@ class RecordingWriter:
         self.quantity = probe.quantity
         self.flush_interval_s = float(flush_interval_s)
         self._last_flush = time.monotonic()
-        _check_texts(layout, probe)
+        meta_text = _check_texts(layout, probe)
         self._label_keys: dict[str, str] = {}
         self._guard = GuardedFile(self.path, new=live)  # live: a new file (never written over)
         try:
             self._file = h5py.File(self._guard, "w")
-            self._create(layout, probe, element_times, compress, live)
+            self._create(layout, probe, meta_text, element_times, compress, live)
             if bounds:  # the lower and upper maps of every value (issue 37)
                 for name in ("lower", "upper"):
                     self._file.create_dataset(name, (0, self.n_elements), np.float32,
@@ -267,14 +270,20 @@ class RecordingWriter:
         self.n_frames = 0
 
     def _create(
-        self, layout: Layout, probe: Recording, element_times: bool, compress: bool, live: bool
+        self,
+        layout: Layout,
+        probe: Recording,
+        meta_text: str,
+        element_times: bool,
+        compress: bool,
+        live: bool,
     ) -> None:
         f = self._file
         f.attrs["format"] = FORMAT_NAME
         f.attrs["version"] = FORMAT_VERSION
         f.attrs["quantity"] = probe.quantity
         f.attrs["unit"] = probe.unit
-        f.attrs["meta"] = check_json(probe.meta)
+        f.attrs["meta"] = meta_text
         f.attrs["software"] = _software()
         f.attrs["open"] = 1  # cleared by close(): a file still open was interrupted
         f.attrs["live"] = int(live)
