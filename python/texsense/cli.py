@@ -89,7 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 #: beyond a type): what they mean is said by the readers (invalid readings, counted)
 _ARITHMETIC = (
     r"(Mean of empty slice|All-NaN (slice|axis) encountered|Degrees of freedom <= 0"
-    r"|(invalid value|overflow|divide by zero|underflow) encountered)"
+    r"|(invalid value|divide by zero) encountered|overflow encountered in cast)"
 )
 
 

@@ -77,3 +77,25 @@ def test_no_numpy_warning_reaches_stderr(tmp_path, fault_row):
     fault_row("values", f"{len(paths)} odd recordings (all invalid, NaN, cells in float16, ...) "
               f"x {len(COMMANDS)} commands: no numpy warning on stderr", "clear error or read",
               cases=len(cases))  # fmt: skip
+
+
+def test_only_the_words_of_odd_data_are_kept_off_stderr():
+    """What the quiet keeps off: numpy's words on a file's odd values (no valid reading, a
+    cell beyond float16). An overflow or underflow of texsense's own arithmetic is a fault
+    to see, and still warns."""
+    import warnings
+
+    from texsense.cli import quiet_arithmetic
+
+    big, tiny = np.array([1e300]), np.array([1e-300])
+    with warnings.catch_warnings(record=True) as seen, np.errstate(all="warn"):
+        warnings.simplefilter("always")  # (the quiet's filters come before this one)
+        with quiet_arithmetic():
+            np.nanmean(np.full(3, np.nan))
+            np.array([1e30]).astype(np.float16)
+            np.array([0.0]) / 0.0
+            assert not seen, [str(w.message) for w in seen]
+            big * big
+            tiny * tiny
+    words = sorted(str(w.message) for w in seen)
+    assert words == ["overflow encountered in multiply", "underflow encountered in multiply"]
