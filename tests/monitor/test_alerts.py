@@ -150,6 +150,22 @@ def test_reposition_alert_opens_once_acknowledge_and_clear():
         tr.acknowledge(99, 1.0)
 
 
+def test_an_adopted_alert_is_the_open_one_and_no_id_is_given_twice():
+    """A takeover reads back an alert the mat's former holder raised after its last
+    checkpoint (``station.checkpoint.replay``): the tracker takes it as its own, and its
+    next alert's id comes after it."""
+    from texsense.apps.alerts import Alert
+
+    lay = Layout.grid(2, 2)
+    tr = ExposureTracker(lay, reposition_min=5, offload_min=1)
+    tr.adopt(Alert(7, 100.0, [0], 300.0))
+    assert tr.open_alert.id == 7
+    run(tr, [(80, [0.0] * 4)])
+    assert tr.open_alert is None
+    run(tr, [(400, [1.0, 0.0, 0.0, 0.0])])
+    assert tr.open_alert.id == 8
+
+
 def test_regions_track_mean_pressure():
     lay = Layout.grid(2, 2)
     regions = {"left": [0, 2], "right": [1, 3]}

@@ -474,6 +474,13 @@ class ExposureTracker:
             next_id = max(next_id, alert.id + 1)
         self._ids = itertools.count(next_id)
 
+    def adopt(self, alert: Alert) -> None:
+        """Take ``alert`` as this tracker's own open alert (one raised by another holder of
+        the mat, read back from the event store after a takeover): the next alert's id comes
+        after it, so no id is given twice."""
+        self.alerts.append(alert)
+        self._ids = itertools.count(max(next(self._ids), alert.id + 1))
+
     def _occupancy(self, t: float, any_load: bool) -> list[Event]:
         """The load appearing or disappearing, once the change has held ``occupancy_hold_s``."""
         if any_load == self.seated:

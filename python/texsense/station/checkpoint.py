@@ -320,8 +320,7 @@ def replay(entry: MatEntry, events: list[dict[str, Any]]) -> list[str]:
             if tracker.open_alert is None:  # raised after the checkpoint: it stays raised
                 alert = Alert(alert_id, t, detail["elements"], tracker.reposition_s,
                               where=detail["where"])  # fmt: skip
-                tracker.alerts.append(alert)
-                tracker.restore({**tracker.state(), "next_id": int(alert_id) + 1})
+                tracker.adopt(alert)
         elif kind in ("acknowledged", "cleared") and alert_id in known:
             alert = known[alert_id]
             if kind == "acknowledged" and alert.acknowledged_t is None:
