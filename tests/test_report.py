@@ -228,3 +228,21 @@ def test_the_summary_names_the_exposure_alert_in_the_modes_words() -> None:
     assert counts["seat"] == "1 reposition, 0 turn due"
     assert counts["bed"] == "1 pressure alert, 0 turn due"
     assert counts["generic"] == "1 offload alert, 0 turn due"
+
+
+def test_the_colour_bar_labels_the_threshold_as_a_tick_of_its_own_in_bold() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from texsense.apps.report._figures import colour_bar
+
+    fig = Figure()
+    ax, cax = fig.add_axes((0.1, 0.1, 0.6, 0.8)), fig.add_axes((0.75, 0.1, 0.05, 0.8))
+    img = ax.imshow(np.linspace(0, 100, 20).reshape(4, 5), vmin=0, vmax=100)
+    colour_bar(fig, img, cax, "pressure [mmHg]", 32.0)
+    labels = {t.get_text(): t.get_fontweight() for t in cax.get_yticklabels()}
+    assert labels.get("32") == "bold", labels
+    assert "40" not in labels  # too close to the threshold: gives way
+    assert {"0", "20", "60", "80", "100"} <= set(labels)
