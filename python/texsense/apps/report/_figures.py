@@ -247,6 +247,10 @@ def series_figure(fig: Figure, c: ReportContent) -> None:
             ax.plot(x, s["cof_y"], lw=0.8, label="y (along)")
             ax.legend(fontsize=SMALL, loc="upper right")
         else:
+            if f"{key}_lower" in s:  # the bounds of every value, as a band (issue 37)
+                ax.fill_between(x, s[f"{key}_lower"], s[f"{key}_upper"], color="#2764c5",
+                                alpha=0.2, lw=0, label="bounds")  # fmt: skip
+                ax.legend(fontsize=SMALL, loc="upper right")
             ax.plot(x, s[key], lw=0.8, color="#2764c5")
         if key == "peak" and r.threshold is not None:
             ax.axhline(r.threshold, color="#c2410c", lw=0.8, ls="--")
