@@ -252,8 +252,9 @@ def test_a_processed_night_with_bounds_shows_the_bounds_of_its_peak(tmp_path):
     """``process --interval`` keeps the bounds of every value; the report's peak over time
     gets its own: each frame's peak lies between them, and the band has a width."""
     night, cal, out = tmp_path / "night.h5", tmp_path / "mat.json", tmp_path / "out.h5"
+    truth = tmp_path / "truth.h5"
     assert main(["simulate", "night", "--hours", "0.15", "--seed", "3", "-o", str(night),
-                 "--truth", str(tmp_path / "truth.h5"), "--calibration", str(cal)]) == 0  # fmt: skip
+                 "--truth", str(truth), "--calibration", str(cal)]) == 0  # fmt: skip
     assert main(["process", str(night), "--calibration", str(cal), "-o", str(out),
                  "--interval", "0.95"]) == 0  # fmt: skip
     s = open_review(out).series
