@@ -228,3 +228,43 @@ def test_the_summary_names_the_exposure_alert_in_the_modes_words() -> None:
     assert counts["seat"] == "1 reposition, 0 turn due"
     assert counts["bed"] == "1 pressure alert, 0 turn due"
     assert counts["generic"] == "1 offload alert, 0 turn due"
+
+
+def test_the_colour_bar_labels_the_threshold_as_a_tick_of_its_own_in_bold() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from texsense.apps.report._figures import colour_bar
+
+    fig = Figure()
+    ax, cax = fig.add_axes((0.1, 0.1, 0.6, 0.8)), fig.add_axes((0.75, 0.1, 0.05, 0.8))
+    img = ax.imshow(np.linspace(0, 100, 20).reshape(4, 5), vmin=0, vmax=100)
+    colour_bar(fig, img, cax, "pressure [mmHg]", 32.0)
+    labels = {t.get_text(): t.get_fontweight() for t in cax.get_yticklabels()}
+    assert labels.get("32") == "bold", labels
+    assert "40" not in labels  # too close to the threshold: gives way
+    assert {"0", "20", "60", "80", "100"} <= set(labels)
+
+
+def test_a_processed_night_with_bounds_shows_the_bounds_of_its_peak(tmp_path):
+    """``process --interval`` keeps the bounds of every value; the report's peak over time
+    gets its own: each frame's peak lies between them, and the band has a width."""
+    night, cal, out = tmp_path / "night.h5", tmp_path / "mat.json", tmp_path / "out.h5"
+    truth = tmp_path / "truth.h5"
+    assert main(["simulate", "night", "--hours", "0.15", "--seed", "3", "-o", str(night),
+                 "--truth", str(truth), "--calibration", str(cal)]) == 0  # fmt: skip
+    assert main(["process", str(night), "--calibration", str(cal), "-o", str(out),
+                 "--interval", "0.95"]) == 0  # fmt: skip
+    s = open_review(out).series
+    assert "load_N_lower" not in s  # (the sums of the bounds: every error aligned)
+    for key in ("peak",):
+        lo, v, hi = s[f"{key}_lower"], s[key], s[f"{key}_upper"]
+        seen = np.isfinite(v)
+        assert seen.sum() > 10
+        assert np.all(lo[seen] <= v[seen] * (1 + 1e-5) + 1e-6), key
+        assert np.all(v[seen] <= hi[seen] * (1 + 1e-5) + 1e-6), key
+        assert np.nanmax(hi - lo) > 0, key
+    write_report(out, tmp_path / "out.pdf")
+    assert open_review(night).series.get("peak_lower") is None  # no bounds: no band

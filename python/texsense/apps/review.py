@@ -379,6 +379,29 @@ def _repairs_and_bounds(review: Review, original: Recording, path: str | Path | 
             from texsense.io.hdf5 import read_bounds
 
             review.bounds = read_bounds(p)
+            review.series.update(_bounds_series(review))
+
+
+def _bounds_series(review: Review) -> dict[str, np.ndarray]:
+    """The bounds of the peak (display unit) per frame, from the bounds of every value
+    (``process --interval``): every element's true pressure between its lower and upper map
+    puts the frame's peak between their highest values over the readings the peak counts —
+    what the alert threshold is compared with. (The load gets none: the sums of the maps
+    are the case of every element's error at its bound in the same direction at once, on a
+    bed night 300-1250 N around a load of 500 N, and an empty mat's 0-750 N.) Empty without
+    bounds or when they are not of the review's frames."""
+    rec = review.rec
+    if review.bounds is None or review.bounds[0].shape != rec.frames.shape:
+        return {}
+    counted = np.isfinite(rec.frames) & (rec.valid if rec.valid is not None else True)
+    any_read = counted.any(axis=1) & review.use
+    out: dict[str, np.ndarray] = {}
+    for name, maps in zip(("lower", "upper"), review.bounds, strict=True):
+        peak = np.full(rec.n_frames, np.nan)
+        m = np.where(counted[any_read], maps[any_read].astype(np.float64), -np.inf)
+        peak[any_read] = m.max(axis=1) * review.factor
+        out[f"peak_{name}"] = peak
+    return out
 
 
 def _events(review: Review, model: Any) -> None:

@@ -144,13 +144,27 @@ def _orientation(ax: Axes, o: dict[str, Any]) -> None:
 
 
 def colour_bar(fig: Figure, img: Any, cax: Axes, label: str, threshold: float | None) -> None:
-    """A colour bar in ``cax`` (as tall as its map) with the threshold marked."""
+    """A colour bar in ``cax`` (as tall as its map) with the threshold marked: a line across
+    the bar, a pointer beside it and the threshold as a tick of its own, labelled in bold
+    (the ticks too close to it give way)."""
     bar = fig.colorbar(img, cax=cax)
     bar.set_label(label, fontsize=SMALL)
     bar.ax.tick_params(labelsize=SMALL)
-    if threshold is not None:
-        bar.ax.axhline(threshold, color="white", lw=2)
-        bar.ax.axhline(threshold, color="black", lw=0.8, ls="--")
+    if threshold is None:
+        return
+    lo, hi = img.get_clim()
+    if not lo <= threshold <= hi:
+        return
+    bar.ax.axhline(threshold, color="white", lw=2.5)
+    bar.ax.axhline(threshold, color="black", lw=1.2, ls="--")
+    bar.ax.plot([-0.35], [threshold], marker=">", color="black", ms=6, clip_on=False)
+    near = 0.1 * (hi - lo)
+    ticks = [t for t in bar.get_ticks() if lo <= t <= hi and abs(t - threshold) > near]
+    ticks = sorted([*ticks, threshold])
+    bar.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
+    for text, tick in zip(bar.ax.get_yticklabels(), ticks, strict=True):
+        if tick == threshold:
+            text.set_fontweight("bold")
 
 
 Box = tuple[float, float, float, float]
@@ -233,6 +247,10 @@ def series_figure(fig: Figure, c: ReportContent) -> None:
             ax.plot(x, s["cof_y"], lw=0.8, label="y (along)")
             ax.legend(fontsize=SMALL, loc="upper right")
         else:
+            if f"{key}_lower" in s:  # the bounds of every value, as a band (issue 37)
+                ax.fill_between(x, s[f"{key}_lower"], s[f"{key}_upper"], color="#2764c5",
+                                alpha=0.2, lw=0, label="bounds")  # fmt: skip
+                ax.legend(fontsize=SMALL, loc="upper right")
             ax.plot(x, s[key], lw=0.8, color="#2764c5")
         if key == "peak" and r.threshold is not None:
             ax.axhline(r.threshold, color="#c2410c", lw=0.8, ls="--")
