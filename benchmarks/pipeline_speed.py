@@ -14,7 +14,8 @@ Run:  .venv/bin/python benchmarks/pipeline_speed.py [--repeat N] [--clock wall|c
   issue 34's eleventh round), and at 4096 elements as before that round (``process``: the
   frames copied to float64, the values back to float32);
 - ``Pipeline.step`` latency on a real stream (every frame different), median and p99, and
-  its compiled part alone (``Chain.step`` into arrays held);
+  its compiled part alone (``Chain.step`` into arrays held); and the
+  step's median on the wall clock (``perf_counter``), measured in the same run;
 - the state kept per element;
 - the experimental float32 Preisach bank (``PreisachBank32``, eight lanes on AVX2; issue 34,
   seventh round) on the same walk, and its largest difference from the float64 bank.
@@ -101,13 +102,18 @@ def median_row(values: list[float]) -> float:
     return float(np.median(values))
 
 
-def step_latency(pipe: Pipeline, cap: np.ndarray, times: np.ndarray) -> np.ndarray:
+def step_latency(
+    pipe: Pipeline, cap: np.ndarray, times: np.ndarray, clock: Callable[[], float] | None = None
+) -> np.ndarray:
+    """Each ``Pipeline.step``'s time on ``clock`` (default: the chosen one), the first 100
+    frames left out."""
+    clock = clock or CLOCK
     pipe.reset()
     lat = np.empty(len(cap))
     for k in range(len(cap)):
-        s = CLOCK()
+        s = clock()
         pipe.step(cap[k], None, float(times[k]))
-        lat[k] = CLOCK() - s
+        lat[k] = clock() - s
     return lat[100:]
 
 
@@ -242,6 +248,7 @@ def main() -> None:
     lat_med: dict[str, list[float]] = {p: [] for p in paths}
     lat_p99: dict[str, list[float]] = {p: [] for p in paths}
     lat_chain: dict[str, list[float]] = {p: [] for p in paths}
+    lat_wall: dict[str, list[float]] = {p: [] for p in paths}
     try:
         for _ in range(args.repeat):
             copy = copy_rate(walk.shape)
@@ -259,6 +266,8 @@ def main() -> None:
                 lat_p99[p].append(float(np.percentile(lat, 99)))
                 dt = float(rec.times[1] - rec.times[0])
                 lat_chain[p].append(float(np.median(chain_latency(step_pipe, cap, dt))))
+                wall = step_latency(step_pipe, cap, rec.times, time.perf_counter)
+                lat_wall[p].append(float(np.median(wall)))
     finally:
         _core.set_simd(True)
     print(
@@ -285,14 +294,15 @@ def main() -> None:
         print(f"| {label} | {cells} |{ratio}")
     print()
     print(
-        "| `Pipeline.step`, 1024 elements, changing frames | median | p99 "
-        "| its compiled part (`Chain.step`), median |"
+        f"| `Pipeline.step`, 1024 elements, changing frames | median ({args.clock} clock) "
+        f"| p99 ({args.clock}) | its compiled part (`Chain.step`), median ({args.clock}) "
+        "| median (wall clock, `perf_counter`, same run) |"
     )
-    print("|---|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|")
     for p in paths:
         med, p99 = median_row(lat_med[p]) * 1e6, median_row(lat_p99[p]) * 1e6
-        chain = median_row(lat_chain[p]) * 1e6
-        print(f"| {p} | {med:.1f} µs | {p99:.0f} µs | {chain:.1f} µs |")
+        chain, wall = median_row(lat_chain[p]) * 1e6, median_row(lat_wall[p]) * 1e6
+        print(f"| {p} | {med:.1f} µs | {p99:.0f} µs | {chain:.1f} µs | {wall:.1f} µs |")
     d_abs, d_rel = f32_difference(cal["hysteresis"].model_, walk)
     print()
     print(

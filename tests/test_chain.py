@@ -227,6 +227,47 @@ def test_chain_step_writes_what_run_gives_into_the_arrays_held(seat):
         held = got, got_ok, pipe.codes_
 
 
+def test_pipeline_step_takes_arrays_as_given_or_converted_with_the_same_results(seat):
+    """`Pipeline.step` hands float64 / bool arrays to the chain as given (issue 34 thirteenth
+    round) and converts anything else first: a float32 frame, a frame not contiguous, a list,
+    validity as integers, each gives the converted frame's values, codes and mask to the
+    bit; a frame or validity of the wrong length is the pipeline's one-line ParameterError
+    (not the chain's), and the state does not step on it; an output array handed back as
+    the input (keep=False) is refused as before."""
+    from texsense.exceptions import ParameterError, ShapeError
+
+    cal, rec = seat
+    lay, n = rec.layout, rec.n_elements
+    given, twin = (Pipeline(cal, lay, repair="neighbour-mean") for _ in range(2))
+    wide = np.ascontiguousarray(rec.frames, dtype=np.float64)
+    strided = np.repeat(wide, 2, axis=1)[:, ::2]  # the same numbers, not contiguous
+    for k in range(24):
+        valid = rec.valid[k]
+        frame = (rec.frames[k], strided[k], wide[k].tolist(), wide[k])[k % 4]
+        flags = (valid, valid.astype(np.int8), None, valid)[k // 4 % 3]
+        want_flags = None if flags is None else valid
+        want, want_ok = twin.step(np.array(wide[k]), want_flags, rec.times[k])
+        got, got_ok = given.step(frame, flags, rec.times[k])
+        assert got.view(np.uint64).tolist() == want.view(np.uint64).tolist()
+        np.testing.assert_array_equal(got_ok, want_ok)
+        np.testing.assert_array_equal(given.codes_, twin.codes_)
+    t = rec.times[24]
+    for frame, flags, what in (
+        (wide[24][:-1], None, "a frame of"),
+        (wide[24], np.ones(n + 1, bool), "validity flags"),
+        (wide[24:26], None, "a frame of"),
+    ):
+        with pytest.raises(ParameterError, match=what) as e:
+            given.step(frame, flags, t)
+        assert "\n" not in str(e.value)
+    want, _ = twin.step(wide[24], None, t)
+    got, _ = given.step(wide[24], None, t)  # the refused frames stepped nothing
+    np.testing.assert_array_equal(got, want)
+    held, _ = given.step(wide[25], None, rec.times[25], keep=False)
+    with pytest.raises(ShapeError):
+        given.step(held, None, rec.times[26], keep=False)
+
+
 def test_run_f32_gives_runs_values_rounded_to_float32_bit_for_bit(seat):
     """`Chain.run_f32` (what `Pipeline.run` calls for a recording, issue 34 eleventh round):
     float32 readings widened a tile at a time, the values rounded to float32 — `run`'s

@@ -56,7 +56,9 @@ from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, Sta
 from texsense.data.files import json_loads
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
-from texsense.exceptions import ParameterError
+from texsense.exceptions import ParameterError, ShapeError
+
+_F64, _BOOL = np.dtype(np.float64), np.dtype(bool)
 
 __all__ = ["Pipeline", "layout_mismatch"]
 
@@ -504,6 +506,21 @@ class Pipeline:
         ``codes_``. ``keep=False``: the caller keeps nothing of the frame past the next step,
         so a pipeline of one compiled pass hands out the arrays it steps into (overwritten by
         the next step) instead of copies of them."""
+        t = float(t)
+        last = self._last_t
+        dt = 0.0 if last is None else t - last
+        if not (dt >= 0 and isfinite(t)):
+            raise ParameterError("frame times must be numbers and must not decrease")
+        live = self._live
+        if (
+            live is not None
+            and (values.__class__ is np.ndarray and values.dtype is _F64)
+            and (valid is None or (valid.__class__ is np.ndarray and valid.dtype is _BOOL))
+        ):
+            try:  # the arrays as given: the chain checks their shape and layout (issue 34)
+                return self._live_step(live, dt, t, values, valid, keep)
+            except (TypeError, ShapeError):  # raised before the chain stepped
+                pass  # converted, or the clear error, below
         n = self.layout.n_elements
         x = np.ascontiguousarray(values, dtype=np.float64)
         if x.shape != (n,):
@@ -511,27 +528,27 @@ class Pipeline:
         v = None if valid is None else np.ascontiguousarray(valid, dtype=bool)
         if v is not None and v.shape != (n,):
             raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
-        t = float(t)
-        last = self._last_t
-        dt = 0.0 if last is None else t - last
-        if not (dt >= 0 and isfinite(t)):
-            raise ParameterError("frame times must be numbers and must not decrease")
-        live = self._live
         if live is not None:  # one compiled pass
-            if keep:  # new arrays, written once by the chain (the caller may keep them)
-                out, self.codes_, ok = live.step_new(dt, x, v)
-            else:  # into the arrays held, overwritten by the next step
-                out, codes, ok = self._held
-                live.step(dt, x, v, out, codes, ok)
-                self.codes_ = codes
-            self._last_t = t
-            return out, ok
+            return self._live_step(live, dt, t, x, v, keep)
         self._dt1[0] = dt
         v = self._all_valid if v is None else v
         # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
         out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
         self.codes_ = codes[0]
         return out[0], ok[0]
+
+    def _live_step(
+        self, live: Chain, dt: float, t: float, x: np.ndarray, v: np.ndarray | None, keep: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`step` of a pipeline of one compiled pass, its inputs checked by the chain."""
+        if keep:  # new arrays, written once by the chain (the caller may keep them)
+            out, self.codes_, ok = live.step_new(dt, x, v)
+        else:  # into the arrays held, overwritten by the next step
+            out, codes, ok = self._held
+            live.step(dt, x, v, out, codes, ok)
+            self.codes_ = codes
+        self._last_t = t
+        return out, ok
 
     def run(self, rec: Recording) -> Recording:
         """A recording of readings -> a recording of values (pressure in N/cm² for a mat
