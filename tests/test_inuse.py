@@ -239,28 +239,3 @@ def test_an_element_barely_loaded_when_still_is_not_scaled_to_nothing_when_loade
     assert (out >= 0).all()
     # A's elements read about what they carry (their creep taken off), not 0
     assert (out[-1][edge] > 0.5 * a[edge]).all(), (out[-1][edge], a[edge])
-
-
-def test_an_element_that_fails_while_the_gains_are_taken_keeps_its_gain() -> None:
-    """An element not measured in the frame whose gains are taken (failed: its reading is
-    0) kept no gain (1), so its first frame back read its value without the correction: a
-    one-frame spike of ~11 mmHg in a simulated night's peak (walk12). It keeps its gain."""
-    est = estimator(predict=False)
-    truth = blob(3.5, 3.5)
-    times = np.arange(0, 2400, 10.0)
-    creep = 0.01 * np.log1p(times / 60.0)
-    frames = [reading(truth, c) for c in creep]
-    e = int(np.argmax(truth))
-    ok = np.ones(64, bool)
-    out, bad = [], np.ones(64, bool)
-    bad[e] = False
-    for k, f in enumerate(frames):
-        failed = k % 20 in (5, 6)  # fails for two frames now and then
-        x = np.where(bad, f, 0.0) if failed else f
-        out.append(est.step(x, bad if failed else ok, float(times[k])))
-    out = np.array(out)
-    back = [k for k in range(1, len(frames)) if k % 20 == 7 and k > 60]
-    assert est.state.read[e] and back
-    for k in back:  # its first frame back is corrected as the frame after it is
-        assert abs(out[k, e] - out[k + 1, e]) < 0.01 * truth[e], (k, out[k - 1 : k + 2, e])
-    assert out[back[-1], e] < frames[back[-1]][e] - 0.02 * truth[e]  # (corrected, not raw)

@@ -259,19 +259,15 @@ class InUseDrift:
             out[sel] = np.interp(np.maximum(u, self._u[0]), self._u, self._p)
         return out
 
-    def _refresh(self, x0: np.ndarray, ok: np.ndarray) -> np.ndarray:
-        """The gain of every measured element (``ok``) at the readings ``x0`` (the creep
-        changed, or the load did); returns the corrected frame. An element not measured in
-        this frame (failed: its reading is none, 0 here) keeps its gain: taking 1 for it gave
-        its first frame back its value without the correction (a one-frame spike of ~11 mmHg
-        in a night's peak, found by walk12)."""
+    def _refresh(self, x0: np.ndarray) -> np.ndarray:
+        """The gain of every element at the readings ``x0`` (the creep changed, or the load
+        did); returns the corrected frame."""
         c = self.corrected(x0)
         # a gain only where the element is loaded (where its creep is read), and never below 0:
         # a ratio over a reading near zero is no gain, and times a later load it was one
         # (-82 N/cm² at a sit-down, docs/drift.md)
         big = x0 > self.loaded_ncm2
-        gain = np.where(big, np.maximum(c / np.where(big, x0, 1.0), 0.0), 1.0)
-        self._gain = np.where(ok, gain, self._gain)
+        self._gain = np.where(big, np.maximum(c / np.where(big, x0, 1.0), 0.0), 1.0)
         return c
 
     def _slope(self, c: np.ndarray) -> np.ndarray:
@@ -320,7 +316,7 @@ class InUseDrift:
             return c
         if self._still_since is None:  # the first still frame: the gains at this load
             self._still_since = t
-            c = self._refresh(x, ok)
+            c = self._refresh(x)
         if t - self._still_since >= self.settle_s:
             c = self._still(x, c, ok, t)
         return c
@@ -389,9 +385,9 @@ class InUseDrift:
         per = self._period
         if per is None:  # the period's reference: the loaded elements and their values
             if self.predict and self._predict_unread(x0, ok):
-                c = self._refresh(x0, ok)
+                c = self._refresh(x0)
             if self.weigh and self._weigh(x0, c, ok, t):
-                c = self._refresh(x0, ok)
+                c = self._refresh(x0)
             loaded = ok & (c > self.loaded_ncm2)
             self._period = {
                 "loaded": loaded,
@@ -432,7 +428,7 @@ class InUseDrift:
             self.state.creep[:] = per["creep0"]
             self.state.still_s = per["still0"]
             self._period = None
-            return self._refresh(x0, ok)
+            return self._refresh(x0)
         rel = np.where(mask, mean / np.where(mask, ref, 1.0) - 1.0, 0.0)
         per["cum"] += rel  # an element changing faster than drift is not drifting
         fast = np.abs(per["cum"]) > self.max_rate * (t - per["t"]) + ELEMENT_SLACK
@@ -446,7 +442,7 @@ class InUseDrift:
         st.still_s += elapsed
         st.first_t = t if st.first_t is None else st.first_t
         st.last_t = t
-        out = self._refresh(x0, ok)
+        out = self._refresh(x0)
         pos = ok & (x0 > 0)
         before = float(self.area[pos] @ x0[pos])
         if before > 0:
