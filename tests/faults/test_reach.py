@@ -170,3 +170,17 @@ def test_every_hdf5_entry_point_uses_the_policy(files, tmp_path, fault_row):
         "refused",
         cases=2 * len(files) + 1,
     )
+
+
+def test_the_bounds_are_read_under_the_policy_too(files, fault_row):
+    """``read_bounds`` (the report's and the playback's bounds of a processed recording)
+    opens its file as every reader does: each construct refused in one line naming the file."""
+    from texsense.io.hdf5 import read_bounds
+
+    for (construct, place), path in files.items():
+        with pytest.raises(FormatError, match=CONSTRUCTS[construct][1]) as got:
+            read_bounds(path)
+        said = str(got.value)
+        assert path.name in said and place in said and SECRET[:16].decode() not in said
+    fault_row("reach outside", f"the {len(files)} files through read_bounds", "refused",
+              cases=len(files))  # fmt: skip

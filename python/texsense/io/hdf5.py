@@ -430,7 +430,7 @@ def read_bounds(
     """The lower and upper maps of a processed recording (``process --interval``), or None
     when it has none; ``frames`` picks some of them."""
     path = Path(path)
-    with h5py.File(path, "r") as f:
+    with open_hdf5(path) as f:  # (the one policy: every object checked, no link followed)
         if "lower" not in f or "upper" not in f:
             return None
         sel = slice(None) if frames is None else frames
