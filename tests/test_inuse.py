@@ -131,6 +131,30 @@ def test_a_still_person_keeps_their_weight_and_a_second_load_is_kept() -> None:
     assert est.state.weighed == 0
 
 
+def test_a_person_back_in_bed_is_not_taken_for_a_new_one() -> None:
+    """Back on the emptied mat, the spacer shows at once the creep it gathered: a heavier load
+    within weigh_max is the same person (walk13: a 2 h night read 13-15 % heavy after the
+    person got back, taken as a new weight), a much lighter one is another occupant."""
+    area = LAY.area_cm2
+    a, b = blob(2.5, 2.5), blob(4.5, 4.5)  # the same load (mirrored on the grid)
+    empty = [np.zeros(64)] * 60  # out of bed for 10 min
+    back = [reading(b, 0.035)] * 20  # creep the estimator never read: ~12 % heavy
+    heavy = (back[0] @ area) / (b @ area) - 1
+    assert 0.08 < heavy < 0.15  # beyond the 2 h window (1 % + 3 %/h), within weigh_max
+    est = estimator(predict=False)
+    run(est, [a] * 720)
+    out = run(est, empty + back, t0=7200.0)
+    err = (out[-1] @ area) / (b @ area) - 1
+    assert abs(err) < 0.01 and est.state.weighed == 1
+    assert est.state.status()["weight_n"] == pytest.approx(a @ area, abs=0.05)
+    # another, lighter occupant after the empty mat: weighed anew, read as it is
+    est = estimator(predict=False)
+    run(est, [a] * 720)
+    out = run(est, empty + [0.7 * b] * 20, t0=7200.0)
+    np.testing.assert_allclose(out[-1] @ area, 0.7 * b @ area, rtol=1e-6)
+    assert est.state.status()["weight_n"] == pytest.approx(0.7 * b @ area, abs=0.05)
+
+
 def test_a_person_sliding_slowly_keeps_the_load_where_it_goes() -> None:
     est = estimator(predict=False)
     frames = [blob(2.5 + min(k, 90) * 0.03, 3.5) for k in range(120)]  # 2.7 cells in 15 min

@@ -476,6 +476,11 @@ class InUseDrift:
             return False
         r = load / st.weight - 1.0
         window = min(self.weigh_max, LOAD_SLACK / 3 + self.weigh_rate * (t - st.weight_t))
+        if returned and r > 0:
+            # back on a mat that was empty, a person's spacer shows at once the creep it
+            # gathered since the weight was taken (the set kept through the empty minutes),
+            # not the drift of a still load since then: heavier by up to weigh_max is creep
+            window = self.weigh_max
         if abs(r) > window:
             if returned:
                 st.weight, st.weight_t = load, t
