@@ -34,7 +34,7 @@ import re
 from collections.abc import Iterator
 from pathlib import Path
 
-from texsense.exceptions import FormatError, ParameterError
+from texsense.exceptions import FormatError, ParameterError, shown
 
 __all__ = ["ENV", "check", "human", "max_memory", "parse_size", "share"]
 
@@ -54,7 +54,10 @@ def parse_size(text: str) -> int:
         raise ParameterError(
             f"{ENV}={text!r}: expected a number of bytes, optionally with K, M, G or T"
         )
-    value = int(float(m.group(1)) * _UNITS[m.group(2)])
+    amount = float(m.group(1)) * _UNITS[m.group(2)]
+    if not amount < 1 << 63:  # 400 digits: a float of inf (int() raised OverflowError)
+        raise ParameterError(f"{ENV}={shown(text, 40)}: more bytes than any machine has")
+    value = int(amount)
     if value < 1 << 20:
         raise ParameterError(f"{ENV}={text!r}: a budget under 1 MiB leaves nothing to work with")
     return value
