@@ -29,7 +29,7 @@ from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.io._base import CEILING, CEILING_OTHER, BlockReader, Header, Piece, RecordingReader
+from texsense.io._base import BlockReader, Header, Piece, RecordingReader
 from texsense.io._registry import Probe
 from texsense.io._text import (
     UTF16_BOMS,
@@ -176,8 +176,6 @@ class ColumnsReader(BlockReader):
             raise
         self.rows_read = 0
         self.not_finite = 0
-        self.beyond = 0  # values beyond any sensor, read as not a number
-        self._ceilings = np.array([_ceiling_of(name) for name in self.names])
         n = len(self.names)
         self._what = f"{n} values ({', '.join(self.names)})"  # what a row holds, for errors
 
@@ -287,21 +285,10 @@ class ColumnsReader(BlockReader):
             logger.warning(
                 "warning: %s: %d value(s) are not finite numbers", self.path, self.not_finite
             )
-        if self.beyond:
-            logger.warning(
-                "warning: %s: %d value(s) beyond any sensor, read as not a number",
-                self.path,
-                self.beyond,
-            )
 
     def _block(self, data: npt.NDArray[np.float64]) -> dict[str, npt.NDArray[np.float64]]:
         self.rows_read += len(data)
         self.not_finite += int(np.count_nonzero(~np.isfinite(data)))
-        with np.errstate(invalid="ignore"):
-            beyond = np.abs(data) > self._ceilings  # (as every recording reader: impossible)
-        if beyond.any():
-            self.beyond += int(np.count_nonzero(beyond))
-            data[beyond] = np.nan
         return {n: data[:, i].copy() for i, n in enumerate(self.names)}
 
     def read(self) -> dict[str, npt.NDArray[np.float64]]:
@@ -320,15 +307,6 @@ def read_columns_csv(
     ``accept_truncated``) a table cut short."""
     with ColumnsReader(path, required, accept_truncated=accept_truncated) as reader:
         return reader.read()
-
-
-def _ceiling_of(name: str) -> float:
-    """The greatest magnitude a column's values can have (:data:`texsense.io._base.CEILING`
-    of its quantity; none for time)."""
-    if unit_of_column(name) == "s":
-        return np.inf
-    found = _quantity_of_column(name)
-    return CEILING.get(found[0], CEILING_OTHER) if found else CEILING_OTHER
 
 
 def _quantity_of_column(name: str) -> tuple[str, str] | None:
