@@ -99,3 +99,32 @@ def test_only_the_words_of_odd_data_are_kept_off_stderr():
             tiny * tiny
     words = sorted(str(w.message) for w in seen)
     assert words == ["overflow encountered in multiply", "underflow encountered in multiply"]
+
+
+def test_a_table_of_values_beyond_any_sensor_is_read_as_not_numbers(tmp_path, fault_row):
+    """A columns table whose values lie beyond any sensor (x 1e300) is read as the recording
+    readers read such values (``io._base.impossible``): not numbers, counted in one warning
+    line. Before, ``hysteresis apply``, ``validate`` and ``fit`` computed on them and printed
+    numpy's overflow warnings (harden13), which ``quiet_arithmetic`` rightly lets through."""
+    from texsense.io.columns_csv import write_columns_csv
+
+    t = np.arange(2000) * 0.1
+    u = 2.0 + 1.5 * np.sin(t / 7.0) * np.sin(t / 31.0)
+    p = 0.8 * u**2 + 0.3 * np.cos(t / 7.0)
+    write_columns_csv(tmp_path / "r.csv", {"time_s": t, "compression_mm": u, "pressure_ncm2": p})
+    big = {"time_s": t, "compression_mm": u * 1e300, "pressure_ncm2": p * 1e300}
+    write_columns_csv(tmp_path / "big.csv", big)
+    model = str(tmp_path / "model.json")
+    argvs = [["hysteresis", "apply", model, "big.csv", "-o", "out.csv"],
+             ["hysteresis", "validate", model, "big.csv"],
+             ["hysteresis", "fit", "big.csv", "-o", "m2.json"]]  # fmt: skip
+    warm = [["hysteresis", "fit", "r.csv", "-o", model]]
+    results, _, _ = batch(argvs, tmp_path, warm=warm, timeout=300)
+    for argv, (rc, _out, err) in zip(argvs, results, strict=True):
+        lines = [s for s in err.strip().splitlines() if s.strip()]
+        assert not [s for s in lines if "Warning" in s or "Traceback" in s or s.startswith(" ")]
+        assert "beyond any sensor, read as not a number" in lines[0], (argv, lines)
+        assert rc in (0, 1) and len(lines) == 1 + rc, (argv, lines)
+    fault_row("values", "a columns table of values beyond any sensor x hysteresis apply, "
+              "validate, fit: read as not numbers, one warning line", "clear error or read",
+              cases=len(argvs))  # fmt: skip

@@ -55,7 +55,8 @@ def test_non_finite_values_are_counted(tmp_path, caplog):
     assert "2 value(s) are not finite" in caplog.text
 
 
-_GOOD = ["1", "-2.5", " 3e2 ", "nan", "inf", "1_0", "+7", "\u0661"]  # float() reads each
+# float() reads each; 1e300 and -1e300 lie beyond any sensor (read as not a number), 1e15 not
+_GOOD = ["1", "-2.5", " 3e2 ", "nan", "inf", "1_0", "+7", "\u0661", "1e300", "-1e300", "1e15"]
 _BAD = ["", "x", "1.2.3", "0x1"]
 
 
@@ -67,7 +68,11 @@ def _line(n: int) -> st.SearchStrategy[list[str]]:
     return length.flatmap(lambda k: st.lists(token if k == n else good, min_size=k, max_size=k))
 
 
-def _by_line(text: str, n: int) -> tuple[np.ndarray | None, str | None]:
+#: the columns a generated table draws its names from, and each one's ceiling
+_NAMES = {"c": 1e15, "pressure_ncm2": 1e5, "time_s": np.inf}
+
+
+def _by_line(text: str, n: int, ceilings: list[float]) -> tuple[np.ndarray | None, str | None]:
     """What the table's rows are when each line is read on its own (the rule the reader
     states): the values, or the start of the error: the first line that is not n numbers (or
     an empty line inside the table), or a last line without its line end that is not a row
@@ -83,7 +88,10 @@ def _by_line(text: str, n: int) -> tuple[np.ndarray | None, str | None]:
         tokens = line.split(",")
         try:
             assert len(tokens) == n
-            rows.append([float(t) for t in tokens])
+            row = [float(t) for t in tokens]
+            # a finite value beyond its column's ceiling is read as not a number
+            rows.append([v if abs(v) <= c or not np.isfinite(v) else np.nan
+                         for v, c in zip(row, ceilings, strict=True)])  # fmt: skip
         except (AssertionError, ValueError):
             cut = number == len(body) + 1  # the last line, without its line end
             return (
@@ -101,23 +109,26 @@ def _by_line(text: str, n: int) -> tuple[np.ndarray | None, str | None]:
 @given(data=st.data(), n=st.integers(1, 4), rows=st.integers(1, 9))
 def test_blocks_read_what_each_line_reads_or_name_its_first_bad_line(tmp_path, data, n, rows):
     """The reader parses a block of lines at once; the values, or the line its error names,
-    are those of reading each line on its own, whatever the block size."""
+    are those of reading each line on its own, whatever the block size (and a value beyond
+    its column's ceiling is read as not a number on either path)."""
     blank = st.just([" "])  # an empty line: the end of the table, or an error inside it
     lines = data.draw(st.lists(st.one_of(_line(n), _line(n), _line(n), blank), max_size=40))
-    names = [f"c{k}" for k in range(n)]
+    kinds = data.draw(st.lists(st.sampled_from(list(_NAMES)), min_size=n, max_size=n))
+    names = [f"{kind}{k}" if kind == "c" else f"x{k}_{kind}" for k, kind in enumerate(kinds)]
+    ceilings = [_NAMES[kind] for kind in kinds]
     text = ",".join(names) + "\n" + "".join(",".join(t) + "\n" for t in lines)
     if lines and data.draw(st.booleans()):  # the last line without its line end
         text = text[:-1]
     path = tmp_path / "g.csv"
     path.write_text(text, encoding="utf-8")
-    expected, error = _by_line(text, n)
+    expected, error = _by_line(text, n, ceilings)
     with ColumnsReader(path) as reader:
         if error is not None:
             with pytest.raises(FormatError, match=re.escape(error)):
                 list(reader.blocks(rows))
             return
         blocks = list(reader.blocks(rows))
-    assert all(len(b["c0"]) == rows for b in blocks[:-1])
+    assert all(len(b[names[0]]) == rows for b in blocks[:-1])
     got = (
         np.column_stack([np.concatenate([b[c] for b in blocks]) for c in names]) if blocks else None
     )

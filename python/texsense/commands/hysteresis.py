@@ -336,7 +336,10 @@ def run_apply(args: argparse.Namespace) -> int:
     )
     if "error" in summary:
         e = summary["error"]
-        print(f"  RMSE {e['rmse']:.4g} {model.output_unit}")
+        if e["rmse"] is None:  # no sample measured and predicted (every value not a number)
+            print("  RMSE: no finite sample to compare")
+        else:
+            print(f"  RMSE {e['rmse']:.4g} {model.output_unit}")
         for band in (k for k in e if "-" in k):
             b = e[band]
             if b["samples"]:

@@ -4,7 +4,10 @@ The virtual sensor writes ``time_s,compression_mm,pressure_ncm2,capacitance_pF``
 hysteresis and drift tools read any such table and pick columns by name. texsense writes a
 first line ``# rows: N``, so a table cut at a line end is noticed; a last row cut mid-line is
 noticed in any table. A table has no validity mask: numbers that are not finite are read as
-they are and counted in one warning line.
+they are and counted in one warning line; finite values beyond any sensor (beyond their
+quantity's ceiling, :data:`texsense.io._base.CEILING`, as every recording reader marks them
+impossible) are read as not a number and counted in another (:meth:`ColumnsReader._values`,
+which every row passes, read in a block or on its own line).
 
 Examples
 --------
@@ -29,7 +32,7 @@ from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES
 from texsense.exceptions import FormatError, ParameterError, UnitError
-from texsense.io._base import BlockReader, Header, Piece, RecordingReader
+from texsense.io._base import CEILING, CEILING_OTHER, BlockReader, Header, Piece, RecordingReader
 from texsense.io._registry import Probe
 from texsense.io._text import (
     UTF16_BOMS,
@@ -44,6 +47,7 @@ from texsense.io._text import (
 __all__ = [
     "ColumnsReader",
     "TableReader",
+    "ceiling_of_column",
     "column_name",
     "is_columns_csv",
     "read_columns_csv",
@@ -176,6 +180,8 @@ class ColumnsReader(BlockReader):
             raise
         self.rows_read = 0
         self.not_finite = 0
+        self.beyond = 0  # finite values beyond any sensor, read as not a number
+        self._ceilings = np.array([ceiling_of_column(name) for name in self.names])
         n = len(self.names)
         self._what = f"{n} values ({', '.join(self.names)})"  # what a row holds, for errors
 
@@ -223,7 +229,7 @@ class ColumnsReader(BlockReader):
                 done = self._parse(held) if held else np.empty((0, len(self.names)))
                 last = self._last_row(line)
                 if last is not None:
-                    done = np.vstack([done, [last]])
+                    done = np.vstack([done, last])
                 if len(done):
                     yield done
                 return
@@ -246,18 +252,20 @@ class ColumnsReader(BlockReader):
             except ValueError:
                 pass
             else:
-                return np.array(values, dtype=np.float64).reshape(len(lines), n)
+                return self._values(np.array(values, dtype=np.float64).reshape(len(lines), n))
         for line in lines:
             parse_csv_row(self.path, line, n, self._what)  # raises for the first bad line
         raise AssertionError("unreachable: a block that failed parses line by line")
 
-    def _last_row(self, line: Line) -> list[float] | None:
-        """A last line without its line end: the table's last row, or its cut-off part."""
+    def _last_row(self, line: Line) -> npt.NDArray[np.float64] | None:
+        """A last line without its line end: the table's last row (a (1, columns) array), or
+        its cut-off part."""
         if self.declared_rows is not None:
             self._cut(f"truncated: the file ends in the middle of line {line.number}")
             return None
         try:
-            return parse_csv_row(self.path, line, len(self.names), self._what)
+            row = parse_csv_row(self.path, line, len(self.names), self._what)
+            return self._values(np.array([row], dtype=np.float64))
         except FormatError:
             self._cut(f"truncated: the file ends in the middle of line {line.number}")
             return None
@@ -285,10 +293,27 @@ class ColumnsReader(BlockReader):
             logger.warning(
                 "warning: %s: %d value(s) are not finite numbers", self.path, self.not_finite
             )
+        if self.beyond:
+            logger.warning(
+                "warning: %s: %d value(s) beyond any sensor, read as not a number",
+                self.path,
+                self.beyond,
+            )
+
+    def _values(self, data: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Rows as read (a block at once, or a line on its own): the one place where values
+        that are not finite are counted and finite values beyond their column's ceiling
+        (:func:`ceiling_of_column`) are counted and read as not a number, in place."""
+        self.not_finite += int(np.count_nonzero(~np.isfinite(data)))
+        with np.errstate(invalid="ignore"):  # NaN and inf stay as they are (counted above)
+            beyond = np.isfinite(data) & (np.abs(data) > self._ceilings)
+        if beyond.any():
+            self.beyond += int(np.count_nonzero(beyond))
+            data[beyond] = np.nan
+        return data
 
     def _block(self, data: npt.NDArray[np.float64]) -> dict[str, npt.NDArray[np.float64]]:
         self.rows_read += len(data)
-        self.not_finite += int(np.count_nonzero(~np.isfinite(data)))
         return {n: data[:, i].copy() for i, n in enumerate(self.names)}
 
     def read(self) -> dict[str, npt.NDArray[np.float64]]:
@@ -307,6 +332,21 @@ def read_columns_csv(
     ``accept_truncated``) a table cut short."""
     with ColumnsReader(path, required, accept_truncated=accept_truncated) as reader:
         return reader.read()
+
+
+def ceiling_of_column(name: str) -> float:
+    """The greatest magnitude a column's values can have: :data:`texsense.io._base.CEILING`
+    of the quantity its unit names (``pressure_ncm2``: 1e5 N/cm²), the ceiling of every other
+    quantity for a column without one (``c0``, ``field_oe``), none for a time column
+    (``time_s``: a recording's times are judged by the recording readers).
+
+    >>> ceiling_of_column("pressure_ncm2"), ceiling_of_column("c0"), ceiling_of_column("time_s")
+    (100000.0, 1000000000000000.0, inf)
+    """
+    if unit_of_column(name) == "s":
+        return float(np.inf)
+    found = _quantity_of_column(name)
+    return CEILING.get(found[0], CEILING_OTHER) if found else CEILING_OTHER
 
 
 def _quantity_of_column(name: str) -> tuple[str, str] | None:
