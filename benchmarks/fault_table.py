@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FAMILIES = ["reach outside", "identity", "declares more", "not a file", "round trip", "values",
             "settings", "requests", "nesting", "output place", "option file", "stop mid-write",
             "paths in files", "no effect", "hostile value", "origins",
-            "duplicate keys", "not Unicode", "layout fields", "stored state"]  # fmt: skip
+            "duplicate keys", "not Unicode", "layout fields", "stored state", "clock"]  # fmt: skip
 
 
 def main() -> int:

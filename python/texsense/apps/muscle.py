@@ -63,8 +63,7 @@ def activation(pressure: Recording, baseline_s: float = 5.0) -> np.ndarray:
         raise ParameterError(f"activation reads pressure, not {pressure.quantity}")
     rec = pressure.to_unit("N/cm2") if pressure.unit != "N/cm2" else pressure
     p = np.nan_to_num(np.where(rec.valid, rec.frames, np.nan).astype(np.float64))
-    dt = float(np.median(np.diff(rec.times))) if rec.n_frames > 1 else 1.0
-    width = max(3, round(baseline_s / dt))
+    width = max(3, rec.frames_in(baseline_s))  # at most the recording's frames
     # the window ends at the present frame (a positive origin shifts it back): only the past
     past = ((width - 1) // 2, 0)
     base = percentile_filter(p, 10, size=(width, 1), mode="nearest", origin=past)

@@ -92,14 +92,27 @@ def _points(rec: Recording) -> np.ndarray:
 
 
 def _hourly(rec: Recording, cols: np.ndarray, hours: list[float]) -> np.ndarray:
+    """Per hour ``h`` the mean pressure (mmHg) over the frames of the 10 minutes up to it, or
+    at the frames nearest to it when none is there: found by bisection, so that the work is
+    in the frames and the rows, never the rows times the frames."""
     v = np.where(rec.valid, rec.frames, np.nan)[:, cols].astype(np.float64)
     mm = np.asarray(convert(v, rec.unit, "mmHg"))
-    t = (rec.times - rec.times[0]) / 3600.0
+    order = np.argsort(rec.times, kind="stable")  # (a reader's times never go back)
+    t, mm = (rec.times[order] - rec.times[order[0]]) / 3600.0, mm[order]
     rows = []
     for h in hours:
-        sel = (t > h - 1 / 6) & (t <= h + 1e-9)
-        if not sel.any():
-            sel = np.abs(t - h) == np.min(np.abs(t - h))
+        lo, hi = np.searchsorted(t, [h - 1 / 6, h + 1e-9], side="right")
+        sel: slice | np.ndarray = slice(lo, hi)
+        if hi <= lo:  # no frame in the window: the frames nearest to h (either side)
+            near = [float(t[k]) for k in (lo - 1, lo) if 0 <= k < t.size]
+            d = min(abs(x - h) for x in near)
+            at = sorted({x for x in near if abs(x - h) == d})
+            sel = np.concatenate(
+                [
+                    np.arange(np.searchsorted(t, x, "left"), np.searchsorted(t, x, "right"))
+                    for x in at
+                ]
+            )
         rows.append(np.nanmean(mm[sel], axis=0))
     return np.array(rows)
 
@@ -108,11 +121,31 @@ def report(
     pressure: Recording, uncompensated: Recording | None = None, every_h: float = 1.0
 ) -> StockingReport:
     """Hour by hour (from the first full ``every_h``) the pressure at B, B1, C, D of a pressure
-    recording of the strip, and beside it an uncompensated one if given."""
+    recording of the strip, and beside it an uncompensated one if given.
+
+    Raises
+    ------
+    ParameterError
+        When the rows would outnumber the recording's frames (a span of years, or
+        ``every_h`` a second in a day's recording): rows are sized from time, the work they
+        cost is bounded by the frames.
+    """
     if pressure.quantity != "pressure":
         raise ParameterError(f"the report reads pressure, not {pressure.quantity}")
+    if not every_h > 0:
+        raise ParameterError(f"hours between rows must be > 0, got {every_h}")
     cols = _points(pressure)
-    span = (pressure.times[-1] - pressure.times[0]) / 3600.0
+    n = pressure.n_frames
+    if n == 0:
+        raise ParameterError("the recording has no frames")
+    span = float(pressure.times[-1] - pressure.times[0]) / 3600.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        count = np.floor((span + 1e-9) / every_h)
+    if not count <= max(n, 1):
+        raise ParameterError(
+            f"a row every {every_h:g} h over the recording's {span:.4g} h makes {count:.4g} "
+            f"rows, more than its {n} frames: choose a longer --every"
+        )
     hours = [round(h, 6) for h in np.arange(every_h, span + 1e-9, every_h)] or [round(span, 6)]
     unc = None if uncompensated is None else _hourly(uncompensated, cols, hours)
     return StockingReport(hours, _hourly(pressure, cols, hours), unc)

@@ -170,6 +170,40 @@ class Recording:
             return float("nan")
         return float(np.median(np.diff(self.times)))
 
+    def frames_in(self, seconds: float) -> int:
+        """How many frames ``seconds`` hold, the one way an app sizes a window from time: at
+        the median frame period (their mean step where more than half the frames share a
+        time stamp), rounded, at least 1 and at most :attr:`n_frames`, so that a window never
+        outgrows the recording however its times run (steps of 1e-300 s: a window of 5 s
+        was 5e300 frames); 1 for a recording of fewer than two frames.
+
+        Raises
+        ------
+        ParameterError
+            When the times do not advance (every frame at one time), or are not numbers.
+
+        >>> import numpy as np
+        >>> from texsense import Layout
+        >>> rec = Recording(np.ones((50, 1)), np.arange(50) * 0.1, Layout.grid(1, 1))
+        >>> rec.frames_in(0.5), rec.frames_in(1e9), rec.frames_in(0.0)
+        (5, 50, 1)
+        """
+        n = self.n_frames
+        if n < 2:
+            return 1
+        with np.errstate(invalid="ignore", over="ignore"):
+            period = float(np.median(np.diff(self.times)))
+            if not period > 0:
+                period = float(self.times[-1] - self.times[0]) / (n - 1)
+        if not (np.isfinite(period) and period > 0):
+            raise ParameterError(
+                f"the {n} frames' times do not advance ({self.times[0]:.9g} to "
+                f"{self.times[-1]:.9g} s): no window in s can be sized in frames"
+            )
+        with np.errstate(over="ignore"):
+            frames = float(seconds) / period
+        return int(min(max(round(frames) if np.isfinite(frames) else n, 1), n))
+
     def maps(self) -> np.ndarray:
         """Frames as (T, rows, cols) maps with NaN in empty cells (grid layouts only)."""
         return self.layout.to_grid(self.frames)

@@ -13,8 +13,9 @@ A format's reader subclasses :class:`RecordingReader` and writes two methods:
 The base converts the values to texsense's unit, marks impossible readings invalid (not a
 number, infinite or beyond float32, negative where the quantity cannot be negative: the
 :class:`~texsense.Recording`'s ``valid`` mask), refuses times that go backwards (naming the
-line), cuts the frames into blocks of the requested length and, at the end, either refuses a
-file that was cut short (:class:`~texsense.exceptions.FormatError`) or, with
+line) or lie on a scale no clock has (:mod:`texsense.io._times`), cuts the frames into blocks
+of the requested length and, at the end, either refuses a file that was cut short
+(:class:`~texsense.exceptions.FormatError`) or, with
 ``accept_truncated=True`` (``--accept-truncated`` on the command line), reads what is there and
 says how much is missing in one warning line. Invalid readings are counted and reported in one
 warning line too.
@@ -47,6 +48,7 @@ from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
 from texsense.io._registry import Probe, register_reader
 from texsense.io._text import Line, TextLines
+from texsense.io._times import TimeCheck
 
 __all__ = [
     "CEILING",
@@ -313,7 +315,7 @@ class RecordingReader(BlockReader):
         #: frames known to be complete when the header already shows a shortfall
         self._known_complete: int | None = None
         self.invalid: collections.Counter[str] = collections.Counter()
-        self._last_time = -np.inf
+        self._times = TimeCheck(self.path)
         self._block = 4096
         #: the most frames :meth:`read` holds before the memory budget is exceeded
         self._max_frames = 1 << 62
@@ -395,24 +397,9 @@ class RecordingReader(BlockReader):
         return Piece(frames, piece.times, piece.labels, piece.lines, valid, piece.element_times)
 
     def _check_times(self, piece: Piece) -> None:
-        t = piece.times
-        previous = np.concatenate(([self._last_time], t[:-1]))
-        with np.errstate(invalid="ignore"):
-            bad = np.nonzero(~np.isfinite(t) | (t < previous))[0]
-        if bad.size:
-            i = int(bad[0])
-            line = None if piece.lines is None else int(piece.lines[i])
-            where = "" if line is not None else f"frame {self.frames_read + i + 1}: "
-            if not np.isfinite(t[i]):
-                raise FormatError(self.path, f"{where}the time is {t[i]}, not a number", line)
-            raise FormatError(
-                self.path,
-                f"{where}the time {t[i]:.9g} s goes back from {previous[i]:.9g} s "
-                "(times must not decrease)",
-                line,
-            )
-        if t.size:
-            self._last_time = float(t[-1])
+        """The piece's times: numbers, not going back, on a clock's scale (:mod:`texsense.io.
+        _times`, the one check of every reader's times; its end in :meth:`_finish`)."""
+        self._times.block(piece.times, piece.lines)
 
     def _recording(self, p: Piece) -> Recording:
         h = self.header
@@ -432,6 +419,7 @@ class RecordingReader(BlockReader):
         """At the end: refuse or report a shortfall, report invalid readings."""
         n = self.frames_read
         self._finish_cut(n)
+        self._times.finish()
         total = sum(self.invalid.values())
         if total:
             parts = ", ".join(f"{c} {reason}" for reason, c in self.invalid.items() if c)

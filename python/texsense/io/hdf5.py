@@ -704,6 +704,7 @@ class HDF5Reader(RecordingReader):
             self._check_times(Piece(np.zeros((b - a, 0), np.float32), t, labels))
             yield t, labels
         self.frames_read = self.n_frames
+        self._times.finish()
 
     def _pieces(self) -> Iterator[Piece]:
         for a in range(0, self.n_frames, self._block):
