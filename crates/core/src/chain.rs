@@ -567,6 +567,40 @@ impl FrameBlock for SegmentBlock<'_> {
         }
         x
     }
+
+    /// The frame's row of the block part after part, each part over the whole row (the
+    /// rows of conversion, compensation and drift in SIMD lanes where the processor has
+    /// them; the loading curve element by element): the same values as
+    /// [`SegmentBlock::step`] per element. After a compensation, drift or loading curve a
+    /// reading is valid when its value is a number (each gives NaN for an invalid input,
+    /// so `ok && y.is_finite()` is `y.is_finite()`); conversion keeps the validity.
+    fn row(&mut self, dt: f64, x: &[f64], valid: &[bool], out: &mut [f64]) {
+        let w = out.len();
+        let (mut a, mut b, mut ok) = ([0.0; MAX_BLOCK], [0.0; MAX_BLOCK], [false; MAX_BLOCK]);
+        let (mut cur, mut next, ok) = (&mut a[..w], &mut b[..w], &mut ok[..w]);
+        cur.copy_from_slice(x);
+        ok.copy_from_slice(valid);
+        for p in &mut self.parts {
+            match p {
+                Part::Convert(c) => c.row(self.start, cur, ok, next),
+                Part::Loading(curve) => {
+                    for i in 0..w {
+                        (next[i], ok[i]) = rules::loading(curve, cur[i], ok[i]);
+                    }
+                }
+                Part::Compensation(c) => {
+                    c.row(dt, cur, ok, next);
+                    crate::lanes::finite_flags(next, ok);
+                }
+                Part::Drift(d) => {
+                    d.row(dt, cur, ok, next);
+                    crate::lanes::finite_flags(next, ok);
+                }
+            }
+            std::mem::swap(&mut cur, &mut next);
+        }
+        out.copy_from_slice(cur);
+    }
 }
 
 #[cfg(test)]
