@@ -1,6 +1,6 @@
 """One rule for a pressure just below zero (an empty element's estimate, about -0.001
 N/cm²): the live map, the statistics and the pressure file all show it as 0
-(:func:`texsense.compensation.intervals.no_negative`), so a mat's map never reads a
+(:func:`texsense.compensation.pipeline.no_negative`), so a mat's map never reads a
 negative pressure that its recording does not hold."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from texsense.compensation.intervals import NEAR_ZERO_NCM2
+from texsense.compensation.pipeline import NEAR_ZERO_NCM2
 from texsense.monitor.store import EventStore
 from texsense.station.ward import MatEntry
 

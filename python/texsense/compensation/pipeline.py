@@ -24,6 +24,10 @@ its Python stage runs (``crates/core/src/chain.rs``):
   (:attr:`Pipeline.in_use_note`). With ``interval`` every value gets a bound
   (:mod:`texsense.compensation.intervals`, ``bounds_``).
 
+What is shown and written of the output (the monitor's map, statistics and recording,
+``texsense process``'s file) is :func:`no_negative`'s: an empty element's estimate just below
+zero as 0, a lower bound never below zero.
+
 Any order the stage contract allows runs; a stage without a compiled kernel is refused in
 one line naming it. The local repairs run in the compiled pass; the harmonic ones solve a
 sparse system per frame in scipy between compiled passes. ``chain.run(rec)`` (the stages in
@@ -60,7 +64,7 @@ from texsense.exceptions import ParameterError, ShapeError
 
 _F64, _BOOL = np.dtype(np.float64), np.dtype(bool)
 
-__all__ = ["Pipeline", "layout_mismatch"]
+__all__ = ["NEAR_ZERO_NCM2", "Pipeline", "layout_mismatch", "no_negative"]
 
 
 def _arrangement(layout: Layout) -> np.ndarray:
@@ -101,6 +105,33 @@ def layout_mismatch(expected: Layout, given: Layout) -> str | None:
             f"({gx:g}, {gy:g}) cm among the others, not ({x:g}, {y:g}))"
         )
     return None
+
+
+#: A compensated pressure down to this far below zero (N/cm², about 7.5 mmHg: the level under
+#: which the in-use correction calls an element empty) is an unloaded element's estimate.
+NEAR_ZERO_NCM2 = 0.1
+
+
+def no_negative(
+    values: np.ndarray, lower: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The pipeline's output as it is shown and written (the monitor's map, statistics and
+    recording, ``texsense process``'s file): ``values`` with those at most
+    :data:`NEAR_ZERO_NCM2` below zero as 0 (an empty element: its conversion reads about
+    -0.001 N/cm², which a file would otherwise mark invalid, so an empty mat read "100 %
+    invalid" and its load not a number; further below zero stays, and is flagged invalid by
+    the writer: a fault to see), and ``lower`` bounds never below zero (no pressure is).
+
+    >>> v, lo = no_negative(np.array([-0.001, 0.5, -5.0]), np.array([-0.08, 0.42, -5.1]))
+    >>> v.tolist(), lo.tolist()
+    ([0.0, 0.5, -5.0], [0.0, 0.42, 0.0])
+    """
+    v = np.asarray(values)
+    near = (v < 0) & (v >= -NEAR_ZERO_NCM2)
+    if near.any():
+        v = np.where(near, np.zeros((), v.dtype), v)
+    lo = None if lower is None else np.maximum(lower, 0)
+    return v, lo
 
 
 #: The first bytes of a pipeline's state (:meth:`Pipeline.snapshot`).
