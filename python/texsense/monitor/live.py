@@ -35,7 +35,7 @@ from texsense.apps.clinical import clinical_state
 from texsense.apps.posture.smoothing import WindowVote
 from texsense.apps.stats import raw_rise
 from texsense.apps.views import MODES, alert_places, format_duration, orientation_of, seat_zones
-from texsense.compensation.intervals import no_negative
+from texsense.compensation.pipeline import no_negative
 from texsense.data import stored, units
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
