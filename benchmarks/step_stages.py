@@ -4,7 +4,7 @@ real stream (every frame different) with stages switched off one after another.
 Run:  .venv/bin/python benchmarks/step_stages.py [--frames N]
 
 Columns: ``step`` is the public call (Python wrapper included), ``chain`` the compiled chain
-alone on a one-frame block. Medians over all frames after the first 100.
+alone (``Chain.step`` into arrays held). Medians over all frames after the first 100.
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ def main() -> None:
     cal = seat_calibration(5)
     calibration, layout, rec = mat_case(cal, 32, 32, args.frames, seed=3)
     cap = np.ascontiguousarray(rec.frames, dtype=np.float64)
-    ok = np.ones((1, cap.shape[1]), bool)
-    dt = np.array([float(np.median(np.diff(rec.times)))])
+    n = cap.shape[1]
+    dt = float(np.median(np.diff(rec.times)))
     print("| stages | step median µs | chain median µs |")
     print("|---|---:|---:|")
     for name, kw in CASES:
@@ -50,10 +50,12 @@ def main() -> None:
             t0 = time.perf_counter()
             pipe.step(cap[k], None, float(rec.times[k]))
             step.append(time.perf_counter() - t0)
-        pipe.reset()
+        compiled = pipe.compiled()
+        compiled.reset()
+        held = np.empty(n), np.empty(n, np.uint8), np.empty(n, bool)
         for k in range(rec.n_frames):
             t0 = time.perf_counter()
-            pipe._chain.run(dt, cap[k : k + 1], ok)
+            compiled.step(dt, cap[k], None, *held)
             chain.append(time.perf_counter() - t0)
         print(
             f"| {name} | {np.median(step[100:]) * 1e6:.0f} | {np.median(chain[100:]) * 1e6:.0f} |"

@@ -191,6 +191,14 @@ fn the_chain_equals_its_stages_run_one_after_the_other_in_any_order() {
         Stage::Repair(mat.repair(2)),
         Stage::Drift(mat.drift()),
     ]);
+    // a segment of every element-wise kind, the loading curve between two that keep state
+    cases.push(vec![
+        Stage::Convert(mat.converter()),
+        Stage::Drift(mat.drift()),
+        Stage::Loading(loading.clone()),
+        Stage::Compensation(mat.compensation(true)),
+        Stage::Drift(mat.drift()),
+    ]);
     for stages in cases {
         let names: Vec<_> = stages.iter().map(Stage::name).collect();
         let mut chain = Chain::new(n, stages.clone()).unwrap();
