@@ -191,7 +191,7 @@ def test_harmonic_fills_a_cluster_from_its_border_and_neighbour_mean_cannot():
 
 
 def test_unknown_repair_method():
-    with pytest.raises(ParameterError, match="repair stage.s method must be one of"):
+    with pytest.raises(ParameterError, match="repair stage's method must be one of"):
         Repair(Layout.grid(2, 2), "magic").fit()
 
 

@@ -257,7 +257,13 @@ class Fields:
         (:mod:`texsense.data.ranges`) are errors."""
         value = self.get(key)
         try:
-            if np.asarray(value).dtype.kind not in "iuf":  # text, true, null among numbers
+            kind: str = np.asarray(value).dtype.kind
+        except (ValueError, TypeError, OverflowError):
+            kind = "ragged"
+        if kind in ("U", "S", "b"):  # numpy would convert "1.5" and true
+            raise self.error(key, "holds text or true/false where numbers belong")
+        try:
+            if kind not in ("i", "u", "f"):  # ragged rows, null, objects, huge integers
                 raise TypeError
             a = np.asarray(value, dtype=np.float64)
         except (ValueError, TypeError, OverflowError):

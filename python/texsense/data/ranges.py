@@ -124,13 +124,14 @@ class Real(Kind):
     hi_open: bool = False
     unit: str = ""
     note: str = ""
+    nonzero: bool = False
 
     def _in(self, v: float) -> bool:
         if v != v:
             return False
         above = v > self.lo if self.lo_open else v >= self.lo
         below = v < self.hi if self.hi_open else v <= self.hi
-        return above and below
+        return above and below and not (self.nonzero and v == 0)
 
     def holds(self, value: Any) -> bool:
         v = _number(value)
@@ -141,14 +142,14 @@ class Real(Kind):
         with np.errstate(invalid="ignore"):
             above = a > self.lo if self.lo_open else a >= self.lo
             below = a < self.hi if self.hi_open else a <= self.hi
-        return above & below  # NaN compares False
+        return above & below & ((a != 0) if self.nonzero else True)  # NaN compares False
 
     def text(self) -> str:
         left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
         ends = f"{left}{_g(self.lo)}, {_g(self.hi)}{right}"
         unit = f" {self.unit}" if self.unit else ""
         note = f" ({self.note})" if self.note else ""
-        return f"a number in {ends}{unit}{note}"
+        return f"a number in {ends}{', not 0' if self.nonzero else ''}{unit}{note}"
 
     def edges(self) -> list[Any]:
         lo = math.nextafter(self.lo, self.hi) if self.lo_open else self.lo
@@ -156,7 +157,7 @@ class Real(Kind):
         return [lo, hi]
 
     def beyond(self) -> list[Any]:
-        out: list[Any] = [math.nan, "1.0", True, [1.0]]
+        out: list[Any] = [math.nan, "1.0", True, [1.0], *([0.0] if self.nonzero else [])]
         for end, is_open, away in ((self.lo, self.lo_open, -INF), (self.hi, self.hi_open, INF)):
             if math.isinf(end) and not is_open:
                 continue  # nothing lies beyond an infinite end

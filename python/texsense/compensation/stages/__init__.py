@@ -74,6 +74,7 @@ def ranges_table() -> str:
             rows.append(f"| `{name}` | `{key}` | {kind.text()} |")
     return "\n".join(rows)
 
+
 __all__ = [
     "STAGES",
     "Convert",

@@ -30,7 +30,7 @@ _CURVE_MM = Real(-1e3, 1e3, unit="mm")
 _CURVE_PF = Real(-1e6, 1e6, unit="pF")
 _GAIN = Real(0.0, 1e3, lo_open=True)
 _LINEAR_OFFSET = Real(-1e15, 1e15)
-_LINEAR_GAIN = Real(-1e15, 1e15)
+_LINEAR_GAIN = Real(-1e15, 1e15, nonzero=True)
 
 
 class _Conversion(Stage):
