@@ -4,7 +4,9 @@ stream of changing frames (the mat of `pipeline_speed.py`), so the host's speed,
 by up to 2x between processes on a shared machine, falls on both alike (issue 34, thirteenth
 round). Each block is `Pipeline.step` over the stream's 2000 frames (the first 100 left
 out), timed on the CPU clock and then on the wall clock; prints the medians of the blocks
-and the median of the pairs' ratios (this one / the other).
+and the median of the pairs' ratios (this one / the other), then every pair's ratio. For the
+other version's blocks the object takes the other module's class, so that its `step` calls
+its own helpers (a helper this version no longer has, too).
 
 Run:  .venv/bin/python benchmarks/step_ab.py OTHER/pipeline.py [--rows 32] [--pairs 8]
 """
@@ -24,23 +26,29 @@ from texsense.calibration.workflows import seat_calibration
 from texsense.compensation.pipeline import Pipeline
 
 
-def other_step(path: str) -> Callable[..., object]:
-    """`Pipeline.step` of the module at ``path`` (it imports this `texsense`'s binding)."""
+def other_class(path: str) -> type[Pipeline]:
+    """`Pipeline` of the module at ``path`` (it imports this `texsense`'s binding)."""
     spec = importlib.util.spec_from_file_location("other_pipeline", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.Pipeline.step
+    return module.Pipeline
 
 
-def block(pipe: Pipeline, step: Callable[..., object], cap, times, clock) -> float:
-    """The median time of ``step`` over the stream (s)."""
-    pipe.reset()
-    lat = np.empty(len(cap))
-    for k in range(len(cap)):
-        s = clock()
-        step(pipe, cap[k], None, float(times[k]))
-        lat[k] = clock() - s
+def block(pipe: Pipeline, cls: type[Pipeline], cap, times, clock) -> float:
+    """The median time of ``cls.step`` over the stream (s), on ``pipe`` made of ``cls``
+    for the block (the same state; the version's own helpers)."""
+    pipe.__class__ = cls
+    try:
+        step: Callable[..., object] = cls.step
+        pipe.reset()
+        lat = np.empty(len(cap))
+        for k in range(len(cap)):
+            s = clock()
+            step(pipe, cap[k], None, float(times[k]))
+            lat[k] = clock() - s
+    finally:
+        pipe.__class__ = Pipeline
     return float(np.median(lat[100:]))
 
 
@@ -54,7 +62,7 @@ def main() -> None:
     c, lay, rec = mat_case(seat_calibration(mat_seed=5), args.rows, args.rows, 2000, seed=3)
     pipe = Pipeline(c, lay, repair="neighbour-mean")
     cap = np.ascontiguousarray(rec.frames, dtype=np.float64)
-    steps = {"other": other_step(args.other), "this": Pipeline.step}
+    steps = {"other": other_class(args.other), "this": Pipeline}
     clocks = {"cpu": time.process_time, "wall": time.perf_counter}
     got: dict[tuple[str, str], list[float]] = {(s, c): [] for s in steps for c in clocks}
     for i in range(args.pairs):
@@ -71,6 +79,9 @@ def main() -> None:
             f"({a.min():.2f}-{a.max():.2f}) | {np.median(b):.2f} µs ({b.min():.2f}-{b.max():.2f})"
             f" | {np.median(b / a):.3f} x ({(b / a).min():.3f}-{(b / a).max():.3f}) |"
         )
+    for c in clocks:  # every pair, in the order run
+        r = np.array(got["this", c]) / np.array(got["other", c])
+        print(f"pairs' ratios ({c} clock): " + " ".join(f"{x:.3f}" for x in r))
 
 
 if __name__ == "__main__":

@@ -64,7 +64,8 @@ def main() -> None:
         cap = np.ascontiguousarray(rec.frames, dtype=np.float64)
         cases[rows * 32] = (pipe.compiled(), cap, float(rec.times[1] - rec.times[0]))
     sizes = list(cases)
-    print("| round | " + " | ".join(f"{n} el.: µs (ns/el.)" for n in sizes) + " | Python loop, ms |")
+    head = " | ".join(f"{n} el.: µs (ns/el.)" for n in sizes)
+    print(f"| round | {head} | Python loop, ms |")
     print("|---:|" + "---:|" * (len(sizes) + 1))
     for r in range(args.rounds):
         cells = []

@@ -18,8 +18,7 @@ from texsense.compensation.archive import (
     process_archive,
     process_file,
 )
-from texsense.compensation.intervals import NEAR_ZERO_NCM2
-from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.pipeline import NEAR_ZERO_NCM2, Pipeline
 from texsense.compensation.stages import Linear, StageChain
 from texsense.io import load, save
 from texsense.sim.seated import Subject, simulate_session
@@ -51,7 +50,7 @@ def test_one_file_in_blocks_equals_the_whole_recording(sessions, tmp_path):
     )
     assert report.status == "done" and report.frames == rec.n_frames > 37
     out = load(tmp_path / "p.h5")
-    # an empty element's estimate just below zero is written as 0 (intervals.no_negative);
+    # an empty element's estimate just below zero is written as 0 (pipeline.no_negative);
     # further below zero is no reading: the file marks it invalid (as every reader would),
     # the rest of the mask is the pipeline's
     near = (expected.frames < 0) & (expected.frames >= -NEAR_ZERO_NCM2)

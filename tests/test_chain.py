@@ -268,6 +268,68 @@ def test_pipeline_step_takes_arrays_as_given_or_converted_with_the_same_results(
         given.step(held, None, rec.times[26], keep=False)
 
 
+class _Refusals:
+    """A compiled chain that counts what it refuses (``step``, ``step_new``)."""
+
+    def __init__(self, chain) -> None:
+        self.chain, self.refused = chain, []
+
+    def _call(self, name, *args):
+        from texsense.exceptions import ShapeError
+
+        try:
+            return getattr(self.chain, name)(*args)
+        except (TypeError, ShapeError) as e:
+            self.refused.append(f"{name}: {type(e).__name__}: {e}")
+            raise
+
+    def step_new(self, *args):
+        return self._call("step_new", *args)
+
+    def step(self, *args):
+        return self._call("step", *args)
+
+
+def test_pipeline_step_hands_the_chain_only_arrays_it_reads(seat):
+    """`Pipeline.step` checks up front what the chain reads (float64 / bool, 1-D,
+    contiguous, of the mat's length) and converts anything else, or refuses it in its own
+    words, before the chain sees it: the chain refuses nothing (before, it was handed every
+    float64 / bool array and its TypeError or ShapeError caught); each frame gives the
+    converted frame's values, codes and mask to the bit."""
+    from texsense.exceptions import ParameterError
+
+    cal, rec = seat
+    lay, n = rec.layout, rec.n_elements
+    given, twin = (Pipeline(cal, lay, repair="neighbour-mean") for _ in range(2))
+    chain = given._live = _Refusals(given._live)
+    wide = np.ascontiguousarray(rec.frames, dtype=np.float64)
+    for k in range(12):
+        valid = rec.valid[k]
+        frame = (
+            np.repeat(wide[k], 2)[::2],  # not contiguous
+            wide[k][::-1].copy()[::-1],  # strides of -8
+            wide[k].astype(">f8"),  # the other byte order
+            wide[k][None, :],  # 2-D
+            wide[k],
+            wide[k],
+        )[k % 6]
+        flags = (valid, np.repeat(valid, 2)[::2], valid[::-1].copy()[::-1])[k // 2 % 3]
+        want, want_ok = twin.step(np.array(wide[k]), valid.copy(), rec.times[k])
+        if frame.ndim == 2:
+            with pytest.raises(ParameterError, match="a frame of"):
+                given.step(frame, flags, rec.times[k])
+            frame = frame[0]
+        got, got_ok = given.step(frame, flags, rec.times[k], keep=k % 2 == 0)
+        assert got.view(np.uint64).tolist() == want.view(np.uint64).tolist()
+        np.testing.assert_array_equal(got_ok, want_ok)
+        np.testing.assert_array_equal(given.codes_, twin.codes_)
+    t = rec.times[12]
+    for frame, flags in ((wide[12][:-1], None), (wide[12], np.ones(n + 1, bool))):
+        with pytest.raises(ParameterError):
+            given.step(frame, flags, t)
+    assert chain.refused == []
+
+
 def test_run_f32_gives_runs_values_rounded_to_float32_bit_for_bit(seat):
     """`Chain.run_f32` (what `Pipeline.run` calls for a recording, issue 34 eleventh round):
     float32 readings widened a tile at a time, the values rounded to float32 — `run`'s

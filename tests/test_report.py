@@ -268,3 +268,43 @@ def test_a_processed_night_with_bounds_shows_the_bounds_of_its_peak(tmp_path):
         assert np.nanmax(hi - lo) > 0, key
     write_report(out, tmp_path / "out.pdf")
     assert open_review(night).series.get("peak_lower") is None  # no bounds: no band
+
+
+def test_the_bounds_of_the_peak_count_the_readings_the_statistics_count():
+    """The bounds of the peak (``review._bounds_series``) over the readings the statistics
+    count (``stats._values``: valid and finite): a recording with invalid, NaN and infinite
+    readings, a frame with none counted and one not used gives the numbers of the mask made
+    on its own (finite and valid), to the bit."""
+    from types import SimpleNamespace
+
+    from texsense.apps.review import _bounds_series
+
+    rng = np.random.default_rng(5)
+    frames = rng.uniform(0, 2, (12, 20)).astype(np.float32)
+    frames[1, :4] = [np.nan, np.inf, -np.inf, np.nan]
+    frames[3] = np.nan
+    valid = rng.random((12, 20)) > 0.2
+    valid[5] = False
+    valid[7, :] = np.isnan(frames[7])  # only NaN readings flagged valid: none counted
+    frames[7, :3] = np.nan
+    valid[7, :3] = True
+    valid[1, :4] = True  # flagged valid, not finite: not counted
+    lo = frames - rng.uniform(0, 0.3, frames.shape).astype(np.float32)
+    hi = frames + rng.uniform(0, 0.3, frames.shape).astype(np.float32)
+    lo[1, 1] = lo[2, 6] = hi[1, 1] = hi[2, 6] = 9.0  # above every other, on readings not counted
+    valid[2, 6] = False
+    rec = Recording(frames, np.arange(12.0), Layout.grid(4, 5), valid=valid)
+    use = np.ones(12, bool)
+    use[9] = False
+    review = SimpleNamespace(rec=rec, bounds=(lo, hi), use=use, factor=75.006)
+    got = _bounds_series(review)  # type: ignore[arg-type]
+
+    counted = np.isfinite(rec.frames) & rec.valid  # the mask as it was made before
+    any_read = counted.any(axis=1) & use
+    for name, maps in (("lower", lo), ("upper", hi)):
+        want = np.full(12, np.nan)
+        m = np.where(counted[any_read], maps[any_read].astype(np.float64), -np.inf)
+        want[any_read] = m.max(axis=1) * 75.006
+        assert got[f"peak_{name}"].view(np.uint64).tolist() == want.view(np.uint64).tolist()
+    assert np.isnan(got["peak_lower"][[3, 5, 7, 9]]).all()
+    assert np.isfinite(got["peak_lower"][[0, 1, 2, 4]]).all()

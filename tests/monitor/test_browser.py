@@ -144,6 +144,22 @@ def test_dashboard_in_headless_chromium(monitor_url, tmp_path):
         assert alert.bounding_box() is None
         page.wait_for_timeout(1500)
         assert int(frames.inner_text()) > first, "the frame counter does not grow"
+        # the peak chart's bounds band (the monitor runs with bounds by default): pixels of
+        # the band's fill over the chart's background, in the peak's row (the second of four)
+        band = page.evaluate(
+            """() => {
+              const c = document.getElementById("charts"), d = c.getContext("2d")
+                .getImageData(0, 0, c.width, c.height).data, rowH = c.height / 4;
+              let n = 0;
+              for (let y = Math.floor(rowH); y < 2 * rowH; y++) for (let x = 0; x < c.width; x++) {
+                const i = 4 * (y * c.width + x);
+                const near = (k, v) => Math.abs(d[i + k] - v) < 6;
+                if (near(0, 210) && near(1, 223) && near(2, 242)) n++;
+              }
+              return n;
+            }"""
+        )
+        assert band > 200, f"{band} pixels of the peak's bounds band"
 
         title = page.locator("#map-title")
         expect(title).to_have_text("pressure (compensated)")

@@ -282,10 +282,11 @@ def test_the_raw_rise_of_a_mat_without_calibration():
     assert raw_rise(np.full(5, np.nan), floor)["peak_rise"] is None
 
 
-def test_a_live_recording_writes_an_empty_element_as_zero_and_no_bound_below_zero(tmp_path):
-    # the monitor's pressure recording: an empty element's estimate a hair below zero (about
-    # -0.001 N/cm² from the conversion) was flagged invalid; a model fault far below zero is
-    # still invalid
+def test_a_live_recording_writes_the_pressure_shown_and_no_bound_below_zero(tmp_path):
+    # the recorder writes the pressure it is given: the monitor's, an empty element's estimate
+    # a hair below zero already shown as 0 (no_negative, tests/monitor/test_shown_pressure.py);
+    # it does not clip it a second time (a value below zero it is given is the writer's
+    # invalid), only the lower bounds, which nothing clipped before: never below zero
     from types import SimpleNamespace
 
     from texsense import Layout
@@ -300,7 +301,8 @@ def test_a_live_recording_writes_an_empty_element_as_zero_and_no_bound_below_zer
     rec.append(frame, pressure, np.ones(4, bool), 0.0, bounds=(pressure - 0.08, pressure + 0.08))
     rec.close()
     out = load(tmp_path / "r.h5")
-    lo, _ = read_bounds(tmp_path / "r.h5")
-    assert out.frames[0].tolist() == [0.0, 0.0, 0.5, -5.0]
-    assert out.valid[0].tolist() == [True, True, True, False]
-    assert lo[0].min() >= 0
+    lo, hi = read_bounds(tmp_path / "r.h5")
+    assert out.frames[0].tolist() == pressure.astype(np.float32).tolist()
+    assert out.valid[0].tolist() == [False, True, True, False]
+    assert lo[0].tolist() == np.float32([0.0, 0.0, 0.42, 0.0]).tolist()
+    assert hi[0].tolist() == (pressure + 0.08).astype(np.float32).tolist()

@@ -393,7 +393,7 @@ def _bounds_series(review: Review) -> dict[str, np.ndarray]:
     rec = review.rec
     if review.bounds is None or review.bounds[0].shape != rec.frames.shape:
         return {}
-    counted = np.isfinite(rec.frames) & (rec.valid if rec.valid is not None else True)
+    counted = np.isfinite(stats._values(rec))  # the readings the peak counts: valid, finite
     any_read = counted.any(axis=1) & review.use
     out: dict[str, np.ndarray] = {}
     for name, maps in zip(("lower", "upper"), review.bounds, strict=True):

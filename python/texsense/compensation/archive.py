@@ -32,8 +32,7 @@ from typing import Any
 import numpy as np
 
 from texsense._progress import progress
-from texsense.compensation.intervals import no_negative
-from texsense.compensation.pipeline import Pipeline
+from texsense.compensation.pipeline import Pipeline, no_negative
 from texsense.compensation.stages import StageChain, load_chain
 from texsense.data.files import (
     atomic_path,

@@ -66,7 +66,6 @@ __all__ = [
     "drift_share",
     "frame_bounds",
     "multiplier",
-    "no_negative",
 ]
 
 #: Bands of the predicted pressure (N/cm²) the held-out residuals are split by; the last is open.
@@ -370,24 +369,3 @@ def frame_bounds(
     return _frame_bounds(np.ascontiguousarray(values, np.float64),
                          np.ascontiguousarray(measured, bool), float(drift), edges, scale,
                          _BAND_EDGES, mult, m, R_REPAIRED, range_max)  # fmt: skip
-
-
-#: A compensated pressure down to this far below zero (N/cm², about 7.5 mmHg: the level under
-#: which the in-use correction calls an element empty) is an unloaded element's estimate.
-NEAR_ZERO_NCM2 = 0.1
-
-
-def no_negative(
-    values: np.ndarray, lower: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """What a pressure file gets: ``values`` with those at most :data:`NEAR_ZERO_NCM2` below
-    zero written as 0 (an empty element: its conversion reads about -0.001 N/cm², which a
-    file would otherwise mark invalid, so an empty mat read "100 % invalid" and its load not a
-    number; further below zero stays, and is flagged invalid by the writer: a fault to see),
-    and ``lower`` bounds never below zero (no pressure is)."""
-    v = np.asarray(values)
-    near = (v < 0) & (v >= -NEAR_ZERO_NCM2)
-    if near.any():
-        v = np.where(near, np.zeros((), v.dtype), v)
-    lo = None if lower is None else np.maximum(lower, 0)
-    return v, lo

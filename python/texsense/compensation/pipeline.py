@@ -24,6 +24,10 @@ its Python stage runs (``crates/core/src/chain.rs``):
   (:attr:`Pipeline.in_use_note`). With ``interval`` every value gets a bound
   (:mod:`texsense.compensation.intervals`, ``bounds_``).
 
+What is shown and written of the output (the monitor's map, statistics and recording,
+``texsense process``'s file) is :func:`no_negative`'s: an empty element's estimate just below
+zero as 0, a lower bound never below zero.
+
 Any order the stage contract allows runs; a stage without a compiled kernel is refused in
 one line naming it. The local repairs run in the compiled pass; the harmonic ones solve a
 sparse system per frame in scipy between compiled passes. ``chain.run(rec)`` (the stages in
@@ -56,11 +60,13 @@ from texsense.compensation.stages import Convert, Drift, Hysteresis, Linear, Sta
 from texsense.data.files import json_loads
 from texsense.data.layout import Layout
 from texsense.data.recording import Recording
-from texsense.exceptions import ParameterError, ShapeError
+from texsense.exceptions import ParameterError
 
 _F64, _BOOL = np.dtype(np.float64), np.dtype(bool)
+#: The strides of a 1-D contiguous array of each (a 2-D array's have two entries).
+_STEP_F64, _STEP_BOOL = (_F64.itemsize,), (_BOOL.itemsize,)
 
-__all__ = ["Pipeline", "layout_mismatch"]
+__all__ = ["NEAR_ZERO_NCM2", "Pipeline", "layout_mismatch", "no_negative"]
 
 
 def _arrangement(layout: Layout) -> np.ndarray:
@@ -101,6 +107,33 @@ def layout_mismatch(expected: Layout, given: Layout) -> str | None:
             f"({gx:g}, {gy:g}) cm among the others, not ({x:g}, {y:g}))"
         )
     return None
+
+
+#: A compensated pressure down to this far below zero (N/cm², about 7.5 mmHg: the level under
+#: which the in-use correction calls an element empty) is an unloaded element's estimate.
+NEAR_ZERO_NCM2 = 0.1
+
+
+def no_negative(
+    values: np.ndarray, lower: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The pipeline's output as it is shown and written (the monitor's map, statistics and
+    recording, ``texsense process``'s file): ``values`` with those at most
+    :data:`NEAR_ZERO_NCM2` below zero as 0 (an empty element: its conversion reads about
+    -0.001 N/cm², which a file would otherwise mark invalid, so an empty mat read "100 %
+    invalid" and its load not a number; further below zero stays, and is flagged invalid by
+    the writer: a fault to see), and ``lower`` bounds never below zero (no pressure is).
+
+    >>> v, lo = no_negative(np.array([-0.001, 0.5, -5.0]), np.array([-0.08, 0.42, -5.1]))
+    >>> v.tolist(), lo.tolist()
+    ([0.0, 0.5, -5.0], [0.0, 0.42, 0.0])
+    """
+    v = np.asarray(values)
+    near = (v < 0) & (v >= -NEAR_ZERO_NCM2)
+    if near.any():
+        v = np.where(near, np.zeros((), v.dtype), v)
+    lo = None if lower is None else np.maximum(lower, 0)
+    return v, lo
 
 
 #: The first bytes of a pipeline's state (:meth:`Pipeline.snapshot`).
@@ -213,6 +246,7 @@ class Pipeline:
         self._parts = self._compile()
         self.reset()
         self._dt1 = np.zeros(1)
+        self._n = layout.n_elements
         self._all_valid = np.ones(layout.n_elements, bool)
         # a stream of one compiled pass steps into arrays it holds (Chain.step, issue 34)
         one = self._parts[0] if len(self._parts) == 1 and self.interval is None else None
@@ -511,44 +545,49 @@ class Pipeline:
         dt = 0.0 if last is None else t - last
         if not (dt >= 0 and isfinite(t)):
             raise ParameterError("frame times must be numbers and must not decrease")
-        live = self._live
-        if (
-            live is not None
-            and (values.__class__ is np.ndarray and values.dtype is _F64)
-            and (valid is None or (valid.__class__ is np.ndarray and valid.dtype is _BOOL))
+        live, n = self._live, self._n
+        if live is None:  # several passes: the same compiled chain as a batch, with one frame
+            x, v = self._frame(values, valid)
+            self._dt1[0] = dt
+            v = self._all_valid if v is None else v
+            out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
+            self.codes_ = codes[0]
+            return out[0], ok[0]
+        if not (  # what the chain reads is handed to it as given (issue 34): float64 / bool
+            (values.__class__ is np.ndarray and values.dtype is _F64)  # arrays of n elements,
+            and (values.strides == _STEP_F64 and len(values) == n)  # 1-D, contiguous
+            and (
+                valid is None
+                or (
+                    (valid.__class__ is np.ndarray and valid.dtype is _BOOL)
+                    and (valid.strides == _STEP_BOOL and len(valid) == n)
+                )
+            )
         ):
-            try:  # the arrays as given: the chain checks their shape and layout (issue 34)
-                return self._live_step(live, dt, t, values, valid, keep)
-            except (TypeError, ShapeError):  # raised before the chain stepped
-                pass  # converted, or the clear error, below
-        n = self.layout.n_elements
+            values, valid = self._frame(values, valid)  # anything else converted first
+        if keep:  # new arrays, written once by the chain (the caller may keep them)
+            out, self.codes_, ok = live.step_new(dt, values, valid)
+        else:  # into the arrays held, overwritten by the next step
+            out, codes, ok = self._held
+            live.step(dt, values, valid, out, codes, ok)
+            self.codes_ = codes
+        self._last_t = t
+        return out, ok
+
+    def _frame(
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """A frame (N,) float64 and its validity (N,) bool (or None), contiguous, converted
+        from what :meth:`step` was given; a frame or validity of another length is one
+        ParameterError line."""
+        n = self._n
         x = np.ascontiguousarray(values, dtype=np.float64)
         if x.shape != (n,):
             raise ParameterError(f"expected a frame of {n} elements, got shape {x.shape}")
         v = None if valid is None else np.ascontiguousarray(valid, dtype=bool)
         if v is not None and v.shape != (n,):
             raise ParameterError(f"expected {n} validity flags, got shape {v.shape}")
-        if live is not None:  # one compiled pass
-            return self._live_step(live, dt, t, x, v, keep)
-        self._dt1[0] = dt
-        v = self._all_valid if v is None else v
-        # the same compiled chain as a batch, with one frame (no per-frame numpy glue)
-        out, ok, codes = self._pass(self._dt1, x.reshape(1, n), v.reshape(1, n), t)
-        self.codes_ = codes[0]
-        return out[0], ok[0]
-
-    def _live_step(
-        self, live: Chain, dt: float, t: float, x: np.ndarray, v: np.ndarray | None, keep: bool
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`step` of a pipeline of one compiled pass, its inputs checked by the chain."""
-        if keep:  # new arrays, written once by the chain (the caller may keep them)
-            out, self.codes_, ok = live.step_new(dt, x, v)
-        else:  # into the arrays held, overwritten by the next step
-            out, codes, ok = self._held
-            live.step(dt, x, v, out, codes, ok)
-            self.codes_ = codes
-        self._last_t = t
-        return out, ok
+        return x, v
 
     def run(self, rec: Recording) -> Recording:
         """A recording of readings -> a recording of values (pressure in N/cm² for a mat

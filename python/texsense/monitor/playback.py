@@ -189,7 +189,8 @@ def _series(review: Review) -> dict[str, Any]:
     bins = min(n, MAX_POINTS)
     index = np.linspace(0, n, bins + 1).astype(int)[:-1]
     out: dict[str, Any] = {"i": index.tolist(), "t": _rounded(s["t"][index], 3)}
-    for key in ("load_N", "peak", "area_cm2"):
+    # the peak's bounds (a file with bounds) by the peak's rule: a bin's highest of each
+    for key in ("load_N", "peak", "area_cm2", "peak_lower", "peak_upper"):
         if key in s:
             out[key] = _rounded(decimate(s[key], bins, "max"), 4)
     for key in ("cof_x", "cof_y"):

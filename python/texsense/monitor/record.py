@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 
 from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, encode_events
-from texsense.compensation.intervals import no_negative
 from texsense.data.files import check_new, make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
@@ -301,7 +300,9 @@ class Recorder:
         """Append one frame (raw values and pressure) with its labels: the wall clock when it
         arrived, the events raised since the last frame, the posture shown
         (:mod:`texsense.apps.clinical`), and its bounds (lower, upper) for a recorder made
-        with ``bounds``."""
+        with ``bounds``. ``pressure`` is the pressure shown, written as given (NaN as 0): an
+        empty element's estimate just below zero is 0 already (the monitor's ``no_negative``);
+        a lower bound below zero is written as 0."""
         t = [frame.t]
         et = frame.element_times[None, :]
         valid = np.isfinite(frame.values)[None, :]
@@ -319,10 +320,12 @@ class Recorder:
             labels=labels,
         )
         if self._pressure is not None:
-            lower = None if bounds is None else np.nan_to_num(bounds[0])
-            p, lower = no_negative(np.nan_to_num(pressure), lower)  # empty: 0, not invalid
+            # the pressure is the one shown, an empty element's estimate already 0 (the
+            # monitor's no_negative); what is left to clip is the lower bound (no pressure is
+            # below zero)
+            lower = None if bounds is None else np.maximum(np.nan_to_num(bounds[0]), 0)
             self._pressure.append(
-                p[None, :],
+                np.nan_to_num(pressure)[None, :],
                 times=t,
                 valid=measured[None, :],
                 element_times=et,

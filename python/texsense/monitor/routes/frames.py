@@ -66,7 +66,7 @@ def router(monitor: Monitor) -> APIRouter:
         opened late draws what came before it."""
         return {
             "columns": ["t", "load_N", "peak_ncm2", "contact_area_cm2", "cof_x_cm", "cof_y_cm",
-                        "peak_rise", "responding"],
+                        "peak_rise", "responding", "peak_lower_ncm2", "peak_upper_ncm2"],
             "rows": list(monitor.history),
         }  # fmt: skip
 

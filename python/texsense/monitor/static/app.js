@@ -146,6 +146,8 @@ function renderCards(st, f, pb) {
   }
 }
 
+// the peak chart's band: the bounds of the peak (a monitor with bounds, a file with them)
+const BAND_NOTE = " · shaded: its bounds";
 function renderCharts(f) {
   let t, rows, cursor = null, marks = [];
   if (PB.active) {
@@ -153,7 +155,9 @@ function renderCharts(f) {
     t = s.t; cursor = PB.frame ? PB.frame.t : null;
     rows = [];
     if (s.load_N) rows.push({ label: "load N", lines: [{ values: s.load_N, colour: "#2764c5" }], zero: true });
-    rows.push({ label: `peak ${q ? LABEL[unit] : PB.info.unit}`, lines: [{ values: s.peak.map((v) => (v === null ? null : v * k)), colour: "#2764c5" }],
+    const scaled = (vs) => vs.map((v) => (v === null ? null : v * k));
+    const band = s.peak_lower && s.peak_upper ? { lower: scaled(s.peak_lower), upper: scaled(s.peak_upper) } : null;
+    rows.push({ label: `peak ${q ? LABEL[unit] : PB.info.unit}${band ? BAND_NOTE : ""}`, lines: [{ values: scaled(s.peak), colour: "#2764c5" }], band,
       threshold: q && PB.info.threshold !== null ? PB.info.threshold * f : null, zero: true });
     rows.push({ label: "contact area cm²", lines: [{ values: s.area_cm2, colour: "#2764c5" }], zero: true });
     rows.push({ label: "centre of force cm (x, y)", lines: [{ values: s.cof_x, colour: "#0891b2" }, { values: s.cof_y, colour: "#d97706" }] });
@@ -169,9 +173,11 @@ function renderCharts(f) {
     $("chart-note").textContent = `the last ${live.length} frames`;
   } else {
     t = live.map((p) => p.t);
+    const scaled = (v) => (v === null ? null : v * f);
+    const band = live.some((p) => p.peakHi !== null) ? { lower: live.map((p) => scaled(p.peakLo)), upper: live.map((p) => scaled(p.peakHi)) } : null;
     rows = [
       { label: "load N", lines: [{ values: live.map((p) => p.load), colour: "#2764c5" }], zero: true },
-      { label: `peak ${LABEL[unit]}`, lines: [{ values: live.map((p) => (p.peak === null ? null : p.peak * f)), colour: "#2764c5" }], threshold: view && view.threshold_ncm2 ? view.threshold_ncm2 * f : null, zero: true },
+      { label: `peak ${LABEL[unit]}${band ? BAND_NOTE : ""}`, lines: [{ values: live.map((p) => (p.peak === null ? null : p.peak * f)), colour: "#2764c5" }], threshold: view && view.threshold_ncm2 ? view.threshold_ncm2 * f : null, zero: true, band },
       { label: "contact area cm²", lines: [{ values: live.map((p) => p.area), colour: "#2764c5" }], zero: true },
       { label: "centre of force cm (x, y)", lines: [{ values: live.map((p) => p.x), colour: "#0891b2" }, { values: live.map((p) => p.y), colour: "#d97706" }] },
     ];

@@ -15,7 +15,8 @@ class Charts {
 
   timeAt(x) { const { t0, t1, left, width } = this.frame; return t0 + (x - left) / width * (t1 - t0); }
 
-  // t: times (s since the start); rows: [{label, lines: [{values, colour}], threshold}];
+  // t: times (s since the start); rows: [{label, lines: [{values, colour}], threshold, band}]
+  // (band: {lower, upper} values drawn as a shaded band behind the lines: the peak's bounds);
   // cursor: the time shown (or null); marks: [{t, colour}] (alerts, turns)
   draw(t, rows, cursor, marks) {
     this.data = { t, rows };
@@ -30,7 +31,8 @@ class Charts {
     rows.forEach((row, k) => {
       const y0 = top + k * (h + gap);
       let lo = Infinity, hi = -Infinity;
-      for (const line of row.lines) for (const v of line.values) if (v !== null && Number.isFinite(v)) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+      const band = row.band || null, ranged = band ? [...row.lines, { values: band.lower }, { values: band.upper }] : row.lines;
+      for (const line of ranged) for (const v of line.values) if (v !== null && Number.isFinite(v)) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
       if (row.threshold !== undefined && row.threshold !== null) hi = Math.max(hi, row.threshold * 1.1);
       if (!Number.isFinite(lo)) { lo = 0; hi = 1; }
       if (row.zero) lo = Math.min(lo, 0);
@@ -45,6 +47,7 @@ class Charts {
         ctx.strokeStyle = "#c2410c"; ctx.setLineDash([4, 3]); ctx.beginPath();
         ctx.moveTo(left, Y(row.threshold)); ctx.lineTo(W - right, Y(row.threshold)); ctx.stroke(); ctx.setLineDash([]);
       }
+      if (band) drawBand(ctx, t, band, X, Y);
       for (const line of row.lines) {
         ctx.strokeStyle = line.colour; ctx.lineWidth = 1.2; ctx.beginPath();
         let pen = false;
@@ -62,6 +65,24 @@ class Charts {
     ctx.fillStyle = "#677189"; ctx.textAlign = "left"; ctx.fillText(label(t0), left, H - 3);
     ctx.textAlign = "right"; ctx.fillText(label(this.frame.t1), W - right, H - 3); ctx.textAlign = "left";
     if (cursor !== null && cursor !== undefined) { ctx.fillStyle = "#e11d48"; ctx.fillRect(X(cursor) - 1, top, 2, H - top - bottom); }
+  }
+}
+
+// the band between two series, in runs of frames where both are numbers (a gap ends a run)
+function drawBand(ctx, t, band, X, Y) {
+  ctx.fillStyle = "rgba(39, 100, 197, 0.18)";
+  const ok = (i) => band.lower[i] !== null && band.upper[i] !== null && Number.isFinite(band.lower[i]) && Number.isFinite(band.upper[i]);
+  let i = 0;
+  while (i < t.length) {
+    if (!ok(i)) { i++; continue; }
+    let j = i;
+    while (j + 1 < t.length && ok(j + 1)) j++;
+    ctx.beginPath();
+    for (let k = i; k <= j; k++) ctx.lineTo(X(t[k]), Y(band.upper[k]));
+    for (let k = j; k >= i; k--) ctx.lineTo(X(t[k]), Y(band.lower[k]));
+    ctx.closePath(); ctx.fill();
+    if (i === j) { ctx.fillRect(X(t[i]) - 1, Y(band.upper[i]), 2, Y(band.lower[i]) - Y(band.upper[i])); }
+    i = j + 1;
   }
 }
 

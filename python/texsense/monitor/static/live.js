@@ -171,7 +171,8 @@ function onSnapshot(snap) {
   if ($("uncalibrated").hidden === uncalibrated) applyCalibrated(!uncalibrated, snap.raw_unit);
   const st = snap.stats, rs = snap.raw_stats, t0 = live.length ? live[0].t0 : snap.t;
   live.push({ t: snap.t - t0, t0, load: st.load_N, peak: st.peak_ncm2, area: st.contact_area_cm2, x: st.cof_cm ? st.cof_cm[0] : null, y: st.cof_cm ? st.cof_cm[1] : null,
-    rise: rs ? rs.peak_rise : null, responding: rs ? rs.responding : null });
+    rise: rs ? rs.peak_rise : null, responding: rs ? rs.responding : null,
+    peakLo: st.peak_lower_ncm2 ?? null, peakHi: st.peak_upper_ncm2 ?? null });
   if (live.length > 1200) { const t00 = live[0].t0; live.shift(); live.forEach((p) => { p.t0 = t00; }); }
   if (!PB.active && !drawing) { drawing = true; requestAnimationFrame(() => { drawing = false; render(); }); }
 }
@@ -198,7 +199,9 @@ async function loadHistory() {
     const h = await api("/api/history");
     if (live.length || !h.rows.length) return;
     const t0 = h.rows[0][0];
-    for (const [t, load, peak, area, x, y, rise, responding] of h.rows) live.push({ t: t - t0, t0, load, peak, area, x, y, rise, responding });
+    for (const [t, load, peak, area, x, y, rise, responding, peakLo, peakHi] of h.rows) {
+      live.push({ t: t - t0, t0, load, peak, area, x, y, rise, responding, peakLo: peakLo ?? null, peakHi: peakHi ?? null });
+    }
   } catch (err) { /* the charts fill from the live frames */ }
 }
 // the live mode and orientation again (how the mat lies changed on the calibration panel)
