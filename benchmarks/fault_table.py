@@ -23,8 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 #: tests record).
 FAMILIES = ["reach outside", "identity", "declares more", "not a file", "round trip", "values",
             "settings", "requests", "nesting", "output place", "option file", "stop mid-write",
-            "paths in files", "no effect", "hostile value", "origins",
-            "duplicate keys", "not Unicode", "layout fields", "stored state", "clock"]  # fmt: skip
+            "paths in files", "no effect", "hostile value", "origins", "duplicate keys",
+            "not Unicode", "layout fields", "stored state", "stage ranges", "clock"]  # fmt: skip
 
 
 def main() -> int:

@@ -101,13 +101,17 @@ def test_earlier_formats_are_read_never_written(tmp_path):
 
 def test_an_edited_first_round_calibration_is_refused(tmp_path):
     d = json.loads((HERE / "calibration-v1-mat.json").read_text())
-    d["elements"]["offset_pF"][3] = 1e308
+    d["elements"]["offset_pF"][3] = 1.25  # an edit within the offsets' bounds
     (tmp_path / "edited.json").write_text(json.dumps(d))
     with pytest.raises(FormatError, match="was edited after texsense wrote it"):
         load_chain(tmp_path / "edited.json")
     del d["id"]  # the first round's way to accept an edit
     (tmp_path / "accepted.json").write_text(json.dumps(d))
-    assert load_chain(tmp_path / "accepted.json")["convert"].offset_pF_[3] == 1e308
+    assert load_chain(tmp_path / "accepted.json")["convert"].offset_pF_[3] == 1.25
+    d["elements"]["offset_pF"][3] = 1e308  # accepted as an edit, refused as an offset
+    (tmp_path / "huge.json").write_text(json.dumps(d))
+    with pytest.raises(FormatError, match=r"offset_pF'.*1e\+308, expected a number in"):
+        load_chain(tmp_path / "huge.json")
     d = json.loads((HERE / "calibration-v1-mat.json").read_text())
     (tmp_path / "kind.json").write_text(json.dumps({**d, "kind": "magic"}))
     with pytest.raises(FormatError, match="unknown calibration kind 'magic'"):

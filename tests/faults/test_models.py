@@ -215,11 +215,12 @@ def test_a_broken_calibration_is_one_line(written, tmp_path, case, fault_row):
 
 
 def test_a_hand_edited_calibration_is_refused_until_accepted(written, tmp_path, fault_row):
-    """One offset changed to 1e308 by hand: refused with a line that says the file was
-    edited and how to accept it; accepted after the documented re-hash."""
+    """One offset changed by hand (to 1.25 pF): refused with a line that says the file was
+    edited and how to accept it; accepted after the documented re-hash (an offset of 1e308
+    is refused even then: tests/faults/test_stage_ranges.py)."""
     d = json.loads((written / "mat.json").read_text(encoding="utf-8"))
     (convert,) = [s for s in _content(d)["stages"] if s["stage"] == "convert"]
-    convert["fitted"]["elements"]["offset_pF"][3] = 1e308
+    convert["fitted"]["elements"]["offset_pF"][3] = 1.25
     edited = tmp_path / "edited.json"
     edited.write_text(json.dumps(d), encoding="utf-8")
     out = tmp_path / "p.h5"
@@ -231,7 +232,7 @@ def test_a_hand_edited_calibration_is_refused_until_accepted(written, tmp_path, 
     assert rc == 0 and "edited.json" in stdout, err
     rc, _, err = run_cli("process", written / "raw.h5", "--calibration", edited, "-o", out)
     assert rc == 0, err
-    fault_row("model files", "hand-edited chain calibration (one offset 1e308)", "clear error")
+    fault_row("model files", "hand-edited chain calibration (one offset 1.25 pF)", "clear error")
 
 
 def _drift_stage(content: dict) -> dict:

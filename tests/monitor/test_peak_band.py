@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from texsense.apps.review import open_review
-from texsense.monitor.live import peak_bounds
+from texsense.apps.stats import peak_bounds
 from texsense.monitor.store import EventStore
 from texsense.station.ward import MatEntry
 

@@ -55,6 +55,7 @@ __all__ = [
     "contact_area",
     "frame_stats",
     "one_frame_stats",
+    "peak_bounds",
     "peak_pressure",
     "peak_pressure_index",
     "raw_rise",
@@ -250,6 +251,27 @@ def one_frame_stats(
         "ppi": float(got["ppi"][0]),
         "cof_cm": got["cof_cm"][0],
     }
+
+
+def peak_bounds(pressure: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> dict[str, Any]:
+    """The bounds of a frame's peak (N/cm², rounded as the peak): every element's true
+    pressure between its lower and upper map puts the peak between their highest values
+    over the elements the peak counts (those with a pressure), the lower one at least 0 as
+    the map shows it (``no_negative``); the same rule as the report's band
+    (``texsense.apps.review``). None for a bound no counted element has.
+
+    >>> lower, upper = np.array([0.1, 0.7, 5.0]), np.array([0.4, 1.3, 9.0])
+    >>> peak_bounds(np.array([0.2, 1.0, np.nan]), (lower, upper))
+    {'peak_lower_ncm2': 0.7, 'peak_upper_ncm2': 1.3}
+    """
+    counted = np.isfinite(pressure)
+    out: dict[str, Any] = {}
+    for name, m in zip(("lower", "upper"), bounds, strict=True):
+        v = np.where(counted & np.isfinite(m), m, -np.inf).max(initial=-np.inf)
+        if name == "lower":
+            v = max(v, 0.0) if np.isfinite(v) else v
+        out[f"peak_{name}_ncm2"] = round(float(v), 3) if np.isfinite(v) else None
+    return out
 
 
 class LiveStats:

@@ -103,7 +103,6 @@ class Range:
 
 
 _POSITIVE = Range(0.0, lo_open=True)
-_NON_NEGATIVE = Range(0.0)
 _COUNT = Range(1, 1_000_000)
 _SEED = Range(0, 2**32 - 1)
 _PORT = Range(1, 65535)
@@ -152,13 +151,13 @@ RANGES: dict[str, Range] = {
     # models and their fits
     "--grid": Range(2, 2000),
     "--cells": Range(1, 2000),
-    "--smoothing": _NON_NEGATIVE,
+    "--smoothing": Range(0.0, 1e12),  # the hysteresis stage's range (data.ranges)
     "--folds": Range(2, 100),
-    "--rest-rate": _POSITIVE,
-    "--drift-rest-rate": _POSITIVE,
+    "--rest-rate": Range(0.0, 1e12, lo_open=True),  # the drift stage's
+    "--drift-rest-rate": Range(0.0, 1e12, lo_open=True),
     "--offset": Range(-1e15, 1e15),
     "--gain": Range(-1e15, 1e15, nonzero=True),
-    "--full-scale": _POSITIVE,
+    "--full-scale": Range(0.0, 1e15, lo_open=True),  # the linear stage's
     "--c": _POSITIVE,
     "--pool": Range(1, 256),
     "--window": Range(0.0, 3.2e7, lo_open=True),

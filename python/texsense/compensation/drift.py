@@ -30,6 +30,7 @@ from texsense._core import Curve, DriftBank
 from texsense.compensation.stage import time_steps as _time_steps
 from texsense.data import modelfile
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import OneOf, Real, check_params
 from texsense.exceptions import FormatError, ParameterError
 
 __all__ = [
@@ -52,6 +53,24 @@ __all__ = [
 #: What the drift superposes: the Preisach output (eq. 5.8) or the elastic response of the
 #: input (``backbone``: quasi-linear viscoelasticity).
 LEVELS = ("output", "backbone")
+
+#: The range of every parameter of a drift model (:mod:`texsense.data.ranges`; the drift
+#: stage's ``kind`` and ``rest_rate`` are these), checked by the model and by its file's reader.
+RANGES = {
+    "gamma": Real(-1e3, 1e3),
+    "kind": OneOf(("log", "thesis", "prony")),
+    "rest_rate": Real(0.0, 1e12, unit="N/cm2 per s", note="0: the time clock of eq. 5.8"),
+    "rest_window": Real(0.0, 1e6, lo_open=True, unit="s"),
+    "gamma_time": Real(-1e3, 1e3),
+    "exponent": Real(0.25, 8.0),
+    "level": OneOf(LEVELS),
+}
+#: The bounds of a file's kernel: weights, time constants (s), its error and span (s), the
+#: backbone's inputs and responses.
+_WEIGHTS = Real(0.0, 1e6)
+_TAUS = Real(0.0, 1e12, lo_open=True, unit="s")
+_SPAN = Real(0.0, 1e12, unit="s")
+_BACKBONE = Real(-1e12, 1e12)
 
 
 @dataclass(frozen=True)
@@ -336,8 +355,7 @@ class DriftModel:
     rms_ncm2_: float | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.level not in LEVELS:
-            raise ParameterError(f"level must be one of {', '.join(LEVELS)}, got {self.level!r}")
+        check_params("the drift model", RANGES, {k: getattr(self, k) for k in RANGES})
         if (self.level == "backbone") != (self.backbone is not None):
             raise ParameterError("level 'backbone' (QLV) needs the backbone curve, and only it")
 
@@ -585,46 +603,39 @@ class DriftModel:
     def from_content(cls, f: Fields) -> DriftModel:
         """A model from the content of its file; every problem raises
         :class:`~texsense.exceptions.FormatError` naming the file and the field."""
-        span = f.array("kernel.span_s", ndim=1)
-        if span.shape != (2,):
-            raise f.error("kernel.span_s", "expected two numbers")
+        span = f.array("kernel.span_s", ndim=1, within=_SPAN)
+        if span.shape != (2,) or not span[1] > span[0]:
+            raise f.error("kernel.span_s", "expected two increasing numbers")
         kernel = DriftKernel(
-            f.array("kernel.weights", ndim=1),
-            f.array("kernel.taus_s", ndim=1),
-            f.number("kernel.max_error"),
+            f.array("kernel.weights", ndim=1, within=_WEIGHTS),
+            f.array("kernel.taus_s", ndim=1, within=_TAUS),
+            f.number("kernel.max_error", within=Real(0.0, 1e12)),
             (float(span[0]), float(span[1])),
         )
-        if (
-            kernel.weights.shape != kernel.taus.shape
-            or np.any(kernel.weights < 0)
-            or np.any(kernel.taus <= 0)
-        ):
-            raise f.error("kernel", "weights must be >= 0 and time constants > 0")
-        rest_rate = f.number("rest_rate", 0.0)  # files before the rest clock: time
-        if rest_rate < 0:
-            raise f.error("rest_rate", f"must be >= 0, got {rest_rate}")
-        window = f.number("rest_window_s", 0.5)
-        if not window > 0:
-            raise f.error("rest_window_s", f"must be > 0, got {window}")
-        gamma_time = f.number("gamma_time", 0.0)
+        if kernel.weights.shape != kernel.taus.shape:
+            raise f.error("kernel", "needs one time constant per weight")
+        rest_rate = f.number("rest_rate", 0.0, within=RANGES["rest_rate"])  # before: time
+        window = f.number("rest_window_s", 0.5, within=RANGES["rest_window"])
+        gamma_time = f.number("gamma_time", 0.0, within=RANGES["gamma_time"])
         if gamma_time and rest_rate <= 0:
             raise f.error("gamma_time", "needs the rest clock (rest_rate > 0)")
         kind = f.text("kind", "log")
-        exponent = f.number("exponent", 1.0)  # files before the level power: eq. 5.8
-        if not 0.25 <= exponent <= 8.0:
-            raise f.error("exponent", f"must lie in [0.25, 8], got {exponent}")
+        if not RANGES["kind"].holds(kind):
+            raise f.error("kind", f"expected {RANGES['kind'].text()}, got {kind!r}")
+        # files before the level power: eq. 5.8
+        exponent = f.number("exponent", 1.0, within=RANGES["exponent"])
         level = f.text("level", "output")  # files before QLV: the Preisach output
-        if level not in LEVELS:
-            raise f.error("level", f"must be one of {', '.join(LEVELS)}, got {level!r}")
+        if not RANGES["level"].holds(level):
+            raise f.error("level", f"expected {RANGES['level'].text()}, got {level!r}")
         backbone = None
         if level == "backbone":
-            x = f.array("backbone.inputs", ndim=1)
-            y = f.array("backbone.responses", ndim=1)
+            x = f.array("backbone.inputs", ndim=1, within=_BACKBONE)
+            y = f.array("backbone.responses", ndim=1, within=_BACKBONE)
             if x.shape != y.shape or x.size < 2 or np.any(np.diff(x) <= 0):
                 raise f.error("backbone", "needs >= 2 points with strictly increasing inputs")
             backbone = (x, y)
         return cls(
-            f.number("gamma"),
+            f.number("gamma", within=RANGES["gamma"]),
             kernel,
             kind,
             rest_rate,

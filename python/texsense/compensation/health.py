@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -34,10 +34,15 @@ from texsense._core import FailureDetector as _CoreDetector
 from texsense.compensation.stage import Stage
 from texsense.data.layout import Layout
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import INF, Instance, Kind, Real, Whole
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 
 __all__ = ["FAILURE_KINDS", "ElementHealth", "FailureDetector", "health_report", "mean_reading"]
+
+#: The largest magnitude of a reading a detector compares with (any unit: a ``linear`` mat's
+#: detector reads counts up to its full scale).
+READING_MAX = 1e16
 
 #: Codes of the failure kinds (0 = healthy).
 FAILURE_KINDS = {0: "ok", 1: "short/break", 2: "out of range", 3: "stuck", 4: "jump"}
@@ -87,6 +92,22 @@ class FailureDetector(Stage):
     name = "detect"
     _reads = ("capacitance", "pF")
     _gives = ("capacitance", "pF")
+
+    #: the range of every parameter (:mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {
+        "layout": Instance(Layout),
+        "min_pF": Real(-INF, READING_MAX, unit="pF", note="-inf: no short/break test"),
+        "low_share": Real(0.0, 1.0, lo_open=True, hi_open=True),
+        "high_share": Real(0.0, 1e3, lo_open=True),
+        "stuck_frames": Whole(2, 10**7),
+        "stuck_pF": Real(0.0, 1e6, unit="pF"),
+        "neighbour_change_pF": Real(0.0, 1e6, unit="pF"),
+        "stuck_floor_pF": Real(-INF, READING_MAX, unit="pF", note="-inf: no floor"),
+        "jump_share": Real(0.0, 1e3, lo_open=True),
+        "jump_pF": Real(0.0, INF, lo_open=True, unit="pF", note="inf: no jump test"),
+    }
+    #: the learned levels' bounds in a file
+    _READINGS = Real(-READING_MAX, READING_MAX, unit="pF")
 
     #: learned: each element's unloaded level and largest expected reading (pF), or None
     baseline_pF_: np.ndarray | None
@@ -196,7 +217,7 @@ class FailureDetector(Stage):
     @classmethod
     def _fitted_from_json(cls, fields: Fields, params: Mapping[str, Any]) -> dict[str, Any]:
         return {
-            k: None if fields.get(k, None) is None else fields.array(k, ndim=1)
+            k: None if fields.get(k, None) is None else fields.array(k, 1, within=cls._READINGS)
             for k in ("baseline_pF", "max_pF")
         }
 

@@ -247,6 +247,11 @@ class HeldOut:
             raise ParameterError(f"held-out residuals: {e}") from None
         if not (len(edges) == len(scale) == len(counts)) or not all(s >= 0 for s in scale):
             raise ParameterError("held-out residuals: edges, scale and counts must match, >= 0")
+        if not all(abs(x) <= 1e12 for x in (*edges, *scale)) or min(counts, default=0) < 0:
+            raise ParameterError(
+                "held-out residuals: edges and scale must be finite numbers within 1e12, "
+                "counts >= 0"
+            )
         return cls(edges, scale, counts, str(d.get("source", "")))
 
 

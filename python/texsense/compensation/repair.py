@@ -39,7 +39,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +49,7 @@ from texsense._progress import progress
 from texsense.compensation.stage import Stage
 from texsense.data.layout import Layout
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import Instance, Kind, OneOf, Real
 from texsense.exceptions import ParameterError
 
 __all__ = ["METHODS", "OUTCOME", "Repair", "idw_weights", "local_repair"]
@@ -99,6 +100,9 @@ class Repair(Stage):
     """
 
     name = "repair"
+
+    #: the range of every parameter (:mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {"layout": Instance(Layout), "method": OneOf(METHODS)}
 
     #: learned: the number of elements the method was prepared for
     n_elements_: int
@@ -182,7 +186,8 @@ class Repair(Stage):
     @classmethod
     def _fitted_from_json(cls, fields: Fields, params: Mapping[str, Any]) -> dict[str, Any]:
         layout = params["layout"]
-        return {"n_elements": int(fields.number("n_elements", layout.n_elements))}
+        n = fields.number("n_elements", layout.n_elements, within=Real(1, 2**31))
+        return {"n_elements": int(n)}
 
 
 class _Harmonic:

@@ -23,6 +23,7 @@ steps (T,) of the frames, ``_prepare()`` (build the kernels from the learned sta
 
 from __future__ import annotations
 
+import functools
 import inspect
 import typing
 from collections.abc import Mapping
@@ -33,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.data.modelfile import Fields, load, write
+from texsense.data.ranges import Kind, RangeError, check_params
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, NotFittedError, ParameterError
 
@@ -147,6 +149,21 @@ class Stage(Stream):
             if other is not None and other.__qualname__ != cls.__qualname__:
                 raise TypeError(f"{cls.__name__}: the stage name {name!r} is {other.__name__}'s")
             STAGES[name] = cls
+        init = cls.__dict__.get("__init__")
+        if init is not None:  # every constructor ends with the check of the parameters
+
+            @functools.wraps(init)
+            def checked(self: Stage, *args: Any, **kw: Any) -> None:
+                init(self, *args, **kw)
+                if type(self).__init__ is checked:  # the outermost constructor only
+                    self.check_params()
+
+            setattr(cls, "__init__", checked)  # noqa: B010 (mypy: no assigning to a method)
+
+    #: The kind and range of every parameter (:mod:`texsense.data.ranges`), declared next to
+    #: the constructor: the constructor checks them (:meth:`check_params`), whether the stage
+    #: is made from Python keywords, a command's options or a model file.
+    ranges: ClassVar[Mapping[str, Kind]] = {}
 
     #: (quantity, unit) read and given; "" passes what comes.
     _reads: ClassVar[tuple[str, str]] = ("", "")
@@ -173,6 +190,12 @@ class Stage(Stream):
             for p in sig.parameters.values()
             if p.name != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
         ]
+
+    def check_params(self) -> None:
+        """Check every parameter against the declared :attr:`ranges`: one
+        :class:`~texsense.data.ranges.RangeError` naming the stage, the parameter, the value
+        and the range."""
+        check_params(self._what(), type(self).ranges, self.get_params())
 
     def get_params(self) -> dict[str, Any]:
         """The constructor's arguments, by name (``type(s)(**s.get_params())`` is the same
@@ -287,12 +310,16 @@ class Stage(Stream):
                 raise f.error(f"params.{key}", f"cannot be read ({e})") from None
         try:
             stage = cls(**args)
+        except RangeError as e:
+            raise f.error(f"params.{e.key}", str(e)) from None
         except (TypeError, ValueError) as e:
             raise f.error("params", str(e)) from None
         if content.get("fitted") is not None:
-            fitted = cls._fitted_from_json(f.sub("fitted"), args)
             try:
+                fitted = cls._fitted_from_json(f.sub("fitted"), args)
                 stage.set_fitted(**fitted)
+            except FormatError:
+                raise  # names its field already
             except (ParameterError, ValueError) as e:
                 raise f.error("fitted", str(e)) from None
         return stage.reset()

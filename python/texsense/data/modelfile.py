@@ -44,7 +44,7 @@ import json
 import math
 from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -52,6 +52,9 @@ from texsense._core import __version__
 from texsense.data import legacy
 from texsense.data.files import json_loads, read_regular, write_text
 from texsense.exceptions import FormatError
+
+if TYPE_CHECKING:
+    from texsense.data.ranges import Kind, Real
 
 __all__ = [
     "FORMATS",
@@ -246,13 +249,24 @@ class Fields:
             raise self.error(key, f"expected an object, got {_kind(value)}")
         return Fields(value, self.source, f"{self._name(key)}.")
 
-    def array(self, key: str, ndim: int | None = None, finite: bool = True) -> np.ndarray:
-        """A float64 array; ragged rows, strings, a wrong number of dimensions or (with
-        ``finite``) NaN and infinities are errors."""
+    def array(
+        self, key: str, ndim: int | None = None, finite: bool = True, within: Real | None = None
+    ) -> np.ndarray:
+        """A float64 array; ragged rows, strings, a wrong number of dimensions, (with
+        ``finite``) NaN and infinities and (with ``within``) an entry outside that range
+        (:mod:`texsense.data.ranges`) are errors."""
         value = self.get(key)
         try:
+            kind: str = np.asarray(value).dtype.kind
+        except (ValueError, TypeError, OverflowError):
+            kind = "ragged"
+        if kind in ("U", "S", "b"):  # numpy would convert "1.5" and true
+            raise self.error(key, "holds text or true/false where numbers belong")
+        try:
+            if kind not in ("i", "u", "f"):  # ragged rows, null, objects, huge integers
+                raise TypeError
             a = np.asarray(value, dtype=np.float64)
-        except (ValueError, TypeError):
+        except (ValueError, TypeError, OverflowError):
             raise self.error(
                 key, "not a regular array of numbers (rows of different length?)"
             ) from None
@@ -260,16 +274,32 @@ class Fields:
             raise self.error(key, f"expected {ndim} dimension(s), got shape {a.shape}")
         if finite and not np.all(np.isfinite(a)):
             raise self.error(key, "holds NaN or infinite values")
+        if within is not None and a.size:
+            out = ~within.holds_array(a)
+            if out.any():
+                at = np.unravel_index(int(np.argmax(out)), a.shape)
+                where = ", ".join(str(int(i)) for i in at)
+                raise self.error(
+                    key, f"entry [{where}] is {float(a[at])!r}, expected {within.text()}"
+                )
         return a
 
-    def number(self, key: str, default: Any = ..., finite: bool = True) -> float:
-        """A float (bool and strings are errors)."""
+    def number(
+        self, key: str, default: Any = ..., finite: bool = True, within: Kind | None = None
+    ) -> float:
+        """A float (bool and strings are errors; with ``within``, a value outside that range
+        too)."""
         value = self.get(key, default)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(key, f"expected a number, got {value!r}")
-        v = float(value)
+        try:
+            v = float(value)
+        except OverflowError:
+            raise self.error(key, "expected a number, got an integer beyond any float") from None
         if finite and not math.isfinite(v):
             raise self.error(key, f"expected a finite number, got {v}")
+        if within is not None and not within.holds(v):
+            raise self.error(key, f"expected {within.text()}, got {v!r}")
         return v
 
     def text(self, key: str, default: Any = ...) -> str:

@@ -49,7 +49,7 @@ if TYPE_CHECKING:  # the calibration and models come from the caller; their modu
     from texsense.apps.posture.model import PostureModel
     from texsense.compensation.pipeline import Pipeline
 
-__all__ = ["Monitor", "Recorder", "peak_bounds", "raw_rise"]
+__all__ = ["Monitor", "Recorder", "raw_rise"]
 
 log = logging.getLogger("texsense.monitor")
 
@@ -74,27 +74,6 @@ def _rounded(v: npt.ArrayLike, nd: int = 3) -> list[Any]:
 def _finite(x: float) -> float:
     """``np.nan_to_num`` of one float (NaN -> 0, an infinity -> the largest float), quickly."""
     return x if math.isfinite(x) else float(np.nan_to_num(x))
-
-
-def peak_bounds(pressure: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> dict[str, Any]:
-    """The bounds of a frame's peak (N/cm², rounded as the peak): every element's true
-    pressure between its lower and upper map puts the peak between their highest values
-    over the elements the peak counts (those with a pressure), the lower one at least 0 as
-    the map shows it (``no_negative``); the same rule as the report's band
-    (``texsense.apps.review``). None for a bound no counted element has.
-
-    >>> lower, upper = np.array([0.1, 0.7, 5.0]), np.array([0.4, 1.3, 9.0])
-    >>> peak_bounds(np.array([0.2, 1.0, np.nan]), (lower, upper))
-    {'peak_lower_ncm2': 0.7, 'peak_upper_ncm2': 1.3}
-    """
-    counted = np.isfinite(pressure)
-    out: dict[str, Any] = {}
-    for name, m in zip(("lower", "upper"), bounds, strict=True):
-        v = np.where(counted & np.isfinite(m), m, -np.inf).max(initial=-np.inf)
-        if name == "lower":
-            v = max(v, 0.0) if np.isfinite(v) else v
-        out[f"peak_{name}_ncm2"] = round(float(v), 3) if np.isfinite(v) else None
-    return out
 
 
 class Monitor:
@@ -505,7 +484,7 @@ class Monitor:
         if full:
             frame_stats, load = self._stats_of(frame.t, pressure)
             if bounds is not None and not self.raw_only:
-                frame_stats.update(peak_bounds(pressure, bounds))
+                frame_stats.update(stats.peak_bounds(pressure, bounds))
             posture = self._posture_of(frame.t, pressure, load)
         elif self.bed is not None:  # the side's vote feeds the turning schedule
             load = _finite(stats.one_frame_stats(pressure, self.layout, threshold=0.05)["load_N"])
@@ -660,7 +639,7 @@ class Monitor:
     def _remember(self, t: float, st: dict[str, Any], raw: dict[str, Any] | None) -> None:
         """One row of the charts' history: t, load, peak, area, centre of force x and y,
         without a calibration the peak rise and the elements responding, and with bounds
-        the peak's (:func:`peak_bounds`)."""
+        the peak's (:func:`texsense.apps.stats.peak_bounds`)."""
         cof = st.get("cof_cm") or [None, None]
         rise = raw or {}
         self.history.append((round(t, 3), st.get("load_N"), st.get("peak_ncm2"),

@@ -30,6 +30,7 @@ from texsense.compensation.intervals import HeldOut
 from texsense.data import modelfile, units
 from texsense.data.fitcache import remembered
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import Maybe, OneOf, RangeError, Real, Text, UnitOf, Whole, check_params
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
 
 __all__ = ["MODEL_FORMAT", "MODEL_VERSION", "HysteresisModel", "PreisachState", "scale_hysteresis"]
@@ -41,6 +42,23 @@ FEW_BRANCHES = 16
 #: The relative RMSE gain on held-out folds that lets one candidate replace another (with
 #: the one-standard-error rule).
 CLEAR_GAIN = 0.2
+
+#: The range of every parameter of a model (:mod:`texsense.data.ranges`; the hysteresis
+#: stage's are these), checked by the constructor.
+RANGES = {
+    "method": OneOf(("auto", "lsq", "thesis", "relay")),
+    "grid": Whole(2, 2000),
+    "cells": Maybe(Whole(1, 2000), "chosen by cross-validation"),
+    "smoothing": Maybe(Real(0.0, 1e12), "chosen by cross-validation"),
+    "folds": Whole(2, 100),
+    "input_name": Text(),
+    "output_name": Text(),
+    "input_unit": UnitOf(),
+    "output_unit": UnitOf(),
+}
+#: The bounds of a file's Everett table and output offset (output units), its input range.
+_OUTPUT = Real(-1e12, 1e12)
+_INPUT = Real(-1e9, 1e9)
 
 
 def _clearly_beats(challenger: Any, incumbent: Any) -> bool:
@@ -207,6 +225,7 @@ class HysteresisModel:
         self.output_name = output_name
         self.input_unit = input_unit
         self.output_unit = output_unit
+        check_params("the hysteresis model", RANGES, vars(self))
 
     # ------------------------------------------------------------------ fitting
     def fit(
@@ -549,16 +568,22 @@ class HysteresisModel:
                 input_unit=units.canonical(f.text("input.unit")),
                 output_unit=units.canonical(f.text("output.unit")),
             )
+        except RangeError as e:
+            raise f.error(f"params.{e.key}", str(e)) from None
         except TypeError as e:
             raise f.error("params", str(e)) from None
         except UnitError as e:
             raise FormatError(f.source, str(e)) from None
-        table = f.array("everett", ndim=2)
+        table = f.array("everett", ndim=2, within=_OUTPUT)
         if table.shape[0] != table.shape[1] or table.shape[0] != f.number("grid"):
             raise f.error("everett", f"must be grid x grid, got {table.shape}")
         model.everett_ = table
-        model.u_min_, model.u_max_ = f.number("input.min"), f.number("input.max")
-        model.offset_, model.sign_ = f.number("output.offset"), f.number("output.sign")
+        model.u_min_ = f.number("input.min", within=_INPUT)
+        model.u_max_ = f.number("input.max", within=_INPUT)
+        model.offset_, model.sign_ = (
+            f.number("output.offset", within=_OUTPUT),
+            f.number("output.sign"),
+        )
         if not model.u_max_ > model.u_min_:
             raise f.error("input", "max must exceed min")
         if model.sign_ not in (1.0, -1.0):

@@ -64,6 +64,17 @@ def _load_stages() -> None:
 
 _load_stages()
 
+
+def ranges_table() -> str:
+    """Every stage's declared parameter ranges (``Stage.ranges``) as a Markdown table, as
+    docs/pipeline.md lists them."""
+    rows = ["| stage | parameter | range |", "|---|---|---|"]
+    for name in sorted(STAGES):
+        for key, kind in STAGES[name].ranges.items():
+            rows.append(f"| `{name}` | `{key}` | {kind.text()} |")
+    return "\n".join(rows)
+
+
 __all__ = [
     "STAGES",
     "Convert",
@@ -77,5 +88,6 @@ __all__ = [
     "chain_from_dict",
     "load_chain",
     "load_stage",
+    "ranges_table",
     "stage_from_dict",
 ]

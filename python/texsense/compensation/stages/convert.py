@@ -5,7 +5,7 @@ linear calibration, offset and gain per element (``linear``). Both run the compi
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -17,10 +17,20 @@ from texsense.compensation.stage import Stage
 from texsense.data import units
 from texsense.data.layout import Layout
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import Kind, Maybe, OneOf, Real, UnitOf
 from texsense.data.recording import QUANTITIES, Recording
 from texsense.exceptions import ParameterError
 
 __all__ = ["Convert", "Linear"]
+
+#: The bounds of a conversion's learned numbers in a file: the material curve (mm, pF), the
+#: elements' offsets (pF) and gains (fit_conversion refuses gains below 0.05), a linear
+#: calibration's offsets and gains (the range of ``--offset`` and ``--gain``).
+_CURVE_MM = Real(-1e3, 1e3, unit="mm")
+_CURVE_PF = Real(-1e6, 1e6, unit="pF")
+_GAIN = Real(0.0, 1e3, lo_open=True)
+_LINEAR_OFFSET = Real(-1e15, 1e15)
+_LINEAR_GAIN = Real(-1e15, 1e15, nonzero=True)
 
 
 class _Conversion(Stage):
@@ -66,6 +76,12 @@ class Convert(_Conversion):
     name = "convert"
     _reads = ("capacitance", "pF")
     _gives = ("compression", "mm")
+
+    #: the range of every parameter (:mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {
+        "thickness_mm": Real(0.0, 100.0, lo_open=True, unit="mm"),
+        "uniform_pressure_ncm2": Real(0.0, 1e4, lo_open=True, unit="N/cm2"),
+    }
 
     #: learned: the material curve (compression in mm, capacitance in pF of a reference
     #: element) and every element's offset (pF) and gain (eq. 2.1)
@@ -132,10 +148,10 @@ class Convert(_Conversion):
     @classmethod
     def _fitted_from_json(cls, fields: Fields, params: Mapping[str, Any]) -> dict[str, Any]:
         return {
-            "curve_compression_mm": fields.array("curve.compression_mm", ndim=1),
-            "curve_capacitance_pF": fields.array("curve.capacitance_pF", ndim=1),
-            "offset_pF": fields.array("elements.offset_pF", ndim=1),
-            "gain": fields.array("elements.gain", ndim=1),
+            "curve_compression_mm": fields.array("curve.compression_mm", 1, within=_CURVE_MM),
+            "curve_capacitance_pF": fields.array("curve.capacitance_pF", 1, within=_CURVE_PF),
+            "offset_pF": fields.array("elements.offset_pF", 1, within=_CURVE_PF),
+            "gain": fields.array("elements.gain", 1, within=_GAIN),
         }
 
 
@@ -160,6 +176,15 @@ class Linear(_Conversion):
     """
 
     name = "linear"
+
+    #: the range of every parameter (:mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {
+        "input_quantity": OneOf(tuple(QUANTITIES)),
+        "input_unit": UnitOf(),
+        "output_quantity": Maybe(OneOf(tuple(QUANTITIES)), "the readings' own"),
+        "output_unit": Maybe(UnitOf(), "the readings' own"),
+        "full_scale": Maybe(Real(0.0, 1e15, lo_open=True), "no top"),
+    }
 
     #: learned: every element's offset and gain
     offset_: np.ndarray
@@ -207,8 +232,8 @@ class Linear(_Conversion):
         for q, u in (self.reads, self.gives):
             if q not in QUANTITIES or units.quantity_of(units.canonical(u)) != QUANTITIES[q]:
                 raise ParameterError(f"unit {u!r} does not measure {q!r}")
-        if self.full_scale is not None and not np.isfinite(self.full_scale):
-            raise ParameterError(f"full_scale must be a number, got {self.full_scale}")
+        if not np.all(gain != 0):
+            raise ParameterError(f"gain 0 for element {int(np.argmin(gain != 0))}")
         self.offset_, self.gain_ = offset, gain
         self._kernel = Converter(offset, gain)
 
@@ -231,4 +256,7 @@ class Linear(_Conversion):
 
     @classmethod
     def _fitted_from_json(cls, fields: Fields, params: Mapping[str, Any]) -> dict[str, Any]:
-        return {"offset": fields.array("offset", ndim=1), "gain": fields.array("gain", ndim=1)}
+        return {
+            "offset": fields.array("offset", 1, within=_LINEAR_OFFSET),
+            "gain": fields.array("gain", 1, within=_LINEAR_GAIN),
+        }

@@ -6,16 +6,19 @@ eq. 4.15-4.22) and the drift of eq. 5.8 after it (``drift``). Both run the compi
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
 from texsense._core import Curve, DriftBank, PreisachBank
+from texsense.compensation.drift import RANGES as DRIFT_RANGES
 from texsense.compensation.drift import DriftModel, StepFit
 from texsense.compensation.hysteresis import DEFAULT_CAPACITY, HysteresisModel
+from texsense.compensation.hysteresis._model import RANGES as MODEL_RANGES
 from texsense.compensation.stage import Stage
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import Kind
 from texsense.exceptions import ParameterError
 
 __all__ = ["Drift", "Hysteresis"]
@@ -35,6 +38,11 @@ class Hysteresis(Stage):
     name = "hysteresis"
     _reads = ("compression", "mm")
     _gives = ("pressure", "N/cm2")
+
+    #: the range of every parameter (the model's, :mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {
+        k: MODEL_RANGES[k] for k in ("method", "grid", "cells", "smoothing", "folds")
+    }
 
     #: learned: the Preisach model (its Everett function)
     model_: HysteresisModel
@@ -131,6 +139,9 @@ class Drift(Stage):
     name = "drift"
     _reads = ("pressure", "N/cm2")
     _gives = ("pressure", "N/cm2")
+
+    #: the range of every parameter (the model's, :mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {k: DRIFT_RANGES[k] for k in ("kind", "rest_rate")}
 
     #: learned: γ and the kernel; how well γ fitted the held steps (after fit only)
     model_: DriftModel
