@@ -1,8 +1,9 @@
 """A new compensation stage in one module: clip pressures to the range the calibration knows.
 
 A stage follows the contract of :mod:`texsense.compensation.stage`: parameters in the
-constructor, ``fit`` learns (here: the largest pressure of a calibration record) and returns
-the stage, the batch path ``_block`` serves ``step`` and ``run``, and the learned state goes
+constructor, each with its declared range (``ranges``, checked when the stage is made),
+``fit`` learns (here: the largest pressure of a calibration record) and returns the stage,
+the batch path ``_block`` serves ``step`` and ``run``, and the learned state goes
 to and from its file. Setting ``name`` registers it (``STAGES``): model files and chains find
 it by that name; saved in ``texsense/compensation/stages/`` it is imported with the package.
 ``tests/test_extending.py`` runs the shared contract check on it.
@@ -11,13 +12,14 @@ it by that name; saved in ``texsense/compensation/stages/`` it is imported with 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
 from texsense.compensation.stage import Stage
 from texsense.data.modelfile import Fields
+from texsense.data.ranges import Kind, Real
 
 
 class Clip(Stage):
@@ -27,6 +29,9 @@ class Clip(Stage):
     name = "example-clip"
     _reads = ("pressure", "N/cm2")
     _gives = ("pressure", "N/cm2")
+
+    #: the range of every parameter, checked by the constructor (:mod:`texsense.data.ranges`)
+    ranges: ClassVar[Mapping[str, Kind]] = {"margin": Real(1.0, 100.0)}
 
     #: learned: the largest pressure of the calibration record (N/cm²)
     top_: float

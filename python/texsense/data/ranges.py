@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from texsense.data import units
 from texsense.exceptions import ParameterError, UnitError, shown
 
 __all__ = [
@@ -214,8 +215,6 @@ class UnitOf(Kind):
     """A unit texsense knows (:func:`texsense.data.units.canonical`)."""
 
     def holds(self, value: Any) -> bool:
-        from texsense.data import units
-
         if not isinstance(value, str):
             return False
         try:
