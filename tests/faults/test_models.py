@@ -50,9 +50,13 @@ def _killable_cli(*args: str, limit: int):
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory):
-    """A 4 x 4 mat's calibration inputs: material record, unloaded and uniform recordings,
-    and a recording to process."""
-    d = tmp_path_factory.mktemp("models")
+    """A 4 x 4 mat's calibration inputs (:func:`calibration_inputs`)."""
+    return calibration_inputs(tmp_path_factory.mktemp("models"))
+
+
+def calibration_inputs(d: Path) -> Path:
+    """A 4 x 4 mat's calibration inputs in ``d``: material record, unloaded and uniform
+    recordings, and a recording to process."""
     mat = VirtualMat.prototype(16, "textile-3mm", seed=4)
     n, ft = 16, mat.cdc.frame_time_s(16)
     mat.scan(np.arange(8) * ft, np.zeros((8, n))).capacitance.save(d / "base.h5")

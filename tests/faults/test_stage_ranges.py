@@ -59,22 +59,9 @@ def calibration_files(tmp_path_factory):
     """A 4 x 4 mat's calibration made by ``texsense calibrate mat`` and a recording (as
     test_models.py makes them)."""
     from faults.conftest import run_cli
-    from faults.test_models import _calibrate
-    from texsense.calibration.workflows import material_record
-    from texsense.io.columns_csv import write_columns_csv
-    from texsense.sim import protocols
-    from texsense.sim.mat import VirtualMat
+    from faults.test_models import _calibrate, calibration_inputs
 
-    d = tmp_path_factory.mktemp("cal")
-    mat = VirtualMat.prototype(16, "textile-3mm", seed=4)
-    n, ft = 16, mat.cdc.frame_time_s(16)
-    mat.scan(np.arange(8) * ft, np.zeros((8, n))).capacitance.save(d / "base.h5")
-    mat.scan((8 + np.arange(8)) * ft, np.ones((8, n))).capacitance.save(d / "uniform.h5")
-    mat.scan((20 + np.arange(20)) * ft, np.full((20, n), 1.5)).capacitance.save(d / "raw.h5")
-    material = material_record(
-        protocols.run_protocol("calibration", "textile-3mm", seed=9, sample_hz=None)
-    )
-    write_columns_csv(d / "material.csv", material)
+    d = calibration_inputs(tmp_path_factory.mktemp("cal"))
     rc, _, err = run_cli(*_calibrate(d, d / "mat.json"))
     assert rc == 0, err
     return d
