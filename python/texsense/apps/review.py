@@ -398,8 +398,7 @@ def _bounds_series(review: Review) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for name, maps in zip(("lower", "upper"), review.bounds, strict=True):
         peak = np.full(rec.n_frames, np.nan)
-        m = np.where(counted[any_read], maps[any_read].astype(np.float64), -np.inf)
-        peak[any_read] = m.max(axis=1) * review.factor
+        peak[any_read] = stats.highest_bound(counted[any_read], maps[any_read]) * review.factor
         out[f"peak_{name}"] = peak
     return out
 

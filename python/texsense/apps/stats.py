@@ -54,6 +54,7 @@ __all__ = [
     "coefficient_of_variation",
     "contact_area",
     "frame_stats",
+    "highest_bound",
     "one_frame_stats",
     "peak_bounds",
     "peak_pressure",
@@ -253,25 +254,33 @@ def one_frame_stats(
     }
 
 
+def highest_bound(counted: np.ndarray, maps: np.ndarray) -> np.ndarray:
+    """The highest value of a bound's map over the readings the peak counts (``counted``),
+    along the last axis (one frame, or frames x elements): every element's true pressure
+    between its lower and upper map puts the peak between the highest lower and the highest
+    upper value. NaN where no counted reading has a bound. The one rule of the peak's band,
+    live (:func:`peak_bounds`) and in the report (``texsense.apps.review``)."""
+    m = np.asarray(maps, dtype=np.float64)
+    top = np.where(counted & np.isfinite(m), m, -np.inf).max(axis=-1, initial=-np.inf)
+    return np.where(np.isfinite(top), top, np.nan)
+
+
 def peak_bounds(pressure: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> dict[str, Any]:
-    """The bounds of a frame's peak (N/cm², rounded as the peak): every element's true
-    pressure between its lower and upper map puts the peak between their highest values
-    over the elements the peak counts (those with a pressure), the lower one at least 0 as
-    the map shows it (``no_negative``); the same rule as the report's band
-    (``texsense.apps.review``). None for a bound no counted element has.
+    """The bounds of a frame's peak (N/cm², rounded as the peak) by :func:`highest_bound`
+    over the elements with a pressure, the lower one at least 0 as the map shows it
+    (``no_negative``). None for a bound no counted element has.
 
     >>> lower, upper = np.array([0.1, 0.7, 5.0]), np.array([0.4, 1.3, 9.0])
     >>> peak_bounds(np.array([0.2, 1.0, np.nan]), (lower, upper))
     {'peak_lower_ncm2': 0.7, 'peak_upper_ncm2': 1.3}
     """
     counted = np.isfinite(pressure)
-    out: dict[str, Any] = {}
-    for name, m in zip(("lower", "upper"), bounds, strict=True):
-        v = np.where(counted & np.isfinite(m), m, -np.inf).max(initial=-np.inf)
-        if name == "lower":
-            v = max(v, 0.0) if np.isfinite(v) else v
-        out[f"peak_{name}_ncm2"] = round(float(v), 3) if np.isfinite(v) else None
-    return out
+    lo, hi = (float(highest_bound(counted, m)) for m in bounds)
+    lo = max(lo, 0.0) if lo == lo else lo
+    return {
+        f"peak_{name}_ncm2": round(v, 3) if v == v else None
+        for name, v in (("lower", lo), ("upper", hi))
+    }
 
 
 class LiveStats:
