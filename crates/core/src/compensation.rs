@@ -1,6 +1,7 @@
 //! The combined compensation stage: Preisach model, then drift (thesis eq. 5.8), frame by
 //! frame in one pass, so a batch needs no intermediate array.
 
+use crate::aligned::Row;
 use crate::convert::Curve;
 use crate::drift::{check_time_steps, DriftBank, DriftBlock};
 use crate::error::{check_len, CoreError};
@@ -78,8 +79,9 @@ impl CompensationBlock<'_> {
     /// chain's segment hands over its row without an array of its own for the inputs).
     pub fn row_in_place(&mut self, dt: f64, valid: &[bool], values: &mut [f64]) {
         let w = values.len();
-        let mut h = [0.0; MAX_BLOCK];
-        let h = &mut h[..w];
+        // on a cache line, as the rows' other arrays ([`crate::aligned`])
+        let mut h = Row([0.0; MAX_BLOCK]);
+        let h = &mut h.0[..w];
         self.preisach.row(values, valid, h);
         match (&mut self.drift, &self.level) {
             (Some(d), Some(curve)) => {

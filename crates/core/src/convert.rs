@@ -10,6 +10,7 @@
 use texsense_kernels::convert::{self as kernel, buckets};
 use texsense_kernels::stage;
 
+use crate::aligned::Lines;
 use crate::error::{check_len, frames_of, CoreError};
 
 /// A piecewise-linear curve `y(x)` over increasing `x`, held at its ends (`np.interp`).
@@ -114,8 +115,9 @@ fn splits(x: &[f64], bucket_start: &[u32]) -> Vec<f64> {
 /// reading scaled per element: a linear calibration).
 #[derive(Debug, Clone)]
 pub struct Converter {
-    offset: Vec<f64>,
-    gain: Vec<f64>,
+    /// Per element, on cache lines ([`Lines`]: the rows read eight at a time).
+    offset: Lines<f64>,
+    gain: Lines<f64>,
     curve: Option<Curve>,
 }
 
@@ -187,8 +189,8 @@ impl Converter {
             });
         }
         Ok(Self {
-            offset,
-            gain,
+            offset: Lines::from_slice(&offset),
+            gain: Lines::from_slice(&gain),
             curve,
         })
     }

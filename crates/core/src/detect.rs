@@ -18,6 +18,7 @@
 
 use texsense_kernels::detect::{self as kernel, Element, Limits};
 
+use crate::aligned::Lines;
 use crate::error::{check_len, CoreError};
 use crate::par::{block_size, for_blocks, parallel};
 use crate::snapshot::{Reader, Writer};
@@ -44,10 +45,12 @@ enum Validity<'a> {
 pub struct FailureDetector {
     params: DetectorParams,
     neighbours: Neighbours,
-    jump: Vec<f64>,
-    baseline: Option<Vec<f64>>,
-    max: Option<Vec<f64>>,
-    elements: Vec<Element<f64>>,
+    /// The limits and states per element on cache lines ([`Lines`]): the rows read eight
+    /// elements' at a time.
+    jump: Lines<f64>,
+    baseline: Option<Lines<f64>>,
+    max: Option<Lines<f64>>,
+    elements: Lines<Element<f64>>,
 }
 
 /// Scratch of one batch: the change of every reading since the element's last finite one
@@ -79,10 +82,10 @@ impl FailureDetector {
         Ok(Self {
             params,
             neighbours,
-            jump,
-            baseline,
-            max,
-            elements: vec![Element::default(); n],
+            jump: Lines::from_slice(&jump),
+            baseline: baseline.as_deref().map(Lines::from_slice),
+            max: max.as_deref().map(Lines::from_slice),
+            elements: Lines::new(Element::default(), n),
         })
     }
 

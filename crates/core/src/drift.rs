@@ -17,6 +17,7 @@ use std::borrow::Cow;
 
 use texsense_kernels::drift::{self as kernel, Element, Settings};
 
+use crate::aligned::Lines;
 use crate::error::{check_len, CoreError};
 use crate::par::{block_size, run_frames, FrameBlock};
 use crate::snapshot::{Reader, Writer};
@@ -119,12 +120,14 @@ fn at(k: usize, i: usize, j: usize) -> usize {
 #[derive(Debug, Clone)]
 pub struct DriftBank {
     settings: DriftSettings,
-    elements: Vec<Element<f64>>,
-    /// K states per element, in groups of [`GROUP`] elements, term-major ([`at`]).
-    z: Vec<f64>,
+    /// On cache lines ([`Lines`]), as `z`: the SIMD rows read four elements to a register.
+    elements: Lines<Element<f64>>,
+    /// K states per element, in groups of [`GROUP`] elements, term-major ([`at`]), on cache
+    /// lines (a group's term is one register, one line).
+    z: Lines<f64>,
     /// The time clock's K states per element when two clocks run (else empty), laid out
     /// as `z`.
-    z_time: Vec<f64>,
+    z_time: Lines<f64>,
     /// The decay factors of the kernel's terms for a time step (`kernel::frame`), the
     /// blocks' start ([`DriftBank::prepare`]): a block whose frame has this step computes
     /// none (a stream of one frame per call would compute them anew in every block).
@@ -316,9 +319,9 @@ impl DriftBank {
                 gamma_time: 0.0,
                 exponent: 1.0,
             },
-            elements: vec![Element::default(); n],
-            z: vec![0.0; n.div_ceil(GROUP) * GROUP * k],
-            z_time: Vec::new(),
+            elements: Lines::new(Element::default(), n),
+            z: Lines::new(0.0, n.div_ceil(GROUP) * GROUP * k),
+            z_time: Lines::new(0.0, 0),
             memo: (f64::NAN, vec![1.0; k]),
         })
     }
@@ -362,9 +365,9 @@ impl DriftBank {
         }
         self.settings.gamma_time = gamma_time;
         self.z_time = if gamma_time != 0.0 {
-            vec![0.0; self.z.len()]
+            Lines::new(0.0, self.z.len())
         } else {
-            Vec::new()
+            Lines::new(0.0, 0)
         };
         Ok(self)
     }

@@ -25,6 +25,7 @@
 //! - [`text`]: rows of numbers in text files, the readers' fast path;
 //! - [`stats`]: one frame's pressure statistics on a grid, the station's per-frame numbers.
 
+pub mod aligned;
 pub mod bouc_wen;
 pub mod chain;
 pub mod compensation;

@@ -9,6 +9,7 @@
 //! Small batches (fewer than [`PARALLEL_MIN`] element-samples, e.g. one live frame) run the
 //! same blocks one after the other on the calling thread: identical arithmetic, no hand-off.
 
+use crate::aligned::Row;
 use rayon::prelude::*;
 
 /// Most elements per block (128 elements' states fit in a core's first-level cache).
@@ -179,8 +180,9 @@ where
     let par = parallel(dt.len(), n);
     for_blocks(out, n, blocks, par, |mut block, o| {
         let (start, width) = (o.start(), o.width());
-        let (mut x, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
-        let (x, ok) = (&mut x[..width], &mut ok[..width]);
+        // the inputs on a cache line ([`crate::aligned`])
+        let (mut x, mut ok) = (Row([0.0; MAX_BLOCK]), [false; MAX_BLOCK]);
+        let (x, ok) = (&mut x.0[..width], &mut ok[..width]);
         for (r, &d) in dt.iter().enumerate() {
             block.frame(d);
             let row = r * n + start;
