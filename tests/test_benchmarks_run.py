@@ -27,6 +27,7 @@ SMALL: dict[str, list[str]] = {
     "cli_start": ["--repeat", "1"],
     "mcu_budget": ["--frames", "10"],
     "muscle_sleeve": ["--sessions", "1", "--minutes", "2"],
+    "station_follow_cost": ["--frames", "10", "--rounds", "1"],
     "station_frame_cost": ["--frames", "10", "--rounds", "1"],
     "station_mats_cost": ["--mats", "3", "--frames", "2"],
     "step_ab": [
@@ -79,7 +80,6 @@ NOT_RUN: dict[str, str] = {
     "read_speed": _LONG + " (the PMD tree, 20,024 frames)",
     "report_speed": _LONG,
     "station_failover": _SERVERS,
-    "station_follow_cost": _LONG + " (--frames 20 --rounds 1)",
     "station_group_capacity": _SERVERS,
     "station_load": _SERVERS,
     "station_mat_cost": _LONG + " (--frames 20 --repeat 1: the virtual mats' calibrations)",

@@ -108,6 +108,12 @@ class Monitor:
         Default: ``bed`` with ``bed``, else ``seat``.
     """
 
+    #: frames never seen (gaps in the frames' numbers, ``seq``: lost on the way, skipped by
+    #: the clock, published while no station held the mat) and the latest
+    #: :data:`MISSED_RUNS` runs of them, each (first seq, last seq)
+    missed: int
+    missed_runs: deque[tuple[int, int]]
+
     def __init__(
         self,
         source: Source,
@@ -170,9 +176,7 @@ class Monitor:
         self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
         self._skimmed = False  # frames not read since the last frame processed
         self.last_seq: int | None = None  # of the last frame on the time line
-        self.missed = 0  # frames never seen: gaps in the frames' numbers (seq)
-        #: the latest :data:`MISSED_RUNS` of them, each (first seq, last seq)
-        self.missed_runs: deque[tuple[int, int]] = deque(maxlen=MISSED_RUNS)
+        self.missed, self.missed_runs = 0, deque(maxlen=MISSED_RUNS)  # frames never seen (seq)
         self.clock = FrameClock(rate=source.rate)
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
