@@ -38,6 +38,7 @@ SMALL: dict[str, list[str]] = {
         "--pairs",
         "1",
     ],
+    "step_builds": [sys.executable, "--pairs", "1", "--rows", "4", "--frames", "20"],  # vs itself
     "step_sizes": ["--rounds", "1", "--frames", "20"],
     "step_stages": ["--frames", "20"],
 }
