@@ -4,9 +4,10 @@ with no ``nan`` in it. The numbers are not judged (a smoke test: the sizes are f
 to mean anything). A script in neither :data:`SMALL` nor :data:`NOT_RUN` fails the test, so
 a new benchmark is listed here with its small size or the reason it is not run.
 
-Measured on the 2-core machine under a load of 8 (other tests, busy loops): the scripts of
-:data:`SMALL` take 48 s of wall time one after the other (mcu_budget 17 s of it, the
-emulated Cortex-M4), 52 s with the test's own start; the suite's two workers share them."""
+Measured on the 2-core machine: the 14 scripts of :data:`SMALL` take 25 s of wall time one
+after the other at a load of 6 (26 s with the test's start); 10 of them took 48 s under a
+load of 8 with cold caches (the virtual mats' calibrations, mcu_budget's builds: 17 s of
+it). The suite's two workers share them."""
 
 from __future__ import annotations
 
@@ -28,8 +29,10 @@ SMALL: dict[str, list[str]] = {
     "cli_start": ["--repeat", "1"],
     "mcu_budget": ["--frames", "10"],
     "muscle_sleeve": ["--sessions", "1", "--minutes", "2"],
+    "pipeline_virtual": [],  # (~5 s as it is)
     "station_follow_cost": ["--frames", "10", "--rounds", "1"],
     "station_frame_cost": ["--frames", "10", "--rounds", "1"],
+    "station_mat_cost": ["--frames", "5", "--repeat", "1"],
     "station_mats_cost": ["--mats", "3", "--frames", "2"],
     "step_ab": [
         str(ROOT / "python/texsense/compensation/pipeline.py"),
@@ -40,6 +43,7 @@ SMALL: dict[str, list[str]] = {
     ],
     "step_builds": [sys.executable, "--pairs", "1", "--rows", "4", "--frames", "20"],  # vs itself
     "step_sizes": ["--rounds", "1", "--frames", "20"],
+    "stocking_wear": [],  # (~2 s as it is)
     "step_stages": ["--frames", "20"],
 }
 
@@ -73,7 +77,6 @@ NOT_RUN: dict[str, str] = {
     "night_oracle": _LONG + " (8-hour simulated nights)",
     "pipeline_repair": _LONG + "; writes docs/img/repair_pmd.png by default",
     "pipeline_speed": _LONG + " (--quick)",
-    "pipeline_virtual": "no small size yet: 13-16 s",
     "playback_memory": _LONG,
     "posture_defaults": _LONG + " (nested leave-one-subject-out)",
     "posture_pmd": _LONG + " (leave-one-subject-out)",
@@ -84,10 +87,8 @@ NOT_RUN: dict[str, str] = {
     "station_failover": _SERVERS,
     "station_group_capacity": _SERVERS,
     "station_load": _SERVERS,
-    "station_mat_cost": "16 s at --frames 5 --repeat 1 (the virtual mats' calibrations)",
-    "stocking_wear": "no small size yet: ~10 s",
     "takeover_gap": _LONG,
-    "virtual_sensor": _LONG,
+    "virtual_sensor": "writes docs/img/sim_*.png (no option to write elsewhere); ~5 s",
     "ward_feed_cost": _SERVERS,
     "ward_open": _SERVERS + " (and Chromium)",
 }
