@@ -1,6 +1,6 @@
 """Speed of the eq. 6.14 neighbour-mean repair: Rust core versus a NumPy baseline.
 
-Run:  .venv/bin/python benchmarks/bench_repair.py
+Run:  .venv/bin/python benchmarks/bench_repair.py [--quick]
 
 Both implementations are run in the same process on the same frames, so the ratio is
 meaningful even on a shared, noisy machine; absolute numbers are not.
@@ -40,10 +40,16 @@ def numpy_repair(frames: np.ndarray, valid: np.ndarray, layout: Layout) -> np.nd
 
 
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="50 times fewer frames (a smoke test)")
+    quick = 50 if ap.parse_args().quick else 1
     rng = np.random.default_rng(0)
     print("| elements | frames | failed | numpy [Melem/s] | rust [Melem/s] | rust / numpy |")
     print("|---:|---:|---:|---:|---:|---:|")
-    for rows, cols, n_frames in ((8, 12, 20000), (32, 32, 5000), (64, 64, 1000)):
+    for rows, cols, frames in ((8, 12, 20000), (32, 32, 5000), (64, 64, 1000)):
+        n_frames = frames // quick
         lay = Layout.grid(rows, cols)
         frames = rng.random((n_frames, lay.n_elements)).astype(np.float32)
         valid = rng.random(frames.shape) > 0.25

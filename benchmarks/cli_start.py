@@ -1,6 +1,6 @@
 """How long the command line takes to start, as a ratio to importing numpy in the same run.
 
-Run:  .venv/bin/python benchmarks/cli_start.py
+Run:  .venv/bin/python benchmarks/cli_start.py [--repeat 15]
 
 Each command is a fresh process, started 15 times in turn with the baseline
 (``python -c "import numpy"``); the table gives the medians and the ratio (target of issue
@@ -37,6 +37,7 @@ def wall(cmd: list[str], env: dict[str, str] | None) -> float:
 def main(repeat: int = 15) -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--before", help="another checkout's python/ folder, run beside")
+    ap.add_argument("--repeat", type=int, default=repeat, help=f"starts of each ({repeat})")
     args = ap.parse_args()
     runs = {k: (cmd, None) for k, cmd in RUNS.items()}
     if args.before:
@@ -45,7 +46,7 @@ def main(repeat: int = 15) -> None:
             cmd = [sys.executable, "-m", "texsense.cli", flag]
             runs[f"texsense {flag} (before)"] = (cmd, env)
     times: dict[str, list[float]] = {k: [] for k in runs}
-    for _ in range(repeat):  # interleaved, so a busy moment hits every command alike
+    for _ in range(args.repeat):  # interleaved, so a busy moment hits every command alike
         for label, (cmd, env) in runs.items():
             times[label].append(wall(cmd, env))
     base = statistics.median(times['python -c "import numpy"'])

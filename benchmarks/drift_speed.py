@@ -1,7 +1,7 @@
 """Speed of the drift stage: Preisach + recursive drift for 240 elements over 4 h at 10 Hz,
 and the exact windowed model against the recursive form as the history grows.
 
-Run:  .venv/bin/python benchmarks/drift_speed.py
+Run:  .venv/bin/python benchmarks/drift_speed.py [--quick]
 """
 
 from __future__ import annotations
@@ -22,11 +22,16 @@ from texsense.sim.protocols import run_protocol
 
 
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="6 min instead of 4 h (a smoke test)")
+    hours = 0.1 if ap.parse_args().quick else 4.0
     cal = run_protocol("calibration", "textile-6mm", seed=0, sample_hz=None)
     model = HysteresisModel().fit(cal.labels["compression_mm"], cal.labels["pressure_ncm2"])
     drift = DriftModel(-0.025, log_kernel())
     rng = np.random.default_rng(0)
-    n_t, n = 4 * 3600 * 10, 240
+    n_t, n = round(hours * 3600 * 10), 240
     t = np.arange(n_t) / 10.0
     # every element cycles slowly with its own phase and amplitude (a person on a seat)
     u = model.u_max_ * (
@@ -41,8 +46,8 @@ def main() -> None:
     print("| what | time (best of 3) |")
     print("|---|---:|")
     print(
-        f"| Preisach alone, 240 elements x 4 h at 10 Hz ({n_t * n / 1e6:.1f} M element-samples) "
-        f"| {t_h:.2f} s |"
+        f"| Preisach alone, 240 elements x {hours:g} h at 10 Hz ({n_t * n / 1e6:.1f} M "
+        f"element-samples) | {t_h:.2f} s |"
     )
     print(f"| recursive drift alone (K = {log_kernel().weights.size}), same | {t_d:.2f} s |")
     print(f"| **Preisach + drift in one pass (`Compensation`)** | **{t_c:.2f} s** |")
@@ -53,7 +58,7 @@ def main() -> None:
     )
     print("|---|---:|---:|---:|---:|")
     k = log_kernel().weights.size
-    for minutes in (10, 60, 240):
+    for minutes in (10, 60, 240) if hours == 4.0 else (1, 6):
         m = minutes * 60 * 10
         tt, hh = t[:m], h[:m, 0]
         e0 = time.perf_counter()

@@ -1,6 +1,7 @@
 """Contractions found by a textile sleeve on a virtual forearm, with and without compensation.
 
 Run:  .venv/bin/python benchmarks/muscle_sleeve.py [--plot docs/img/muscle_sleeve.png]
+      [--sessions 5] [--minutes 10]
 
 Five 10-minute sessions (texsense.sim.muscle: random contractions of 0.4-2 s and intensity
 0.2-1, a minute of rest every three, the sleeve's preload of 0.15 N/cm² all the time), read at
@@ -50,14 +51,16 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--plot", type=Path)
     ap.add_argument("--first-seed", type=int, default=0, help="sessions first-seed .. first-seed+4")
+    ap.add_argument("--sessions", type=int, default=5, help="how many sessions (5)")
+    ap.add_argument("--minutes", type=float, default=10.0, help="of each session (10)")
     args = ap.parse_args()
     totals = {n: [0, 0, [], [], []] for n in VARIANTS}
     shown = None
     head = " | ".join(f"{n}: found / false per min (at rest) / intensity error" for n in VARIANTS)
     print(f"| session | contractions | {head} |")
     print("|---:|---:|" + "---|" * len(VARIANTS))
-    for seed in range(args.first_seed, args.first_seed + 5):
-        s = session(10.0, seed=seed)
+    for seed in range(args.first_seed, args.first_seed + args.sessions):
+        s = session(args.minutes, seed=seed)
         cal = sleeve_calibration(seed=seed)
         rec = s.scan.capacitance
         cells = []

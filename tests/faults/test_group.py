@@ -50,10 +50,11 @@ REPLAY = os.environ.get("TEXSENSE_GROUP_PUBLISHER", "replay") != "simulate"
 #: a killed member's mats are back within this (issue 38), s
 TAKEOVER_S = 10.0
 #: the group raises each of the reference's alerts within this of the reference's time
-#: (simulated s), and within the time of the mat's frames that one read and the other did
-#: not (a takeover's gap, frames peeked at while far behind): that time counts as loaded
-#: where a frame read on either side of it is (ExposureTracker.step), so an alert comes at
-#: most that much later, and earlier by a relief that fell inside it
+#: (simulated s), and within the time in which their exposures may differ (frames_apart: a
+#: run of frames one never saw and the other did not miss alike, such as a takeover's gap,
+#: from the frame read before it to the one after; frames peeked at while far behind): that
+#: time counts as loaded where a frame read on either side of it is (ExposureTracker.step),
+#: so an alert comes at most that much later, and earlier by a relief that fell inside it
 #: (tests/monitor/test_alerts.py, docs/station.md "What is lost at worst")
 ALERT_TOL_S = 10.0
 #: a mat's frame period in simulated s (the seat's 1.6 s, every EVERY-th published)
@@ -281,11 +282,57 @@ def checkpoint_times(url: str, group: str) -> dict[str, float]:
     return {str(m): float(t) for m, t in rows}
 
 
+def frames_apart(ours: dict, theirs: dict) -> int:
+    """The frame periods of a mat in which two stations' exposures may differ, from their
+    ``GET /api/mats`` rows: each run of frames that one never saw (``missed_runs``) and the
+    other did not miss alike spans its frames and one period more, from the frame read before
+    it to the one after (that time counts as loaded where either of those is,
+    ExposureTracker.step's ``skipped``: one frame lost at the start of a relief moves an
+    alert two periods earlier); a run missed alike (the broker's frames while it was down,
+    the same frames read on either side) is the same to both. Frames beyond the runs named
+    (only the latest are) and frames peeked at, whose runs are not known, count twice."""
+    runs = [{tuple(r) for r in s.get("missed_runs") or []} for s in (ours, theirs)]
+    apart = sum(last - first + 2 for first, last in runs[0] ^ runs[1])
+    for s, named in zip((ours, theirs), runs, strict=True):
+        unnamed = (s.get("missed") or 0) - sum(last - first + 1 for first, last in named)
+        apart += 2 * (max(unnamed, 0) + (s.get("peeked") or 0))
+    return apart
+
+
+def test_a_frame_lost_at_a_relief_is_within_the_tolerance():
+    """One frame lost at a takeover just as a relief of two frames began, another by the
+    reference at the broker's restart, while the person sat: the same count (1 and 1) is not
+    the same frames, and the group's lost frame made the 12.8 s from the frame before it to
+    the one after loaded (never relief: docs/station.md, "What is lost at worst"), two
+    periods, more than the older tolerance (10 s + the difference of the counts) allowed.
+    (Round 15's flake had the same numbers, with another cause: the sensor's state,
+    tests/monitor/test_group_leases.py.) Judged as the fault test judges, on trackers."""
+    from texsense import Layout
+    from texsense.monitor import ExposureTracker
+
+    loads = [1.0] * 4 + [0.0] * 2 + [1.0] * 60  # frames FRAME_S apart; relieved at 4 and 5
+    lost = {"ours": 4, "ref": 31}
+    raised = {}
+    for who, frame in lost.items():
+        tr = ExposureTracker(Layout.grid(1, 1), reposition_min=REPOSITION_MIN, offload_min=1)
+        for k, p in enumerate(loads):
+            if k == frame:
+                continue
+            events = tr.step(np.array([p]), k * FRAME_S, skipped=k == frame + 1)
+            if any(e.kind == "reposition" for e in events):
+                raised[who] = k * FRAME_S
+                break
+    rows = {who: {"missed": 1, "missed_runs": [[k, k]], "peeked": 0} for who, k in lost.items()}
+    apart = raised["ref"] - raised["ours"]
+    assert apart == pytest.approx(2 * FRAME_S)  # the group's alert two periods early
+    assert apart <= ALERT_TOL_S + FRAME_S * frames_apart(rows["ours"], rows["ref"])
+    # a run missed alike is the same to both
+    assert frames_apart(rows["ours"], rows["ours"]) == 0
+
+
 def test_the_alerts_of_the_reference_all_raised_none_twice(cluster, fault_row):
     def read() -> tuple[dict, dict, dict, dict]:
-        seen = {who: {k: (m["holder"], m.get("behind"), m.get("peeked"), m.get("missed"))
-                      for k, m in cluster.mats_of(who).items()}
-                for who in ("a", "ref")}  # fmt: skip
+        seen = {who: cluster.mats_of(who) for who in ("a", "ref")}
         done = checkpoint_times(cluster.pg.url, "ward")
         ref_done = checkpoint_times(cluster.reference_db, "ref")
         horizon = {k: min(t, ref_done.get(k, 0.0)) for k, t in done.items()}
@@ -293,13 +340,14 @@ def test_the_alerts_of_the_reference_all_raised_none_twice(cluster, fault_row):
             reposition_alerts(cluster.reference_db, "ref"), seen  # fmt: skip
 
     def tolerance(mat: str, seen: dict) -> float:
-        """ALERT_TOL_S and the time of the mat's frames that one of the group and the
-        reference read and the other did not, simulated s: those they peeked at, and those
-        the group never saw beyond the reference's (the frames that neither saw, such as the
-        broker's while it was down, are the same to both)."""
-        (_, _, peeked, missed), (_, _, ref_peeked, ref_missed) = seen["a"][mat], seen["ref"][mat]
-        apart = (peeked or 0) + (ref_peeked or 0) + max((missed or 0) - (ref_missed or 0), 0)
-        return ALERT_TOL_S + FRAME_S * apart
+        """ALERT_TOL_S and the time in which the group's and the reference's exposure of the
+        mat may differ (:func:`frames_apart`), simulated s."""
+        return ALERT_TOL_S + FRAME_S * frames_apart(seen["a"][mat], seen["ref"][mat])
+
+    def said(mat: str, seen: dict) -> list:
+        """What an assertion says of the mat: holder, behind, peeked, missed (its runs)."""
+        return [[m.get(k) for k in ("holder", "behind", "peeked", "missed", "missed_runs")]
+                for m in (seen["a"][mat], seen["ref"][mat])]  # fmt: skip
 
     def judged(r: tuple[dict, dict, dict, dict]) -> int:
         """The reference's alerts that both databases are the tolerance past: an alert is
@@ -323,20 +371,14 @@ def test_the_alerts_of_the_reference_all_raised_none_twice(cluster, fault_row):
         got = [t for t, _ in ours.get(mat, [])]
         for w in (w for w in want if w < until):  # raised, once
             twins = [g for g in got if abs(g - w) <= tol]
-            assert len(twins) == 1, (mat, got, want, tol, seen["a"][mat], seen["ref"][mat])
+            assert len(twins) == 1, (mat, got, want, tol, said(mat, seen))
             worst = max(worst, abs(twins[0] - w))
             n += 1
         for g in (g for g in got if g < until):  # none that the reference did not raise
-            assert any(abs(g - w) <= tol for w in want), (
-                mat,
-                got,
-                want,
-                tol,
-                seen["a"][mat],
-                seen["ref"][mat],
-            )
+            assert any(abs(g - w) <= tol for w in want), (mat, got, want, tol, said(mat, seen))
     assert n >= enough, n
-    skims = {who: [sum(v[i] or 0 for v in seen[who].values()) for i in (1, 2, 3)] for who in seen}
+    skims = {who: [sum(v.get(k) or 0 for v in seen[who].values())
+                   for k in ("behind", "peeked", "missed")] for who in seen}  # fmt: skip
     fault_row(
         "group",
         "alerts across a takeover",

@@ -41,6 +41,24 @@ def test_a_taken_checkpoint_restores_the_mat_where_it_was(seat_mat, tmp_path):
     assert c.state == "live" and b.state == "live" and b.last_seen is not None
 
 
+def test_the_frames_never_seen_go_with_the_mat_and_say_which(seat_mat, tmp_path):
+    """Frames lost (seq 10-11 on the way, 20 at a takeover) are counted (``missed``) and named
+    as runs (``missed_runs``: the group's fault test tells a run two stations missed alike
+    from two runs of the same count), and both go over a checkpoint."""
+    config, payloads = seat_mat
+    a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)
+    for k in [*range(10), *range(12, 20)]:
+        a.handle(*payloads[k])
+    b = MatEntry(config, EventStore(":memory:"), tmp_path / "b", 1.0)
+    checkpoint.restore(b, [checkpoint.save(a, often=False), checkpoint.save(a)])
+    b.handle(*payloads[21])
+    assert b.monitor.missed == 3 and list(b.monitor.missed_runs) == [(10, 11), (20, 20)]
+    assert b.status()["missed_runs"] == [[10, 11], [20, 20]]
+    state = {**b.monitor.resume_state(), "missed_runs": [1, 2, 3]}  # not pairs: refused
+    with pytest.raises(ParameterError, match="missed_runs"):
+        b.monitor.resume(state)
+
+
 def test_the_tracker_s_packed_state_is_its_state_exactly(seat_mat, tmp_path):
     config, payloads = seat_mat
     a = MatEntry(config, EventStore(":memory:"), tmp_path / "a", 1.0)

@@ -255,7 +255,11 @@ def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatc
     (50 s after two minutes) and called every mat silent ("no data") while its frames waited
     in the inbox. Two mats send 100 frames a second each to a station that reads 50: it
     skips the older frames of a mat whose newer ones wait, counts them, shows the newest,
-    and judges silence on what it has read."""
+    and judges silence on what it has read. Judged in frames, not seconds (the machine is
+    shared: a stall of the process stops the sender too): the frames waiting in the inbox
+    and how far the frame each mat shows is behind the newest one sent stay bounded, where a
+    station that reads every frame in order (``max_wait_s`` infinite) falls ever further
+    behind (here ~110 of a mat's 150 frames and ~220 waiting when the sending stops)."""
     import threading
 
     st = station("bed1", "bed2")
@@ -269,8 +273,8 @@ def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatc
 
         monkeypatch.setattr(entry.monitor, "process", busy)
     sent = {"bed1": 0, "bed2": 0}
-    lags: list[float] = []
-    ages: list[float] = []  # how old the frame each mat shows is
+    waiting: list[int] = []  # frames waiting in the inbox, polled
+    behind: list[int] = []  # frames between the newest sent and the one a mat shows
 
     async def run() -> None:
         inbox = st.open_inbox()
@@ -287,15 +291,17 @@ def test_a_busy_station_stays_current_and_calls_no_sending_mat_silent(monkeypatc
         sender = threading.Thread(target=mats)
         sender.start()
         while sender.is_alive() or inbox.waiting:
-            now = time.time()
-            lags.append(now - inbox.read_until(now))
-            ages.extend(now - e.last_wall for e in st.mats.values() if e.last_wall is not None)
+            waiting.append(inbox.waiting)
+            for m, e in st.mats.items():
+                shown = e.monitor.latest["seq"] if e.monitor.latest else -1
+                behind.append(sent[m] - 1 - shown)
             await asyncio.sleep(0.01)
         watch.cancel()
 
     asyncio.run(run())
-    assert max(lags) < 1.0, f"the station fell {max(lags):.2f} s behind"  # (before: 6.7 s)
-    assert max(ages) < 1.2, f"a mat showed a frame {max(ages):.2f} s old"
+    # the old station: ~220 frames waiting, a mat showing a frame ~110 behind the newest
+    assert max(waiting) <= 100, f"{max(waiting)} frames waited in the inbox"
+    assert max(behind) <= 50, f"a mat showed a frame {max(behind)} behind the newest sent"
     assert not st.store.events(kind="stale"), "a mat that kept sending was called silent"
     for m, entry in st.mats.items():
         assert entry.state == "live" and entry.messages == sent[m] == 150

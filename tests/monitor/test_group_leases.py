@@ -334,3 +334,29 @@ def test_a_turns_budget_gives_one_turn_at_least_and_more_until_it_is_spent(monke
     assert sum(1 for _ in group.at_least_once_for(1.0)) == 3  # at 0 (the first), 0.5, 0.9
     ticks = iter([5.0, 5.0])
     assert sum(1 for _ in group.at_least_once_for(0.0)) == 1
+
+
+def test_a_calibrated_mat_s_sensor_state_is_written_once_it_has_read_frames(db, seat_mat):
+    """Round 15's flake of the group fault test: a member took its mats before any frame came
+    (the full checkpoint, the sensor's state, written then), was killed four frames later,
+    and its survivor went on from the monitor's state after those frames with a pipeline that
+    had read none: an alert 12.8 s before the reference's. The first checkpoint after a mat
+    reads frames here queues a full one (at most FULL_PER_S a second), not SENSOR_EVERY
+    intervals later."""
+    from texsense.station import group
+    from texsense.station.broker import BrokerURL
+
+    config, payloads = seat_mat
+    st = group.GroupStation(BrokerURL("127.0.0.1", 9), [config], group="g", member="a", db=db,
+                            page="http://a/", record_dir=".", checkpoint_s=2.0)  # fmt: skip
+    written: list[bool] = []  # with the sensor's state
+    st.journal.checkpoint = lambda mat, *a, **k: written.append(a[4] is not None)  # type: ignore
+    st.grant([lease.Grant(config.id, 1, 0)])  # fresh (no blobs), before any frame
+    t0 = time.monotonic() + 1.0
+    assert st.checkpoints(t0) == 1 and written == [False]  # the reset state: nothing to write
+    for k in range(1, 4):  # three frames, a checkpoint after each (none full before)
+        st.mats[config.id].handle(*payloads[k - 1])
+        st.checkpoints(t0 + 2.1 * k)
+    assert True in written[:3], written  # the sensor's state of the frames read here
+    assert written.count(True) == 1, written  # once: then every SENSOR_EVERY-th again
+    st.store.close()

@@ -59,6 +59,9 @@ HISTORY = 1200
 #: The posture shown live is the vote over this many seconds of frame-by-frame predictions
 #: (``posture.frame_label`` in the snapshot is the present frame's own).
 POSTURE_WINDOW_S = 5.0
+#: The latest runs of frames never seen that the monitor names (``missed_runs``: which frames a
+#: takeover, the broker or the clock lost; ``missed`` counts them all).
+MISSED_RUNS = 20
 #: A source that has sent nothing for this long is said to be silent (console and page).
 SILENT_S = 10.0
 
@@ -104,6 +107,12 @@ class Monitor:
         of the events and alerts, whether there are any, the page's unit and colour scale.
         Default: ``bed`` with ``bed``, else ``seat``.
     """
+
+    #: frames never seen (gaps in the frames' numbers, ``seq``: lost on the way, skipped by
+    #: the clock, published while no station held the mat) and the latest
+    #: :data:`MISSED_RUNS` runs of them, each (first seq, last seq)
+    missed: int
+    missed_runs: deque[tuple[int, int]]
 
     def __init__(
         self,
@@ -167,7 +176,7 @@ class Monitor:
         self._live_stats: stats.LiveStats | None = None  # the frames' statistics (compiled)
         self._skimmed = False  # frames not read since the last frame processed
         self.last_seq: int | None = None  # of the last frame on the time line
-        self.missed = 0  # frames never seen: gaps in the frames' numbers (seq)
+        self.missed, self.missed_runs = 0, deque(maxlen=MISSED_RUNS)  # frames never seen (seq)
         self.clock = FrameClock(rate=source.rate)
         self.quiet = Quiet(log)
         self.last_wall: float | None = None  # wall time of the last frame processed
@@ -336,6 +345,7 @@ class Monitor:
             "t_first": self._t_first,
             "seq": self.last_seq,
             "missed": self.missed,
+            "missed_runs": [s for run in self.missed_runs for s in run],
             "clock": self.clock.state(),
             "tracker": self.tracker.state_packed(),
             "bed": None if self.bed is None else self.bed.schedule.state(),
@@ -353,6 +363,9 @@ class Monitor:
         t_first = stored.optional_number(state, "t_first", what)
         seq = stored.optional_whole(state, "seq", what)  # (an earlier version's has none)
         missed = stored.whole(state, "missed", what, default=0)
+        runs = stored.wholes(state, "missed_runs", what) if "missed_runs" in state else []
+        if len(runs) % 2:
+            raise ParameterError(f"the stored {what} state's missed_runs are not pairs")
         clock = FrameClock(rate=self.clock.rate_hint).restore(stored.mapping(state, "clock", what))
         self.tracker.restore(stored.mapping(state, "tracker", what))
         if self.bed is not None and state.get("bed") is not None:
@@ -360,6 +373,8 @@ class Monitor:
         self._vote.restore(stored.mapping(state, "vote", what))
         self.clock, self.frames, self._t_first = clock, frames, t_first
         self.last_seq, self.missed = seq, missed
+        self.missed_runs.clear()
+        self.missed_runs.extend(zip(runs[::2], runs[1::2], strict=True))
         self._skimmed = self.last_seq is None
         self.changes += 1
 
@@ -429,6 +444,7 @@ class Monitor:
             return False
         if self.last_seq is not None and frame.seq > self.last_seq + 1:  # frames not seen
             self.missed += frame.seq - self.last_seq - 1
+            self.missed_runs.append((self.last_seq + 1, frame.seq - 1))
             self._skimmed = True
         self.last_seq = frame.seq
         source_t, shift = frame.t, t - frame.t

@@ -408,6 +408,7 @@ class MatEntry:
             "behind": self.behind,
             "peeked": self.peeked,
             "missed": self.monitor.missed,
+            "missed_runs": [list(r) for r in self.monitor.missed_runs],  # [first, last] seq
             "last_error": self.last_error,
             "problem": self.problem,
             "last_frame_wall": self.last_wall,
