@@ -147,13 +147,9 @@ fn by_stages(stages: Vec<Stage>, dt: &[f64], r: &[f64], v: &[bool]) -> (Vec<f64>
     (x, ok)
 }
 
-#[test]
-fn the_chain_equals_its_stages_run_one_after_the_other_in_any_order() {
-    let mat = Mat { rows: 5, cols: 6 };
-    let n = mat.n();
-    let (r, v, dt) = mat.readings(60);
+/// Chains of every shape: the usual one with every response and repair, and other orders.
+fn shapes(mat: &Mat) -> Vec<Vec<Stage>> {
     let loading = Curve::new(vec![0.0, 1.0, 2.4], vec![0.0, 0.5, 3.0]).unwrap();
-    // (name, stages): the usual shape with every response and repair, and other orders
     let mut cases: Vec<Vec<Stage>> = Vec::new();
     for response in 0..4 {
         for repair in 0..5 {
@@ -199,6 +195,45 @@ fn the_chain_equals_its_stages_run_one_after_the_other_in_any_order() {
         Stage::Compensation(mat.compensation(true)),
         Stage::Drift(mat.drift()),
     ]);
+    cases
+}
+
+/// `Chain::step`'s binding hands the chain output arrays whose bytes are not set: every
+/// value and code must be written before it is read. Frame after frame, outputs filled
+/// with two different patterns beforehand give the same values and codes, for chains of
+/// every shape.
+#[test]
+fn every_value_and_code_is_written_before_it_is_read() {
+    let mat = Mat { rows: 5, cols: 6 };
+    let n = mat.n();
+    let (r, v, dt) = mat.readings(30);
+    for stages in shapes(&mat) {
+        let names: Vec<_> = stages.iter().map(Stage::name).collect();
+        let run_with = |fill: f64, code: u8| {
+            let mut chain = Chain::new(n, stages.clone()).unwrap();
+            let (mut all, mut all_codes) = (Vec::new(), Vec::new());
+            for (k, &d) in dt.iter().enumerate() {
+                let (mut out, mut codes) = (vec![fill; n], vec![code; n]);
+                let at = k * n..(k + 1) * n;
+                chain
+                    .run(&[d], &r[at.clone()], &v[at], &mut out, &mut codes)
+                    .unwrap();
+                all.extend(out.iter().map(|x| x.to_bits()));
+                all_codes.extend(codes);
+            }
+            (all, all_codes)
+        };
+        let a = run_with(f64::from_bits(0x7ff8_dead_beef_0001), 0xab);
+        assert_eq!(a, run_with(7.5, 0), "{names:?}");
+    }
+}
+
+#[test]
+fn the_chain_equals_its_stages_run_one_after_the_other_in_any_order() {
+    let mat = Mat { rows: 5, cols: 6 };
+    let n = mat.n();
+    let (r, v, dt) = mat.readings(60);
+    let cases = shapes(&mat);
     for stages in cases {
         let names: Vec<_> = stages.iter().map(Stage::name).collect();
         let mut chain = Chain::new(n, stages.clone()).unwrap();
