@@ -472,12 +472,21 @@ class RecordingReader(BlockReader):
         readings invalid, as in every block; no labels): what a player seeking in a long
         recording reads (:mod:`texsense.io.lazy`).
 
+        Their times are checked as every block's are, within the frames read (numbers, not
+        going back, on a clock's scale: :class:`~texsense.io._times.TimeCheck`; a file changed
+        since its timeline was read is refused here, not shown).
+
         Raises
         ------
         FormatError
-            For a format that is read from its start only (every text format).
+            For a format that is read from its start only (every text format), or for a time
+            no clock has (naming the frame).
         """
-        return self._checked(self._piece(start, stop), running=False)
+        piece = self._checked(self._piece(start, stop), running=False)
+        check = TimeCheck(self.path)
+        check.count = start  # frames are named by their place in the file
+        check.block(np.asarray(piece.times, dtype=np.float64))
+        return piece
 
     def _piece(self, start: int, stop: int) -> Piece:
         raise FormatError(self.path, f"a {self.what} is read from its start only, not in parts")

@@ -42,7 +42,7 @@ import numpy.typing as npt
 
 from texsense.exceptions import FormatError
 
-__all__ = ["MAX_SPAN_S", "MAX_TIME_S", "MIN_MEAN_STEP_S", "TimeCheck"]
+__all__ = ["MAX_SPAN_S", "MAX_TIME_S", "MIN_MEAN_STEP_S", "TimeCheck", "off_scale"]
 
 #: No time stamp is further from zero (s): about 31,700 years (see the module's docstring).
 MAX_TIME_S = 1e12
@@ -50,6 +50,28 @@ MAX_TIME_S = 1e12
 MAX_SPAN_S = 10 * 365.25 * 86400.0
 #: Frames are at least this far apart on average over a file (s): 1 us (1 MHz).
 MIN_MEAN_STEP_S = 1e-6
+
+
+def off_scale(t: npt.ArrayLike) -> str | None:
+    """What is wrong with the first of the times ``t`` that no clock has (not a number, or
+    beyond :data:`MAX_TIME_S`), or None: the scale rule of :class:`TimeCheck` for times that
+    come one frame at a time (a live frame's element times, :class:`~texsense.monitor.clock.
+    FrameClock`), where going back is the frame clock's to judge.
+
+    >>> off_scale([0.0, 0.1]) is None, off_scale([0.0, float("nan")])
+    (True, 'the time nan is not a number')
+    >>> off_scale([1e300])
+    'the time 1e+300 s is beyond any clock (|t| over 1e12 s)'
+    """
+    t = np.asarray(t, dtype=np.float64).ravel()
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(t) <= MAX_TIME_S)
+    if not bad.any():
+        return None
+    ti = t[int(np.argmax(bad))]
+    if not np.isfinite(ti):
+        return f"the time {ti} is not a number"
+    return f"the time {ti:.9g} s is beyond any clock (|t| over 1e12 s)"
 
 
 class TimeCheck:
