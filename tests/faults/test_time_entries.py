@@ -1,4 +1,4 @@
-"""Times no clock has, at the entries the readers' time check (``io._times.TimeCheck``) did
+"""Times no clock has, at the entries the readers' time check (``data.times.TimeCheck``) did
 not cover (harden15): a column table's ``time_s`` read by the tools of one element (the
 hysteresis and drift fits, ``read_columns``), a player's frames read out of order
 (``RecordingReader.frames_at``), and live frames (the monitor, and so the station's mats, and

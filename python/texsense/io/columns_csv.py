@@ -31,6 +31,7 @@ from texsense.data import units
 from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES
+from texsense.data.times import TimeCheck
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import CEILING, CEILING_OTHER, BlockReader, Header, Piece, RecordingReader
 from texsense.io._registry import Probe
@@ -43,7 +44,6 @@ from texsense.io._text import (
     open_binary,
     parse_csv_row,
 )
-from texsense.io._times import TimeCheck
 
 __all__ = [
     "ColumnsReader",
@@ -183,7 +183,7 @@ class ColumnsReader(BlockReader):
         self.not_finite = 0
         self.beyond = 0  # finite values beyond any sensor, read as not a number
         self._ceilings = np.array([ceiling_of_column(name) for name in self.names])
-        # the time column is checked as every recording's times are (texsense.io._times)
+        # the time column is checked as every recording's times are (texsense.data.times)
         self._time_column = self.names.index("time_s") if "time_s" in self.names else None
         self._times = TimeCheck(self.path)
         n = len(self.names)
@@ -311,7 +311,7 @@ class ColumnsReader(BlockReader):
         numbers): the one place where values that are not finite are counted and finite values
         beyond their column's ceiling (:func:`ceiling_of_column`) are counted and read as not a
         number, in place, and where the ``time_s`` column is checked as every recording's
-        times are (:class:`~texsense.io._times.TimeCheck`: a number, not going back, on a
+        times are (:class:`~texsense.data.times.TimeCheck`: a number, not going back, on a
         clock's scale; one :class:`FormatError` naming the line and the time)."""
         if self._time_column is not None:
             self._times.block(data[:, self._time_column], np.asarray(lines, dtype=np.int64))
@@ -349,7 +349,7 @@ def ceiling_of_column(name: str) -> float:
     """The greatest magnitude a column's values can have: :data:`texsense.io._base.CEILING`
     of the quantity its unit names (``pressure_ncm2``: 1e5 N/cm²), the ceiling of every other
     quantity for a column without one (``c0``, ``field_oe``), none for a time column
-    (``time_s``: its times are checked by :class:`~texsense.io._times.TimeCheck`).
+    (``time_s``: its times are checked by :class:`~texsense.data.times.TimeCheck`).
 
     >>> ceiling_of_column("pressure_ncm2"), ceiling_of_column("c0"), ceiling_of_column("time_s")
     (100000.0, 1000000000000000.0, inf)

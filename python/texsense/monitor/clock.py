@@ -29,7 +29,7 @@ get a mat going again, and no time ever goes backwards downstream.
 
 A frame is placed with :meth:`FrameClock.place_frame`, the one door of every live frame (the
 monitor's, and through it the station's mats, and ``texsense record``'s): a frame any of whose
-element times no clock has (not a number, beyond 1e12 s: :func:`texsense.io._times.off_scale`,
+element times no clock has (not a number, beyond 1e12 s: :func:`texsense.data.times.off_scale`,
 the readers' scale rule) is ``unclocked``: refused before the clock sees it (it neither moves
 the clock nor counts as the first frame of a jump), counted in ``unclocked``; the caller
 counts it with the source's errors and says it in one line naming the source. A time on the
@@ -57,8 +57,8 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
+from texsense.data.times import off_scale
 from texsense.exceptions import ParameterError
-from texsense.io._times import off_scale
 
 if TYPE_CHECKING:
     from texsense.data.protocol import Frame

@@ -1,7 +1,10 @@
 """The one check of a recording's times, under every reader (:class:`~texsense.io._base.
 RecordingReader` checks each block of frames it reads with a :class:`TimeCheck`, and the file's
-end with :meth:`TimeCheck.finish`): a time is a number, does not go back, and lies on a scale
-that a clock of a sensor session has.
+end with :meth:`TimeCheck.finish`), a column table's ``time_s`` and frames read out of order:
+a time is a number, does not go back, and lies on a scale that a clock of a sensor session
+has. Its scale rule (:func:`off_scale`) is also the door of every live frame
+(:meth:`texsense.monitor.clock.FrameClock.place_frame`): this module is in the data layer so
+that the monitor uses it without loading the file formats (harden15; it was ``io._times``).
 
 The scale's limits, and why:
 
