@@ -16,6 +16,7 @@ from texsense import Layout
 from texsense.commands._options import RANGES
 from texsense.compensation.health import FailureDetector
 from texsense.compensation.hysteresis import HysteresisModel
+from texsense.compensation.hysteresis._model import RANGES as MODEL
 from texsense.compensation.stages import STAGES, Convert, Drift, Hysteresis, Linear, Repair
 from texsense.compensation.stages.convert import _LINEAR_GAIN
 from texsense.data.ranges import RangeError
@@ -31,18 +32,19 @@ MAKE = {
     "drift": lambda: Drift(),
     "hysteresis model": lambda: HysteresisModel(),
 }
-CLASSES = {**STAGES, "hysteresis model": HysteresisModel}
+#: the declared ranges of each (the model's table is its module's RANGES)
+RANGES_OF = {**{name: cls.ranges for name, cls in STAGES.items()}, "hysteresis model": MODEL}
 
 
 def _cases(which: str):
-    for name, cls in CLASSES.items():
-        for key, kind in cls.ranges.items():
+    for name, ranges in RANGES_OF.items():
+        for key, kind in ranges.items():
             for value in kind.beyond() if which == "beyond" else kind.edges():
                 yield pytest.param(name, key, value, id=f"{name}.{key}={value!r}"[:80])
 
 
 def test_every_stage_is_made_here():
-    assert set(MAKE) == set(CLASSES)
+    assert set(MAKE) == set(RANGES_OF)
 
 
 def set_beyond(name: str, key: str, value: object) -> str | None:

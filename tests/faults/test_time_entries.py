@@ -40,16 +40,21 @@ PATHOLOGIES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 }
 
 
-def _times(name: str) -> np.ndarray:
-    return PATHOLOGIES[name](100.0 + np.arange(N, dtype=np.float64))
+def _times(name: str, n: int = N) -> np.ndarray:
+    return PATHOLOGIES.get(name, lambda t: t)(100.0 + np.arange(n, dtype=np.float64))
 
 
 # ------------------------------------------------------------------ files
 
 
 def _table(folder: Path, name: str) -> Path:
+    """A step of 1 mm held for 50 s (a drift fit's and a hysteresis fit's record, 1 Hz) with
+    the pathology's times (``"good"``: none)."""
     path = folder / "table.csv"
-    rows = [f"{float(t)!r},{0.1 * k:.2f},{0.5 + 0.2 * k:.2f}" for k, t in enumerate(_times(name))]
+    mm = np.r_[np.linspace(0.0, 1.0, 10), np.full(50, 1.0)].tolist()
+    ncm2 = np.r_[np.linspace(0.0, 2.0, 10), 2.0 - 0.05 * np.log1p(np.arange(50))].tolist()
+    times = _times(name, 60)
+    rows = [f"{float(t)!r},{c!r},{p!r}" for t, c, p in zip(times, mm, ncm2, strict=True)]
     path.write_text("time_s,compression_mm,pressure_ncm2\n" + "\n".join(rows) + "\n")
     return path
 
@@ -185,6 +190,16 @@ def case(entry: str, pathology: str, folder: Path) -> str | None:
         return ENTRIES[entry](folder, pathology)
     except Exception as e:
         return f"{type(e).__name__}: {e}"
+
+
+@pytest.mark.parametrize("command", [["hysteresis", "fit", "TABLE", "-o", "TABLE.json"],
+                                     ["drift", "fit", "TABLE"]])  # fmt: skip
+def test_the_table_without_a_pathology_is_fitted(command, tmp_path, monkeypatch):
+    """The control: the fits' failures above are the times', not the record's."""
+    monkeypatch.chdir(tmp_path)
+    path = _table(tmp_path, "good")
+    code, _out, err = call_main([a.replace("TABLE", str(path)) for a in command])
+    assert code == 0, err
 
 
 @pytest.mark.parametrize("pathology", list(PATHOLOGIES))
