@@ -44,7 +44,8 @@ def main() -> int:
     print(f"set after construction: {sum(wrong.values())} of {total} wrong")
     for k, n in sorted(wrong.items()):
         print(f"  {k}: {n}")
-    print("  e.g.", *examples[:3], sep="\n    ")
+    if examples:
+        print("  e.g.", *examples[:3], sep="\n    ")
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "cal").mkdir()
         (Path(tmp) / "files").mkdir()
