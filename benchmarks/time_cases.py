@@ -1,7 +1,7 @@
 """The generated cases of tests/faults/test_time_entries.py (the entries the readers' time
 check did not cover: a column table's ``time_s`` under ``read_columns`` and the hysteresis and
-drift fits, ``frames_at``, live frames through the monitor and ``texsense record``) x the time
-pathologies: how many go wrong, and how.
+drift fits, ``frames_at``, live frames through the monitor, ``texsense record`` and the
+calibration wizard) x the time pathologies: how many go wrong, and how.
 
     .venv/bin/python benchmarks/time_cases.py
     PYTHONPATH=OLD/python .venv/bin/python benchmarks/time_cases.py   # an older texsense

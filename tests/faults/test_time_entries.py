@@ -1,10 +1,12 @@
 """Times no clock has, at the entries the readers' time check (``data.times.TimeCheck``) did
 not cover (harden15): a column table's ``time_s`` read by the tools of one element (the
 hysteresis and drift fits, ``read_columns``), a player's frames read out of order
-(``RecordingReader.frames_at``), and live frames (the monitor, and so the station's mats, and
-``texsense record``: ``FrameClock.place_frame``). Every entry x every pathology: a refusal in
-one line naming where and what (files), or the frame refused, counted and said (live), and
-never a time off the scale downstream. ``benchmarks/time_cases.py`` counts the same cases.
+(``RecordingReader.frames_at``), the elements' own times in a file (every reader's blocks
+and ``frames_at``), and live frames (the monitor, and so the station's mats,
+``texsense record`` and ``calibrate wizard``: ``FrameClock.place_frame``). Every entry x
+every pathology: a refusal in one line naming where and what (files), or the frame refused,
+counted and said (live), and never a time off the scale downstream.
+``benchmarks/time_cases.py`` counts the same cases.
 """
 
 from __future__ import annotations
@@ -99,11 +101,36 @@ def _frames_at(folder: Path, name: str) -> str | None:
     return f"read times {piece.times.tolist()}"
 
 
+def _element_times(folder: Path, name: str) -> str | None:
+    """A recording whose frame times are right and whose second element's times have the
+    pathology: read whole (``load``, every reader's blocks) and out of order (``frames_at``)."""
+    from texsense.io import load
+    from texsense.io.hdf5 import HDF5Reader
+
+    path = folder / "r.h5"
+    t = 100.0 + np.arange(N)
+    et = np.c_[t, _times(name)]
+    Recording(np.ones((N, 2)), t, LAY, "pressure", "N/cm2", element_times=et).save(path)
+    read = []
+    for how, what in (("load", lambda: load(path)),
+                      ("frames_at", lambda: HDF5Reader(path).frames_at(0, N))):  # fmt: skip
+        try:
+            what()
+            read.append(how)
+        except FormatError as e:
+            if "element 2" not in str(e) or str(path) not in str(e):
+                return f"unclear: {e}"
+    if name == "back by years inside":  # on the scale: an element's time is not judged more
+        return None
+    return f"read by {read}" if read else None
+
+
 FILE_ENTRIES: dict[str, Callable[[Path, str], str | None]] = {
     "read_columns": _read_columns,
     "hysteresis fit": _command(["hysteresis", "fit", "TABLE", "-o", "TABLE.json"]),
     "drift fit": _command(["drift", "fit", "TABLE"]),
     "frames_at": _frames_at,
+    "element times (load, frames_at)": _element_times,
 }
 
 
@@ -177,9 +204,28 @@ def _record(folder: Path, name: str) -> str | None:
     return None
 
 
+def _wizard(_folder: Path, name: str) -> str | None:
+    from texsense.commands.wizard import _Feed
+
+    source = _ListSource.make(_frames(name))
+
+    async def read() -> list[Frame]:
+        feed = _Feed(source)  # type: ignore[arg-type]
+        await feed.task
+        return list(feed.recent)
+
+    kept = asyncio.run(read())
+    if any(_off_scale(float(t)) for frame in kept for t in frame.element_times):
+        return f"frames kept at {[frame.t for frame in kept]}"
+    if name != "back by years inside" and source.errors == 0:  # type: ignore[attr-defined]
+        return "not counted"
+    return None
+
+
 LIVE_ENTRIES: dict[str, Callable[[Path, str], str | None]] = {
     "monitor (station mats)": lambda _folder, name: _monitor(name),
     "record": _record,
+    "calibrate wizard": _wizard,
 }
 ENTRIES = {**FILE_ENTRIES, **LIVE_ENTRIES}
 

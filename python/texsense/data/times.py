@@ -96,12 +96,17 @@ class TimeCheck:
         self,
         t: npt.NDArray[np.float64],
         lines: npt.NDArray[np.int64] | None = None,
+        element_times: npt.NDArray[np.float64] | None = None,
     ) -> None:
         """Check the next frames' times ``t`` (``lines``: where each frame starts, in a text
-        file); raise :class:`FormatError` naming the first bad one."""
+        file) and their elements' (``element_times``, (frames, elements), if the file holds
+        them: each on a clock's scale, :func:`off_scale`); raise :class:`FormatError` naming
+        the first bad one."""
         t = np.asarray(t, dtype=np.float64)
         if not t.size:
             return
+        if element_times is not None:
+            self._elements(np.asarray(element_times, dtype=np.float64), lines)
         first = float(t[0]) if self.first is None else self.first
         previous = np.concatenate(([self.last], t[:-1]))
         with np.errstate(invalid="ignore", over="ignore"):
@@ -112,6 +117,16 @@ class TimeCheck:
         self.first = first
         self.last = float(t[-1])
         self.count += t.size
+
+    def _elements(self, et: npt.NDArray[np.float64], lines: npt.NDArray[np.int64] | None) -> None:
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(et) <= MAX_TIME_S)
+        if not bad.any():
+            return
+        i, j = (int(k) for k in np.unravel_index(int(np.argmax(bad)), bad.shape))
+        line = None if lines is None else int(lines[i])
+        where = "" if line is not None else f"frame {self.count + i + 1}: "
+        raise FormatError(self.path, f"{where}element {j + 1}: {off_scale(et[i, j])}", line)
 
     def _refuse(
         self,

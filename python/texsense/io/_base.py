@@ -399,7 +399,7 @@ class RecordingReader(BlockReader):
     def _check_times(self, piece: Piece) -> None:
         """The piece's times: numbers, not going back, on a clock's scale (:mod:`texsense.data.
         times`, the one check of every reader's times; its end in :meth:`_finish`)."""
-        self._times.block(piece.times, piece.lines)
+        self._times.block(piece.times, piece.lines, piece.element_times)
 
     def _recording(self, p: Piece) -> Recording:
         h = self.header
@@ -485,7 +485,7 @@ class RecordingReader(BlockReader):
         piece = self._checked(self._piece(start, stop), running=False)
         check = TimeCheck(self.path)
         check.count = start  # frames are named by their place in the file
-        check.block(np.asarray(piece.times, dtype=np.float64))
+        check.block(np.asarray(piece.times, dtype=np.float64), None, piece.element_times)
         return piece
 
     def _piece(self, start: int, stop: int) -> Piece:
