@@ -234,9 +234,6 @@ class HysteresisModel(Checked):
     def _what(self) -> str:
         return "the hysteresis model"
 
-    def _params(self) -> dict[str, Any]:
-        return dict(vars(self))  # when made: the constructor's arguments, each declared
-
     # ------------------------------------------------------------------ fitting
     def fit(
         self,
@@ -296,6 +293,7 @@ class HysteresisModel(Checked):
         return self
 
     def _params(self) -> dict[str, Any]:
+        """The constructor's arguments by name (what :meth:`check_all` checks)."""
         names = "method grid cells smoothing folds input_name output_name input_unit output_unit"
         return {name: getattr(self, name) for name in names.split()}
 
