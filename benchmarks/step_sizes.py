@@ -2,19 +2,21 @@
 minute: is a step bound by its elements or by a fixed part, and which of the host's speeds
 was it measured at?
 
-Run:  .venv/bin/python benchmarks/step_sizes.py [--rounds N] [--frames N]
+Run:  .venv/bin/python benchmarks/step_sizes.py [--rounds N] [--frames N] [--rows 4 8 ...] [--json]
 
 Each round steps a mat of 128, 256, ..., 4096 elements (32 columns, the benchmark's
 calibration and stream, every frame different) through ``Chain.step`` into arrays held, one
 size after the other in one process, and times a fixed pure-Python loop (200,000 integer
 multiply-adds) right after: the loop runs no texsense code, so when its time moves with the
 step's, the host's speed moved, not the code. Medians per size over the frames after the
-first 100, wall clock.
+first 100, wall clock. ``--rows`` picks the mats (rows of 32 columns); ``--json`` prints each
+round as one line of JSON instead of the table (``step_builds.py`` reads it).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -55,24 +57,29 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--frames", type=int, default=1500)
+    ap.add_argument("--rows", type=int, nargs="+", default=ROWS, help="mats of ROWS x 32")
+    ap.add_argument("--json", action="store_true", help="one JSON line per round")
     args = ap.parse_args()
     cal = seat_calibration(mat_seed=5)
     cases = {}
-    for rows in ROWS:
+    for rows in args.rows:
         c, lay, rec = mat_case(cal, rows, 32, args.frames, seed=3)
         pipe = Pipeline(c, lay, repair="neighbour-mean")
         cap = np.ascontiguousarray(rec.frames, dtype=np.float64)
         cases[rows * 32] = (pipe.compiled(), cap, float(rec.times[1] - rec.times[0]))
     sizes = list(cases)
-    head = " | ".join(f"{n} el.: µs (ns/el.)" for n in sizes)
-    print(f"| round | {head} | Python loop, ms |")
-    print("|---:|" + "---:|" * (len(sizes) + 1))
+    if not args.json:
+        head = " | ".join(f"{n} el.: µs (ns/el.)" for n in sizes)
+        print(f"| round | {head} | Python loop, ms |")
+        print("|---:|" + "---:|" * (len(sizes) + 1))
     for r in range(args.rounds):
-        cells = []
-        for n in sizes:
-            t = step_median(*cases[n])
-            cells.append(f"{t * 1e6:.1f} ({t / n * 1e9:.1f})")
-        print(f"| {r + 1} | " + " | ".join(cells) + f" | {python_loop() * 1e3:.1f} |", flush=True)
+        steps = {n: step_median(*cases[n]) for n in sizes}
+        loop = python_loop()
+        if args.json:
+            print(json.dumps({"step_s": steps, "loop_s": loop}), flush=True)
+            continue
+        cells = [f"{t * 1e6:.1f} ({t / n * 1e9:.1f})" for n, t in steps.items()]
+        print(f"| {r + 1} | " + " | ".join(cells) + f" | {loop * 1e3:.1f} |", flush=True)
 
 
 if __name__ == "__main__":

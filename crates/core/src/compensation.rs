@@ -70,19 +70,30 @@ impl CompensationBlock<'_> {
     /// row ([`PreisachBlock::row`], SIMD across elements where the processor has it), then
     /// the drift row; the same values as [`CompensationBlock::stage`] per element.
     pub fn row(&mut self, dt: f64, u: &[f64], valid: &[bool], out: &mut [f64]) {
-        let w = out.len();
-        let (mut h, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
-        let (h, ok) = (&mut h[..w], &mut ok[..w]);
-        self.preisach.row(u, valid, h);
-        crate::lanes::finite_flags(h, ok);
+        out.copy_from_slice(u);
+        self.row_in_place(dt, valid, out);
+    }
+
+    /// [`CompensationBlock::row`] with the inputs in `values`, which take the outputs (a
+    /// chain's segment hands over its row without an array of its own for the inputs).
+    pub fn row_in_place(&mut self, dt: f64, valid: &[bool], values: &mut [f64]) {
+        let w = values.len();
+        let mut h = [0.0; MAX_BLOCK];
+        let h = &mut h[..w];
+        self.preisach.row(values, valid, h);
         match (&mut self.drift, &self.level) {
             (Some(d), Some(curve)) => {
-                for (i, slot) in out.iter_mut().enumerate() {
-                    *slot = d.step_on_level(i, dt, curve, u[i], h[i], ok[i]).0;
+                for (i, slot) in values.iter_mut().enumerate() {
+                    let ok = h[i].is_finite();
+                    *slot = d.step_on_level(i, dt, curve, *slot, h[i], ok).0;
                 }
             }
-            (Some(d), None) => d.row(dt, h, ok, out),
-            (None, _) => out.copy_from_slice(h),
+            // the drift's input is valid where the Preisach output is a number (`stage`);
+            // the drift takes `valid && h.is_finite()`, which is that: the Preisach row gives
+            // NaN for every reading not `valid` (no flags of its own needed: issue 34,
+            // fifteenth round)
+            (Some(d), None) => d.row(dt, h, valid, values),
+            (None, _) => values.copy_from_slice(h),
         }
     }
 }

@@ -12,7 +12,9 @@
 //!
 //! 0 means healthy. A batch runs in two passes over blocks of elements: the change of every
 //! reading first (each element on its own), then the codes (which read the neighbours'
-//! changes of the same frame). Same results as frame after frame (tested).
+//! changes of the same frame). A single frame on AVX-512 (a live step) runs in one pass,
+//! the codes that read the neighbours' changes after it. Same results as frame after frame
+//! and on every path (tested).
 
 use texsense_kernels::detect::{self as kernel, Element, Limits};
 
@@ -165,6 +167,11 @@ impl FailureDetector {
         check_len("valid", valid.len(), t * n)?;
         check_len("codes", codes.len(), t * n)?;
         scratch.delta.resize(t * n, 0.0);
+        #[cfg(target_arch = "x86_64")]
+        if t == 1 && simd_wide() {
+            self.frame_in_one_pass(readings, valid, &mut scratch.delta, codes);
+            return Ok(());
+        }
         let par = parallel(t, n);
         self.changes(readings, &mut scratch.delta, par);
         self.codes(readings, Validity::Given(valid), &scratch.delta, codes, par);
@@ -394,12 +401,7 @@ impl FailureDetector {
         #[cfg(target_arch = "x86_64")]
         {
             let n = self.jump.len(); // the states are out of `self` during the pass
-            let i = at % n;
-            let lim = avx2::RowLimits {
-                jump: &self.jump[i..i + whole],
-                baseline: self.baseline.as_deref().map(|b| &b[i..i + whole]),
-                max: self.max.as_deref().map(|m| &m[i..i + whole]),
-            };
+            let lim = self.row_limits(at % n, whole);
             let at = at..at + whole;
             if simd_wide() {
                 // SAFETY: `crate::simd::avx512` found AVX-512 F/DQ/VL and AVX2
@@ -432,6 +434,17 @@ impl FailureDetector {
         {
             let _ = (readings, delta, valid, at, els, out, whole);
             u32::MAX
+        }
+    }
+
+    /// The limits of elements `i .. i + w`.
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    fn row_limits(&self, i: usize, w: usize) -> avx2::RowLimits<'_> {
+        avx2::RowLimits {
+            jump: &self.jump[i..i + w],
+            baseline: self.baseline.as_deref().map(|b| &b[i..i + w]),
+            max: self.max.as_deref().map(|m| &m[i..i + w]),
         }
     }
 
@@ -521,6 +534,8 @@ fn simd_wide() -> bool {
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+#[cfg(target_arch = "x86_64")]
+mod one_pass;
 
 #[cfg(test)]
 mod tests;

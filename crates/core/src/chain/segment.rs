@@ -123,12 +123,9 @@ impl FrameBlock for UsualBlock<'_> {
     /// The frame's row of the block through conversion, then the compensation's row (its
     /// Preisach step across elements in SIMD lanes where the processor has them).
     fn row(&mut self, dt: f64, x: &[f64], valid: &[bool], out: &mut [f64]) {
-        let w = out.len();
-        let (mut c, mut ok) = ([0.0; MAX_BLOCK], [false; MAX_BLOCK]);
-        let (c, ok) = (&mut c[..w], &mut ok[..w]);
-        self.conv.row(self.start, x, valid, c);
-        ok.copy_from_slice(valid); // conversion keeps the validity (stage::conversion)
-        self.comp.row(dt, c, ok, out);
+        self.conv.row(self.start, x, valid, out);
+        // conversion keeps the validity (stage::conversion)
+        self.comp.row_in_place(dt, valid, out);
     }
 }
 

@@ -76,6 +76,27 @@ pub(super) unsafe fn changes_row(els: &mut [Element<f64>], c: &[f64], d: &mut [f
     let w = c.len();
     assert!(els.len() == w && d.len() == w);
     let whole = w / LANES * LANES;
+    for i in (0..whole).step_by(LANES) {
+        // SAFETY: i + 8 <= whole <= w: the eight elements (24 words) and values are inside
+        // the slices
+        unsafe {
+            let cv = _mm512_loadu_pd(c.as_ptr().add(i));
+            let dv = change8(els.as_mut_ptr().add(i), cv);
+            _mm512_storeu_pd(d.as_mut_ptr().add(i), dv);
+        }
+    }
+    // SAFETY: the caller's processor has AVX2
+    unsafe { avx2::changes_row(&mut els[whole..], &c[whole..], &mut d[whole..]) };
+}
+
+/// The changes `|c - last|` of eight readings `cv` (`kernel::change`), and the eight
+/// elements' `last` set to their readings that are finite.
+///
+/// # Safety
+/// The processor must have AVX-512 F/DQ/VL; `els` points to eight elements.
+#[inline]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2")]
+unsafe fn change8(els: *mut Element<f64>, cv: __m512d) -> __m512d {
     let abs = _mm512_castsi512_pd(_mm512_set1_epi64(i64::MAX));
     // word 3 j of the three registers to lane j, and back
     let pick_ab = _mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0);
@@ -83,31 +104,25 @@ pub(super) unsafe fn changes_row(els: &mut [Element<f64>], c: &[f64], d: &mut [f
     let to_a = _mm512_setr_epi64(0, 0, 0, 1, 0, 0, 2, 0);
     let to_b = _mm512_setr_epi64(0, 3, 0, 0, 4, 0, 0, 5);
     let to_c = _mm512_setr_epi64(0, 0, 6, 0, 0, 7, 0, 0);
-    for i in (0..whole).step_by(LANES) {
-        // SAFETY: i + 8 <= whole <= w: the eight elements (24 words) and values are inside
-        // the slices; `Element<f64>` is repr(C), three words with `last` first
-        unsafe {
-            let e = els.as_mut_ptr().add(i).cast::<f64>();
-            let (a, b, cc) = (
-                _mm512_loadu_pd(e),
-                _mm512_loadu_pd(e.add(8)),
-                _mm512_loadu_pd(e.add(16)),
-            );
-            let last = _mm512_permutex2var_pd(_mm512_permutex2var_pd(a, pick_ab, b), pick_c, cc);
-            let cv = _mm512_loadu_pd(c.as_ptr().add(i));
-            // |c - last| as the kernel's `abs` (the sign bit cleared)
-            let dv = _mm512_and_pd(_mm512_sub_pd(cv, last), abs);
-            _mm512_storeu_pd(d.as_mut_ptr().add(i), dv);
-            let finite =
-                _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(cv, cv), _mm512_setzero_pd());
-            let [ma, mb, mc] = word_masks(finite, 0);
-            _mm512_mask_storeu_pd(e, ma, _mm512_permutexvar_pd(to_a, cv));
-            _mm512_mask_storeu_pd(e.add(8), mb, _mm512_permutexvar_pd(to_b, cv));
-            _mm512_mask_storeu_pd(e.add(16), mc, _mm512_permutexvar_pd(to_c, cv));
-        }
+    // SAFETY: the eight elements' 24 words (`Element<f64>` is repr(C), three words with
+    // `last` first)
+    unsafe {
+        let e = els.cast::<f64>();
+        let (a, b, cc) = (
+            _mm512_loadu_pd(e),
+            _mm512_loadu_pd(e.add(8)),
+            _mm512_loadu_pd(e.add(16)),
+        );
+        let last = _mm512_permutex2var_pd(_mm512_permutex2var_pd(a, pick_ab, b), pick_c, cc);
+        // |c - last| as the kernel's `abs` (the sign bit cleared)
+        let dv = _mm512_and_pd(_mm512_sub_pd(cv, last), abs);
+        let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(cv, cv), _mm512_setzero_pd());
+        let [ma, mb, mc] = word_masks(finite, 0);
+        _mm512_mask_storeu_pd(e, ma, _mm512_permutexvar_pd(to_a, cv));
+        _mm512_mask_storeu_pd(e.add(8), mb, _mm512_permutexvar_pd(to_b, cv));
+        _mm512_mask_storeu_pd(e.add(16), mc, _mm512_permutexvar_pd(to_c, cv));
+        dv
     }
-    // SAFETY: the caller's processor has AVX2
-    unsafe { avx2::changes_row(&mut els[whole..], &c[whole..], &mut d[whole..]) };
 }
 
 /// The codes of a block's row as `avx2::codes_row` (the same contract: whole groups of four,
@@ -132,6 +147,65 @@ pub(super) unsafe fn codes_row(
     let w = c.len();
     assert!(w.is_multiple_of(4) && w <= 32 * 4);
     assert!(d.len() == w && valid.len() == w && els.len() == w && out.len() == w);
+    let whole = w / LANES * LANES;
+    // SAFETY: AVX-512 (this function's features); `d` is read only (CHANGES false)
+    let mut left = unsafe { groups::<false>(p, lim, c, d.as_ptr().cast_mut(), valid, els, out) };
+    if whole < w {
+        // SAFETY: the caller's processor has AVX2
+        left |= unsafe { codes_tail(p, lim, c, d, valid, els, out, whole) } << (whole / 4);
+    }
+    left
+}
+
+/// The changes and the codes of a frame's row of whole groups of eight in one pass (issue
+/// 34, fifteenth round): [`changes_row`]'s changes into `d`, then [`codes_row`]'s codes
+/// with them, group by group. Returns the groups of four left to the scalar kernel (a
+/// reading that holds still reads its neighbours' changes, which may come later in the
+/// row): bit `g` for elements `4 g .. 4 g + 4`.
+///
+/// # Safety
+/// The processor must have AVX-512 F/DQ/VL and AVX2.
+///
+/// # Panics
+/// When the slices differ in length, are not whole groups of eight, or hold more than 32
+/// groups of four.
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2")]
+pub(super) unsafe fn changes_codes_row(
+    p: &DetectorParams,
+    lim: &RowLimits<'_>,
+    c: &[f64],
+    d: &mut [f64],
+    valid: &[bool],
+    els: &mut [Element<f64>],
+    out: &mut [u8],
+) -> u32 {
+    let w = c.len();
+    assert!(w.is_multiple_of(LANES) && w <= 32 * 4);
+    assert!(d.len() == w && valid.len() == w && els.len() == w && out.len() == w);
+    // SAFETY: AVX-512 (this function's features); `d` is `w` values of its own
+    unsafe { groups::<true>(p, lim, c, d.as_mut_ptr(), valid, els, out) }
+}
+
+/// The whole groups of eight of a row: with `CHANGES`, each group's changes first
+/// ([`change8`], into `d`), else read from `d`; then the codes ([`codes_row`]).
+///
+/// # Safety
+/// The processor must have AVX-512 F/DQ/VL and AVX2; `d` points to `c.len()` values
+/// (written only with `CHANGES`); the other slices are `c.len()` long, at most 128.
+#[inline]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2")]
+unsafe fn groups<const CHANGES: bool>(
+    p: &DetectorParams,
+    lim: &RowLimits<'_>,
+    c: &[f64],
+    d: *mut f64,
+    valid: &[bool],
+    els: &mut [Element<f64>],
+    out: &mut [u8],
+) -> u32 {
+    let w = c.len();
+    assert!(valid.len() == w && els.len() == w && out.len() == w && w <= 32 * 4);
     assert!(lim.jump.len() == w);
     assert!(lim.baseline.is_none_or(|b| b.len() == w) && lim.max.is_none_or(|m| m.len() == w));
     let (stuck, floor) = (_mm512_set1_pd(p.stuck_pf), _mm512_set1_pd(p.stuck_floor_pf));
@@ -143,7 +217,17 @@ pub(super) unsafe fn codes_row(
     for i in (0..whole).step_by(LANES) {
         // SAFETY: i + 8 <= whole <= w, the length of every slice (checked above)
         let load = |s: &[f64]| unsafe { _mm512_loadu_pd(s.as_ptr().add(i)) };
-        let (cv, dv) = (load(c), load(d));
+        let cv = load(c);
+        // SAFETY: i + 8 <= w: `d`'s values and the eight elements
+        let dv = unsafe {
+            if CHANGES {
+                let dv = change8(els.as_mut_ptr().add(i), cv);
+                _mm512_storeu_pd(d.add(i), dv);
+                dv
+            } else {
+                _mm512_loadu_pd(d.add(i))
+            }
+        };
         let still = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(dv, stuck)
             & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(cv, floor);
         // the halves (groups of four) with a reading that holds still go to the scalar kernel
@@ -180,10 +264,6 @@ pub(super) unsafe fn codes_row(
             | (spread8(jump) * u64::from(codes::JUMP));
         // SAFETY: i + 8 <= w, the length of `out` and `els`
         unsafe { write_moving(lanes, word, &mut out[i..i + LANES], &mut els[i..i + LANES]) };
-    }
-    if whole < w {
-        // SAFETY: the caller's processor has AVX2
-        left |= unsafe { codes_tail(p, lim, c, d, valid, els, out, whole) } << (whole / 4);
     }
     left
 }

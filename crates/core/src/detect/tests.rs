@@ -148,9 +148,42 @@ fn lanes_give_the_scalar_codes_and_states() {
         // the AVX2 lanes forced, then the best path (eight AVX-512 lanes where present)
         assert_eq!(scalar, run(Path::Avx2), "case {case}, AVX2");
         assert_eq!(scalar, run(Path::Avx512), "case {case}, best path");
+        // frame after frame (a live step: on AVX-512 the changes and codes in one pass)
+        let stepped = (scalar.0.clone(), scalar.2.clone());
+        for path in [Path::Scalar, Path::Avx512] {
+            let frames = frame_after_frame(path, mk(), &readings, &valid);
+            assert_eq!(stepped, frames, "case {case}, frames, {path:?}");
+        }
         seen.extend(scalar.0.iter().chain(&scalar.1));
     }
     assert_eq!(seen.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
+}
+
+/// The codes of `readings` and the elements' states after them, one frame at a time on
+/// `path`.
+fn frame_after_frame(
+    path: crate::simd::Path,
+    mut det: FailureDetector,
+    readings: &[f64],
+    valid: &[bool],
+) -> (Vec<u8>, Vec<(u64, u32, u64)>) {
+    let n = det.len();
+    crate::simd::set_limit(path);
+    let mut codes = vec![0u8; readings.len()];
+    let mut scratch = Changes::default();
+    for ((r, v), c) in readings
+        .chunks_exact(n)
+        .zip(valid.chunks_exact(n))
+        .zip(codes.chunks_exact_mut(n))
+    {
+        det.run(r, v, c, &mut scratch).unwrap();
+    }
+    crate::simd::set_enabled(true);
+    let bits = det
+        .elements
+        .iter()
+        .map(|e| (e.last.to_bits(), e.still, e.moved.to_bits()));
+    (codes, bits.collect())
 }
 
 #[test]

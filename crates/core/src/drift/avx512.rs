@@ -54,7 +54,7 @@ pub(super) unsafe fn groups(
     }
 }
 
-/// Words of 8 bytes from one element to the next (the fields are gathered with it).
+/// Words of 8 bytes from one element to the next.
 const ELEMENT_WORDS: usize = size_of::<Element<f64>>() / 8;
 const _: () = assert!(size_of::<Element<f64>>() == 8 * ELEMENT_WORDS);
 
@@ -122,20 +122,27 @@ unsafe fn pair(
     let y = _mm512_add_pd(hv, _mm512_mul_pd(_mm512_set1_pd(s.gamma()), drift));
     let nan = _mm512_set1_pd(f64::NAN);
     _mm512_storeu_pd(out.as_mut_ptr(), _mm512_mask_blend_pd(live, nan, y));
-    let mut totals = [0.0; LANES];
-    _mm512_storeu_pd(totals.as_mut_ptr(), total);
-    for (l, el) in els.iter_mut().enumerate() {
-        if live >> l & 1 != 0 {
-            el.started = 1;
-            el.last_h = h[l];
-            el.total = totals[l];
-        }
-    }
+    // SAFETY: AVX-512 F/DQ/VL (this function's features); els holds 8 (asserted)
+    unsafe { store_heads(els, live, live & !started, hv, total) };
 }
 
-/// The last level, the sum of steps and the `started` flags of eight elements, gathered
-/// (an element is `ELEMENT_WORDS` words apart), not stored lane by lane and loaded as a
-/// register (a store-forwarding stall each; issue 34, eleventh round).
+/// The eight elements of a group two to a register (`Element<f64>` is four words: `total`,
+/// `last_h`, `smooth`, `started` and its padding), register `r` holding elements `2 r` and
+/// `2 r + 1`.
+const PAIRS: usize = LANES / 2;
+const _: () = assert!(ELEMENT_WORDS == 4);
+
+/// The words of lanes 0-3 from `a` and 4-7 from `b` of [`permutex2var`]: `total` of four
+/// elements, then their `last_h`, from two registers of two elements each.
+#[inline(always)]
+fn pick_heads() -> [i64; LANES] {
+    [0, 4, 8, 12, 1, 5, 9, 13]
+}
+
+/// The last level, the sum of steps and the `started` flags of eight elements: `total` and
+/// `last_h` by four masked loads (two elements each; the other words not read) and four
+/// permutes, `started` gathered (issue 34, fifteenth round: gathers of the two f64 fields
+/// before).
 ///
 /// # Safety
 /// The processor must have AVX2 and AVX-512 F/DQ/VL.
@@ -146,23 +153,69 @@ unsafe fn pair(
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn heads(els: &[Element<f64>]) -> (__m512d, __m512d, __mmask8) {
     assert_eq!(els.len(), LANES);
-    let base = els.as_ptr().cast::<u8>();
-    let words = _mm512_mullo_epi64(
-        _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
-        _mm512_set1_epi64(ELEMENT_WORDS as i64),
-    );
+    let base = els.as_ptr().cast::<f64>();
+    // SAFETY: register r reads the first two words of elements 2 r and 2 r + 1 (all inside
+    // `els`: 8 elements of 4 words)
+    let e: [__m512d; PAIRS] =
+        std::array::from_fn(|r| unsafe { _mm512_maskz_loadu_pd(0b0011_0011, base.add(8 * r)) });
+    let pick = |v: [i64; LANES]| _mm512_loadu_si512(v.as_ptr().cast());
+    let heads = pick(pick_heads());
+    // lanes 0-3: total of elements 0-3 (4-7), lanes 4-7: their last_h
+    let low = _mm512_permutex2var_pd(e[0], heads, e[1]);
+    let high = _mm512_permutex2var_pd(e[2], heads, e[3]);
+    let total = _mm512_permutex2var_pd(low, pick([0, 1, 2, 3, 8, 9, 10, 11]), high);
+    let last = _mm512_permutex2var_pd(low, pick([4, 5, 6, 7, 12, 13, 14, 15]), high);
     let quads = _mm256_mullo_epi32(
         _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
         _mm256_set1_epi32(2 * ELEMENT_WORDS as i32),
     );
-    // SAFETY: lane l reads the field of els[l] (l < 8 = els.len(), asserted), an f64 at
-    // its offset in the #[repr(C)] element, and the u32 `started` (quads of bytes)
-    unsafe {
-        let field = |offset: usize| base.add(offset).cast::<f64>();
-        let last = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, last_h)));
-        let total = _mm512_i64gather_pd::<8>(words, field(offset_of!(Element<f64>, total)));
-        let at = base.add(offset_of!(Element<f64>, started)).cast::<i32>();
-        let st = _mm256_i32gather_epi32::<4>(at, quads);
-        (last, total, _mm256_test_epi32_mask(st, st))
+    // SAFETY: lane l reads the u32 `started` of els[l] (l < 8 = els.len())
+    let st = unsafe {
+        let at = base.cast::<u8>().add(offset_of!(Element<f64>, started));
+        _mm256_i32gather_epi32::<4>(at.cast::<i32>(), quads)
+    };
+    (last, total, _mm256_test_epi32_mask(st, st))
+}
+
+/// The `live` lanes' new heads into their elements: `started = 1`, `last_h = h`, `total`,
+/// by four permutes and eight masked stores (two elements per register; a store per field
+/// and lane before).
+///
+/// # Safety
+/// The processor must have AVX2 and AVX-512 F/DQ/VL.
+///
+/// # Panics
+/// When `els` is not eight elements.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn store_heads(
+    els: &mut [Element<f64>],
+    live: __mmask8,
+    starts: __mmask8,
+    h: __m512d,
+    total: __m512d,
+) {
+    assert_eq!(els.len(), LANES);
+    let base = els.as_mut_ptr().cast::<f64>();
+    let one = _mm512_set1_epi32(1);
+    let started_dword = offset_of!(Element<f64>, started) / 4;
+    for r in 0..PAIRS {
+        let (a, b) = (2 * r as i64, 2 * r as i64 + 1);
+        // words of elements 2 r and 2 r + 1: total and last_h where the element has them
+        let idx = _mm512_setr_epi64(a, LANES as i64 + a, 0, 0, b, LANES as i64 + b, 0, 0);
+        let words = _mm512_permutex2var_pd(total, idx, h);
+        let (la, lb) = (live >> (2 * r) & 1, live >> (2 * r + 1) & 1);
+        let fields = (la * 0b0000_0011) | (lb * 0b0011_0000);
+        let (sa, sb) = (starts >> (2 * r) & 1, starts >> (2 * r + 1) & 1);
+        let started = u16::from(sa) << started_dword | u16::from(sb) << (started_dword + 8);
+        // SAFETY: the two elements' 8 words are inside `els` (r < 4); the masks write
+        // only their `total`, `last_h` and `started`
+        unsafe {
+            let at = base.add(8 * r);
+            _mm512_mask_storeu_pd(at, fields, words);
+            if started != 0 {
+                _mm512_mask_storeu_epi32(at.cast(), started, one);
+            }
+        }
     }
 }
