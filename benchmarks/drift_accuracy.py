@@ -21,7 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _float32 import FLOAT32, apply, predict
 from _realdata import vhb_relaxation
-from texsense.compensation.drift import DriftModel, fit_gamma, prony_kernel, split_steps
+from texsense.compensation.drift import DriftModel, fit_gamma, split_steps
+from texsense.compensation.drift_kernels import prony_kernel
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer

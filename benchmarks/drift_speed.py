@@ -15,7 +15,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import best_of
 from texsense._core import Compensation
-from texsense.compensation.drift import DriftModel, drift_exact, log_kernel
+from texsense.compensation.drift import DriftModel, drift_exact
+from texsense.compensation.drift_kernels import log_kernel
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.compensation.stage import time_steps
 from texsense.sim.protocols import run_protocol

@@ -46,7 +46,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.optimize import nnls
 
-from texsense.compensation.drift import DriftKernel, DriftModel, log_kernel, split_steps
+from texsense.compensation.drift import DriftModel, split_steps
+from texsense.compensation.drift_kernels import DriftKernel, log_kernel
 from texsense.compensation.hysteresis import HysteresisModel
 from texsense.sim import protocols
 from texsense.sim.spacer import Spacer

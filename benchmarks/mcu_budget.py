@@ -35,7 +35,8 @@ import build  # noqa: E402
 
 from texsense._core import mcu_blob_info  # noqa: E402
 from texsense.calibration.workflows import calibrate_virtual_mat  # noqa: E402
-from texsense.compensation.drift import DriftModel, log_kernel  # noqa: E402
+from texsense.compensation.drift import DriftModel  # noqa: E402
+from texsense.compensation.drift_kernels import log_kernel  # noqa: E402
 from texsense.compensation.pipeline import Pipeline  # noqa: E402
 from texsense.compensation.stages import Drift, StageChain  # noqa: E402
 from texsense.data.layout import Layout  # noqa: E402

@@ -2,7 +2,7 @@
 hold one stray stamp of 1e9 s in a 10 Hz file, advance by 1e-300 s or not at all made
 ``stocking report`` trace back or run on (an ``arange`` per hour over the span) and ``muscle
 detect`` trace back (a window of ``round(5 / dt)`` frames with ``dt`` 0). Every reader's times
-now pass one check, ``texsense.io._times.TimeCheck`` (a span over ten years, a time beyond
+now pass one check, ``texsense.data.times.TimeCheck`` (a span over ten years, a time beyond
 1e12 s, frames under 1 us apart on average: one line naming the file, the line or frame and
 the time), and the apps size their work from time within the frame count
 (``Recording.frames_in``, ``apps.stocking.report``), so that a real session of years costs

@@ -42,7 +42,11 @@ def _rehashed(d: dict) -> dict:
 def files(tmp_path_factory, calibration_files):
     """Good files of every stage: a mat's chain (detect, convert, hysteresis, drift), a
     linear chain, a repair stage."""
-    d = tmp_path_factory.mktemp("ranges")
+    return make_files(tmp_path_factory.mktemp("ranges"), calibration_files)
+
+
+def make_files(d: Path, calibration_files: Path) -> Path:
+    """The files of :func:`files` in the folder ``d``."""
     mat = load_chain(calibration_files / "mat.json")
     drift = Drift.of(DriftModel(-0.02, log_kernel(), "log", 0.5, gamma_time=-0.01))
     StageChain([*mat.stages, drift]).save(d / "mat.json")
@@ -58,10 +62,15 @@ def files(tmp_path_factory, calibration_files):
 def calibration_files(tmp_path_factory):
     """A 4 x 4 mat's calibration made by ``texsense calibrate mat`` and a recording (as
     test_models.py makes them)."""
+    return make_calibration(tmp_path_factory.mktemp("cal"))
+
+
+def make_calibration(folder: Path) -> Path:
+    """The files of :func:`calibration_files` in the folder ``folder``."""
     from faults.conftest import run_cli
     from faults.test_models import _calibrate, calibration_inputs
 
-    d = calibration_inputs(tmp_path_factory.mktemp("cal"))
+    d = calibration_inputs(folder)
     rc, _, err = run_cli(*_calibrate(d, d / "mat.json"))
     assert rc == 0, err
     return d
@@ -318,3 +327,73 @@ def test_the_models_own_files_check_the_same_ranges(files, calibration_files, tm
         one_line(rc, err, Path(argv[2] if argv[0] == "hysteresis" else argv[3]).name)
     fault_row("stage ranges", f"{tried} model parameters out of range (hysteresis and drift "
               "model files, their reader and load_chain)", "clear error", cases=tried)  # fmt: skip
+
+
+#: values in many a range that a stage may divide by or scale with (harden15): denormals,
+#: 1e-300, a gain of 1e-13; the fitted numbers also at the ends of the bounds they have
+DEGENERATE = [5e-324, -5e-324, 1e-300, -1e-300, 1e-13]
+DEGENERATE_FITTED = [*DEGENERATE, 1e15, -1e15, 1e12, -1e12, 1e6, 1e3]
+
+
+def _degenerate_cases(files: Path):
+    """(file name, good file, stage index, tampering, what) of every declared real parameter at
+    the degenerate values it holds and its ends, and every fitted number at the degenerate
+    values."""
+    from texsense.data.ranges import Real
+
+    for name in ("mat.json", "linear.json"):
+        good = json.loads((files / name).read_text(encoding="utf-8"))
+        for k, stage in enumerate(_stages(good)):
+            cls = STAGES[stage["stage"]]
+            for key, kind in cls.ranges.items():
+                real = kind.kind if isinstance(kind, Maybe) else kind
+                for value in (DEGENERATE + real.edges()) if isinstance(real, Real) else []:
+                    if real.holds(value):
+                        edit = lambda s, key=key, value=value: s["params"].update({key: value})  # noqa: E731
+                        yield name, good, k, edit, f"{cls.name} params.{key}={value!r}"
+            for path_, index in _numbers({"fitted": stage["fitted"]}):
+                for value in DEGENERATE_FITTED:
+                    edit = lambda s, p=path_, i=index, v=value: _set(s, p, i, v)  # noqa: E731
+                    yield name, good, k, edit, f"{cls.name} {path_}[{index}]={value!r}"
+
+
+def degenerate_outcomes(files: Path, tmp_path: Path) -> tuple[int, list[str]]:
+    """Every case of :func:`_degenerate_cases`: refused at load in one line naming the file,
+    or run on the mat's sample with every reading it marks valid finite; else what went
+    wrong (taken and inf or NaN given as valid, an error or traceback while running)."""
+    from texsense.io import load
+
+    raw = load(files / "raw.h5")
+    wrong, tried = [], 0
+    for name, good, k, edit, what in _degenerate_cases(files):
+        tried += 1
+        path = tmp_path / "degenerate.json"
+        path.write_text(json.dumps(_tampered(good, k, edit)), encoding="utf-8")
+        try:
+            chain = load_chain(path)
+        except FormatError as e:
+            if path.name not in str(e) or "\n" in str(e):
+                wrong.append(f"{name} {what}: {e}")
+            continue
+        try:
+            out = chain.run(raw)
+        except Exception as e:
+            wrong.append(f"{name} {what}: taken, then {type(e).__name__}: {e}")
+            continue
+        frames = np.asarray(out.frames, np.float64)
+        bad = int(np.count_nonzero(~np.isfinite(frames[out.valid])))
+        if bad:
+            wrong.append(f"{name} {what}: taken, {bad} readings inf or NaN marked valid")
+    return tried, wrong
+
+
+def test_no_value_in_range_makes_a_stage_give_inf(files, tmp_path, fault_row):
+    """Degenerate values inside the declared ranges (a linear gain of 1e-300 was in
+    ``[-1e15, 1e15]``, its readings became inf marked valid; a Preisach input range of 5e-324
+    loaded and failed when run): refused at load in one line, or the chain's valid readings
+    stay finite."""
+    tried, wrong = degenerate_outcomes(files, tmp_path)
+    print(f"{len(wrong)} of {tried} went wrong:", *wrong[:40], sep="\n")
+    assert not wrong
+    fault_row("stage ranges", f"{tried} parameters and fitted numbers at degenerate values in "
+              "range", "clear error or finite", cases=tried)  # fmt: skip

@@ -64,7 +64,8 @@ def refuse_replacing(path: Path, replace: bool) -> None:
 @dataclass(frozen=True)
 class Range:
     """Where a numeric option's values may lie: ``lo`` and ``hi`` (None: unbounded), each
-    included unless ``lo_open`` / ``hi_open``; ``nonzero`` excludes 0. Every value must also be
+    included unless ``lo_open`` / ``hi_open``; ``nonzero`` excludes 0, ``least`` a magnitude
+    below it other than 0 (a value divided by: a gain of 1e-300). Every value must also be
     finite."""
 
     lo: float | None = None
@@ -72,11 +73,13 @@ class Range:
     lo_open: bool = False
     hi_open: bool = False
     nonzero: bool = False
+    least: float = 0.0
 
     def text(self) -> str:
         """The range in words: ``> 0``, ``>= 1``, ``5..120``."""
         if self.lo is not None and self.hi is not None and not (self.lo_open or self.hi_open):
-            return f"{self.lo:g}..{self.hi:g}" + (", not 0" if self.nonzero else "")
+            least = f", of magnitude at least {self.least:g}" if self.least else ""
+            return f"{self.lo:g}..{self.hi:g}" + (", not 0" if self.nonzero else "") + least
         parts = []
         if self.lo is not None:
             parts.append(f"{'>' if self.lo_open else '>='} {self.lo:g}")
@@ -89,6 +92,8 @@ class Range:
     def holds(self, value: float) -> bool:
         """Whether ``value`` lies in the range (and is finite)."""
         if not math.isfinite(value) or (self.nonzero and value == 0):
+            return False
+        if value != 0 and abs(value) < self.least:
             return False
         if self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo):
             return False
@@ -156,7 +161,7 @@ RANGES: dict[str, Range] = {
     "--rest-rate": Range(0.0, 1e12, lo_open=True),  # the drift stage's
     "--drift-rest-rate": Range(0.0, 1e12, lo_open=True),
     "--offset": Range(-1e15, 1e15),
-    "--gain": Range(-1e15, 1e15, nonzero=True),
+    "--gain": Range(-1e15, 1e15, nonzero=True, least=1e-12),  # the linear stage's gain
     "--full-scale": Range(0.0, 1e15, lo_open=True),  # the linear stage's
     "--c": _POSITIVE,
     "--pool": Range(1, 256),

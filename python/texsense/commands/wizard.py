@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import logging
 import sys
 import time
 from collections import deque
@@ -45,6 +46,7 @@ from texsense.data.protocol import Frame
 from texsense.data.recording import Recording
 from texsense.exceptions import ParameterError
 from texsense.io import save
+from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.sources import Source
 
 __all__ = ["register_wizard", "run_wizard"]
@@ -91,17 +93,26 @@ def register_wizard(cs: argparse._SubParsersAction) -> None:
 
 class _Feed:
     """Every frame of a source, read in the background (so that no stale frame waits in a
-    buffer while the person reads a prompt)."""
+    buffer while the person reads a prompt); a frame with a time no clock has is refused at
+    the door of every live frame (:meth:`~texsense.monitor.clock.FrameClock.place_frame`),
+    counted with the source's errors and said once."""
 
     def __init__(self, source: Source) -> None:
         self.source = source
         self.recent: deque[Frame] = deque(maxlen=256)
         self.count = 0
         self.arrived = asyncio.Event()
+        self.clock = FrameClock(rate=source.rate)
+        self.quiet = Quiet(logging.getLogger("texsense.monitor"))
         self.task = asyncio.ensure_future(self._run())
 
     async def _run(self) -> None:
         async for frame in self.source.frames():
+            if self.clock.place_frame(frame)[0] == "unclocked":  # the steps take the rest
+                self.source.errors += 1
+                self.quiet.warn(self.source.name, "unclocked",
+                                f"refused frame {frame.seq}: {self.clock.fault}")  # fmt: skip
+                continue
             self.recent.append(frame)
             self.count += 1
             self.arrived.set()

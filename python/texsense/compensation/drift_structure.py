@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from texsense.compensation.drift import DriftKernel, DriftModel, log_kernel, unit_drift
+from texsense.compensation.drift import DriftModel, unit_drift
+from texsense.compensation.drift_kernels import DriftKernel, log_kernel
 from texsense.exceptions import ParameterError
 
 __all__ = [

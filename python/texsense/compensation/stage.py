@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from texsense.data.modelfile import Fields, load, write
-from texsense.data.ranges import Kind, RangeError, check_params
+from texsense.data.ranges import Checked, Kind, RangeError, check_params
 from texsense.data.recording import Recording
 from texsense.exceptions import FormatError, NotFittedError, ParameterError
 
@@ -133,7 +133,7 @@ class Stream:
 STAGES: dict[str, type[Stage]] = {}
 
 
-class Stage(Stream):
+class Stage(Stream, Checked):
     """The contract (see the module documentation). A subclass that sets ``name`` is a stage
     of the registry :data:`STAGES`: model files, chains and the stage contract test find it
     there."""
@@ -156,7 +156,7 @@ class Stage(Stream):
             def checked(self: Stage, *args: Any, **kw: Any) -> None:
                 init(self, *args, **kw)
                 if type(self).__init__ is checked:  # the outermost constructor only
-                    self.check_params()
+                    self.check_all()  # and each parameter set after (ranges.Checked)
 
             setattr(cls, "__init__", checked)  # noqa: B010 (mypy: no assigning to a method)
 
@@ -196,6 +196,9 @@ class Stage(Stream):
         :class:`~texsense.data.ranges.RangeError` naming the stage, the parameter, the value
         and the range."""
         check_params(self._what(), type(self).ranges, self.get_params())
+
+    def _params(self) -> dict[str, Any]:
+        return self.get_params()
 
     def get_params(self) -> dict[str, Any]:
         """The constructor's arguments, by name (``type(s)(**s.get_params())`` is the same

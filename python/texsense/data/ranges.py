@@ -32,7 +32,7 @@ import math
 import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from texsense.exceptions import ParameterError, UnitError, shown
 
 __all__ = [
     "INF",
+    "Checked",
     "Instance",
     "Kind",
     "Maybe",
@@ -126,13 +127,20 @@ class Real(Kind):
     unit: str = ""
     note: str = ""
     nonzero: bool = False
+    #: the least magnitude of a value other than 0 (a gain divided by: 1e-300 is in
+    #: ``[-1e15, 1e15]`` but its reciprocal overflows), 0: none
+    least: float = 0.0
 
     def _in(self, v: float) -> bool:
         if v != v:
             return False
         above = v > self.lo if self.lo_open else v >= self.lo
         below = v < self.hi if self.hi_open else v <= self.hi
-        return above and below and not (self.nonzero and v == 0)
+        tiny = v != 0 and abs(v) < self.least
+        return above and below and not (self.nonzero and v == 0) and not tiny
+
+    def _in_ends(self, v: float) -> bool:
+        return Real(self.lo, self.hi, self.lo_open, self.hi_open)._in(v)
 
     def holds(self, value: Any) -> bool:
         v = _number(value)
@@ -143,14 +151,16 @@ class Real(Kind):
         with np.errstate(invalid="ignore"):
             above = a > self.lo if self.lo_open else a >= self.lo
             below = a < self.hi if self.hi_open else a <= self.hi
-        return above & below & ((a != 0) if self.nonzero else True)  # NaN compares False
+        tiny = (a != 0) & (np.abs(a) < self.least)
+        return above & below & ((a != 0) if self.nonzero else True) & ~tiny  # NaN: False
 
     def text(self) -> str:
         left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
         ends = f"{left}{_g(self.lo)}, {_g(self.hi)}{right}"
         unit = f" {self.unit}" if self.unit else ""
         note = f" ({self.note})" if self.note else ""
-        return f"a number in {ends}{', not 0' if self.nonzero else ''}{unit}{note}"
+        least = f", of magnitude at least {self.least:g}" if self.least else ""
+        return f"a number in {ends}{', not 0' if self.nonzero else ''}{least}{unit}{note}"
 
     def edges(self) -> list[Any]:
         lo = math.nextafter(self.lo, self.hi) if self.lo_open else self.lo
@@ -159,6 +169,10 @@ class Real(Kind):
 
     def beyond(self) -> list[Any]:
         out: list[Any] = [math.nan, "1.0", True, [1.0], *([0.0] if self.nonzero else [])]
+        if self.least:  # a magnitude below the least, within [lo, hi]
+            out += [
+                v for v in (self.least / 2, -self.least / 2, 1e-300, 5e-324) if self._in_ends(v)
+            ]
         for end, is_open, away in ((self.lo, self.lo_open, -INF), (self.hi, self.hi_open, INF)):
             if math.isinf(end) and not is_open:
                 continue  # nothing lies beyond an infinite end
@@ -290,3 +304,44 @@ def check_params(what: str, table: Mapping[str, Kind], values: Mapping[str, Any]
             raise TypeError(f"{what} declares no range for its parameter {key!r}")
         if not kind.holds(value):
             raise RangeError(f"{what}'s {key} must be {kind.text()}, got {shown_value(value)}", key)
+
+
+class Checked:
+    """An object whose parameters are declared in :attr:`ranges` (a stage, the hysteresis
+    model): checked by :func:`check_params` when made (:meth:`check_all`, which the
+    constructor ends with), and each one set after that (``stage.gain = -5``) is checked by the
+    same function before it is taken, so the object never holds a value outside its range.
+
+    >>> class Gain(Checked):
+    ...     ranges = {"gain": Real(0.0, 10.0, lo_open=True)}
+    ...     def __init__(self, gain: float) -> None:
+    ...         self.gain = gain
+    ...         self.check_all()
+    >>> g = Gain(2.0)
+    >>> try:
+    ...     g.gain = -5
+    ... except RangeError as e:
+    ...     print(e, "| kept:", g.gain)
+    the object's gain must be a number in (0, 10], got -5 | kept: 2.0
+    """
+
+    #: the kind and range of every parameter, by name
+    ranges: ClassVar[Mapping[str, Kind]] = {}
+
+    def _what(self) -> str:
+        return "the object"
+
+    def _params(self) -> dict[str, Any]:
+        """The parameters by name (a stage's: its constructor's arguments)."""
+        return {k: getattr(self, k) for k in type(self).ranges}
+
+    def check_all(self) -> None:
+        """Check every parameter (:meth:`_params`) against :attr:`ranges` as it is now; from
+        here on each one set is checked before it is taken."""
+        check_params(self._what(), type(self).ranges, self._params())
+        object.__setattr__(self, "_params_checked", True)
+
+    def __setattr__(self, key: str, value: Any) -> None:
+        if key in type(self).ranges and self.__dict__.get("_params_checked"):
+            check_params(self._what(), type(self).ranges, {key: value})
+        super().__setattr__(key, value)

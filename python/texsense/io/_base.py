@@ -13,7 +13,7 @@ A format's reader subclasses :class:`RecordingReader` and writes two methods:
 The base converts the values to texsense's unit, marks impossible readings invalid (not a
 number, infinite or beyond float32, negative where the quantity cannot be negative: the
 :class:`~texsense.Recording`'s ``valid`` mask), refuses times that go backwards (naming the
-line) or lie on a scale no clock has (:mod:`texsense.io._times`), cuts the frames into blocks
+line) or lie on a scale no clock has (:mod:`texsense.data.times`), cuts the frames into blocks
 of the requested length and, at the end, either refuses a file that was cut short
 (:class:`~texsense.exceptions.FormatError`) or, with
 ``accept_truncated=True`` (``--accept-truncated`` on the command line), reads what is there and
@@ -45,10 +45,10 @@ from texsense._progress import check_stopping, logger
 from texsense.data import budget, units
 from texsense.data.layout import BYTES_PER_CELL, Layout
 from texsense.data.recording import Recording
+from texsense.data.times import TimeCheck
 from texsense.exceptions import FormatError, ParameterError, ShapeError, UnitError
 from texsense.io._registry import Probe, register_reader
 from texsense.io._text import Line, TextLines
-from texsense.io._times import TimeCheck
 
 __all__ = [
     "CEILING",
@@ -397,9 +397,9 @@ class RecordingReader(BlockReader):
         return Piece(frames, piece.times, piece.labels, piece.lines, valid, piece.element_times)
 
     def _check_times(self, piece: Piece) -> None:
-        """The piece's times: numbers, not going back, on a clock's scale (:mod:`texsense.io.
-        _times`, the one check of every reader's times; its end in :meth:`_finish`)."""
-        self._times.block(piece.times, piece.lines)
+        """The piece's times: numbers, not going back, on a clock's scale (:mod:`texsense.data.
+        times`, the one check of every reader's times; its end in :meth:`_finish`)."""
+        self._times.block(piece.times, piece.lines, piece.element_times)
 
     def _recording(self, p: Piece) -> Recording:
         h = self.header
@@ -472,12 +472,21 @@ class RecordingReader(BlockReader):
         readings invalid, as in every block; no labels): what a player seeking in a long
         recording reads (:mod:`texsense.io.lazy`).
 
+        Their times are checked as every block's are, within the frames read (numbers, not
+        going back, on a clock's scale: :class:`~texsense.data.times.TimeCheck`; a file changed
+        since its timeline was read is refused here, not shown).
+
         Raises
         ------
         FormatError
-            For a format that is read from its start only (every text format).
+            For a format that is read from its start only (every text format), or for a time
+            no clock has (naming the frame).
         """
-        return self._checked(self._piece(start, stop), running=False)
+        piece = self._checked(self._piece(start, stop), running=False)
+        check = TimeCheck(self.path)
+        check.count = start  # frames are named by their place in the file
+        check.block(np.asarray(piece.times, dtype=np.float64), None, piece.element_times)
+        return piece
 
     def _piece(self, start: int, stop: int) -> Piece:
         raise FormatError(self.path, f"a {self.what} is read from its start only, not in parts")

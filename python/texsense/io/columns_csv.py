@@ -31,6 +31,7 @@ from texsense.data import units
 from texsense.data.files import atomic_open
 from texsense.data.layout import Layout
 from texsense.data.recording import QUANTITIES
+from texsense.data.times import TimeCheck
 from texsense.exceptions import FormatError, ParameterError, UnitError
 from texsense.io._base import CEILING, CEILING_OTHER, BlockReader, Header, Piece, RecordingReader
 from texsense.io._registry import Probe
@@ -182,6 +183,9 @@ class ColumnsReader(BlockReader):
         self.not_finite = 0
         self.beyond = 0  # finite values beyond any sensor, read as not a number
         self._ceilings = np.array([ceiling_of_column(name) for name in self.names])
+        # the time column is checked as every recording's times are (texsense.data.times)
+        self._time_column = self.names.index("time_s") if "time_s" in self.names else None
+        self._times = TimeCheck(self.path)
         n = len(self.names)
         self._what = f"{n} values ({', '.join(self.names)})"  # what a row holds, for errors
 
@@ -252,7 +256,8 @@ class ColumnsReader(BlockReader):
             except ValueError:
                 pass
             else:
-                return self._values(np.array(values, dtype=np.float64).reshape(len(lines), n))
+                data = np.array(values, dtype=np.float64).reshape(len(lines), n)
+                return self._values(data, [line.number for line in lines])
         for line in lines:
             parse_csv_row(self.path, line, n, self._what)  # raises for the first bad line
         raise AssertionError("unreachable: a block that failed parses line by line")
@@ -265,10 +270,10 @@ class ColumnsReader(BlockReader):
             return None
         try:
             row = parse_csv_row(self.path, line, len(self.names), self._what)
-            return self._values(np.array([row], dtype=np.float64))
         except FormatError:
             self._cut(f"truncated: the file ends in the middle of line {line.number}")
             return None
+        return self._values(np.array([row], dtype=np.float64), [line.number])
 
     def blocks(self, rows: int = 65536) -> Iterator[dict[str, npt.NDArray[np.float64]]]:
         """Yield the table as {column: array} blocks of ``rows`` rows (the last one after the
@@ -287,6 +292,7 @@ class ColumnsReader(BlockReader):
                 f"{total} ({declared - total} missing)"
             )
         self._finish_cut(total, "row")
+        self._times.finish()
         if tail is not None:
             yield self._block(tail)
         if self.not_finite:
@@ -300,10 +306,15 @@ class ColumnsReader(BlockReader):
                 self.beyond,
             )
 
-    def _values(self, data: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Rows as read (a block at once, or a line on its own): the one place where values
-        that are not finite are counted and finite values beyond their column's ceiling
-        (:func:`ceiling_of_column`) are counted and read as not a number, in place."""
+    def _values(self, data: npt.NDArray[np.float64], lines: list[int]) -> npt.NDArray[np.float64]:
+        """Rows as read (a block at once, or a line on its own; ``lines``: their line
+        numbers): the one place where values that are not finite are counted and finite values
+        beyond their column's ceiling (:func:`ceiling_of_column`) are counted and read as not a
+        number, in place, and where the ``time_s`` column is checked as every recording's
+        times are (:class:`~texsense.data.times.TimeCheck`: a number, not going back, on a
+        clock's scale; one :class:`FormatError` naming the line and the time)."""
+        if self._time_column is not None:
+            self._times.block(data[:, self._time_column], np.asarray(lines, dtype=np.int64))
         self.not_finite += int(np.count_nonzero(~np.isfinite(data)))
         with np.errstate(invalid="ignore"):  # NaN and inf stay as they are (counted above)
             beyond = np.isfinite(data) & (np.abs(data) > self._ceilings)
@@ -338,7 +349,7 @@ def ceiling_of_column(name: str) -> float:
     """The greatest magnitude a column's values can have: :data:`texsense.io._base.CEILING`
     of the quantity its unit names (``pressure_ncm2``: 1e5 N/cm²), the ceiling of every other
     quantity for a column without one (``c0``, ``field_oe``), none for a time column
-    (``time_s``: a recording's times are judged by the recording readers).
+    (``time_s``: its times are checked by :class:`~texsense.data.times.TimeCheck`).
 
     >>> ceiling_of_column("pressure_ncm2"), ceiling_of_column("c0"), ceiling_of_column("time_s")
     (100000.0, 1000000000000000.0, inf)

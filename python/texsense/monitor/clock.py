@@ -27,6 +27,15 @@ reposition alert would clear. :class:`FrameClock` stands between a source and th
 So a glitch costs one frame, and so does a real jump; two frames in a row of any sane clock
 get a mat going again, and no time ever goes backwards downstream.
 
+A frame is placed with :meth:`FrameClock.place_frame`, the one door of every live frame (the
+monitor's, and through it the station's mats, and ``texsense record``'s): a frame any of whose
+element times no clock has (not a number, beyond 1e12 s: :func:`texsense.data.times.off_scale`,
+the readers' scale rule) is ``unclocked``: refused before the clock sees it (it neither moves
+the clock nor counts as the first frame of a jump), counted in ``unclocked``; the caller
+counts it with the source's errors and says it in one line naming the source. A time on the
+scale that goes back by years is a clock that was set: the rules above (skipped, then
+re-synchronised).
+
 Examples
 --------
 >>> clock = FrameClock()
@@ -46,9 +55,13 @@ import logging
 import math
 import time
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from texsense.data.times import off_scale
 from texsense.exceptions import ParameterError
+
+if TYPE_CHECKING:
+    from texsense.data.protocol import Frame
 
 __all__ = ["FrameClock", "Quiet"]
 
@@ -85,6 +98,8 @@ class FrameClock:
         self._pending: tuple[float, float] | None = None  # the frame skipped last
         self.skipped = 0
         self.resyncs = 0
+        self.unclocked = 0  # frames refused for times no clock has (place_frame)
+        self.fault: str | None = None  # why the last of them was
 
     @property
     def rate(self) -> float:
@@ -103,6 +118,19 @@ class FrameClock:
     def _in_step(self, t: float, wall: float, ref: tuple[float, float]) -> bool:
         dt = t - ref[0]
         return 0.0 <= dt <= self._limit(wall - ref[1])
+
+    def place_frame(self, frame: Frame, wall: float | None = None) -> tuple[str, float, float]:
+        """Where ``frame`` goes (see :meth:`place`), or ``("unclocked", nan, nan)`` when one
+        of its element times is not on any clock's scale (its reason in :attr:`fault`): the
+        one door of every live frame (the module's docstring)."""
+        fault = off_scale(frame.element_times)
+        if fault is None and frame.element_times.size == 0:
+            fault = off_scale([frame.t])
+        if fault is not None:
+            self.unclocked += 1
+            self.fault = fault
+            return "unclocked", math.nan, math.nan
+        return self.place(frame.t, wall)
 
     def place(self, t: float, wall: float | None = None) -> tuple[str, float, float]:
         """Where a frame of source time ``t`` (arrived at ``wall``, Unix s) goes.

@@ -7,10 +7,11 @@ and ``await monitor.watch()`` says when it falls silent;
 subscribers (``subscribe()``) get every snapshot as an already serialised JSON text, so twenty
 viewers cost one serialisation per frame.
 
-Every frame passes the mat's :class:`~texsense.monitor.clock.FrameClock` first: a frame whose
-time is off the mat's clock (from the future, or backwards) is counted, logged once and
-skipped, so a glitch never reaches the pipeline, the exposure and the alerts; a clock that
-really jumped is re-synchronised with an event ``clock``.
+Every frame passes the mat's :class:`~texsense.monitor.clock.FrameClock` first: a frame with
+a time no clock has (not a number, beyond 1e12 s) is refused, and a frame whose time is off
+the mat's clock (from the future, or backwards) skipped, both counted and logged once, so a
+glitch never reaches the pipeline, the exposure and the alerts; a clock that really jumped is
+re-synchronised with an event ``clock``.
 """
 
 from __future__ import annotations
@@ -434,7 +435,13 @@ class Monitor:
         by the clock, published while no station held the mat): counted as ``missed``, and
         the exposure of the next frame processed spans them (:meth:`ExposureTracker.step`,
         ``skipped``). A number that goes back (the mat restarted) is no gap."""
-        verdict, t, jump = self.clock.place(frame.t, wall)
+        verdict, t, jump = self.clock.place_frame(frame, wall)
+        if verdict == "unclocked":  # a time no clock has: never reaches the clock
+            self.source.errors += 1
+            self.source.last_error = f"frame {frame.seq}: {self.clock.fault}"
+            self.quiet.warn(self.source.name, "unclocked",
+                            f"refused frame {frame.seq}: {self.clock.fault}")  # fmt: skip
+            return False
         if verdict in ("ahead", "backwards"):
             self.source.errors += 1
             what = "from the future" if verdict == "ahead" else "from the past"

@@ -7,13 +7,16 @@ labels of :mod:`texsense.apps.clinical`).
 frame time or ``max_frames`` frames, or until it is stopped, and appends every frame to a
 crash-safe HDF5 recording (flushed every :data:`FLUSH_S` s, so a killed recorder keeps all
 but the last second). Frames pass the mat's :class:`~texsense.monitor.clock.FrameClock`
-first, so a glitching time stamp never makes a recording whose times go backwards; such
-frames, gaps in the frame counter and malformed lines count as dropped.
+first, so a glitching time stamp never makes a recording whose times go backwards, and a time
+no clock has (not a number, beyond 1e12 s) never one that no reader reads back; such frames
+(the latter said in one line naming the source), gaps in the frame counter and malformed
+lines count as dropped.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import time
 from collections.abc import Callable
@@ -27,8 +30,10 @@ from texsense.apps.clinical import EVENTS_LABEL, POSTURE_LABEL, WALL_LABEL, enco
 from texsense.data.files import check_new, make_folder, unused_name
 from texsense.data.protocol import Frame
 from texsense.exceptions import ParameterError
-from texsense.monitor.clock import FrameClock
+from texsense.monitor.clock import FrameClock, Quiet
 from texsense.monitor.sources import Source
+
+log = logging.getLogger("texsense.monitor")
 
 __all__ = [
     "FLUSH_S",
@@ -185,10 +190,17 @@ async def _consume(
     on_progress: Callable[[RecordStats], None] | None,
 ) -> None:
     clock = FrameClock(rate=source.rate)
+    quiet = Quiet(log)
     errors_before = source.errors
     last_seq: int | None = None
     async for frame in frames:
-        verdict, t, _jump = clock.place(frame.t)
+        verdict, t, _jump = clock.place_frame(frame)
+        if verdict == "unclocked":  # a time no clock has: refused, counted, said once
+            source.errors += 1
+            errors_before = source.errors
+            stats.dropped += 1
+            quiet.warn(source.name, "unclocked", f"refused frame {frame.seq}: {clock.fault}")
+            continue
         if verdict in ("ahead", "backwards"):
             stats.dropped += 1
             continue

@@ -6,8 +6,9 @@ chain of hysteresis and drift (:mod:`texsense.data.legacy`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -30,7 +31,7 @@ from texsense.compensation.intervals import HeldOut
 from texsense.data import modelfile, units
 from texsense.data.fitcache import remembered
 from texsense.data.modelfile import Fields
-from texsense.data.ranges import Maybe, OneOf, RangeError, Real, Text, UnitOf, Whole, check_params
+from texsense.data.ranges import Checked, Kind, Maybe, OneOf, RangeError, Real, Text, UnitOf, Whole
 from texsense.exceptions import FormatError, NotFittedError, ParameterError, UnitError
 
 __all__ = ["MODEL_FORMAT", "MODEL_VERSION", "HysteresisModel", "PreisachState", "scale_hysteresis"]
@@ -167,7 +168,7 @@ class PreisachState:
         return self._bank.forgotten()
 
 
-class HysteresisModel:
+class HysteresisModel(Checked):
     """A Preisach model from an input (compression, displacement, field, ...) to an output
     (pressure, force, magnetisation, ...), identified from a calibration record.
 
@@ -204,6 +205,9 @@ class HysteresisModel:
     'thesis/lsq average'
     """
 
+    #: the range of every parameter (:data:`RANGES`), checked when made and when set
+    ranges: ClassVar[Mapping[str, Kind]] = RANGES
+
     def __init__(
         self,
         method: str = "auto",
@@ -225,7 +229,10 @@ class HysteresisModel:
         self.output_name = output_name
         self.input_unit = input_unit
         self.output_unit = output_unit
-        check_params("the hysteresis model", RANGES, vars(self))
+        self.check_all()  # and each parameter set after (ranges.Checked)
+
+    def _what(self) -> str:
+        return "the hysteresis model"
 
     # ------------------------------------------------------------------ fitting
     def fit(
@@ -286,6 +293,7 @@ class HysteresisModel:
         return self
 
     def _params(self) -> dict[str, Any]:
+        """The constructor's arguments by name (what :meth:`check_all` checks)."""
         names = "method grid cells smoothing folds input_name output_name input_unit output_unit"
         return {name: getattr(self, name) for name in names.split()}
 
@@ -586,6 +594,13 @@ class HysteresisModel:
         )
         if not model.u_max_ > model.u_min_:
             raise f.error("input", "max must exceed min")
+        with np.errstate(over="ignore", divide="ignore"):  # the kernel runs on 1 / step
+            if not np.isfinite((table.shape[0] - 1) / (model.u_max_ - model.u_min_)):
+                raise f.error(
+                    "input",
+                    f"max and min are {model.u_max_ - model.u_min_:g} apart: too close for a "
+                    f"grid of {table.shape[0]} (the reciprocal of its step overflows)",
+                )
         if model.sign_ not in (1.0, -1.0):
             raise f.error("output.sign", f"must be 1 or -1, got {model.sign_}")
         model.method_ = method

@@ -28,9 +28,9 @@ __all__ = ["Convert", "Linear"]
 #: calibration's offsets and gains (the range of ``--offset`` and ``--gain``).
 _CURVE_MM = Real(-1e3, 1e3, unit="mm")
 _CURVE_PF = Real(-1e6, 1e6, unit="pF")
-_GAIN = Real(0.0, 1e3, lo_open=True)
+_GAIN = Real(0.0, 1e3, lo_open=True, least=1e-12)
 _LINEAR_OFFSET = Real(-1e15, 1e15)
-_LINEAR_GAIN = Real(-1e15, 1e15, nonzero=True)
+_LINEAR_GAIN = Real(-1e15, 1e15, nonzero=True, least=1e-12)
 
 
 class _Conversion(Stage):
@@ -232,8 +232,12 @@ class Linear(_Conversion):
         for q, u in (self.reads, self.gives):
             if q not in QUANTITIES or units.quantity_of(units.canonical(u)) != QUANTITIES[q]:
                 raise ParameterError(f"unit {u!r} does not measure {q!r}")
-        if not np.all(gain != 0):
-            raise ParameterError(f"gain 0 for element {int(np.argmin(gain != 0))}")
+        held = _LINEAR_GAIN.holds_array(gain)
+        if not held.all():  # the file's bound: readings are divided by the gain (eq. 2.1)
+            i = int(np.argmin(held))
+            raise ParameterError(
+                f"the gain of element {i} must be {_LINEAR_GAIN.text()}, got {gain[i]:g}"
+            )
         self.offset_, self.gain_ = offset, gain
         self._kernel = Converter(offset, gain)
 

@@ -1,7 +1,10 @@
 """The one check of a recording's times, under every reader (:class:`~texsense.io._base.
 RecordingReader` checks each block of frames it reads with a :class:`TimeCheck`, and the file's
-end with :meth:`TimeCheck.finish`): a time is a number, does not go back, and lies on a scale
-that a clock of a sensor session has.
+end with :meth:`TimeCheck.finish`), a column table's ``time_s`` and frames read out of order:
+a time is a number, does not go back, and lies on a scale that a clock of a sensor session
+has. Its scale rule (:func:`off_scale`) is also the door of every live frame
+(:meth:`texsense.monitor.clock.FrameClock.place_frame`): this module is in the data layer so
+that the monitor uses it without loading the file formats (harden15; it was ``io._times``).
 
 The scale's limits, and why:
 
@@ -42,7 +45,7 @@ import numpy.typing as npt
 
 from texsense.exceptions import FormatError
 
-__all__ = ["MAX_SPAN_S", "MAX_TIME_S", "MIN_MEAN_STEP_S", "TimeCheck"]
+__all__ = ["MAX_SPAN_S", "MAX_TIME_S", "MIN_MEAN_STEP_S", "TimeCheck", "off_scale"]
 
 #: No time stamp is further from zero (s): about 31,700 years (see the module's docstring).
 MAX_TIME_S = 1e12
@@ -50,6 +53,28 @@ MAX_TIME_S = 1e12
 MAX_SPAN_S = 10 * 365.25 * 86400.0
 #: Frames are at least this far apart on average over a file (s): 1 us (1 MHz).
 MIN_MEAN_STEP_S = 1e-6
+
+
+def off_scale(t: npt.ArrayLike) -> str | None:
+    """What is wrong with the first of the times ``t`` that no clock has (not a number, or
+    beyond :data:`MAX_TIME_S`), or None: the scale rule of :class:`TimeCheck` for times that
+    come one frame at a time (a live frame's element times, :class:`~texsense.monitor.clock.
+    FrameClock`), where going back is the frame clock's to judge.
+
+    >>> off_scale([0.0, 0.1]) is None, off_scale([0.0, float("nan")])
+    (True, 'the time nan is not a number')
+    >>> off_scale([1e300])
+    'the time 1e+300 s is beyond any clock (|t| over 1e12 s)'
+    """
+    t = np.asarray(t, dtype=np.float64).ravel()
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(t) <= MAX_TIME_S)
+    if not bad.any():
+        return None
+    ti = t[int(np.argmax(bad))]
+    if not np.isfinite(ti):
+        return f"the time {ti} is not a number"
+    return f"the time {ti:.9g} s is beyond any clock (|t| over 1e12 s)"
 
 
 class TimeCheck:
@@ -71,12 +96,17 @@ class TimeCheck:
         self,
         t: npt.NDArray[np.float64],
         lines: npt.NDArray[np.int64] | None = None,
+        element_times: npt.NDArray[np.float64] | None = None,
     ) -> None:
         """Check the next frames' times ``t`` (``lines``: where each frame starts, in a text
-        file); raise :class:`FormatError` naming the first bad one."""
+        file) and their elements' (``element_times``, (frames, elements), if the file holds
+        them: each on a clock's scale, :func:`off_scale`); raise :class:`FormatError` naming
+        the first bad one."""
         t = np.asarray(t, dtype=np.float64)
         if not t.size:
             return
+        if element_times is not None:
+            self._elements(np.asarray(element_times, dtype=np.float64), lines)
         first = float(t[0]) if self.first is None else self.first
         previous = np.concatenate(([self.last], t[:-1]))
         with np.errstate(invalid="ignore", over="ignore"):
@@ -87,6 +117,16 @@ class TimeCheck:
         self.first = first
         self.last = float(t[-1])
         self.count += t.size
+
+    def _elements(self, et: npt.NDArray[np.float64], lines: npt.NDArray[np.int64] | None) -> None:
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(et) <= MAX_TIME_S)
+        if not bad.any():
+            return
+        i, j = (int(k) for k in np.unravel_index(int(np.argmax(bad)), bad.shape))
+        line = None if lines is None else int(lines[i])
+        where = "" if line is not None else f"frame {self.count + i + 1}: "
+        raise FormatError(self.path, f"{where}element {j + 1}: {off_scale(et[i, j])}", line)
 
     def _refuse(
         self,
