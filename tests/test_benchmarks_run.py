@@ -57,7 +57,7 @@ NOT_RUN: dict[str, str] = {
     "bed_virtual": _LONG,
     "calibration_device": _LONG + " (a virtual device on a pseudo-terminal, the CLI)",
     "clock_cases": "runs the generated cases of tests/faults/test_clock.py (tested there)",
-    "param_cases": "runs the generated cases of tests/faults/test_stage_setattr.py and test_stage_ranges.py (tested there)",
+    "param_cases": "runs the cases of tests/faults/test_stage_setattr.py, test_stage_ranges.py",
     "time_cases": "runs the generated cases of tests/faults/test_time_entries.py (tested there)",
     "columns_speed": _LONG + " (a 144,185-row table)",
     "drift_accuracy": _LONG + "; writes docs/img/drift_*.png by default",
