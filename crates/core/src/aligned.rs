@@ -26,6 +26,16 @@ unsafe impl<T: Copy + Sync> Sync for Lines<T> {}
 impl<T: Copy> Lines<T> {
     /// `len` copies of `value`.
     pub fn new(value: T, len: usize) -> Self {
+        Self::from_fn(len, |_| value)
+    }
+
+    /// A copy of `values`.
+    pub fn from_slice(values: &[T]) -> Self {
+        Self::from_fn(values.len(), |i| values[i])
+    }
+
+    /// `len` values, value `i` made by `f(i)`.
+    fn from_fn(len: usize, f: impl Fn(usize) -> T) -> Self {
         let layout = Self::layout(len);
         let ptr = if layout.size() == 0 {
             NonNull::<T>::dangling()
@@ -37,23 +47,11 @@ impl<T: Copy> Lines<T> {
             };
             for i in 0..len {
                 // SAFETY: i < len: inside the allocation of `len` values
-                unsafe { ptr.as_ptr().add(i).write(value) };
+                unsafe { ptr.as_ptr().add(i).write(f(i)) };
             }
             ptr
         };
         Self { ptr, len }
-    }
-
-    /// A copy of `values`.
-    pub fn from_slice(values: &[T]) -> Self {
-        match values.first() {
-            Some(&v) => {
-                let mut lines = Self::new(v, values.len());
-                lines.copy_from_slice(values);
-                lines
-            }
-            None => Self::new_empty(),
-        }
     }
 
     fn layout(len: usize) -> Layout {
@@ -97,19 +95,10 @@ impl<T: Copy> Clone for Lines<T> {
     }
 }
 
-impl<T: Copy> Lines<T> {
-    fn new_empty() -> Self {
-        Self {
-            ptr: NonNull::dangling(),
-            len: 0,
-        }
-    }
-}
-
 /// Empty (what `std::mem::take` leaves).
 impl<T: Copy> Default for Lines<T> {
     fn default() -> Self {
-        Self::new_empty()
+        Self::from_fn(0, |_| unreachable!("no values"))
     }
 }
 
@@ -164,6 +153,9 @@ mod tests {
             assert_eq!(a, b);
             assert_eq!(b.len(), len);
         }
+        let empty: Lines<f64> = Lines::default();
+        assert!(empty.is_empty() && Lines::<f64>::from_slice(&[]).is_empty());
+        assert_eq!(empty.clone().len(), 0);
         let r = Row([0u8; 3]);
         assert_eq!(&r as *const _ as usize % LINE, 0);
     }

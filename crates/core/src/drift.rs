@@ -321,7 +321,7 @@ impl DriftBank {
             },
             elements: Lines::new(Element::default(), n),
             z: Lines::new(0.0, n.div_ceil(GROUP) * GROUP * k),
-            z_time: Lines::new(0.0, 0),
+            z_time: Lines::default(),
             memo: (f64::NAN, vec![1.0; k]),
         })
     }
@@ -367,7 +367,7 @@ impl DriftBank {
         self.z_time = if gamma_time != 0.0 {
             Lines::new(0.0, self.z.len())
         } else {
-            Lines::new(0.0, 0)
+            Lines::default()
         };
         Ok(self)
     }
