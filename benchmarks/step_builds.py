@@ -29,11 +29,18 @@ SCRIPT = Path(__file__).resolve().parent / "step_sizes.py"
 def run(python: str, rows: int, frames: int) -> tuple[float, float]:
     """(step seconds, Python loop seconds) of one run of ``step_sizes.py`` by ``python``."""
     cmd = [python, str(SCRIPT), "--rounds", "1", "--rows", str(rows), "--frames", str(frames)]
-    done = subprocess.run([*cmd, "--json"], capture_output=True, text=True, check=False)
+    try:
+        done = subprocess.run([*cmd, "--json"], capture_output=True, text=True, check=False)
+    except OSError as e:
+        sys.exit(f"step_builds: cannot run {python}: {e.strerror}")
     if done.returncode != 0:
-        sys.exit(f"step_builds: {python} failed: {done.stderr.strip().splitlines()[-1:]}")
-    line = json.loads(done.stdout.strip().splitlines()[-1])
-    return float(next(iter(line["step_s"].values()))), float(line["loop_s"])
+        last = done.stderr.strip().splitlines()[-1:]
+        sys.exit(f"step_builds: {python} failed (exit {done.returncode}): {' '.join(last)}")
+    try:
+        line = json.loads(done.stdout.strip().splitlines()[-1])
+        return float(next(iter(line["step_s"].values()))), float(line["loop_s"])
+    except (IndexError, ValueError, KeyError, TypeError, AttributeError, StopIteration):
+        sys.exit(f"step_builds: {python} printed no step_sizes.py result: {done.stdout[:80]!r}")
 
 
 def main() -> None:

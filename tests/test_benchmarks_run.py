@@ -127,3 +127,20 @@ def test_the_benchmark_runs_at_a_tiny_size(name, tmp_path):
     assert TABLE.search(proc.stdout), f"no table printed:\n{proc.stdout[-2000:]}"
     rows = [line for line in proc.stdout.splitlines() if line.startswith("|")]
     assert not [r for r in rows if re.search(r"\bnan\b", r)], proc.stdout[-2000:]
+
+
+@pytest.mark.parametrize("other", ["/nonexistent/python", "/bin/echo", "/bin/false"])
+def test_step_builds_names_an_other_build_it_cannot_use_in_one_line(other: str) -> None:
+    """step_builds.py's argument is another interpreter: one that is missing, prints no
+    result or fails is one line naming it, not a traceback."""
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "step_builds.py"), other, "--pairs", "1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode != 0
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("step_builds: ") and other in lines[0]
