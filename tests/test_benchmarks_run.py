@@ -41,7 +41,7 @@ SMALL: dict[str, list[str]] = {
         "--pairs",
         "1",
     ],
-    "step_builds": [sys.executable, "--pairs", "1", "--rows", "4", "--frames", "20"],  # vs itself
+    "step_builds": [sys.executable, "--pairs", "1", "--rows", "4", "--frames", "20", "--pipeline"],
     "step_sizes": ["--rounds", "1", "--frames", "20"],
     "stocking_wear": [],  # (~2 s as it is)
     "step_stages": ["--frames", "20"],
