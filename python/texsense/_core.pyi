@@ -34,6 +34,7 @@ __all__ = [
     "__version__",
     "everett_terms",
     "exposure_advance",
+    "first_off_scale",
     "frame_bounds",
     "mcu_blob_info",
     "parse_json_frame",
@@ -321,6 +322,9 @@ class MotionTest:
         motion: float,
     ) -> tuple[_F64, str]:
         """``x * gain`` and "empty", "moved" or "still"."""
+
+def first_off_scale(t: _F64, limit: float) -> int | None:
+    """The index of the first time not a number or beyond ``limit`` in size, or None."""
 
 def frame_bounds(
     values: _F64,
