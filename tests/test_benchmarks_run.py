@@ -27,6 +27,7 @@ BENCHMARKS = ROOT / "benchmarks"
 SMALL: dict[str, list[str]] = {
     "bench_repair": ["--quick"],
     "cli_start": ["--repeat", "1"],
+    "frame_door": ["--repeat", "1", "--sizes", "16"],
     "mcu_budget": ["--frames", "10"],
     "muscle_sleeve": ["--sessions", "1", "--minutes", "2"],
     "pipeline_virtual": [],  # (~5 s as it is)
