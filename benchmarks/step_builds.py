@@ -4,9 +4,11 @@ in one process beside the code it replaced, so the two alternate, each run follo
 fixed pure-Python loop (``step_sizes.py``'s), which shows the host's speed in that minute.
 
 Run:  .venv/bin/python benchmarks/step_builds.py OTHER/.venv/bin/python [--pairs 6] [--rows 32]
+      [--pipeline]
 
 Each pair runs ``step_sizes.py --json`` (one round, the mat of ROWS x 32 elements,
-``Chain.step`` into arrays held, median over the stream's frames after the first 100) with
+``Chain.step`` into arrays held, or ``Pipeline.step`` with ``--pipeline``, median over the
+stream's frames after the first 100) with
 the other interpreter, then with this one (this one first in the even pairs). Prints each
 pair's medians, the ratio this / other, and each run's Python loop; then the median of the
 ratios. Pairs whose two loops differ by more than 15 % ran at different host speeds and are
@@ -26,9 +28,10 @@ import numpy as np
 SCRIPT = Path(__file__).resolve().parent / "step_sizes.py"
 
 
-def run(python: str, rows: int, frames: int) -> tuple[float, float]:
+def run(python: str, rows: int, frames: int, pipeline: bool = False) -> tuple[float, float]:
     """(step seconds, Python loop seconds) of one run of ``step_sizes.py`` by ``python``."""
     cmd = [python, str(SCRIPT), "--rounds", "1", "--rows", str(rows), "--frames", str(frames)]
+    cmd += ["--pipeline"] if pipeline else []
     try:
         done = subprocess.run([*cmd, "--json"], capture_output=True, text=True, check=False)
     except OSError as e:
@@ -49,6 +52,7 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=6)
     ap.add_argument("--rows", type=int, default=32, help="a mat of ROWS x 32 elements")
     ap.add_argument("--frames", type=int, default=1500)
+    ap.add_argument("--pipeline", action="store_true", help="time Pipeline.step (step_sizes.py)")
     args = ap.parse_args()
     this = sys.executable
     print("| pair | other: step µs (loop ms) | this: step µs (loop ms) | this / other |")
@@ -56,7 +60,7 @@ def main() -> None:
     ratios, same_speed = [], []
     for p in range(args.pairs):
         order = [args.other, this] if p % 2 == 0 else [this, args.other]
-        got = {py: run(py, args.rows, args.frames) for py in order}
+        got = {py: run(py, args.rows, args.frames, args.pipeline) for py in order}
         (o, lo), (t, lt) = got[args.other], got[this]
         ratio = t / o
         ratios.append(ratio)

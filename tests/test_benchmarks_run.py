@@ -27,6 +27,7 @@ BENCHMARKS = ROOT / "benchmarks"
 SMALL: dict[str, list[str]] = {
     "bench_repair": ["--quick"],
     "cli_start": ["--repeat", "1"],
+    "frame_door": ["--repeat", "1", "--sizes", "16"],
     "mcu_budget": ["--frames", "10"],
     "muscle_sleeve": ["--sessions", "1", "--minutes", "2"],
     "pipeline_virtual": [],  # (~5 s as it is)
@@ -41,7 +42,7 @@ SMALL: dict[str, list[str]] = {
         "--pairs",
         "1",
     ],
-    "step_builds": [sys.executable, "--pairs", "1", "--rows", "4", "--frames", "20"],  # vs itself
+    "step_builds": [sys.executable, "--pairs", "1", "--rows", "4", "--frames", "20", "--pipeline"],
     "step_sizes": ["--rounds", "1", "--frames", "20"],
     "stocking_wear": [],  # (~2 s as it is)
     "step_stages": ["--frames", "20"],

@@ -269,7 +269,7 @@ def test_pipeline_step_takes_arrays_as_given_or_converted_with_the_same_results(
 
 
 class _Refusals:
-    """A compiled chain that counts what it refuses (``step``, ``step_new``)."""
+    """A compiled chain that counts what it refuses (``step``, ``step_new``, ``step_at``)."""
 
     def __init__(self, chain) -> None:
         self.chain, self.refused = chain, []
@@ -288,6 +288,17 @@ class _Refusals:
 
     def step(self, *args):
         return self._call("step", *args)
+
+    def step_at(self, *args):
+        return self._call("step_at", *args)
+
+    @property
+    def last_t(self):
+        return self.chain.last_t
+
+    @last_t.setter
+    def last_t(self, t):
+        self.chain.last_t = t
 
 
 def test_pipeline_step_hands_the_chain_only_arrays_it_reads(seat):

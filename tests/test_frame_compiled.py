@@ -1,8 +1,9 @@
 """The per-frame arithmetic a live mat runs around its compiled chain, compiled
-(``texsense._core``: ``frame_bounds``, ``MotionTest``, ``exposure_advance``) against the numpy
-code it stands in for, which stays the reference (``compiled = False``): the same bits on
-generated frames and streams — NaN, infinities, negative values, repaired elements, empty
-mats, stillness and movement, skipped frames, alerts opening and clearing.
+(``texsense._core``: ``frame_bounds``, ``MotionTest``, ``exposure_advance``,
+``first_off_scale``) against the numpy code it stands in for, which stays the reference
+(``compiled = False``): the same bits on generated frames and streams — NaN, infinities,
+negative values, repaired elements, empty mats, stillness and movement, skipped frames,
+alerts opening and clearing.
 """
 
 from __future__ import annotations
@@ -219,3 +220,35 @@ def test_a_stations_pipeline_gives_numpys_bounds():
         assert ref.bounds_[0].tobytes() == fast.bounds_[0].tobytes()
         assert ref.bounds_[1].tobytes() == fast.bounds_[1].tobytes()
     assert ref.in_use_status() == fast.in_use_status()
+
+
+@SETTINGS
+@given(
+    n=st.integers(0, 300),
+    bad=st.lists(
+        st.tuples(
+            st.integers(0, 299),
+            st.sampled_from([np.nan, np.inf, -np.inf, 1e12 * (1 + 2**-52), -2e12, 1e300]),
+        ),
+        max_size=3,
+    ),
+    edge=st.sampled_from([1e12, -1e12, 0.0, -0.0]),
+)
+def test_the_first_time_off_scale_is_numpys(n, bad, edge):
+    """``first_off_scale`` (the door of every live frame, ``off_scale``) against numpy's
+    ``~(|t| <= limit)``: the same first index over lengths across its chunks of 64, with
+    times not a number, infinite, just past the limit, and times at the limit (on it)."""
+    from texsense._core import first_off_scale
+    from texsense.data.times import MAX_TIME_S, off_scale
+
+    t = np.linspace(-5.0, 5.0, n)
+    if n:
+        t[n // 2] = edge
+    for at, value in bad:
+        if at < n:
+            t[at] = value
+    off = ~(np.abs(t) <= MAX_TIME_S)
+    want = int(np.argmax(off)) if off.any() else None
+    assert first_off_scale(t, MAX_TIME_S) == want
+    assert (off_scale(t) is None) == (want is None)
+    assert off_scale(t[::-1]) == off_scale(np.ascontiguousarray(t[::-1]))  # a strided view

@@ -34,6 +34,7 @@ __all__ = [
     "__version__",
     "everett_terms",
     "exposure_advance",
+    "first_off_scale",
     "frame_bounds",
     "mcu_blob_info",
     "parse_json_frame",
@@ -280,6 +281,12 @@ class Chain:
         """One frame into arrays the caller holds: values, codes and measured (code 0)."""
     def step_new(self, dt: float, readings: _F64, valid: _Bools | None) -> tuple[_F64, _U8, _Bools]:
         """One frame into new arrays: (values, codes, measured)."""
+    @property
+    def last_t(self) -> float | None: ...
+    @last_t.setter
+    def last_t(self, t: float | None) -> None: ...
+    def step_at(self, t: float, readings: object, valid: object) -> tuple[_F64, _U8, _Bools] | None:
+        """One frame at time ``t`` into new arrays, or None when the inputs need converting."""
     def snapshot(self) -> bytes: ...
     def restore(self, state: bytes) -> None: ...
     def mcu_blob(self) -> bytes: ...
@@ -315,6 +322,9 @@ class MotionTest:
         motion: float,
     ) -> tuple[_F64, str]:
         """``x * gain`` and "empty", "moved" or "still"."""
+
+def first_off_scale(t: _F64, limit: float) -> int | None:
+    """The index of the first time not a number or beyond ``limit`` in size, or None."""
 
 def frame_bounds(
     values: _F64,

@@ -208,18 +208,16 @@ impl Compensation {
     }
 
     /// Both stages split into blocks of [`crate::par::block_size`] elements.
-    pub fn blocks(&mut self) -> Vec<CompensationBlock<'_>> {
-        let mut drift = self.drift.as_mut().map(|d| d.blocks().into_iter());
+    pub fn blocks(&mut self) -> impl Iterator<Item = CompensationBlock<'_>> {
+        let mut drift = self.drift.as_mut().map(DriftBank::blocks);
         let level = self.level.as_deref().map(Curve::view);
         self.preisach
             .blocks()
-            .into_iter()
-            .map(|preisach| CompensationBlock {
+            .map(move |preisach| CompensationBlock {
                 preisach,
                 drift: drift.as_mut().and_then(Iterator::next),
                 level,
             })
-            .collect()
     }
 
     /// A batch of T frames: time steps `dt` (T,), inputs and validity (T x N) -> outputs;

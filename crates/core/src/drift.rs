@@ -477,23 +477,23 @@ impl DriftBank {
     }
 
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter).
-    pub fn blocks(&mut self) -> Vec<DriftBlock<'_>> {
+    pub fn blocks(&mut self) -> impl Iterator<Item = DriftBlock<'_>> {
         let k = self.settings.kernel.len();
         let settings = self.settings.view();
         let size = block_size(self.len());
+        let (decay_dt, decay) = (self.memo.0, &self.memo.1);
         let mut z_time = self.z_time.chunks_mut(size * k);
         self.elements
             .chunks_mut(size)
             .zip(self.z.chunks_mut(size * k))
-            .map(|(elements, z)| DriftBlock {
+            .map(move |(elements, z)| DriftBlock {
                 settings,
                 elements,
                 z,
                 z_time: z_time.next().unwrap_or_default(),
-                decay: Cow::Borrowed(&self.memo.1),
-                decay_dt: self.memo.0,
+                decay: Cow::Borrowed(decay),
+                decay_dt,
             })
-            .collect()
     }
 
     /// The decay factors of a time step `dt` computed once for the blocks that

@@ -9,10 +9,29 @@
 //!   frames (`InUseDrift.step` and `_moved`: the load change summed over blocks of elements);
 //! - [`exposure_advance`]: the exposure tracker's step of every element
 //!   (`ExposureTracker.step` and `_advance`: time above the threshold grows while loaded, a
-//!   relief of the offload time resets it; thesis §1.1).
+//!   relief of the offload time resets it; thesis §1.1);
+//! - [`first_off_scale`]: the first of a frame's element times that no clock has
+//!   (`texsense.data.times.off_scale`, the door of every live frame).
 //!
 //! Sums of many values are numpy's pairwise sums ([`pairwise_sum`]), so that a comparison of a
 //! sum with a threshold comes out as numpy's does.
+
+/// The index of the first time in `t` that is not a number or lies beyond `limit` in size
+/// (`!(|t| <= limit)`, the test of `texsense.data.times.off_scale`), or None.
+pub fn first_off_scale(t: &[f64], limit: f64) -> Option<usize> {
+    // whole chunks tested without an early exit (the loop vectorises), then the chunk found
+    const CHUNK: usize = 64;
+    let off = |v: f64| v.is_nan() || v.abs() > limit;
+    let mut start = 0;
+    for chunk in t.chunks(CHUNK) {
+        let found = chunk.iter().fold(false, |any, &v| any | off(v));
+        if found {
+            return chunk.iter().position(|&v| off(v)).map(|i| start + i);
+        }
+        start += chunk.len();
+    }
+    None
+}
 
 /// `numpy.add.reduce` of a contiguous float64 array: pairwise summation in blocks of at most
 /// 128 values, each summed in eight interleaved partial sums.

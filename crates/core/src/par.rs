@@ -114,8 +114,13 @@ impl<T: Copy> BlockOut<'_, T> {
 ///
 /// # Panics
 /// When `out` is not `T x n` or `blocks` does not hold one entry per block.
-pub fn for_blocks<B, T, F>(out: &mut [T], n: usize, blocks: Vec<B>, par: bool, work: F)
-where
+pub fn for_blocks<B, T, F>(
+    out: &mut [T],
+    n: usize,
+    blocks: impl IntoIterator<Item = B>,
+    par: bool,
+    work: F,
+) where
     B: Send,
     T: Copy + Send,
     F: Fn(B, &mut BlockOut<'_, T>) + Sync + Send,
@@ -125,11 +130,6 @@ where
     }
     assert!(out.len().is_multiple_of(n), "output is not T x {n}");
     let size = block_size(n);
-    assert_eq!(
-        blocks.len(),
-        n.div_ceil(size),
-        "one state per block of {size}"
-    );
     let frames = out.len() / n;
     let cols = Columns {
         ptr: out.as_mut_ptr(),
@@ -137,7 +137,8 @@ where
     };
     debug_assert_eq!(cols.len, frames * n);
     let cols = &cols;
-    each_block(blocks, par, |(b, block)| {
+    let blocks = each_block(blocks, par, |(b, block)| {
+        assert!(b * size < n, "one state per block of {size}");
         let start = b * size;
         let mut o = BlockOut {
             cols,
@@ -148,6 +149,7 @@ where
         };
         work(block, &mut o);
     });
+    assert_eq!(blocks, n.div_ceil(size), "one state per block of {size}");
 }
 
 /// A block of a bank whose elements step frame after frame: a frame starts `dt` seconds
@@ -172,8 +174,13 @@ pub trait FrameBlock: Send {
 /// The frames `dt` (T,) of a batch through blocks of a bank ([`for_blocks`]): element `i`
 /// of frame `r` reads `input(r * n + i, i)` (None: an invalid reading) and its output goes to
 /// `out[r * n + i]`.
-pub fn run_frames<B, F>(out: &mut [f64], n: usize, blocks: Vec<B>, dt: &[f64], input: F)
-where
+pub fn run_frames<B, F>(
+    out: &mut [f64],
+    n: usize,
+    blocks: impl IntoIterator<Item = B>,
+    dt: &[f64],
+    input: F,
+) where
     B: FrameBlock,
     F: Fn(usize, usize) -> Option<f64> + Sync,
 {
@@ -207,7 +214,7 @@ where
 pub fn run_frames_coded<B>(
     out: &mut [f64],
     n: usize,
-    blocks: Vec<B>,
+    blocks: impl IntoIterator<Item = B>,
     dt: &[f64],
     src: &[f64],
     codes: &[u8],
@@ -249,15 +256,24 @@ where
 }
 
 /// `work((b, block))` for every block (e.g. the per-block views of a bank), on the thread
-/// pool when `par`, else one after the other on this thread.
-pub fn each_block<B, F>(blocks: Vec<B>, par: bool, work: F)
+/// pool when `par`, else one after the other on this thread as the blocks come (a live
+/// frame makes no list of them: issue 34, sixteenth round); how many blocks there were.
+pub fn each_block<B, F>(blocks: impl IntoIterator<Item = B>, par: bool, work: F) -> usize
 where
     B: Send,
     F: Fn((usize, B)) + Sync + Send,
 {
     if par {
+        let blocks: Vec<B> = blocks.into_iter().collect();
+        let count = blocks.len();
         blocks.into_par_iter().enumerate().for_each(work);
+        count
     } else {
-        blocks.into_iter().enumerate().for_each(work);
+        let mut count = 0;
+        for (b, block) in blocks.into_iter().enumerate() {
+            work((b, block));
+            count = b + 1;
+        }
+        count
     }
 }

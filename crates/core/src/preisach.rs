@@ -353,7 +353,7 @@ impl PreisachBank {
 
     /// The bank split into blocks of [`block_size`] elements (the last may be shorter; a
     /// block's first element is a multiple of [`GROUP`]).
-    pub fn blocks(&mut self) -> Vec<PreisachBlock<'_>> {
+    pub fn blocks(&mut self) -> impl Iterator<Item = PreisachBlock<'_>> {
         let (everett, capacity, output) = (self.everett.view(), self.capacity, self.output);
         let cells = self.everett.cells();
         let size = block_size(self.len());
@@ -361,7 +361,7 @@ impl PreisachBank {
         self.elements
             .chunks_mut(size)
             .zip(self.heads.chunks_mut(size / GROUP))
-            .map(|(elements, heads)| PreisachBlock {
+            .map(move |(elements, heads)| PreisachBlock {
                 everett,
                 cells,
                 capacity,
@@ -369,7 +369,6 @@ impl PreisachBank {
                 heads,
                 output,
             })
-            .collect()
     }
 
     /// One frame: inputs (N,), validity (N,) -> outputs (N,) (NaN where skipped).

@@ -68,10 +68,23 @@ pub fn detected() -> Path {
     Path::Scalar
 }
 
+/// [`detected`] as `u8`, found once ([`UNKNOWN`] before): the kernels ask for the path
+/// per block and row of a frame, where four feature tests each were a measurable share of
+/// a live step (issue 34, sixteenth round).
+static DETECTED: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// [`DETECTED`] not yet found.
+const UNKNOWN: u8 = u8::MAX;
+
 /// The path batches run on now: [`detected`], at most the limit of [`set_limit`].
 #[inline]
 pub fn path() -> Path {
-    detected().min(Path::of(LIMIT.load(Ordering::Relaxed)))
+    let mut best = DETECTED.load(Ordering::Relaxed);
+    if best == UNKNOWN {
+        best = detected() as u8;
+        DETECTED.store(best, Ordering::Relaxed);
+    }
+    Path::of(best.min(LIMIT.load(Ordering::Relaxed)))
 }
 
 /// Allow (default) or forbid the SIMD paths, process-wide (for benchmarks and tests that

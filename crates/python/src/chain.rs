@@ -85,14 +85,122 @@ fn set_measured(measured: &mut [bool], codes: &[u8]) {
     }
 }
 
+/// [`set_measured`] into `codes.len()` bools at `measured` whose bytes may not be set yet
+/// (a new numpy array's): written through the pointer, no reference to them made first.
+///
+/// # Safety
+/// `measured` must be valid for writes of `codes.len()` bytes, and nothing else may read
+/// or write them meanwhile.
+unsafe fn write_measured(measured: *mut bool, codes: &[u8]) {
+    for (i, &c) in codes.iter().enumerate() {
+        // SAFETY: i < codes.len(), inside the bytes the caller vouches for
+        unsafe { measured.add(i).write(c == 0) };
+    }
+}
+
 #[pyclass(name = "Chain", module = "texsense._core")]
 pub(crate) struct PyChain {
     inner: Chain,
     /// The validity of a frame given as None (every reading valid).
     all_valid: Vec<bool>,
+    /// The time of the last frame of a stream stepped by [`PyChain::step_at`] (s; None: no
+    /// frame yet).
+    last_t: Option<f64>,
 }
 
-element_bank!(PyChain, reset = "Every stage back to its initial state.", {
+/// A live frame's readings or validity as `step_at` takes them as given: an exact numpy
+/// array (not a subclass) of `T`, one-dimensional, C-contiguous, of `n` elements; None
+/// for anything else (the caller converts it first).
+fn as_given<'a, 'py, T: numpy::Element>(
+    py: Python<'py>,
+    x: &'a Bound<'py, PyAny>,
+    n: usize,
+) -> Option<&'a Bound<'py, PyArray1<T>>> {
+    use pyo3::PyTypeInfo;
+    let ndarray = numpy::PyUntypedArray::type_object(py);
+    if !x.get_type().is(&ndarray) {
+        return None;
+    }
+    let a = x.cast::<PyArray1<T>>().ok()?;
+    (a.len() == n && a.is_c_contiguous()).then_some(a)
+}
+
+/// An array another borrow holds (written elsewhere meanwhile): one ShapeError line.
+fn borrowed(what: &'static str, e: numpy::BorrowError) -> PyErr {
+    to_py(CoreError::Shape {
+        what,
+        expected: "an array no one writes meanwhile".into(),
+        got: e.to_string(),
+    })
+}
+
+element_bank!(PyChain, {
+    /// Every stage back to its initial state, and no frame time (`step_at`).
+    fn reset(&mut self) {
+        self.inner.reset();
+        self.last_t = None;
+    }
+
+    /// The time of the last frame `step_at` stepped (s; None before the first; settable:
+    /// a stream restored from a snapshot goes on from its time).
+    #[getter]
+    fn get_last_t(&self) -> Option<f64> {
+        self.last_t
+    }
+
+    #[setter]
+    fn set_last_t(&mut self, t: Option<f64>) {
+        self.last_t = t;
+    }
+
+    /// One frame of a live stream at time `t` (s): readings (N,) float64 and their validity
+    /// (N,) bool or None -> (values, codes, measured) in new arrays, as `step_new` with `dt`
+    /// the time since the last frame (0 for the first). Frame times must be numbers and must
+    /// not decrease (ParameterError). Returns None, stepping nothing, when the readings or
+    /// the validity are not exact numpy arrays of their type, one-dimensional, contiguous,
+    /// of N elements: the caller converts them and steps again (`Pipeline.step`: its
+    /// checks and the clock in one call, issue 34, sixteenth round).
+    #[pyo3(signature = (t, readings, valid))]
+    #[allow(clippy::type_complexity)]
+    fn step_at<'py>(
+        &mut self,
+        py: Python<'py>,
+        t: f64,
+        readings: &Bound<'py, PyAny>,
+        valid: &Bound<'py, PyAny>,
+    ) -> PyResult<
+        Option<(
+            Bound<'py, PyArray1<f64>>,
+            Bound<'py, PyArray1<u8>>,
+            Bound<'py, PyArray1<bool>>,
+        )>,
+    > {
+        let dt = self.last_t.map_or(0.0, |last| t - last);
+        if !(dt >= 0.0 && t.is_finite()) {
+            return Err(crate::errors::ParameterError::new_err(
+                "frame times must be numbers and must not decrease",
+            ));
+        }
+        let n = self.inner.len();
+        let Some(readings) = as_given::<f64>(py, readings, n) else {
+            return Ok(None);
+        };
+        let valid = if valid.is_none() {
+            None
+        } else {
+            match as_given::<bool>(py, valid, n) {
+                Some(v) => Some(v.try_readonly().map_err(|e| borrowed("valid", e))?),
+                None => return Ok(None),
+            }
+        };
+        let readings = readings
+            .try_readonly()
+            .map_err(|e| borrowed("readings", e))?;
+        let done = self.step_new(py, dt, readings, valid)?;
+        self.last_t = Some(t);
+        Ok(Some(done))
+    }
+
     #[new]
     fn new(n_elements: usize, stages: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
         let stages = stages
@@ -104,6 +212,7 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
         Ok(Self {
             inner,
             all_valid: vec![true; n_elements],
+            last_t: None,
         })
     }
 
@@ -236,21 +345,18 @@ element_bank!(PyChain, reset = "Every stage back to its initial state.", {
                 PyArray1::<u8>::new(py, [n], false),
             )
         };
-        let measured = PyArray1::<bool>::zeros(py, [n], false);
+        // SAFETY: as `out`; its bytes are written below through a raw pointer before
+        // anything reads them (no `bool` is made of a byte not yet written)
+        let measured = unsafe { PyArray1::<bool>::new(py, [n], false) };
         {
-            // SAFETY: the three arrays were made just above, contiguous, of n elements, and
-            // no other reference to them exists yet, so no borrow can conflict
-            let (o, c, m) = unsafe {
-                (
-                    out.as_slice_mut()?,
-                    codes.as_slice_mut()?,
-                    measured.as_slice_mut()?,
-                )
-            };
+            // SAFETY: the arrays were made just above, contiguous, of n elements, and no
+            // other reference to them exists yet, so no borrow can conflict
+            let (o, c) = unsafe { (out.as_slice_mut()?, codes.as_slice_mut()?) };
             self.inner
                 .run(&[dt], readings.as_slice()?, valid, o, c)
                 .map_err(to_py)?;
-            set_measured(m, c);
+            // SAFETY: `measured` owns n contiguous bytes (made above, C order)
+            unsafe { write_measured(measured.data(), c) };
         }
         Ok((out, codes, measured))
     }

@@ -47,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(text::py_parse_json_numbers, m)?)?;
     m.add_function(wrap_pyfunction!(text::py_parse_json_frame, m)?)?;
     m.add_function(wrap_pyfunction!(live::py_frame_bounds, m)?)?;
+    m.add_function(wrap_pyfunction!(live::py_first_off_scale, m)?)?;
     m.add_function(wrap_pyfunction!(live::py_exposure_advance, m)?)?;
     let py = m.py();
     m.add("ShapeError", py.get_type::<errors::ShapeError>())?;

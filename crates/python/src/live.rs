@@ -19,6 +19,17 @@ fn misfit(what: &'static str) -> PyErr {
     })
 }
 
+/// The index of the first element time of `t` (float64, 1-D) that no clock has: not a number,
+/// or `|t|` over `limit` (`texsense.data.times.off_scale`); None when all are on the scale.
+#[pyfunction]
+#[pyo3(name = "first_off_scale")]
+pub(crate) fn py_first_off_scale(
+    t: PyReadonlyArray1<'_, f64>,
+    limit: f64,
+) -> PyResult<Option<usize>> {
+    Ok(live::first_off_scale(t.as_slice()?, limit))
+}
+
 /// The lower and upper bounds of one frame (`intervals.bounds` of one frame, to the bit).
 #[pyfunction]
 #[pyo3(name = "frame_bounds")]

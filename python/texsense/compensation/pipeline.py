@@ -244,13 +244,15 @@ class Pipeline:
             conversion.detector(layout) if conversion is not None else None
         )
         self._parts = self._compile()
+        # a stream of one compiled pass steps in one call of its chain, which keeps the
+        # stream's clock (Chain.step_at, issue 34)
+        one = self._parts[0] if len(self._parts) == 1 and self.interval is None else None
+        self._live = one if isinstance(one, Chain) else None
+        self._clock: float | None = None  # the clock of a pipeline of several passes
         self.reset()
         self._dt1 = np.zeros(1)
         self._n = layout.n_elements
         self._all_valid = np.ones(layout.n_elements, bool)
-        # a stream of one compiled pass steps into arrays it holds (Chain.step, issue 34)
-        one = self._parts[0] if len(self._parts) == 1 and self.interval is None else None
-        self._live = one if isinstance(one, Chain) else None
         n = layout.n_elements
         self._held = (np.empty(n), np.empty(n, np.uint8), np.empty(n, bool))
         #: the failure codes of the last frames (0: measured)
@@ -532,6 +534,20 @@ class Pipeline:
             multiplier_value=self.interval_multiplier,
         )
 
+    @property
+    def _last_t(self) -> float | None:
+        """The time of the last frame (s; None before the first): the chain's clock for a
+        pipeline of one compiled pass, which steps in one call (:meth:`step`)."""
+        live = self._live
+        return self._clock if live is None else live.last_t
+
+    @_last_t.setter
+    def _last_t(self, t: float | None) -> None:
+        if self._live is None:
+            self._clock = t
+        else:
+            self._live.last_t = t
+
     def step(
         self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float, *, keep: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -540,6 +556,21 @@ class Pipeline:
         ``codes_``. ``keep=False``: the caller keeps nothing of the frame past the next step,
         so a pipeline of one compiled pass hands out the arrays it steps into (overwritten by
         the next step) instead of copies of them."""
+        live = self._live
+        if live is not None and keep:  # one call: the chain checks the time and the arrays
+            try:
+                done = live.step_at(t, values, valid)
+            except TypeError:  # a time the binding does not read as a float (float() may)
+                done = None
+            if done is not None:  # None: readings or validity to convert first (_frame)
+                out, self.codes_, ok = done
+                return out, ok
+        return self._step(values, valid, t, keep)
+
+    def _step(
+        self, values: npt.ArrayLike, valid: npt.ArrayLike | None, t: float, keep: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`step` for everything its one call does not take as given."""
         t = float(t)
         last = self._last_t
         dt = 0.0 if last is None else t - last

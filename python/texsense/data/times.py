@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from texsense._core import first_off_scale
 from texsense.exceptions import FormatError
 
 __all__ = ["MAX_SPAN_S", "MAX_TIME_S", "MIN_MEAN_STEP_S", "TimeCheck", "off_scale"]
@@ -66,12 +67,11 @@ def off_scale(t: npt.ArrayLike) -> str | None:
     >>> off_scale([1e300])
     'the time 1e+300 s is beyond any clock (|t| over 1e12 s)'
     """
-    t = np.asarray(t, dtype=np.float64).ravel()
-    with np.errstate(invalid="ignore"):
-        bad = ~(np.abs(t) <= MAX_TIME_S)
-    if not bad.any():
+    t = np.ascontiguousarray(t, dtype=np.float64).ravel()
+    i = first_off_scale(t, MAX_TIME_S)  # one compiled pass (every live frame comes here)
+    if i is None:
         return None
-    ti = t[int(np.argmax(bad))]
+    ti = t[i]
     if not np.isfinite(ti):
         return f"the time {ti} is not a number"
     return f"the time {ti:.9g} s is beyond any clock (|t| over 1e12 s)"

@@ -35,16 +35,11 @@ pub(super) fn segment(
         // conversion then compensation, the usual segment: one step without a dispatch,
         // its blocks made without a list of parts each (a live step makes them every frame)
         let conv = conv.view();
-        let usual = comp
-            .blocks()
-            .into_iter()
-            .enumerate()
-            .map(|(b, comp)| UsualBlock {
-                start: b * size,
-                conv,
-                comp,
-            })
-            .collect();
+        let usual = comp.blocks().enumerate().map(|(b, comp)| UsualBlock {
+            start: b * size,
+            conv,
+            comp,
+        });
         run_frames_coded(dst, n, usual, dt, src, codes, code::OK);
         crate::lanes::code_not_finite(dst, codes, code::OK, code::OUT_OF_RANGE);
         return;

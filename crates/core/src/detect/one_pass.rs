@@ -54,7 +54,11 @@ impl FailureDetector {
         for (b, groups) in left.into_iter().enumerate() {
             let start = b * size;
             let end = (start + size).min(n);
-            for g in (0..32).filter(|g| groups >> g & 1 != 0) {
+            let mut groups = groups;
+            // the set bits only (most blocks have none)
+            while groups != 0 {
+                let g = groups.trailing_zeros() as usize;
+                groups &= groups - 1;
                 let (a, z) = (start + 4 * g, (start + 4 * g + 4).min(end));
                 self.codes_scalar(
                     readings,
