@@ -33,12 +33,19 @@ class Cluster:
     core, the others read its file). No beds by default (their side model is one more thing
     to train or read at the start). A mat is stale after 2 s without a frame at the least
     (``--stale-after 2``: at 4x two frame periods are 0.8 s, less than a loaded machine's
-    hiccups)."""
+    hiccups). ``ready_s``: the members' READY_S (default: texsense's, 10 s), set in their
+    processes by tests/group_ready/sitecustomize.py."""
 
     def __init__(self, folder: Path, members: list[str], mats: int, *, speed: float = 1.0,
                  reposition_min: float = 20.0, beds: int = 0,
-                 extra: tuple[str, ...] = (), publish: bool = True) -> None:  # fmt: skip
+                 extra: tuple[str, ...] = (), publish: bool = True,
+                 ready_s: float | None = None) -> None:  # fmt: skip
         self.folder, self.mats, self.speed = folder, mats, speed
+        self.env = {**os.environ, "TMPDIR": str(folder)}
+        if ready_s is not None:
+            here = str(Path(__file__).with_name("group_ready"))
+            path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH")) if p)
+            self.env.update(PYTHONPATH=path, TEXSENSE_TEST_READY_S=str(ready_s))
         self.extra = ("--reposition-min", str(reposition_min), "--virtual-beds", str(beds),
                       "--virtual-calibrations", str(folder / "calibrations"),
                       "--stale-after", "2", *extra)  # fmt: skip
@@ -77,7 +84,7 @@ class Cluster:
         with (self.folder / f"{name}.log").open("ab") as out:
             return subprocess.Popen([sys.executable, "-m", "texsense.cli", *args], stdout=out,
                                     stderr=subprocess.STDOUT, cwd=self.folder,
-                                    env={**os.environ, "TMPDIR": str(self.folder)})  # fmt: skip
+                                    env=self.env)  # fmt: skip
 
     # ---------------------------------------------------------------- members
     def database(self, name: str) -> str:

@@ -60,6 +60,9 @@ ALERT_TOL_S = 10.0
 #: a mat's frame period in simulated s (the seat's 1.6 s, every EVERY-th published)
 FRAME_S = 1.6 * EVERY
 
+#: the members' READY_S (texsense's: 10 s), s
+READY_S = 3.0
+
 #: One worker runs the whole module (pytest-xdist's --dist loadgroup): the cases share one
 #: cluster and run in order (a member is killed, then comes back).
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("group_cluster")]
@@ -69,8 +72,11 @@ pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("group_cluster")]
 def cluster():
     folder = Path(tempfile.mkdtemp(prefix="texsense-group-", dir="/tmp"))
     folder.chmod(0o755)  # Mosquitto and PostgreSQL run as their own users under root
+    # READY_S 3 s (tests/group_ready): the setup waited 10 s of beats before the first member
+    # gave the others their mats, before the mats publish (the cases after it wait on the
+    # simulated time of the alerts, which runs from the publishing)
     c = Cluster(folder, MEMBERS, MATS, speed=SPEED, reposition_min=REPOSITION_MIN,
-                publish=False)  # fmt: skip
+                publish=False, ready_s=READY_S)  # fmt: skip
     try:
         c.reference_db = c.database("reference")  # type: ignore[attr-defined]
         c.start("ref", group="ref", db=c.reference_db)  # type: ignore[attr-defined]
@@ -106,7 +112,7 @@ def test_the_members_share_the_mats(cluster, fault_row):
     cluster.all_held("a", timeout=180)  # the members start, on 2 shared cores
     cluster.all_held("ref", timeout=60)
     # the first member up takes every mat; the others get theirs (rendezvous hashing) once
-    # they have been beating for READY_S (10 s) without a break
+    # they have been beating for READY_S without a break
     settled = {k: preferred(k, MEMBERS) for k in cluster.mats_of("a")}
     mats = cluster.until(lambda: cluster.mats_of("a"), lambda s: live(s) and
                          {k: m["holder"] for k, m in s.items()} == settled, 60)  # fmt: skip
@@ -222,7 +228,7 @@ def test_a_killed_member_s_mats_are_taken_over(cluster, fault_row):
 def test_a_member_that_comes_back_takes_a_share(cluster):
     cluster.start("b")
     settled = {k: preferred(k, MEMBERS) for k in cluster.mats_of("a")}
-    # its start (a minute on the loaded machine), then READY_S (10 s) of beats: b's mats go
+    # its start (a minute on the loaded machine), then READY_S of beats: b's mats go
     # back to it, every mat live
     cluster.until(lambda: cluster.mats_of("a"), lambda s: live(s) and
                   {k: m["holder"] for k, m in s.items()} == settled, 120)  # fmt: skip

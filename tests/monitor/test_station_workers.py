@@ -169,7 +169,10 @@ def test_a_killed_worker_s_mats_go_to_its_sibling_and_come_back():
     folder = Path(tempfile.mkdtemp(prefix="texsense-workers-", dir="/tmp"))
     folder.chmod(0o755)  # Mosquitto and PostgreSQL run as their own users under root
     mats = 8
-    c = Cluster(folder, [], mats, speed=4.0, extra=("--workers", "2"), publish=False)
+    # READY_S 3 s (tests/group_ready): the two waits on a worker's 10 s of beats before it gets
+    # its mats (at the start and after its restart) were 20 of the test's 37 s
+    c = Cluster(folder, [], mats, speed=4.0, extra=("--workers", "2"), publish=False,
+                ready_s=3.0)  # fmt: skip
     try:
         c.ports["m"] = free_pair()
         c.start("m")

@@ -128,3 +128,26 @@ def test_announcement_round_trips_a_checkerboard():
     lay = VirtualMat.seat().layout
     back, info = parse_announcement(layout_announcement(lay, spacer="x"))
     assert back == lay and info == {"elements": 96, "spacer": "x"}
+
+
+def test_the_layout_is_announced_again_at_least_four_times_a_second(serve):
+    """A reader that opens the port while the device runs (`texsense record`, a monitor)
+    waits for the next announcement: at most a quarter of a second (ANNOUNCE_EVERY_S; 1 s
+    before, half a second on average of every such start). Counted in frames between two
+    announcements: at 100x a seat frame is 16 ms, a quarter second 15.6 of them (a busy
+    machine paces fewer frames into it, never more)."""
+    dev = VirtualDevice("seat", load="empty", speed=100)
+    port = serial.Serial(str(serve(dev)), timeout=0.5)
+    runs, run, frames = [], 0, 0
+    try:
+        while frames < 120:
+            line = port.readline()
+            assert line, "the device went quiet"
+            if parse_announcement(line) is not None:
+                runs.append(run)
+                run = 0
+            elif line.startswith(b"F,"):
+                run, frames = run + 1, frames + 1
+    finally:
+        port.close()
+    assert len(runs) >= 5 and max(runs[1:]) <= 17, runs

@@ -59,6 +59,7 @@ from texsense.io._registry import Probe, writer
 from texsense.io.policy import (
     DAMAGED,
     check_json,
+    check_strings,
     check_text,
     link_name,
     named,
@@ -136,6 +137,7 @@ def _whole(ds: h5py.Dataset) -> Any:
         raise TypeError(f"{ds.name} is not a dataset")
     itemsize = 64 if ds.dtype.kind == "O" else ds.dtype.itemsize
     budget.check(ds.size * itemsize, f"the dataset {ds.name}", ds.file.filename)
+    check_strings(ds)
     return ds[()]
 
 
@@ -515,6 +517,7 @@ def _held_rows(ds: h5py.Dataset) -> int | None:
 def _labels(group: h5py.Group, a: int, b: int) -> dict[str, np.ndarray]:
     labels = {}
     for name, ds in named(group).items():
+        check_strings(ds, slice(a, b))
         values = ds[a:b]
         labels[name] = (
             np.array([_text(v) for v in values], dtype=str) if ds.dtype.kind in "OS" else values

@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 import h5py
+import numpy as np
 from h5py import h5d, h5z
 
 from texsense.data import budget
@@ -59,6 +60,7 @@ __all__ = [
     "FILTERS",
     "MAX_OBJECTS",
     "check_hdf5",
+    "check_strings",
     "check_text",
     "link_name",
     "named",
@@ -266,3 +268,48 @@ def check_text(value: str, what: str) -> str:
     except UnicodeEncodeError:
         raise ParameterError(f"{what} {shown(value)} is not valid Unicode text") from None
     return value
+
+
+def check_strings(ds: h5py.Dataset, rows: slice = slice(None)) -> None:
+    """Before ``ds[rows]`` of a dataset of variable-length strings: every string's declared
+    length, read from its stored descriptor (the length's 4 bytes, then the global heap's
+    address and index), is at most the file's size. HDF5 allocates and clears a string's
+    declared length before it reads the string: a flipped byte in a length declared up to
+    4 GiB, which took 4 GiB of memory and ~3 s before HDF5 found that the string in the heap
+    does not match. Raises an OSError (one of :data:`DAMAGED`: the caller says that the file
+    is damaged, as for any damaged read). Checked where the descriptors lie plainly in the
+    file: contiguous storage and chunks stored without a filter (in a compressed chunk a
+    flipped byte fails the decompression; a compact dataset's few lie in its header)."""
+    info = h5py.check_string_dtype(ds.dtype)
+    if info is None or info.length is not None or ds.size == 0:
+        return
+    fcpl = ds.file.id.get_create_plist()
+    size = 4 + fcpl.get_sizes()[0] + 4
+    first, stop, _ = rows.indices(ds.shape[0]) if ds.ndim else (0, 1, 1)
+    spans = []  # (address, bytes) of the stored descriptors of ``rows``
+    dcpl = ds.id.get_create_plist()
+    if dcpl.get_layout() == h5d.CONTIGUOUS and ds.id.get_offset() is not None:
+        row = size * (ds.size // max(ds.shape[0], 1) if ds.ndim else 1)
+        spans.append((ds.id.get_offset() + first * row, max(stop - first, 0) * row))
+    elif dcpl.get_layout() == h5d.CHUNKED:
+        along, filters = ds.chunks[0], dcpl.get_nfilters()
+        chunks = (
+            [ds.id.get_chunk_info_by_coord((k * along,)) for k in
+             range(first // along, -(-stop // along))] if ds.ndim == 1 else
+            [ds.id.get_chunk_info(i) for i in range(ds.id.get_num_chunks())]
+        )  # fmt: skip
+        spans += [(c.byte_offset, c.size) for c in chunks if c.byte_offset is not None and
+                  all(c.filter_mask >> i & 1 for i in range(filters))]  # fmt: skip
+    if not spans:
+        return
+    with open(ds.file.filename, "rb") as f:
+        end = f.seek(0, 2)
+        for at, n in spans:
+            f.seek(fcpl.get_userblock() + at)  # addresses count from the end of a user block
+            raw = f.read(n // size * size)
+            lengths = np.frombuffer(raw, "<u4").reshape(-1, size // 4)[:, 0] if size % 4 == 0 \
+                else np.array([int.from_bytes(raw[i : i + 4], "little")
+                               for i in range(0, len(raw), size)])  # fmt: skip
+            if lengths.size and int(lengths.max()) > end:
+                raise OSError(f"a string of {ds.name} declares {int(lengths.max())} bytes, more "
+                              f"than the file's {end}")  # fmt: skip

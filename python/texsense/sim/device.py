@@ -3,8 +3,9 @@ texsense serial line protocol (:mod:`texsense.data.protocol`) on a pseudo-termin
 that everything a real mat goes through — the serial port, the line protocol, the recorder,
 the calibration, the monitor — can be run and tested without hardware (docs/calibration.md).
 
-The device announces itself first (and again every few seconds, for a reader that opens the
-port later) with a comment line that a reader of the protocol may use instead of ``--grid``::
+The device announces itself first (and again before a frame, at most four times a second, for
+a reader that opens the port later) with a comment line that a reader of the protocol may use
+instead of ``--grid``::
 
     #layout {"device": "texsense virtual seat", "spacer": "textile-3mm", "elements": 96, ...}
 
@@ -57,8 +58,10 @@ __all__ = ["LOADS", "MATS", "VirtualDevice", "parse_load"]
 MATS = ("seat", "bed")
 #: What can lie on it (``uniform:P`` with P in N/cm²).
 LOADS = ("empty", "uniform:P", "person")
-#: Seconds between two announcements of the layout.
-ANNOUNCE_EVERY_S = 1.0
+#: Seconds between two announcements of the layout: the longest a reader that opens the port
+#: waits for one (1 s before: half a second on average of every `texsense record` and monitor
+#: started on a device; a line of ~300 bytes four times a second is nothing on the line).
+ANNOUNCE_EVERY_S = 0.25
 
 
 def parse_load(text: str) -> tuple[str, float]:
