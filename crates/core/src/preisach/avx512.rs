@@ -6,9 +6,10 @@
 //! corners are gathered from the table (four gathers; on AVX-512 faster than a load per lane
 //! from the table by cell and its transpose, 1.14 x on the timing binary).
 //!
-//! Two whole groups step here, their stacks in place or on the heap (each lane's stack
-//! from its own offset; a stack on the heap that is shallow again goes back in place
-//! afterwards), a stack at its room too unless its input turns. A turning point onto a full
+//! Whole groups step here, two side by side where both have their stacks in place
+//! ([`pair_n`]), one at a time where a stack is on the heap (each lane's stack from its own
+//! offset; a stack on the heap that is shallow again goes back in place afterwards); a stack
+//! at its room too unless its input turns. A turning point onto a full
 //! stack and the last group of a block go through `super::avx2::row` for those elements,
 //! which grows the stack on the heap or forgets a loop.
 
@@ -53,6 +54,15 @@ pub(super) unsafe fn row(
     let mut i = 0;
     while i < n {
         let g = i / GROUP;
+        // RUNS whole groups side by side where their stacks are in place ([`pair_n`]); a
+        // group on the heap, or a turning point onto a stack at its room, goes alone below
+        // SAFETY: AVX-512 (this function's features); the slices hold n elements
+        if i + RUNS * WIDE <= n
+            && unsafe { run_of_groups(&consts, elements, heads, (off, room), i, u, ok, out) }
+        {
+            i += RUNS * WIDE;
+            continue;
+        }
         let stepped = i + WIDE <= n && {
             let els = &mut elements[i..i + WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
@@ -68,17 +78,18 @@ pub(super) unsafe fn row(
             // SAFETY: AVX-512 (this function's features); eight elements, lane `l`'s stack
             // `offs[l]` f64 from `base` with `rooms[l]` extrema plus the spare slot
             let moved = unsafe {
-                pair(
+                pair_n::<1>(
                     &consts,
-                    &mut heads[g],
-                    base,
-                    offs,
-                    rooms,
+                    std::array::from_mut(&mut heads[g]),
+                    [base],
+                    [offs],
+                    [rooms],
                     &u[i..i + WIDE],
                     &ok[i..i + WIDE],
                     &mut out[i..i + WIDE],
                 )
-            };
+            }
+            .map(|[moved]| moved);
             if let (Some(moved), true) = (moved, spilled) {
                 back_in_place(els, &mut heads[g], moved);
             }
@@ -104,6 +115,279 @@ pub(super) unsafe fn row(
         }
         i += m;
     }
+}
+
+/// [`pair_n`] of the [`RUNS`] groups from element `i` when none has a stack on the heap
+/// (their stacks at `off` with `room` extrema, in place); false when they did not step (a
+/// stack on the heap, or a turning point onto a stack at its room: nothing touched).
+///
+/// # Safety
+/// The processor must have AVX2 and AVX-512 F, DQ and VL; `i + RUNS * WIDE` elements are
+/// in `elements`, `u`, `ok` and `out`, and their groups in `heads`.
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn run_of_groups(
+    consts: &Consts,
+    elements: &mut [Element],
+    heads: &mut [Heads],
+    (off, room): (__m512i, __m512i),
+    i: usize,
+    u: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) -> bool {
+    let g = i / GROUP;
+    // SAFETY: AVX-512 (this function's features)
+    if (0..RUNS).any(|k| unsafe { on_heap(&heads[g + k]) }) {
+        return false;
+    }
+    let p = elements[i..i + RUNS * WIDE].as_mut_ptr();
+    // SAFETY: group k's elements start at p + 8 k (inside the slice)
+    let bases: [*mut f64; RUNS] = std::array::from_fn(|k| unsafe {
+        std::ptr::addr_of_mut!((*p.add(k * WIDE)).inline).cast::<f64>()
+    });
+    let hd: &mut [Heads; RUNS] = (&mut heads[g..g + RUNS]).try_into().expect("RUNS groups");
+    let at = i..i + RUNS * WIDE;
+    // SAFETY: AVX-512 (this function's features); group k's lane l's stack `off[l]` f64 from
+    // `bases[k]` with `room` extrema plus the spare slot (in place)
+    let done = unsafe {
+        pair_n::<RUNS>(
+            consts,
+            hd,
+            bases,
+            [off; RUNS],
+            [room; RUNS],
+            &u[at.clone()],
+            &ok[at.clone()],
+            &mut out[at],
+        )
+    };
+    done.is_some()
+}
+
+/// Groups side by side in [`pair_n`] where their stacks are in place.
+const RUNS: usize = 2;
+
+/// True when a group has a stack on the heap (`element::HEAP`: the counters' sign bits).
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn on_heap(hd: &Heads) -> bool {
+    _mm512_movepi64_mask(_mm512_load_si512(hd.clamped.as_ptr().cast())) != 0
+}
+
+/// `Everett::value_of_numbers` per lane for `u_min <= alpha, beta` (`super::avx2::everett`)
+/// of `N` groups side by side, stage by stage: the four gathers of the corners of every
+/// group one after the other, so that the groups' lookups overlap (on AVX-512 the gathers
+/// beat a load per lane from the table by cell and its transpose: fewer instructions, and no
+/// lane's index through a general register).
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn everett_n<const N: usize>(
+    c: &Consts,
+    alpha: [__m512d; N],
+    beta: [__m512d; N],
+) -> [__m512d; N] {
+    use std::array::from_fn;
+    let zero = _mm512_setzero_pd();
+    let one = _mm512_set1_pd(1.0);
+    let zero_i = _mm256_setzero_si256();
+    // SAFETY: AVX-512 (this function's features)
+    let a: [__m512d; N] = from_fn(|k| unsafe { grid(c, alpha[k]) });
+    // SAFETY: as above
+    let b: [__m512d; N] = from_fn(|k| unsafe { grid(c, beta[k]) });
+    let cell =
+        |v: __m512d| _mm256_max_epi32(_mm256_min_epi32(_mm512_cvttpd_epi32(v), c.top), zero_i);
+    let i0: [__m256i; N] = from_fn(|k| cell(a[k]));
+    let j0: [__m256i; N] = from_fn(|k| cell(b[k]));
+    let i64a: [__m512i; N] = from_fn(|k| _mm512_cvtepi32_epi64(i0[k]));
+    let i64b: [__m512i; N] = from_fn(|k| _mm512_cvtepi32_epi64(j0[k]));
+    let one_i = _mm512_set1_epi64(1);
+    let q: [__m512i; N] = from_fn(|k| _mm512_add_epi64(_mm512_mul_epi32(i64a[k], c.k), i64b[k]));
+    let qk: [__m512i; N] = from_fn(|k| _mm512_add_epi64(q[k], c.k));
+    let f00: [__m512d; N] = from_fn(|k| _mm512_i64gather_pd::<8>(q[k], c.table));
+    let f01: [__m512d; N] =
+        from_fn(|k| _mm512_i64gather_pd::<8>(_mm512_add_epi64(q[k], one_i), c.table));
+    let f10: [__m512d; N] = from_fn(|k| _mm512_i64gather_pd::<8>(qk[k], c.table));
+    let f11: [__m512d; N] =
+        from_fn(|k| _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk[k], one_i), c.table));
+    from_fn(|k| {
+        let wa = _mm512_sub_pd(a[k], _mm512_cvtepi32_pd(i0[k]));
+        let wb = _mm512_sub_pd(b[k], _mm512_cvtepi32_pd(j0[k]));
+        let (owa, owb) = (_mm512_sub_pd(one, wa), _mm512_sub_pd(one, wb));
+        let low = _mm512_add_pd(_mm512_mul_pd(owb, f00[k]), _mm512_mul_pd(wb, f01[k]));
+        let high = _mm512_add_pd(_mm512_mul_pd(owb, f10[k]), _mm512_mul_pd(wb, f11[k]));
+        let bilinear = _mm512_add_pd(_mm512_mul_pd(owa, low), _mm512_mul_pd(wa, high));
+        let diagonal = _mm512_mul_pd(_mm512_sub_pd(wa, wb), f10[k]);
+        let on_diagonal = _mm512_cmpeq_epi64_mask(i64a[k], i64b[k]);
+        let v = _mm512_mask_blend_pd(on_diagonal, bilinear, diagonal);
+        _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(b[k], a[k]), v, zero)
+    })
+}
+
+/// `N` groups of eight elements (`super::avx2::group` on each group of eight heads) side by
+/// side: group `k`'s lane `l`'s stack starts `off[k][l]` f64 from `bases[k]` and holds
+/// `room[k][l]` extrema plus the spare slot. The same lane program per group, stage by stage
+/// across the groups, so that their dependent gathers (the wiped tops, the Everett corners)
+/// overlap (issue 34, sixteenth round: two groups 0.988 x the step against one at a time, in
+/// one process; four 0.993 x). Returns the lanes that moved per group, or `None` before
+/// touching anything when an input of any group turns on a stack at its room (the scalar step
+/// grows the stack or forgets a loop).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn pair_n<const N: usize>(
+    c: &Consts,
+    hd: &mut [Heads; N],
+    bases: [*mut f64; N],
+    off: [__m512i; N],
+    room: [__m512i; N],
+    u: &[f64],
+    ok: &[bool],
+    out: &mut [f64],
+) -> Option<[__mmask8; N]> {
+    use std::array::from_fn;
+    assert!(u.len() == N * WIDE && ok.len() == N * WIDE && out.len() == N * WIDE);
+    let zero = _mm512_setzero_pd();
+    let (one_i, two_i) = (_mm512_set1_epi64(1), _mm512_set1_epi64(2));
+    let len0: [__m512i; N] = from_fn(|k| _mm512_load_si512(hd[k].len.as_ptr().cast()));
+    let last_u: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].last_u.as_ptr()));
+    let last_h: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].last_h.as_ptr()));
+    let u_in: [__m512d; N] = from_fn(|k| _mm512_loadu_pd(u[k * WIDE..(k + 1) * WIDE].as_ptr()));
+    let live: [__mmask8; N] = from_fn(|k| {
+        let flags = u64::from_le_bytes(
+            ok[k * WIDE..(k + 1) * WIDE]
+                .try_into()
+                .map_or([0; 8], |b: [bool; WIDE]| b.map(u8::from)),
+        );
+        let ok_k = _mm512_test_epi64_mask(
+            _mm512_cvtepu8_epi64(_mm_cvtsi64_si128(flags as i64)),
+            _mm512_set1_epi64(1),
+        );
+        let v = u_in[k];
+        ok_k & _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(v, v), zero)
+    });
+    // SAFETY: AVX-512 (this function's features)
+    let clamped: [__m512d; N] = from_fn(|k| unsafe { clamp(u_in[k], c.u_min, c.u_max) });
+    let uc: [__m512d; N] = from_fn(|k| _mm512_mask_blend_pd(live[k], c.u_min, clamped[k]));
+    let rising: [__mmask8; N] = from_fn(|k| _mm512_cmp_pd_mask::<_CMP_GT_OQ>(uc[k], last_u[k]));
+    let moving: [__mmask8; N] =
+        from_fn(|k| !_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(uc[k], last_u[k]) & live[k]);
+    let turned: [__mmask8; N] = from_fn(|k| rising[k] ^ _mm512_test_epi64_mask(len0[k], one_i));
+    // a turning point onto a stack at its room: the caller steps the groups one by one
+    if (0..N).any(|k| _mm512_mask_cmpeq_epi64_mask(turned[k] & moving[k], len0[k], room[k]) != 0) {
+        return None;
+    }
+    // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
+    let top_u: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].top_u.as_ptr()));
+    let top_h: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].top_h.as_ptr()));
+    let below_u: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].below_u.as_ptr()));
+    let mut len: [__m512i; N] =
+        from_fn(|k| _mm512_mask_add_epi64(len0[k], turned[k], len0[k], one_i));
+    let mut t_u: [__m512d; N] = from_fn(|k| _mm512_mask_blend_pd(turned[k], top_u[k], last_u[k]));
+    let mut t_h: [__m512d; N] = from_fn(|k| _mm512_mask_blend_pd(turned[k], top_h[k], last_h[k]));
+    let mut b_u: [__m512d; N] = from_fn(|k| _mm512_mask_blend_pd(turned[k], below_u[k], top_u[k]));
+    let dir: [__m512d; N] =
+        from_fn(|k| _mm512_mask_blend_pd(rising[k], _mm512_set1_pd(-1.0), _mm512_set1_pd(1.0)));
+    let passes = |k: usize, s: __m512d| {
+        let d = _mm512_mul_pd(_mm512_sub_pd(uc[k], s), dir[k]);
+        _mm512_cmp_pd_mask::<_CMP_GE_OQ>(d, zero)
+    };
+    let base: [*const f64; N] = bases.map(|b| b as *const f64);
+    let slot = |k: usize, s: __m512i| _mm512_add_epi64(_mm512_add_epi64(s, s), off[k]);
+    let wiped: [__mmask8; N] =
+        from_fn(|k| _mm512_cmpgt_epi64_mask(len[k], two_i) & passes(k, b_u[k]) & moving[k]);
+    if wiped.iter().any(|&w| w != 0) {
+        // the new top and the extremum below it of every group, gathered at once (none where
+        // a group wipes nothing: the gathers are masked)
+        let tops = |t_u: &mut [__m512d; N],
+                    t_h: &mut [__m512d; N],
+                    b_u: &mut [__m512d; N],
+                    lanes: [__mmask8; N],
+                    len: &[__m512i; N]| {
+            let top: [__m512i; N] = from_fn(|k| slot(k, _mm512_sub_epi64(len[k], one_i)));
+            let below: [__m512i; N] =
+                from_fn(|k| slot(k, _mm512_sub_epi64(_mm512_max_epi64(len[k], two_i), two_i)));
+            *t_u = from_fn(|k| _mm512_mask_i64gather_pd::<8>(t_u[k], lanes[k], top[k], base[k]));
+            *t_h = from_fn(|k| {
+                let at = _mm512_add_epi64(top[k], one_i);
+                _mm512_mask_i64gather_pd::<8>(t_h[k], lanes[k], at, base[k])
+            });
+            *b_u = from_fn(|k| _mm512_mask_i64gather_pd::<8>(b_u[k], lanes[k], below[k], base[k]));
+        };
+        len = from_fn(|k| _mm512_mask_sub_epi64(len[k], wiped[k], len[k], two_i));
+        tops(&mut t_u, &mut t_h, &mut b_u, wiped, &len);
+        // deeper: while a lane passes the extremum below its new top, the gathers again
+        let deep: [__mmask8; N] =
+            from_fn(|k| wiped[k] & _mm512_cmpgt_epi64_mask(len[k], two_i) & passes(k, b_u[k]));
+        if deep.iter().any(|&d| d != 0) {
+            for k in 0..N {
+                let mut wipes = deep[k];
+                while wipes != 0 {
+                    len[k] = _mm512_mask_sub_epi64(len[k], wipes, len[k], two_i);
+                    let can = wipes & _mm512_cmpgt_epi64_mask(len[k], two_i);
+                    let at = slot(k, _mm512_sub_epi64(len[k], two_i));
+                    let s = _mm512_mask_i64gather_pd::<8>(zero, can, at, base[k]);
+                    wipes = can & passes(k, s);
+                }
+            }
+            tops(&mut t_u, &mut t_h, &mut b_u, deep, &len);
+        }
+    }
+    // back at lower saturation
+    for k in 0..N {
+        let at_sat = _mm512_cmpeq_epi64_mask(len[k], two_i)
+            & moving[k]
+            & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(uc[k], b_u[k]);
+        if at_sat != 0 {
+            len[k] = _mm512_mask_mov_epi64(len[k], at_sat, one_i);
+            t_u[k] = _mm512_mask_blend_pd(at_sat, t_u[k], b_u[k]);
+            let at = _mm512_add_epi64(off[k], one_i);
+            t_h[k] = _mm512_mask_i64gather_pd::<8>(t_h[k], at_sat, at, base[k]);
+        }
+    }
+    let odd: [__mmask8; N] = from_fn(|k| _mm512_test_epi64_mask(len[k], one_i));
+    let alpha: [__m512d; N] = from_fn(|k| _mm512_mask_blend_pd(odd[k], t_u[k], uc[k]));
+    let beta: [__m512d; N] = from_fn(|k| _mm512_mask_blend_pd(odd[k], uc[k], t_u[k]));
+    // SAFETY: AVX-512 (this function's features)
+    let f = unsafe { everett_n::<N>(c, alpha, beta) };
+    let nan = _mm512_set1_pd(f64::NAN);
+    for k in 0..N {
+        let sign = _mm512_mask_blend_pd(odd[k], _mm512_set1_pd(-2.0), _mm512_set1_pd(2.0));
+        let h = _mm512_add_pd(t_h[k], _mm512_mul_pd(sign, f[k]));
+        let sum = _mm512_mask_blend_pd(moving[k], last_h[k], h);
+        let y = _mm512_mul_pd(c.sign, _mm512_add_pd(sum, c.offset));
+        let o = &mut out[k * WIDE..(k + 1) * WIDE];
+        _mm512_storeu_pd(o.as_mut_ptr(), _mm512_mask_blend_pd(live[k], nan, y));
+        // the turning point into the slot above the old top of each stack (only where it is
+        // kept: a lane that moved and turned; the slot above the top is never read)
+        let at = _mm512_add_epi64(_mm512_add_epi64(len0[k], len0[k]), off[k]);
+        let push = turned[k] & moving[k];
+        _mm512_mask_i64scatter_pd::<8>(bases[k].cast(), push, at, last_u[k]);
+        _mm512_mask_i64scatter_pd::<8>(
+            bases[k].cast(),
+            push,
+            _mm512_add_epi64(at, one_i),
+            last_h[k],
+        );
+        // the heads of the lanes that moved
+        let m = moving[k];
+        let keep = |old: __m512d, new: __m512d| _mm512_mask_blend_pd(m, old, new);
+        let h_len = _mm512_mask_blend_epi64(m, len0[k], len[k]);
+        let g = &mut hd[k];
+        _mm512_store_si512(g.len.as_mut_ptr().cast(), h_len);
+        _mm512_store_pd(g.last_u.as_mut_ptr(), keep(last_u[k], uc[k]));
+        _mm512_store_pd(g.last_h.as_mut_ptr(), keep(last_h[k], h));
+        _mm512_store_pd(g.top_u.as_mut_ptr(), keep(top_u[k], t_u[k]));
+        _mm512_store_pd(g.top_h.as_mut_ptr(), keep(top_h[k], t_h[k]));
+        _mm512_store_pd(g.below_u.as_mut_ptr(), keep(below_u[k], b_u[k]));
+        let was_clamped = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(clamped[k], u_in[k]) & live[k];
+        if was_clamped != 0 {
+            let counts = _mm512_load_si512(g.clamped.as_ptr().cast());
+            let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
+            _mm512_store_si512(g.clamped.as_mut_ptr().cast(), counts);
+        }
+    }
+    Some(moving)
 }
 
 /// Each stack of a group with a stack on the heap: its offset from lane 0's place in f64
@@ -178,172 +462,4 @@ unsafe fn clamp(x: __m512d, lo: __m512d, hi: __m512d) -> __m512d {
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn grid(c: &Consts, v: __m512d) -> __m512d {
     _mm512_min_pd(_mm512_mul_pd(_mm512_sub_pd(v, c.u_min), c.inv_step), c.last)
-}
-
-/// `Everett::value_of_numbers` per lane for `u_min <= alpha, beta` (`super::avx2::everett`).
-#[inline]
-#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn everett(c: &Consts, alpha: __m512d, beta: __m512d) -> __m512d {
-    let zero = _mm512_setzero_pd();
-    let one = _mm512_set1_pd(1.0);
-    let (a, b) = (grid(c, alpha), grid(c, beta));
-    let zero_i = _mm256_setzero_si256();
-    let i0 = _mm256_max_epi32(_mm256_min_epi32(_mm512_cvttpd_epi32(a), c.top), zero_i);
-    let j0 = _mm256_max_epi32(_mm256_min_epi32(_mm512_cvttpd_epi32(b), c.top), zero_i);
-    let wa = _mm512_sub_pd(a, _mm512_cvtepi32_pd(i0));
-    let wb = _mm512_sub_pd(b, _mm512_cvtepi32_pd(j0));
-    let (i64a, i64b) = (_mm512_cvtepi32_epi64(i0), _mm512_cvtepi32_epi64(j0));
-    // four gathers from the table (on this path they beat a load per lane from the table
-    // by cell and its transpose: fewer instructions, and no lane's index through a
-    // general register)
-    let q = _mm512_add_epi64(_mm512_mul_epi32(i64a, c.k), i64b);
-    let one_i = _mm512_set1_epi64(1);
-    let qk = _mm512_add_epi64(q, c.k);
-    let (f00, f01, f10, f11) = (
-        _mm512_i64gather_pd::<8>(q, c.table),
-        _mm512_i64gather_pd::<8>(_mm512_add_epi64(q, one_i), c.table),
-        _mm512_i64gather_pd::<8>(qk, c.table),
-        _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk, one_i), c.table),
-    );
-    let (owa, owb) = (_mm512_sub_pd(one, wa), _mm512_sub_pd(one, wb));
-    let low = _mm512_add_pd(_mm512_mul_pd(owb, f00), _mm512_mul_pd(wb, f01));
-    let high = _mm512_add_pd(_mm512_mul_pd(owb, f10), _mm512_mul_pd(wb, f11));
-    let bilinear = _mm512_add_pd(_mm512_mul_pd(owa, low), _mm512_mul_pd(wa, high));
-    let diagonal = _mm512_mul_pd(_mm512_sub_pd(wa, wb), f10);
-    let on_diagonal = _mm512_cmpeq_epi64_mask(i64a, i64b);
-    let v = _mm512_mask_blend_pd(on_diagonal, bilinear, diagonal);
-    _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(b, a), v, zero)
-}
-
-/// Eight elements (`super::avx2::group` on a group of eight heads): lane `l`'s stack starts
-/// `off[l]` f64 from `base` and holds `room[l]` extrema plus the spare slot. Returns the
-/// lanes that moved, or `None` before touching anything when an input turns on a stack at
-/// its room (the scalar step grows the stack or forgets a loop).
-#[allow(clippy::too_many_arguments)]
-#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn pair(
-    c: &Consts,
-    hd: &mut Heads,
-    base: *mut f64,
-    off: __m512i,
-    room: __m512i,
-    u: &[f64],
-    ok: &[bool],
-    out: &mut [f64],
-) -> Option<__mmask8> {
-    let zero = _mm512_setzero_pd();
-    let (one_i, two_i) = (_mm512_set1_epi64(1), _mm512_set1_epi64(2));
-    // the kernel's `prepare` (the heads aligned, a field per register)
-    let len0 = _mm512_load_si512(hd.len.as_ptr().cast());
-    let last_u = _mm512_load_pd(hd.last_u.as_ptr());
-    let last_h = _mm512_load_pd(hd.last_h.as_ptr());
-    let u_in = _mm512_loadu_pd(u.as_ptr());
-    // the eight flags as bytes, then one mask bit per lane (a bool is 0 or 1)
-    let flags = u64::from_le_bytes(
-        ok[..WIDE]
-            .try_into()
-            .map_or([0; 8], |b: [bool; WIDE]| b.map(u8::from)),
-    );
-    let ok_k = _mm512_test_epi64_mask(
-        _mm512_cvtepu8_epi64(_mm_cvtsi64_si128(flags as i64)),
-        _mm512_set1_epi64(1),
-    );
-    let finite = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(_mm512_sub_pd(u_in, u_in), zero);
-    let live = ok_k & finite;
-    let clamped = clamp(u_in, c.u_min, c.u_max);
-    let uc = _mm512_mask_blend_pd(live, c.u_min, clamped);
-    let rising = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(uc, last_u);
-    let moving = !_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(uc, last_u) & live;
-    let odd0 = _mm512_test_epi64_mask(len0, one_i);
-    let turned = rising ^ odd0;
-    // a turning point onto a stack at its room: the scalar step (it grows or forgets)
-    if _mm512_mask_cmpeq_epi64_mask(turned & moving, len0, room) != 0 {
-        return None;
-    }
-    // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
-    let top_u = _mm512_load_pd(hd.top_u.as_ptr());
-    let top_h = _mm512_load_pd(hd.top_h.as_ptr());
-    let below_u = _mm512_load_pd(hd.below_u.as_ptr());
-    let mut len = _mm512_mask_add_epi64(len0, turned, len0, one_i);
-    let mut t_u = _mm512_mask_blend_pd(turned, top_u, last_u);
-    let mut t_h = _mm512_mask_blend_pd(turned, top_h, last_h);
-    let mut b_u = _mm512_mask_blend_pd(turned, below_u, top_u);
-    let dir = _mm512_mask_blend_pd(rising, _mm512_set1_pd(-1.0), _mm512_set1_pd(1.0));
-    let passes = |s: __m512d| {
-        let d = _mm512_mul_pd(_mm512_sub_pd(uc, s), dir);
-        _mm512_cmp_pd_mask::<_CMP_GE_OQ>(d, zero)
-    };
-    let wiped = _mm512_cmpgt_epi64_mask(len, two_i) & passes(b_u) & moving;
-    let base = base as *const f64;
-    if wiped != 0 {
-        let slot = |s: __m512i| _mm512_add_epi64(_mm512_add_epi64(s, s), off);
-        // the new top and the extremum below it, gathered at once (their addresses depend
-        // on the depth alone, not on each other)
-        let tops = |t_u, t_h, b_u, lanes, len: __m512i| {
-            let top = slot(_mm512_sub_epi64(len, one_i));
-            let below = slot(_mm512_sub_epi64(_mm512_max_epi64(len, two_i), two_i));
-            (
-                _mm512_mask_i64gather_pd::<8>(t_u, lanes, top, base),
-                _mm512_mask_i64gather_pd::<8>(t_h, lanes, _mm512_add_epi64(top, one_i), base),
-                _mm512_mask_i64gather_pd::<8>(b_u, lanes, below, base),
-            )
-        };
-        len = _mm512_mask_sub_epi64(len, wiped, len, two_i);
-        (t_u, t_h, b_u) = tops(t_u, t_h, b_u, wiped, len);
-        // deeper: while a lane passes the extremum below its new top (which is `b_u`
-        // while above depth 2), the gathers again for those lanes
-        let deep = wiped & _mm512_cmpgt_epi64_mask(len, two_i) & passes(b_u);
-        if deep != 0 {
-            let mut wipes = deep;
-            while wipes != 0 {
-                len = _mm512_mask_sub_epi64(len, wipes, len, two_i);
-                let can = wipes & _mm512_cmpgt_epi64_mask(len, two_i);
-                let at = slot(_mm512_sub_epi64(len, two_i));
-                let s = _mm512_mask_i64gather_pd::<8>(zero, can, at, base);
-                wipes = can & passes(s);
-            }
-            (t_u, t_h, b_u) = tops(t_u, t_h, b_u, deep, len);
-        }
-    }
-    // back at lower saturation
-    let at_sat =
-        _mm512_cmpeq_epi64_mask(len, two_i) & moving & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(uc, b_u);
-    if at_sat != 0 {
-        len = _mm512_mask_mov_epi64(len, at_sat, one_i);
-        t_u = _mm512_mask_blend_pd(at_sat, t_u, b_u);
-        t_h = _mm512_mask_i64gather_pd::<8>(t_h, at_sat, _mm512_add_epi64(off, one_i), base);
-    }
-    let odd = _mm512_test_epi64_mask(len, one_i);
-    let alpha = _mm512_mask_blend_pd(odd, t_u, uc);
-    let beta = _mm512_mask_blend_pd(odd, uc, t_u);
-    let sign = _mm512_mask_blend_pd(odd, _mm512_set1_pd(-2.0), _mm512_set1_pd(2.0));
-    let f = everett(c, alpha, beta);
-    let h = _mm512_add_pd(t_h, _mm512_mul_pd(sign, f));
-    let sum = _mm512_mask_blend_pd(moving, last_h, h);
-    let y = _mm512_mul_pd(c.sign, _mm512_add_pd(sum, c.offset));
-    let nan = _mm512_set1_pd(f64::NAN);
-    _mm512_storeu_pd(out.as_mut_ptr(), _mm512_mask_blend_pd(live, nan, y));
-    // the turning point into the slot above the old top of each stack (only where it is
-    // kept: a lane that moved and turned; the slot above the top is never read)
-    let at = _mm512_add_epi64(_mm512_add_epi64(len0, len0), off);
-    let push = turned & moving;
-    let base = base.cast_mut();
-    _mm512_mask_i64scatter_pd::<8>(base.cast(), push, at, last_u);
-    _mm512_mask_i64scatter_pd::<8>(base.cast(), push, _mm512_add_epi64(at, one_i), last_h);
-    // the heads of the lanes that moved
-    let keep = |old: __m512d, new: __m512d| _mm512_mask_blend_pd(moving, old, new);
-    let len = _mm512_mask_blend_epi64(moving, len0, len);
-    _mm512_store_si512(hd.len.as_mut_ptr().cast(), len);
-    _mm512_store_pd(hd.last_u.as_mut_ptr(), keep(last_u, uc));
-    _mm512_store_pd(hd.last_h.as_mut_ptr(), keep(last_h, h));
-    _mm512_store_pd(hd.top_u.as_mut_ptr(), keep(top_u, t_u));
-    _mm512_store_pd(hd.top_h.as_mut_ptr(), keep(top_h, t_h));
-    _mm512_store_pd(hd.below_u.as_mut_ptr(), keep(below_u, b_u));
-    let was_clamped = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(clamped, u_in) & live;
-    if was_clamped != 0 {
-        let counts = _mm512_load_si512(hd.clamped.as_ptr().cast());
-        let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
-        _mm512_store_si512(hd.clamped.as_mut_ptr().cast(), counts);
-    }
-    Some(moving)
 }
