@@ -78,15 +78,9 @@ fn frame_inputs<'a>(
     Ok(valid)
 }
 
-/// `measured`: the elements whose failure code is 0.
-fn set_measured(measured: &mut [bool], codes: &[u8]) {
-    for (m, &c) in measured.iter_mut().zip(codes) {
-        *m = c == 0;
-    }
-}
-
-/// [`set_measured`] into `codes.len()` bools at `measured` whose bytes may not be set yet
-/// (a new numpy array's): written through the pointer, no reference to them made first.
+/// `measured`: the elements whose failure code is 0, into `codes.len()` bools at `measured`
+/// (a held array's, or a new numpy array's whose bytes may not be set yet: written through
+/// the pointer, no reference to them made first).
 ///
 /// # Safety
 /// `measured` must be valid for writes of `codes.len()` bytes, and nothing else may read
@@ -312,7 +306,8 @@ element_bank!(PyChain, {
                 codes,
             )
             .map_err(to_py)?;
-        set_measured(measured, codes);
+        // SAFETY: `measured` is this call's writable borrow of n = codes.len() bools
+        unsafe { write_measured(measured.as_mut_ptr(), codes) };
         Ok(())
     }
 

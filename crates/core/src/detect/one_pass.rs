@@ -51,10 +51,9 @@ impl FailureDetector {
             left.push(groups);
         }
         let mut scratch = (Vec::new(), [0.0; 8]);
-        for (b, groups) in left.into_iter().enumerate() {
+        for (b, mut groups) in left.into_iter().enumerate() {
             let start = b * size;
             let end = (start + size).min(n);
-            let mut groups = groups;
             // the set bits only (most blocks have none)
             while groups != 0 {
                 let g = groups.trailing_zeros() as usize;

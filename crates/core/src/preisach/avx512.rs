@@ -66,9 +66,7 @@ pub(super) unsafe fn row(
         let stepped = i + WIDE <= n && {
             let els = &mut elements[i..i + WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
-            // the heads' bit per stack on the heap (`element::HEAP`: the counters' sign bits)
-            let counts = _mm512_load_si512(heads[g].clamped.as_ptr().cast());
-            let spilled = _mm512_movepi64_mask(counts) != 0;
+            let spilled = on_heap(&heads[g]);
             debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
             let (offs, rooms) = if spilled {
                 heap_stacks(els, base, capacity)
