@@ -162,7 +162,7 @@ def cases(
     out: list[tuple[str, Callable[[], object], int]] = []
     for label, schedule in (
         ("one thread, frame after frame", "frames"),
-        ("one thread, blocks of 128 elements through all frames", "blocks"),
+        ("one thread, blocks of 512 elements through all frames", "blocks"),
         ("blocks in parallel (all cores)", "parallel"),
     ):
         out.append(

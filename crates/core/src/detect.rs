@@ -273,7 +273,7 @@ impl FailureDetector {
                         let whole = w / GROUP * GROUP;
                         let left =
                             this.codes_row(readings, delta, v, row + start, block, out, whole);
-                        !u64::from(left) & ((1u64 << (whole / GROUP)) - 1)
+                        !left & low_bits(whole / GROUP)
                     }
                     _ => 0,
                 };
@@ -386,9 +386,9 @@ impl FailureDetector {
     }
 
     /// The codes of the first `whole` elements (whole groups) of a block's row starting
-    /// at reading `at` (element `at % n`) in SIMD lanes (`detect::avx2::codes_row`);
-    /// returns the groups left to the scalar kernel (bit g: the group at 4 g); all of them
-    /// without AVX2.
+    /// at reading `at` (element `at % n`) in SIMD lanes, [`KERNEL_ROW`] elements per call of
+    /// the lane kernel; returns the groups left to the scalar kernel (bit g: the group at
+    /// 4 g); all of them without AVX2.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn codes_row(
@@ -400,7 +400,36 @@ impl FailureDetector {
         els: &mut [Element<f64>],
         out: &mut [u8],
         whole: usize,
+    ) -> u128 {
+        let mut left = 0;
+        for a in (0..whole).step_by(KERNEL_ROW) {
+            let b = (a + KERNEL_ROW).min(whole);
+            let part = self.codes_part(
+                readings,
+                delta,
+                valid,
+                at + a,
+                &mut els[a..b],
+                &mut out[a..b],
+            );
+            left |= u128::from(part) << (a / GROUP);
+        }
+        left
+    }
+
+    /// [`FailureDetector::codes_row`] of at most [`KERNEL_ROW`] elements (`els.len()`, whole
+    /// groups) by one call of the lane kernel (`detect::avx2::codes_row`).
+    #[inline]
+    fn codes_part(
+        &self,
+        readings: &[f64],
+        delta: &[f64],
+        valid: &[bool],
+        at: usize,
+        els: &mut [Element<f64>],
+        out: &mut [u8],
     ) -> u32 {
+        let whole = els.len();
         #[cfg(target_arch = "x86_64")]
         {
             let n = self.jump.len(); // the states are out of `self` during the pass
@@ -508,6 +537,17 @@ impl FailureDetector {
 
 /// Elements per group of the SIMD path.
 const GROUP: usize = 4;
+
+/// Elements per call of the lane kernels that report the groups they leave to the scalar
+/// kernel as the bits of a `u32` (32 groups of [`GROUP`]); a block's row of up to
+/// [`crate::par::MAX_BLOCK`] elements takes several calls.
+const KERNEL_ROW: usize = 32 * GROUP;
+
+/// The lowest `k` bits set (`k <= 128`).
+#[inline]
+fn low_bits(k: usize) -> u128 {
+    u128::MAX.checked_shr((128 - k) as u32).unwrap_or(0)
+}
 
 /// Whether the codes run four elements at a time in AVX2 lanes ([`crate::simd`]).
 fn simd_lanes() -> bool {

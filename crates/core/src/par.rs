@@ -12,8 +12,12 @@
 use crate::aligned::Row;
 use rayon::prelude::*;
 
-/// Most elements per block (128 elements' states fit in a core's first-level cache).
-pub const MAX_BLOCK: usize = 128;
+/// Most elements per block. 512 elements' states (about 260 KB for the benchmark's chain, 510
+/// bytes per element) stay in a core's second-level cache; against blocks of 128 elements
+/// (whose states fit the first-level cache), a block's rows are read and written in runs four
+/// times as long and each row's fixed costs are spread over four times the elements (issue
+/// 34, seventeenth round: docs/pipeline.md has the measurements).
+pub const MAX_BLOCK: usize = 512;
 
 /// Fewest elements per block.
 pub const MIN_BLOCK: usize = 16;

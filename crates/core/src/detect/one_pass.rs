@@ -1,8 +1,7 @@
 //! A single frame (a live step) on AVX-512 in one pass over the detector's elements instead
 //! of two (issue 34, fifteenth round).
 
-use super::{avx512, kernel, FailureDetector, Validity};
-use crate::par::block_size;
+use super::{avx512, kernel, FailureDetector, Validity, KERNEL_ROW};
 
 impl FailureDetector {
     /// One frame (a live step) in one pass on AVX-512 instead of two (issue 34, fifteenth
@@ -19,9 +18,10 @@ impl FailureDetector {
         codes: &mut [u8],
     ) {
         let n = self.len();
-        let size = block_size(n);
+        let size = KERNEL_ROW;
         let mut elements = std::mem::take(&mut self.elements);
-        // per block, its groups of four left to the scalar kernel
+        // per part of the row (one call of the lane kernel each), its groups of four left to
+        // the scalar kernel
         let mut left = Vec::with_capacity(n.div_ceil(size));
         for start in (0..n).step_by(size) {
             let end = (start + size).min(n);

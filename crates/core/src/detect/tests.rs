@@ -89,8 +89,14 @@ fn lanes_give_the_scalar_codes_and_states() {
     let _guard = crate::simd::testing::lock();
     let mut rng = Rng(11);
     let mut seen = std::collections::BTreeSet::<u8>::new();
-    for case in 0..24 {
-        let (rows, cols) = (1 + (rng.next() % 6) as usize, 1 + (rng.next() % 9) as usize);
+    // the last cases' blocks hold more elements than one call of the lane kernel takes
+    // (`KERNEL_ROW`): a block's row in several parts, the last one short
+    let wide = [(17, 31), (32, 32), (3, 100)];
+    for case in 0..24 + wide.len() {
+        let (rows, cols) = match case.checked_sub(24) {
+            Some(w) => wide[w],
+            None => (1 + (rng.next() % 6) as usize, 1 + (rng.next() % 9) as usize),
+        };
         let n = rows * cols;
         let t = 30;
         let mut p = params();
