@@ -31,6 +31,7 @@ SMALL: dict[str, list[str]] = {
     "mcu_budget": ["--frames", "10"],
     "muscle_sleeve": ["--sessions", "1", "--minutes", "2"],
     "pipeline_virtual": [],  # (~5 s as it is)
+    "preisach_inputs": ["--frames", "20", "--elements", "64", "--repeat", "1"],
     "station_follow_cost": ["--frames", "10", "--rounds", "1"],
     "station_frame_cost": ["--frames", "10", "--rounds", "1"],
     "station_mat_cost": ["--frames", "5", "--repeat", "1"],
