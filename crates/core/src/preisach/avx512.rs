@@ -6,12 +6,13 @@
 //! corners are gathered from the table (four gathers; on AVX-512 faster than a load per lane
 //! from the table by cell and its transpose, 1.14 x on the timing binary).
 //!
-//! Whole groups step here, two side by side where both have their stacks in place
-//! ([`pair_n`]), one at a time where a stack is on the heap (each lane's stack from its own
-//! offset; a stack on the heap that is shallow again goes back in place afterwards); a stack
-//! at its room too unless its input turns. A turning point onto a full
-//! stack and the last group of a block go through `super::avx2::row` for those elements,
-//! which grows the stack on the heap or forgets a loop.
+//! Whole groups step here, two side by side ([`pair_n`]; a group with a stack on the heap
+//! gives each lane's stack from its own offset, and a stack on the heap that is shallow again
+//! goes back in place afterwards), one at a time where a turning point of the other group
+//! lands on a stack at its room; a stack at its room steps here too unless its input turns.
+//! A turning point onto a full stack and the last group of a block go through
+//! `super::avx2::row` for those elements, which grows the stack on the heap or forgets a
+//! loop.
 
 use std::arch::x86_64::*;
 
@@ -54,11 +55,22 @@ pub(super) unsafe fn row(
     let mut i = 0;
     while i < n {
         let g = i / GROUP;
-        // RUNS whole groups side by side where their stacks are in place ([`pair_n`]); a
-        // group on the heap, or a turning point onto a stack at its room, goes alone below
+        // RUNS whole groups side by side ([`pair_n`]); where a turning point lands on a
+        // stack at its room, the groups go alone below
         // SAFETY: AVX-512 (this function's features); the slices hold n elements
         if i + RUNS * WIDE <= n
-            && unsafe { run_of_groups(&consts, elements, heads, (off, room), i, u, ok, out) }
+            && unsafe {
+                run_of_groups(
+                    &consts,
+                    elements,
+                    heads,
+                    (off, room, capacity),
+                    i,
+                    u,
+                    ok,
+                    out,
+                )
+            }
         {
             i += RUNS * WIDE;
             continue;
@@ -115,9 +127,11 @@ pub(super) unsafe fn row(
     }
 }
 
-/// [`pair_n`] of the [`RUNS`] groups from element `i` when none has a stack on the heap
-/// (their stacks at `off` with `room` extrema, in place); false when they did not step (a
-/// stack on the heap, or a turning point onto a stack at its room: nothing touched).
+/// [`pair_n`] of the [`RUNS`] groups from element `i` (stacks in place at `off` with `room`
+/// extrema; a group with a stack on the heap gives its lanes' own offsets and rooms, and its
+/// stacks that are shallow again go back in place after the step: issue 34, seventeenth
+/// round, 1.04 x the Preisach row on the walk against stepping such a group alone); false
+/// when they did not step (a turning point onto a stack at its room: nothing touched).
 ///
 /// # Safety
 /// The processor must have AVX2 and AVX-512 F, DQ and VL; `i + RUNS * WIDE` elements are
@@ -128,7 +142,7 @@ unsafe fn run_of_groups(
     consts: &Consts,
     elements: &mut [Element],
     heads: &mut [Heads],
-    (off, room): (__m512i, __m512i),
+    (off, room, capacity): (__m512i, __m512i, usize),
     i: usize,
     u: &[f64],
     ok: &[bool],
@@ -136,8 +150,19 @@ unsafe fn run_of_groups(
 ) -> bool {
     let g = i / GROUP;
     // SAFETY: AVX-512 (this function's features)
-    if (0..RUNS).any(|k| unsafe { on_heap(&heads[g + k]) }) {
-        return false;
+    let spilled: [bool; RUNS] = std::array::from_fn(|k| unsafe { on_heap(&heads[g + k]) });
+    debug_assert!((0..RUNS).all(|k| spilled[k]
+        == elements[i + k * WIDE..i + (k + 1) * WIDE]
+            .iter()
+            .any(|el| el.spill.is_some())));
+    let mut stacks = [(off, room); RUNS];
+    for (k, s) in stacks.iter_mut().enumerate() {
+        if spilled[k] {
+            let els = &mut elements[i + k * WIDE..i + (k + 1) * WIDE];
+            let base = els[0].inline.as_mut_ptr().cast::<f64>();
+            // SAFETY: AVX-512 (this function's features)
+            *s = unsafe { heap_stacks(els, base, capacity) };
+        }
     }
     let p = elements[i..i + RUNS * WIDE].as_mut_ptr();
     // SAFETY: group k's elements start at p + 8 k (inside the slice)
@@ -153,17 +178,23 @@ unsafe fn run_of_groups(
             consts,
             hd,
             bases,
-            [off; RUNS],
-            [room; RUNS],
+            stacks.map(|s| s.0),
+            stacks.map(|s| s.1),
             &u[at.clone()],
             &ok[at.clone()],
             &mut out[at],
         )
     };
+    if let Some(moved) = done {
+        for k in (0..RUNS).filter(|&k| spilled[k]) {
+            let els = &mut elements[i + k * WIDE..i + (k + 1) * WIDE];
+            back_in_place(els, &mut heads[g + k], moved[k]);
+        }
+    }
     done.is_some()
 }
 
-/// Groups side by side in [`pair_n`] where their stacks are in place.
+/// Groups side by side in [`pair_n`].
 const RUNS: usize = 2;
 
 /// True when a group has a stack on the heap (`element::HEAP`: the counters' sign bits).

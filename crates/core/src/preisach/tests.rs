@@ -227,6 +227,61 @@ fn deep_stacks_move_to_the_heap_and_back_without_changing_the_output() {
     }
 }
 
+/// Groups with stacks on the heap step side by side with their neighbours on the SIMD path
+/// (issue 34, seventeenth round): three lanes of every group nest deeper than the in-place
+/// stack and unwind again, the others walk; frame after frame and in blocks, the outputs,
+/// counters and states equal the scalar kernel's at every frame.
+#[test]
+fn stacks_on_the_heap_step_beside_other_groups_as_the_scalar_kernel() {
+    let _guard = crate::simd::testing::lock();
+    let e = uniform(41);
+    let n = 48;
+    let path = nested(30, 1e-3);
+    let mut rng = Rng(7);
+    let mut walk: Vec<f64> = (0..n).map(|_| rng.unit()).collect();
+    let t = 2 * path.len();
+    let mut u = Vec::with_capacity(t * n);
+    for r in 0..t {
+        for (i, w) in walk.iter_mut().enumerate() {
+            u.push(if i % 8 < 3 {
+                path[(r + i) % path.len()] + 1e-4 * i as f64
+            } else {
+                *w = (*w + (rng.unit() - 0.5) * 0.1).clamp(0.0, 1.0);
+                *w
+            });
+        }
+    }
+    let ok = vec![true; t * n];
+    let bank = PreisachBank::new(e, n, 256).unwrap();
+    for schedule in [Schedule::FrameOrder, Schedule::Blocks] {
+        let (mut a, mut b) = (bank.clone(), bank.clone());
+        let mut deepest = 0;
+        for r in 0..t {
+            let frame = r * n..(r + 1) * n;
+            let step = |bank: &mut PreisachBank, path: Path| {
+                crate::simd::set_limit(path);
+                let mut out = vec![0.0; n];
+                bank.run_scheduled(&u[frame.clone()], &ok[frame.clone()], &mut out, schedule)
+                    .unwrap();
+                crate::simd::set_enabled(true);
+                let mut w = Writer::default();
+                bank.save(&mut w);
+                (out.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), w.buf)
+            };
+            assert!(
+                step(&mut a, Path::Scalar) == step(&mut b, Path::Avx512),
+                "{schedule:?}, frame {r}: outputs or states differ"
+            );
+            deepest = deepest.max(*b.depth().iter().max().unwrap());
+        }
+        assert!(
+            deepest > INLINE_EXTREMA + 10,
+            "the deepest stack held {deepest}"
+        );
+        assert_eq!(a.state_bytes(), b.state_bytes());
+    }
+}
+
 #[test]
 fn every_schedule_gives_the_same_outputs() {
     let e = uniform(41);
