@@ -7,20 +7,22 @@ Run:  .venv/bin/python benchmarks/preisach_inputs.py [--frames 1000] [--elements
 
 The shapes, from the least work per step to the benchmark's walk:
 
-- constant: no element moves (no turning point, nothing wiped); every step still reads its
-  heads, looks up the Everett function (four gathers) and writes its output;
+- constant: no element moves (no turning point, nothing wiped); on the AVX-512 path a step
+  of groups at rest reads their heads and writes the last outputs again (since the
+  seventeenth round; before, it also looked up the Everett function);
 - rising ramp: every element moves, none turns;
 - alternating: every element turns every frame around the same input (a turning point pushed
   every step, nothing wiped below the first loop);
 - the walk, the same for every element: every kind of step, but all elements of a frame take
   the same branches (predictable across the groups);
+- the walk in one half of the mat, the other half at rest (an unloaded region: its inputs at
+  the range's lower end; groups whose elements all hold still take a short step);
 - the walk (``pipeline_speed.py``'s): each element its own random walk, so the kernel's
   branches (a wipe-out deeper than one loop, a stack on the heap) go one way in one group and
   the other way in the next.
 
-The gap between the last two is what the kernel loses to branches that vary from group to
-group; the first row is the kernel's floor, the cost of a step that does nothing but read its
-state, interpolate and write.
+The gap between the walk alike in every element and the walk is what the kernel loses to
+branches that vary from group to group.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ def shapes(model: object, frames: int, n: int) -> dict[str, np.ndarray]:
             (lo + hi) / 2 + 0.001 * (-1.0) ** t, full
         ),
         "the walk, the same for every element": np.broadcast_to(walk[:, :1], full),
+        "the walk in one half, the other half at rest": np.where(np.arange(n) < n // 2, walk, lo),
         "the walk, each element its own (pipeline_speed.py's)": walk,
     }
 

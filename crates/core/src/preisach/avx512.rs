@@ -306,6 +306,20 @@ unsafe fn pair_n<const N: usize>(
     if (0..N).any(|k| _mm512_mask_cmpeq_epi64_mask(turned[k] & moving[k], len0[k], room[k]) != 0) {
         return None;
     }
+    // no lane of any group moves (elements at rest, e.g. unloaded ones held at the range's
+    // lower end): the last outputs again and the clampings counted, the heads as they are
+    // (issue 34, seventeenth round: a constant input 2.8 x, half a mat at rest 1.3 x)
+    if moving.iter().all(|&m| m == 0) {
+        let nan = _mm512_set1_pd(f64::NAN);
+        for k in 0..N {
+            let y = _mm512_mul_pd(c.sign, _mm512_add_pd(last_h[k], c.offset));
+            let o = &mut out[k * WIDE..(k + 1) * WIDE];
+            _mm512_storeu_pd(o.as_mut_ptr(), _mm512_mask_blend_pd(live[k], nan, y));
+            // SAFETY: AVX-512 (this function's features)
+            unsafe { count_clamped(&mut hd[k], clamped[k], u_in[k], live[k]) };
+        }
+        return Some(moving);
+    }
     // the kernel's `finish`: the turning point pushed (in registers; stored at the end)
     let top_u: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].top_u.as_ptr()));
     let top_h: [__m512d; N] = from_fn(|k| _mm512_load_pd(hd[k].top_h.as_ptr()));
@@ -410,14 +424,23 @@ unsafe fn pair_n<const N: usize>(
         _mm512_store_pd(g.top_u.as_mut_ptr(), keep(top_u[k], t_u[k]));
         _mm512_store_pd(g.top_h.as_mut_ptr(), keep(top_h[k], t_h[k]));
         _mm512_store_pd(g.below_u.as_mut_ptr(), keep(below_u[k], b_u[k]));
-        let was_clamped = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(clamped[k], u_in[k]) & live[k];
-        if was_clamped != 0 {
-            let counts = _mm512_load_si512(g.clamped.as_ptr().cast());
-            let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, one_i);
-            _mm512_store_si512(g.clamped.as_mut_ptr().cast(), counts);
-        }
+        // SAFETY: AVX-512 (this function's features)
+        unsafe { count_clamped(g, clamped[k], u_in[k], live[k]) };
     }
     Some(moving)
+}
+
+/// The clamping counters of a group's live lanes whose input was clamped (`clamped` is not
+/// `u`) go up by one.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn count_clamped(g: &mut Heads, clamped: __m512d, u: __m512d, live: __mmask8) {
+    let was_clamped = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(clamped, u) & live;
+    if was_clamped != 0 {
+        let counts = _mm512_load_si512(g.clamped.as_ptr().cast());
+        let counts = _mm512_mask_add_epi64(counts, was_clamped, counts, _mm512_set1_epi64(1));
+        _mm512_store_si512(g.clamped.as_mut_ptr().cast(), counts);
+    }
 }
 
 /// Lane `l`'s pair (`u[l]`, `h[l]`) into the two f64 at `at[l]` from `base`: eight 16-byte

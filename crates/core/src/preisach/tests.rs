@@ -282,6 +282,71 @@ fn stacks_on_the_heap_step_beside_other_groups_as_the_scalar_kernel() {
     }
 }
 
+/// Groups whose lanes all hold still (the same input, an input clamped to the same end of the
+/// range, a reading that is not a number or flagged invalid) take the SIMD path's short step
+/// (issue 34, seventeenth round): the outputs, clamping counters and states equal the scalar
+/// kernel's at every frame, also when the groups move again.
+#[test]
+fn groups_at_rest_step_as_the_scalar_kernel() {
+    let _guard = crate::simd::testing::lock();
+    let e = uniform(41);
+    let (n, t) = (40, 90);
+    let mut rng = Rng(5);
+    let mut walk: Vec<f64> = (0..n).map(|_| rng.unit()).collect();
+    let (mut u, mut ok) = (Vec::with_capacity(t * n), Vec::with_capacity(t * n));
+    for r in 0..t {
+        for (i, w) in walk.iter_mut().enumerate() {
+            *w = (*w + (rng.unit() - 0.5) * 0.2).clamp(0.0, 1.0);
+            // the first 24 elements (three groups) rest from frame 20 to 60: held, below or
+            // above the range (clamped: counted every frame), NaN or flagged invalid
+            let rest = i < 24 && (20..60).contains(&r);
+            u.push(match (rest, i % 6) {
+                (false, _) => *w,
+                (true, 0) => -0.5,
+                (true, 1) => 1.5,
+                (true, 2) => f64::NAN,
+                _ => 0.0, // held: set below
+            });
+            ok.push(!(rest && i % 6 == 5));
+        }
+        if (20..60).contains(&r) {
+            // the held lanes keep one input over the rest
+            for i in (0..24).filter(|i| i % 6 >= 3) {
+                u[r * n + i] = 0.25 + 0.01 * i as f64;
+            }
+        }
+    }
+    let bank = PreisachBank::new(e, n, 64)
+        .and_then(|b| b.with_output(0.1, -1.0))
+        .unwrap();
+    for schedule in [Schedule::FrameOrder, Schedule::Blocks] {
+        let (mut a, mut b) = (bank.clone(), bank.clone());
+        for r in 0..t {
+            let frame = r * n..(r + 1) * n;
+            let step = |bank: &mut PreisachBank, path: Path| {
+                crate::simd::set_limit(path);
+                let mut out = vec![0.0; n];
+                bank.run_scheduled(&u[frame.clone()], &ok[frame.clone()], &mut out, schedule)
+                    .unwrap();
+                crate::simd::set_enabled(true);
+                let mut w = Writer::default();
+                bank.save(&mut w);
+                (out.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), w.buf)
+            };
+            assert!(
+                step(&mut a, Path::Scalar) == step(&mut b, Path::Avx512),
+                "{schedule:?}, frame {r}: outputs or states differ"
+            );
+        }
+        assert_eq!(a.clamped(), b.clamped());
+        assert!(
+            b.clamped()[0] >= 40 && b.clamped()[1] >= 40,
+            "{:?}",
+            b.clamped()
+        );
+    }
+}
+
 #[test]
 fn every_schedule_gives_the_same_outputs() {
     let e = uniform(41);
