@@ -227,6 +227,38 @@ fn deep_stacks_move_to_the_heap_and_back_without_changing_the_output() {
     }
 }
 
+/// Frame after frame of `u` and `ok` (frames of the bank's elements) through a copy of `bank`
+/// on the scalar kernel and one on the best SIMD path, in `schedule`: the same outputs and
+/// states after every frame (asserted); `each` sees the SIMD copy after every frame. Returns
+/// the scalar and the SIMD copy.
+fn frames_against_scalar(
+    bank: &PreisachBank,
+    u: &[f64],
+    ok: &[bool],
+    schedule: Schedule,
+    mut each: impl FnMut(&PreisachBank),
+) -> (PreisachBank, PreisachBank) {
+    let n = bank.len();
+    let (mut a, mut b) = (bank.clone(), bank.clone());
+    for (r, (x, v)) in u.chunks_exact(n).zip(ok.chunks_exact(n)).enumerate() {
+        let step = |bank: &mut PreisachBank, path: Path| {
+            crate::simd::set_limit(path);
+            let mut out = vec![0.0; n];
+            bank.run_scheduled(x, v, &mut out, schedule).unwrap();
+            crate::simd::set_enabled(true);
+            let mut w = Writer::default();
+            bank.save(&mut w);
+            (out.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), w.buf)
+        };
+        assert!(
+            step(&mut a, Path::Scalar) == step(&mut b, Path::Avx512),
+            "{schedule:?}, frame {r}: outputs or states differ"
+        );
+        each(&b);
+    }
+    (a, b)
+}
+
 /// Groups with stacks on the heap step side by side with their neighbours on the SIMD path
 /// (issue 34, seventeenth round): three lanes of every group nest deeper than the in-place
 /// stack and unwind again, the others walk; frame after frame and in blocks, the outputs,
@@ -254,26 +286,10 @@ fn stacks_on_the_heap_step_beside_other_groups_as_the_scalar_kernel() {
     let ok = vec![true; t * n];
     let bank = PreisachBank::new(e, n, 256).unwrap();
     for schedule in [Schedule::FrameOrder, Schedule::Blocks] {
-        let (mut a, mut b) = (bank.clone(), bank.clone());
         let mut deepest = 0;
-        for r in 0..t {
-            let frame = r * n..(r + 1) * n;
-            let step = |bank: &mut PreisachBank, path: Path| {
-                crate::simd::set_limit(path);
-                let mut out = vec![0.0; n];
-                bank.run_scheduled(&u[frame.clone()], &ok[frame.clone()], &mut out, schedule)
-                    .unwrap();
-                crate::simd::set_enabled(true);
-                let mut w = Writer::default();
-                bank.save(&mut w);
-                (out.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), w.buf)
-            };
-            assert!(
-                step(&mut a, Path::Scalar) == step(&mut b, Path::Avx512),
-                "{schedule:?}, frame {r}: outputs or states differ"
-            );
+        let (a, b) = frames_against_scalar(&bank, &u, &ok, schedule, |b| {
             deepest = deepest.max(*b.depth().iter().max().unwrap());
-        }
+        });
         assert!(
             deepest > INLINE_EXTREMA + 10,
             "the deepest stack held {deepest}"
@@ -320,24 +336,7 @@ fn groups_at_rest_step_as_the_scalar_kernel() {
         .and_then(|b| b.with_output(0.1, -1.0))
         .unwrap();
     for schedule in [Schedule::FrameOrder, Schedule::Blocks] {
-        let (mut a, mut b) = (bank.clone(), bank.clone());
-        for r in 0..t {
-            let frame = r * n..(r + 1) * n;
-            let step = |bank: &mut PreisachBank, path: Path| {
-                crate::simd::set_limit(path);
-                let mut out = vec![0.0; n];
-                bank.run_scheduled(&u[frame.clone()], &ok[frame.clone()], &mut out, schedule)
-                    .unwrap();
-                crate::simd::set_enabled(true);
-                let mut w = Writer::default();
-                bank.save(&mut w);
-                (out.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), w.buf)
-            };
-            assert!(
-                step(&mut a, Path::Scalar) == step(&mut b, Path::Avx512),
-                "{schedule:?}, frame {r}: outputs or states differ"
-            );
-        }
+        let (a, b) = frames_against_scalar(&bank, &u, &ok, schedule, |_| {});
         assert_eq!(a.clamped(), b.clamped());
         assert!(
             b.clamped()[0] >= 40 && b.clamped()[1] >= 40,
