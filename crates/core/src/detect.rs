@@ -444,8 +444,8 @@ impl FailureDetector {
                         &readings[at.clone()],
                         &delta[at.clone()],
                         &valid[at],
-                        &mut els[..whole],
-                        &mut out[..whole],
+                        els,
+                        out,
                     )
                 };
             }
@@ -457,8 +457,8 @@ impl FailureDetector {
                     &readings[at.clone()],
                     &delta[at.clone()],
                     &valid[at],
-                    &mut els[..whole],
-                    &mut out[..whole],
+                    els,
+                    out,
                 )
             }
         }

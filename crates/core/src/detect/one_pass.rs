@@ -54,7 +54,7 @@ impl FailureDetector {
         for (b, mut groups) in left.into_iter().enumerate() {
             let start = b * size;
             let end = (start + size).min(n);
-            // the set bits only (most blocks have none)
+            // the set bits only (most parts have none)
             while groups != 0 {
                 let g = groups.trailing_zeros() as usize;
                 groups &= groups - 1;

@@ -55,56 +55,19 @@ pub(super) unsafe fn row(
     let mut i = 0;
     while i < n {
         let g = i / GROUP;
+        let stacks = (off, room, capacity);
         // RUNS whole groups side by side ([`pair_n`]); where a turning point lands on a
         // stack at its room, the groups go alone below
         // SAFETY: AVX-512 (this function's features); the slices hold n elements
         if i + RUNS * WIDE <= n
-            && unsafe {
-                run_of_groups(
-                    &consts,
-                    elements,
-                    heads,
-                    (off, room, capacity),
-                    i,
-                    u,
-                    ok,
-                    out,
-                )
-            }
+            && unsafe { run_of_groups::<RUNS>(&consts, elements, heads, stacks, i, u, ok, out) }
         {
             i += RUNS * WIDE;
             continue;
         }
-        let stepped = i + WIDE <= n && {
-            let els = &mut elements[i..i + WIDE];
-            let base = els[0].inline.as_mut_ptr().cast::<f64>();
-            let spilled = on_heap(&heads[g]);
-            debug_assert_eq!(spilled, els.iter().any(|el| el.spill.is_some()));
-            let (offs, rooms) = if spilled {
-                heap_stacks(els, base, capacity)
-            } else {
-                (off, room)
-            };
-            // SAFETY: AVX-512 (this function's features); eight elements, lane `l`'s stack
-            // `offs[l]` f64 from `base` with `rooms[l]` extrema plus the spare slot
-            let moved = unsafe {
-                pair_n::<1>(
-                    &consts,
-                    std::array::from_mut(&mut heads[g]),
-                    [base],
-                    [offs],
-                    [rooms],
-                    &u[i..i + WIDE],
-                    &ok[i..i + WIDE],
-                    &mut out[i..i + WIDE],
-                )
-            }
-            .map(|[moved]| moved);
-            if let (Some(moved), true) = (moved, spilled) {
-                back_in_place(els, &mut heads[g], moved);
-            }
-            moved.is_some()
-        };
+        // SAFETY: as above
+        let stepped = i + WIDE <= n
+            && unsafe { run_of_groups::<1>(&consts, elements, heads, stacks, i, u, ok, out) };
         let m = WIDE.min(n - i);
         if !stepped {
             // SAFETY: AVX2 (this function's features); one group (or the block's last
@@ -127,18 +90,18 @@ pub(super) unsafe fn row(
     }
 }
 
-/// [`pair_n`] of the [`RUNS`] groups from element `i` (stacks in place at `off` with `room`
+/// [`pair_n`] of the `R` groups from element `i` (stacks in place at `off` with `room`
 /// extrema; a group with a stack on the heap gives its lanes' own offsets and rooms, and its
 /// stacks that are shallow again go back in place after the step: issue 34, seventeenth
 /// round, 1.04 x the Preisach row on the walk against stepping such a group alone); false
 /// when they did not step (a turning point onto a stack at its room: nothing touched).
 ///
 /// # Safety
-/// The processor must have AVX2 and AVX-512 F, DQ and VL; `i + RUNS * WIDE` elements are
+/// The processor must have AVX2 and AVX-512 F, DQ and VL; `i + R * WIDE` elements are
 /// in `elements`, `u`, `ok` and `out`, and their groups in `heads`.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn run_of_groups(
+unsafe fn run_of_groups<const R: usize>(
     consts: &Consts,
     elements: &mut [Element],
     heads: &mut [Heads],
@@ -150,12 +113,12 @@ unsafe fn run_of_groups(
 ) -> bool {
     let g = i / GROUP;
     // SAFETY: AVX-512 (this function's features)
-    let spilled: [bool; RUNS] = std::array::from_fn(|k| unsafe { on_heap(&heads[g + k]) });
-    debug_assert!((0..RUNS).all(|k| spilled[k]
+    let spilled: [bool; R] = std::array::from_fn(|k| unsafe { on_heap(&heads[g + k]) });
+    debug_assert!((0..R).all(|k| spilled[k]
         == elements[i + k * WIDE..i + (k + 1) * WIDE]
             .iter()
             .any(|el| el.spill.is_some())));
-    let mut stacks = [(off, room); RUNS];
+    let mut stacks = [(off, room); R];
     for (k, s) in stacks.iter_mut().enumerate() {
         if spilled[k] {
             let els = &mut elements[i + k * WIDE..i + (k + 1) * WIDE];
@@ -164,17 +127,17 @@ unsafe fn run_of_groups(
             *s = unsafe { heap_stacks(els, base, capacity) };
         }
     }
-    let p = elements[i..i + RUNS * WIDE].as_mut_ptr();
+    let p = elements[i..i + R * WIDE].as_mut_ptr();
     // SAFETY: group k's elements start at p + 8 k (inside the slice)
-    let bases: [*mut f64; RUNS] = std::array::from_fn(|k| unsafe {
+    let bases: [*mut f64; R] = std::array::from_fn(|k| unsafe {
         std::ptr::addr_of_mut!((*p.add(k * WIDE)).inline).cast::<f64>()
     });
-    let hd: &mut [Heads; RUNS] = (&mut heads[g..g + RUNS]).try_into().expect("RUNS groups");
-    let at = i..i + RUNS * WIDE;
-    // SAFETY: AVX-512 (this function's features); group k's lane l's stack `off[l]` f64 from
-    // `bases[k]` with `room` extrema plus the spare slot (in place)
+    let hd: &mut [Heads; R] = (&mut heads[g..g + R]).try_into().expect("R groups");
+    let at = i..i + R * WIDE;
+    // SAFETY: AVX-512 (this function's features); group k's lane l's stack `stacks[k].0[l]`
+    // f64 from `bases[k]` with `stacks[k].1[l]` extrema plus the spare slot
     let done = unsafe {
-        pair_n::<RUNS>(
+        pair_n::<R>(
             consts,
             hd,
             bases,
@@ -186,7 +149,7 @@ unsafe fn run_of_groups(
         )
     };
     if let Some(moved) = done {
-        for k in (0..RUNS).filter(|&k| spilled[k]) {
+        for k in (0..R).filter(|&k| spilled[k]) {
             let els = &mut elements[i + k * WIDE..i + (k + 1) * WIDE];
             back_in_place(els, &mut heads[g + k], moved[k]);
         }
