@@ -206,6 +206,20 @@ def cases(
     return out
 
 
+# the ratios beside the scalar one: AVX-512 against AVX2, and one lookup of the AVX-512
+# kernels against the other
+LOOKUP_PAIRS = [("avx2", "avx512"), ("avx512-gather", "avx512-loads"), ("avx512-gather", "avx512")]
+
+
+def use_path(p: str) -> None:
+    """Run the kernels on path ``p`` from now on (``avx512-gather``: AVX-512 with the
+    gathers of table cells; ``avx512-loads``: with loads per lane; ``avx512``: the
+    processor's lookup)."""
+    path, _, lookup = p.partition("-")
+    _core.set_simd_path(path)
+    _core.set_simd_lookup(lookup or "auto")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="smaller sizes (a smoke test)")
@@ -222,7 +236,9 @@ def main() -> None:
         "--paths",
         default="",
         help="comma-separated kernel paths to time (scalar, avx2, avx512; default: every path "
-        "this processor has), e.g. avx512 for a short run",
+        "this processor has), e.g. avx512 for a short run; on an AVX-512 processor also "
+        "avx512-gather and avx512-loads (the AVX-512 kernels with that lookup of table "
+        "cells; avx512 is the processor's own)",
     )
     args = ap.parse_args()
     global CLOCK
@@ -231,7 +247,8 @@ def main() -> None:
     _, best = _core.simd_path()
     paths = ["scalar", "avx2", "avx512"][: ["scalar", "avx2", "avx512"].index(best) + 1]
     if args.paths:
-        paths = [p for p in paths if p in args.paths.split(",")]
+        lookups = ["avx512-gather", "avx512-loads"] if best == "avx512" else []
+        paths = [p for p in paths + lookups if p in args.paths.split(",")]
     cal = seat_calibration(mat_seed=5)
     walk = random_walk(cal["hysteresis"].model_, frames, 4096)
     batch = cases(cal, frames, walk)
@@ -255,12 +272,12 @@ def main() -> None:
             copies.append(copy)
             for label, run, size in batch:
                 for p in paths:
-                    _core.set_simd_path(p)
+                    use_path(p)
                     t = timed(run)
                     rates[label, p].append(size / t)
                     shares[label, p].append(size / t / copy)
             for p in paths:
-                _core.set_simd_path(p)
+                use_path(p)
                 lat = step_latency(step_pipe, cap, rec.times)
                 lat_med[p].append(float(np.median(lat)))
                 lat_p99[p].append(float(np.percentile(lat, 99)))
@@ -270,6 +287,7 @@ def main() -> None:
                 lat_wall[p].append(float(np.median(wall)))
     finally:
         _core.set_simd(True)
+        _core.set_simd_lookup("auto")
     print(
         f"copy rate of a ({frames}, 4096) float64 array: {median_row(copies) / 1e6:.0f} M "
         f"element-samples/s (median of {args.repeat}, {args.clock} clock); "
@@ -277,7 +295,8 @@ def main() -> None:
     )
     print()
     head = " | ".join(f"{p}: rate | {p}: share of the copy rate" for p in paths)
-    pairs = [("scalar", p) for p in paths[1:]] + ([("avx2", "avx512")] if len(paths) > 2 else [])
+    pairs = [("scalar", p) for p in paths[1:] if "scalar" in paths]
+    pairs += [(a, b) for a, b in LOOKUP_PAIRS if a in paths and b in paths]
     ratios = "".join(f" {b} / {a} |" for a, b in pairs)
     print(f"| path | {head} |{ratios}")
     print("|---|" + "---:|---:|" * len(paths) + "---:|" * len(pairs))

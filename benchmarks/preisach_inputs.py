@@ -22,7 +22,10 @@ The shapes, from the least work per step to the benchmark's walk:
   the other way in the next.
 
 The gap between the walk alike in every element and the walk is what the kernel loses to
-branches that vary from group to group.
+branches that vary from group to group. On an AVX-512 processor every shape also runs with
+the kernel's other lookup of the Everett cells (``texsense._core.set_simd_lookup``: a
+gather per corner, or a load per lane from the table by cell), alternating with the
+processor's own, and the table gives their ratio (issue 34, eighteenth round).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import time
 import numpy as np
 
 from pipeline_speed import random_walk
+from texsense import _core
 from texsense.calibration.workflows import seat_calibration
 
 
@@ -54,18 +58,25 @@ def shapes(model: object, frames: int, n: int) -> dict[str, np.ndarray]:
     }
 
 
-def rate(model: object, x: np.ndarray, repeat: int) -> float:
-    """Element-steps per second of the bank on ``x``, frame after frame (best of
-    ``repeat``, CPU clock), into an output array allocated beforehand."""
+def rates(model: object, x: np.ndarray, repeat: int, lookups: list[str]) -> dict[str, float]:
+    """Element-steps per second of the bank on ``x`` by each of the AVX-512 kernel's
+    ``lookups`` of the Everett cells, frame after frame (best of ``repeat``, CPU clock, the
+    lookups in turn and their order reversed every other time), into an output array
+    allocated beforehand."""
     ok = np.ones(x.shape, bool)
     out = np.empty_like(x)
-    best = float("inf")
-    for _ in range(repeat):
-        bank = model.bank(x.shape[1])
-        start = time.process_time()
-        bank.run(x, ok, schedule="frames", out=out)
-        best = min(best, time.process_time() - start)
-    return x.size / best
+    best = dict.fromkeys(lookups, float("inf"))
+    try:
+        for r in range(repeat):
+            for lookup in lookups if r % 2 == 0 else lookups[::-1]:
+                _core.set_simd_lookup(lookup)
+                bank = model.bank(x.shape[1])
+                start = time.process_time()
+                bank.run(x, ok, schedule="frames", out=out)
+                best[lookup] = min(best[lookup], time.process_time() - start)
+    finally:
+        _core.set_simd_lookup("auto")
+    return {k: x.size / t for k, t in best.items()}
 
 
 def copy_rate(shape: tuple[int, int], repeat: int) -> float:
@@ -96,12 +107,24 @@ def main() -> None:
         f"copy rate {copy / 1e6:.0f} M element-samples/s (best of {max(args.repeat, 5)}, "
         "CPU clock)"
     )
+    # on AVX-512 both lookups of the Everett cells, the processor's first (`simd_lookup`)
+    path, default = _core.simd_path()[0], _core.simd_lookup()[1]
+    other = "gather" if default == "loads" else "loads"
+    lookups = [default, other] if path == "avx512" else [default]
+    print(f"SIMD path {path}; the Everett cells by {default} (this processor's lookup)")
     print()
-    print("| input | rate | share of the copy rate | ns per element-step |")
-    print("|---|---:|---:|---:|")
+    head = "| input | rate | share of the copy rate | ns per element-step |"
+    if len(lookups) == 2:
+        head += f" by {other}: rate | {default} / {other} |"
+    print(head)
+    print("|---|---:|---:|---:|" + ("---:|---:|" if len(lookups) == 2 else ""))
     for name, x in inputs.items():
-        r = rate(model, x, args.repeat)
-        print(f"| {name} | {r / 1e6:.1f} M/s | {100 * r / copy:.2f} % | {1e9 / r:.2f} |")
+        got = rates(model, x, args.repeat, lookups)
+        r = got[default]
+        line = f"| {name} | {r / 1e6:.1f} M/s | {100 * r / copy:.2f} % | {1e9 / r:.2f} |"
+        if len(lookups) == 2:
+            line += f" {got[other] / 1e6:.1f} M/s | {r / got[other]:.2f} x |"
+        print(line)
 
 
 if __name__ == "__main__":

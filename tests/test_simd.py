@@ -44,7 +44,9 @@ def same_bits(a: Any, b: Any) -> None:
 
 def both_paths(run: Callable[[], Any]) -> tuple[Any, Any]:
     """``run()`` on the scalar kernels, then on the best SIMD path; on an AVX-512 processor
-    also with the AVX2 kernels forced in between, which must give the scalar bits too."""
+    also with the AVX2 kernels forced in between, and with the AVX-512 kernels' other
+    lookup of table cells (gathers or loads per lane), each of which must give the scalar
+    bits too."""
     _core.set_simd(False)
     assert _core.simd_path()[0] == "scalar"
     scalar = run()
@@ -52,6 +54,14 @@ def both_paths(run: Callable[[], Any]) -> tuple[Any, Any]:
         _core.set_simd_path("avx2")
         assert _core.simd_path()[0] == "avx2"
         same_bits(scalar, run())
+        _core.set_simd(True)
+        used, default = _core.simd_lookup()
+        assert used == default
+        _core.set_simd_lookup("gather" if default == "loads" else "loads")
+        try:
+            same_bits(scalar, run())
+        finally:
+            _core.set_simd_lookup("auto")
     _core.set_simd(True)
     assert _core.simd_path()[0] == BEST
     return scalar, run()
@@ -64,6 +74,18 @@ def test_the_path_can_be_limited():
     assert _core.simd_path()[0] == BEST
     with pytest.raises(ValueError, match="one of scalar, avx2, avx512"):
         _core.set_simd_path("sse2")
+
+
+def test_the_lookup_can_be_chosen():
+    used, default = _core.simd_lookup()
+    assert used == default and default in ("gather", "loads")
+    for lookup in ("gather", "loads"):
+        _core.set_simd_lookup(lookup)
+        assert _core.simd_lookup() == (lookup, default)
+    _core.set_simd_lookup("auto")
+    assert _core.simd_lookup() == (default, default)
+    with pytest.raises(ValueError, match="one of gather, loads, auto"):
+        _core.set_simd_lookup("scatter")
 
 
 def spoil(x: np.ndarray, rng: np.random.Generator, lo: float, hi: float) -> np.ndarray:

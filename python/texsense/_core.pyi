@@ -41,7 +41,9 @@ __all__ = [
     "parse_json_numbers",
     "parse_row",
     "set_simd",
+    "set_simd_lookup",
     "set_simd_path",
+    "simd_lookup",
     "simd_path",
 ]
 
@@ -371,6 +373,12 @@ def set_simd(enabled: bool) -> None:
 
 def set_simd_path(best: str) -> None:
     """The best SIMD path batches may take: "avx512" (default), "avx2" or "scalar"."""
+
+def simd_lookup() -> tuple[str, str]:
+    """(lookup in use, this processor's faster lookup): "gather" or "loads" each."""
+
+def set_simd_lookup(lookup: str) -> None:
+    """How the AVX-512 kernels read table cells: "gather", "loads" or "auto" (default)."""
 
 def parse_row(line: str, sep: str, expected: int) -> npt.NDArray[np.float32] | None:
     """Exactly ``expected`` numbers separated by ``sep``, as float32, or None (the fast path)."""

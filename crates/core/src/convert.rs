@@ -27,6 +27,10 @@ pub struct Curve {
     inv_width: f64,
     /// Per bucket, for the SIMD lanes ([`Curve::splits`]).
     split: Vec<f64>,
+    /// Per bucket, its start and split side by side ([`Curve::lane_tables`]).
+    by_bucket: Vec<[f64; 2]>,
+    /// Per point, its x, y and slope side by side ([`Curve::lane_tables`]).
+    by_point: Vec<[f64; 4]>,
 }
 
 impl Curve {
@@ -42,6 +46,14 @@ impl Curve {
             }
         })?;
         let split = splits(&x, &bucket_start);
+        let by_bucket = bucket_start
+            .iter()
+            .zip(&split)
+            .map(|(&start, &cut)| [f64::from(start), cut])
+            .collect();
+        let by_point = (0..x.len())
+            .map(|j| [x[j], y[j], slope.get(j).copied().unwrap_or(0.0), 0.0])
+            .collect();
         Ok(Self {
             x,
             y,
@@ -49,6 +61,8 @@ impl Curve {
             bucket_start,
             inv_width,
             split,
+            by_bucket,
+            by_point,
         })
     }
 
@@ -60,6 +74,14 @@ impl Curve {
     /// (issue 34, twelfth round); a lane with NaN walks as the kernel does.
     pub fn splits(&self) -> &[f64] {
         &self.split
+    }
+
+    /// The curve's tables for the AVX-512 lanes' loads ([`crate::simd::Lookup::Loads`]):
+    /// per bucket its start (as f64) and [`Curve::splits`], and per point its `x`, `y` and
+    /// slope (0 at the last point) and a zero, so that a lane reads each with one load
+    /// instead of a gather per value (issue 34, eighteenth round).
+    pub fn lane_tables(&self) -> (&[[f64; 2]], &[[f64; 4]]) {
+        (&self.by_bucket, &self.by_point)
     }
 
     /// The kernels' view (checked when the curve was built).
@@ -132,6 +154,10 @@ pub struct ConverterView<'a> {
     pub curve: Option<kernel::Curve<'a, f64>>,
     /// The curve's [`Curve::splits`] (empty without a curve).
     pub split: &'a [f64],
+    /// The curve's [`Curve::lane_tables`] (empty without a curve).
+    pub by_bucket: &'a [[f64; 2]],
+    /// As above.
+    pub by_point: &'a [[f64; 4]],
 }
 
 impl ConverterView<'_> {
@@ -217,6 +243,8 @@ impl Converter {
             gain: &self.gain,
             curve: self.curve.as_ref().map(Curve::view),
             split: self.curve.as_ref().map_or(&[], Curve::splits),
+            by_bucket: self.curve.as_ref().map_or(&[], |c| c.lane_tables().0),
+            by_point: self.curve.as_ref().map_or(&[], |c| c.lane_tables().1),
         }
     }
 

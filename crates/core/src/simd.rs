@@ -112,6 +112,76 @@ pub fn avx512() -> bool {
     path() == Path::Avx512
 }
 
+/// How the AVX-512 kernels read a table's entries at eight lanes' own indices (the Everett
+/// cell of each element in the Preisach row): both give the same values, bit for bit; which
+/// is faster depends on the processor (issue 34, eighteenth round).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lookup {
+    /// A gather instruction per value: the faster on the Intel Xeon of the eighth round
+    /// (1.14 x the Preisach kernel against loads per lane).
+    Gather,
+    /// A load per lane of the lane's entries, stored side by side (the table by cell), and
+    /// a transpose across the lanes: the faster on AMD processors, where a gather of eight
+    /// f64 takes about 15 cycles (Zen 5; the Preisach kernel 1.12-1.29 x against gathers).
+    Loads,
+}
+
+impl Lookup {
+    /// `"gather"` or `"loads"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Lookup::Gather => "gather",
+            Lookup::Loads => "loads",
+        }
+    }
+}
+
+/// The lookup of [`set_lookup`] ([`Lookup`] as `u8`), or [`UNKNOWN`]: the processor's
+/// ([`detected_lookup`]).
+static LOOKUP: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// The faster lookup of this processor: [`Lookup::Loads`] on an AMD processor (its vendor
+/// string), [`Lookup::Gather`] elsewhere.
+pub fn detected_lookup() -> Lookup {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let vendor = std::arch::x86_64::__cpuid(0);
+        // "AuthenticAMD" in ebx, edx, ecx
+        if (vendor.ebx, vendor.edx, vendor.ecx) == (0x6874_7541, 0x6974_6E65, 0x444D_4163) {
+            return Lookup::Loads;
+        }
+    }
+    Lookup::Gather
+}
+
+/// The lookup the AVX-512 kernels use now: [`set_lookup`]'s, else [`detected_lookup`]
+/// (found once: the Preisach row asks per row of a block).
+#[inline]
+pub fn lookup() -> Lookup {
+    let mut chosen = LOOKUP.load(Ordering::Relaxed);
+    if chosen == UNKNOWN {
+        chosen = DETECTED_LOOKUP.load(Ordering::Relaxed);
+        if chosen == UNKNOWN {
+            chosen = detected_lookup() as u8;
+            DETECTED_LOOKUP.store(chosen, Ordering::Relaxed);
+        }
+    }
+    if chosen == Lookup::Gather as u8 {
+        Lookup::Gather
+    } else {
+        Lookup::Loads
+    }
+}
+
+/// [`detected_lookup`], found once ([`UNKNOWN`] before).
+static DETECTED_LOOKUP: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// The lookup the AVX-512 kernels use from now on, process-wide (`None`: the processor's
+/// faster one), for tests and the benchmark that compare the two.
+pub fn set_lookup(lookup: Option<Lookup>) {
+    LOOKUP.store(lookup.map_or(UNKNOWN, |l| l as u8), Ordering::Relaxed);
+}
+
 #[cfg(test)]
 pub(crate) mod testing {
     use std::sync::{Mutex, MutexGuard};

@@ -43,6 +43,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simd::py_simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_set_simd, m)?)?;
     m.add_function(wrap_pyfunction!(simd::py_set_simd_path, m)?)?;
+    m.add_function(wrap_pyfunction!(simd::py_simd_lookup, m)?)?;
+    m.add_function(wrap_pyfunction!(simd::py_set_simd_lookup, m)?)?;
     m.add_function(wrap_pyfunction!(text::py_parse_row, m)?)?;
     m.add_function(wrap_pyfunction!(text::py_parse_json_numbers, m)?)?;
     m.add_function(wrap_pyfunction!(text::py_parse_json_frame, m)?)?;

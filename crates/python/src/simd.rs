@@ -38,3 +38,33 @@ pub(crate) fn py_set_simd_path(best: &str) -> PyResult<()> {
     set_limit(path);
     Ok(())
 }
+
+/// `(lookup in use, this processor's faster lookup)`: "gather" or "loads" each — how the
+/// AVX-512 kernels read the Everett cells of eight elements (`texsense_core::simd::Lookup`).
+#[pyfunction]
+#[pyo3(name = "simd_lookup")]
+pub(crate) fn py_simd_lookup() -> (&'static str, &'static str) {
+    use texsense_core::simd;
+    (simd::lookup().name(), simd::detected_lookup().name())
+}
+
+/// The lookup the AVX-512 kernels use from now on, process-wide: "gather", "loads", or
+/// "auto" (the processor's faster one, the default); both give the same numbers, bit for
+/// bit (for the benchmark and tests that compare the two).
+#[pyfunction]
+#[pyo3(name = "set_simd_lookup")]
+pub(crate) fn py_set_simd_lookup(lookup: &str) -> PyResult<()> {
+    use texsense_core::simd::{set_lookup, Lookup};
+    let chosen = match lookup {
+        "gather" => Some(Lookup::Gather),
+        "loads" => Some(Lookup::Loads),
+        "auto" => None,
+        _ => {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "simd lookup {lookup:?}: one of gather, loads, auto"
+            )))
+        }
+    };
+    set_lookup(chosen);
+    Ok(())
+}

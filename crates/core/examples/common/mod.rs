@@ -1,7 +1,7 @@
 //! What the timing examples share: the process's CPU clock and the SIMD path named by their
 //! first argument.
 
-use texsense_core::simd::Path;
+use texsense_core::simd::{Lookup, Path};
 
 extern "C" {
     fn clock_gettime(clock: i32, ts: *mut [i64; 2]) -> i32;
@@ -16,8 +16,15 @@ pub fn cpu() -> f64 {
 }
 
 /// Limit the kernels to the path an example's first argument names (`avx2`, anything ending
-/// in `scalar`, else AVX-512); returns the argument (default `avx512`).
+/// in `scalar`, else AVX-512), and the AVX-512 kernels' table lookup to the environment's
+/// `LOOKUP` (`gather` or `loads`; else the processor's); returns the argument (default
+/// `avx512`).
 pub fn use_path(args: &[String]) -> &str {
+    texsense_core::simd::set_lookup(match std::env::var("LOOKUP").as_deref() {
+        Ok("gather") => Some(Lookup::Gather),
+        Ok("loads") => Some(Lookup::Loads),
+        _ => None,
+    });
     let path = args.get(1).map_or("avx512", |s| s.as_str());
     texsense_core::simd::set_limit(match path {
         "avx2" => Path::Avx2,

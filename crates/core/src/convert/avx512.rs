@@ -46,6 +46,12 @@ pub(super) unsafe fn row(
             }
         }
         Some(c) => {
+            let tables = Tables {
+                split: view.split,
+                by_bucket: view.by_bucket,
+                by_point: view.by_point,
+                loads: crate::simd::lookup() == crate::simd::Lookup::Loads,
+            };
             // runs of RUN groups side by side through the curve, then the groups left one
             // by one
             let runs = n / (RUN * LANES) * (RUN * LANES);
@@ -53,7 +59,7 @@ pub(super) unsafe fn row(
                 let got: [(__mmask8, __m512d); RUN] =
                     std::array::from_fn(|k| scaled(i + k * LANES));
                 // SAFETY: AVX-512 (this function's features)
-                let v = unsafe { at_n::<RUN>(c, view.split, got.map(|(_, v)| v)) };
+                let v = unsafe { at_n::<RUN>(c, &tables, got.map(|(_, v)| v)) };
                 for (k, ((live, _), v)) in got.into_iter().zip(v).enumerate() {
                     let at = i + k * LANES;
                     _mm512_storeu_pd(
@@ -65,7 +71,7 @@ pub(super) unsafe fn row(
             for i in (runs..whole).step_by(LANES) {
                 let (live, v) = scaled(i);
                 // SAFETY: AVX-512 (this function's features)
-                let [v] = unsafe { at_n::<1>(c, view.split, [v]) };
+                let [v] = unsafe { at_n::<1>(c, &tables, [v]) };
                 _mm512_storeu_pd(
                     out[i..i + LANES].as_mut_ptr(),
                     _mm512_mask_blend_pd(live, nan, v),
@@ -131,23 +137,54 @@ unsafe fn scale(
 /// When `split` is not one per bucket.
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn at_n<const N: usize>(c: &Curve<'_, f64>, split: &[f64], v: [__m512d; N]) -> [__m512d; N] {
+unsafe fn at_n<const N: usize>(
+    c: &Curve<'_, f64>,
+    t: &Tables<'_>,
+    v: [__m512d; N],
+) -> [__m512d; N] {
     let (xs, ys, slope, buckets) = (c.x(), c.y(), c.slopes(), c.bucket_starts());
-    assert_eq!(split.len(), buckets.len(), "one split per bucket");
+    assert_eq!(t.split.len(), buckets.len(), "one split per bucket");
+    assert!(t.by_bucket.len() == buckets.len() && t.by_point.len() == xs.len());
     let last = xs.len() - 1;
     // SAFETY: AVX-512 (this function's features)
-    let l: [Lanes; N] = std::array::from_fn(|k| unsafe { lanes(c, v[k]) });
-    let cut: [__m512d; N] =
-        std::array::from_fn(|k| _mm512_i64gather_pd::<8>(l[k].b, split.as_ptr()));
+    let mut l: [Lanes; N] = std::array::from_fn(|k| unsafe { place(c, v[k]) });
+    // each lane's bucket start and split: a load per lane of both, or two gathers
+    let cut: [__m512d; N] = std::array::from_fn(|k| {
+        if t.loads {
+            let at = _mm512_slli_epi64::<1>(l[k].b);
+            // SAFETY: AVX-512 (this function's features); b < buckets, two f64 per bucket
+            let (start, cut) = unsafe { lane_pairs(t.by_bucket.as_ptr().cast(), at) };
+            l[k].bucket = _mm512_cvttpd_epi32(start);
+            cut
+        } else {
+            l[k].bucket = _mm512_i64gather_epi32::<4>(l[k].b, buckets.as_ptr().cast::<i32>());
+            _mm512_i64gather_pd::<8>(l[k].b, t.split.as_ptr())
+        }
+    });
     // the kernel's first step forward (`x[j + 1] <= v`, `j + 1 < last`: the split)
     let j: [__m512i; N] = std::array::from_fn(|k| {
         let up = l[k].inside & _mm512_cmp_pd_mask::<_CMP_LE_OQ>(cut[k], l[k].vin);
         let j0 = _mm512_cvtepu32_epi64(l[k].bucket);
         _mm512_mask_add_epi64(j0, up, j0, _mm512_set1_epi64(1))
     });
-    let xj: [__m512d; N] = std::array::from_fn(|k| _mm512_i64gather_pd::<8>(j[k], xs.as_ptr()));
-    let yj: [__m512d; N] = std::array::from_fn(|k| _mm512_i64gather_pd::<8>(j[k], ys.as_ptr()));
-    let sj: [__m512d; N] = std::array::from_fn(|k| _mm512_i64gather_pd::<8>(j[k], slope.as_ptr()));
+    // the segment's x, y and slope: a load per lane of the three, or three gathers
+    let (xj, yj, sj): ([__m512d; N], [__m512d; N], [__m512d; N]) = if t.loads {
+        // SAFETY: AVX-512 (this function's features); j <= last, four f64 per point
+        let p: [[__m512d; 3]; N] = std::array::from_fn(|k| unsafe {
+            lane_rows(t.by_point.as_ptr().cast(), _mm512_slli_epi64::<2>(j[k]))
+        });
+        (
+            std::array::from_fn(|k| p[k][0]),
+            std::array::from_fn(|k| p[k][1]),
+            std::array::from_fn(|k| p[k][2]),
+        )
+    } else {
+        (
+            std::array::from_fn(|k| _mm512_i64gather_pd::<8>(j[k], xs.as_ptr())),
+            std::array::from_fn(|k| _mm512_i64gather_pd::<8>(j[k], ys.as_ptr())),
+            std::array::from_fn(|k| _mm512_i64gather_pd::<8>(j[k], slope.as_ptr())),
+        )
+    };
     std::array::from_fn(|k| {
         let Lanes {
             nan,
@@ -190,9 +227,21 @@ struct Lanes {
     bucket: __m256i,
 }
 
+/// [`place`] with the buckets' first segments gathered.
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn lanes(c: &Curve<'_, f64>, v: __m512d) -> Lanes {
+    // SAFETY: AVX-512 (this function's features)
+    let mut l = unsafe { place(c, v) };
+    let buckets = c.bucket_starts();
+    l.bucket = _mm512_i64gather_epi32::<4>(l.b, buckets.as_ptr().cast::<i32>());
+    l
+}
+
+/// [`Lanes`] of eight inputs but their buckets' first segments (`bucket` zero).
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn place(c: &Curve<'_, f64>, v: __m512d) -> Lanes {
     let (xs, buckets) = (c.x(), c.bucket_starts());
     let (x0, xl) = (_mm512_set1_pd(xs[0]), _mm512_set1_pd(xs[xs.len() - 1]));
     let nan = _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(v, v);
@@ -207,7 +256,6 @@ unsafe fn lanes(c: &Curve<'_, f64>, v: __m512d) -> Lanes {
     );
     // 0 <= pos <= top < 2^31: truncation is the floor
     let b = _mm512_cvtepi32_epi64(_mm512_cvttpd_epi32(pos));
-    let bucket = _mm512_i64gather_epi32::<4>(b, buckets.as_ptr().cast::<i32>());
     Lanes {
         nan,
         lo,
@@ -215,8 +263,73 @@ unsafe fn lanes(c: &Curve<'_, f64>, v: __m512d) -> Lanes {
         inside,
         vin,
         b,
-        bucket,
+        bucket: _mm256_setzero_si256(),
     }
+}
+
+/// The curve's tables for [`at_n`], and whether its lanes read them by loads
+/// ([`crate::simd::Lookup`]).
+struct Tables<'a> {
+    split: &'a [f64],
+    by_bucket: &'a [[f64; 2]],
+    by_point: &'a [[f64; 4]],
+    loads: bool,
+}
+
+/// Lane `l`'s pair of f64 at `at[l]` from `base`, as two registers (the pairs' first and
+/// second values): eight 16-byte loads and a transpose.
+///
+/// # Safety
+/// The processor must have AVX-512 F; every lane's two f64 are inside one allocation from
+/// `base`.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn lane_pairs(base: *const f64, at: __m512i) -> (__m512d, __m512d) {
+    let mut idx = [0i64; LANES];
+    _mm512_storeu_si512(idx.as_mut_ptr().cast(), at);
+    // SAFETY: the caller's
+    let pair = |l: usize| unsafe { _mm_loadu_pd(base.offset(idx[l] as isize)) };
+    let four = |l: usize| {
+        let lo = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(pair(l)), pair(l + 1));
+        let hi = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(pair(l + 2)), pair(l + 3));
+        _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(lo), hi)
+    };
+    let (z0, z1) = (four(0), four(4));
+    (
+        _mm512_permutex2var_pd(z0, _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0), z1),
+        _mm512_permutex2var_pd(z0, _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1), z1),
+    )
+}
+
+/// The first three of lane `l`'s four f64 at `at[l]` from `base`, as three registers:
+/// eight 32-byte loads and a transpose.
+///
+/// # Safety
+/// The processor must have AVX-512 F; every lane's four f64 are inside one allocation from
+/// `base`.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn lane_rows(base: *const f64, at: __m512i) -> [__m512d; 3] {
+    let mut idx = [0i64; LANES];
+    _mm512_storeu_si512(idx.as_mut_ptr().cast(), at);
+    // SAFETY: the caller's
+    let row = |l: usize| unsafe { _mm256_loadu_pd(base.offset(idx[l] as isize)) };
+    let two = |a: usize, b: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(row(a)), row(b));
+    let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
+    // [first of lanes 0-3, second of lanes 0-3] of the four lanes of two registers
+    let first = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
+    let third = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
+    let (a, b) = (
+        _mm512_permutex2var_pd(z01, first, z23),
+        _mm512_permutex2var_pd(z45, first, z67),
+    );
+    let c = _mm512_permutex2var_pd(z01, third, z23);
+    let d = _mm512_permutex2var_pd(z45, third, z67);
+    [
+        _mm512_shuffle_f64x2::<0x44>(a, b),
+        _mm512_shuffle_f64x2::<0xEE>(a, b),
+        _mm512_shuffle_f64x2::<0x44>(c, d),
+    ]
 }
 
 /// `Curve::at` per lane (`super::avx2::at`), walking from the bucket's start.
@@ -301,7 +414,7 @@ unsafe fn at_walk(c: &Curve<'_, f64>, v: __m512d) -> __m512d {
 mod tests {
     use crate::convert::{Converter, Curve};
     use crate::preisach::tests::Rng;
-    use crate::simd::Path;
+    use crate::simd::{Lookup, Path};
 
     /// The points' x of case `case`: up to 400, spaced at random, smoothly uneven (as a
     /// material curve), in clusters, or evenly from 0.5 (points on buckets' edges).
@@ -330,7 +443,8 @@ mod tests {
     /// clusters, or evenly (points on buckets' edges), readings inside them (most groups on
     /// the split path), on their points and splits, an ulp or two below their points (a step
     /// back), and a few beyond the ends or not numbers: the AVX-512 lanes give the scalar
-    /// kernel's bits, and most groups took the split path (no lane with a NaN split).
+    /// kernel's bits by either lookup of the curve's tables, and most groups took the split
+    /// path (no lane with a NaN split).
     #[test]
     fn split_lanes_equal_the_scalar_kernel_bit_for_bit() {
         let _guard = crate::simd::testing::lock();
@@ -394,7 +508,14 @@ mod tests {
                 crate::simd::set_enabled(true);
                 out.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
             };
-            assert_eq!(run(Path::Scalar), run(Path::Avx512), "case {case}");
+            let scalar = run(Path::Scalar);
+            // the curve's tables read by either lookup
+            for lookup in [Lookup::Gather, Lookup::Loads] {
+                crate::simd::set_lookup(Some(lookup));
+                let simd = run(Path::Avx512);
+                crate::simd::set_lookup(None);
+                assert_eq!(scalar, simd, "case {case}, {}", lookup.name());
+            }
         }
         assert!(
             split_groups * 2 > groups,

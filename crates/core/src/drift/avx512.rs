@@ -139,10 +139,11 @@ fn pick_heads() -> [i64; LANES] {
     [0, 4, 8, 12, 1, 5, 9, 13]
 }
 
-/// The last level, the sum of steps and the `started` flags of eight elements: `total` and
-/// `last_h` by four masked loads (two elements each; the other words not read) and four
-/// permutes, `started` gathered (issue 34, fifteenth round: gathers of the two f64 fields
-/// before).
+/// The last level, the sum of steps and the `started` flags of eight elements: `total`,
+/// `last_h` and `started` by four masked loads (two elements each; `smooth` and the padding
+/// not read) and six permutes (issue 34, fifteenth round: gathers of the two f64 fields
+/// before; eighteenth round: `started` by the same loads instead of a gather of eight u32,
+/// the drift row 1.12-1.19 x on the timing binary on an AMD Zen 5).
 ///
 /// # Safety
 /// The processor must have AVX2 and AVX-512 F/DQ/VL.
@@ -154,10 +155,19 @@ fn pick_heads() -> [i64; LANES] {
 unsafe fn heads(els: &[Element<f64>]) -> (__m512d, __m512d, __mmask8) {
     assert_eq!(els.len(), LANES);
     let base = els.as_ptr().cast::<f64>();
-    // SAFETY: register r reads the first two words of elements 2 r and 2 r + 1 (all inside
-    // `els`: 8 elements of 4 words)
-    let e: [__m512d; PAIRS] =
-        std::array::from_fn(|r| unsafe { _mm512_maskz_loadu_pd(0b0011_0011, base.add(8 * r)) });
+    // the dwords of `total`, `last_h` and `started` of two elements (not the padding
+    // after `started`, whose dword loads as zero: the word of `started` is its value)
+    const STARTED: usize = offset_of!(Element<f64>, started) / 4;
+    const _: () = assert!(STARTED == 6, "`started` in the low half of the fourth word");
+    const FIELDS: u16 = 0b0000_1111 | 1 << STARTED;
+    // SAFETY: register r reads those of elements 2 r and 2 r + 1 (all inside `els`: 8
+    // elements of 4 words)
+    let e: [__m512d; PAIRS] = std::array::from_fn(|r| unsafe {
+        _mm512_castsi512_pd(_mm512_maskz_loadu_epi32(
+            FIELDS | FIELDS << 8,
+            base.add(8 * r).cast(),
+        ))
+    });
     let pick = |v: [i64; LANES]| _mm512_loadu_si512(v.as_ptr().cast());
     let heads = pick(pick_heads());
     // lanes 0-3: total of elements 0-3 (4-7), lanes 4-7: their last_h
@@ -165,16 +175,11 @@ unsafe fn heads(els: &[Element<f64>]) -> (__m512d, __m512d, __mmask8) {
     let high = _mm512_permutex2var_pd(e[2], heads, e[3]);
     let total = _mm512_permutex2var_pd(low, pick([0, 1, 2, 3, 8, 9, 10, 11]), high);
     let last = _mm512_permutex2var_pd(low, pick([4, 5, 6, 7, 12, 13, 14, 15]), high);
-    let quads = _mm256_mullo_epi32(
-        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-        _mm256_set1_epi32(2 * ELEMENT_WORDS as i32),
-    );
-    // SAFETY: lane l reads the u32 `started` of els[l] (l < 8 = els.len())
-    let st = unsafe {
-        let at = base.cast::<u8>().add(offset_of!(Element<f64>, started));
-        _mm256_i32gather_epi32::<4>(at.cast::<i32>(), quads)
-    };
-    (last, total, _mm256_test_epi32_mask(st, st))
+    // the words of `started` (the fourth of each element)
+    let fourth = pick([3, 7, 11, 15, 3, 7, 11, 15]);
+    let word = |a: __m512d, b: __m512d| _mm512_castpd_si512(_mm512_permutex2var_pd(a, fourth, b));
+    let st = _mm512_mask_blend_epi64(0xF0, word(e[0], e[1]), word(e[2], e[3]));
+    (last, total, _mm512_test_epi64_mask(st, st))
 }
 
 /// The `live` lanes' new heads into their elements: `started = 1`, `last_h = h`, `total`,

@@ -3,8 +3,11 @@
 //! same order, without fused multiply-adds, so every output and state is the scalar
 //! kernel's, bit for bit) on a group of eight heads, with the lane conditions in mask
 //! registers (masked adds, blends and gathers instead of all-ones vectors). The Everett
-//! corners are gathered from the table (four gathers; on AVX-512 faster than a load per lane
-//! from the table by cell and its transpose, 1.14 x on the timing binary).
+//! corners come by the processor's faster lookup ([`crate::simd::lookup`]): four gathers
+//! from the table (on the Intel Xeon of the eighth round 1.14 x against loads per lane), or
+//! one 32-byte load per lane from the table by cell and a transpose ([`cell_corners`]; on an
+//! AMD Zen 5, where a gather of eight f64 takes about 15 cycles, 1.12-1.29 x against the
+//! gathers, issue 34, eighteenth round).
 //!
 //! Whole groups step here, two side by side ([`pair_n`]; a group with a stack on the heap
 //! gives each lane's stack from its own offset, and a stack on the heap that is shallow again
@@ -45,7 +48,7 @@ pub(super) unsafe fn row(
     let n = elements.len();
     assert!(u.len() == n && ok.len() == n && out.len() == n);
     assert!(heads.len() == n.div_ceil(GROUP));
-    let consts = Consts::new(e, output);
+    let consts = Consts::new(e, cells, output);
     let room = _mm512_set1_epi64(INLINE_EXTREMA.min(capacity) as i64);
     let step = (std::mem::size_of::<Element>() / 8) as i64;
     let off = _mm512_mullo_epi64(
@@ -193,27 +196,81 @@ unsafe fn everett_n<const N: usize>(
     let j0: [__m256i; N] = from_fn(|k| cell(b[k]));
     let i64a: [__m512i; N] = from_fn(|k| _mm512_cvtepi32_epi64(i0[k]));
     let i64b: [__m512i; N] = from_fn(|k| _mm512_cvtepi32_epi64(j0[k]));
-    let one_i = _mm512_set1_epi64(1);
-    let q: [__m512i; N] = from_fn(|k| _mm512_add_epi64(_mm512_mul_epi32(i64a[k], c.k), i64b[k]));
-    let qk: [__m512i; N] = from_fn(|k| _mm512_add_epi64(q[k], c.k));
-    let f00: [__m512d; N] = from_fn(|k| _mm512_i64gather_pd::<8>(q[k], c.table));
-    let f01: [__m512d; N] =
-        from_fn(|k| _mm512_i64gather_pd::<8>(_mm512_add_epi64(q[k], one_i), c.table));
-    let f10: [__m512d; N] = from_fn(|k| _mm512_i64gather_pd::<8>(qk[k], c.table));
-    let f11: [__m512d; N] =
-        from_fn(|k| _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk[k], one_i), c.table));
+    // the corners F(i, j), F(i, j + 1), F(i + 1, j), F(i + 1, j + 1) of every group
+    let f: [[__m512d; 4]; N] = if c.cells.is_null() {
+        let one_i = _mm512_set1_epi64(1);
+        let q: [__m512i; N] =
+            from_fn(|k| _mm512_add_epi64(_mm512_mul_epi32(i64a[k], c.k), i64b[k]));
+        let qk: [__m512i; N] = from_fn(|k| _mm512_add_epi64(q[k], c.k));
+        let (t, k1) = (c.table, one_i);
+        let f00: [__m512d; N] = from_fn(|k| _mm512_i64gather_pd::<8>(q[k], t));
+        let f01: [__m512d; N] =
+            from_fn(|k| _mm512_i64gather_pd::<8>(_mm512_add_epi64(q[k], k1), t));
+        let f10: [__m512d; N] = from_fn(|k| _mm512_i64gather_pd::<8>(qk[k], t));
+        let f11: [__m512d; N] =
+            from_fn(|k| _mm512_i64gather_pd::<8>(_mm512_add_epi64(qk[k], k1), t));
+        from_fn(|k| [f00[k], f01[k], f10[k], f11[k]])
+    } else {
+        // SAFETY: AVX-512 (this function's features); i0, j0 <= K - 2, and the table by
+        // cell exists (K <= CELL_GRID_MAX)
+        from_fn(|k| unsafe { cell_corners(c.cells, i0[k], j0[k]) })
+    };
     from_fn(|k| {
         let wa = _mm512_sub_pd(a[k], _mm512_cvtepi32_pd(i0[k]));
         let wb = _mm512_sub_pd(b[k], _mm512_cvtepi32_pd(j0[k]));
         let (owa, owb) = (_mm512_sub_pd(one, wa), _mm512_sub_pd(one, wb));
-        let low = _mm512_add_pd(_mm512_mul_pd(owb, f00[k]), _mm512_mul_pd(wb, f01[k]));
-        let high = _mm512_add_pd(_mm512_mul_pd(owb, f10[k]), _mm512_mul_pd(wb, f11[k]));
+        let [f00, f01, f10, f11] = f[k];
+        let low = _mm512_add_pd(_mm512_mul_pd(owb, f00), _mm512_mul_pd(wb, f01));
+        let high = _mm512_add_pd(_mm512_mul_pd(owb, f10), _mm512_mul_pd(wb, f11));
         let bilinear = _mm512_add_pd(_mm512_mul_pd(owa, low), _mm512_mul_pd(wa, high));
-        let diagonal = _mm512_mul_pd(_mm512_sub_pd(wa, wb), f10[k]);
+        let diagonal = _mm512_mul_pd(_mm512_sub_pd(wa, wb), f10);
         let on_diagonal = _mm512_cmpeq_epi64_mask(i64a[k], i64b[k]);
         let v = _mm512_mask_blend_pd(on_diagonal, bilinear, diagonal);
         _mm512_mask_blend_pd(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(b[k], a[k]), v, zero)
     })
+}
+
+/// The four corners of each lane's Everett cell `(i0, j0)` (`i0, j0 <= K - 2`) from the
+/// table by cell (`super::avx2::cell_corners` on eight lanes): one 32-byte load per lane,
+/// two lanes to a register, transposed into `F(i, j), F(i, j + 1), F(i + 1, j),
+/// F(i + 1, j + 1)` across the lanes.
+///
+/// # Safety
+/// The processor must have AVX-512 F; `cells` holds the table by cell of a grid of at most
+/// `CELL_GRID_MAX` points, and `i0, j0 <= K - 2` in every lane.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn cell_corners(cells: *const f64, i0: __m256i, j0: __m256i) -> [__m512d; 4] {
+    // cell index i (i + 1) / 2 + j, times four f64, in 32-bit lanes
+    let tri = _mm256_srli_epi32::<1>(_mm256_mullo_epi32(
+        i0,
+        _mm256_add_epi32(i0, _mm256_set1_epi32(1)),
+    ));
+    let q = _mm256_slli_epi32::<2>(_mm256_add_epi32(tri, j0));
+    let mut at = [0i32; WIDE];
+    _mm256_storeu_si256(at.as_mut_ptr().cast(), q);
+    // SAFETY: the caller's: every cell index is below (K - 1) K / 2
+    let cell = |l: usize| unsafe { _mm256_loadu_pd(cells.add(at[l] as usize)) };
+    let two =
+        |a: usize, b: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(cell(a)), cell(b));
+    let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
+    // [F(i, j) of lanes 0-3, F(i, j + 1) of lanes 0-3] and the same of the upper corners
+    let low = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
+    let high = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
+    let (a, b) = (
+        _mm512_permutex2var_pd(z01, low, z23),
+        _mm512_permutex2var_pd(z45, low, z67),
+    );
+    let (c, d) = (
+        _mm512_permutex2var_pd(z01, high, z23),
+        _mm512_permutex2var_pd(z45, high, z67),
+    );
+    [
+        _mm512_shuffle_f64x2::<0x44>(a, b),
+        _mm512_shuffle_f64x2::<0xEE>(a, b),
+        _mm512_shuffle_f64x2::<0x44>(c, d),
+        _mm512_shuffle_f64x2::<0xEE>(c, d),
+    ]
 }
 
 /// `N` groups of eight elements (`super::avx2::group` on each group of eight heads) side by
@@ -475,12 +532,16 @@ struct Consts {
     sign: __m512d,
     /// The table (row-major).
     table: *const f64,
+    /// The table by cell (`Everett::cells`), or null: the corners gathered from `table`
+    /// (a large grid, or [`crate::simd::Lookup::Gather`]).
+    cells: *const f64,
 }
 
 impl Consts {
     #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-    unsafe fn new(e: &EverettView<'_, f64>, output: Output<f64>) -> Self {
+    unsafe fn new(e: &EverettView<'_, f64>, cells: &[f64], output: Output<f64>) -> Self {
         let k = e.size();
+        debug_assert!(cells.is_empty() || cells.len() == 2 * k * (k - 1));
         Self {
             u_min: _mm512_set1_pd(e.u_min()),
             u_max: _mm512_set1_pd(e.u_max()),
@@ -491,6 +552,11 @@ impl Consts {
             offset: _mm512_set1_pd(output.offset),
             sign: _mm512_set1_pd(output.sign),
             table: e.table().as_ptr(),
+            cells: if cells.is_empty() || crate::simd::lookup() == crate::simd::Lookup::Gather {
+                std::ptr::null()
+            } else {
+                cells.as_ptr()
+            },
         }
     }
 }

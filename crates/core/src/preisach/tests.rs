@@ -1,7 +1,7 @@
 //! Tests of the preisach module.
 
 use super::*;
-use crate::simd::Path;
+use crate::simd::{Lookup, Path};
 use proptest::prelude::*;
 
 /// The Everett function of a uniform (non-negative) Preisach density: F = (α - β)² / 2.
@@ -500,11 +500,38 @@ proptest! {
         prop_assert!(scalar == avx2, "AVX2: outputs, counters or states differ");
         let simd = simd_run(Path::Avx512, &bank, &u, &ok, Schedule::Blocks);
         prop_assert!(scalar == simd, "best path: outputs, counters or states differ");
+        // AVX-512's Everett corners by either lookup (the processor's is the run above)
+        for lookup in [Lookup::Gather, Lookup::Loads] {
+            crate::simd::set_lookup(Some(lookup));
+            let by = simd_run(Path::Avx512, &bank, &u, &ok, Schedule::Blocks);
+            crate::simd::set_lookup(None);
+            prop_assert!(scalar == by, "{}: outputs, counters or states differ", lookup.name());
+        }
         // and both are the frame-order kernel's
         let frames = simd_run(Path::Scalar, &bank, &u, &ok, Schedule::FrameOrder);
         prop_assert!(frames == simd);
         prop_assert!(simd_run(Path::Avx512, &bank, &u, &ok, Schedule::FrameOrder) == simd);
     }
+}
+
+#[test]
+fn the_lookup_is_loads_on_amd_processors_and_gathers_elsewhere() {
+    let _guard = crate::simd::testing::lock();
+    // the vendor as Linux reports it (the cpuid constants of `simd::detected_lookup`)
+    if let Ok(info) = std::fs::read_to_string("/proc/cpuinfo") {
+        let amd = info
+            .lines()
+            .any(|l| l.starts_with("vendor_id") && l.contains("AuthenticAMD"));
+        let expected = if amd { Lookup::Loads } else { Lookup::Gather };
+        assert_eq!(crate::simd::detected_lookup(), expected);
+        assert_eq!(crate::simd::lookup(), expected);
+    }
+    crate::simd::set_lookup(Some(Lookup::Gather));
+    assert_eq!(crate::simd::lookup(), Lookup::Gather);
+    crate::simd::set_lookup(Some(Lookup::Loads));
+    assert_eq!(crate::simd::lookup(), Lookup::Loads);
+    crate::simd::set_lookup(None);
+    assert_eq!(crate::simd::lookup(), crate::simd::detected_lookup());
 }
 
 #[test]
