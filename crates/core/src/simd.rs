@@ -121,8 +121,9 @@ pub enum Lookup {
     /// (1.14 x the Preisach kernel against loads per lane).
     Gather,
     /// A load per lane of the lane's entries, stored side by side (the table by cell), and
-    /// a transpose across the lanes: the faster on AMD processors, where a gather of eight
-    /// f64 takes about 15 cycles (Zen 5; the Preisach kernel 1.12-1.29 x against gathers).
+    /// a transpose across the lanes: the faster on AMD processors (on a Zen 5 four gathers
+    /// of eight f64 take four times as long as eight 32-byte loads and the transpose,
+    /// `examples/gather_time.rs`; the Preisach kernel 1.07-1.33 x against gathers).
     Loads,
 }
 

@@ -19,6 +19,7 @@ pub fn cpu() -> f64 {
 /// in `scalar`, else AVX-512), and the AVX-512 kernels' table lookup to the environment's
 /// `LOOKUP` (`gather` or `loads`; else the processor's); returns the argument (default
 /// `avx512`).
+#[allow(dead_code)] // not every example takes a path (`gather_time`)
 pub fn use_path(args: &[String]) -> &str {
     texsense_core::simd::set_lookup(match std::env::var("LOOKUP").as_deref() {
         Ok("gather") => Some(Lookup::Gather),

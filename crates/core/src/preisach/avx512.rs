@@ -6,8 +6,9 @@
 //! corners come by the processor's faster lookup ([`crate::simd::lookup`]): four gathers
 //! from the table (on the Intel Xeon of the eighth round 1.14 x against loads per lane), or
 //! one 32-byte load per lane from the table by cell and a transpose ([`cell_corners`]; on an
-//! AMD Zen 5, where a gather of eight f64 takes about 15 cycles, 1.12-1.29 x against the
-//! gathers, issue 34, eighteenth round).
+//! AMD Zen 5, where four gathers take four times as long as the loads and the transpose,
+//! 1.07-1.33 x against the gathers on `preisach_inputs.py`'s moving inputs: issue 34,
+//! eighteenth round).
 //!
 //! Whole groups step here, two side by side ([`pair_n`]; a group with a stack on the heap
 //! gives each lane's stack from its own offset, and a stack on the heap that is shallow again
