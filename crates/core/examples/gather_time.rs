@@ -73,25 +73,9 @@ unsafe fn time_all() {
     let (loads, s2) = best(&mut || {
         let mut acc = _mm512_setzero_pd();
         for i in 0..STEPS {
-            let at = &places[(8 * i) % 4088..];
-            // SAFETY: every place has four values after it in the table
-            let row = |l: usize| unsafe { _mm256_loadu_pd(t.offset(at[l] as isize)) };
-            let two = |a: usize, b: usize| {
-                _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(row(a)), row(b))
-            };
-            let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
-            let first = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
-            let third = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
-            let a = _mm512_permutex2var_pd(z01, first, z23);
-            let b = _mm512_permutex2var_pd(z45, first, z67);
-            let c = _mm512_permutex2var_pd(z01, third, z23);
-            let d = _mm512_permutex2var_pd(z45, third, z67);
-            for v in [
-                _mm512_shuffle_f64x2::<0x44>(a, b),
-                _mm512_shuffle_f64x2::<0xEE>(a, b),
-                _mm512_shuffle_f64x2::<0x44>(c, d),
-                _mm512_shuffle_f64x2::<0xEE>(c, d),
-            ] {
+            // SAFETY: AVX-512 (this function's features); every place has four values
+            // after it in the table
+            for v in unsafe { by_loads(t, &places[(8 * i) % 4088..]) } {
                 acc = _mm512_add_pd(acc, v);
             }
         }
@@ -115,4 +99,31 @@ unsafe fn time_all() {
     println!(
         "| one gather after another (latency + conversion + mask), ns per gather | {chain:.2} |"
     );
+}
+
+/// The four values at each of eight places `at[..8]` from `t`, across the lanes: a 32-byte
+/// load per place, two places to a register, and a transpose (as `preisach::avx512`'s).
+///
+/// # Safety
+/// The processor must have AVX-512 F; four values follow every place inside the table.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+unsafe fn by_loads(t: *const f64, at: &[i64]) -> [std::arch::x86_64::__m512d; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller's
+    let row = |l: usize| unsafe { _mm256_loadu_pd(t.offset(at[l] as isize)) };
+    let two = |a: usize, b: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(row(a)), row(b));
+    let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
+    let first = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
+    let third = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
+    let a = _mm512_permutex2var_pd(z01, first, z23);
+    let b = _mm512_permutex2var_pd(z45, first, z67);
+    let c = _mm512_permutex2var_pd(z01, third, z23);
+    let d = _mm512_permutex2var_pd(z45, third, z67);
+    [
+        _mm512_shuffle_f64x2::<0x44>(a, b),
+        _mm512_shuffle_f64x2::<0xEE>(a, b),
+        _mm512_shuffle_f64x2::<0x44>(c, d),
+        _mm512_shuffle_f64x2::<0xEE>(c, d),
+    ]
 }
