@@ -392,7 +392,9 @@ unsafe fn pair_n<const N: usize>(
                     len[k] = _mm512_mask_sub_epi64(len[k], wipes, len[k], two_i);
                     let can = wipes & _mm512_cmpgt_epi64_mask(len[k], two_i);
                     let at = slot(k, _mm512_sub_epi64(len[k], two_i));
-                    let s = _mm512_mask_i64gather_pd::<8>(zero, can, at, base[k]);
+                    // SAFETY: AVX-512 (this function's features); each of those lanes' slot
+                    // is inside its stack (len > 2)
+                    let s = unsafe { few_lanes(c, zero, can, at, base[k]) };
                     wipes = can & passes(k, s);
                 }
             }
@@ -408,7 +410,8 @@ unsafe fn pair_n<const N: usize>(
             len[k] = _mm512_mask_mov_epi64(len[k], at_sat, one_i);
             t_u[k] = _mm512_mask_blend_pd(at_sat, t_u[k], b_u[k]);
             let at = _mm512_add_epi64(off[k], one_i);
-            t_h[k] = _mm512_mask_i64gather_pd::<8>(t_h[k], at_sat, at, base[k]);
+            // SAFETY: AVX-512 (this function's features); the first slot of each stack
+            t_h[k] = unsafe { few_lanes(c, t_h[k], at_sat, at, base[k]) };
         }
     }
     let odd: [__mmask8; N] = from_fn(|k| _mm512_test_epi64_mask(len[k], one_i));
@@ -449,6 +452,41 @@ unsafe fn pair_n<const N: usize>(
         unsafe { count_clamped(g, clamped[k], u_in[k], live[k]) };
     }
     Some(moving)
+}
+
+/// `_mm512_mask_i64gather_pd(src, lanes, at, base)`: by a gather, or with
+/// [`crate::simd::Lookup::Loads`] by a load per lane of `lanes` (the lowest set bit, then the
+/// next), for the few lanes that wipe out a second loop or fall back to saturation (issue 34,
+/// eighteenth round: 1.02-1.04 x the Preisach row each on the timing binary's walk on an AMD
+/// Zen 5; the new tops after the first wipe-out, where most lanes of a group read, went 0.80-0.89 x
+/// this way and are gathered).
+///
+/// # Safety
+/// The processor must have AVX-512 F; each lane of `lanes` reads an f64 at `at` from
+/// `base` inside one allocation.
+#[inline]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn few_lanes(
+    c: &Consts,
+    src: __m512d,
+    lanes: __mmask8,
+    at: __m512i,
+    base: *const f64,
+) -> __m512d {
+    if !c.loads {
+        return _mm512_mask_i64gather_pd::<8>(src, lanes, at, base);
+    }
+    let mut idx = [0i64; WIDE];
+    _mm512_storeu_si512(idx.as_mut_ptr().cast(), at);
+    let mut got = [0.0f64; WIDE];
+    let mut bits = lanes;
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        // SAFETY: the caller's
+        got[l] = unsafe { *base.offset(idx[l] as isize) };
+    }
+    _mm512_mask_blend_pd(lanes, src, _mm512_loadu_pd(got.as_ptr()))
 }
 
 /// The clamping counters of a group's live lanes whose input was clamped (`clamped` is not
@@ -536,6 +574,8 @@ struct Consts {
     /// The table by cell (`Everett::cells`), or null: the corners gathered from `table`
     /// (a large grid, or [`crate::simd::Lookup::Gather`]).
     cells: *const f64,
+    /// [`crate::simd::Lookup::Loads`]: a few lanes' stack slots by loads ([`few_lanes`]).
+    loads: bool,
 }
 
 impl Consts {
@@ -553,6 +593,7 @@ impl Consts {
             offset: _mm512_set1_pd(output.offset),
             sign: _mm512_set1_pd(output.sign),
             table: e.table().as_ptr(),
+            loads: crate::simd::lookup() == crate::simd::Lookup::Loads,
             cells: if cells.is_empty() || crate::simd::lookup() == crate::simd::Lookup::Gather {
                 std::ptr::null()
             } else {
