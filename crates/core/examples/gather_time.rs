@@ -5,7 +5,8 @@
 //! of a 100-point grid) per step, the places independent of the values read:
 //! - by four gathers (`vgatherqpd`, every lane on);
 //! - by eight loads of 32 bytes (each lane's four values side by side, as the table by
-//!   cell) and a transpose, the lookup the AVX-512 kernels use on AMD processors;
+//!   cell) and a transpose (`texsense_core::simd::loads::rows_of_four`, the lookup the
+//!   AVX-512 kernels use on AMD processors);
 //!
 //! and one gather after another, each place from the value the last one read (the
 //! gather's latency, plus a conversion and a mask). Best of five, on the CPU clock.
@@ -37,6 +38,7 @@ const STEPS: usize = 10_000_000;
 #[target_feature(enable = "avx2,avx512f")]
 unsafe fn time_all() {
     use std::arch::x86_64::*;
+    use texsense_core::simd::loads::rows_of_four;
     let table: Vec<f64> = (0..10_000).map(|i| (i % 977) as f64).collect();
     // random places, each with room for four values after it
     let mut state = 0x2545_f491_4f6c_dd1du64;
@@ -73,9 +75,10 @@ unsafe fn time_all() {
     let (loads, s2) = best(&mut || {
         let mut acc = _mm512_setzero_pd();
         for i in 0..STEPS {
+            let at = _mm512_loadu_si512(places[(8 * i) % 4088..].as_ptr().cast());
             // SAFETY: AVX-512 (this function's features); every place has four values
             // after it in the table
-            for v in unsafe { by_loads(t, &places[(8 * i) % 4088..]) } {
+            for v in unsafe { rows_of_four(t, at) } {
                 acc = _mm512_add_pd(acc, v);
             }
         }
@@ -99,31 +102,4 @@ unsafe fn time_all() {
     println!(
         "| one gather after another (latency + conversion + mask), ns per gather | {chain:.2} |"
     );
-}
-
-/// The four values at each of eight places `at[..8]` from `t`, across the lanes: a 32-byte
-/// load per place, two places to a register, and a transpose (as `preisach::avx512`'s).
-///
-/// # Safety
-/// The processor must have AVX-512 F; four values follow every place inside the table.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f")]
-unsafe fn by_loads(t: *const f64, at: &[i64]) -> [std::arch::x86_64::__m512d; 4] {
-    use std::arch::x86_64::*;
-    // SAFETY: the caller's
-    let row = |l: usize| unsafe { _mm256_loadu_pd(t.offset(at[l] as isize)) };
-    let two = |a: usize, b: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(row(a)), row(b));
-    let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
-    let first = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
-    let third = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
-    let a = _mm512_permutex2var_pd(z01, first, z23);
-    let b = _mm512_permutex2var_pd(z45, first, z67);
-    let c = _mm512_permutex2var_pd(z01, third, z23);
-    let d = _mm512_permutex2var_pd(z45, third, z67);
-    [
-        _mm512_shuffle_f64x2::<0x44>(a, b),
-        _mm512_shuffle_f64x2::<0xEE>(a, b),
-        _mm512_shuffle_f64x2::<0x44>(c, d),
-        _mm512_shuffle_f64x2::<0xEE>(c, d),
-    ]
 }

@@ -19,6 +19,9 @@
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
+#[cfg(target_arch = "x86_64")]
+pub mod loads;
+
 /// The best path batches may take ([`Path`] as `u8`; [`set_limit`]).
 static LIMIT: AtomicU8 = AtomicU8::new(Path::Avx512 as u8);
 

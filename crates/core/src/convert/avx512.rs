@@ -7,6 +7,7 @@ use std::arch::x86_64::*;
 use texsense_kernels::convert::Curve;
 
 use super::ConverterView;
+use crate::simd::loads;
 
 /// Lanes of a register.
 const LANES: usize = 8;
@@ -153,7 +154,7 @@ unsafe fn at_n<const N: usize>(
         if t.loads {
             let at = _mm512_slli_epi64::<1>(l[k].b);
             // SAFETY: AVX-512 (this function's features); b < buckets, two f64 per bucket
-            let (start, cut) = unsafe { lane_pairs(t.by_bucket.as_ptr().cast(), at) };
+            let (start, cut) = unsafe { loads::pairs(t.by_bucket.as_ptr().cast(), at) };
             l[k].bucket = _mm512_cvttpd_epi32(start);
             cut
         } else {
@@ -170,8 +171,8 @@ unsafe fn at_n<const N: usize>(
     // the segment's x, y and slope: a load per lane of the three, or three gathers
     let (xj, yj, sj): ([__m512d; N], [__m512d; N], [__m512d; N]) = if t.loads {
         // SAFETY: AVX-512 (this function's features); j <= last, four f64 per point
-        let p: [[__m512d; 3]; N] = std::array::from_fn(|k| unsafe {
-            lane_rows(t.by_point.as_ptr().cast(), _mm512_slli_epi64::<2>(j[k]))
+        let p: [[__m512d; 4]; N] = std::array::from_fn(|k| unsafe {
+            loads::rows_of_four(t.by_point.as_ptr().cast(), _mm512_slli_epi64::<2>(j[k]))
         });
         (
             std::array::from_fn(|k| p[k][0]),
@@ -274,62 +275,6 @@ struct Tables<'a> {
     by_bucket: &'a [[f64; 2]],
     by_point: &'a [[f64; 4]],
     loads: bool,
-}
-
-/// Lane `l`'s pair of f64 at `at[l]` from `base`, as two registers (the pairs' first and
-/// second values): eight 16-byte loads and a transpose.
-///
-/// # Safety
-/// The processor must have AVX-512 F; every lane's two f64 are inside one allocation from
-/// `base`.
-#[inline]
-#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn lane_pairs(base: *const f64, at: __m512i) -> (__m512d, __m512d) {
-    let mut idx = [0i64; LANES];
-    _mm512_storeu_si512(idx.as_mut_ptr().cast(), at);
-    // SAFETY: the caller's
-    let pair = |l: usize| unsafe { _mm_loadu_pd(base.offset(idx[l] as isize)) };
-    let four = |l: usize| {
-        let lo = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(pair(l)), pair(l + 1));
-        let hi = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(pair(l + 2)), pair(l + 3));
-        _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(lo), hi)
-    };
-    let (z0, z1) = (four(0), four(4));
-    (
-        _mm512_permutex2var_pd(z0, _mm512_set_epi64(14, 12, 10, 8, 6, 4, 2, 0), z1),
-        _mm512_permutex2var_pd(z0, _mm512_set_epi64(15, 13, 11, 9, 7, 5, 3, 1), z1),
-    )
-}
-
-/// The first three of lane `l`'s four f64 at `at[l]` from `base`, as three registers:
-/// eight 32-byte loads and a transpose.
-///
-/// # Safety
-/// The processor must have AVX-512 F; every lane's four f64 are inside one allocation from
-/// `base`.
-#[inline]
-#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn lane_rows(base: *const f64, at: __m512i) -> [__m512d; 3] {
-    let mut idx = [0i64; LANES];
-    _mm512_storeu_si512(idx.as_mut_ptr().cast(), at);
-    // SAFETY: the caller's
-    let row = |l: usize| unsafe { _mm256_loadu_pd(base.offset(idx[l] as isize)) };
-    let two = |a: usize, b: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(row(a)), row(b));
-    let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
-    // [first of lanes 0-3, second of lanes 0-3] of the four lanes of two registers
-    let first = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
-    let third = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
-    let (a, b) = (
-        _mm512_permutex2var_pd(z01, first, z23),
-        _mm512_permutex2var_pd(z45, first, z67),
-    );
-    let c = _mm512_permutex2var_pd(z01, third, z23);
-    let d = _mm512_permutex2var_pd(z45, third, z67);
-    [
-        _mm512_shuffle_f64x2::<0x44>(a, b),
-        _mm512_shuffle_f64x2::<0xEE>(a, b),
-        _mm512_shuffle_f64x2::<0x44>(c, d),
-    ]
 }
 
 /// `Curve::at` per lane (`super::avx2::at`), walking from the bucket's start.

@@ -5,11 +5,12 @@
 use std::arch::x86_64::*;
 
 use super::WIDE;
+use crate::simd::loads::{few, rows_of_four};
 
 /// The four corners of each lane's Everett cell `(i0, j0)` (`i0, j0 <= K - 2`) from the
-/// table by cell (`super::avx2::cell_corners` on eight lanes): one 32-byte load per lane,
-/// two lanes to a register, transposed into `F(i, j), F(i, j + 1), F(i + 1, j),
-/// F(i + 1, j + 1)` across the lanes.
+/// table by cell (`super::avx2::cell_corners` on eight lanes): `F(i, j), F(i, j + 1),
+/// F(i + 1, j), F(i + 1, j + 1)` across the lanes by one 32-byte load per lane and a
+/// transpose ([`rows_of_four`]).
 ///
 /// # Safety
 /// The processor must have AVX-512 F; `cells` holds the table by cell of a grid of at most
@@ -23,35 +24,12 @@ pub(super) unsafe fn cell_corners(cells: *const f64, i0: __m256i, j0: __m256i) -
         _mm256_add_epi32(i0, _mm256_set1_epi32(1)),
     ));
     let q = _mm256_slli_epi32::<2>(_mm256_add_epi32(tri, j0));
-    let mut at = [0i32; WIDE];
-    _mm256_storeu_si256(at.as_mut_ptr().cast(), q);
     // SAFETY: the caller's: every cell index is below (K - 1) K / 2
-    let cell = |l: usize| unsafe { _mm256_loadu_pd(cells.add(at[l] as usize)) };
-    let two =
-        |a: usize, b: usize| _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(cell(a)), cell(b));
-    let (z01, z23, z45, z67) = (two(0, 1), two(2, 3), two(4, 5), two(6, 7));
-    // [F(i, j) of lanes 0-3, F(i, j + 1) of lanes 0-3] and the same of the upper corners
-    let low = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);
-    let high = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);
-    let (a, b) = (
-        _mm512_permutex2var_pd(z01, low, z23),
-        _mm512_permutex2var_pd(z45, low, z67),
-    );
-    let (c, d) = (
-        _mm512_permutex2var_pd(z01, high, z23),
-        _mm512_permutex2var_pd(z45, high, z67),
-    );
-    [
-        _mm512_shuffle_f64x2::<0x44>(a, b),
-        _mm512_shuffle_f64x2::<0xEE>(a, b),
-        _mm512_shuffle_f64x2::<0x44>(c, d),
-        _mm512_shuffle_f64x2::<0xEE>(c, d),
-    ]
+    unsafe { rows_of_four(cells, _mm512_cvtepi32_epi64(q)) }
 }
 
 /// `_mm512_mask_i64gather_pd(src, lanes, at, base)`: by a gather, or with
-/// [`crate::simd::Lookup::Loads`] by a load per lane of `lanes` (the lowest set bit, then the
-/// next), for the few lanes that wipe out a second loop or fall back to saturation (issue 34,
+/// [`crate::simd::Lookup::Loads`] by a load per lane of `lanes` ([`few`]), for the few lanes that wipe out a second loop or fall back to saturation (issue 34,
 /// eighteenth round: 1.02-1.04 x the Preisach row each on the timing binary's walk on an AMD
 /// Zen 5; the new tops after the first wipe-out, where most lanes of a group read, went 0.80-0.89 x
 /// this way and are gathered).
@@ -68,20 +46,12 @@ pub(super) unsafe fn few_lanes(
     at: __m512i,
     base: *const f64,
 ) -> __m512d {
-    if !loads {
-        return _mm512_mask_i64gather_pd::<8>(src, lanes, at, base);
+    if loads {
+        // SAFETY: AVX-512 (this function's features); the caller's
+        unsafe { few(src, lanes, at, base) }
+    } else {
+        _mm512_mask_i64gather_pd::<8>(src, lanes, at, base)
     }
-    let mut idx = [0i64; WIDE];
-    _mm512_storeu_si512(idx.as_mut_ptr().cast(), at);
-    let mut got = [0.0f64; WIDE];
-    let mut bits = lanes;
-    while bits != 0 {
-        let l = bits.trailing_zeros() as usize;
-        bits &= bits - 1;
-        // SAFETY: the caller's
-        got[l] = unsafe { *base.offset(idx[l] as isize) };
-    }
-    _mm512_mask_blend_pd(lanes, src, _mm512_loadu_pd(got.as_ptr()))
 }
 
 /// Lane `l`'s pair (`u[l]`, `h[l]`) into the two f64 at `at[l]` from `base`: eight 16-byte
