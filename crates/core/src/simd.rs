@@ -15,7 +15,9 @@
 //! after [`set_enabled`]`(false)`, the scalar kernels run.
 //!
 //! The choice is made per call from a flag and the CPU detection that `std` caches
-//! (`is_x86_feature_detected!`), so switching it between two batches is safe.
+//! (`is_x86_feature_detected!`), so switching it between two batches is safe. Where the
+//! AVX-512 kernels read memory at each lane's own place, [`lookup`] chooses between gathers
+//! and loads per lane ([`loads`]) by the processor's vendor, as fast as each is there.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
@@ -115,9 +117,10 @@ pub fn avx512() -> bool {
     path() == Path::Avx512
 }
 
-/// How the AVX-512 kernels read a table's entries at eight lanes' own indices (the Everett
-/// cell of each element in the Preisach row): both give the same values, bit for bit; which
-/// is faster depends on the processor (issue 34, eighteenth round).
+/// How the AVX-512 kernels read memory at eight lanes' own places (the Everett cell of each
+/// element and a few lanes' stack slots in the Preisach row, the segment of each input on
+/// the conversion's curve): both give the same values, bit for bit; which is faster depends
+/// on the processor (issue 34, eighteenth round).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Lookup {
     /// A gather instruction per value: the faster on the Intel Xeon of the eighth round
@@ -149,7 +152,10 @@ static LOOKUP: AtomicU8 = AtomicU8::new(UNKNOWN);
 pub fn detected_lookup() -> Lookup {
     #[cfg(target_arch = "x86_64")]
     {
-        let vendor = std::arch::x86_64::__cpuid(0);
+        // (an unsafe function in older Rust, a safe one in newer)
+        #[allow(unused_unsafe)]
+        // SAFETY: every x86-64 processor has the `cpuid` instruction and its leaf 0
+        let vendor = unsafe { std::arch::x86_64::__cpuid(0) };
         // "AuthenticAMD" in ebx, edx, ecx
         if (vendor.ebx, vendor.edx, vendor.ecx) == (0x6874_7541, 0x6974_6E65, 0x444D_4163) {
             return Lookup::Loads;

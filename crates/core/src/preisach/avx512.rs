@@ -478,6 +478,7 @@ impl Consts {
     unsafe fn new(e: &EverettView<'_, f64>, cells: &[f64], output: Output<f64>) -> Self {
         let k = e.size();
         debug_assert!(cells.is_empty() || cells.len() == 2 * k * (k - 1));
+        let loads = crate::simd::lookup() == crate::simd::Lookup::Loads;
         Self {
             u_min: _mm512_set1_pd(e.u_min()),
             u_max: _mm512_set1_pd(e.u_max()),
@@ -488,11 +489,11 @@ impl Consts {
             offset: _mm512_set1_pd(output.offset),
             sign: _mm512_set1_pd(output.sign),
             table: e.table().as_ptr(),
-            loads: crate::simd::lookup() == crate::simd::Lookup::Loads,
-            cells: if cells.is_empty() || crate::simd::lookup() == crate::simd::Lookup::Gather {
-                std::ptr::null()
-            } else {
+            loads,
+            cells: if loads && !cells.is_empty() {
                 cells.as_ptr()
+            } else {
+                std::ptr::null()
             },
         }
     }
