@@ -248,7 +248,13 @@ def main() -> None:
     paths = ["scalar", "avx2", "avx512"][: ["scalar", "avx2", "avx512"].index(best) + 1]
     if args.paths:
         lookups = ["avx512-gather", "avx512-loads"] if best == "avx512" else []
-        paths = [p for p in paths + lookups if p in args.paths.split(",")]
+        asked = args.paths.split(",")
+        unknown = [p for p in asked if p not in paths + lookups]
+        if unknown:
+            ap.error(
+                f"--paths {','.join(unknown)}: this processor has {', '.join(paths + lookups)}"
+            )
+        paths = [p for p in paths + lookups if p in asked]
     cal = seat_calibration(mat_seed=5)
     walk = random_walk(cal["hysteresis"].model_, frames, 4096)
     batch = cases(cal, frames, walk)

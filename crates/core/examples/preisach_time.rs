@@ -1,7 +1,7 @@
 //! Timing of the Preisach bank on a random walk (the benchmark's input shape), for profiling:
-//! `cargo run --release -p texsense-core --example preisach_time -- [avx512|avx2|scalar|f32] [frames|blocks] [T] [N]`
+//! `cargo run --release -p texsense-core --example preisach_time -- [avx512|avx2|scalar|f32] [frames|blocks] [T] [N] [K]`
 //! (`f32`: the experimental float32 bank, eight lanes, frame order; `f32-scalar`: its
-//! scalar kernel).
+//! scalar kernel; `K`: the Everett grid's points, 100 by default).
 
 mod common;
 use common::{cpu, use_path};
@@ -20,7 +20,7 @@ fn main() {
     };
     let t: usize = args.get(3).map_or(4000, |s| s.parse().unwrap());
     let n: usize = args.get(4).map_or(4096, |s| s.parse().unwrap());
-    let k = 100;
+    let k: usize = args.get(5).map_or(100, |s| s.parse().unwrap());
     let (lo, hi) = (0.0, 2.212);
     let mut table = vec![0.0; k * k];
     for i in 0..k {

@@ -25,9 +25,8 @@ pub struct Curve {
     slope: Vec<f64>,
     bucket_start: Vec<u32>,
     inv_width: f64,
-    /// Per bucket, for the SIMD lanes ([`Curve::splits`]).
-    split: Vec<f64>,
-    /// Per bucket, its start and split side by side ([`Curve::lane_tables`]).
+    /// Per bucket, its start and split side by side ([`Curve::split`],
+    /// [`Curve::lane_tables`]).
     by_bucket: Vec<[f64; 2]>,
     /// Per point, its x, y and slope side by side ([`Curve::lane_tables`]).
     by_point: Vec<[f64; 4]>,
@@ -45,12 +44,7 @@ impl Curve {
                 why: "needs >= 2 finite points with strictly increasing x".into(),
             }
         })?;
-        let split = splits(&x, &bucket_start);
-        let by_bucket = bucket_start
-            .iter()
-            .zip(&split)
-            .map(|(&start, &cut)| [f64::from(start), cut])
-            .collect();
+        let by_bucket = by_bucket(&x, &bucket_start);
         let by_point = (0..x.len())
             .map(|j| [x[j], y[j], slope.get(j).copied().unwrap_or(0.0), 0.0])
             .collect();
@@ -60,7 +54,6 @@ impl Curve {
             slope,
             bucket_start,
             inv_width,
-            split,
             by_bucket,
             by_point,
         })
@@ -72,12 +65,15 @@ impl Curve {
     /// the bucket, or close to its end). The AVX-512 conversion gathers it with the bucket's
     /// start, so that the segment's `x`, `y` and slope are one gather level after the bucket
     /// (issue 34, twelfth round); a lane with NaN walks as the kernel does.
-    pub fn splits(&self) -> &[f64] {
-        &self.split
+    ///
+    /// # Panics
+    /// When `b` is not a bucket.
+    pub fn split(&self, b: usize) -> f64 {
+        self.by_bucket[b][1]
     }
 
     /// The curve's tables for the AVX-512 lanes' loads ([`crate::simd::Lookup::Loads`]):
-    /// per bucket its start (as f64) and [`Curve::splits`], and per point its `x`, `y` and
+    /// per bucket its start (as f64) and [`Curve::split`], and per point its `x`, `y` and
     /// slope (0 at the last point) and a zero, so that a lane reads each with one load
     /// instead of a gather per value (issue 34, eighteenth round).
     pub fn lane_tables(&self) -> (&[[f64; 2]], &[[f64; 4]]) {
@@ -109,8 +105,9 @@ impl Curve {
     }
 }
 
-/// [`Curve::splits`] of a curve's points and bucket table ([`kernel::tables`]).
-fn splits(x: &[f64], bucket_start: &[u32]) -> Vec<f64> {
+/// Per bucket its start (as f64) and [`Curve::split`], from a curve's points and bucket
+/// table ([`kernel::tables`]).
+fn by_bucket(x: &[f64], bucket_start: &[u32]) -> Vec<[f64; 2]> {
     let last = x.len() - 1;
     let buckets = (bucket_start.len() - 1) as f64;
     let width = (x[last] - x[0]) / buckets;
@@ -121,13 +118,14 @@ fn splits(x: &[f64], bucket_start: &[u32]) -> Vec<f64> {
             let j = start as usize;
             // the bucket's end with a margin far above the rounding of an input's bucket
             let end = x[0] + (b as f64 + 1.001) * width;
-            if j + 2 < last && x[j + 2] <= end {
+            let split = if j + 2 < last && x[j + 2] <= end {
                 f64::NAN
             } else if j + 1 < last {
                 x[j + 1]
             } else {
                 f64::INFINITY
-            }
+            };
+            [f64::from(start), split]
         })
         .collect()
 }
@@ -152,8 +150,6 @@ pub struct ConverterView<'a> {
     pub gain: &'a [f64],
     /// The material curve.
     pub curve: Option<kernel::Curve<'a, f64>>,
-    /// The curve's [`Curve::splits`] (empty without a curve).
-    pub split: &'a [f64],
     /// The curve's [`Curve::lane_tables`] (empty without a curve).
     pub by_bucket: &'a [[f64; 2]],
     /// As above.
@@ -242,7 +238,6 @@ impl Converter {
             offset: &self.offset,
             gain: &self.gain,
             curve: self.curve.as_ref().map(Curve::view),
-            split: self.curve.as_ref().map_or(&[], Curve::splits),
             by_bucket: self.curve.as_ref().map_or(&[], |c| c.lane_tables().0),
             by_point: self.curve.as_ref().map_or(&[], |c| c.lane_tables().1),
         }

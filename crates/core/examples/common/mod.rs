@@ -24,7 +24,11 @@ pub fn use_path(args: &[String]) -> &str {
     texsense_core::simd::set_lookup(match std::env::var("LOOKUP").as_deref() {
         Ok("gather") => Some(Lookup::Gather),
         Ok("loads") => Some(Lookup::Loads),
-        _ => None,
+        Ok("") | Err(_) => None,
+        Ok(other) => {
+            eprintln!("LOOKUP={other:?}: one of gather, loads (or unset: the processor's)");
+            std::process::exit(2);
+        }
     });
     let path = args.get(1).map_or("avx512", |s| s.as_str());
     texsense_core::simd::set_limit(match path {

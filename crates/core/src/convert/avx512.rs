@@ -48,7 +48,6 @@ pub(super) unsafe fn row(
         }
         Some(c) => {
             let tables = Tables {
-                split: view.split,
                 by_bucket: view.by_bucket,
                 by_point: view.by_point,
                 loads: crate::simd::lookup() == crate::simd::Lookup::Loads,
@@ -126,16 +125,16 @@ unsafe fn scale(
     }
 }
 
-/// `Curve::at` per lane of `N` groups with the curve's `split` table
-/// (`super::Curve::splits`): per group, the bucket's start and split gathered at once, the
+/// `Curve::at` per lane of `N` groups with the curve's tables ([`Tables`]; the split is
+/// `super::Curve::split`): per group, the bucket's start and split read at once, the
 /// start stepped once where the input is at or past the split, then the segment's `x`, `y`
-/// and slope gathered at once — two levels of dependent gathers (the walk of [`at_walk`]
+/// and slope read at once (by gathers or loads, [`crate::simd::Lookup`]) — two levels of dependent gathers (the walk of [`at_walk`]
 /// has three), the `N` groups' gathers interleaved ([`RUN`]). A group with a lane whose
 /// bucket may step twice (NaN split) or back goes through [`at_walk`]: the same segment as
 /// the kernel's walk in every lane, so the same bits.
 ///
 /// # Panics
-/// When `split` is not one per bucket.
+/// When the tables are not one row per bucket and per point.
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn at_n<const N: usize>(
@@ -144,8 +143,12 @@ unsafe fn at_n<const N: usize>(
     v: [__m512d; N],
 ) -> [__m512d; N] {
     let (xs, ys, slope, buckets) = (c.x(), c.y(), c.slopes(), c.bucket_starts());
-    assert_eq!(t.split.len(), buckets.len(), "one split per bucket");
-    assert!(t.by_bucket.len() == buckets.len() && t.by_point.len() == xs.len());
+    assert_eq!(
+        t.by_bucket.len(),
+        buckets.len(),
+        "one start and split per bucket"
+    );
+    assert_eq!(t.by_point.len(), xs.len(), "one row per point");
     let last = xs.len() - 1;
     // SAFETY: AVX-512 (this function's features)
     let mut l: [Lanes; N] = std::array::from_fn(|k| unsafe { place(c, v[k]) });
@@ -159,7 +162,8 @@ unsafe fn at_n<const N: usize>(
             cut
         } else {
             l[k].bucket = _mm512_i64gather_epi32::<4>(l[k].b, buckets.as_ptr().cast::<i32>());
-            _mm512_i64gather_pd::<8>(l[k].b, t.split.as_ptr())
+            let at = _mm512_add_epi64(_mm512_slli_epi64::<1>(l[k].b), _mm512_set1_epi64(1));
+            _mm512_i64gather_pd::<8>(at, t.by_bucket.as_ptr().cast::<f64>())
         }
     });
     // the kernel's first step forward (`x[j + 1] <= v`, `j + 1 < last`: the split)
@@ -271,7 +275,6 @@ unsafe fn place(c: &Curve<'_, f64>, v: __m512d) -> Lanes {
 /// The curve's tables for [`at_n`], and whether its lanes read them by loads
 /// ([`crate::simd::Lookup`]).
 struct Tables<'a> {
-    split: &'a [f64],
     by_bucket: &'a [[f64; 2]],
     by_point: &'a [[f64; 4]],
     loads: bool,
@@ -421,7 +424,7 @@ mod tests {
                         let p = x[(rng.next() % points as u64) as usize];
                         f64::from_bits(p.to_bits() - rng.next() % 3)
                     }
-                    1 => curve.splits()[(rng.next() % curve.splits().len() as u64) as usize],
+                    1 => curve.split((rng.next() % curve.lane_tables().0.len() as u64) as usize),
                     2 if case % 7 == 0 => [f64::NAN, lo - 1.0, hi + 1.0][(rng.next() % 3) as usize],
                     _ => lo + (hi - lo) * rng.unit(),
                 })
@@ -442,7 +445,7 @@ mod tests {
                 let walk = g.iter().any(|&v| {
                     let inside = v > lo && v < hi;
                     let b = ((v - lo) * c.inv_width()).min(top) as usize;
-                    inside && curve.splits()[b].is_nan()
+                    inside && curve.split(b).is_nan()
                 });
                 split_groups += usize::from(!walk);
             }
