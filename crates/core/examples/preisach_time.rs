@@ -1,7 +1,8 @@
 //! Timing of the Preisach bank on a random walk (the benchmark's input shape), for profiling:
 //! `cargo run --release -p texsense-core --example preisach_time -- [avx512|avx2|scalar|f32] [frames|blocks] [T] [N] [K]`
 //! (`f32`: the experimental float32 bank, eight lanes, frame order; `f32-scalar`: its
-//! scalar kernel; `K`: the Everett grid's points, 100 by default).
+//! scalar kernel; `K`: the Everett grid's points, 100 by default; `SHAPE=walk|alike|ramp`:
+//! the input, `shape`).
 
 mod common;
 use common::{cpu, use_path};
@@ -51,6 +52,7 @@ fn main() {
             inputs[f * n + i] = lo + x;
         }
     }
+    shape(&mut inputs, t, n, lo, hi);
     let valid = vec![true; t * n];
     let mut out = vec![0.0; t * n];
     let reps: usize = std::env::var("REPS").ok().map_or(5, |s| s.parse().unwrap());
@@ -86,4 +88,27 @@ fn main() {
     }
     std::hint::black_box(&copy);
     println!("copy: {:.0} M/s", (t * n) as f64 / (cpu() - s) / 1e6);
+}
+
+/// The input's shape by the environment's `SHAPE`: `walk` (each element its own random walk,
+/// the default), `alike` (element 0's walk in every element), `ramp` (rising, never turning).
+fn shape(inputs: &mut [f64], t: usize, n: usize, lo: f64, hi: f64) {
+    match std::env::var("SHAPE").as_deref() {
+        Ok("walk") | Ok("") | Err(_) => {}
+        Ok("alike") => {
+            for row in inputs.chunks_exact_mut(n) {
+                let v = row[0];
+                row.fill(v);
+            }
+        }
+        Ok("ramp") => {
+            for (f, row) in inputs.chunks_exact_mut(n).enumerate() {
+                row.fill(lo + (hi - lo) * f as f64 / t as f64);
+            }
+        }
+        Ok(other) => {
+            eprintln!("SHAPE={other:?}: one of walk, alike, ramp");
+            std::process::exit(2);
+        }
+    }
 }

@@ -120,18 +120,15 @@ unsafe fn run_of_groups<const R: usize>(
 ) -> bool {
     let g = i / GROUP;
     // SAFETY: AVX-512 (this function's features)
-    let spilled: [bool; R] = std::array::from_fn(|k| unsafe { on_heap(&heads[g + k]) });
-    debug_assert!((0..R).all(|k| spilled[k]
-        == elements[i + k * WIDE..i + (k + 1) * WIDE]
-            .iter()
-            .any(|el| el.spill.is_some())));
+    let spilled: [__mmask8; R] = std::array::from_fn(|k| unsafe { on_heap(&heads[g + k]) });
+    debug_assert!((0..R).all(|k| (0..WIDE)
+        .all(|l| (spilled[k] >> l & 1 != 0) == elements[i + k * WIDE + l].spill.is_some())));
     let mut stacks = [(off, room); R];
     for (k, s) in stacks.iter_mut().enumerate() {
-        if spilled[k] {
+        if spilled[k] != 0 {
             let els = &mut elements[i + k * WIDE..i + (k + 1) * WIDE];
             let base = els[0].inline.as_mut_ptr().cast::<f64>();
-            // SAFETY: AVX-512 (this function's features)
-            *s = unsafe { heap_stacks(els, base, capacity) };
+            *s = heap_stacks(els, spilled[k], *s, base, capacity);
         }
     }
     let p = elements[i..i + R * WIDE].as_mut_ptr();
@@ -156,9 +153,9 @@ unsafe fn run_of_groups<const R: usize>(
         )
     };
     if let Some(moved) = done {
-        for k in (0..R).filter(|&k| spilled[k]) {
+        for k in (0..R).filter(|&k| spilled[k] & moved[k] != 0) {
             let els = &mut elements[i + k * WIDE..i + (k + 1) * WIDE];
-            back_in_place(els, &mut heads[g + k], moved[k]);
+            back_in_place(els, &mut heads[g + k], spilled[k] & moved[k]);
         }
     }
     done.is_some()
@@ -167,11 +164,12 @@ unsafe fn run_of_groups<const R: usize>(
 /// Groups side by side in [`pair_n`].
 const RUNS: usize = 2;
 
-/// True when a group has a stack on the heap (`element::HEAP`: the counters' sign bits).
+/// The lanes of a group whose stacks are on the heap (`element::HEAP`: the counters' sign
+/// bits).
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn on_heap(hd: &Heads) -> bool {
-    _mm512_movepi64_mask(_mm512_load_si512(hd.clamped.as_ptr().cast())) != 0
+unsafe fn on_heap(hd: &Heads) -> __mmask8 {
+    _mm512_movepi64_mask(_mm512_load_si512(hd.clamped.as_ptr().cast()))
 }
 
 /// `Everett::value_of_numbers` per lane for `u_min <= alpha, beta` (`super::avx2::everett`)
@@ -427,28 +425,46 @@ unsafe fn count_clamped(g: &mut Heads, clamped: __m512d, u: __m512d, live: __mma
     }
 }
 
-/// Each stack of a group with a stack on the heap: its offset from lane 0's place in f64
-/// (the distance of two f64 arrays) and its room.
+/// The stacks of a group with stacks on the heap: the offsets and rooms of stacks in place
+/// (`off`, `room`), with each lane of `heap` given its stack's offset from lane 0's place in
+/// f64 (the distance of two f64 arrays) and its room. Only those lanes' elements are read: the
+/// others' stacks are in place (issue 34, nineteenth round: reading all eight
+/// elements' stack fields, eight cache lines a step, made the steps of a group with a stack
+/// on the heap cost several times a group's step in place).
 #[inline]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn heap_stacks(els: &mut [Element], base: *mut f64, capacity: usize) -> (__m512i, __m512i) {
-    let (mut o, mut r) = ([0i64; WIDE], [0i64; WIDE]);
-    for (l, el) in els.iter_mut().enumerate() {
-        r[l] = el.room(capacity) as i64;
-        o[l] = (el.stack_mut().as_mut_ptr() as isize - base as isize) as i64 >> 3;
+fn heap_stacks(
+    els: &mut [Element],
+    heap: __mmask8,
+    (mut off, mut room): (__m512i, __m512i),
+    base: *mut f64,
+    capacity: usize,
+) -> (__m512i, __m512i) {
+    let mut lanes = heap;
+    while lanes != 0 {
+        let l = lanes.trailing_zeros() as usize;
+        let one = 1 << l;
+        lanes &= lanes - 1;
+        let el = &mut els[l];
+        let at = (el.stack_mut().as_mut_ptr() as isize - base as isize) as i64 >> 3;
+        room = _mm512_mask_set1_epi64(room, one, el.room(capacity) as i64);
+        off = _mm512_mask_set1_epi64(off, one, at);
     }
-    let load = |v: &[i64; WIDE]| _mm512_loadu_si512(v.as_ptr().cast());
-    (load(&o), load(&r))
+    (off, room)
 }
 
-/// A stack on the heap that is shallow again after a step that `moved` it goes back in
-/// place (`Element::step`).
+/// A stack on the heap that is shallow again after a step that moved it (the lanes
+/// `moved`, each with its stack on the heap) goes back in place (`Element::step`).
 #[inline]
 fn back_in_place(els: &mut [Element], hd: &mut Heads, moved: __mmask8) {
-    for (l, el) in els.iter_mut().enumerate() {
+    let mut lanes = moved;
+    while lanes != 0 {
+        let l = lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
         let len = hd.len[l] as usize;
-        if moved >> l & 1 != 0 && len <= INLINE_EXTREMA / 2 && el.spill.is_some() {
-            el.unspill(len);
+        debug_assert!(els[l].spill.is_some());
+        if len <= INLINE_EXTREMA / 2 {
+            els[l].unspill(len);
             hd.mark(l, false);
         }
     }
