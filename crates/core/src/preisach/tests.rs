@@ -229,8 +229,8 @@ fn deep_stacks_move_to_the_heap_and_back_without_changing_the_output() {
 
 /// Frame after frame of `u` and `ok` (frames of the bank's elements) through a copy of `bank`
 /// on the scalar kernel and one on the best SIMD path, in `schedule`: the same outputs and
-/// states, and the same stacks on the heap (`state_bytes`), after every frame (asserted); `each` sees the SIMD copy after every frame. Returns
-/// the scalar and the SIMD copy.
+/// states, and the same stacks on the heap (`state_bytes`), after every frame (asserted);
+/// `each` sees the SIMD copy after every frame. Returns the scalar and the SIMD copy.
 fn frames_against_scalar(
     bank: &PreisachBank,
     u: &[f64],
