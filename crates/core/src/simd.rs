@@ -134,12 +134,20 @@ pub enum Lookup {
 }
 
 impl Lookup {
+    /// Both lookups.
+    pub const ALL: [Lookup; 2] = [Lookup::Gather, Lookup::Loads];
+
     /// `"gather"` or `"loads"`.
     pub fn name(self) -> &'static str {
         match self {
             Lookup::Gather => "gather",
             Lookup::Loads => "loads",
         }
+    }
+
+    /// The lookup of that [`Lookup::name`], if any.
+    pub fn from_name(name: &str) -> Option<Lookup> {
+        Self::ALL.into_iter().find(|l| l.name() == name)
     }
 }
 

@@ -55,16 +55,15 @@ pub(crate) fn py_simd_lookup() -> (&'static str, &'static str) {
 #[pyo3(name = "set_simd_lookup")]
 pub(crate) fn py_set_simd_lookup(lookup: &str) -> PyResult<()> {
     use texsense_core::simd::{set_lookup, Lookup};
-    let chosen = match lookup {
-        "gather" => Some(Lookup::Gather),
-        "loads" => Some(Lookup::Loads),
-        "auto" => None,
-        _ => {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "simd lookup {lookup:?}: one of gather, loads, auto"
-            )))
-        }
-    };
-    set_lookup(chosen);
+    if lookup == "auto" {
+        set_lookup(None);
+        return Ok(());
+    }
+    let chosen = Lookup::from_name(lookup).ok_or_else(|| {
+        pyo3::exceptions::PyValueError::new_err(format!(
+            "simd lookup {lookup:?}: one of gather, loads, auto"
+        ))
+    })?;
+    set_lookup(Some(chosen));
     Ok(())
 }

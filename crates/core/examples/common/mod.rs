@@ -22,13 +22,11 @@ pub fn cpu() -> f64 {
 #[allow(dead_code)] // not every example takes a path (`gather_time`)
 pub fn use_path(args: &[String]) -> &str {
     texsense_core::simd::set_lookup(match std::env::var("LOOKUP").as_deref() {
-        Ok("gather") => Some(Lookup::Gather),
-        Ok("loads") => Some(Lookup::Loads),
         Ok("") | Err(_) => None,
-        Ok(other) => {
-            eprintln!("LOOKUP={other:?}: one of gather, loads (or unset: the processor's)");
+        Ok(name) => Some(Lookup::from_name(name).unwrap_or_else(|| {
+            eprintln!("LOOKUP={name:?}: one of gather, loads (or unset: the processor's)");
             std::process::exit(2);
-        }
+        })),
     });
     let path = args.get(1).map_or("avx512", |s| s.as_str());
     texsense_core::simd::set_limit(match path {

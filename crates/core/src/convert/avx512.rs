@@ -128,8 +128,9 @@ unsafe fn scale(
 /// `Curve::at` per lane of `N` groups with the curve's tables ([`Tables`]; the split is
 /// `super::Curve::split`): per group, the bucket's start and split read at once, the
 /// start stepped once where the input is at or past the split, then the segment's `x`, `y`
-/// and slope read at once (by gathers or loads, [`crate::simd::Lookup`]) — two levels of dependent gathers (the walk of [`at_walk`]
-/// has three), the `N` groups' gathers interleaved ([`RUN`]). A group with a lane whose
+/// and slope read at once (by gathers or loads, [`crate::simd::Lookup`]) — two levels of
+/// dependent reads (the walk of [`at_walk`] has three), the `N` groups' reads interleaved
+/// ([`RUN`]). A group with a lane whose
 /// bucket may step twice (NaN split) or back goes through [`at_walk`]: the same segment as
 /// the kernel's walk in every lane, so the same bits.
 ///
@@ -458,7 +459,7 @@ mod tests {
             };
             let scalar = run(Path::Scalar);
             // the curve's tables read by either lookup
-            for lookup in [Lookup::Gather, Lookup::Loads] {
+            for lookup in Lookup::ALL {
                 crate::simd::set_lookup(Some(lookup));
                 let simd = run(Path::Avx512);
                 crate::simd::set_lookup(None);

@@ -503,7 +503,7 @@ proptest! {
         let simd = simd_run(Path::Avx512, &bank, &u, &ok, Schedule::Blocks);
         prop_assert!(scalar == simd, "best path: outputs, counters or states differ");
         // AVX-512's Everett corners by either lookup (the processor's is the run above)
-        for lookup in [Lookup::Gather, Lookup::Loads] {
+        for lookup in Lookup::ALL {
             crate::simd::set_lookup(Some(lookup));
             let by = simd_run(Path::Avx512, &bank, &u, &ok, Schedule::Blocks);
             crate::simd::set_lookup(None);

@@ -29,10 +29,11 @@ pub(super) unsafe fn cell_corners(cells: *const f64, i0: __m256i, j0: __m256i) -
 }
 
 /// `_mm512_mask_i64gather_pd(src, lanes, at, base)`: by a gather, or with
-/// [`crate::simd::Lookup::Loads`] by a load per lane of `lanes` ([`few`]), for the few lanes that wipe out a second loop or fall back to saturation (issue 34,
-/// eighteenth round: 1.02-1.04 x the Preisach row each on the timing binary's walk on an AMD
-/// Zen 5; the new tops after the first wipe-out, where most lanes of a group read, went 0.80-0.89 x
-/// this way and are gathered).
+/// [`crate::simd::Lookup::Loads`] by a load per lane of `lanes` ([`few`]), for the few lanes
+/// that wipe out a second loop or fall back to saturation (issue 34, eighteenth round:
+/// 1.02-1.04 x the Preisach row each on the timing binary's walk on an AMD Zen 5; the new
+/// tops after the first wipe-out, where most lanes of a group read, went 0.80-0.89 x this
+/// way and are gathered).
 ///
 /// # Safety
 /// The processor must have AVX-512 F; each lane of `lanes` reads an f64 at `at` from
