@@ -3,12 +3,13 @@
 //! arrays.
 
 use numpy::{
-    Element, IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    Element, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray2,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use texsense_core::{CoreError, Neighbours};
 
-use crate::errors::{to_py, ShapeError};
+use crate::errors::to_py;
 
 /// The `#[pymethods]` block of an element bank (a class whose `inner` has `len()`): the
 /// `n_elements` getter and, given `reset = "doc"`, a `reset` documented so, then the class's
@@ -173,8 +174,23 @@ impl<'a> Batch<'a> {
     }
 }
 
+/// A new (T, N) array of zeros from numpy's allocator, for a kernel to write its output into.
+/// numpy asks Linux for huge pages for large arrays (`madvise`), where a Rust `Vec` of zeros
+/// is memory in 4 KB pages that fault in one by one on the first write: a 4000 x 4096 float64
+/// output took 32,000 such faults, and the Preisach batch that made it ran at 0.53 x the
+/// rate of the same batch into an array held (issue 34, twentieth round: docs/pipeline.md).
+fn zeros<'py, T: Element>(py: Python<'py>, t: usize, n: usize) -> Bound<'py, PyArray2<T>> {
+    PyArray2::zeros(py, [t, n], false)
+}
+
+/// Write access to the array `a` that [`zeros`] made (new, C-contiguous, not yet in Python).
+fn fill<'py, T: Element>(a: &Bound<'py, PyArray2<T>>) -> PyResult<PyReadwriteArray2<'py, T>> {
+    a.try_readwrite()
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("a new array: {e}")))
+}
+
 /// Run a kernel that fills a (T, N) output (float64, or float32 for a chain's float32
-/// batch), with the GIL released, and return the array.
+/// batch, or codes), with the GIL released, and return the array ([`zeros`]).
 pub(crate) fn run_detached<'py, T, F>(
     py: Python<'py>,
     t: usize,
@@ -182,21 +198,36 @@ pub(crate) fn run_detached<'py, T, F>(
     kernel: F,
 ) -> PyResult<Bound<'py, PyArray2<T>>>
 where
-    T: Element + Copy + Default + Send,
+    T: Element + Send,
     F: FnOnce(&mut [T]) -> Result<(), CoreError> + Send,
 {
-    let mut out = vec![T::default(); t * n];
-    py.detach(|| kernel(&mut out)).map_err(to_py)?;
-    to_2d(py, out, t, n)
+    let out = zeros(py, t, n);
+    {
+        let mut w = fill(&out)?;
+        let o = w.as_slice_mut()?;
+        py.detach(|| kernel(o)).map_err(to_py)?;
+    }
+    Ok(out)
 }
 
-pub(crate) fn to_2d<T: numpy::Element>(
-    py: Python<'_>,
-    v: Vec<T>,
+/// [`run_detached`] for a kernel with two (T, N) outputs.
+#[allow(clippy::type_complexity)]
+pub(crate) fn run_detached2<'py, T, U, F>(
+    py: Python<'py>,
     t: usize,
     n: usize,
-) -> PyResult<Bound<'_, PyArray2<T>>> {
-    let a = numpy::ndarray::Array2::from_shape_vec((t, n), v)
-        .map_err(|e| ShapeError::new_err(e.to_string()))?;
-    Ok(a.into_pyarray(py))
+    kernel: F,
+) -> PyResult<(Bound<'py, PyArray2<T>>, Bound<'py, PyArray2<U>>)>
+where
+    T: Element + Send,
+    U: Element + Send,
+    F: FnOnce(&mut [T], &mut [U]) -> Result<(), CoreError> + Send,
+{
+    let (a, b) = (zeros(py, t, n), zeros(py, t, n));
+    {
+        let (mut wa, mut wb) = (fill(&a)?, fill(&b)?);
+        let (oa, ob) = (wa.as_slice_mut()?, wb.as_slice_mut()?);
+        py.detach(|| kernel(oa, ob)).map_err(to_py)?;
+    }
+    Ok((a, b))
 }

@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use texsense_core::{Chain, ChainStage, CoreError};
 
-use crate::arrays::{element_bank, run_detached, to_2d, Batch};
+use crate::arrays::{element_bank, run_detached2, Batch};
 use crate::compensation::PyCompensation;
 use crate::convert::{PyConverter, PyCurve};
 use crate::detect::PyFailureDetector;
@@ -231,12 +231,10 @@ element_bank!(PyChain, {
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u8>>)> {
         let b = Batch::new("chain run", self.inner.len(), Some(&dt), &readings, &valid)?;
-        let mut codes = vec![0u8; b.t * b.n];
         let inner = &mut self.inner;
-        let out = run_detached(py, b.t, b.n, |out| {
-            inner.run(b.dt, b.values, b.valid, out, &mut codes)
-        })?;
-        Ok((out, to_2d(py, codes, b.t, b.n)?))
+        run_detached2(py, b.t, b.n, |out, codes| {
+            inner.run(b.dt, b.values, b.valid, out, codes)
+        })
     }
 
     /// Batch of float32 readings (a recording's frames): dt (T,), readings (T, N) float32,
@@ -251,12 +249,10 @@ element_bank!(PyChain, {
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u8>>)> {
         let b = Batch::new("chain run", self.inner.len(), Some(&dt), &readings, &valid)?;
-        let mut codes = vec![0u8; b.t * b.n];
         let inner = &mut self.inner;
-        let out = run_detached(py, b.t, b.n, |out| {
-            inner.run_f32(b.dt, b.values, b.valid, out, &mut codes)
-        })?;
-        Ok((out, to_2d(py, codes, b.t, b.n)?))
+        run_detached2(py, b.t, b.n, |out, codes| {
+            inner.run_f32(b.dt, b.values, b.valid, out, codes)
+        })
     }
 
     /// One frame, for a live stream: `dt` (s since the previous frame), readings (N,) and

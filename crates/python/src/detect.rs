@@ -4,7 +4,7 @@ use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use texsense_core::detect::{Changes, DetectorParams, FailureDetector};
 
-use crate::arrays::{element_bank, neighbours_from, to_2d, Batch};
+use crate::arrays::{element_bank, neighbours_from, run_detached, Batch};
 use crate::errors::to_py;
 
 /// Failure detection on raw capacitance (thesis §6.5.2.5): codes 0 ok, 1 short/break,
@@ -69,10 +69,7 @@ element_bank!(PyFailureDetector, reset = "Forget the history.", {
     ) -> PyResult<Bound<'py, PyArray2<u8>>> {
         let b = Batch::new("readings", self.inner.len(), None, &readings, &valid)?;
         let (t, n, r, v) = (b.t, b.n, b.values, b.valid);
-        let mut codes = vec![0u8; t * n];
         let (inner, changes) = (&mut self.inner, &mut self.changes);
-        py.detach(|| inner.run(r, v, &mut codes, changes))
-            .map_err(to_py)?;
-        to_2d(py, codes, t, n)
+        run_detached(py, t, n, |codes| inner.run(r, v, codes, changes))
     }
 });

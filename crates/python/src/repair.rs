@@ -4,7 +4,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2}
 use pyo3::prelude::*;
 use texsense_core::{CoreError, LocalRepair, RepairMethod};
 
-use crate::arrays::{element_bank, neighbours_from, to_2d, Batch};
+use crate::arrays::{element_bank, neighbours_from, run_detached2, Batch};
 use crate::errors::to_py;
 
 /// A local repair with its state (the last value of every element). `method`: "zero",
@@ -71,11 +71,10 @@ element_bank!(PyLocalRepair, reset = "Forget all last values.", {
         valid: PyReadonlyArray2<'py, bool>,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u8>>)> {
         let b = Batch::new("values", self.inner.len(), None, &values, &valid)?;
-        let mut out = b.values.to_vec();
-        let mut outcome = vec![0u8; out.len()];
         let inner = &mut self.inner;
-        py.detach(|| inner.run(&mut out, |i| b.valid[i], Some(&mut outcome)))
-            .map_err(to_py)?;
-        Ok((to_2d(py, out, b.t, b.n)?, to_2d(py, outcome, b.t, b.n)?))
+        run_detached2(py, b.t, b.n, |out, outcome| {
+            out.copy_from_slice(b.values);
+            inner.run(out, |i| b.valid[i], Some(outcome))
+        })
     }
 });

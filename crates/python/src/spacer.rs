@@ -6,7 +6,7 @@ use texsense_core::{
     BoucWenBank, BoucWenParams, CoreError, SpacerBank, SpacerBatch, SpacerLaw, SpacerParams,
 };
 
-use crate::arrays::{element_bank, pairs, to_2d, Batch};
+use crate::arrays::{element_bank, pairs, run_detached2, Batch};
 use crate::errors::to_py;
 
 /// N spacer elements of one material (the virtual sensor's mechanics), stepped together by
@@ -135,11 +135,10 @@ element_bank!(PySpacerBank, {
     ) -> PyResult<Pair<'py>> {
         let b = Batch::unmasked("compression", self.inner.len(), &dt, &compression)?;
         let (t, n) = (b.t, b.n);
-        let (mut p, mut s) = (vec![0.0; t * n], vec![0.0; t * n]);
         let inner = &mut self.inner;
-        py.detach(|| inner.run_displacement(b.dt, b.values, &mut p, &mut s))
-            .map_err(to_py)?;
-        Ok((to_2d(py, p, t, n)?, to_2d(py, s, t, n)?))
+        run_detached2(py, t, n, |p, s| {
+            inner.run_displacement(b.dt, b.values, p, s)
+        })
     }
 
     /// Test-machine ramp of a one-element bank at `rate` (fraction of thickness per s) until
@@ -174,11 +173,10 @@ element_bank!(PySpacerBank, {
     ) -> PyResult<Pair<'py>> {
         let b = Batch::unmasked("pressure", self.inner.len(), &dt, &pressure)?;
         let (t, n) = (b.t, b.n);
-        let (mut e, mut reached) = (vec![0.0; t * n], vec![0.0; t * n]);
         let inner = &mut self.inner;
-        py.detach(|| inner.run_pressure(b.dt, b.values, &mut e, &mut reached))
-            .map_err(to_py)?;
-        Ok((to_2d(py, e, t, n)?, to_2d(py, reached, t, n)?))
+        run_detached2(py, t, n, |e, reached| {
+            inner.run_pressure(b.dt, b.values, e, reached)
+        })
     }
 });
 
