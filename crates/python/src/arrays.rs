@@ -183,7 +183,8 @@ fn zeros<'py, T: Element>(py: Python<'py>, t: usize, n: usize) -> Bound<'py, PyA
     PyArray2::zeros(py, [t, n], false)
 }
 
-/// Write access to the array `a` that [`zeros`] made (new, C-contiguous, not yet in Python).
+/// Write access to the array `a` that [`zeros`] made (new, C-contiguous, not yet handed to
+/// the caller, so nothing else borrows it).
 fn fill<'py, T: Element>(a: &Bound<'py, PyArray2<T>>) -> PyResult<PyReadwriteArray2<'py, T>> {
     a.try_readwrite()
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("a new array: {e}")))
