@@ -26,6 +26,7 @@ BENCHMARKS = ROOT / "benchmarks"
 #: The scripts run, with the options that make them tiny.
 SMALL: dict[str, list[str]] = {
     "bench_repair": ["--quick"],
+    "batch_outputs": ["--repeat", "1", "--frames", "20"],
     "cli_start": ["--repeat", "1"],
     "frame_door": ["--repeat", "1", "--sizes", "16"],
     "mcu_budget": ["--frames", "10"],
